@@ -1,0 +1,52 @@
+"""Shared fixtures.
+
+Real data comes from ``../shared/data`` beside the repository (always present
+in CI).  A test that needs it and cannot find it fails loudly instead of
+skipping.  Nothing here touches the network: the sample cache is seeded from
+that folder (see ``workbench.samples``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("QT_API", "pyside6")
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("WORKBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+
+def _require(path: Path) -> Path:
+    if not path.exists():
+        pytest.fail(
+            f"real test data not found: {path} (the ../shared/data folder must sit beside "
+            "the repository; set WORKBENCH_SHARED_DATA to point elsewhere)",
+            pytrace=False,
+        )
+    return path
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    return _require(SHARED_DATA)
+
+
+@pytest.fixture(scope="session")
+def headsq_nhdr(shared_data: Path) -> Path:
+    """The VTK headsq quarter CT: NRRD header with 93 detached raw slices."""
+    return _require(shared_data / "vtk_headsq_quarter_ct" / "headsq" / "quarter.nhdr")
+
+
+@pytest.fixture(scope="session")
+def skull_obj(shared_data: Path) -> Path:
+    """Watertight 100k-triangle skull with mandible (unitless, +y up, face +z)."""
+    return _require(shared_data / "skull_mesh_yahoojapan" / "skull.obj")
+
+
+@pytest.fixture(scope="session")
+def fsaverage_ply(shared_data: Path) -> Path:
+    """Average adult head surface in mm (MNE fsaverage)."""
+    return _require(shared_data / "fsaverage_head_mne" / "fsaverage-head_mm.ply")

@@ -1,0 +1,1 @@
+"""Undoable commands over the Case and the one command stack."""

@@ -1,0 +1,1 @@
+"""Pure numerics: numpy and scipy only, arrays in and arrays out, mm units."""

@@ -1,0 +1,1 @@
+"""File formats: meshes, volumes, landmarks, tables, case files."""

@@ -1,0 +1,1 @@
+"""The Case document and its parts: plain data, no Qt, no VTK."""

@@ -1,0 +1,1 @@
+"""PySide6 desktop shell (main window, panels, tools)."""

@@ -1,0 +1,1 @@
+"""pyvista visuals and off-screen snapshots; no Qt widgets."""

@@ -1,0 +1,1 @@
+"""Scriptable services (one per tool) orchestrating core over model values."""
