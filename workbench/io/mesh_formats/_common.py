@@ -1,0 +1,167 @@
+"""Helpers shared by the mesh format readers and writers.
+
+Every reader returns a :class:`ParsedMesh` in *file units* (no scaling) and
+raises :class:`~workbench.core.errors.InputError` for anything it cannot
+read.  Writers return the complete file content as ``bytes``; the atomic
+write itself happens in :mod:`workbench.io.meshes`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.errors import InputError
+
+UNITS_NOTE = "units: mm"
+WRITER_NAME = "forensic-workbench"
+
+
+@dataclass
+class ParsedMesh:
+    """Raw mesh data as stored in the file (file units, usually unknown).
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+        Positions in file units.
+    faces : (m, 3) int64
+        Zero-based triangle corner indices (already range-checked).
+    messages : list of str
+        Notes for the user (polygons split, properties ignored, ...).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    messages: list[str] = field(default_factory=list)
+
+
+class Reader:
+    """Bundles the path with error helpers so parsers can fail in plain words."""
+
+    def __init__(self, path: Path, data: bytes, label: str):
+        self.path = path
+        self.data = data
+        self.label = label
+        self.messages: list[str] = []
+        self.index_base = 0  # how the format numbers vertices (OBJ: 1), for messages
+
+    def fail(self, problem: str, hint: str | None = None) -> InputError:
+        """Build (not raise) an :class:`InputError` naming this file."""
+        return InputError(self.path, f"{self.label} file: {problem}", hint)
+
+    def truncated(self, what: str) -> InputError:
+        return self.fail(
+            f"the file ends early while reading {what} (truncated or damaged)",
+            "copy or export the file again",
+        )
+
+    def note(self, message: str) -> None:
+        self.messages.append(message)
+
+    def to_float(self, tokens: np.ndarray | list, what: str) -> np.ndarray:
+        """Convert text tokens to float64, raising InputError for non-numbers."""
+        try:
+            return np.asarray(tokens).astype(np.float64)
+        except (ValueError, TypeError, OverflowError):
+            raise self.fail(f"non-numeric data among the {what}") from None
+
+    def to_int(self, tokens: np.ndarray | list, what: str) -> np.ndarray:
+        """Convert text tokens to int64 (accepting "3.0"-style integers)."""
+        arr = np.asarray(tokens)
+        try:
+            return arr.astype(np.int64)
+        except (ValueError, TypeError, OverflowError):
+            pass
+        values = self.to_float(arr, what)
+        if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
+            raise self.fail(f"the {what} must be whole numbers")
+        return values.astype(np.int64)
+
+    def frombuffer(self, dtype: np.dtype | str, count: int, offset: int, what: str) -> np.ndarray:
+        """``np.frombuffer`` with a plain-words error when the data run out."""
+        dtype = np.dtype(dtype)
+        if count < 0:
+            raise self.fail(f"negative count for the {what}")
+        if offset + count * dtype.itemsize > len(self.data):
+            raise self.truncated(what)
+        return np.frombuffer(self.data, dtype=dtype, count=count, offset=offset)
+
+    def finish(self, vertices: np.ndarray, faces: np.ndarray) -> ParsedMesh:
+        """Check shapes and index ranges and package the result."""
+        vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+        faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        if len(vertices) == 0:
+            raise self.fail("the file contains no vertices")
+        if len(faces) == 0:
+            raise self.fail(
+                "the file contains no triangles (only points or lines?)",
+                "the workbench needs a surface mesh made of triangles or polygons",
+            )
+        n = len(vertices)
+        bad = (faces < 0) | (faces >= n)
+        if bad.any():
+            row, col = (int(i) for i in np.argwhere(bad)[0])
+            value = int(faces[row, col]) + self.index_base
+            raise self.fail(
+                f"face index out of range: triangle {row + 1} uses vertex {value}, but the "
+                f"file has only {n} vertices",
+                "the file is damaged or was written incorrectly",
+            )
+        bad_coords = int((~np.isfinite(vertices).all(axis=1)).sum())
+        if bad_coords:
+            self.note(f"{bad_coords} vertices have NaN or infinite coordinates")
+        return ParsedMesh(vertices, faces, self.messages)
+
+
+def fan_triangulate(counts: np.ndarray, flat: np.ndarray, reader: Reader) -> np.ndarray:
+    """Split polygons into triangle fans, vectorised.
+
+    Parameters
+    ----------
+    counts : (k,) int
+        Number of corners of every polygon.
+    flat : (sum(counts),) int
+        Corner indices of all polygons, one after another.
+    reader : Reader
+        Receives a note when polygons are split or dropped.
+
+    Returns
+    -------
+    (m, 3) int64
+        Triangles ``(c0, ci, ci+1)`` for every polygon with at least 3 corners.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    flat = np.asarray(flat, dtype=np.int64)
+    if len(counts) == 0:
+        return np.zeros((0, 3), np.int64)
+    if int(counts.sum()) != len(flat):
+        raise reader.fail("polygon corner counts do not match the number of indices")
+    if np.all(counts == 3):
+        return flat.reshape(-1, 3)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    small = counts < 3
+    if small.any():
+        reader.note(f"{int(small.sum())} polygons with fewer than 3 corners were skipped")
+    n_tri = np.maximum(counts - 2, 0)
+    big = int((counts > 3).sum())
+    if big:
+        reader.note(f"{big} polygons with more than 3 corners were split into triangles")
+    poly = np.repeat(np.arange(len(counts)), n_tri)
+    first_tri = np.cumsum(n_tri) - n_tri
+    j = np.arange(int(n_tri.sum())) - first_tri[poly]
+    s = starts[poly]
+    return np.stack([flat[s], flat[s + j + 1], flat[s + j + 2]], axis=1)
+
+
+def format_rows(fmt: str, values: np.ndarray) -> str:
+    """Format a 2-D array row by row with one printf-style ``fmt`` per row.
+
+    Use ``%r`` for floats: the shortest text that reads back as the same double.
+    """
+    values = np.asarray(values)
+    if values.size == 0:
+        return ""
+    return (fmt * len(values)) % tuple(values.ravel().tolist())

@@ -1,0 +1,277 @@
+"""Stanford PLY: ascii, binary little- and big-endian.
+
+Reads the ``vertex`` element's x/y/z (any numeric type) and the ``face``
+element's ``vertex_indices`` / ``vertex_index`` list (any count and index
+type); other elements and properties are skipped.  Polygons are split into
+triangle fans.  Writes double-precision vertices and ``uchar int`` faces with a
+``comment units: mm`` line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workbench.io.mesh_formats._common import (
+    UNITS_NOTE,
+    WRITER_NAME,
+    ParsedMesh,
+    Reader,
+    fan_triangulate,
+    format_rows,
+)
+
+_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
+_FACE_LISTS = ("vertex_indices", "vertex_index")
+
+
+@dataclass
+class _Property:
+    name: str
+    dtype: str  # numpy kind+size, e.g. "f4"
+    count_dtype: str | None = None  # set for list properties
+
+
+@dataclass
+class _Element:
+    name: str
+    count: int
+    properties: list[_Property]
+
+
+def _parse_header(r: Reader) -> tuple[str, list[_Element], int]:
+    end = r.data.find(b"end_header")
+    if not r.data.startswith(b"ply") or end < 0:
+        raise r.fail("not a PLY file (missing 'ply' magic line or 'end_header')")
+    body = r.data.find(b"\n", end)
+    if body < 0:
+        raise r.truncated("the header")
+    text = r.data[:end].decode("ascii", errors="replace")
+    fmt = None
+    elements: list[_Element] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        words = line.split()
+        if not words or words[0] in ("ply", "comment", "obj_info"):
+            continue
+        try:
+            if words[0] == "format":
+                fmt = words[1]
+                if fmt not in _FORMATS:
+                    raise r.fail(f"unknown PLY format '{fmt}'", "expected ascii or binary")
+            elif words[0] == "element":
+                elements.append(_Element(words[1], int(words[2]), []))
+            elif words[0] == "property":
+                if not elements:
+                    raise r.fail(f"header line {number}: property before any element")
+                if words[1] == "list":
+                    prop = _Property(words[4], _TYPES[words[3]], _TYPES[words[2]])
+                else:
+                    prop = _Property(words[2], _TYPES[words[1]])
+                elements[-1].properties.append(prop)
+            else:
+                raise r.fail(f"header line {number} not understood: {line.strip()!r}")
+        except (IndexError, ValueError):
+            raise r.fail(f"header line {number} is malformed: {line.strip()!r}") from None
+        except KeyError as exc:
+            raise r.fail(f"header line {number}: unknown property type {exc.args[0]!r}") from None
+    if fmt is None:
+        raise r.fail("the header has no 'format' line")
+    if any(e.count < 0 for e in elements):
+        raise r.fail("negative element count in the header")
+    return fmt, elements, body + 1
+
+
+def _xyz_columns(r: Reader, element: _Element) -> list[int]:
+    names = [p.name for p in element.properties]
+    try:
+        cols = [names.index(axis) for axis in "xyz"]
+    except ValueError:
+        raise r.fail("the vertex element has no x, y and z properties") from None
+    if any(element.properties[c].count_dtype for c in cols):
+        raise r.fail("vertex x/y/z are lists, expected numbers")
+    return cols
+
+
+def _face_list(r: Reader, element: _Element) -> int:
+    for i, p in enumerate(element.properties):
+        if p.name in _FACE_LISTS and p.count_dtype:
+            return i
+    raise r.fail("the face element has no 'vertex_indices' list")
+
+
+# ------------------------------------------------------------------ ascii
+def _read_ascii(r: Reader, elements: list[_Element], start: int) -> ParsedMesh:
+    tokens = np.array(r.data[start:].split())
+    values = r.to_float(tokens, "numbers") if tokens.size else np.zeros(0)
+    pos = 0
+    vertices = faces = None
+    for el in elements:
+        if vertices is not None and faces is not None:
+            break
+        lists = [i for i, p in enumerate(el.properties) if p.count_dtype]
+        width = len(el.properties)
+        if not lists:
+            n = el.count * width
+            if pos + n > len(values):
+                raise r.truncated(f"the {el.name} element")
+            table = values[pos:pos + n].reshape(el.count, width)
+            pos += n
+            if el.name == "vertex":
+                vertices = table[:, _xyz_columns(r, el)]
+            continue
+        wanted = _face_list(r, el) if el.name == "face" else lists[0]
+        counts, flat, pos = _ascii_rows(r, el, values, pos, wanted)
+        if el.name == "face":
+            faces = fan_triangulate(counts, r.to_int(flat, "face indices"), r)
+    if vertices is None or faces is None:
+        raise r.fail("the file needs both a 'vertex' and a 'face' element")
+    return r.finish(vertices, faces)
+
+
+def _ascii_rows(
+    r: Reader, el: _Element, values: np.ndarray, pos: int, wanted: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Rows of an element with list properties: fast path when all lists match."""
+    props = el.properties
+    if el.count == 0:
+        return np.zeros(0, np.int64), np.zeros(0), pos
+    if el.count > len(values) - pos:  # every row has at least one number
+        raise r.truncated(f"the {el.name} element")
+    if len([p for p in props if p.count_dtype]) == 1 and pos + wanted < len(values):
+        c = values[pos + wanted]
+        width = len(props) + int(c)
+        n = el.count * width
+        if c >= 0 and pos + n <= len(values):
+            table = values[pos:pos + n].reshape(el.count, width)
+            if np.all(table[:, wanted] == c):
+                flat = table[:, wanted + 1:wanted + 1 + int(c)].ravel()
+                return np.full(el.count, int(c)), flat, pos + n
+    counts = np.empty(el.count, np.int64)
+    chunks = []
+    for row in range(el.count):
+        for i, p in enumerate(props):
+            if pos >= len(values):
+                raise r.truncated(f"the {el.name} element")
+            if p.count_dtype:
+                k = int(values[pos])
+                if k < 0 or pos + 1 + k > len(values):
+                    raise r.truncated(f"the {el.name} element")
+                if i == wanted:
+                    counts[row] = k
+                    chunks.append(values[pos + 1:pos + 1 + k])
+                pos += 1 + k
+            else:
+                pos += 1
+    flat = np.concatenate(chunks) if chunks else np.zeros(0)
+    return counts, flat, pos
+
+
+# ------------------------------------------------------------------ binary
+def _read_binary(r: Reader, elements: list[_Element], start: int, order: str) -> ParsedMesh:
+    pos = start
+    vertices = faces = None
+    for el in elements:
+        if vertices is not None and faces is not None:
+            break
+        if not any(p.count_dtype for p in el.properties):
+            dtype = np.dtype([(f"p{i}", order + p.dtype) for i, p in enumerate(el.properties)])
+            table = r.frombuffer(dtype, el.count, pos, f"the {el.name} element")
+            pos += el.count * dtype.itemsize
+            if el.name == "vertex":
+                cols = _xyz_columns(r, el)
+                vertices = np.stack([table[f"p{c}"].astype(np.float64) for c in cols], axis=1)
+            continue
+        wanted = _face_list(r, el) if el.name == "face" else 0
+        counts, flat, pos = _binary_rows(r, el, pos, order, wanted)
+        if el.name == "face":
+            faces = fan_triangulate(counts, flat, r)
+    if vertices is None or faces is None:
+        raise r.fail("the file needs both a 'vertex' and a 'face' element")
+    return r.finish(vertices, faces)
+
+
+def _binary_rows(
+    r: Reader, el: _Element, pos: int, order: str, wanted: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    props = el.properties
+    if el.count == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), pos
+    if el.count > len(r.data) - pos:  # every row has at least one byte
+        raise r.truncated(f"the {el.name} element")
+    # fast path: every row has the same list lengths as the first row
+    fields, offset, first = [], pos, []
+    for i, p in enumerate(props):
+        if p.count_dtype:
+            c = int(r.frombuffer(order + p.count_dtype, 1, offset, f"the {el.name} element")[0])
+            first.append(c)
+            fields += [(f"c{i}", order + p.count_dtype), (f"p{i}", order + p.dtype, (max(c, 0),))]
+            offset += np.dtype(p.count_dtype).itemsize + max(c, 0) * np.dtype(p.dtype).itemsize
+        else:
+            fields.append((f"p{i}", order + p.dtype))
+            offset += np.dtype(p.dtype).itemsize
+    dtype = np.dtype(fields)
+    if pos + el.count * dtype.itemsize <= len(r.data):
+        table = np.frombuffer(r.data, dtype, el.count, pos)
+        lists = [i for i, p in enumerate(props) if p.count_dtype]
+        if all(np.all(table[f"c{i}"] == c) for i, c in zip(lists, first)):
+            flat = table[f"p{wanted}"].reshape(-1).astype(np.int64)
+            counts = np.full(el.count, first[lists.index(wanted)])
+            return counts, flat, pos + el.count * dtype.itemsize
+    # general path: row by row
+    counts = np.empty(el.count, np.int64)
+    chunks = []
+    for row in range(el.count):
+        for i, p in enumerate(props):
+            if p.count_dtype:
+                k = int(r.frombuffer(order + p.count_dtype, 1, pos, f"the {el.name} element")[0])
+                pos += np.dtype(p.count_dtype).itemsize
+                items = r.frombuffer(order + p.dtype, k, pos, f"the {el.name} element")
+                pos += k * items.itemsize
+                if i == wanted:
+                    counts[row] = k
+                    chunks.append(items)
+            else:
+                pos += np.dtype(p.dtype).itemsize
+    if pos > len(r.data):
+        raise r.truncated(f"the {el.name} element")
+    flat = np.concatenate(chunks).astype(np.int64) if chunks else np.zeros(0, np.int64)
+    return counts, flat, pos
+
+
+def read(path: Path, data: bytes) -> ParsedMesh:
+    """Parse PLY bytes; vertices in file units."""
+    r = Reader(path, data, "PLY")
+    fmt, elements, start = _parse_header(r)
+    names = {e.name for e in elements}
+    extra = sorted(names - {"vertex", "face"})
+    if extra:
+        r.note(f"PLY elements ignored: {', '.join(extra)}")
+    if fmt == "ascii":
+        return _read_ascii(r, elements, start)
+    return _read_binary(r, elements, start, _FORMATS[fmt])
+
+
+def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:
+    """PLY bytes: binary little endian (default) or ascii, double vertices."""
+    fmt = "binary_little_endian" if binary else "ascii"
+    header = (
+        f"ply\nformat {fmt} 1.0\ncomment {UNITS_NOTE}\ncomment written by {WRITER_NAME}\n"
+        f"element vertex {len(vertices)}\n"
+        "property double x\nproperty double y\nproperty double z\n"
+        f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode("ascii")
+    if binary:
+        rec = np.empty(len(faces), np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
+        rec["n"] = 3
+        rec["i"] = faces
+        return header + np.ascontiguousarray(vertices, "<f8").tobytes() + rec.tobytes()
+    body = format_rows("%r %r %r\n", vertices) + format_rows("3 %d %d %d\n", faces)
+    return header + body.encode("ascii")

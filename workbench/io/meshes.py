@@ -1,0 +1,254 @@
+"""Read and write triangle meshes (PLY, STL, OBJ, legacy VTK, VTP) without VTK.
+
+Reading returns a :class:`MeshReadResult`: the mesh in millimetres plus a
+:class:`~workbench.core.units.UnitsReport` saying whether the numbers look
+like millimetres.  Units are never changed silently: with ``units="auto"``
+the mesh is returned as stored and ``result.units.needs_confirmation`` tells
+the caller to ask; ``units="cm"`` (etc.) or ``scale=`` convert explicitly.
+
+Writing is atomic: the file is written beside the target under a temporary
+name and moved into place with :func:`os.replace`, so a failed write never
+leaves a half-written or clobbered target.  Written files state
+``units: mm`` where the format has room for it.
+
+Every problem with an input file raises
+:class:`~workbench.core.errors.InputError` naming the file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import secrets
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+from workbench.core.errors import InputError
+from workbench.core.mesh import Mesh
+from workbench.core.units import (
+    UNIT_SCALES,
+    UnitsReport,
+    detect_units,
+    detect_units_from_extent,
+    unit_scale,
+)
+from workbench.io.mesh_formats import obj, ply, stl, vtk_legacy, vtp
+
+_FORMATS: dict[str, ModuleType] = {
+    ".ply": ply,
+    ".stl": stl,
+    ".obj": obj,
+    ".vtk": vtk_legacy,
+    ".vtp": vtp,
+}
+SUPPORTED_EXTENSIONS: tuple[str, ...] = tuple(_FORMATS)
+
+
+@dataclass(frozen=True)
+class MeshReadResult:
+    """A mesh read from disk.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        Vertices in mm (file units times ``scale_applied``).
+    units : UnitsReport
+        Judgement of the file's units from its size; ``units.needs_confirmation``
+        is True when the numbers do not look like mm and the caller gave no
+        units or scale.
+    source_path : Path
+        The file that was read.
+    messages : tuple of str
+        Notes for the user (polygons split, vertices merged, units unclear, ...).
+    scale_applied : float
+        Factor applied to the file's numbers (1.0 unless units/scale were given).
+    format : str
+        File extension that chose the reader, e.g. ".ply".
+    """
+
+    mesh: Mesh
+    units: UnitsReport
+    source_path: Path
+    messages: tuple[str, ...]
+    scale_applied: float = 1.0
+    format: str = ""
+
+
+def _format_for(path: Path, action: str) -> ModuleType:
+    ext = path.suffix.lower()
+    if ext not in _FORMATS:
+        shown = f"'{path.suffix}'" if path.suffix else "no extension"
+        raise InputError(
+            path,
+            f"cannot {action} mesh files with {shown}",
+            f"supported extensions: {', '.join(SUPPORTED_EXTENSIONS)}",
+        )
+    return _FORMATS[ext]
+
+
+def _load_bytes(path: Path) -> bytes:
+    if not path.exists():
+        raise InputError(path, "file not found", "check the path and spelling")
+    if path.is_dir():
+        raise InputError(path, "is a folder, not a mesh file")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, f"cannot be read ({exc.strerror or exc})") from None
+    if not data:
+        raise InputError(path, "the file is empty (0 bytes)")
+    return data
+
+
+def _check_scale(path: Path, units: str, scale: float | None) -> float | None:
+    if scale is None:
+        return None
+    if units not in ("auto", None):
+        raise InputError(path, "give either units or a scale factor, not both")
+    try:
+        value = float(scale)
+    except (TypeError, ValueError):
+        raise InputError(path, f"scale must be a number, got {scale!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise InputError(path, f"scale must be a positive number, got {scale!r}")
+    return value
+
+
+def read_mesh(
+    path: str | PathLike[str],
+    units: str = "auto",
+    scale: float | None = None,
+    *,
+    kind: str = "head",
+) -> MeshReadResult:
+    """Read a triangle mesh; the format is chosen by the file extension.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.ply``, ``.stl``, ``.obj``, ``.vtk`` (legacy polydata) or ``.vtp``.
+    units : {"auto", "mm", "cm", "m", "in"}
+        Units of the numbers in the file.  "auto" keeps them unscaled and
+        flags (``result.units.needs_confirmation``) data that do not look
+        like mm; a unit name converts to mm (e.g. "cm" multiplies by 10).
+    scale : float, optional
+        Explicit factor from file units to mm (instead of ``units``).
+    kind : {"head", "skull", "face"}
+        What the mesh shows; sets the plausible size used by unit detection.
+
+    Returns
+    -------
+    MeshReadResult
+
+    Raises
+    ------
+    InputError
+        Missing file, unsupported extension, or a file that cannot be parsed
+        (truncated, non-numeric, indices out of range, no triangles, ...).
+    """
+    path = Path(path)
+    module = _format_for(path, "read")
+    detect_units_from_extent(1.0, kind)  # reject an unknown kind before reading
+    factor = _check_scale(path, units, scale)
+    if factor is None and units not in ("auto", None):
+        factor = unit_scale(units)
+    data = _load_bytes(path)
+    with np.errstate(all="ignore"):  # damaged numbers (NaN, overflow) are reported, not warned
+        parsed = module.read(path, data)
+    raw = Mesh(parsed.vertices, parsed.faces)
+    report = detect_units(raw, kind)
+    messages = list(parsed.messages)
+    if factor is None:
+        factor = 1.0
+        if report.needs_confirmation:
+            messages.append(f"units unclear: {report.message}")
+    else:
+        how = f"--scale {factor:g}" if scale is not None else f"--units {units}"
+        report = report.confirm(how)
+        scaled_report = detect_units(raw.vertices * factor, kind)
+        if not scaled_report.plausible_in_mm:
+            messages.append(
+                f"after {how} the largest extent is {report.largest_extent * factor:.4g} mm, "
+                f"which is unusual for a {kind}; check the units"
+            )
+    mesh = raw if factor == 1.0 else raw.scaled(factor)
+    return MeshReadResult(mesh, report, path, tuple(messages), factor, path.suffix.lower())
+
+
+def _atomic_write(path: Path, payload: bytes) -> None:
+    """Write beside ``path`` under a unique temporary name, then rename over it.
+
+    ``os.open(..., 0o666)`` lets the umask set the permissions, as for any
+    new file (``tempfile.mkstemp`` would make it private); an existing
+    target keeps its permissions.
+    """
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
+    mode = path.stat().st_mode & 0o7777 if path.exists() else 0o666
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), mode)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(payload)
+            handle.flush()
+            os.fsync(handle.fileno())
+        if path.exists():
+            os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def write_mesh(path: str | PathLike[str], mesh: Mesh, binary: bool = True) -> Path:
+    """Write a mesh (vertices in mm) atomically; the format follows the extension.
+
+    Parameters
+    ----------
+    path : path-like
+        Target file: ``.ply``, ``.stl``, ``.obj``, ``.vtk`` or ``.vtp``.
+    mesh : Mesh
+        Vertices in mm.
+    binary : bool
+        Binary encoding where the format has one (PLY little endian, STL,
+        legacy VTK big endian, VTP appended raw); False gives ascii (VTP:
+        inline base64).  OBJ is always text.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    InputError
+        Unsupported extension, missing folder, or the file cannot be written.
+    """
+    path = Path(path)
+    module = _format_for(path, "write")
+    if not isinstance(mesh, Mesh):
+        raise InputError(path, f"expected a Mesh to write, got {type(mesh).__name__}")
+    if not path.parent.is_dir():
+        raise InputError(path, "the folder does not exist", "create it first")
+    if path.is_dir():
+        raise InputError(path, "is a folder, cannot write a mesh file there")
+    payload = module.encode(mesh.vertices, np.asarray(mesh.faces), binary=binary)
+    try:
+        _atomic_write(path, payload)
+    except OSError as exc:
+        raise InputError(path, f"cannot be written ({exc.strerror or exc})") from None
+    return path
+
+
+__all__ = [
+    "SUPPORTED_EXTENSIONS",
+    "UNIT_SCALES",
+    "MeshReadResult",
+    "read_mesh",
+    "write_mesh",
+]
