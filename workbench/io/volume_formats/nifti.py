@@ -1,0 +1,111 @@
+"""NIfTI-1/2 reader (``.nii``, ``.nii.gz``) through nibabel.
+
+The voxel-to-world affine (sform when set, else qform, as chosen by
+nibabel) maps (i, j, k) to RAS+ millimetres; it is split into origin,
+spacing (column norms) and direction (normalised columns).  ``scl_slope`` /
+``scl_inter`` are applied by nibabel; the native dtype is kept when they are
+identity.  A 4-D image is accepted only when its 4th axis has length 1.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.errors import InputError
+from workbench.core.volume import Volume
+
+_SPACE_UNITS_TO_MM = {"mm": 1.0, "meter": 1000.0, "micron": 1e-3, "unknown": 1.0}
+
+
+def _header_text(header, key: str) -> str:
+    try:
+        value = np.asarray(header[key]).item()
+    except Exception:
+        return ""
+    return value.decode("latin-1").strip("\x00 ") if isinstance(value, bytes) else str(value)
+
+
+def _scaled(raw: np.ndarray, slope: float, inter: float) -> np.ndarray:
+    """``raw * slope + inter`` as a C-contiguous native array: raw dtype when identity,
+    int16 when exact and in range, float32 otherwise (never a float64 volume)."""
+    if slope == 1.0 and inter == 0.0:
+        return np.ascontiguousarray(raw, dtype=raw.dtype.newbyteorder("="))
+    exact = raw.dtype.kind in "iu" and slope.is_integer() and inter.is_integer()
+    ends = (float(raw.min()) * slope + inter, float(raw.max()) * slope + inter)
+    info = np.iinfo(np.int16)
+    dtype = np.int16 if exact and info.min <= min(ends) and max(ends) <= info.max else np.float32
+    out = np.empty(raw.shape, dtype)
+    for k in range(raw.shape[0]):  # slice by slice: no full-size temporary
+        if dtype == np.int16:
+            out[k] = raw[k].astype(np.int32) * int(slope) + int(inter)
+        else:
+            out[k] = raw[k].astype(np.float64) * slope + inter
+    return out
+
+
+def read_nifti(path: Path) -> Volume:
+    """Read a 3-D scalar NIfTI image; physical frame RAS, mm."""
+    import nibabel as nib  # local import: nibabel is slow to import
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file not found")
+    try:
+        img = nib.load(str(path))
+    except Exception as exc:  # nibabel raises many types for bad files
+        raise InputError(path, f"cannot read NIfTI file: {exc}") from None
+    shape = img.shape
+    if len(shape) == 4 and shape[3] == 1:
+        shape = shape[:3]
+    if len(shape) != 3:
+        raise InputError(path, f"only 3-D NIfTI images are supported, got shape {img.shape}")
+    if shape[2] < 2:
+        raise InputError(path, "the image has a single slice; an iso-surface needs at least 2")
+    proxy = img.dataobj
+    slope = float(getattr(proxy, "slope", 1.0))
+    inter = float(getattr(proxy, "inter", 0.0))
+    try:
+        raw = np.asarray(proxy.get_unscaled() if hasattr(proxy, "get_unscaled") else proxy)
+    except Exception as exc:
+        raise InputError(path, f"cannot read the NIfTI voxel data: {exc}") from None
+    if raw.dtype.kind not in "iuf":
+        raise InputError(path, f"unsupported NIfTI voxel type {raw.dtype}")
+    # nibabel is (i, j, k); ours is (k, j, i); scaling as in DICOM (int16 when exact)
+    data = _scaled(raw.reshape(shape).transpose(2, 1, 0), slope, inter)
+
+    warnings: list[str] = []
+    header = img.header
+    factor = 1.0
+    try:
+        space_unit = header.get_xyzt_units()[0]
+        factor = _SPACE_UNITS_TO_MM.get(space_unit, 1.0)
+        if space_unit == "unknown":
+            warnings.append("NIfTI spatial units are unset; assuming mm")
+    except Exception:  # pragma: no cover - header without units API
+        pass
+    affine = np.asarray(img.affine, dtype=np.float64)
+    axes = affine[:3, :3] * factor
+    spacing = np.linalg.norm(axes, axis=0)
+    if np.any(spacing == 0):
+        raise InputError(path, "the NIfTI affine has a zero-length axis")
+    direction = axes / spacing
+    origin = affine[:3, 3] * factor
+    codes = {}
+    try:
+        codes = {"sform_code": int(header["sform_code"]), "qform_code": int(header["qform_code"])}
+    except Exception:  # pragma: no cover - NIfTI-2 headers without codes
+        pass
+    metadata = {
+        "format": "NIfTI",
+        "affine": affine.tolist(),
+        "description": _header_text(header, "descrip"),
+        "scl_slope": slope,
+        "scl_inter": inter,
+        **codes,
+        "warnings": warnings,
+    }
+    return Volume(
+        data, spacing, origin, direction, "RAS", "unknown", "unknown", str(path), metadata
+    )

@@ -1,0 +1,188 @@
+"""Service behind ``workbench mesh-from-ct``: CT volume -> bone or skin surface mesh.
+
+The mesh is returned in millimetres in the volume's physical frame (LPS for
+DICOM/NRRD/MetaImage, RAS for NIfTI; recorded in the result), with outward
+normals.  Nothing is written to disk here; the caller saves the mesh.
+
+Progress is reported through an optional ``progress(step, fraction)``
+callback (``fraction`` of the whole job, 0..1), so the service can run in a
+worker thread or be wrapped in a generator by a GUI/CLI without changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from os import PathLike
+from time import perf_counter
+from typing import Any
+
+from workbench.core.isosurface import TISSUES, IsoChoice, choose_iso, extract_isosurface
+from workbench.core.mesh import Mesh, ValidationReport, validate
+from workbench.core.volume import Volume
+from workbench.io.volumes import read_volume
+
+Progress = Callable[[str, float], None]
+
+_READ_END = 0.1
+_EXTRACT_END = 0.9
+
+
+@dataclass(frozen=True)
+class CTMeshResult:
+    """A surface extracted from a CT volume.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        Vertices in mm in ``frame``; outward normals.
+    tissue : str
+        "bone" or "skin" (the preset asked for; see ``rule`` when ``iso`` was given).
+    iso : float
+        Level used, in the volume's units (``units``).
+    rule : str
+        Why this level (HU preset, VTK convention, multi-Otsu, explicit).
+    frame : str
+        Physical frame of the vertices ("LPS" or "RAS").
+    units : str
+        Units of ``iso`` ("HU" or "unknown").
+    timings_s : dict
+        Wall time per step in seconds ("read", "extract", "validate", "total").
+    validation : ValidationReport
+        :func:`workbench.core.mesh.validate` of ``mesh``.
+    stats : dict
+        Extraction statistics (crop box, slab count, triangle counts, ...).
+    source : str
+        The input path or the volume's source.
+    warnings : tuple of str
+        Reader warnings (ignored series, irregular spacing, assumed frame).
+    """
+
+    mesh: Mesh
+    tissue: str
+    iso: float
+    rule: str
+    frame: str
+    units: str
+    timings_s: dict[str, float]
+    validation: ValidationReport
+    stats: dict[str, Any] = field(default_factory=dict)
+    source: str = ""
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def summary(self) -> str:
+        """One-line validation summary (counts and problems)."""
+        return self.validation.summary()
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly description (no mesh arrays)."""
+        return {
+            "source": self.source,
+            "tissue": self.tissue,
+            "iso": self.iso,
+            "units": self.units,
+            "rule": self.rule,
+            "frame": self.frame,
+            "n_vertices": self.mesh.n_vertices,
+            "n_faces": self.mesh.n_faces,
+            "bounds_mm": self.mesh.bounds.tolist(),
+            "timings_s": dict(self.timings_s),
+            "validation": self.validation.to_dict() | {"summary": self.summary},
+            "stats": {k: v for k, v in self.stats.items() if k != "timings_s"},
+            "warnings": list(self.warnings),
+        }
+
+
+def mesh_from_ct(
+    path_or_volume: str | PathLike[str] | Volume,
+    tissue: str = "bone",
+    iso: float | None = None,
+    target_triangles: int | None = None,
+    smooth_iterations: int = 0,
+    progress: Progress | None = None,
+    *,
+    largest_component: bool = True,
+) -> CTMeshResult:
+    """Extract the bone or skin surface of a CT volume.
+
+    Parameters
+    ----------
+    path_or_volume : path-like or Volume
+        DICOM series folder, NRRD/NHDR, MetaImage or NIfTI file, or a loaded volume.
+    tissue : {"bone", "skin"}
+        Preset used when ``iso`` is None (300 / -300 HU for CT in HU; see
+        :func:`workbench.core.isosurface.choose_iso` for non-HU data).
+    iso : float, optional
+        Explicit level in the volume's units; overrides the preset.
+    target_triangles : int, optional
+        Decimate (quadric) to about this many triangles.
+    smooth_iterations : int
+        Taubin smoothing iterations (0 keeps the marching-cubes surface as is,
+        the most faithful choice for measurements).
+    progress : callable(step: str, fraction: float), optional
+        Progress of the whole job, 0..1.
+    largest_component : bool
+        Keep only the largest connected piece (drops debris, the CT table,
+        and a mandible that does not touch the skull at this level).
+
+    Returns
+    -------
+    CTMeshResult
+    """
+    if tissue not in TISSUES:
+        raise ValueError(f"tissue must be one of {TISSUES}, got {tissue!r}")
+
+    def report(step: str, fraction: float) -> None:
+        if progress is not None:
+            progress(step, fraction)
+
+    timings: dict[str, float] = {}
+    start = perf_counter()
+    report("reading volume", 0.0)
+    if isinstance(path_or_volume, Volume):
+        volume = path_or_volume
+    else:
+        volume = read_volume(path_or_volume)
+    timings["read"] = round(perf_counter() - start, 4)
+    report("reading volume", _READ_END)
+
+    if iso is None:
+        choice = choose_iso(volume, tissue)
+    else:
+        choice = IsoChoice(
+            float(iso), f"explicit level {float(iso):g} {volume.units} (preset not used)"
+        )
+
+    def inner(step: str, fraction: float) -> None:
+        report(step, _READ_END + (_EXTRACT_END - _READ_END) * fraction)
+
+    t0 = perf_counter()
+    result = extract_isosurface(
+        volume,
+        choice.iso,
+        largest_component=largest_component,
+        smooth_iterations=smooth_iterations,
+        target_triangles=target_triangles,
+        progress=inner,
+    )
+    timings["extract"] = round(perf_counter() - t0, 4)
+    report("validating", _EXTRACT_END)
+    t0 = perf_counter()
+    report_ = validate(result.mesh)
+    timings["validate"] = round(perf_counter() - t0, 4)
+    timings["total"] = round(perf_counter() - start, 4)
+    report("done", 1.0)
+    return CTMeshResult(
+        mesh=result.mesh,
+        tissue=tissue,
+        iso=choice.iso,
+        rule=choice.rule,
+        frame=result.frame,
+        units=volume.units,
+        timings_s=timings,
+        validation=report_,
+        stats=dict(result.stats),
+        source=str(path_or_volume) if not isinstance(path_or_volume, Volume) else volume.source,
+        warnings=tuple(volume.metadata.get("warnings", ())),
+    )
