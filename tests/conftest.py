@@ -50,3 +50,16 @@ def skull_obj(shared_data: Path) -> Path:
 def fsaverage_ply(shared_data: Path) -> Path:
     """Average adult head surface in mm (MNE fsaverage)."""
     return _require(shared_data / "fsaverage_head_mne" / "fsaverage-head_mm.ply")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _sample_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Point the sample cache at a temporary folder seeded from ../shared/data.
+
+    Downloads are disabled: a test that would need the network fails.
+    """
+    cache = tmp_path_factory.mktemp("sample-cache")
+    os.environ["WORKBENCH_DATA_DIR"] = str(cache)
+    os.environ["WORKBENCH_SAMPLE_MIRRORS"] = str(SHARED_DATA)
+    os.environ["WORKBENCH_OFFLINE"] = "1"
+    return cache

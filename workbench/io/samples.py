@@ -12,7 +12,8 @@ Before downloading, the folders listed in ``WORKBENCH_SAMPLE_MIRRORS``
 (separated by ``os.pathsep``) are searched for a copy at the file's
 ``mirror`` path; a copy whose hash matches is copied into the cache.  The
 test suite seeds the cache this way from the project's shared data folder,
-so tests never touch the network.
+so tests never touch the network (they also set ``WORKBENCH_OFFLINE=1``,
+which turns any download attempt into an error).
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ class Sample:
     description: str
     licence: str
     files: tuple[SampleFile, ...]
+    anatomy: dict | None = None
 
 
 def registry() -> dict[str, Sample]:
@@ -53,7 +55,7 @@ def registry() -> dict[str, Sample]:
     raw = json.loads(_REGISTRY_PATH.read_text(encoding="utf-8"))
     return {
         name: Sample(name, s["main"], s["kind"], s["description"], s["licence"],
-                     tuple(SampleFile(**f) for f in s["files"]))
+                     tuple(SampleFile(**f) for f in s["files"]), s.get("anatomy"))
         for name, s in raw["samples"].items()
     }
 
@@ -131,6 +133,11 @@ def fetch(name: str, *, progress: bool = False) -> Path:
 
 
 def _download(files: list[SampleFile], progress: bool) -> None:
+    if os.environ.get("WORKBENCH_OFFLINE"):
+        names = ", ".join(f.path for f in files)
+        raise WorkbenchError(
+            f"sample files not in the cache and downloads are off (WORKBENCH_OFFLINE): {names}"
+        )
     import pooch
 
     root = cache_dir()

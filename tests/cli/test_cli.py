@@ -1,0 +1,118 @@
+"""The ``workbench`` command line, end to end on real data."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import workbench
+from workbench.cli.main import main
+from workbench.io.markups import read_landmarks, write_landmarks
+from workbench.io.meshes import read_mesh
+from workbench.core.landmarks import LandmarkSet
+
+
+def test_version_and_help(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert workbench.__version__ in capsys.readouterr().out
+    assert main([]) == 0
+    out = capsys.readouterr().out
+    for command in ("demo", "mesh-from-ct", "mesh", "landmarks", "samples"):
+        assert command in out
+
+
+def test_python_dash_m_runs_the_cli() -> None:
+    done = subprocess.run([sys.executable, "-m", "workbench", "--version"],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 0
+    assert workbench.__version__ in done.stdout
+
+
+def test_mesh_from_ct_on_headsq(tmp_path: Path, headsq_nhdr: Path) -> None:
+    out = tmp_path / "bone.ply"
+    report = tmp_path / "bone.json"
+    assert main(["mesh-from-ct", str(headsq_nhdr), "--tissue", "bone", "--out", str(out),
+                 "--report", str(report), "--quiet"]) == 0
+    mesh = read_mesh(out).mesh
+    extent = mesh.extent
+    # bone of an adult head, cut by the field of view: ~15 cm wide, 13.8 cm of slices
+    assert 130 < extent[0] < 175 and 130 < extent[1] < 200 and extent[2] == pytest.approx(138, abs=2)
+    data = json.loads(report.read_text())
+    assert data["tissue"] == "bone" and data["iso"] == pytest.approx(1150, abs=1)
+    assert data["n_faces"] == mesh.n_faces
+
+
+def test_mesh_from_ct_decimates_and_accepts_sample_names(tmp_path: Path) -> None:
+    out = tmp_path / "skin.stl"
+    assert main(["mesh-from-ct", "sample:headsq", "--tissue", "skin",
+                 "--target-triangles", "20000", "--out", str(out), "--quiet"]) == 0
+    mesh = read_mesh(out).mesh
+    assert abs(mesh.n_faces - 20000) < 0.05 * 20000
+
+
+def test_units_are_never_guessed_silently(tmp_path: Path, skull_obj: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "skull.ply"
+    assert main(["mesh", "convert", str(skull_obj), str(out), "--kind", "skull"]) == 2
+    err = capsys.readouterr().err
+    assert "skull.obj" in err and "--units" in err
+    assert not out.exists()
+    assert main(["mesh", "convert", str(skull_obj), str(out), "--kind", "skull",
+                 "--units", "cm"]) == 0
+    mesh = read_mesh(out).mesh
+    assert mesh.extent.max() == pytest.approx(139.0, abs=0.5)
+
+
+def test_mesh_info_reports_problems(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    headsq_nhdr: Path) -> None:
+    out = tmp_path / "skin.ply"
+    main(["mesh-from-ct", str(headsq_nhdr), "--tissue", "skin", "--out", str(out), "--quiet"])
+    capsys.readouterr()
+    assert main(["mesh", "info", str(out)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["units"]["looks_like_mm"] is True
+    # the CT field of view cuts the head: open at the top and bottom
+    assert info["validation"]["holes"] >= 2
+    assert any("holes" in p for p in info["validation"]["problems"])
+
+
+def test_bad_input_gives_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    broken = tmp_path / "broken.ply"
+    broken.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\n")
+    assert main(["mesh", "info", str(broken)]) == 2
+    err = capsys.readouterr().err
+    assert "broken.ply" in err and "Traceback" not in err
+    assert main(["mesh-from-ct", str(tmp_path / "nothing.nrrd"), "--out",
+                 str(tmp_path / "x.ply")]) == 2
+    assert "nothing.nrrd" in capsys.readouterr().err
+
+
+def test_landmark_convert_round_trip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    points = {"n": (0.5, 85.0, -34.0), "po_l": (70.0, -10.0, -40.0), "po_r": (-70.0, -10.0, -40.0)}
+    src = tmp_path / "skull.fcsv"
+    write_landmarks(src, LandmarkSet.from_points("skull", points))
+    dst = tmp_path / "skull.mrk.json"
+    assert main(["landmarks", "convert", str(src), str(dst), "--surface", "skull"]) == 0
+    back = read_landmarks(dst, "skull").landmarks
+    for code, p in points.items():
+        assert np.array_equal(back[code].position, np.asarray(p))
+    assert main(["landmarks", "check", str(dst), "--surface", "skull"]) == 0
+    report = json.loads(capsys.readouterr().out.split("\n", 1)[1])
+    assert set(report["defined"]) == set(points)
+    assert "g" in report["not_in_file"]
+
+
+def test_samples_list_and_offline_fetch(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["samples", "list"]) == 0
+    assert "headsq" in capsys.readouterr().out
+    assert main(["samples", "fetch", "skull"]) == 0
+    path = Path(capsys.readouterr().out.strip())
+    assert path.name == "skull.obj" and path.stat().st_size == 3_421_857
+    assert main(["samples", "fetch", "no-such-sample"]) == 2

@@ -1,0 +1,84 @@
+"""Helpers shared by the sub-commands: unit options, mesh loading, output."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from workbench.core.mesh import Mesh
+from workbench.core.units import UNIT_SCALES, resolve_units
+from workbench.io.meshes import MeshReadResult, read_mesh
+from workbench.io.samples import resolve_input
+
+
+def add_units_options(parser: argparse.ArgumentParser) -> None:
+    """``--units`` and ``--scale`` for every command that reads a mesh."""
+    parser.add_argument(
+        "--units", choices=["auto", *UNIT_SCALES], default="auto",
+        help="units of the numbers in the mesh file (mesh files carry none). 'auto' accepts "
+             "the file only if its size looks like millimetres and otherwise stops with an "
+             "explanation; nothing is ever rescaled silently (default: auto)",
+    )
+    parser.add_argument("--scale", type=float, default=None, metavar="FACTOR",
+                        help="explicit factor from file units to mm (instead of --units)")
+
+
+def load_mesh(argument: str, args: argparse.Namespace, kind: str = "head") -> MeshReadResult:
+    """Read a mesh (path or ``sample:NAME``) applying the user's units policy.
+
+    Raises ``UnitsError`` when ``--units auto`` and the size does not look like mm.
+    """
+    path = resolve_input(argument)
+    units = getattr(args, "units", "auto")
+    scale = getattr(args, "scale", None)
+    result = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind=kind)
+    if scale is None and units == "auto":
+        resolve_units(result.units, "auto", source=str(path))
+    return result
+
+
+def write_json(data: dict[str, Any], out: Path | None) -> None:
+    text = json.dumps(data, indent=2, default=_json_default)
+    if out is None:
+        print(text)
+    else:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".tmp")
+        tmp.write_text(text + "\n", encoding="utf-8")
+        tmp.replace(out)
+
+
+def _json_default(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def mesh_summary(mesh: Mesh) -> dict[str, Any]:
+    lo, hi = mesh.bounds
+    return {
+        "n_vertices": mesh.n_vertices,
+        "n_faces": mesh.n_faces,
+        "bounds_mm": [lo.tolist(), hi.tolist()],
+        "extent_mm": (hi - lo).tolist(),
+        "area_mm2": mesh.area,
+    }
+
+
+def progress_printer(enabled: bool = True):  # noqa: ANN201 - returns a callback
+    """A ``progress(step, fraction)`` callback printing to stderr."""
+    last = {"step": None}
+
+    def report(step: str, fraction: float) -> None:
+        if not enabled:
+            return
+        if step != last["step"] and step != "done":
+            print(f"    {step} ...", file=sys.stderr, flush=True)
+            last["step"] = step
+
+    return report

@@ -1,0 +1,72 @@
+"""``workbench landmarks check|convert``: landmark files in the catalogue's codes."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from workbench.cli.common import write_json
+from workbench.core.errors import LandmarkError
+from workbench.io.catalogue import load_catalogue
+from workbench.io.markups import read_landmarks, write_landmarks
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "landmarks", help="check and convert landmark files",
+        description="Landmark files: 3D Slicer .mrk.json and .fcsv, MeshLab .pp, plain .csv. "
+                    "Labels are matched against the landmark catalogue (Farkas skin codes, "
+                    "craniometric / Caple & Stephan skull codes).")
+    lsub = p.add_subparsers(dest="landmarks_command", metavar="ACTION", required=True)
+    for name, helptext, handler in (
+        ("check", "list recognised, unknown, duplicate and undefined points", run_check),
+        ("convert", "convert between formats (exact)", run_convert),
+    ):
+        q = lsub.add_parser(name, help=helptext)
+        q.add_argument("file", type=Path)
+        if name == "convert":
+            q.add_argument("out", type=Path)
+            q.add_argument("--coordinate-system", choices=["LPS", "RAS"], default="LPS",
+                           help="for .mrk.json/.fcsv output (default LPS, as Slicer writes)")
+        q.add_argument("--surface", choices=["skull", "skin"], required=True)
+        q.add_argument("--strict", action="store_true",
+                       help="fail on unknown, duplicate or undefined points")
+        q.set_defaults(handler=handler)
+
+
+def _read(args: argparse.Namespace):  # noqa: ANN202
+    return read_landmarks(args.file, args.surface, catalogue=load_catalogue(),
+                          allow_undefined=True, strict=args.strict)
+
+
+def run_check(args: argparse.Namespace) -> int:
+    result = _read(args)
+    catalogue = load_catalogue()
+    expected = set(catalogue.codes(args.surface))
+    present = {lm.code for lm in result.landmarks}
+    write_json({
+        "file": str(args.file),
+        "surface": args.surface,
+        "coordinate_system": result.coordinate_system,
+        "defined": [lm.code for lm in result.landmarks if lm.is_defined],
+        "unknown": list(result.unknown),
+        "duplicates": list(result.duplicates),
+        "undefined": list(result.undefined),
+        "not_in_file": sorted(expected - present),
+        "messages": list(result.messages),
+    }, None)
+    return 0
+
+
+def run_convert(args: argparse.Namespace) -> int:
+    result = _read(args)
+    if not len(result.landmarks):
+        raise LandmarkError(f"{args.file}: no recognised landmarks to write")
+    kwargs = {}
+    if args.out.suffix.lower() in (".json", ".fcsv") or args.out.name.endswith(".mrk.json"):
+        kwargs["coordinate_system"] = args.coordinate_system
+    write_landmarks(args.out, result.landmarks, **kwargs)
+    for message in result.messages:
+        print(f"note: {message}")
+    print(f"wrote {len(result.landmarks)} landmarks to {args.out}")
+    return 0

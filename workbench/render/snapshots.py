@@ -1,0 +1,98 @@
+"""Off-screen pictures of meshes (pyvista), for reports, docs and the demo.
+
+Meshes arrive as :class:`workbench.core.mesh.Mesh` in mm; this module is the
+boundary where they become ``pyvista.PolyData``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.mesh import Mesh
+
+# anterior and superior directions of each named frame (head frame: x to the
+# subject's left, y up, z forward)
+_AXES = {
+    "HEAD": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    "LPS": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+    "RAS": ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+}
+
+
+def view_directions(view: str, anterior: np.ndarray, superior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera direction (from the focus toward the camera) and view-up for a named view.
+
+    "front" looks at the face, "side" at the subject's right profile,
+    "three_quarter" halfway between.
+    """
+    a = np.asarray(anterior, float) / np.linalg.norm(anterior)
+    s = np.asarray(superior, float) / np.linalg.norm(superior)
+    right = np.cross(a, s)
+    directions = {"front": a, "side": right, "three_quarter": (a + right) / np.sqrt(2.0)}
+    if view not in directions:
+        raise ValueError(f"unknown view {view!r}; use one of {sorted(directions)}")
+    return directions[view], s
+
+
+def _prefer_headless_gl() -> None:
+    """Without an X display, ask VTK for its EGL window directly.
+
+    VTK >= 9.4 would otherwise try X first, print a warning, then fall back.
+    """
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
+def to_polydata(mesh: Mesh):  # noqa: ANN201 - pyvista type
+    import pyvista as pv
+
+    faces = np.hstack([np.full((mesh.n_faces, 1), 3, np.int64), mesh.faces]).ravel()
+    return pv.PolyData(np.asarray(mesh.vertices), faces)
+
+
+def render_surfaces(
+    layers: Sequence[tuple[Mesh, str, float]],
+    path: str | Path,
+    *,
+    views: Sequence[str] = ("front", "side", "three_quarter"),
+    frame: str = "HEAD",
+    orientation: tuple[Sequence[float], Sequence[float]] | None = None,
+    size: tuple[int, int] = (480, 560),
+) -> Path:
+    """Render ``(mesh, colour, opacity)`` layers side by side, one panel per view.
+
+    ``frame`` names the coordinate convention of the meshes ("HEAD", "LPS" or
+    "RAS") so that "front" looks at the face; ``orientation`` =
+    ``(anterior, superior)`` vectors overrides it for data in a
+    non-anatomical frame.
+    """
+    anterior, superior = orientation if orientation is not None else _AXES[frame]
+    _prefer_headless_gl()
+    import pyvista as pv
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    plotter = pv.Plotter(off_screen=True, shape=(1, len(views)),
+                         window_size=(size[0] * len(views), size[1]), border=False)
+    try:
+        for col, view in enumerate(views):
+            plotter.subplot(0, col)
+            plotter.set_background("white")
+            for mesh, colour, opacity in layers:
+                plotter.add_mesh(to_polydata(mesh), color=colour, opacity=opacity,
+                                 smooth_shading=True, specular=0.2)
+            direction, up = view_directions(view, anterior, superior)
+            centre = np.mean([m.bounds.mean(axis=0) for m, _, _ in layers], axis=0)
+            radius = max(float(np.linalg.norm(m.extent)) for m, _, _ in layers)
+            plotter.camera.focal_point = centre
+            plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
+            plotter.camera.up = up
+            plotter.add_text(view.replace("_", " "), font_size=10, color="black")
+        plotter.screenshot(str(path))
+    finally:
+        plotter.close()
+    return path
