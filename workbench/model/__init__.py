@@ -1,1 +1,12 @@
 """The Case document and its parts: plain data, no Qt, no VTK."""
+
+from __future__ import annotations
+
+from workbench.model.audit import AuditLog
+from workbench.model.case import PARTS, Case, EvidenceConflictError
+from workbench.model.evidence import EvidenceFile
+from workbench.model.meta import CaseMeta
+from workbench.model.specimen import Specimen
+
+__all__ = ["PARTS", "AuditLog", "Case", "CaseMeta", "EvidenceConflictError", "EvidenceFile",
+           "Specimen"]

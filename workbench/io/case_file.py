@@ -1,0 +1,423 @@
+"""The ``.fcase`` case file: one zip holding a whole case.
+
+Layout
+------
+``case.json``
+    Small state (see ``data_tables/schemas/case.schema.json``); arrays are
+    referenced by the sha256 of their ``.npy`` bytes.
+``arrays/<sha256>.npy``
+    Arrays (specimen vertices and faces...), ``np.save(allow_pickle=False)``.
+``evidence/<name>``
+    Original evidence files, byte-for-byte (stored, not compressed).
+``audit.jsonl``
+    Append-only audit log (see :mod:`workbench.model.audit`).
+
+Guarantees
+----------
+- Saving is atomic: a temporary file in the same folder is written, fsynced
+  and moved over the target with :func:`os.replace`; a failed save leaves the
+  previous file as it was.
+- Evidence bytes are never re-encoded: a save copies them from the previous
+  case file or from the original file, re-hashing them on the way.
+- The audit log only grows: a save over the same case writes the old log
+  byte-identical and appends.
+- Loading runs the data-only migrations, validates against the schema, builds
+  objects through :data:`workbench.model.case.PARTS` only (no class named in
+  the file is ever instantiated, nothing is unpickled) and re-hashes every
+  array and evidence file.  A mismatch is refused unless
+  ``allow_tampered=True``, which loads and reports it in ``evidence_status``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import time
+import uuid
+import zipfile
+import zlib
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from functools import lru_cache, partial
+from os import PathLike
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Protocol
+
+import jsonschema
+import numpy as np
+
+import workbench
+from workbench.core.errors import InputError
+from workbench.io.migrations import CURRENT_VERSION, SCHEMA_ID, MigrationError, migrate
+from workbench.model.audit import AuditLog, make_record
+from workbench.model.case import PARTS, Case
+from workbench.model.evidence import (
+    EvidenceFile,
+    Opener,
+    copy_hashed,
+    find_verified_copy,
+    hash_chunks,
+    read_chunks,
+)
+from workbench.model.state import ARRAY_KEY, array_from_npy, join_arrays, split_arrays
+
+CASE_JSON = "case.json"
+AUDIT = "audit.jsonl"
+OK = "ok"
+_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError)
+
+PathArg = str | PathLike[str]
+
+
+class CaseFileError(InputError):
+    """A case file that cannot be read or written; names the file and the problem."""
+
+
+@dataclass(frozen=True)
+class LoadedCase:
+    """Result of :func:`load_case`.
+
+    Attributes
+    ----------
+    case : Case
+    audit_records : tuple of dict
+        The stored audit log, oldest first.
+    evidence_status : mapping
+        ``{member: "ok" or what is wrong}`` for every ``evidence/...`` and
+        ``arrays/...`` member the case refers to.
+    """
+
+    case: Case
+    audit_records: tuple[dict[str, Any], ...]
+    evidence_status: Mapping[str, str]
+
+    @property
+    def tampered(self) -> bool:
+        return any(status != OK for status in self.evidence_status.values())
+
+
+# ---------------------------------------------------------------- schema
+def schema_dir() -> Path:
+    """Folder of the JSON schemas: the wheel's ``_data`` copy first, else the source tree."""
+    package = Path(workbench.__file__).parent
+    for folder in (package / "_data" / "data_tables" / "schemas",
+                   package.parent / "data_tables" / "schemas"):
+        if (folder / "case.schema.json").is_file():
+            return folder
+    raise FileNotFoundError(f"case.schema.json not found beside the package {package}")
+
+
+@lru_cache(maxsize=1)
+def _validator() -> jsonschema.Draft202012Validator:
+    schema = json.loads((schema_dir() / "case.schema.json").read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+def validate_case_json(doc: Any, source: PathArg) -> None:
+    """Raise :class:`CaseFileError` naming the first schema violation in ``doc``."""
+    error = jsonschema.exceptions.best_match(_validator().iter_errors(doc))
+    if error is not None:
+        message = error.message if len(error.message) < 300 else error.message[:300] + "..."
+        raise CaseFileError(source, f"case.json does not match {SCHEMA_ID} at "
+                                    f"{error.json_path}: {message}")
+
+
+# ---------------------------------------------------------------- reading
+@contextlib.contextmanager
+def _open_zip(path: Path) -> Iterator[zipfile.ZipFile]:
+    if not path.is_file():
+        raise CaseFileError(path, "no such case file")
+    try:
+        with zipfile.ZipFile(path, "r") as archive:
+            yield archive
+    except _ZIP_ERRORS as error:
+        raise CaseFileError(path, f"the file is damaged or truncated ({error})",
+                            "restore it from a backup") from None
+    except OSError as error:
+        raise CaseFileError(path, f"cannot read the file ({error})") from None
+
+
+def _read_member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes:
+    try:
+        return archive.read(name)
+    except KeyError:
+        raise CaseFileError(path, f"{name} is missing from the case file") from None
+
+
+def _read_document(archive: zipfile.ZipFile, path: Path) -> dict[str, Any]:
+    """``case.json``, migrated to the current format and validated."""
+    raw = _read_member(archive, CASE_JSON, path)
+    try:
+        doc = json.loads(raw.decode("utf-8"), parse_constant=_reject_constant)
+    except (UnicodeDecodeError, ValueError) as error:
+        raise CaseFileError(path, f"case.json is not valid JSON ({error})") from None
+    if not isinstance(doc, dict):
+        raise CaseFileError(path, "case.json is not a JSON object")
+    try:
+        doc, _ = migrate(doc)
+    except MigrationError as error:
+        raise CaseFileError(path, str(error)) from None
+    validate_case_json(doc, path)
+    return doc
+
+
+def _reject_constant(name: str) -> None:
+    raise ValueError(f"{name} is not allowed")
+
+
+def _load_array(archive: zipfile.ZipFile, path: Path, status: dict[str, str],
+                ref: Mapping[str, Any]) -> np.ndarray:
+    member = f"arrays/{ref[ARRAY_KEY]}.npy"
+    data = _read_member(archive, member, path)
+    found = hashlib.sha256(data).hexdigest()
+    status[member] = OK if found == ref[ARRAY_KEY] else f"sha256 mismatch (hashes to {found})"
+    try:
+        return array_from_npy(data, ref)
+    except ValueError as error:
+        raise CaseFileError(path, f"{member}: {error}") from None
+
+
+def _evidence_status(archive: zipfile.ZipFile, item: EvidenceFile) -> str:
+    try:
+        with archive.open(f"evidence/{item.name}") as stream:
+            sha, size = hash_chunks(read_chunks(stream))
+    except KeyError:
+        return "missing from the case file"
+    except _ZIP_ERRORS as error:
+        return f"unreadable ({error})"
+    if (sha, size) != (item.sha256, item.size):
+        return f"sha256 mismatch (recorded {item.sha256}, found {sha}, {size} bytes)"
+    return OK
+
+
+def _evidence_store(doc: Mapping[str, Any], path: Path) -> tuple[EvidenceFile, ...]:
+    store = {e["name"]: EvidenceFile.from_state(e) for e in doc["evidence_store"]}
+    if len(store) != len(doc["evidence_store"]):
+        raise CaseFileError(path, "the evidence store lists a file name twice")
+    for entry in doc["evidence"]:
+        if store.get(entry["name"]) != EvidenceFile.from_state(entry):
+            raise CaseFileError(path, f"evidence {entry['name']!r} is not in the evidence store")
+    return tuple(store.values())
+
+
+def _build_case(doc: Mapping[str, Any], load: Callable[[Mapping[str, Any]], np.ndarray],
+                path: Path) -> Case:
+    state = {name: join_arrays(doc[name], load) if codec.has_arrays else doc[name]
+             for name, codec in PARTS.items()}
+    try:
+        return Case.from_state(state)
+    except (ValueError, TypeError, KeyError) as error:
+        raise CaseFileError(path, f"invalid case content: {error}") from None
+
+
+def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
+    """Open a ``.fcase`` file (read-only; the file is never modified).
+
+    Raises
+    ------
+    CaseFileError
+        Not a zip, truncated, invalid JSON, schema violation, missing member,
+        or (unless ``allow_tampered``) an array or evidence hash mismatch.
+    """
+    path = Path(path)
+    status: dict[str, str] = {}
+    with _open_zip(path) as archive:
+        doc = _read_document(archive, path)
+        store = _evidence_store(doc, path)
+        case = _build_case(doc, lambda ref: _load_array(archive, path, status, ref), path)
+        for item in store:
+            status[f"evidence/{item.name}"] = _evidence_status(archive, item)
+        audit_bytes = archive.read(AUDIT) if AUDIT in archive.namelist() else b""
+    bad = {member: s for member, s in status.items() if s != OK}
+    if bad and not allow_tampered:
+        listing = "; ".join(f"{member}: {s}" for member, s in bad.items())
+        raise CaseFileError(path, f"integrity check failed, refusing to open: {listing}",
+                            "it was modified or damaged outside the workbench; "
+                            "load with allow_tampered=True to inspect it")
+    try:
+        case.audit = AuditLog(audit_bytes)
+    except ValueError as error:
+        raise CaseFileError(path, f"the audit log is damaged ({error})") from None
+    for item in store:
+        case.retain_evidence(item)
+    case.source_path = path.resolve()
+    return LoadedCase(case, case.audit.records, MappingProxyType(status))
+
+
+def evidence_bytes(path: PathArg, name: str, *, allow_tampered: bool = False) -> bytes:
+    """The original bytes of evidence file ``name``, checked against its recorded sha256."""
+    path = Path(path)
+    with _open_zip(path) as archive:
+        store = {e.name: e for e in _evidence_store(_read_document(archive, path), path)}
+        if name not in store:
+            raise CaseFileError(path, f"the case has no evidence file named {name!r}")
+        data = _read_member(archive, f"evidence/{name}", path)
+    found = hashlib.sha256(data).hexdigest()
+    if found != store[name].sha256 and not allow_tampered:
+        raise CaseFileError(path, f"evidence/{name} does not match its recorded sha256")
+    return data
+
+
+# ---------------------------------------------------------------- writing
+def _encode(case: Case, meta_state: dict[str, Any]) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """``case.json`` document and ``{sha256: npy bytes}`` for ``case``."""
+    doc: dict[str, Any] = {"@schema": SCHEMA_ID, "format_version": CURRENT_VERSION,
+                           "software": f"forensic-workbench {workbench.__version__}"}
+    blobs: dict[str, bytes] = {}
+    for name, state in case.to_state().items():
+        if name == "meta":
+            state = meta_state
+        if PARTS[name].has_arrays:
+            state, part_blobs = split_arrays(state)
+            blobs.update(part_blobs)
+        doc[name] = state
+        if name == "evidence":
+            doc["evidence_store"] = [e.to_state() for e in case.retained_evidence.values()]
+    return doc, blobs
+
+
+def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[zipfile.ZipFile]:
+    """Readable previous case files (target first, then where the case came from)."""
+    found = []
+    for candidate in dict.fromkeys(p for p in (path, case.source_path) if p is not None):
+        with contextlib.suppress(OSError, *_ZIP_ERRORS):
+            found.append(stack.enter_context(zipfile.ZipFile(candidate, "r")))
+    return found
+
+
+def _check_audit_prefix(path: Path, case: Case, sources: list[zipfile.ZipFile],
+                        new_audit: bytes) -> None:
+    """Refuse to overwrite this case's file if its log is not a prefix of ``new_audit``."""
+    if not sources or Path(sources[0].filename or "") != path:
+        return  # nothing to overwrite
+    try:
+        doc, _ = migrate(json.loads(sources[0].read(CASE_JSON)))
+        same_case = doc["meta"]["case_id"] == case.meta.case_id
+        old_audit = sources[0].read(AUDIT)
+    except (KeyError, ValueError, TypeError, *_ZIP_ERRORS):
+        return  # not a case file, or no log yet
+    if same_case and not new_audit.startswith(old_audit):
+        raise CaseFileError(path, "the audit log in this file has records this session does "
+                                  "not know (another session saved it)", "save under a new name")
+
+
+def _evidence_source(item: EvidenceFile, sources: list[zipfile.ZipFile]) -> Opener:
+    """An opener for a copy of ``item`` whose bytes hash to its recorded sha256."""
+    member = f"evidence/{item.name}"
+    openers = [partial(a.open, member) for a in sources if member in a.namelist()]
+    if item.original_path:
+        openers.append(partial(open, item.original_path, "rb"))
+    found = find_verified_copy(item, openers, (OSError, *_ZIP_ERRORS))
+    if found is None:
+        raise CaseFileError(item.original_path or item.name,
+                            f"no copy of evidence {item.name!r} with sha256 {item.sha256} was "
+                            "found in the previous case file or at its original path")
+    return found
+
+
+def _zip_info(name: str, compress: int, size: int = 0) -> zipfile.ZipInfo:
+    info = zipfile.ZipInfo(name, date_time=time.localtime()[:6])
+    info.compress_type = compress
+    info.file_size = size
+    return info
+
+
+def _write_members(archive: zipfile.ZipFile, doc: dict[str, Any], blobs: dict[str, bytes],
+                   audit: bytes, openers: dict[EvidenceFile, Opener]) -> None:
+    text = json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False)
+    archive.writestr(_zip_info(CASE_JSON, zipfile.ZIP_DEFLATED), text.encode("utf-8"))
+    for sha, data in blobs.items():
+        archive.writestr(_zip_info(f"arrays/{sha}.npy", zipfile.ZIP_DEFLATED), data)
+    for item, opener in openers.items():
+        info = _zip_info(f"evidence/{item.name}", zipfile.ZIP_STORED, item.size)
+        with opener() as source, archive.open(info, "w") as target:
+            copied = copy_hashed(source, target)
+        if copied != (item.sha256, item.size):
+            raise CaseFileError(item.name, "evidence changed while it was being copied")
+    archive.writestr(_zip_info(AUDIT, zipfile.ZIP_DEFLATED), audit)
+
+
+@contextlib.contextmanager
+def _cleanup_on_error(path: Path, temp: Path) -> Iterator[None]:
+    """Remove ``temp`` if the block fails; report OS errors as :class:`CaseFileError`."""
+    try:
+        yield
+    except BaseException as error:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temp)
+        if isinstance(error, OSError):
+            raise CaseFileError(path, f"could not save ({error})") from error
+        raise
+
+
+def _write_temp(path: Path, write: Callable[[zipfile.ZipFile], None]) -> Path:
+    """Write a complete, fsynced zip next to ``path`` and return its name."""
+    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
+    with _cleanup_on_error(path, temp):
+        fd = os.open(temp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+        with os.fdopen(fd, "wb") as stream:
+            with zipfile.ZipFile(stream, "w") as archive:
+                write(archive)
+            stream.flush()
+            os.fsync(stream.fileno())
+    return temp
+
+
+def _replace(temp: Path, path: Path) -> None:
+    """Move ``temp`` over ``path`` (atomic on one file system) and sync the folder."""
+    with _cleanup_on_error(path, temp):
+        os.replace(temp, path)
+    with contextlib.suppress(OSError):  # make the rename durable where supported
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+
+
+class _Cleanable(Protocol):
+    def set_clean(self) -> None: ...
+
+
+def save_case(case: Case, path: PathArg, stack: _Cleanable | None = None) -> Path:
+    """Write ``case`` to ``path`` atomically; see the module docstring.
+
+    Parameters
+    ----------
+    case : Case
+    path : path
+        Target ``.fcase`` file; its folder must exist.
+    stack : CommandStack, optional
+        Marked clean after a successful save.
+
+    Returns
+    -------
+    Path
+        ``path``.  On success ``case.meta.modified`` is updated, the audit
+        log (with one ``save`` record added) is marked persisted and
+        ``case.source_path`` becomes ``path``.
+    """
+    path = Path(path).resolve()
+    meta = case.meta.touched()
+    doc, blobs = _encode(case, meta.to_state())
+    validate_case_json(doc, path)
+    record = make_record("save", "Save case", meta.examiner,
+                         {"file": path.name, "format_version": CURRENT_VERSION})
+    audit = case.audit.encode([record])
+    with contextlib.ExitStack() as stack_of_files:
+        sources = _sources(path, case, stack_of_files)
+        _check_audit_prefix(path, case, sources, audit)
+        openers = {item: _evidence_source(item, sources)
+                   for item in case.retained_evidence.values()}
+        temp = _write_temp(path, lambda zf: _write_members(zf, doc, blobs, audit, openers))
+    _replace(temp, path)  # after the previous file is closed (needed on Windows)
+    case.audit.mark_persisted(audit, [record])
+    case.replace("meta", meta)
+    case.source_path = path
+    if stack is not None:
+        stack.set_clean()
+    return path
