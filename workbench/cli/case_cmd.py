@@ -1,0 +1,66 @@
+"""``workbench case new|info|evidence``: case files from the command line."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from workbench.cli.common import add_units_options, write_json
+from workbench.io.case_file import evidence_bytes, save_case
+from workbench.io.samples import resolve_input
+from workbench.services.case_setup import describe_case, start_case_from_skull
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("case", help="create and inspect case files (.fcase)",
+                       description="Case files keep the original evidence byte for byte with "
+                                   "its SHA-256, the working data, and an append-only audit log.")
+    csub = p.add_subparsers(dest="case_command", metavar="ACTION", required=True)
+
+    new = csub.add_parser("new", help="start a case from a skull mesh")
+    new.add_argument("skull", help="skull mesh file or sample:NAME")
+    add_units_options(new)
+    new.add_argument("--landmarks", type=Path, default=None,
+                     help="skull landmarks to import (.mrk.json .fcsv .pp .csv)")
+    new.add_argument("--examiner", default="")
+    new.add_argument("--out", type=Path, required=True, help="case file to write (.fcase)")
+    new.set_defaults(handler=run_new)
+
+    info = csub.add_parser("info", help="summary, evidence check and audit log (JSON)")
+    info.add_argument("case", type=Path)
+    info.add_argument("--allow-tampered", action="store_true",
+                      help="report a case whose evidence no longer matches its hashes "
+                           "instead of refusing it")
+    info.set_defaults(handler=run_info)
+
+    ev = csub.add_parser("evidence", help="extract an original evidence file")
+    ev.add_argument("case", type=Path)
+    ev.add_argument("name", help="evidence file name (see 'case info')")
+    ev.add_argument("--out", type=Path, required=True)
+    ev.set_defaults(handler=run_evidence)
+
+
+def run_new(args: argparse.Namespace) -> int:
+    opened = start_case_from_skull(resolve_input(args.skull), units=args.units, scale=args.scale,
+                                   examiner=args.examiner, landmarks_path=args.landmarks)
+    save_case(opened.case, args.out, opened.stack)
+    for note in opened.notes:
+        print(f"note: {note}")
+    print(f"wrote {args.out} (case {opened.case.meta.case_id})")
+    return 0
+
+
+def run_info(args: argparse.Namespace) -> int:
+    write_json(describe_case(args.case, allow_tampered=args.allow_tampered), None)
+    return 0
+
+
+def run_evidence(args: argparse.Namespace) -> int:
+    data = evidence_bytes(args.case, args.name)
+    if args.out.exists():
+        from workbench.core.errors import InputError
+
+        raise InputError(args.out, "already exists; refusing to overwrite", "choose another --out")
+    args.out.write_bytes(data)
+    print(f"wrote {args.out} ({len(data)} bytes, verified against the recorded SHA-256)")
+    return 0

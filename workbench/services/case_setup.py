@@ -1,0 +1,133 @@
+"""Start a case from a skull (mesh file or CT surface) and report on saved cases.
+
+Opening a skull is one undoable step: the original file becomes evidence
+(bytes kept, SHA-256 recorded) and a working copy in millimetres becomes the
+specimen.  The original is never modified; unit conversion applies only to
+the working copy, and the evidence record notes it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+from workbench.commands.case_edits import AddEvidence, SetSpecimen
+from workbench.commands.landmarks import ReplaceLandmarkSet
+from workbench.commands.stack import CommandStack
+from workbench.core.mesh import validate
+from workbench.core.units import resolve_units
+from workbench.io.case_file import load_case
+from workbench.io.catalogue import load_catalogue
+from workbench.io.markups import read_landmarks
+from workbench.io.meshes import read_mesh
+from workbench.model.case import Case
+from workbench.model.evidence import EvidenceFile
+from workbench.model.meta import CaseMeta
+
+
+@dataclass
+class OpenedCase:
+    """A new case with its command stack and notes for the user."""
+
+    case: Case
+    stack: CommandStack
+    notes: list[str] = field(default_factory=list)
+
+
+def start_case_from_skull(
+    skull_path: str | PathLike[str],
+    *,
+    units: str = "auto",
+    scale: float | None = None,
+    examiner: str = "",
+    landmarks_path: str | PathLike[str] | None = None,
+) -> OpenedCase:
+    """New case whose specimen is the skull mesh at ``skull_path``.
+
+    Parameters
+    ----------
+    skull_path : path
+        Skull surface (PLY, STL, OBJ, VTK, VTP); kept byte-for-byte as evidence.
+    units, scale
+        Units of the file (see :func:`workbench.io.meshes.read_mesh`); with
+        ``"auto"`` a file whose size does not look like mm is refused with an
+        explanation (``UnitsError``).
+    examiner : str
+        Name recorded in the case and the audit log.
+    landmarks_path : path, optional
+        Skull landmarks to import (``.mrk.json``, ``.fcsv``, ``.pp``, ``.csv``),
+        in the same frame and units as the skull file.
+    """
+    path = Path(skull_path)
+    read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="skull")
+    if scale is None and units == "auto":
+        resolve_units(read.units, "auto", source=str(path))
+    factor = read.scale_applied
+    units_note = "millimetres" if factor == 1.0 else f"file units x {factor:g} = mm"
+    case = Case(meta=CaseMeta.new(examiner=examiner))
+    stack = CommandStack(case)
+    notes = list(read.messages)
+    report = validate(read.mesh)
+    notes += [f"skull mesh: {p}" for p in report.problems()]
+    with stack.group(f"Open skull {path.name}"):
+        stack.push(AddEvidence(evidence=EvidenceFile.from_path(path, "skull_mesh",
+                                                               units_note=units_note)))
+        stack.push(SetSpecimen(mesh=read.mesh, units="mm"))
+        if landmarks_path is not None:
+            result = read_landmarks(landmarks_path, "skull", catalogue=load_catalogue())
+            landmarks = result.landmarks
+            if factor != 1.0:
+                landmarks = landmarks.transformed(_scale_matrix(factor))
+            notes += list(result.messages)
+            stack.push(AddEvidence(evidence=EvidenceFile.from_path(landmarks_path, "skull_landmarks")))
+            stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
+                                          label=f"Import landmarks {Path(landmarks_path).name}"))
+    stack.set_clean()
+    return OpenedCase(case, stack, notes)
+
+
+def _scale_matrix(factor: float) -> Any:
+    import numpy as np
+
+    m = np.eye(4)
+    m[:3, :3] *= factor
+    return m
+
+
+def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) -> dict[str, Any]:
+    """JSON-able summary of a saved case: meta, evidence check, specimen, landmarks, audit."""
+    loaded = load_case(path, allow_tampered=allow_tampered)
+    case = loaded.case
+    specimen = case.specimen
+    landmarks = {
+        surface: {
+            "defined": [lm.code for lm in lmset if lm.is_defined],
+            "absent": [lm.code for lm in lmset if lm.status == "absent"],
+        }
+        for surface, lmset in case.landmarks.items()
+    }
+    return {
+        "file": str(path),
+        "case_id": case.meta.case_id,
+        "examiner": case.meta.examiner,
+        "created": case.meta.created,
+        "modified": case.meta.modified,
+        "software_version": case.meta.software_version,
+        "evidence": [
+            {"name": e.name, "role": e.role, "sha256": e.sha256, "size": e.size,
+             "units_note": e.units_note, "status": loaded.evidence_status.get(f"evidence/{e.name}", "?")}
+            for e in case.evidence
+        ],
+        "tampered": loaded.tampered,
+        "specimen": None if specimen.mesh is None else {
+            "n_vertices": specimen.mesh.n_vertices, "n_faces": specimen.mesh.n_faces,
+            "units": specimen.units, "extent_mm": specimen.mesh.extent.tolist(),
+            "head_frame_set": specimen.input_to_head is not None,
+        },
+        "landmarks": landmarks,
+        "parameters": dict(case.parameters),
+        "audit": [{k: r.get(k) for k in ("time", "action", "operation", "examiner") if k in r}
+                  for r in loaded.audit_records],
+    }
