@@ -116,3 +116,33 @@ def test_samples_list_and_offline_fetch(capsys: pytest.CaptureFixture[str]) -> N
     path = Path(capsys.readouterr().out.strip())
     assert path.name == "skull.obj" and path.stat().st_size == 3_421_857
     assert main(["samples", "fetch", "no-such-sample"]) == 2
+
+
+def test_landmarks_frame_aligns_a_copy(tmp_path: Path, skull_obj: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    # FH landmarks on the unitless skull (+y up, face +z), with the head tilted 12 degrees
+    # about x; the frame undoes the tilt and an aligned copy of the mesh is written
+    tilt = np.deg2rad(12.0)
+    rot = np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]])
+    fh = {"po_l": (6.2, 7.0, -0.5), "po_r": (-6.2, 7.0, -0.5), "or_l": (3.3, 7.0, 6.7),
+          "or_r": (-3.3, 7.0, 6.7), "n": (0.0, 9.2, 7.9), "me": (0.0, -0.5, 6.5)}
+    tilted = {c: rot @ np.asarray(p) for c, p in fh.items()}
+    lm = tmp_path / "fh.csv"
+    write_landmarks(lm, LandmarkSet.from_points("skull", tilted))
+    out = tmp_path / "aligned.ply"
+    args = ["landmarks", "frame", str(lm), "--surface", "skull", "--apply", str(skull_obj),
+            "--out", str(out)]
+    assert main(args) == 2  # the mesh's units are unclear: refused, nothing written
+    assert not out.exists()
+    capsys.readouterr()
+    assert main([*args, "--units", "mm"]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads(printed[: printed.rindex("}") + 1])
+    matrix = np.asarray(report["input_to_head"])
+    head = {c: matrix[:3, :3] @ p + matrix[:3, 3] for c, p in tilted.items()}
+    assert np.allclose(head["po_l"], [6.2, 0, 0], atol=1e-9)
+    assert np.allclose(head["or_l"][1], 0, atol=1e-9) and head["or_l"][2] > 0
+    assert report["mirrored_input"] is False
+    aligned = read_mesh(out, units="mm").mesh
+    original = read_mesh(skull_obj, units="mm").mesh
+    assert np.allclose(aligned.vertices, original.vertices @ matrix[:3, :3].T + matrix[:3, 3])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import write_json
+from workbench.cli.common import add_units_options, load_mesh, write_json
 from workbench.core.errors import LandmarkError
 from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import read_landmarks, write_landmarks
@@ -32,6 +32,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         q.add_argument("--strict", action="store_true",
                        help="fail on unknown, duplicate or undefined points")
         q.set_defaults(handler=handler)
+
+    fr = lsub.add_parser(
+        "frame", help="Frankfort Horizontal head frame from porions, orbitales and midline points",
+        description="Compute the head frame (x to the subject's left, x = 0 midsagittal, y up, "
+                    "z toward the face; mm) from a landmark file. Prints the 4x4 transform from "
+                    "the file's frame. With --apply, also writes a copy of a mesh in the head "
+                    "frame (the input mesh is not changed).")
+    fr.add_argument("file", type=Path)
+    fr.add_argument("--surface", choices=["skull", "skin"], required=True)
+    fr.add_argument("--apply", default=None, metavar="MESH",
+                    help="mesh in the same frame and units as the landmarks")
+    add_units_options(fr)
+    fr.add_argument("--out", type=Path, default=None, help="where to write the aligned mesh")
+    fr.set_defaults(handler=run_frame, strict=False)
 
 
 def _read(args: argparse.Namespace):  # noqa: ANN202
@@ -69,4 +83,31 @@ def run_convert(args: argparse.Namespace) -> int:
     for message in result.messages:
         print(f"note: {message}")
     print(f"wrote {len(result.landmarks)} landmarks to {args.out}")
+    return 0
+
+
+def run_frame(args: argparse.Namespace) -> int:
+    from workbench.io.meshes import write_mesh
+    from workbench.services.frame import head_frame_from_landmarks
+
+    result = _read(args)
+    frame = head_frame_from_landmarks(result.landmarks)
+    head = result.landmarks.transformed(frame.input_to_head)
+    write_json({
+        "file": str(args.file),
+        "input_to_head": frame.input_to_head.round(12).tolist(),
+        "fh_residual_mm": frame.fh_residual_mm,
+        "mirrored_input": frame.mirrored_input,
+        "landmarks_in_head_frame_mm": {lm.code: lm.position.round(4).tolist()
+                                       for lm in head if lm.is_defined},
+    }, None)
+    if frame.mirrored_input:
+        print("warning: the landmarks imply a mirrored input (left and right swapped, or a "
+              "mesh exported with one axis flipped); check the left/right labels")
+    if args.apply:
+        if args.out is None:
+            raise LandmarkError("--apply needs --out for the aligned copy")
+        mesh = load_mesh(args.apply, args, kind="skull").mesh
+        write_mesh(args.out, mesh.transformed(frame.input_to_head))
+        print(f"wrote {args.out} (head frame, mm)")
     return 0
