@@ -278,14 +278,9 @@ class ValidationReport:
         return head + (": " + "; ".join(problems) if problems else ": no problems found")
 
     def to_dict(self) -> dict[str, object]:
-        return {
-            "n_vertices": self.n_vertices,
-            "n_faces": self.n_faces,
-            "nonfinite_vertices": self.nonfinite_vertices,
-            "degenerate_faces": self.degenerate_faces,
-            "duplicate_faces": self.duplicate_faces,
-            "nonmanifold_edges": self.nonmanifold_edges,
-            "boundary_edges": self.boundary_edges,
+        counts = ("n_vertices", "n_faces", "nonfinite_vertices", "degenerate_faces",
+                  "duplicate_faces", "nonmanifold_edges", "boundary_edges")
+        return {name: getattr(self, name) for name in counts} | {
             "holes": len(self.boundary_loops),
             "hole_sizes": [len(loop) for loop in self.boundary_loops],
             "n_components": self.n_components,

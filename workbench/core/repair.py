@@ -51,28 +51,39 @@ def _keep_faces(mesh: Mesh, keep: np.ndarray, what: str) -> Repaired:
                     f"removed {removed} {what}")
 
 
+def _drop_vertices(vertices: np.ndarray, faces: np.ndarray,
+                   drop: np.ndarray) -> tuple[Mesh, np.ndarray]:
+    """Remove the vertices flagged in ``drop`` (no face may use them) and renumber."""
+    keep = ~drop
+    new_index = np.cumsum(keep) - 1
+    return Mesh(vertices[keep], new_index[faces]), np.flatnonzero(keep)
+
+
+def _used(n_vertices: int, faces: np.ndarray) -> np.ndarray:
+    used = np.zeros(n_vertices, bool)
+    used[faces.ravel()] = True
+    return used
+
+
 def remove_unreferenced_vertices(mesh: Mesh) -> Repaired:
     """Drop vertices no triangle uses and renumber the faces."""
-    used = np.zeros(mesh.n_vertices, bool)
-    used[mesh.faces.ravel()] = True
-    if used.all():
+    unused = ~_used(mesh.n_vertices, mesh.faces)
+    if not unused.any():
         return _unchanged(mesh)
-    new_index = np.cumsum(used) - 1
-    source = np.flatnonzero(used)
-    return Repaired(Mesh(mesh.vertices[used], new_index[mesh.faces]), source,
-                    f"removed {int((~used).sum())} unreferenced vertices")
+    new_mesh, source = _drop_vertices(mesh.vertices, mesh.faces, unused)
+    return Repaired(new_mesh, source, f"removed {int(unused.sum())} unreferenced vertices")
 
 
 def remove_nonfinite(mesh: Mesh) -> Repaired:
-    """Drop triangles touching NaN/inf vertices, then the bad vertices."""
+    """Drop NaN/inf vertices and the triangles touching them (nothing else)."""
     bad = ~np.isfinite(mesh.vertices).all(axis=1)
     if not bad.any():
         return _unchanged(mesh)
     keep = ~bad[mesh.faces].any(axis=1)
-    step = Mesh(mesh.vertices, mesh.faces[keep])
-    cleaned = remove_unreferenced_vertices(step)
-    return Repaired(cleaned.mesh, cleaned.vertex_source,
-                    f"removed {int(bad.sum())} non-finite vertices and {int((~keep).sum())} triangles")
+    new_mesh, source = _drop_vertices(mesh.vertices, mesh.faces[keep], bad)
+    return Repaired(new_mesh, source,
+                    f"removed {int(bad.sum())} non-finite vertices and "
+                    f"{int((~keep).sum())} triangles")
 
 
 def remove_degenerate_faces(mesh: Mesh, area_tol_mm2: float = 1e-12) -> Repaired:
@@ -87,22 +98,24 @@ def merge_close_vertices(mesh: Mesh, tol_mm: float = 1e-6) -> Repaired:
     """Weld vertices closer than ``tol_mm`` (keeps the lowest index of each cluster)."""
     if mesh.n_vertices == 0:
         return _unchanged(mesh)
-    pairs = cKDTree(mesh.vertices).query_pairs(tol_mm, output_type="ndarray")
+    finite = np.flatnonzero(np.isfinite(mesh.vertices).all(axis=1))
+    pairs = cKDTree(mesh.vertices[finite]).query_pairs(tol_mm, output_type="ndarray")
     if len(pairs) == 0:
         return _unchanged(mesh)
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     n = mesh.n_vertices
+    pairs = finite[pairs]
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     first = np.full(label.max() + 1, n)
     np.minimum.at(first, label, np.arange(n))
     remap = first[label]
-    welded = Mesh(mesh.vertices, remap[mesh.faces])
-    cleaned = remove_unreferenced_vertices(welded)
-    return Repaired(cleaned.mesh, cleaned.vertex_source,
-                    f"merged {n - cleaned.mesh.n_vertices} vertices closer than {tol_mm:g} mm")
+    merged = remap != np.arange(n)  # welded into a lower index
+    new_mesh, source = _drop_vertices(mesh.vertices, remap[mesh.faces], merged)
+    return Repaired(new_mesh, source,
+                    f"merged {int(merged.sum())} vertices closer than {tol_mm:g} mm")
 
 
 def keep_largest_component(mesh: Mesh) -> Repaired:
@@ -112,9 +125,10 @@ def keep_largest_component(mesh: Mesh) -> Repaired:
         return _unchanged(mesh)
     sizes = np.bincount(labels)
     keep = labels == sizes.argmax()
-    step = Mesh(mesh.vertices, mesh.faces[keep])
-    cleaned = remove_unreferenced_vertices(step)
-    return Repaired(cleaned.mesh, cleaned.vertex_source,
+    # drop the vertices of the removed pieces, not other unreferenced ones
+    orphaned = _used(mesh.n_vertices, mesh.faces[~keep]) & ~_used(mesh.n_vertices, mesh.faces[keep])
+    new_mesh, source = _drop_vertices(mesh.vertices, mesh.faces[keep], orphaned)
+    return Repaired(new_mesh, source,
                     f"kept the largest of {len(sizes)} pieces ({int(keep.sum())} of "
                     f"{mesh.n_faces} triangles)")
 

@@ -4,15 +4,22 @@ Units: mm in the mesh's frame.  All queries are vectorised over many points.
 
 Closest point
 -------------
-A k-d tree over face centroids gives candidate faces; exact point–triangle
-distances (Ericson, *Real-Time Collision Detection*, §5.1.5, vectorised)
-pick the best.  The answer is *certified*: a face not among the candidates
-is at least ``‖x − centroid‖ − ρ`` away, where ρ is the largest
-centroid-to-corner radius of any face, so a query is finished once the
-best distance is below the k-th candidate's centroid distance minus ρ.
-Uncertified queries (typically points far from the surface) are finished
-by a branch-and-bound search in a bounding-volume hierarchy
-(:mod:`workbench.core.bvh`) that starts from the best distance found.
+Faces are grouped into leaves of about eight under a tree of bounding boxes
+(:mod:`workbench.core.bvh`).  For each query the leaf whose centre is
+nearest is measured exactly first; its best distance ``d`` bounds the
+answer, and a breadth-first branch-and-bound search collects every other
+leaf whose boxes come within ``d``; those are measured exactly too.  No face
+outside those leaves can be closer, so the answer is *certified* (exact up
+to floating-point rounding; among exact ties any of the tied faces may be
+returned).  Queries are sorted along a Z-order curve for cache locality and
+processed in blocks on a small thread pool.  The returned point, distance
+and barycentric coordinates are recomputed for the winning face with
+:func:`closest_on_triangles`, a second, independent formulation.
+
+Typical cost (2 cores, 320k triangles, 10⁵ queries): 0.6 s to build the
+index, 0.25-0.4 s for queries within a few mm of the surface; queries far
+from it, or near the centre of a closed surface (where much of the surface
+is almost equally far), cost more because more leaves are within reach.
 
 Signed distance
 ---------------
@@ -23,13 +30,15 @@ consistently wound meshes: positive outside, negative inside.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from workbench.core.bvh import TriangleBVH
+from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
 from workbench.core.normals import _normalise, angle_weighted_vertex_normals
 
@@ -57,136 +66,167 @@ def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray,
     """Closest points on triangles ``(a, b, c)`` to points ``p`` (all ``(k, 3)``).
 
     Returns the closest points ``(k, 3)`` and their barycentric coordinates
-    ``(k, 3)`` (weights of a, b, c).  Degenerate triangles are handled (the
-    closest point then lies on an edge or vertex).
+    ``(k, 3)`` (weights of a, b, c).  The candidates are the projection onto
+    the triangle's plane (when it falls inside a non-degenerate triangle)
+    and the closest points of the three edges; the nearest wins, an edge on
+    a tie, so points on an edge or corner get exact zero weights.  Unlike
+    Ericson's region classification (*Real-Time Collision Detection*,
+    §5.1.5) this stays correct for degenerate triangles (coincident or
+    collinear corners).
     """
+    # coordinates as contiguous rows: (k, 3) views with a stride are slow
+    p, a, b, c = (np.asarray(x, dtype=np.float64).reshape(-1, 3).T.copy() for x in (p, a, b, c))
+    k = p.shape[1]
+    best_d2 = np.full(k, np.inf)
+    best_edge = np.zeros(k, np.int64)
+    best_t = np.zeros(k)
+    # edges ab, bc, ca: t along the edge from its first corner
+    for i, (p0, p1) in enumerate(((a, b), (b, c), (c, a))):
+        e = p1 - p0
+        rel = p - p0
+        ee = _dot(e, e)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = _dot(rel, e) / ee
+        t = np.clip(np.where(ee > 0, t, 0.0), 0.0, 1.0)
+        rel -= t * e
+        d2 = _dot(rel, rel)
+        better = d2 < best_d2
+        best_d2 = np.where(better, d2, best_d2)
+        best_t = np.where(better, t, best_t)
+        best_edge[better] = i
+    # interior: solve the 2x2 normal equations for the weights of b and c
     ab, ac, ap = b - a, c - a, p - a
-    d1 = np.einsum("ij,ij->i", ab, ap)
-    d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-
-    k = len(p)
-    bary = np.zeros((k, 3))
-    done = np.zeros(k, bool)
-
-    def assign(mask: np.ndarray, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> None:
-        m = mask & ~done
-        bary[m, 0], bary[m, 1], bary[m, 2] = u[m], v[m], w[m]
-        done[m] = True
-
-    one, zero = np.ones(k), np.zeros(k)
+    d00, d01, d11 = _dot(ab, ab), _dot(ab, ac), _dot(ac, ac)
+    d20, d21 = _dot(ap, ab), _dot(ap, ac)
+    det = d00 * d11 - d01 * d01
+    good = det > 1e-12 * np.maximum(d00 * d11, 1e-300)
     with np.errstate(invalid="ignore", divide="ignore"):
-        assign((d1 <= 0) & (d2 <= 0), one, zero, zero)                     # vertex a
-        assign((d3 >= 0) & (d4 <= d3), zero, one, zero)                    # vertex b
-        assign((d6 >= 0) & (d5 <= d6), zero, zero, one)                    # vertex c
-        t = d1 / (d1 - d3)
-        assign((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1 - t, t, zero)          # edge ab
-        t = d2 / (d2 - d6)
-        assign((vb <= 0) & (d2 >= 0) & (d6 <= 0), 1 - t, zero, t)          # edge ac
-        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        assign((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), zero, 1 - t, t)  # edge bc
-        denom = va + vb + vc
-        v = vb / denom
-        w = vc / denom
-        assign(np.isfinite(v) & np.isfinite(w), 1 - v - w, v, w)           # interior
-    # anything left is a fully degenerate triangle: use its first corner
-    bary[~done] = (1.0, 0.0, 0.0)
-    bary = np.nan_to_num(bary)
-    points = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
-    return points, bary
+        v = np.where(good, (d11 * d20 - d01 * d21) / det, -1.0)
+        w = np.where(good, (d00 * d21 - d01 * d20) / det, -1.0)
+    inside = good & (v >= 0) & (w >= 0) & (v + w <= 1)
+    ap -= v * ab
+    ap -= w * ac
+    inside &= _dot(ap, ap) < best_d2
+    bary = np.zeros((3, k))
+    rows = np.arange(k)
+    bary[best_edge, rows] = 1.0 - best_t
+    bary[(best_edge + 1) % 3, rows] = best_t
+    bary = np.where(inside, np.stack([1.0 - v - w, v, w]), bary)
+    points = bary[0] * a + bary[1] * b + bary[2] * c
+    return np.ascontiguousarray(points.T), np.ascontiguousarray(bary.T)
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise dot product of ``(3, k)`` coordinate arrays."""
+    out = u[0] * v[0]
+    out += u[1] * v[1]
+    out += u[2] * v[2]
+    return out
+
+
+def _morton_order(points: np.ndarray) -> np.ndarray:
+    """Permutation sorting ``points`` along a Z-order curve (for cache locality)."""
+    lo = points.min(axis=0)
+    span = max(float((points.max(axis=0) - lo).max()), 1e-300)
+    q = np.clip((points - lo) * (1023.0 / span), 0, 1023).astype(np.uint64)
+    code = np.zeros(len(points), np.uint64)
+    for axis in range(3):
+        x = q[:, axis]
+        x = (x | (x << np.uint64(16))) & np.uint64(0x030000FF)
+        x = (x | (x << np.uint64(8))) & np.uint64(0x0300F00F)
+        x = (x | (x << np.uint64(4))) & np.uint64(0x030C30C3)
+        x = (x | (x << np.uint64(2))) & np.uint64(0x09249249)
+        code |= x << np.uint64(axis)
+    return np.argsort(code, kind="stable")
 
 
 class MeshIndex:
     """Spatial index over one mesh for closest-point and signed-distance queries.
 
-    Build once per mesh (about 30 ms for 250k faces) and query many times.
+    Build once per mesh and query many times.  Results are exact (certified)
+    up to floating-point rounding: see the module docstring.
     """
+
+    chunk = 4096
 
     def __init__(self, mesh: Mesh):
         if mesh.n_faces == 0:
             raise ValueError("cannot index a mesh without triangles")
+        if not np.isfinite(mesh.vertices[mesh.faces.ravel()]).all():
+            raise ValueError("cannot index a mesh with NaN or infinite vertices")
         self.mesh = mesh
-        tri = mesh.triangles
-        self._centroids = tri.mean(axis=1)
-        self._radius = float(np.linalg.norm(tri - self._centroids[:, None], axis=2).max())
-        self._tree = cKDTree(self._centroids)
-
-    @property
-    def centroid_tree(self) -> cKDTree:
-        return self._tree
-
-    # ------------------------------------------------------------- closest
-    def _evaluate(self, pts: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Best of ``cand`` ``(k, c)`` face ids (``-1`` = none) for each point."""
-        k, c = cand.shape
-        valid = cand >= 0
-        cand = np.where(valid, cand, 0)
-        tri = self.mesh.triangles[cand.ravel()]
-        rep = np.repeat(pts, c, axis=0)
-        cp, bary = closest_on_triangles(rep, tri[:, 0], tri[:, 1], tri[:, 2])
-        d2 = ((cp - rep) ** 2).sum(axis=1).reshape(k, c)
-        d2[~valid] = np.inf
-        best = d2.argmin(axis=1)
-        flat = np.arange(k) * c + best
-        return cp[flat], np.sqrt(d2[np.arange(k), best]), cand[np.arange(k), best], bary[flat]
-
-    def closest_points(self, points: np.ndarray, *, chunk: int = 20_000) -> ClosestPoints:
-        """Exact closest surface points for ``points`` ``(k, 3)`` mm."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        n = len(pts)
-        out_p = np.empty((n, 3))
-        out_d = np.empty(n)
-        out_f = np.empty(n, np.int64)
-        out_b = np.empty((n, 3))
-        for s in range(0, n, chunk):
-            sl = slice(s, min(s + chunk, n))
-            out_p[sl], out_d[sl], out_f[sl], out_b[sl] = self._closest_chunk(pts[sl])
-        return ClosestPoints(out_p, out_d, out_f, out_b)
-
-    def _closest_chunk(self, pts: np.ndarray) -> tuple[np.ndarray, ...]:
-        k = min(8, self.mesh.n_faces)
-        dist_c, cand = self._tree.query(pts, k=k, workers=-1)
-        cand = cand.reshape(len(pts), -1)
-        dist_c = dist_c.reshape(len(pts), -1)
-        res = list(self._evaluate(pts, cand))
-        certified = (res[1] <= dist_c[:, -1] - self._radius) | (k >= self.mesh.n_faces)
-        rest = np.flatnonzero(~certified)
-        if len(rest):
-            self._bvh_search(pts, rest, res)
-        return tuple(res)
+        self._tree = LeafTree(mesh)
+        scale = float(np.abs(mesh.bounds).max()) + float(mesh.extent.max()) + 1.0
+        self._abs_tol2 = (1e-9 * scale) ** 2
 
     @cached_property
-    def _bvh(self) -> TriangleBVH:
-        return TriangleBVH(self.mesh)
+    def centroid_tree(self) -> cKDTree:
+        """k-d tree over face centroids (for callers that need one, e.g. normals)."""
+        return cKDTree(self.mesh.triangles.mean(axis=1))
 
-    def _bvh_search(self, pts: np.ndarray, idx: np.ndarray, res: list[np.ndarray]) -> None:
-        """Certify the queries ``idx`` by branch and bound, nearest leaf first."""
-        bvh = self._bvh
-        best = res[1][idx].copy()
-        q, leaf, lb = bvh.candidate_leaves(pts[idx], best * (1 + 1e-12) + 1e-12)
-        first = np.searchsorted(q, q, side="left")
-        rank = np.arange(len(q)) - first
-        for r in range(int(rank.max()) + 1 if len(rank) else 0):
-            sel = (rank == r) & (lb < best[q])
-            if not sel.any():
-                if r > 0 and not ((rank > r) & (lb < best[q])).any():
-                    break
-                continue
-            local = q[sel]
-            cp, d, f, b = self._evaluate(pts[idx[local]], bvh.leaf_faces(leaf[sel]))
-            better = d < best[local]
-            local, rows = local[better], idx[local[better]]
-            best[local] = d[better]
-            res[0][rows], res[1][rows], res[2][rows], res[3][rows] = (
-                cp[better], d[better], f[better], b[better])
+    # ------------------------------------------------------------- closest
+    def closest_points(self, points: np.ndarray, *, workers: int | None = None) -> ClosestPoints:
+        """Exact closest surface points for ``points`` ``(k, 3)`` mm."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if not np.isfinite(pts).all():
+            raise ValueError("query points must be finite")
+        n = len(pts)
+        face = np.zeros(n, np.int64)
+        cp, bary = np.zeros((n, 3)), np.zeros((n, 3))
+        if n:
+            tree = self._tree
+            order = _morton_order(pts)
+            sorted_pts = np.ascontiguousarray(pts[order])
+            _, near = tree.centre_tree.query(sorted_pts, workers=-1)
+            first = tree.centre_leaf[near]
+            blocks = [slice(s, min(s + self.chunk, n)) for s in range(0, n, self.chunk)]
+
+            def run(block: slice) -> None:
+                p = sorted_pts[block]
+                f = self._closest_block(p, first[block])
+                tri = self.mesh.triangles[f]
+                rows = order[block]
+                face[rows] = f
+                cp[rows], bary[rows] = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
+
+            if workers is None:
+                workers = os.cpu_count() or 1
+            if workers > 1 and len(blocks) > 1:
+                with ThreadPoolExecutor(max_workers=min(workers, len(blocks))) as pool:
+                    list(pool.map(run, blocks))
+            else:
+                for block in blocks:
+                    run(block)
+        return ClosestPoints(cp, np.linalg.norm(cp - pts, axis=1), face, bary)
+
+    def _closest_block(self, p: np.ndarray, first: np.ndarray) -> np.ndarray:
+        """Face ids of the closest faces to ``p``; ``first`` is a nearby leaf per query."""
+        tree = self._tree
+        d2 = tree.leaf_distances(p, first)
+        j = d2.argmin(axis=1)
+        best, face = d2[np.arange(len(p)), j], tree.leaf_faces[first, j]
+        # every other leaf whose box could hold something closer
+        q, leaf = tree.descend(p, self._slack(best))
+        other = leaf != first[q]
+        self._update(p, q[other], leaf[other], best, face)
+        return face
+
+    def _slack(self, d2: np.ndarray) -> np.ndarray:
+        """Squared distance bound widened to cover rounding (never misses a face)."""
+        return d2 * (1.0 + 1e-7) + self._abs_tol2
+
+    def _update(self, p: np.ndarray, q: np.ndarray, leaf: np.ndarray,
+                best: np.ndarray, face: np.ndarray) -> None:
+        """Evaluate leaves ``leaf`` for queries ``q`` and keep improvements (in place)."""
+        if len(q) == 0:
+            return
+        d2 = self._tree.leaf_distances(np.take(p, q, axis=0), leaf)
+        j = d2.argmin(axis=1)
+        pair_best = d2[np.arange(len(q)), j]
+        pair_face = self._tree.leaf_faces[leaf, j]
+        np.minimum.at(best, q, pair_best)
+        win = pair_best <= best[q]
+        face[q[win]] = pair_face[win]
 
     # ------------------------------------------------------------- sign
     @cached_property
