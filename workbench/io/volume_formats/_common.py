@@ -63,6 +63,16 @@ class DataSpec:
     dtype: np.dtype
 
 
+def open_header(path: Path):  # noqa: ANN201 - a binary file object
+    """Open a header file for reading, turning OS errors into :class:`InputError`."""
+    try:
+        return open(path, "rb")  # noqa: SIM115 - the caller closes it with 'with'
+    except FileNotFoundError:
+        raise InputError(path, "file not found") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot open: {exc.strerror or exc}") from None
+
+
 def expand_file_pattern(header: Path, pattern: str, first: int, last: int, step: int) -> list[Path]:
     """Numbered data files ``pattern % n`` for n = first, first+step, ... last (inclusive)."""
     if step == 0:

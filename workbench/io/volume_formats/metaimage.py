@@ -23,7 +23,7 @@ import numpy as np
 from workbench.core.errors import InputError
 from workbench.core.volume import Volume
 
-from ._common import DataSpec, check_sizes, expand_file_pattern, parse_floats, read_block
+from ._common import DataSpec, check_sizes, expand_file_pattern, open_header, parse_floats, read_block
 
 _ELEMENT_TYPES = {
     "MET_CHAR": "i1",
@@ -56,12 +56,7 @@ def _true(value: str | None) -> bool:
 
 def parse_metaimage_header(path: Path) -> tuple[dict[str, str], list[str], int]:
     """Return (fields with lower-case keys, LIST file names, byte offset after the header)."""
-    try:
-        fh = open(path, "rb")
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
-    except OSError as exc:
-        raise InputError(path, f"cannot open: {exc.strerror or exc}") from None
+    fh = open_header(path)
     fields: dict[str, str] = {}
     listed: list[str] = []
     with fh:

@@ -29,7 +29,7 @@ import numpy as np
 from workbench.core.errors import InputError
 from workbench.core.volume import Volume
 
-from ._common import ENCODINGS, DataSpec, check_sizes, expand_file_pattern, parse_floats, read_block
+from ._common import DataSpec, ENCODINGS, check_sizes, expand_file_pattern, open_header, parse_floats, read_block
 
 _TYPES: dict[str, str] = {}
 for _names, _dt in [
@@ -77,12 +77,7 @@ def parse_nrrd_header(path: Path) -> tuple[dict[str, str], dict[str, str], list[
 
     Field names are lower-cased with spaces removed (``data file`` -> ``datafile``).
     """
-    try:
-        fh = open(path, "rb")
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
-    except OSError as exc:
-        raise InputError(path, f"cannot open: {exc.strerror or exc}") from None
+    fh = open_header(path)
     fields: dict[str, str] = {}
     pairs: dict[str, str] = {}
     listed: list[str] = []
