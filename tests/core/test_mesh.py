@@ -21,8 +21,6 @@ CLEAN = {
 }
 
 
-
-
 def report(mesh: Mesh) -> dict:
     d = validate(mesh).to_dict()
     return {k: d[k] for k in CLEAN}
