@@ -1,0 +1,43 @@
+"""Reference head assembly: the procedural skull fitted under the authored skin (issue 3, in progress)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.io.tables import load_depth_table
+from workbench.model.template import PARTS
+from workbench.services.template import build_reference_head
+
+
+@pytest.fixture(scope="module", params=["female", "male"])
+def head(request: pytest.FixtureRequest):  # noqa: ANN201
+    return build_reference_head(request.param)
+
+
+def test_every_ttable_pair_is_fitted(head) -> None:  # noqa: ANN001
+    table = load_depth_table("ttable_2023")
+    errors = head.provenance["depth_error_mm"]
+    assert set(errors) == set(table.codes)  # all 36 T-Table landmark pairs take part
+    values = np.array(list(errors.values()))
+    # the skin landmark lies at the dowel tip: skull landmark + table depth along the dowel
+    assert np.median(values) < 0.1
+    assert values.max() < 1.0  # the issue's tolerance
+
+
+def test_parts_are_present_and_the_bone_is_under_the_skin(head) -> None:  # noqa: ANN001
+    assert set(PARTS) <= set(head.meshes)
+    # Away from the openings, bone stays under the skin except for slivers of
+    # at most ~1.5 mm over the nasal bones (open point of issue 3: the goal is > 0)
+    assert head.provenance["min_clearance_mm"] > -2.0
+    skin = head.meshes["skin"]
+    for part in ("cranium", "mandible"):
+        lo, hi = head.meshes[part].bounds
+        assert (lo > skin.bounds[0] - 1).all() and (hi < skin.bounds[1] + 1).all()
+
+
+def test_template_identity(head) -> None:  # noqa: ANN001
+    assert head.template_id.endswith(head.sex)
+    assert len(head.content_hash) == 64
+    again = build_reference_head(head.sex)
+    assert again.content_hash == head.content_hash  # deterministic
