@@ -14,10 +14,18 @@ import sys
 from collections.abc import Sequence
 
 import workbench
-from workbench.cli import case_cmd, ct_cmd, demo_cmd, landmarks_cmd, mesh_cmd, samples_cmd
+from workbench.cli import (
+    case_cmd,
+    ct_cmd,
+    demo_cmd,
+    landmarks_cmd,
+    mesh_cmd,
+    samples_cmd,
+    template_cmd,
+)
 from workbench.core.errors import WorkbenchError
 
-_MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, samples_cmd)
+_MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -62,13 +62,15 @@ def render_surfaces(
     frame: str = "HEAD",
     orientation: tuple[Sequence[float], Sequence[float]] | None = None,
     size: tuple[int, int] = (480, 560),
+    points: Sequence[tuple[np.ndarray, str]] = (),
 ) -> Path:
     """Render ``(mesh, colour, opacity)`` layers side by side, one panel per view.
 
     ``frame`` names the coordinate convention of the meshes ("HEAD", "LPS" or
     "RAS") so that "front" looks at the face; ``orientation`` =
     ``(anterior, superior)`` vectors overrides it for data in a
-    non-anatomical frame.
+    non-anatomical frame.  ``points`` adds ``((k, 3) positions, colour)``
+    markers (e.g. landmarks) drawn as small spheres.
     """
     anterior, superior = orientation if orientation is not None else _AXES[frame]
     _prefer_headless_gl()
@@ -85,12 +87,18 @@ def render_surfaces(
             for mesh, colour, opacity in layers:
                 plotter.add_mesh(to_polydata(mesh), color=colour, opacity=opacity,
                                  smooth_shading=True, specular=0.2)
+            for positions, colour in points:
+                if len(positions):
+                    plotter.add_mesh(pv.PolyData(np.asarray(positions, float)), color=colour,
+                                     point_size=9, render_points_as_spheres=True)
             direction, up = view_directions(view, anterior, superior)
             centre = np.mean([m.bounds.mean(axis=0) for m, _, _ in layers], axis=0)
             radius = max(float(np.linalg.norm(m.extent)) for m, _, _ in layers)
             plotter.camera.focal_point = centre
             plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
             plotter.camera.up = up
+            plotter.reset_camera()  # keep the direction, fit the distance to the bounds
+            plotter.camera.zoom(1.15)
             plotter.add_text(view.replace("_", " "), font_size=10, color="black")
         plotter.screenshot(str(path))
     finally:

@@ -163,15 +163,21 @@ def fit_skull_to_skin(
                           lm.description) if lm.is_defined else lm for lm in lms]
         lms = LandmarkSet(lms.surface, tuple(moved))
 
+    # the skull's own Frankfort landmarks stay on the FH plane (y = 0)
+    fh_codes = [c for c in ("po_l", "po_r", "or_l", "or_r") if c in lms.as_dict()]
     for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported below
         s = lms.positions_of(codes)
         n = dowel_directions(parts, s, [part_of.get(c, "cranium") for c in codes], codes)
         target = p_skin - d[:, None] * n
-        if np.abs(target - s).max() < 0.02 and iterations > 1:
+        fh = lms.positions_of(fh_codes)
+        fh_target = fh * [1.0, 0.0, 1.0]
+        if max(np.abs(target - s).max(), np.abs(fh[:, 1]).max(initial=0)) < 0.02 and iterations > 1:
             break
-        warp_all(np.vstack([s, fixed_src]), np.vstack([target, fixed_src]))
-        fixed_src = _push_inward(parts, lms.positions_of(codes), skin_index, skin_normals,
-                                 fixed_src, warp_all, openings)
+        warp_all(np.vstack([s, fh, fixed_src]), np.vstack([target, fh_target, fixed_src]))
+        if np.abs(target - s).max() > 0.5:
+            continue  # settle the dowel landmarks before adding clearance constraints
+        fixed_src = _push_inward(parts, lms.positions_of([*codes, *fh_codes]), skin_index,
+                                 skin_normals, fixed_src, warp_all, openings)
     s = lms.positions_of(codes)
     n = dowel_directions(parts, s, [part_of.get(c, "cranium") for c in codes], codes)
     along = np.einsum("ij,ij->i", p_skin - s, n)

@@ -1,0 +1,86 @@
+"""Write a reference head as a folder of standard files (a "template pack").
+
+Layout (all meshes PLY, millimetres, head frame: x to the subject's left,
+x = 0 midsagittal, y up, z toward the face, Frankfort Horizontal at y = 0)::
+
+    skin.ply  skull.ply  mandible.ply  teeth.ply  eyes.ply  tongue.ply
+    skin.mrk.json  skull.mrk.json     (3D Slicer markups; RAS = head frame axes as stored)
+    template.json                     (id, content hash, sex, provenance, regions, openings)
+"""
+
+from __future__ import annotations
+
+import json
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.core.mesh import Mesh
+from workbench.io.markups import write_mrk_json
+from workbench.io.meshes import write_mesh
+from workbench.model.template import TemplateHead
+
+FILES = {
+    "skin.ply": ("skin",),
+    "skull.ply": ("cranium",),
+    "mandible.ply": ("mandible",),
+    "teeth.ply": ("upper_teeth", "lower_teeth"),
+    "eyes.ply": ("eyes",),
+    "tongue.ply": ("tongue",),
+}
+
+
+def _combine(meshes: list[Mesh]) -> Mesh:
+    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
+    return Mesh(np.vstack([m.vertices for m in meshes]),
+                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Path]:
+    """Write ``head`` into ``folder`` (created if needed); returns the files written."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, parts in FILES.items():
+        written.append(write_mesh(out / name, _combine([head.meshes[p] for p in parts])))
+    for name, lmset in (("skin.mrk.json", head.skin_landmarks),
+                        ("skull.mrk.json", head.skull_landmarks)):
+        write_mrk_json(out / name, lmset, coordinate_system="RAS")
+        written.append(out / name)
+    info = {
+        "@schema": "template-pack-v1",
+        "template_id": head.template_id,
+        "content_hash": head.content_hash,
+        "sex": head.sex,
+        "units": "mm",
+        "frame": "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward "
+                 "the face; Frankfort Horizontal at y = 0; origin between the porions",
+        "files": {name: list(parts) for name, parts in FILES.items()},
+        "skull_landmark_part": dict(head.skull_landmark_part),
+        "eye_centres_mm": head.eye_centres,
+        "eye_radius_mm": head.eye_radius,
+        "tmj_axis": {"point_mm": head.tmj_axis[0], "direction": head.tmj_axis[1]},
+        "regions": {k: np.asarray(v, dtype=int) for k, v in head.regions.items()},
+        "openings": {k: np.asarray(v, dtype=int) for k, v in head.openings.items()},
+        "provenance": dict(head.provenance),
+    }
+    path = out / "template.json"
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(_jsonable(info), indent=1) + "\n", encoding="utf-8")
+    tmp.replace(path)
+    written.append(path)
+    return written
