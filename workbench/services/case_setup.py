@@ -13,6 +13,8 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from workbench.commands.case_edits import AddEvidence, SetSpecimen
 from workbench.commands.landmarks import ReplaceLandmarkSet
 from workbench.commands.stack import CommandStack
@@ -88,9 +90,7 @@ def start_case_from_skull(
     return OpenedCase(case, stack, notes)
 
 
-def _scale_matrix(factor: float) -> Any:
-    import numpy as np
-
+def _scale_matrix(factor: float) -> np.ndarray:
     m = np.eye(4)
     m[:3, :3] *= factor
     return m

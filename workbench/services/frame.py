@@ -46,7 +46,10 @@ def head_frame_from_landmarks(landmarks: LandmarkSet) -> HeadFrame:
     if or_l is None:  # classic FH uses the left orbitale; use the right one alone if needed
         or_l, or_r = or_r, None
     surface = landmarks.surface
-    pick = lambda codes: [defined[c] for c in codes if c in defined]  # noqa: E731
+
+    def pick(codes: tuple[str, ...]) -> list:
+        return [defined[c] for c in codes if c in defined]
+
     return frankfort_frame(
         defined["po_l"], defined["po_r"], or_l, or_r,
         midline=pick(MIDLINE[surface]) or None,
