@@ -18,9 +18,15 @@ def test_template_export_writes_loadable_files(tmp_path: Path) -> None:
     assert main(["template", "export", "--sex", "female", "--out", str(out)]) == 0
     info = json.loads((out / "template.json").read_text())
     assert info["template_id"].endswith("female") and len(info["content_hash"]) == 64
+    # skull-skin offset vectors: the 2023 T-Table pairs are all there, about one depth long
+    pg = np.linalg.norm(info["pairs"]["pg"]["offset_mm"])
+    assert info["pairs"]["pr"]["skin"] == "ls" and abs(pg - 11.0) < 1.0
     for name in ("skin.ply", "skull.ply", "mandible.ply", "teeth.ply", "eyes.ply", "tongue.ply"):
         mesh = pv.read(out / name)  # other tools read what we write
         assert mesh.n_cells > 1000, name
+    muscles = json.loads((out / "muscles.json").read_text())["muscles"]
+    assert len(muscles) == 24
+    assert {m["kind"] for m in muscles} == {"linear", "sphincter"}
     skin = pv.read(out / "skin.ply")
     assert 5_000 <= skin.n_cells <= 10_000
     skull_lm = read_landmarks(out / "skull.mrk.json", "skull").landmarks
@@ -37,7 +43,7 @@ def test_render_template_pictures_are_not_blank(tmp_path: Path) -> None:
 
     assert main(["render", "template", "--sex", "male", "--out", str(tmp_path)]) == 0
     pictures = sorted(tmp_path.glob("*.png"))
-    assert len(pictures) == 9
+    assert len(pictures) == 11
     for picture in pictures:
         image = np.asarray(Image.open(picture).convert("RGB")).astype(int)
         assert (np.abs(image - 255).sum(axis=2) > 30).mean() > 0.05, picture.name

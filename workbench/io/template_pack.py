@@ -5,6 +5,8 @@ x = 0 midsagittal, y up, z toward the face, Frankfort Horizontal at y = 0)::
 
     skin.ply  skull.ply  mandible.ply  teeth.ply  eyes.ply  tongue.ply
     skin.mrk.json  skull.mrk.json     (3D Slicer markups; RAS = head frame axes as stored)
+    muscles.json                      (24 grids of Kähler's Table 7.1 as skin triangles + barycentric
+                                       weights + depth, and their positions on this skin in mm)
     template.json                     (id, content hash, sex, provenance, regions, openings)
 """
 
@@ -50,6 +52,19 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def _pairs(head: TemplateHead) -> dict[str, Any]:
+    from workbench.io.catalogue import load_catalogue
+
+    catalogue = load_catalogue()
+    skin = head.skin_landmarks.as_dict()
+    out = {}
+    for code, position in head.skull_landmarks.as_dict().items():
+        partner = catalogue.partner(code, "skull")
+        if partner and partner in skin:
+            out[code] = {"skin": partner, "offset_mm": skin[partner] - position}
+    return out
+
+
 def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Path]:
     """Write ``head`` into ``folder`` (created if needed); returns the files written."""
     out = Path(folder)
@@ -61,6 +76,19 @@ def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Pat
                         ("skull.mrk.json", head.skull_landmarks)):
         write_mrk_json(out / name, lmset, coordinate_system="RAS")
         written.append(out / name)
+    muscles = {
+        "@schema": "muscle-grids-v1",
+        "units": "mm",
+        "note": "points are stored on skin.ply as (triangle, barycentric weights, depth below the "
+                "skin along the interpolated vertex normal); 'positions_mm' evaluates them on this skin",
+        "muscles": [m.to_state() | {"positions_mm": m.points.evaluate(head.skin),
+                                    "axis_positions_mm": None if m.axis is None
+                                    else m.axis.evaluate(head.skin)}
+                    for m in head.muscles],
+    }
+    path = out / "muscles.json"
+    path.write_text(json.dumps(_jsonable(muscles), indent=1) + "\n", encoding="utf-8")
+    written.append(path)
     info = {
         "@schema": "template-pack-v1",
         "template_id": head.template_id,
@@ -71,6 +99,9 @@ def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Pat
                  "the face; Frankfort Horizontal at y = 0; origin between the porions",
         "files": {name: list(parts) for name, parts in FILES.items()},
         "skull_landmark_part": dict(head.skull_landmark_part),
+        # Kähler §8.3.2: each skull landmark is tied to its skin partner by an
+        # offset vector (skin - skull, mm); rescaling it changes tissue depth
+        "pairs": _pairs(head),
         "eye_centres_mm": head.eye_centres,
         "eye_radius_mm": head.eye_radius,
         "tmj_axis": {"point_mm": head.tmj_axis[0], "direction": head.tmj_axis[1]},

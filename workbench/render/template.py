@@ -1,8 +1,10 @@
-"""Pictures of the reference head: skin, skull with landmarks (head frame, mm)."""
+"""Pictures of the reference head: skin, skull with landmarks, muscle grids (head frame, mm)."""
 
 from __future__ import annotations
 
 from pathlib import Path
+
+import numpy as np
 
 from workbench.model.template import TemplateHead
 from workbench.render.snapshots import render_surfaces
@@ -11,7 +13,8 @@ VIEWS = ("front", "side", "three_quarter")
 
 
 def render_template(head: TemplateHead, folder: str | Path) -> list[Path]:
-    """Front, side and three-quarter PNGs of the skin and of the skull with landmarks."""
+    """PNGs of the skin, the skull with landmarks and the head (front, side, three-quarter),
+    and of the muscle grid points on the skin (front, three-quarter)."""
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     m = head.meshes
@@ -29,4 +32,9 @@ def render_template(head: TemplateHead, folder: str | Path) -> list[Path]:
         path = out / f"head_{view}.png"
         written.append(render_surfaces([*bone, (m["skin"], "peachpuff", 0.35)], path,
                                        views=(view,)))
+    lines = [grid.points.evaluate(head.skin) for grid in head.muscles]
+    for view in ("front", "three_quarter"):
+        path = out / f"muscles_{view}.png"
+        written.append(render_surfaces([(m["skin"], "peachpuff", 0.6)], path, views=(view,),
+                                       points=[(np.vstack(lines), "darkred")] if lines else ()))
     return written

@@ -15,30 +15,40 @@ averaged over :data:`DOWEL_RADIUS_MM`):
 
 with ``d_i`` the adult mean of the depth table (default the 2023 T-Table).
 Because ``n_i`` depends on the warped skull, the fit is repeated until the
-landmarks stop moving.  Skull regions that come closer to the skin than
-:data:`MIN_CLEARANCE_MM` are then pushed inward by extra correspondences, so
-the skin never intersects the skull.
+dowel directions stop changing; each round re-solves one warp of the
+original skull with all constraints, and the directions are damped per
+landmark (harder where they oscillate).  Left/right dowels are kept mirror
+images and midline dowels lie in the mid-sagittal plane, so the fitted skull
+is symmetric.  Skull regions that come closer to the skin than
+:data:`MIN_CLEARANCE_MM` are pushed inward by extra (mirrored)
+correspondences that ride on the landmark warp, so the skin never
+intersects the skull away from its openings.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh
-from workbench.core.normals import normals_within_radius, vertex_normals
+from workbench.core.normals import normals_within_radius
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
 from workbench.io.tables import load_depth_table
 from workbench.model.template import TemplateHead
+from workbench.services.muscles import layout_muscles
 
 TEMPLATE_NAME = "workbench-reference-head"
 TEMPLATE_VERSION = "1"
 DOWEL_RADIUS_MM = 5.0
 MIN_CLEARANCE_MM = 2.0
+#: Clearance constraints aim this far beyond MIN_CLEARANCE_MM, and lie this far apart.
+CLEARANCE_SLACK_MM = 0.5
+CLEARANCE_SPACING_MM = 10.0
+#: No clearance constraint closer than this to a fitted skull landmark.
+LANDMARK_GAP_MM = 4.0
 BONE_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue")
 
 #: Landmarks of the mouth region whose dowels run parallel to the Frankfort
@@ -98,6 +108,14 @@ def dowel_directions(parts: dict[str, Mesh], points: np.ndarray, part_of: list[s
         idx = [i for i, p in enumerate(part_of) if p == part]
         mesh = parts[part if part in parts else "cranium"]
         normals[idx] = normals_within_radius(mesh, points[idx], DOWEL_RADIUS_MM)
+    # midline landmarks: the dowel lies in the mid-sagittal plane (the
+    # procedural bone mesh is not vertex-symmetric, so its averaged normal
+    # there has a small, spurious x component)
+    midline = np.array([not c.endswith(("_l", "_r")) for c in codes])
+    if midline.any():
+        normals[midline, 0] = 0.0
+        normals[midline] /= np.maximum(np.linalg.norm(normals[midline], axis=1, keepdims=True),
+                                       1e-12)
     flat = np.array([c in HORIZONTAL_DOWELS for c in codes])
     if flat.any():
         h = normals[flat].copy()
@@ -118,9 +136,27 @@ def fit_skull_to_skin(
     *,
     extra_points: dict[str, np.ndarray] | None = None,
     openings: np.ndarray | None = None,
-    max_iterations: int = 16,
+    max_iterations: int = 40,
+    damping: float = 0.5,
+    tolerance_mm: float = 0.02,
 ) -> tuple[dict[str, Mesh], LandmarkSet, dict[str, np.ndarray], SkullFitReport]:
     """Warp every bone part so paired landmarks sit one table depth under the skin.
+
+    Every round solves *one* warp of the original skull with all constraints
+    together: the paired landmarks at ``p_i − d_i n_i``, the skull's Frankfort
+    landmarks on y = 0, and the clearance constraints.  The dowel directions
+    ``n_i`` are re-measured on the warped skull and moved part of the way
+    (``damping``) towards the new measurement, which stops the oscillation of
+    the plain fixed-point iteration; the loop ends when the dowel tips move
+    less than ``tolerance_mm`` and no bone is left too close to the skin.
+
+    Clearance constraints are bone points (mirrored across x = 0) with an
+    inward offset along the skin normal, *relative to the landmark-only warp*:
+    their target is ``W_landmarks(q) + offset``, so they follow the landmark
+    moves instead of freezing bone where an earlier round left it.  Offsets
+    grow while the point (or its mirror image) is shallower than
+    :data:`MIN_CLEARANCE_MM`; new points are added where bone is still too
+    close to the skin.
 
     Parameters
     ----------
@@ -132,7 +168,7 @@ def fit_skull_to_skin(
     skin_landmarks : LandmarkSet
     depths : {skull code: (skin code, depth mm)}
     extra_points : {name: (k, 3)}, optional
-        Other points carried through the same warps (e.g. the TMJ axis).
+        Other points carried through the same warp (e.g. the TMJ axis).
     openings : (m, 3), optional
         Skin points on the borders of openings (eyes, mouth, neck); near them
         the inside/outside test of the open skin is unreliable, so no
@@ -142,44 +178,95 @@ def fit_skull_to_skin(
     -------
     warped parts, warped skull landmarks, warped extra points, report
     """
+    from scipy.spatial import cKDTree
+
     codes = sorted(depths)
     p_skin = skin_landmarks.positions_of([depths[c][0] for c in codes])
     d = np.array([depths[c][1] for c in codes])
-    parts = dict(parts)
-    extra = {k: np.asarray(v, float) for k, v in (extra_points or {}).items()}
-    lms = skull_landmarks
+    orig = dict(parts)
+    extra0 = {k: np.asarray(v, float) for k, v in (extra_points or {}).items()}
+    lms0 = skull_landmarks
     skin_index = MeshIndex(skin)
-    skin_normals = vertex_normals(skin)
-    fixed_src = np.zeros((0, 3))
-    iterations = 0
-
-    def warp_all(src: np.ndarray, dst: np.ndarray) -> None:
-        nonlocal lms
-        w = fit_warp(src, dst)
-        # update in place: _push_inward holds the same dicts
-        parts.update({k: m.with_vertices(w(m.vertices)) for k, m in parts.items()})
-        extra.update({k: w(v) for k, v in extra.items()})
-        moved = [Landmark(lm.code, w(lm.position[None])[0], lm.status, lm.confidence,
-                          lm.description) if lm.is_defined else lm for lm in lms]
-        lms = LandmarkSet(lms.surface, tuple(moved))
+    fn = np.cross(skin.vertices[skin.faces[:, 1]] - skin.vertices[skin.faces[:, 0]],
+                  skin.vertices[skin.faces[:, 2]] - skin.vertices[skin.faces[:, 0]])
+    skin_face_normals = fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-12)
+    near_opening = cKDTree(openings) if openings is not None and len(openings) else None
+    part_names = [part_of.get(c, "cranium") for c in codes]
 
     # the skull's own Frankfort landmarks stay on the FH plane (y = 0)
-    fh_codes = [c for c in ("po_l", "po_r", "or_l", "or_r") if c in lms.as_dict()]
+    fh_codes = [c for c in ("po_l", "po_r", "or_l", "or_r") if c in lms0.as_dict()]
+    s0 = lms0.positions_of(codes)
+    fh0 = lms0.positions_of(fh_codes).reshape(-1, 3)
+    lm_src = np.vstack([s0, fh0])
+    fh_dst = fh0 * [1.0, 0.0, 1.0]
+    keep_away = np.vstack([s0, fh0])  # no clearance constraints right at the landmarks
+
+    # clearance constraints: primary source points (x >= 0 or midline) and offsets
+    c_src = np.zeros((0, 3))
+    c_off = np.zeros((0, 3))
+    mirror = np.array([-1.0, 1.0, 1.0])
+
+    def expand(src: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lateral = np.abs(src[:, 0]) > 0.5 * CLEARANCE_SPACING_MM
+        off = off.copy()
+        off[~lateral, 0] = 0.0  # midline points stay on the midline
+        return (np.vstack([src, src[lateral] * mirror]),
+                np.vstack([off, off[lateral] * mirror]))
+
+    def solve(n: np.ndarray):  # noqa: ANN202
+        lm_dst = np.vstack([p_skin - d[:, None] * n, fh_dst])
+        if not len(c_src):
+            return fit_warp(lm_src, lm_dst)
+        src, off = expand(c_src, c_off)
+        base = fit_warp(lm_src, lm_dst)
+        return fit_warp(np.vstack([lm_src, src]), np.vstack([lm_dst, base(src) + off]))
+
+    def apply(w) -> dict[str, Mesh]:  # noqa: ANN001
+        return {k: m.with_vertices(w(m.vertices)) for k, m in orig.items()}
+
+    # left/right pairs get mirror-image dowels, so the targets are symmetric
+    index = {c: i for i, c in enumerate(codes)}
+    pairs = [(i, index[c[:-2] + "_r"]) for i, c in enumerate(codes)
+             if c.endswith("_l") and c[:-2] + "_r" in index]
+
+    def symmetric(n: np.ndarray) -> np.ndarray:
+        n = n.copy()
+        for i, j in pairs:
+            n[i] = 0.5 * (n[i] + n[j] * mirror)
+            n[j] = n[i] * mirror
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    n = symmetric(dowel_directions(orig, s0, part_names, codes))
+    iterations = 0
+    alpha = np.full(len(codes), damping)
+    last_step = np.zeros_like(n)
     for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported below
-        s = lms.positions_of(codes)
-        n = dowel_directions(parts, s, [part_of.get(c, "cranium") for c in codes], codes)
-        target = p_skin - d[:, None] * n
-        fh = lms.positions_of(fh_codes)
-        fh_target = fh * [1.0, 0.0, 1.0]
-        if max(np.abs(target - s).max(), np.abs(fh[:, 1]).max(initial=0)) < 0.02 and iterations > 1:
+        w = solve(n)
+        current = apply(w)
+        s = p_skin - d[:, None] * n
+        n_new = symmetric(dowel_directions(current, s, part_names, codes))
+        tip_move = float((d * np.linalg.norm(n_new - n, axis=1)).max())
+        step = n_new - n
+        # a landmark whose direction update flips sign oscillates: damp it harder
+        flip = np.einsum("ij,ij->i", step, last_step) < 0
+        alpha = np.where(flip, np.maximum(alpha * 0.5, 0.05), np.minimum(alpha * 1.25, damping))
+        last_step = step
+        n = symmetric(n + alpha[:, None] * step)
+        added, grown = 0, 0.0
+        if tip_move < 1.0:  # settle the dowel landmarks before adding clearance constraints
+            c_src, c_off, added, grown = _update_clearance(
+                current, orig, w, c_src, c_off, keep_away, skin_index, skin_face_normals,
+                near_opening)
+        if tip_move < tolerance_mm and added == 0 and grown < tolerance_mm:
             break
-        warp_all(np.vstack([s, fh, fixed_src]), np.vstack([target, fh_target, fixed_src]))
-        if np.abs(target - s).max() > 0.5:
-            continue  # settle the dowel landmarks before adding clearance constraints
-        fixed_src = _push_inward(parts, lms.positions_of([*codes, *fh_codes]), skin_index,
-                                 skin_normals, fixed_src, warp_all, openings)
+    w = solve(n)
+    parts = apply(w)
+    extra = {k: w(v) for k, v in extra0.items()}
+    lms = LandmarkSet(lms0.surface, tuple(
+        Landmark(lm.code, w(lm.position[None])[0], lm.status, lm.confidence, lm.description)
+        if lm.is_defined else lm for lm in lms0))
     s = lms.positions_of(codes)
-    n = dowel_directions(parts, s, [part_of.get(c, "cranium") for c in codes], codes)
+    n = dowel_directions(parts, s, part_names, codes)
     along = np.einsum("ij,ij->i", p_skin - s, n)
     off_axis = np.linalg.norm(p_skin - s - along[:, None] * n, axis=1)
     report = SkullFitReport(
@@ -187,7 +274,7 @@ def fit_skull_to_skin(
                         for c, a, o, di in zip(codes, along, off_axis, d, strict=True)},
         min_clearance_mm=_min_clearance(parts, skin_index, openings),
         iterations=iterations,
-        extra_constraints=len(fixed_src),
+        extra_constraints=len(expand(c_src, c_off)[0]),
     )
     return parts, lms, extra, report
 
@@ -219,64 +306,80 @@ def _min_clearance(parts: dict[str, Mesh], skin_index: MeshIndex,
     return worst
 
 
-def _push_inward(parts: dict[str, Mesh], landmarks: np.ndarray, skin_index: MeshIndex,
-                 skin_normals: np.ndarray, fixed: np.ndarray,
-                 warp_all: Callable[[np.ndarray, np.ndarray], None],
-                 openings: np.ndarray | None = None,
-                 spacing_mm: float = 12.0, rounds: int = 4) -> np.ndarray:
-    """Add correspondences pulling bone that is too close to the skin inward.
+def _update_clearance(current: dict[str, Mesh], orig: dict[str, Mesh], warp,  # noqa: ANN001
+                      c_src: np.ndarray, c_off: np.ndarray, keep_away: np.ndarray,
+                      skin_index: MeshIndex, skin_face_normals: np.ndarray,
+                      near_opening, spacing_mm: float = CLEARANCE_SPACING_MM,  # noqa: ANN001
+                      ) -> tuple[np.ndarray, np.ndarray, int, float]:
+    """Grow the clearance offsets and add clearance points where bone is too shallow.
 
-    Returns all fixed correspondences (their warped positions), which later
-    fits keep in place so the clearance is not lost again.  Every constraint
-    is mirrored across x = 0 so the skull stays symmetric.
+    ``c_src`` are primary source points on the original skull (x >= 0, or on
+    the midline); each also acts mirrored.  Returns the updated points,
+    offsets, how many points were added and the largest offset growth (mm).
     """
-    from scipy.spatial import cKDTree
+    goal = MIN_CLEARANCE_MM + CLEARANCE_SLACK_MM
+    mirror = np.array([-1.0, 1.0, 1.0])
 
-    near_opening = cKDTree(openings) if openings is not None and len(openings) else None
-    for _ in range(rounds):
-        pts, moves = [], []
-        for name in ("cranium", "mandible"):
-            mesh = parts[name]
-            depth = _clearance(mesh, skin_index)
-            bad = np.flatnonzero(depth < MIN_CLEARANCE_MM)
-            if len(bad) == 0:
+    def inward_push(points: np.ndarray) -> np.ndarray:
+        """Offset that brings ``points`` (warped) to ``goal`` under the skin, or 0."""
+        cl = skin_index.closest_points(points)
+        depth = -skin_index.signed_distance(points)
+        need = np.clip(goal - depth, 0.0, None)
+        return -need[:, None] * skin_face_normals[cl.face_ids]
+
+    c_off = c_off.copy()
+    grown = 0.0
+    if len(c_src):
+        # a primary point and its mirror image: grow the offset by the larger deficit
+        own = inward_push(warp(c_src))
+        mir = inward_push(warp(c_src * mirror)) * mirror
+        pick = np.linalg.norm(mir, axis=1) > np.linalg.norm(own, axis=1)
+        growth = np.where(pick[:, None], mir, own)
+        c_off += growth
+        grown = float(np.linalg.norm(growth, axis=1).max())
+    new_src, new_off = [], []
+    # spacing is measured on the original skull, between mirror-canonical (x >= 0) points
+    taken = np.abs(c_src) * [1.0, 0.0, 0.0] + c_src * [0.0, 1.0, 1.0]
+    for name in ("cranium", "mandible"):
+        mesh = current[name]
+        depth = _clearance(mesh, skin_index)
+        bad = np.flatnonzero(depth < MIN_CLEARANCE_MM)
+        if not len(bad):
+            continue
+        cl = skin_index.closest_points(mesh.vertices[bad])
+        if near_opening is not None:
+            ok = near_opening.query(cl.points)[0] > spacing_mm
+            bad = bad[ok]
+        order = bad[np.argsort(depth[bad], kind="stable")]
+        home = orig[name].vertices
+        chosen: list[int] = []
+        chosen_c: list[np.ndarray] = []
+        for v in order:
+            p = home[v]
+            pc = np.array([abs(p[0]), p[1], p[2]])
+            if len(taken) and np.linalg.norm(taken - pc, axis=1).min() < 0.5 * spacing_mm:
                 continue
-            # keep the worst vertex per spacing-sized cell, away from the landmarks
-            order = bad[np.argsort(depth[bad])]
-            chosen: list[int] = []
-            taken = np.vstack([landmarks, fixed, *moves])
-            for v in order:
-                p = mesh.vertices[v]
-                if np.linalg.norm(taken - p, axis=1).min() < spacing_mm:
-                    continue
-                if all(np.linalg.norm(mesh.vertices[c] - p) >= spacing_mm for c in chosen):
-                    chosen.append(int(v))
-                if len(chosen) >= 60:
-                    break
-            if not chosen:
+            if np.linalg.norm(keep_away - p, axis=1).min() < LANDMARK_GAP_MM:
                 continue
-            cl = skin_index.closest_points(mesh.vertices[chosen])
-            keep = np.ones(len(chosen), bool)
-            if near_opening is not None:
-                keep = near_opening.query(cl.points)[0] > spacing_mm
-            if not keep.any():
+            if chosen_c and np.linalg.norm(np.asarray(chosen_c) - pc, axis=1).min() < spacing_mm:
                 continue
-            chosen_v = mesh.vertices[np.asarray(chosen)[keep]]
-            normal = skin_normals[skin_index.mesh.faces[cl.face_ids[keep], 0]]
-            shift = (MIN_CLEARANCE_MM + 0.5 - depth[np.asarray(chosen)[keep]])[:, None] * normal
-            moved = chosen_v - shift
-            lateral = np.abs(chosen_v[:, 0]) > spacing_mm / 2
-            mirror = np.array([-1.0, 1.0, 1.0])
-            moved[~lateral, 0] = chosen_v[~lateral, 0]  # midline points stay on the midline
-            pts.append(np.vstack([chosen_v, chosen_v[lateral] * mirror]))
-            moves.append(np.vstack([moved, moved[lateral] * mirror]))
-        if not pts:
-            break
-        src = np.vstack([landmarks, fixed, *pts])
-        dst = np.vstack([landmarks, fixed, *moves])
-        warp_all(src, dst)
-        fixed = np.vstack([fixed, *moves])
-    return fixed
+            chosen.append(int(v))
+            chosen_c.append(pc)
+        if not chosen:
+            continue
+        src = home[chosen].copy()
+        off = inward_push(mesh.vertices[chosen])
+        left = src[:, 0] < -0.5 * spacing_mm
+        src[left] *= mirror
+        off[left] *= mirror
+        new_src.append(src)
+        new_off.append(off)
+        taken = np.vstack([taken, chosen_c])
+    added = sum(len(s) for s in new_src)
+    if added:
+        c_src = np.vstack([c_src, *new_src])
+        c_off = np.vstack([c_off, *new_off])
+    return c_src, c_off, added, grown
 
 
 def build_reference_head(sex: str = "male", table_id: str = "ttable_2023") -> TemplateHead:
@@ -307,6 +410,7 @@ def build_reference_head(sex: str = "male", table_id: str = "ttable_2023") -> Te
         skin_landmarks=skin.landmarks,
         skull_landmarks=skull_lms,
         skull_landmark_part=dict(skull.landmark_part),
+        muscles=layout_muscles(skin),
         regions=dict(skin.regions),
         openings=dict(skin.openings),
         eye_centres=eye_centres,
