@@ -52,11 +52,13 @@ if ! "$py" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)'; t
 fi
 venv="${WORKBENCH_VENV:-$root/.venv}"
 extras="$([ "$mode" = test ] && echo "[test]" || echo "")"
-stamp="$venv/.workbench-install-$(sha256sum pyproject.toml setup.py | sha256sum | cut -c1-16)${extras:+-test}"
+base_stamp="$venv/.workbench-install-$(sha256sum pyproject.toml setup.py | sha256sum | cut -c1-16)"
+stamp="$base_stamp${extras:+-test}"
 if [ ! -x "$venv/bin/python" ]; then
   "$py" -m venv "$venv"
 fi
-if [ ! -f "$stamp" ]; then
+# a test install (with the [test] extra) also serves the demo
+if [ ! -f "$stamp" ] && ! { [ "$mode" = demo ] && [ -f "$base_stamp-test" ]; }; then
   echo "installing the workbench and its dependencies into $venv"
   "$venv/bin/python" -m pip install -q --upgrade pip
   "$venv/bin/python" -m pip install -q -e ".$extras"
