@@ -21,16 +21,6 @@ from workbench.model.evidence import EvidenceFile
 SHA = "c" * 64
 
 
-@pytest.fixture
-def case() -> Case:
-    return Case()
-
-
-@pytest.fixture
-def stack(case: Case) -> CommandStack:
-    return CommandStack(case)
-
-
 def test_set_parameter_json_values(case: Case, stack: CommandStack) -> None:
     stack.push(SetParameter("guides", {"nose": {"projection_mm": 1.5, "points": [1, 2]}}))
     assert case.parameters["guides"]["nose"]["points"] == (1, 2)

@@ -28,11 +28,6 @@ def case() -> Case:
     return Case(landmarks={"skull": skull})
 
 
-@pytest.fixture
-def stack(case: Case) -> CommandStack:
-    return CommandStack(case)
-
-
 def test_place_adds_and_keeps_description(case: Case, stack: CommandStack) -> None:
     stack.push(PlaceLandmark("skull", "g", [1, 2, 3]))
     stack.push(PlaceLandmark("skull", "n", [0, 49, 81]))

@@ -13,16 +13,6 @@ from workbench.model.case import Case
 from workbench.model.state import states_equal
 
 
-@pytest.fixture
-def case() -> Case:
-    return Case()
-
-
-@pytest.fixture
-def stack(case: Case) -> CommandStack:
-    return CommandStack(case)
-
-
 def position(case: Case, code: str, surface: str = "skull") -> list[float]:
     return case.landmarks[surface][code].position.tolist()
 

@@ -161,6 +161,21 @@ def aabb_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
     return total
 
 
+def _segment_dist2(x: np.ndarray, y: np.ndarray, ux: np.ndarray, uy: np.ndarray,
+                   inv_len2: np.ndarray) -> np.ndarray:
+    """Squared distance in the triangle plane from ``(x, y)`` to the segment 0 → ``(ux, uy)``."""
+    s = x * ux
+    s += y * uy
+    s *= inv_len2
+    np.clip(s, 0.0, 1.0, out=s)
+    dx = x - s * ux
+    dy = y - s * uy
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return dx
+
+
 class LeafTree:
     """Median-split leaves of a mesh's faces under an implicit tree of boxes.
 
@@ -276,30 +291,10 @@ class LeafTree:
         np.subtract(x, s, out=s)
         d = s * s
         d += y * y
-        # edge ac
-        s = x * cx
-        s += y * cy
-        s *= iac
-        np.clip(s, 0.0, 1.0, out=s)
-        dx = x - s * cx
-        dy = y - s * cy
-        dx *= dx
-        dy *= dy
-        dx += dy
-        np.minimum(d, dx, out=d)
+        np.minimum(d, _segment_dist2(x, y, cx, cy, iac), out=d)  # edge ac
         inside = cy * x >= cx * y
-        # edge bc (x relative to b)
-        xb = x - bx
-        s = xb * ex
-        s += y * cy
-        s *= ibc
-        np.clip(s, 0.0, 1.0, out=s)
-        dx = xb - s * ex
-        dy = y - s * cy
-        dx *= dx
-        dy *= dy
-        dx += dy
-        np.minimum(d, dx, out=d)
+        xb = x - bx  # edge bc, with x measured from corner b
+        np.minimum(d, _segment_dist2(xb, y, ex, cy, ibc), out=d)
         inside &= ex * y >= cy * xb
         inside &= y >= ylo
         np.copyto(d, 0.0, where=inside)

@@ -100,7 +100,6 @@ def loop_step(faces: np.ndarray, n_vertices: int, creases: np.ndarray | None = N
     """
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     n = int(n_vertices)
-    m = len(faces)
     edges, face_edges, counts, opp, inv = _edge_table(faces, n)
     ne = len(edges)
     if (counts > 2).any():
