@@ -93,7 +93,12 @@ def test_identity_when_source_equals_target(case):
     src = spread_points(n, rng)
     warp = fit_warp(src, src)
     x = rng.uniform(-100, 100, (300, 3))
-    np.testing.assert_allclose(warp(x), x, atol=1e-10)
+    # Rounding error in the affine part grows with the conditioning of the
+    # landmark spread: four nearly coplanar points (smallest singular value of
+    # the centred set a few µm) legitimately lose ~1e-7 mm over a 100 mm box.
+    sv = np.linalg.svd(src - src.mean(axis=0), compute_uv=False)
+    tol = 1e-12 * 100.0 * max(sv[0] / sv[-1], 1.0)
+    np.testing.assert_allclose(warp(x), x, rtol=0, atol=max(tol, 1e-10))
     assert np.abs(warp.weights).max() < 1e-12
 
 
