@@ -70,3 +70,39 @@ def _sample_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     os.environ["WORKBENCH_SAMPLE_MIRRORS"] = str(SHARED_DATA)
     os.environ["WORKBENCH_OFFLINE"] = "1"
     return cache
+
+
+# ------------------------------------------------------------------ shared heavy fixtures
+# The built-in reference head takes ~10 s to build; reference_head() caches it
+# as a template pack in the session's temporary data folder, so each sex is
+# built once per test session.
+
+@pytest.fixture(scope="session")
+def head_male(_sample_cache: Path):
+    from workbench.services.template_cache import reference_head
+
+    return reference_head("male")
+
+
+@pytest.fixture(scope="session")
+def head_female(_sample_cache: Path):
+    from workbench.services.template_cache import reference_head
+
+    return reference_head("female")
+
+
+@pytest.fixture(scope="session")
+def headsq_surfaces(headsq_nhdr: Path) -> dict:
+    """Bone and skin surfaces of the headsq CT (its physical frame, mm)."""
+    from workbench.services.ct_mesh import mesh_from_ct
+
+    return {t: mesh_from_ct(headsq_nhdr, t).mesh for t in ("bone", "skin")}
+
+
+#: headsq anatomy (sample registry): face toward -y, superior -z, subject's left +x
+HEADSQ_ORIENTATION = ((0.0, -1.0, 0.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0))
+
+
+@pytest.fixture(scope="session")
+def headsq_orientation() -> tuple:
+    return HEADSQ_ORIENTATION

@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.io.markups import write_mrk_json
-from workbench.io.meshes import write_mesh
-from workbench.model.template import TemplateHead
+from workbench.io.markups import read_mrk_json, write_mrk_json
+from workbench.io.meshes import read_mesh, write_mesh
+from workbench.model.muscles import MuscleGrid
+from workbench.model.template import PARTS, TemplateHead
 
 FILES = {
     "skin.ply": ("skin",),
@@ -98,6 +100,8 @@ def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Pat
         "frame": "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward "
                  "the face; Frankfort Horizontal at y = 0; origin between the porions",
         "files": {name: list(parts) for name, parts in FILES.items()},
+        # per-part sizes so a reader can split the combined files again
+        "part_sizes": {p: [head.meshes[p].n_vertices, head.meshes[p].n_faces] for p in PARTS},
         "skull_landmark_part": dict(head.skull_landmark_part),
         # Kähler §8.3.2: each skull landmark is tied to its skin partner by an
         # offset vector (skin - skull, mm); rescaling it changes tissue depth
@@ -115,3 +119,69 @@ def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Pat
     tmp.replace(path)
     written.append(path)
     return written
+
+
+def _split(mesh: Mesh, parts: list[str], sizes: dict[str, list[int]], path: Path) -> dict[str, Mesh]:
+    out, v0, f0 = {}, 0, 0
+    for part in parts:
+        nv, nf = sizes[part]
+        faces = mesh.faces[f0:f0 + nf] - v0
+        if len(faces) != nf or (nf and (faces.min() < 0 or faces.max() >= nv)):
+            raise InputError(path, f"part {part!r} does not match the sizes in template.json",
+                             hint="the pack was edited or is incomplete; export it again")
+        out[part] = Mesh(mesh.vertices[v0:v0 + nv], faces)
+        v0, f0 = v0 + nv, f0 + nf
+    if v0 != mesh.n_vertices or f0 != mesh.n_faces:
+        raise InputError(path, "holds more geometry than template.json lists",
+                         hint="the pack was edited; export it again")
+    return out
+
+
+def load_template_pack(folder: str | PathLike[str]) -> TemplateHead:
+    """Read a folder written by :func:`export_template` back into a :class:`TemplateHead`.
+
+    The content hash is recomputed and must equal the one recorded in
+    ``template.json``; a pack whose files were changed by hand is refused,
+    because cases record the hash to name exactly which head they used.
+    """
+    root = Path(folder)
+    info_path = root / "template.json"
+    if not info_path.is_file():
+        raise InputError(root, "is not a template pack (no template.json)",
+                         hint="write one with 'workbench template export' or 'workbench template build'")
+    try:
+        info = json.loads(info_path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(info_path, f"is not valid JSON ({exc})") from None
+    if info.get("@schema") != "template-pack-v1" or "part_sizes" not in info:
+        raise InputError(info_path, "is not a template-pack-v1 description (or predates part sizes)",
+                         hint="export the pack again with this version of the workbench")
+    meshes: dict[str, Mesh] = {}
+    for name, parts in info["files"].items():
+        path = root / name
+        if not path.is_file():
+            raise InputError(path, "is missing from the template pack")
+        meshes.update(_split(read_mesh(path, units="mm").mesh, list(parts), info["part_sizes"], path))
+    marks = {s: read_mrk_json(root / f"{s}.mrk.json", s, allow_undefined=True).landmarks
+             for s in ("skin", "skull")}
+    muscles_doc = json.loads((root / "muscles.json").read_text(encoding="utf-8"))
+    head = TemplateHead(
+        template_id=str(info["template_id"]),
+        sex=str(info["sex"]),
+        meshes={p: meshes[p] for p in PARTS},
+        skin_landmarks=marks["skin"],
+        skull_landmarks=marks["skull"],
+        skull_landmark_part=dict(info["skull_landmark_part"]),
+        muscles=tuple(MuscleGrid.from_state(m) for m in muscles_doc["muscles"]),
+        regions={k: np.asarray(v, dtype=np.int64) for k, v in info["regions"].items()},
+        openings={k: np.asarray(v, dtype=np.int64) for k, v in info["openings"].items()},
+        eye_centres=np.asarray(info["eye_centres_mm"], dtype=float),
+        eye_radius=float(info["eye_radius_mm"]),
+        tmj_axis=np.vstack([info["tmj_axis"]["point_mm"], info["tmj_axis"]["direction"]]),
+        provenance=dict(info.get("provenance", {})),
+    )
+    if head.content_hash != info["content_hash"]:
+        raise InputError(root, "content does not match the hash recorded in template.json",
+                         hint="a file in the pack was changed; export or build the pack again")
+    return head
+

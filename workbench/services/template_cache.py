@@ -1,0 +1,93 @@
+"""Get a reference head quickly: from a template pack, a cached build, or a fresh build.
+
+Building the built-in head (authored skin, procedural skull fitted at
+T-Table depths, 24 muscle grids) takes several seconds, so the result is
+kept as a template pack (see :mod:`workbench.io.template_pack`) in the user
+cache folder, keyed by a hash of every source file and data table that goes
+into it.  Editing any of them gives a new key, so a stale head is never
+used.  Units and frame: mm, head frame (x to the subject's left, y up,
+z forward, Frankfort Horizontal at y = 0).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from os import PathLike
+from pathlib import Path
+
+from workbench.core.errors import InputError, WorkbenchError
+from workbench.io.template_pack import export_template, load_template_pack
+from workbench.model.template import TemplateHead
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+#: sources whose content decides the built-in head
+_SOURCE_GLOBS = ("core/headgen/*.py", "services/template.py", "services/muscles.py",
+                 "model/template.py", "model/muscles.py", "core/tps.py", "core/normals.py")
+_TABLE_GLOBS = ("template/*", "tissue_depth/ttable_2023.*", "muscles/*", "landmarks/catalogue.csv")
+SEXES = ("female", "male")
+
+
+def _tables_root() -> Path:
+    from workbench.io.tables import tables_dir
+
+    return tables_dir().parent
+
+
+def source_key() -> str:
+    """Hash of every file the built-in head is made from (first 16 hex digits)."""
+    h = hashlib.sha256()
+    roots = [(_PACKAGE, _SOURCE_GLOBS), (_tables_root(), _TABLE_GLOBS)]
+    for root, globs in roots:
+        for pattern in globs:
+            for path in sorted(root.glob(pattern)):
+                h.update(path.relative_to(root).as_posix().encode())
+                h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cache_root() -> Path:
+    env = os.environ.get("WORKBENCH_DATA_DIR")
+    if env:
+        return Path(env) / "templates"
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("forensic-workbench")) / "templates"
+
+
+def reference_head(sex: str = "male", pack: str | PathLike[str] | None = None, *,
+                   use_cache: bool = True) -> TemplateHead:
+    """The head to work with: ``pack`` if given, else the built-in head for ``sex``.
+
+    A pack is read as it is (its own sex wins; ``sex`` is ignored).  The
+    built-in head comes from the cache when an up-to-date copy is there and
+    is built (and cached) otherwise.  A damaged cache entry is rebuilt.
+    """
+    if pack is not None:
+        return load_template_pack(pack)
+    if sex not in SEXES:
+        raise InputError("--sex", f"unknown sex {sex!r}", hint="use female or male")
+    from workbench.services.template import build_reference_head
+
+    if not use_cache:
+        return build_reference_head(sex)
+    folder = cache_root() / f"{sex}-{source_key()}"
+    if (folder / "template.json").is_file():
+        try:
+            return load_template_pack(folder)
+        except (WorkbenchError, OSError, KeyError, ValueError):
+            shutil.rmtree(folder, ignore_errors=True)
+    head = build_reference_head(sex)
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{sex}-", dir=folder.parent))
+        export_template(head, tmp)
+        try:
+            tmp.rename(folder)   # atomic publish; a concurrent builder may have won
+        except OSError:
+            shutil.rmtree(tmp, ignore_errors=True)
+    except OSError:
+        pass                     # a read-only cache only costs time
+    return head
