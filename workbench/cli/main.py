@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import workbench
 from workbench.cli import (
     case_cmd,
+    compare_cmd,
     ct_cmd,
     demo_cmd,
     landmarks_cmd,
@@ -25,7 +26,8 @@ from workbench.cli import (
 )
 from workbench.core.errors import WorkbenchError
 
-_MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd)
+_MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd,
+            compare_cmd)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,120 @@
+"""``workbench compare RECON TRUTH``: validate a reconstruction against the true skin.
+
+Both meshes in mm (``--units``/``--truth-units`` convert) and in the same
+frame.  Prints the figures as JSON; ``--out DIR`` also writes
+``DIR/compare.json`` and ``DIR/heatmap.png`` (the true skin coloured by the
+signed distance: red = reconstruction outside, blue = inside).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from workbench.cli.common import add_units_options, load_mesh, write_json
+from workbench.core.errors import InputError
+from workbench.core.units import UNIT_SCALES
+from workbench.services.compare import REGION_NAMES
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "compare", help="validate a reconstruction against the true skin (signed distances, JSON)",
+        description="For every vertex of the true skin (e.g. the CT skin of the same person) the "
+                    "signed distance to the reconstruction (mm; positive = reconstruction outside "
+                    "the true skin): mean absolute, RMS, signed mean and SD, % within 2.5 and 5 mm, "
+                    "overall and per face region. Both meshes must be in the same frame.")
+    p.add_argument("recon", help="reconstructed skin (e.g. face.ply from workbench reconstruct)")
+    p.add_argument("truth", help="true skin surface (mesh file or sample:NAME)")
+    add_units_options(p)
+    p.add_argument("--truth-units", choices=["auto", *UNIT_SCALES], default="auto",
+                   help="units of the truth mesh file (default: auto, as --units)")
+    p.add_argument("--truth-scale", type=float, default=None, metavar="FACTOR",
+                   help="explicit factor from truth file units to mm")
+    p.add_argument("--region", default="face",
+                   help="face (default: the six face regions), all (every truth vertex near the "
+                        f"reconstruction) or one of: {', '.join(REGION_NAMES)}")
+    tpl = p.add_mutually_exclusive_group()
+    tpl.add_argument("--template", type=Path, default=None, metavar="PACK",
+                     help="template pack folder (workbench template export) the reconstruction "
+                          "was made from; it defines the face regions")
+    tpl.add_argument("--sex", choices=["female", "male"], default=None,
+                     help="built-in reference head the reconstruction was made from (default male)")
+    p.add_argument("--max-distance", type=float, default=25.0, metavar="MM",
+                   help="truth vertices farther from the reconstruction are not used (default 25)")
+    p.add_argument("--clim", type=float, default=10.0, metavar="MM",
+                   help="heat-map colour range ±MM (default 10)")
+    p.add_argument("--frame", choices=["auto", "HEAD", "LPS", "RAS"], default="auto",
+                   help="frame of the meshes, to aim the heat-map views (auto: from the template "
+                        "fit when the reconstruction has its topology, else HEAD)")
+    p.add_argument("--out", type=Path, default=None, help="write compare.json and heatmap.png here")
+    p.set_defaults(handler=run)
+
+
+def _template_skin(args: argparse.Namespace):  # noqa: ANN202 - (name, mesh, regions, landmarks)
+    """The template skin, its labelled regions and skin landmarks (head frame, mm)."""
+    if args.template is None:
+        from workbench.core.headgen.skin import build_skin
+
+        sex = args.sex or "male"
+        skin = build_skin(sex)  # the skin of build_reference_head(sex), without the skull fit
+        return f"built-in reference head ({sex})", skin.mesh, skin.regions, skin.landmarks
+    from workbench.io.template_pack import load_template_pack
+
+    pack = args.template
+    head = load_template_pack(pack)
+    mesh, regions, landmarks = head.skin, dict(head.regions), head.skin_landmarks
+    info = {"template_id": head.template_id}
+    return f"template pack {pack} ({info.get('template_id', '?')})", mesh, regions, landmarks
+
+
+def run(args: argparse.Namespace) -> int:
+    from workbench.services.compare import compare_surfaces, skin_face_regions, template_orientation
+
+    if not args.clim > 0:
+        raise InputError("--clim", f"must be positive, got {args.clim}")
+    if args.region not in ("face", "all", *REGION_NAMES):
+        raise InputError("--region", f"unknown region {args.region!r}",
+                         f"use face, all or one of: {', '.join(REGION_NAMES)}")
+    recon_read = load_mesh(args.recon, args, kind="head")
+    truth_args = argparse.Namespace(units=args.truth_units, scale=args.truth_scale)
+    truth_read = load_mesh(args.truth, truth_args, kind="face")
+    recon, truth = recon_read.mesh, truth_read.mesh
+
+    name, skin, skin_regions, landmarks = _template_skin(args)
+    same = recon.n_vertices == skin.n_vertices and np.array_equal(recon.faces, skin.faces)
+    regions = skin_face_regions(skin, skin_regions, landmarks) if same else None
+    if not same and args.region != "all":
+        raise InputError(
+            args.recon,
+            f"region {args.region!r} needs the template skin's topology, but the mesh has "
+            f"{recon.n_vertices} vertices / {recon.n_faces} triangles and the {name} skin "
+            f"{skin.n_vertices} / {skin.n_faces} (or different triangles)",
+            "use --region all, or compare the face.ply written by workbench reconstruct "
+            "(PLY, OBJ or VTP keep the vertex order; STL does not)")
+    result = compare_surfaces(recon, truth, recon_regions=regions, region=args.region,
+                              max_distance_mm=args.max_distance)
+
+    data = {"reconstruction": str(recon_read.source_path),
+            "truth": str(truth_read.source_path),
+            "template": name if same else None,
+            **result.to_json()}
+    data["notes"] = [*recon_read.messages, *truth_read.messages, *data["notes"]]
+    if args.out is not None:
+        from workbench.render.heatmap import render_heatmap
+
+        if args.frame != "auto":
+            frame = args.frame
+        elif same:
+            frame = template_orientation(recon, skin)
+        else:
+            frame = "HEAD"
+        picture = render_heatmap(truth, result.truth_vertex_values(), args.out / "heatmap.png",
+                                 clim=(-args.clim, args.clim), frame=frame)
+        data["files"] = {"json": str(args.out / "compare.json"), "heatmap": str(picture)}
+        write_json(data, args.out / "compare.json")
+    write_json(data, None)
+    return 0
