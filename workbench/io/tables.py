@@ -49,6 +49,9 @@ class DepthTable:
     sources : (k,) citation keys
     meta : dict
         The sidecar metadata (title, population, sources, caveats ...).
+    sexes, builds : (k,) labels from the ``sex`` / ``build`` columns
+        ("female", "male", "pooled" / "slender", "normal", "obese", "pooled";
+        '' where the table does not say).
     """
 
     table_id: str
@@ -60,6 +63,8 @@ class DepthTable:
     n: np.ndarray
     sources: tuple[str, ...]
     meta: dict[str, Any] = field(default_factory=dict)
+    sexes: tuple[str, ...] = ()
+    builds: tuple[str, ...] = ()
 
     def group_names(self) -> tuple[str, ...]:
         return tuple(dict.fromkeys(self.groups))
@@ -72,6 +77,20 @@ class DepthTable:
                              f"groups: {', '.join(self.group_names())}")
         return {c: (float(m), float(s)) for c, g, m, s in
                 zip(self.codes, self.groups, self.mean_mm, self.sd_mm, strict=True) if g == group}
+
+    def group_sex(self, group: str) -> str:
+        """The ``sex`` label of a group ('' if the table gives none)."""
+        return self._group_attr(self.sexes, group)
+
+    def group_build(self, group: str) -> str:
+        """The ``build`` label of a group ('' if the table gives none)."""
+        return self._group_attr(self.builds, group)
+
+    def _group_attr(self, values: tuple[str, ...], group: str) -> str:
+        if group not in self.groups:
+            raise InputError(self.table_id, f"no group {group!r}",
+                             f"groups: {', '.join(self.group_names())}")
+        return values[self.groups.index(group)] if values else ""
 
     def citation(self, key: str) -> str:
         return str(self.meta.get("sources", {}).get(key, key))
@@ -100,8 +119,14 @@ def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | 
     Raises
     ------
     InputError
-        Missing file or columns, non-numeric or non-positive depths, unknown
-        landmark codes (listed by name), rows without a citation key.
+        Naming the file and, for row problems, the line: missing file or
+        columns, rows with too few or too many values, empty required
+        values, non-numeric or non-positive depths, negative SDs or counts,
+        unknown landmark codes (listed by name, with a "did you mean"), skin
+        codes that are not skin landmarks, duplicate rows (same landmark and
+        group), unknown sex/build labels, groups whose rows disagree on sex or
+        build, and rows without a citation key (or citing one the metadata
+        does not define).
     """
     path = Path(table)
     if path.suffix.lower() != ".csv":
@@ -114,49 +139,140 @@ def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | 
     meta = _read_meta(path.with_suffix(".meta.json"))
     rows = _read_rows(path)
     catalogue = catalogue or load_catalogue()
-    codes, skin, groups, mean, sd, n, src = [], [], [], [], [], [], []
-    unknown: list[str] = []
+    codes, skin, groups, sexes, builds, mean, sd, n, src = ([] for _ in range(9))
+    unknown: list[tuple[int, str]] = []
+    first_line: dict[tuple[str, str], int] = {}
+    group_kind: dict[str, tuple[str, str, int]] = {}
     for line, row in rows:
-        label = row["landmark_code"].strip()
+        label = _text(path, line, row, "landmark_code")
         try:
             code = catalogue.normalise(label, "skull")
         except Exception:  # noqa: BLE001 - collect every unknown label, report once
-            unknown.append(label)
+            unknown.append((line, label))
             continue
+        group = (row.get("group") or "").strip() or "all"
+        if (code, group) in first_line:
+            raise InputError(path, f"line {line}: duplicate row for {code} in group {group!r} "
+                             f"(first given on line {first_line[code, group]})",
+                             "keep one row per landmark and group")
+        first_line[code, group] = line
+        sex = _label(path, line, row, "sex", SEX_LABELS)
+        build = _label(path, line, row, "build", BUILD_LABELS)
+        kind = group_kind.setdefault(group, (sex, build, line))
+        if kind[:2] != (sex, build):
+            raise InputError(path, f"line {line}: group {group!r} is {sex or '-'}/{build or '-'} "
+                             f"here but {kind[0] or '-'}/{kind[1] or '-'} on line {kind[2]}",
+                             "one group is one sex and build; use separate group labels")
         codes.append(code)
-        skin.append((row.get("skin_code") or catalogue.partner(code, "skull") or "").strip())
-        groups.append((row.get("group") or "all").strip())
+        skin.append(_skin_code(path, line, row, code, catalogue))
+        groups.append(group)
+        sexes.append(sex)
+        builds.append(build)
         mean.append(_number(path, line, "mean_mm", row["mean_mm"], positive=True))
         sd.append(_number(path, line, "sd_mm", row.get("sd_mm", ""), optional=True))
         n.append(_number(path, line, "n", row.get("n", ""), optional=True))
-        src.append(row["source"].strip())
+        src.append(_text(path, line, row, "source"))
     if unknown:
-        raise InputError(path, f"unknown skull landmark codes: {', '.join(unknown)}",
-                         "use the codes of data_tables/landmarks/catalogue.csv")
+        raise InputError(path, f"unknown skull landmark codes: {', '.join(u for _, u in unknown)} "
+                         f"({'; '.join(_unknown_note(line, u, catalogue) for line, u in unknown)})",
+                         "use the skull codes of data_tables/landmarks/catalogue.csv")
     known_sources = set(meta.get("sources", {}))
     if known_sources:
         missing = sorted({s for s in src if s not in known_sources})
         if missing:
             raise InputError(path, f"rows cite sources not defined in the metadata: {', '.join(missing)}")
     return DepthTable(meta.get("id", path.stem), tuple(codes), tuple(skin), tuple(groups),
-                      _ro(mean), _ro(sd), _ro(n), tuple(src), meta)
+                      _ro(mean), _ro(sd), _ro(n), tuple(src), meta, tuple(sexes), tuple(builds))
+
+
+#: Accepted ``sex`` and ``build`` labels ('' = not given); "pooled" covers both sexes or all builds.
+SEX_LABELS = ("female", "male", "pooled")
+BUILD_LABELS = ("slender", "normal", "obese", "pooled")
+_POOLED_WORDS = ("all", "both", "any", "mixed", "combined")
 
 
 def _read_rows(path: Path) -> list[tuple[int, dict[str, str]]]:
+    """Data rows with their line numbers in the file (comment lines ``#`` are skipped)."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot be read as UTF-8 text ({exc})") from None
-    lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("#")]
-    reader = csv.DictReader(io.StringIO("\n".join(lines)))
+    kept = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
+            if not ln.lstrip().startswith("#")]
+    reader = csv.DictReader(io.StringIO("\n".join(ln for _, ln in kept)), skipinitialspace=True)
+    if reader.fieldnames:
+        reader.fieldnames = [f.strip() for f in reader.fieldnames]
     missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
     if missing:
-        raise InputError(path, f"missing columns: {', '.join(missing)}",
+        header = kept[0][0] if kept else 1
+        raise InputError(path, f"line {header}: missing columns: {', '.join(missing)}",
                          f"expected columns: {', '.join(COLUMNS)}")
-    rows = [(i + 2, r) for i, r in enumerate(reader)]
+    rows = []
+    for row in reader:
+        line = kept[reader.line_num - 1][0]  # the row's last physical line
+        if None in row:
+            raise InputError(path, f"line {line}: more values than columns "
+                             f"({len(reader.fieldnames or [])})")
+        rows.append((line, row))
     if not rows:
         raise InputError(path, "the table has no rows")
     return rows
+
+
+def _text(path: Path, line: int, row: dict[str, str | None], column: str) -> str:
+    value = (row.get(column) or "").strip()
+    if not value:
+        raise InputError(path, f"line {line}: {column} is empty")
+    return value
+
+
+def _label(path: Path, line: int, row: dict[str, str | None], column: str,
+           allowed: tuple[str, ...]) -> str:
+    value = (row.get(column) or "").strip().lower()
+    if value in _POOLED_WORDS:
+        return "pooled"
+    if column == "sex" and value in ("f", "m"):
+        return {"f": "female", "m": "male"}[value]
+    if value and value not in allowed:
+        raise InputError(path, f"line {line}: unknown {column} {value!r}",
+                         f"use one of: {', '.join(allowed)} (or leave it empty)")
+    return value
+
+
+def _skin_code(path: Path, line: int, row: dict[str, str | None], code: str,
+               catalogue: LandmarkCatalogue) -> str:
+    label = (row.get("skin_code") or "").strip()
+    if not label:
+        return catalogue.partner(code, "skull") or ""
+    try:
+        return catalogue.normalise(label, "skin")
+    except Exception:  # noqa: BLE001 - LandmarkError: reported with the line
+        raise InputError(path, f"line {line}: unknown skin landmark code {label!r}",
+                         "use the skin codes of data_tables/landmarks/catalogue.csv, or leave "
+                         "skin_code empty for the catalogue's partner") from None
+
+
+def _unknown_note(line: int, label: str, catalogue: LandmarkCatalogue) -> str:
+    """``line 3: 'pgn' (did you mean pg?)`` -- close catalogue codes, names or aliases."""
+    import difflib
+
+    note = f"line {line}: {label!r}"
+    try:
+        skin = catalogue.normalise(label, "skin")
+    except Exception:  # noqa: BLE001 - not a skin code either
+        skin = None
+    if skin is not None:
+        partner = catalogue.partner(skin, "skin")
+        return note + (f" is a skin landmark; its skull partner is {partner}" if partner
+                       else " is a skin landmark")
+    names: dict[str, str] = {}
+    for e in catalogue.entries:
+        if e.surface == "skull":
+            for name in (e.code, e.name, *e.aliases):
+                names.setdefault(name.lower(), e.code)
+    close = difflib.get_close_matches(label.lower(), list(names), n=6, cutoff=0.6)
+    guesses = list(dict.fromkeys(names[c] for c in close))[:3]
+    return note + (f", did you mean {' or '.join(guesses)}?" if guesses else "")
 
 
 def _number(path: Path, line: int, column: str, text: str | None, *, positive: bool = False,
@@ -171,7 +287,10 @@ def _number(path: Path, line: int, column: str, text: str | None, *, positive: b
     except ValueError:
         raise InputError(path, f"line {line}: {column} is not a number ({text!r})") from None
     if not math.isfinite(value) or (positive and value <= 0) or value < 0:
-        raise InputError(path, f"line {line}: {column} must be a positive number of mm, got {text}")
+        what = ("a positive number of mm" if positive
+                else "a non-negative number of mm" if column.endswith("_mm")
+                else "a non-negative number")
+        raise InputError(path, f"line {line}: {column} must be {what}, got {text}")
     return value
 
 

@@ -1,0 +1,398 @@
+"""Tissue-depth dowels on a skull: the skin targets of a reconstruction (Kähler 2003, §8.6.4-5).
+
+Units and frame: millimetres, head frame (x to the subject's left, x = 0
+midsagittal; y up; z toward the face; Frankfort Horizontal at y = 0).  The
+caller aligns the skull to this frame first.
+
+A dowel starts at a skull landmark, points outward (the skull normal averaged
+over a radius, or a direction set by the user; see
+:mod:`workbench.services.dowel_sites`) and is as long as the tissue depth:
+the table value of the chosen group (default the 2023 T-Table, Hona & Stephan
+2024), a build variant of it (a slender/normal/obese group where the table
+has one, otherwise mean + k·SD), or the user's override.  Its tip is where
+the paired skin landmark of the reference head is sent.  Dowels can be
+switched off one by one: Kähler (2003, §8.6.8) had to exclude the cheek
+landmarks spm2 and sbm2 (our ectomolare codes ``ecm2s_*`` / ``ecm2i_*``, see
+:data:`KAEHLER_CHEEK_EXCLUSIONS`) because their Rhine depths gave hollow
+cheeks.  Interpolated dowels on the vault and the mandibular body
+(§8.6.5) take the weighted depths of their parent landmarks.
+
+Nothing is dropped silently: landmarks that are absent, not placed, off the
+bone or without a depth value, and interpolated sites that cannot be placed,
+are listed in :attr:`DowelPlan.warnings`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from workbench.core.errors import InputError
+from workbench.core.landmarks import LandmarkSet
+from workbench.core.mesh import Mesh
+from workbench.core.spatial import MeshIndex
+from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
+from workbench.io.tables import DepthTable, load_depth_table
+from workbench.services.dowel_sites import (
+    OFF_BONE_MM,
+    SITE_PATTERN,
+    choose_depth_group,
+    codes_directions,
+    dowel_directions_at,
+    interpolated_sites,
+    signed_k,
+)
+from workbench.services.template import DOWEL_RADIUS_MM
+
+#: Kähler's spm2 / sbm2 (supra / sub second molar), excluded in his reconstructions (§8.6.8).
+KAEHLER_CHEEK_EXCLUSIONS = frozenset({"ecm2s_l", "ecm2s_r", "ecm2i_l", "ecm2i_r"})
+#: Smallest dowel depth (mm): mean − k·SD variants are floored here (with a warning) and the
+#: depth draws of the uncertainty ensemble are truncated below it.
+MIN_SAMPLE_DEPTH_MM = 0.5
+
+
+@dataclass(frozen=True)
+class DepthSettings:
+    """How to turn skull landmarks into dowels.
+
+    Attributes
+    ----------
+    table : str
+        Shipped table id or path to a user CSV (:func:`workbench.io.tables.load_depth_table`).
+    group : str or None
+        Table group; None = the group matching ``sex`` and ``build`` (or the only one).
+    sex : "female" | "male" | None
+    build : "slender" | "normal" | "obese" or float k
+        A named build needs a table with such groups; a number k means
+        mean + k·SD of the chosen group (needs SDs).
+    overrides : {skull code: depth mm}
+        Depths set by the user (also for codes the table lacks, and for
+        interpolated ``i:`` codes).
+    excluded : set of codes
+        Dowels switched off (kept in the plan, flagged ``excluded``).
+    directions : {code: (3,) vector}
+        User-set dowel directions (normalised here).
+    normal_radius_mm : float
+        Radius over which the skull normal is averaged.
+    interpolate : bool
+        Add the interpolated vault and mandible dowels.
+    """
+
+    table: str = "ttable_2023"
+    group: str | None = None
+    sex: str | None = None
+    build: str | float = "normal"
+    overrides: Mapping[str, float] = field(default_factory=dict)
+    excluded: frozenset[str] = frozenset()
+    directions: Mapping[str, tuple[float, float, float]] = field(default_factory=dict)
+    normal_radius_mm: float = DOWEL_RADIUS_MM
+    interpolate: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class Dowel:
+    """One dowel: ``tip = origin + depth_mm * direction`` (mm, head frame).
+
+    ``source`` is "table", "override" or "interpolated"; ``sd_mm`` is None
+    where the depth has no spread (overrides, tables without SDs);
+    ``table_depth_mm`` is the table mean (None if the table has no value);
+    ``parents`` holds ``((code, weight), ...)`` for interpolated dowels.
+    ``skin_code`` is the paired skin landmark (None for interpolated dowels).
+    """
+
+    code: str
+    skin_code: str | None
+    origin: np.ndarray
+    direction: np.ndarray
+    depth_mm: float
+    sd_mm: float | None
+    table_depth_mm: float | None
+    source: str
+    excluded: bool = False
+    parents: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def tip(self) -> np.ndarray:
+        return self.origin + self.depth_mm * self.direction
+
+
+@dataclass(frozen=True, eq=False)
+class DowelPlan:
+    """All dowels of one skull, with where the depths came from."""
+
+    dowels: tuple[Dowel, ...]
+    table_id: str
+    table_title: str
+    citation: str
+    group_label: str
+    warnings: tuple[str, ...] = ()
+
+    def active(self) -> tuple[Dowel, ...]:
+        return tuple(d for d in self.dowels if not d.excluded)
+
+    def __getitem__(self, code: str) -> Dowel:
+        for d in self.dowels:
+            if d.code == code:
+                return d
+        raise KeyError(f"no dowel {code!r}")
+
+    @property
+    def codes(self) -> tuple[str, ...]:
+        return tuple(d.code for d in self.dowels)
+
+
+def plan_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings = DepthSettings(),
+                *, catalogue: LandmarkCatalogue | None = None) -> DowelPlan:
+    """Dowels for every placed or suggested skull landmark with a depth.
+
+    Parameters
+    ----------
+    skull : Mesh
+        The whole bone surface as one mesh (cranium and mandible, if
+        present), mm, head frame, outward winding.
+    landmarks : LandmarkSet
+        Skull landmarks in the same frame.
+    settings : DepthSettings
+    catalogue : LandmarkCatalogue, optional
+
+    Raises
+    ------
+    InputError
+        Unknown table, group, sex or build the table cannot provide, unknown
+        codes in the settings, non-positive overrides, zero directions.
+    """
+    catalogue = catalogue or load_catalogue()
+    table = load_depth_table(settings.table, catalogue)
+    group, k, label, warnings = choose_depth_group(table, settings.group, settings.sex,
+                                                    settings.build)
+    rows = {c: i for i, (c, g) in enumerate(zip(table.codes, table.groups, strict=True))
+            if g == group}
+    site_codes = {r.code for r in SITE_PATTERN}
+    overrides = {_code(c, catalogue, site_codes, "overrides"): _depth(c, v)
+                 for c, v in settings.overrides.items()}
+    excluded = {c for label_ in settings.excluded
+                for c in _codes(label_, catalogue, site_codes, "excluded")}
+    user_dirs = {_code(c, catalogue, site_codes, "directions"): _unit(c, v)
+                 for c, v in settings.directions.items()}
+
+    index = MeshIndex(skull)
+    status = {lm.code: lm.status for lm in landmarks}
+    defined = landmarks.as_dict()
+    want = [c for c in landmarks.codes if c in defined and (c in rows or c in overrides)]
+    off_bone: list[str] = []
+    if want:
+        dist = index.closest_points(np.stack([defined[c] for c in want])).distances
+        off_bone = [f"{c} ({d:.1f} mm)" for c, d in zip(want, dist, strict=True) if d > OFF_BONE_MM]
+        want = [c for c, d in zip(want, dist, strict=True) if d <= OFF_BONE_MM]
+    _report_skipped(warnings, table, landmarks, rows, overrides, status, off_bone, catalogue)
+
+    dowels: list[Dowel] = []
+    if want:
+        origins = np.stack([defined[c] for c in want])
+        dirs = codes_directions(skull, origins, want, settings.normal_radius_mm,
+                                tree=index.centroid_tree)
+        no_sd, floored = [], []
+        for c, o, d in zip(want, origins, dirs, strict=True):
+            mean = float(table.mean_mm[rows[c]]) if c in rows else None
+            sd = float(table.sd_mm[rows[c]]) if c in rows else np.nan
+            sd_or_none = None if np.isnan(sd) else sd
+            skin = (table.skin_codes[rows[c]] if c in rows else "") or catalogue.partner(c, "skull")
+            if c in overrides:
+                depth, source, sd_or_none = overrides[c], "override", None
+            else:
+                if k and sd_or_none is None:
+                    no_sd.append(c)
+                depth, source = mean + (k * sd_or_none if k and sd_or_none else 0.0), "table"
+                if depth < MIN_SAMPLE_DEPTH_MM:
+                    floored.append(f"{c} ({depth:.1f} mm)")
+                    depth = MIN_SAMPLE_DEPTH_MM
+            dowels.append(Dowel(c, skin or None, _ro(o), _ro(user_dirs.get(c, d)), float(depth),
+                                sd_or_none, mean, source, c in excluded))
+        if floored:
+            warnings.append(f"mean {signed_k(k)} SD is below {MIN_SAMPLE_DEPTH_MM:g} mm for "
+                            f"{', '.join(floored)}: set to {MIN_SAMPLE_DEPTH_MM:g} mm")
+        if no_sd:
+            warnings.append(f"no SD in the table for {', '.join(no_sd)}: their depths are the "
+                            f"plain means, not mean {signed_k(k)} SD")
+    if settings.interpolate:
+        dowels += _interpolated(skull, landmarks, index, dowels, settings, overrides, excluded,
+                                user_dirs, warnings)
+    unused = sorted(set(overrides) - {d.code for d in dowels})
+    if unused:
+        warnings.append(f"overrides not used (no placed landmark or site): {', '.join(unused)}")
+    from_table = [d for d in dowels if d.source == "table"]
+    if from_table and all(d.sd_mm is None for d in from_table):
+        warnings.append(f"table {table.table_id} has no SDs: the uncertainty ensemble keeps "
+                        "these depths fixed")
+    _check_outward(dowels, warnings)
+    used = [p for d in dowels if d.source != "override"
+            for p in ([d.code] if not d.parents else [c for c, _ in d.parents])]
+    keys = list(dict.fromkeys(table.sources[rows[p]] for p in used
+                              if p in rows and p not in overrides))
+    return DowelPlan(tuple(dowels), table.table_id, str(table.meta.get("title", table.table_id)),
+                     "\n".join(table.citation(key) for key in keys), label, tuple(warnings))
+
+
+def depth_samples(plan: DowelPlan, rng: np.random.Generator) -> np.ndarray:
+    """One random draw of every dowel's depth (mm), in the order of ``plan.dowels``.
+
+    Table depths are drawn from a normal distribution (mean = the plan's
+    depth, SD = the table SD) truncated below :data:`MIN_SAMPLE_DEPTH_MM`;
+    overrides and depths without an SD stay fixed; interpolated dowels take
+    the same weights over their parents' draws.
+    """
+    n = len(plan.dowels)
+    mean = np.array([d.depth_mm for d in plan.dowels])
+    sd = np.array([d.sd_mm if d.sd_mm is not None and d.source == "table" else 0.0
+                   for d in plan.dowels])
+    draw = mean + sd * rng.standard_normal(n)
+    for _ in range(100):
+        low = (draw < MIN_SAMPLE_DEPTH_MM) & (sd > 0)
+        if not low.any():
+            break
+        draw[low] = mean[low] + sd[low] * rng.standard_normal(int(low.sum()))
+    draw = np.where(sd > 0, np.maximum(draw, MIN_SAMPLE_DEPTH_MM), mean)
+    where = {d.code: i for i, d in enumerate(plan.dowels)}
+    for i, d in enumerate(plan.dowels):
+        if d.source == "interpolated" and all(c in where for c, _ in d.parents):
+            draw[i] = sum(w * draw[where[c]] for c, w in d.parents)
+    return draw
+
+
+# ---------------------------------------------------------------- settings codes
+def _codes(label: str, catalogue: LandmarkCatalogue, sites: set[str], what: str) -> list[str]:
+    """Catalogue codes for a settings label; a side-less bilateral label gives both sides."""
+    if label in sites or label.startswith("i:"):
+        if label not in sites:
+            raise InputError(what, f"unknown interpolated site {label!r}",
+                             f"sites: {', '.join(sorted(sites))}")
+        return [label]
+    try:
+        return [catalogue.normalise(label, "skull")]
+    except Exception:  # noqa: BLE001 - LandmarkError; try both sides below
+        pass
+    both = []
+    for side in ("L", "R"):
+        try:
+            both.append(catalogue.normalise(f"{label} {side}", "skull"))
+        except Exception:  # noqa: BLE001
+            break
+    if len(both) == 2:
+        return both
+    raise InputError(what, f"unknown skull landmark {label!r}",
+                     "use the skull codes of data_tables/landmarks/catalogue.csv")
+
+
+def _code(label: str, catalogue: LandmarkCatalogue, sites: set[str], what: str) -> str:
+    codes = _codes(label, catalogue, sites, what)
+    if len(codes) != 1:
+        raise InputError(what, f"{label!r} names both sides ({', '.join(codes)})",
+                         "give the side, e.g. " + codes[0])
+    return codes[0]
+
+
+def _depth(code: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError("overrides", f"{code}: depth is not a number ({value!r})") from None
+    if not np.isfinite(v) or v <= 0:
+        raise InputError("overrides", f"{code}: depth must be a positive number of mm, got {value}")
+    return v
+
+
+def _unit(code: str, value: tuple[float, float, float]) -> np.ndarray:
+    v = np.asarray(value, dtype=float).reshape(-1)
+    length = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
+    if v.shape != (3,) or not np.isfinite(v).all() or length < 1e-9:
+        raise InputError("directions",
+                         f"{code}: a direction must be a non-zero 3-vector, got {value!r}")
+    return v / length
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+# ---------------------------------------------------------------- helpers
+def _report_skipped(warnings: list[str], table: DepthTable, landmarks: LandmarkSet,
+                    rows: dict[str, int], overrides: dict[str, float], status: dict[str, str],
+                    off_bone: list[str], catalogue: LandmarkCatalogue) -> None:
+    """Warnings for every landmark or table code that gets no dowel, grouped by reason."""
+    dowel_codes = set(rows) | set(overrides)
+    for st, why in (("absent", "marked absent"), ("missing", "not placed yet")):
+        codes = [c for c in landmarks.codes if status[c] == st and c in dowel_codes]
+        if codes:
+            warnings.append(f"no dowel for {', '.join(codes)}: {why}")
+    gone = [c for c in rows if c not in status]
+    if gone:
+        warnings.append(f"no dowel for {', '.join(gone)}: not in the landmark set")
+    if off_bone:
+        warnings.append(f"no dowel for {', '.join(off_bone)}: farther than {OFF_BONE_MM:g} mm "
+                        "from the skull surface (missing bone, or a misplaced landmark?)")
+    no_value = [c for c in landmarks.codes if status[c] in ("placed", "suggested")
+                and c not in dowel_codes and (e := catalogue.get(c, "skull")) is not None
+                and e.partner]
+    if no_value:
+        warnings.append(f"no depth in table {table.table_id} for {', '.join(no_value)}: "
+                        "no dowels there (set an override to add one)")
+
+
+def _interpolated(skull: Mesh, landmarks: LandmarkSet, index: MeshIndex, dowels: list[Dowel],
+                  settings: DepthSettings, overrides: dict[str, float], excluded: set[str],
+                  user_dirs: dict[str, np.ndarray], warnings: list[str]) -> list[Dowel]:
+    skipped: list[str] = []
+    sites = interpolated_sites(skull, landmarks, radius_mm=settings.normal_radius_mm,
+                               skipped=skipped, index=index)
+    by_code = {d.code: d for d in dowels}
+    placed = []
+    for code, pos, parents in sites:
+        missing = [c for c, _ in parents if c not in by_code]
+        if missing:
+            skipped.append(f"{code}: no dowel at {', '.join(missing)}")
+            continue
+        placed.append((code, pos, parents))
+    if skipped:
+        warnings.append("interpolated dowels skipped: " + "; ".join(skipped))
+    if not placed:
+        return []
+    pts = np.stack([p for _, p, _ in placed])
+    midline = np.array([not any(c.endswith(("_l", "_r")) for c, _ in par) for _, _, par in placed])
+    dirs = dowel_directions_at(skull, pts, midline, np.zeros(len(placed), bool),
+                               settings.normal_radius_mm, tree=index.centroid_tree)
+    out, followed = [], []
+    for (code, pos, parents), d in zip(placed, dirs, strict=True):
+        ps = [by_code[c] for c, _ in parents]
+        w = np.array([wt for _, wt in parents])
+        depth = float(w @ [p.depth_mm for p in ps])
+        table = ([p.table_depth_mm for p in ps] if all(p.table_depth_mm is not None for p in ps)
+                 else None)
+        sds = [0.0 if p.source == "override" else p.sd_mm for p in ps]
+        sd = None if any(s is None for s in sds) else float(np.sqrt(np.sum((w * sds) ** 2)))
+        source = "interpolated"
+        if code in overrides:
+            depth, source, sd = overrides[code], "override", None
+        off = code in excluded or any(p.excluded for p in ps)
+        if off and code not in excluded:
+            followed.append(code)
+        out.append(Dowel(code, None, _ro(pos), _ro(user_dirs.get(code, d)), depth, sd,
+                         None if table is None else float(w @ table), source, off, parents))
+    if followed:
+        warnings.append(f"interpolated dowels excluded with a parent: {', '.join(followed)}")
+    return out
+
+
+def _check_outward(dowels: list[Dowel], warnings: list[str]) -> None:
+    """Flag a skull whose dowels mostly point inward (faces wound the wrong way?)."""
+    if len(dowels) < 4:
+        return
+    o = np.stack([d.origin for d in dowels])
+    n = np.stack([d.direction for d in dowels])
+    out = np.einsum("ij,ij->i", o - o.mean(axis=0), n) > 0
+    if out.mean() < 0.5:
+        warnings.append(f"{int((~out).sum())} of {len(dowels)} dowels point into the skull: "
+                        "are the mesh's faces wound inward?")
