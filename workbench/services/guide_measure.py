@@ -1,0 +1,408 @@
+"""Skull measurements for the nose, mouth and eye guides, and the guide tables' constants.
+
+Units and frame: millimetres, head frame (x to the subject's left with x = 0
+the midsagittal plane, y up, z toward the face, Frankfort Horizontal at y = 0).
+
+:func:`measure_skull` derives what the guide rules need from the skull
+landmarks and, where a landmark cannot give it (the widest nasal aperture, the
+incisal edge, the canine–premolar junction, the base of the nasal spine), from
+the skull mesh: rays cast backward in the frontal view and a horizontal section
+through the upper tooth crowns.  Without a mesh, cited typical values stand in
+(``data_tables/guides/guide_constants.csv``: crown length and width after
+Nelson & Ash 2010, crest-to-CEJ distance after Hausmann et al. 1991, incisor
+display after Vig & Brundo 1978).  Every measurement says how it was obtained.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+
+from workbench.core.errors import InputError
+from workbench.core.landmarks import LandmarkSet
+from workbench.core.mesh import Mesh
+from workbench.core.raycast import RayCaster
+from workbench.io.catalogue import default_catalogue_path
+from workbench.io.tables import load_depth_table
+
+CONSTANT_COLUMNS = ("name", "sex", "value", "unit", "source", "notes")
+SIDES = (("l", 1.0), ("r", -1.0))
+#: Implementation choices (not published numbers): rays and sections used on the mesh.
+APERTURE_RIM_DEPTH_MM = 4.0   # a frontal ray hitting within this of the row's front is bone
+SECTION_BELOW_CREST_MM = 3.0  # tooth section this far below prosthion (cervical third of crowns)
+
+
+def guides_dir() -> Path:
+    """Folder of the guide tables (``data_tables/guides``)."""
+    return default_catalogue_path().parents[1] / "guides"
+
+
+def read_table_csv(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+    """``(line number, row)`` pairs; InputError naming the file for missing columns or ragged rows."""
+    try:
+        with path.open(encoding="utf-8", newline="") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in columns if c not in (reader.fieldnames or ())]
+            if missing:
+                raise InputError(path, f"missing columns: {', '.join(missing)}")
+            rows = []
+            for i, row in enumerate(reader, start=2):
+                if None in row or any(v is None for v in row.values()):
+                    raise InputError(path, f"line {i}: wrong number of values")
+                rows.append((i, {k: v.strip() for k, v in row.items()}))
+            return rows
+    except OSError as exc:
+        raise InputError(path, f"cannot read the guide table ({exc})") from None
+
+
+def parse_number(path: Path, line: int, col: str, text: str, default: float | None = None) -> float:
+    """``float(text)`` (``default`` when empty), else InputError naming file, line and column."""
+    if not text and default is not None:
+        return default
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(path, f"line {line}: {col} {text!r} is not a number") from None
+
+
+@lru_cache(maxsize=1)
+def guides_meta() -> dict:
+    """``guides.meta.json`` (sources, where_read, predictor definitions)."""
+    path = guides_dir() / "guides.meta.json"
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(path, f"guide table metadata is not readable JSON ({exc})") from None
+
+
+def citation(keys: str) -> str:
+    """Full reference(s) for ``;``-separated source keys of the guide tables."""
+    sources = guides_meta()["sources"]
+    return "; ".join(sources.get(k, k) for k in keys.split(";") if k)
+
+
+@lru_cache(maxsize=1)
+def load_constants() -> dict[tuple[str, str], tuple[float, str]]:
+    """``{(name, sex): (value, citation)}`` from ``guide_constants.csv``."""
+    path = guides_dir() / "guide_constants.csv"
+    return {(r["name"], r["sex"]): (parse_number(path, line, "value", r["value"]), citation(r["source"]))
+            for line, r in read_table_csv(path, CONSTANT_COLUMNS)}
+
+
+def constant(name: str, sex: str | None = None) -> float:
+    """A constant for ``sex`` ("M"/"F"); the pooled row, else the mean of the sexes."""
+    table = load_constants()
+    for key in ((name, sex or ""), (name, "pooled")):
+        if key in table:
+            return table[key][0]
+    values = [v for (n, _), (v, _) in table.items() if n == name]
+    if not values:
+        raise KeyError(f"no guide constant {name!r}")
+    return float(np.mean(values))
+
+
+def sex_code(sex: str | None) -> str | None:
+    """``"male"``/``"m"`` → ``"M"``, ``"female"``/``"f"`` → ``"F"``, None/"" → None."""
+    if sex is None or str(sex).strip() == "":
+        return None
+    key = str(sex).strip().lower()
+    if key in ("m", "male"):
+        return "M"
+    if key in ("f", "female"):
+        return "F"
+    raise InputError("sex", f"unknown sex {sex!r}", "use female, male or leave it out")
+
+
+
+# ------------------------------------------------------------------ measurements
+@dataclass(frozen=True)
+class Measure:
+    """A skull measurement (mm) and how it was obtained."""
+
+    value: float
+    how: str
+
+
+@dataclass
+class SkullMeasures:
+    """Named measurements; ``missing`` says why the others could not be taken."""
+
+    values: dict[str, Measure] = field(default_factory=dict)
+    missing: dict[str, str] = field(default_factory=dict)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.values
+
+    def __getitem__(self, name: str) -> float:
+        return self.values[name].value
+
+    def put(self, name: str, value: float | None, how: str, why_missing: str = "") -> None:
+        if value is None or not np.isfinite(value):
+            self.missing[name] = why_missing or how
+        else:
+            self.values[name] = Measure(float(value), how)
+
+    def numbers(self) -> dict[str, float]:
+        return {k: m.value for k, m in self.values.items()}
+
+
+def _pos(lms: LandmarkSet, code: str) -> np.ndarray | None:
+    lm = lms.get(code)
+    return lm.position if lm is not None and lm.is_defined else None
+
+
+def _front_z(caster: RayCaster, xs: np.ndarray, ys: np.ndarray, z0: float) -> np.ndarray:
+    """z of the first hit of rays cast backward (−z) from ``z0``.
+
+    Shape ``(len(ys), len(xs))``; NaN where a ray misses.
+    """
+    gx, gy = np.meshgrid(xs, ys)
+    origins = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z0)])
+    hits = caster.first_hits(origins, np.tile([0.0, 0.0, -1.0], (gx.size, 1)))
+    return np.where(hits.hit, hits.points[:, 2], np.nan).reshape(gx.shape)
+
+
+def _aperture_width(caster: RayCaster, z0: float, ys: np.ndarray, side: float) -> float | None:
+    """|x| of the widest aperture point on one side, seen from the front.
+
+    Per row, rays step outward from 2 mm beside the midline; the aperture ends at
+    the first ray that hits within :data:`APERTURE_RIM_DEPTH_MM` of the row's most
+    anterior bone (the rim), while rays inside it pass deep into the nasal cavity.
+    """
+    xs = side * np.arange(2.0, 25.01, 0.5)
+    best = None
+    with np.errstate(invalid="ignore"):
+        for row in _front_z(caster, xs, ys, z0):
+            if np.isnan(row).all():
+                continue
+            closed = row >= np.nanmax(row) - APERTURE_RIM_DEPTH_MM
+            if closed[0] or not closed.any():
+                continue
+            half = abs(xs[int(np.argmax(closed))]) - 0.25
+            best = half if best is None else max(best, half)
+    return best
+
+
+def _spine_base_z(caster: RayCaster, z0: float, ans: np.ndarray) -> float | None:
+    """z of the lower aperture margin 4 mm either side of the spine (where it leaves the maxilla)."""
+    ys = np.arange(ans[1] + 4.0, ans[1] - 12.0, -0.25)
+    out = []
+    with np.errstate(invalid="ignore"):
+        for col in _front_z(caster, np.array([-4.0, 4.0]), ys, z0).T:
+            front = col >= ans[2] - 15.0
+            if not front[0] and front.any():  # open aperture above, bone below
+                out.append(col[int(np.argmax(front))])
+    return float(np.mean(out)) if out else None
+
+
+def _incisal_edge_y(caster: RayCaster, z0: float, pr: np.ndarray) -> float | None:
+    """y of the upper incisal edge: going down the labial face 2.5 mm either side of the
+    midline, where the profile steps back by more than 1 mm (onto the lower incisors) or ends."""
+    step = 0.2
+    ys = np.arange(pr[1] - 2.0, pr[1] - 20.0, -step)
+    edges = []
+    with np.errstate(invalid="ignore"):
+        for col in _front_z(caster, np.array([-2.5, 2.5]), ys, z0).T:
+            if not np.isfinite(col[0]) or col[0] < pr[2] - 10.0:
+                continue
+            drop = np.flatnonzero(~(col[1:] >= col[:-1] - 1.0))
+            if len(drop):
+                edges.append(ys[drop[0]] - 0.5 * step)
+    return float(np.mean(edges)) if edges else None
+
+
+def section_loops(mesh: Mesh, y: float) -> list[np.ndarray]:
+    """Connected pieces of the section of ``mesh`` with the plane ``y``: ``(k, 2)`` (x, z) each."""
+    s = mesh.vertices[:, 1] - y
+    s[s == 0.0] = 1e-9
+    sf = s[mesh.faces]
+    faces = mesh.faces[(sf.min(axis=1) < 0) & (sf.max(axis=1) > 0)]
+    if not len(faces):
+        return []
+    edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)
+    crossing = (s[edges[..., 0]] < 0) != (s[edges[..., 1]] < 0)  # two per face
+    pairs = np.sort(edges[crossing].reshape(-1, 2), axis=1)
+    uniq, inv = np.unique(pairs, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    a, b = uniq[:, 0], uniq[:, 1]
+    t = s[a] / (s[a] - s[b])
+    pts = mesh.vertices[a] + t[:, None] * (mesh.vertices[b] - mesh.vertices[a])
+    n = len(uniq)
+    graph = sparse.coo_matrix((np.ones(len(inv) // 2), (inv[0::2], inv[1::2])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return [pts[label == k][:, [0, 2]] for k in np.unique(label)]
+
+
+def _canines(mesh: Mesh, pr: np.ndarray) -> dict[str, tuple[float, float]] | None:
+    """Per side: (x of the canine's lateral aspect, x of the canine–first-premolar junction).
+
+    The tooth crowns are cut :data:`SECTION_BELOW_CREST_MM` below prosthion, where
+    neighbouring crowns (narrower at the cervix than at their contacts) are separate
+    outlines.  Outlines of tooth size in front of the arch are ordered by their angle
+    around a point 30 mm behind prosthion: the third on each side is the canine (a
+    single outline across the midline counts as both central incisors).
+    """
+    centre_z = pr[2] - 30.0
+    teeth = []
+    for loop in section_loops(mesh, pr[1] - SECTION_BELOW_CREST_MM):
+        c = loop.mean(axis=0)
+        size = float(np.linalg.norm(loop.max(axis=0) - loop.min(axis=0)))
+        if 2.5 <= size <= 15.0 and c[1] > pr[2] - 35.0 and abs(c[0]) < 35.0:
+            teeth.append((float(np.arctan2(c[0], c[1] - centre_z)), loop))
+    out = {}
+    for side, sign in SIDES:
+        row = sorted(((abs(a), lp) for a, lp in teeth
+                      if sign * lp[:, 0].mean() > 0 or (lp[:, 0].min() < -1 and lp[:, 0].max() > 1)),
+                     key=lambda item: item[0])
+        if len(row) < 3:
+            return None
+        canine = row[2][1]
+        lateral = float(sign * (sign * canine[:, 0]).max())
+        junction = lateral
+        if len(row) > 3:  # the middle of the closest pair of canine and premolar points
+            d = np.linalg.norm(canine[:, None, :] - row[3][1][None, :, :], axis=2)
+            i, j = np.unravel_index(int(np.argmin(d)), d.shape)
+            junction = float(0.5 * (canine[i, 0] + row[3][1][j, 0]))
+        out[side] = (lateral, junction)
+    return out
+
+
+def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
+                  dowel_tips: Mapping[str, np.ndarray] | None = None, sex: str | None = None,
+                  table_id: str = "ttable_2023") -> SkullMeasures:
+    """Everything the guide rules need, from landmarks, the mesh (optional) and cited constants."""
+    sex = sex_code(sex)
+    m = SkullMeasures()
+    p = {c: _pos(lms, c) for c in lms.codes}
+    p = {c: v for c, v in p.items() if v is not None}
+    caster = RayCaster(skull) if skull is not None and skull.n_faces else None
+    z0 = float(skull.vertices[:, 2].max() + 5.0) if caster else 0.0
+
+    # nose width: the widest aperture (frontal rays on the mesh, else the bony alare)
+    ys = None
+    if caster is not None and ("ans" in p or "apl_l" in p or "apl_r" in p):
+        lo = p["ans"][1] if "ans" in p else min(p[c][1] for c in ("apl_l", "apl_r") if c in p) - 15
+        hi = p["rhi"][1] if "rhi" in p else lo + 40.0
+        ys = np.arange(lo, hi, 0.5)
+    for side, sign in SIDES:
+        got = _aperture_width(caster, z0, ys, sign) if ys is not None else None
+        if got is not None:
+            m.put(f"aperture_x_{side}", sign * got,
+                  "widest nasal aperture in the frontal view (rays on the skull mesh)")
+        elif f"apl_{side}" in p:
+            m.put(f"aperture_x_{side}", p[f"apl_{side}"][0],
+                  f"bony alare apl_{side} (most lateral aperture point)")
+        else:
+            m.put(f"aperture_x_{side}", None, "", f"no skull mesh aperture and no apl_{side}")
+
+    # anterior nasal spine: tip = ans, base = front of the maxilla beneath it
+    if "ans" in p:
+        m.put("ans_y", p["ans"][1], "anterior nasal spine tip ans")
+        m.put("ans_z", p["ans"][2], "anterior nasal spine tip ans")
+        base = _spine_base_z(caster, z0, p["ans"]) if caster is not None else None
+        how = "lower aperture margin beside the spine (rays on the skull mesh)"
+        if base is None and "ss" in p:
+            base, how = p["ss"][2], "depth of subspinale ss (no mesh margin found)"
+        m.put("spine_projection", None if base is None else p["ans"][2] - base,
+              f"ans z minus the spine base z; base from the {how}", "no spine base (mesh or ss)")
+    else:
+        m.missing["spine_projection"] = "no anterior nasal spine ans"
+    if dowel_tips is not None and "mp" in dowel_tips:
+        m.put("mp_dowel_z", float(np.asarray(dowel_tips["mp"], float)[2]),
+              "mid-philtrum dowel tip (given)")
+    elif "mp" in p:
+        depth = load_depth_table(table_id).lookup(None).get("mp")
+        m.put("mp_dowel_z", None if depth is None else p["mp"][2] + depth[0],
+              f"skull mp + {depth[0] if depth else '?'} mm ({table_id} mean) parallel to FH",
+              f"table {table_id} has no mp depth")
+    else:
+        m.missing["mp_dowel_z"] = "no mid-philtrum landmark mp and no dowel tip"
+
+    # teeth: CEJ lines from the alveolar crests, incisal edge, canines
+    crest = constant("cej_below_alveolar_crest")
+    if "pr" in p:
+        m.put("upper_cej_y", p["pr"][1] - crest, f"prosthion pr − {crest} mm (crest to CEJ)")
+        edge = _incisal_edge_y(caster, z0, p["pr"]) if caster is not None else None
+        crown = constant("upper_central_incisor_crown_length")
+        m.put("incisal_edge_y", edge if edge is not None else p["pr"][1] - crest - crown,
+              "incisal edge of the upper central incisors (rays on the skull mesh)" if edge is not None
+              else f"upper CEJ − {crown} mm crown length (no incisal edge found on a mesh)")
+    else:
+        for k in ("upper_cej_y", "incisal_edge_y"):
+            m.missing[k] = "no prosthion pr (upper alveolar crest)"
+    if "id" in p:
+        m.put("lower_cej_y", p["id"][1] + crest, f"infradentale id + {crest} mm (crest to CEJ)")
+    else:
+        m.missing["lower_cej_y"] = "no infradentale id (mandible missing?)"
+    m.put("incisor_display", constant("incisor_display_at_rest", sex),
+          f"incisor display at rest ({sex or 'sex unknown: mean of men and women'})")
+    found = _canines(skull, p["pr"]) if skull is not None and "pr" in p else None
+    half_md = 0.5 * constant("upper_canine_crown_md")
+    for side, sign in SIDES:
+        if found is not None:
+            m.put(f"canine_x_{side}", found[side][0],
+                  "lateral aspect of the upper canine (crown section of the mesh)")
+            m.put(f"cp_junction_x_{side}", found[side][1],
+                  "canine–first-premolar junction (crown section of the mesh)")
+        elif f"sC_{side}" in p:
+            # half a canine crown along the arch, whose direction at the canine is
+            # taken from pr → sC → ecm2s when those are placed (else straight lateral)
+            sc = p[f"sC_{side}"][[0, 2]]
+            lateral = 1.0
+            if "pr" in p and f"ecm2s_{side}" in p:
+                d1 = sc - p["pr"][[0, 2]]
+                d2 = p[f"ecm2s_{side}"][[0, 2]] - sc
+                t = d1 / np.linalg.norm(d1) + d2 / np.linalg.norm(d2)
+                lateral = abs(t[0]) / np.linalg.norm(t)
+            x = sc[0] + sign * half_md * lateral
+            how = f"supracanine sC_{side} + half the canine crown width ({half_md} mm) along the arch"
+            m.put(f"canine_x_{side}", x, how)
+            m.put(f"cp_junction_x_{side}", x, how)
+        else:
+            for k in ("canine_x", "cp_junction_x"):
+                m.missing[f"{k}_{side}"] = f"no tooth crowns on a mesh and no sC_{side}"
+    if "canine_x_l" in m and "canine_x_r" in m:
+        m.put("intercanine_width", m["canine_x_l"] - m["canine_x_r"], "lateral aspects of the canines")
+        m.put("cp_junction_width", m["cp_junction_x_l"] - m["cp_junction_x_r"],
+              "canine–premolar junctions")
+
+    # Rynn et al. 2010 distances
+    for name, (a, b) in {"X": ("n", "ans"), "Y": ("rhi", "ss"), "Z": ("n", "ss")}.items():
+        if a in p and b in p:
+            m.put(name, float(np.linalg.norm(p[a] - p[b])), f"distance {a}–{b}")
+        else:
+            m.missing[name] = f"needs {a} and {b}"
+    if "n" in p and "pr" in p:
+        for code in ("n", "pr"):
+            m.put(f"{code}_y", p[code][1], f"{code} landmark")
+            m.put(f"{code}_z", p[code][2], f"{code} landmark")
+    if "ss" in p:
+        m.put("ss_z", p["ss"][2], "subspinale ss")
+
+    # orbits (supraconchion ≈ mso, dlom ≈ ec; see guides.meta.json)
+    for side, _ in SIDES:
+        need = [f"{c}_{side}" for c in ("mso", "or", "d", "ec")]
+        if not all(c in p for c in need):
+            m.missing[f"OBH_{side}"] = f"needs {', '.join(need)}"
+            continue
+        mso, orb, d, ec = (p[c] for c in need)
+        m.put(f"OBH_{side}", mso[1] - orb[1], f"y of mso_{side} − y of or_{side}")
+        m.put(f"OBB_{side}", float(np.linalg.norm(ec - d)), f"distance d_{side}–ec_{side}")
+        m.put(f"sk_y_{side}", mso[1], f"mso_{side} for supraconchion")
+        m.put(f"d_x_{side}", d[0], f"dacryon d_{side}")
+        m.put(f"dlom_z_{side}", ec[2], f"ectoconchion ec_{side} for dlom")
+        cy = 0.5 * (mso[1] + orb[1])
+        m.put(f"orbit_cx_{side}", 0.5 * (d[0] + ec[0]), "middle of d and ec")
+        m.put(f"orbit_cy_{side}", cy, "middle of mso and or")
+        m.put(f"tangent_z_{side}", orb[2] + (cy - orb[1]) * (mso[2] - orb[2]) / (mso[1] - orb[1]),
+              "mso–or tangent at mid-orbit height")
+    return m
+
