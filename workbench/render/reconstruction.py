@@ -1,0 +1,282 @@
+"""Report pictures of a skull-to-face reconstruction (off-screen pyvista).
+
+Units and frame: meshes and dowels in mm, in the *input* frame (e.g. scanner
+coordinates).  ``frame`` is the 4×4 matrix from that frame to the head frame
+(x to the subject's left, y up, z toward the face, Frankfort Horizontal at
+y = 0); it only orients the camera, so "front" looks at the face and "side"
+at the right profile even when the skull lies in scanner coordinates.  The
+pictures are orthographic (parallel projection) and share one scale and one
+centre per view, with a 50 mm scale bar, so they can be compared and
+measured on the page.
+
+Pictures (PNG, named ``<prefix>_<key>.png``; ``key`` is returned):
+
+- ``skull_dowels_<view>``: the skull with one peg per landmark (a tube from
+  the skull landmark to the dowel tip and a ball at the tip), coloured by
+  depth in mm;
+- ``face_skull_<view>``: the face semi-transparent over the skull and dowels;
+- ``face_<view>``: the face alone;
+- ``spread``: the face coloured by the ensemble spread (mm), front, side and
+  three-quarter in one picture with one colour bar.
+
+``<view>`` is ``front``, ``side`` and ``three_quarter``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.errors import InputError
+from workbench.core.mesh import Mesh
+from workbench.render.snapshots import _prefer_headless_gl, to_polydata, view_directions
+
+VIEWS = ("front", "side", "three_quarter")
+BONE, SKIN, EYE, BACKGROUND = "#e9e0c9", "#e3b48f", "#d8dde3", "white"
+DOWEL_CMAP, SPREAD_CMAP = "viridis", "YlOrRd"
+TUBE_RADIUS_MM, BALL_RADIUS_MM, SCALE_BAR_MM = 0.9, 1.9, 50.0
+FACE_OPACITY = 0.4
+#: the face is framed down to this far below the skull (the neck is cut off)
+NECK_MARGIN_MM = 20.0
+
+
+def render_reconstruction(
+    skull: Mesh,
+    face: Mesh | None,
+    dowels: tuple[np.ndarray, np.ndarray] | None,
+    out_dir: str | Path,
+    *,
+    frame: np.ndarray | None = None,
+    spread: np.ndarray | None = None,
+    prefix: str = "recon",
+    eyes: Mesh | None = None,
+    size: tuple[int, int] = (600, 700),
+    views: Sequence[str] = VIEWS,
+) -> dict[str, Path]:
+    """Write the report pictures to ``out_dir`` and return ``{key: path}``.
+
+    Parameters
+    ----------
+    skull : Mesh
+        The skull (cranium and mandible as one mesh), mm, input frame.
+    face : Mesh or None
+        The reconstructed skin; without it only the skull pictures are made.
+    dowels : (origins, tips) or None
+        ``(n, 3)`` skull landmarks and dowel tips, mm, input frame.
+    frame : (4, 4), optional
+        Input frame → head frame (default: the input already is the head frame).
+    spread : (face.n_vertices,), optional
+        Per-vertex ensemble spread of the face in mm (adds the ``spread`` picture).
+    eyes : Mesh, optional
+        Eyeballs drawn with the face, so the eye openings are not see-through.
+    size : (width, height)
+        Pixels per view.
+    """
+    origins, tips = _check(skull, face, dowels, spread)
+    anterior, superior = _orientation(frame)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _prefer_headless_gl()
+    import pyvista as pv
+
+    framed = [skull.vertices, tips]
+    face_pd = None
+    if face is not None:  # a bust: the face cut just below the skull (no long neck)
+        floor = float((skull.vertices @ superior).min()) - NECK_MARGIN_MM
+        keep = face.vertices @ superior >= floor
+        framed.append(face.vertices[keep])
+        face_pd = to_polydata(face)
+        if spread is not None:
+            face_pd["spread_mm"] = np.asarray(spread, float)
+        face_pd = face_pd.clip(normal=superior, origin=superior * floor, invert=False)
+    cameras = {v: _camera(np.vstack(framed), v, anterior, superior, size) for v in views}
+    peg = _pegs(pv, origins, tips) if len(origins) else None
+    depth_range = _nice_range(np.linalg.norm(tips - origins, axis=1))
+    skull_pd = to_polydata(skull)
+    eyes_pd = to_polydata(eyes) if eyes is not None and eyes.n_faces else None
+
+    def draw_skull(p, bar: bool) -> None:  # noqa: ANN001
+        p.add_mesh(skull_pd, color=BONE, smooth_shading=True, specular=0.15, diffuse=0.85)
+        if peg is not None:
+            actors = [p.add_mesh(part, scalars="depth_mm", cmap=DOWEL_CMAP, clim=depth_range[:2],
+                                 smooth_shading=True, show_scalar_bar=False) for part in peg]
+            if bar:
+                _scalar_bar(p, actors[0], "tissue depth (mm)", depth_range, size)
+
+    def over(p, _v) -> None:  # noqa: ANN001
+        draw_skull(p, False)
+        p.add_mesh(face_pd, color=SKIN, opacity=FACE_OPACITY, smooth_shading=True, specular=0.1)
+
+    def alone(p, _v) -> None:  # noqa: ANN001
+        p.add_mesh(face_pd, color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9)
+        if eyes_pd is not None:
+            p.add_mesh(eyes_pd, color=EYE, smooth_shading=True, specular=0.4)
+
+    written: dict[str, Path] = {}
+    for view in views:
+        written[f"skull_dowels_{view}"] = _shoot(pv, out / f"{prefix}_skull_dowels_{view}.png", size,
+                                                 [(cameras[view], view)],
+                                                 lambda p, _v: draw_skull(p, True))
+        if face_pd is None:
+            continue
+        written[f"face_skull_{view}"] = _shoot(pv, out / f"{prefix}_face_skull_{view}.png", size,
+                                               [(cameras[view], view)], over, peel=True)
+        written[f"face_{view}"] = _shoot(pv, out / f"{prefix}_face_{view}.png", size,
+                                         [(cameras[view], view)], alone)
+    if spread is not None and face_pd is not None:
+        spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
+
+        def coloured(p, v) -> None:  # noqa: ANN001
+            actor = p.add_mesh(face_pd, scalars="spread_mm", cmap=SPREAD_CMAP,
+                               clim=spread_range[:2], smooth_shading=True, show_scalar_bar=False)
+            if eyes_pd is not None:
+                p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
+            if v == views[len(views) // 2]:
+                _scalar_bar(p, actor, "spread (mm)", spread_range, size)
+
+        written["spread"] = _shoot(pv, out / f"{prefix}_spread.png", size,
+                                   [(cameras[v], v) for v in views], coloured)
+    return written
+
+
+# ---------------------------------------------------------------- helpers
+def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+    if skull.n_faces == 0:
+        raise InputError("skull", "the skull mesh has no triangles")
+    origins = tips = np.zeros((0, 3))
+    if dowels is not None:
+        origins, tips = (np.asarray(a, float).reshape(-1, 3) for a in dowels)
+        if origins.shape != tips.shape:
+            raise InputError("dowels", f"{len(origins)} origins but {len(tips)} tips")
+        if not (np.isfinite(origins).all() and np.isfinite(tips).all()):
+            raise InputError("dowels", "dowel origins and tips must be finite (leave absent landmarks out)")
+    if spread is not None:
+        if face is None:
+            raise InputError("spread", "a spread map needs the face it belongs to")
+        if np.shape(spread) != (face.n_vertices,):
+            raise InputError("spread", f"{np.size(spread)} values for a face of {face.n_vertices} vertices")
+        if not np.isfinite(spread).all():
+            raise InputError("spread", "the spread map has NaN or infinite values")
+    return origins, tips
+
+
+def _orientation(frame: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Anterior and superior directions in the input frame."""
+    if frame is None:
+        return np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    m = np.asarray(frame, float)
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise InputError("frame", "the input-to-head frame must be a finite 4x4 matrix")
+    rot = m[:3, :3]
+    if abs(np.linalg.det(rot)) < 1e-9:
+        raise InputError("frame", "the input-to-head frame is singular")
+    anterior, superior = np.linalg.solve(rot, [0.0, 0.0, 1.0]), np.linalg.solve(rot, [0.0, 1.0, 0.0])
+    return anterior / np.linalg.norm(anterior), superior / np.linalg.norm(superior)
+
+
+def _camera(points: np.ndarray, view: str, anterior: np.ndarray, superior: np.ndarray,
+            size: tuple[int, int]) -> dict:
+    """One orthographic camera that frames ``points`` for ``view`` with a margin."""
+    direction, up = view_directions(view, anterior, superior)
+    up = up - direction * (up @ direction)
+    up /= np.linalg.norm(up)
+    right = np.cross(up, direction)
+    u, w = points @ right, points @ up
+    lo, hi = np.array([u.min(), w.min()]), np.array([u.max(), w.max()])
+    lo[1] -= 0.17 * (hi[1] - lo[1])  # room for the colour and scale bars
+    mid = (lo + hi) / 2
+    depth = points @ direction
+    centre = right * mid[0] + up * mid[1] + direction * (depth.min() + depth.max()) / 2
+    half_h = max((hi[1] - lo[1]) / 2, (hi[0] - lo[0]) / 2 * size[1] / size[0]) * 1.06
+    reach = float(depth.max() - depth.min()) + 100.0
+    return {"centre": centre, "direction": direction, "up": up, "right": right,
+            "scale": half_h, "reach": reach, "aspect": size[0] / size[1]}
+
+
+def _pegs(pv, origins: np.ndarray, tips: np.ndarray) -> list:  # noqa: ANN001
+    """Tubes from origin to tip and balls at the tips, with point data ``depth_mm``."""
+    n = len(origins)
+    depth = np.linalg.norm(tips - origins, axis=1)
+    lines = pv.PolyData(np.vstack([origins, tips]),
+                        lines=np.column_stack([np.full(n, 2), np.arange(n), np.arange(n) + n]).ravel())
+    lines["depth_mm"] = np.concatenate([depth, depth])
+    tubes = lines.tube(radius=TUBE_RADIUS_MM, n_sides=14, capping=True)
+    balls = pv.PolyData(tips)
+    balls["depth_mm"] = depth
+    balls = balls.glyph(geom=pv.Sphere(radius=BALL_RADIUS_MM, theta_resolution=16,
+                                       phi_resolution=12), scale=False, orient=False)
+    return [tubes, balls]
+
+
+def _nice_range(values: np.ndarray) -> tuple[float, float, float]:
+    """``(low, high, step)`` on round numbers covering ``values``, with at most 7 ticks."""
+    if not len(values):
+        return 0.0, 1.0, 0.5
+    lo, hi = float(np.min(values)), float(np.max(values))
+    for step in (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0):
+        a, b = np.floor(lo / step) * step, np.ceil(hi / step) * step
+        if b <= a:
+            b = a + step
+        if (b - a) / step <= 6:
+            return float(a), float(b), step
+    return lo, max(hi, lo + 1.0), (max(hi, lo + 1.0) - lo) / 6
+
+
+def _font(size: tuple[int, int], points: float) -> int:
+    """A font size that prints at about ``points`` pt when the picture is 57 mm wide."""
+    return max(8, round(points * size[0] / 600 * 3.3))
+
+
+def _scalar_bar(p, actor, title: str, scale: tuple[float, float, float],  # noqa: ANN001
+                size: tuple[int, int]) -> None:
+    """A horizontal colour bar for ``actor`` in the lower left corner."""
+    lo, hi, step = scale
+    bar = p.add_scalar_bar(title=title, mapper=actor.mapper, vertical=False, position_x=0.06,
+                           position_y=0.015, width=0.58, height=0.155, n_labels=round((hi - lo) / step) + 1,
+                           fmt="%.0f" if step >= 1 else "%.1f", color="black",
+                           title_font_size=_font(size, 6.5), label_font_size=_font(size, 6),
+                           bold=False, unconstrained_font_size=True)
+    bar.SetTextPositionToPrecedeScalarBar()  # labels under the bar, title above
+
+
+def _shoot(pv, path: Path, size: tuple[int, int], panels: Sequence[tuple[dict, str]],  # noqa: ANN001
+           draw, *, peel: bool = False) -> Path:  # noqa: ANN001
+    """One picture with one panel per ``(camera, view)``; ``draw(plotter, view)`` adds the actors."""
+    plotter = pv.Plotter(off_screen=True, shape=(1, len(panels)), border=False,
+                         window_size=(size[0] * len(panels), size[1]))
+    try:
+        for col, (cam, view) in enumerate(panels):
+            plotter.subplot(0, col)
+            plotter.set_background(BACKGROUND)
+            if peel:
+                plotter.enable_depth_peeling(number_of_peels=8)
+            draw(plotter, view)
+            _scale_bar(pv, plotter, cam, size)
+            camera = plotter.camera
+            camera.focal_point = cam["centre"]
+            camera.position = cam["centre"] + cam["direction"] * cam["reach"]
+            camera.up = cam["up"]
+            plotter.enable_parallel_projection()
+            camera.parallel_scale = cam["scale"]
+            camera.clipping_range = (1.0, 2.0 * cam["reach"] + 400.0)
+        plotter.enable_anti_aliasing("ssaa")
+        plotter.screenshot(str(path))
+    finally:
+        plotter.close()
+    return path
+
+
+def _scale_bar(pv, plotter, cam: dict, size: tuple[int, int]) -> None:  # noqa: ANN001
+    """A 50 mm bar in the lower right corner, drawn in front of everything."""
+    half_w = cam["scale"] * cam["aspect"]
+    front = cam["centre"] + cam["direction"] * (cam["reach"] / 2)
+    end = front + cam["right"] * (half_w * 0.9) - cam["up"] * (cam["scale"] * 0.9)
+    start = end - cam["right"] * SCALE_BAR_MM
+    plotter.add_mesh(pv.Line(start, end), color="black", line_width=3)
+    plotter.add_point_labels(pv.PolyData([(start + end) / 2 + cam["up"] * cam["scale"] * 0.05]),
+                             [f"{SCALE_BAR_MM:.0f} mm"], show_points=False, shape=None,
+                             font_size=_font(size, 6.5), text_color="black", always_visible=True,
+                             bold=False,
+                             justification_horizontal="center")

@@ -1,0 +1,281 @@
+"""A4 PDF building blocks for reports (fpdf2; pure Python, no rendering).
+
+Page furniture (footer with case id and "page n of N"), headings, key-value
+blocks, tables, warning boxes and rows of captioned pictures, which
+:mod:`workbench.reporting.report` arranges into the reconstruction report
+(see ``reports/README.md``).  Numbers arrive in mm; pictures as PNG *paths*.
+
+Text is set in DejaVu Sans / Sans Mono when the TTF files are found (system
+font folders, ``WORKBENCH_REPORT_FONT_DIR``, or matplotlib's copy), so names
+such as "Kähler", "±" and "–" print as they are; otherwise the PDF core fonts
+are used and text outside Latin-1 is transliterated ("–" → "-").
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import unicodedata
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from fpdf import FPDF, FontFace
+from PIL import Image
+
+FONT_DIRS = ("/usr/share/fonts/truetype/dejavu", "/usr/share/fonts/TTF", "/usr/share/fonts/dejavu",
+             "/usr/share/fonts/dejavu-sans-fonts", "/usr/local/share/fonts",
+             "/Library/Fonts", "C:/Windows/Fonts")
+_FACES = {"": "DejaVuSans.ttf", "B": "DejaVuSans-Bold.ttf", "I": "DejaVuSans-Oblique.ttf"}
+_MONO = "DejaVuSansMono.ttf"
+_ASCII = {"–": "-", "—": "-", "−": "-", "‘": "'", "’": "'", "“": '"', "”": '"', "…": "...",
+          "≤": "<=", "≥": ">=", "→": "->", "·": "-", "≈": "~", "×": "x", "•": "-"}
+VIEWS = ("front", "side", "three_quarter")
+#: picture groups: (key prefix, heading)
+GROUPS = (("skull_dowels_", "Skull with tissue-depth dowels"),
+          ("face_skull_", "Reconstructed face over the skull"),
+          ("face_", "Reconstructed face"))
+GREY, DARK, ACCENT = (110, 110, 110), (30, 30, 30), (35, 70, 120)
+
+
+def find_fonts() -> dict[str, Path] | None:
+    """DejaVu TTF files ``{"": regular, "B": bold, "I": oblique, "mono": mono}`` or None."""
+    dirs = [os.environ.get("WORKBENCH_REPORT_FONT_DIR", ""), *FONT_DIRS]
+    spec = importlib.util.find_spec("matplotlib")
+    if spec and spec.origin:
+        dirs.append(str(Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf"))
+    for folder in filter(None, dirs):
+        base = Path(folder)
+        if (base / _FACES[""]).is_file() and (base / _MONO).is_file():
+            found = {k: base / v for k, v in _FACES.items() if (base / v).is_file()}
+            return {**found, "mono": base / _MONO}
+    return None
+
+
+def transliterate(text: str) -> str:
+    """Latin-1 text for the PDF core fonts ("–" → "-", "ł" → "l", else "?")."""
+    out = []
+    for ch in text:
+        ch = _ASCII.get(ch, ch)
+        if all(ord(c) < 256 for c in ch):
+            out.append(ch)
+            continue
+        base = unicodedata.normalize("NFKD", ch).encode("latin-1", "ignore").decode("latin-1")
+        out.append(base or "?")
+    return "".join(out)
+
+
+def num(value: Any, digits: int = 1) -> str:
+    """A number for a table cell; ``None`` prints as an en dash."""
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.{digits}f}"
+    return str(value)
+
+
+def describe_value(value: Any) -> str:
+    """A guide value in words: number (mm), point, line or mapping."""
+    if isinstance(value, list) and value and all(isinstance(v, int | float) for v in value):
+        return "(" + ", ".join(f"{v:.1f}" for v in value) + ")"
+    if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+        return " – ".join(describe_value(v) for v in value)
+    if isinstance(value, dict):
+        return "; ".join(f"{k} {describe_value(v)}" for k, v in value.items())
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return f"{value:.1f} mm"
+    return num(value)
+
+
+class ReportPDF(FPDF):
+    """FPDF with the report's fonts, footer and a few layout helpers."""
+
+    def __init__(self, case_id: str, created: str, software: str) -> None:
+        super().__init__(orientation="P", unit="mm", format="A4")
+        self.case_id, self.created, self.software = case_id, created, software
+        self.set_margins(15, 15, 15)
+        self.set_auto_page_break(True, margin=18)
+        self.set_title(f"Reconstruction report, case {case_id}")
+        self.set_creator(software)
+        fonts = find_fonts()
+        self.unicode = fonts is not None
+        if fonts:
+            for style, path in fonts.items():
+                if style != "mono":
+                    self.add_font("DejaVu", style, str(path))
+            self.add_font("DejaVuMono", "", str(fonts["mono"]))
+            self.sans, self.mono, self.styles = "DejaVu", "DejaVuMono", {s for s in fonts if s != "mono"}
+        else:
+            self.sans, self.mono, self.styles = "helvetica", "courier", {"", "B", "I"}
+
+    # ---------------------------------------------------------------- text
+    def t(self, text: Any) -> str:
+        text = "" if text is None else str(text)
+        return text if self.unicode else transliterate(text)
+
+    def font(self, size: float, style: str = "", mono: bool = False) -> None:
+        style = style if style in self.styles else ""
+        self.set_font(self.mono if mono else self.sans, style, size)
+
+    def face(self, style: str = "", *, mono: bool = False, size: float | None = None,
+             color: Sequence[int] | None = None) -> FontFace:
+        return FontFace(family=self.mono if mono else self.sans,
+                        emphasis=style if style in self.styles and style else None,
+                        size_pt=size, color=color)
+
+    def footer(self) -> None:
+        self.set_y(-13)
+        self.font(7.5)
+        self.set_text_color(*GREY)
+        self.set_draw_color(200, 200, 200)
+        self.line(self.l_margin, self.get_y(), self.w - self.r_margin, self.get_y())
+        width = (self.w - self.l_margin - self.r_margin) / 2
+        self.cell(width, 6, self.t(f"Case {self.case_id} · {self.software} · {self.created}"))
+        self.cell(width, 6, f"page {self.page_no()} of {{nb}}", align="R")
+        self.set_text_color(*DARK)
+
+    def heading(self, text: str, min_space: float = 30.0) -> None:
+        if self.get_y() + min_space > self.page_break_trigger:
+            self.add_page()
+        self.ln(3)
+        self.font(12, "B")
+        self.set_text_color(*ACCENT)
+        self.cell(0, 7, self.t(text), new_x="LMARGIN", new_y="NEXT")
+        self.set_draw_color(*ACCENT)
+        self.line(self.l_margin, self.get_y(), self.w - self.r_margin, self.get_y())
+        self.ln(2)
+        self.set_text_color(*DARK)
+
+    def subheading(self, text: str) -> None:
+        self.font(9.5, "B")
+        self.cell(0, 6, self.t(text), new_x="LMARGIN", new_y="NEXT")
+
+    def para(self, text: str, size: float = 9, style: str = "", color: Sequence[int] = DARK) -> None:
+        self.font(size, style)
+        self.set_text_color(*color)
+        self.multi_cell(0, size * 0.45, self.t(text), new_x="LMARGIN", new_y="NEXT", align="L")
+        self.set_text_color(*DARK)
+
+    def box(self, title: str, lines: Sequence[str], fill: Sequence[int] = (255, 243, 205)) -> None:
+        self.set_fill_color(*fill)
+        self.font(9, "B")
+        self.multi_cell(0, 5, self.t(title), fill=True, new_x="LMARGIN", new_y="NEXT", align="L",
+                        padding=(1.5, 2, 0, 2))
+        self.font(8.5)
+        self.multi_cell(0, 4.2, self.t("\n".join(f"• {line}" for line in lines)), fill=True,
+                        new_x="LMARGIN", new_y="NEXT", align="L", padding=(0.5, 2, 1.5, 2))
+        self.set_fill_color(255, 255, 255)
+        self.ln(1)
+
+    def grid(self, headers: Sequence[str], rows: Sequence[Sequence[Any]],
+             widths: Sequence[float], *, aligns: Sequence[str] | None = None,
+             styles: Sequence[FontFace | None] | None = None, size: float = 8,
+             col_styles: dict[int, FontFace] | None = None) -> None:
+        """A table with a heading row; ``styles`` per row, ``col_styles`` per column."""
+        self.font(size)
+        self.set_fill_color(247, 247, 247)
+        aligns = aligns or ["L"] * len(widths)
+        with self.table(col_widths=tuple(widths), width=sum(widths), align="LEFT",
+                        borders_layout="SINGLE_TOP_LINE" if headers else "NONE",
+                        first_row_as_headings=bool(headers), line_height=size * 0.5,
+                        padding=(0.8, 1.2, 0.8, 1.2), text_align="LEFT",
+                        headings_style=FontFace(emphasis="BOLD" if "B" in self.styles else None,
+                                                fill_color=(232, 238, 246)),
+                        cell_fill_color=(247, 247, 247), cell_fill_mode="ROWS") as table:
+            if headers:
+                head = table.row()
+                for text, align in zip(headers, aligns, strict=True):
+                    head.cell(self.t(text), align=align)
+            for i, values in enumerate(rows):
+                row = table.row()
+                for j, (value, align) in enumerate(zip(values, aligns, strict=True)):
+                    style = (col_styles or {}).get(j) or (styles[i] if styles else None)
+                    row.cell(self.t(value), align=align, style=style)
+        self.ln(2)
+
+    def key_values(self, pairs: Sequence[tuple[str, Any]], key_width: float = 42,
+                   mono_keys: frozenset[str] = frozenset()) -> None:
+        width = self.w - self.l_margin - self.r_margin
+        for key, value in pairs:
+            self.font(8.5, "B")
+            self.set_text_color(*GREY)
+            self.cell(key_width, 4.8, self.t(key))
+            self.set_text_color(*DARK)
+            self.font(7.5 if key in mono_keys else 8.5, mono=key in mono_keys)
+            self.multi_cell(width - key_width, 4.8, self.t(value), new_x="LMARGIN", new_y="NEXT",
+                            align="L")
+
+    # ---------------------------------------------------------------- pictures
+    def pictures(self, items: Sequence[tuple[str, Path]], columns: int = 3, gap: float = 4.0,
+                 title: str | None = None) -> None:
+        """Rows of captioned pictures, ``columns`` per row, scaled to the width.
+
+        ``title`` is set above the first row and kept on the same page.
+        """
+        width = self.w - self.l_margin - self.r_margin
+        cell_w = (width - gap * (columns - 1)) / columns
+        for start in range(0, len(items), columns):
+            row = items[start:start + columns]
+            heights = [cell_w * _aspect(path) for _, path in row]
+            row_h = max(heights) + 5
+            title_h = 6.0 if title and start == 0 else 0.0
+            if self.get_y() + title_h + row_h > self.page_break_trigger:
+                self.add_page()
+            if title_h:
+                self.subheading(title)
+            top = self.get_y()
+            for k, ((caption, path), h) in enumerate(zip(row, heights, strict=True)):
+                x = self.l_margin + k * (cell_w + gap)
+                if path.is_file():
+                    self.image(str(path), x=x, y=top, w=cell_w, h=h, alt_text=self.t(caption))
+                else:
+                    self.set_draw_color(*GREY)
+                    self.rect(x, top, cell_w, h)
+                    self.set_xy(x + 2, top + h / 2 - 4)
+                    self.font(7.5)
+                    self.multi_cell(cell_w - 4, 4, self.t(f"picture not found: {path}"), align="C")
+                self.set_xy(x, top + h + 0.5)
+                self.font(7.5)
+                self.set_text_color(*GREY)
+                self.cell(cell_w, 4, self.t(caption), align="C")
+                self.set_text_color(*DARK)
+            self.set_xy(self.l_margin, top + row_h + 1)
+
+
+def _aspect(path: Path) -> float:
+    """Height / width of a picture (0.75 for a missing file, so the gap keeps its place)."""
+    try:
+        with Image.open(path) as img:
+            return img.height / img.width
+    except OSError:
+        return 0.75
+
+
+def view_caption(view: str) -> str:
+    return {"three_quarter": "three-quarter (right)", "side": "side (right)"}.get(view, view)
+
+
+def picture_groups(pictures: dict[str, str], base: Path) -> dict[str, list[tuple[str, Path]]]:
+    """Sort picture keys into the report's groups (views in front, side, three-quarter order)."""
+    groups: dict[str, list[tuple[str, Path]]] = {}
+    rank = {v: i for i, v in enumerate(VIEWS)}
+    used = set()
+    for prefix, title in GROUPS:
+        keys = [k for k in pictures if k.startswith(prefix) and k not in used]
+        keys.sort(key=lambda k: rank.get(k[len(prefix):], len(rank)))
+        if keys:
+            groups[title] = [(view_caption(k[len(prefix):]), _resolve(pictures[k], base)) for k in keys]
+            used.update(keys)
+    for key in pictures:
+        if key not in used:
+            groups.setdefault(key, []).append((key.replace("_", " "), _resolve(pictures[key], base)))
+    return groups
+
+
+def _resolve(path: str, base: Path) -> Path:
+    p = Path(path)
+    return p if p.is_absolute() else base / p
