@@ -47,6 +47,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     fr.add_argument("--out", type=Path, default=None, help="where to write the aligned mesh")
     fr.set_defaults(handler=run_frame, strict=False)
 
+    sg = lsub.add_parser(
+        "suggest", help="suggest the whole skull (or skin) landmark set on a mesh",
+        description="Transfer the reference head's landmarks onto a skull or skin mesh: coarse "
+                    "alignment (from --seed points, an orientation, or a search), a regularised "
+                    "landmark warp, then projection onto the surface. Landmarks on missing parts "
+                    "come out 'absent'; each suggestion carries a confidence (0-1).")
+    sg.add_argument("mesh", help="skull or skin mesh, or sample:NAME")
+    add_units_options(sg)
+    sg.add_argument("--surface", choices=["skull", "skin"], default="skull")
+    sg.add_argument("--seed", type=Path, default=None, metavar="FILE",
+                    help="landmarks you placed (kept as they are; 3+ fix the alignment)")
+    sg.add_argument("--sex", choices=["female", "male"], default="male")
+    sg.add_argument("--template", type=Path, default=None, metavar="PACK")
+    from workbench.cli.reconstruct_cmd import add_orientation_options
+
+    add_orientation_options(sg)
+    sg.add_argument("--out", type=Path, required=True, help="output .mrk.json (or .fcsv/.csv/.pp)")
+    sg.set_defaults(handler=run_suggest, strict=False)
+
 
 def _read(args: argparse.Namespace):  # noqa: ANN202
     return read_landmarks(args.file, args.surface, catalogue=load_catalogue(),
@@ -110,4 +129,48 @@ def run_frame(args: argparse.Namespace) -> int:
         mesh = load_mesh(args.apply, args, kind="skull").mesh
         write_mesh(args.out, mesh.transformed(frame.input_to_head))
         print(f"wrote {args.out} (head frame, mm)")
+    return 0
+
+
+def run_suggest(args: argparse.Namespace) -> int:
+    from workbench.cli.reconstruct_cmd import orientation_of
+    from workbench.services.landmark_transfer import transfer_landmarks
+    from workbench.services.reference_parts import skull_surface
+    from workbench.services.template_cache import reference_head
+
+    read = load_mesh(args.mesh, args, kind="skull" if args.surface == "skull" else "head")
+    head = reference_head(args.sex, args.template)
+    seeds = None
+    if args.seed is not None:
+        seeds = read_landmarks(args.seed, args.surface, catalogue=load_catalogue()).landmarks
+        if read.scale_applied != 1.0:
+            import numpy as np
+
+            m = np.eye(4)
+            m[:3, :3] *= read.scale_applied
+            seeds = seeds.transformed(m)
+    reference = skull_surface(head) if args.surface == "skull" else head.skin
+    refs = head.skull_landmarks if args.surface == "skull" else head.skin_landmarks
+    result = transfer_landmarks(read.mesh, reference, refs, seeds=seeds,
+                                orientation=orientation_of(args, args.mesh))
+    lms = result.landmarks
+    if read.scale_applied != 1.0:  # back to the file's units
+        import numpy as np
+
+        m = np.eye(4)
+        m[:3, :3] /= read.scale_applied
+        lms = lms.transformed(m)
+    options = {"coordinate_system": "RAS"} if args.out.suffix in (".json", ".fcsv") else {}
+    write_landmarks(args.out, lms, **options)
+    for w in result.warnings:
+        print(f"note: {w}")
+    write_json({
+        "file": str(args.out), "surface": args.surface, "template": head.template_id,
+        "placed": [lm.code for lm in lms if lm.status == "placed"],
+        "suggested": {lm.code: round(lm.confidence, 2) for lm in lms if lm.status == "suggested"},
+        "absent": list(result.absent),
+        "alignment": {"method": result.alignment.method, "rms_mm": round(result.alignment.rms_mm, 2),
+                      "scale": round(result.alignment.scale, 4)},
+        "warp_residual_mm": round(result.warp_residual_mm, 3), "matches": result.matches,
+    }, None)
     return 0

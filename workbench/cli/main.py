@@ -21,13 +21,14 @@ from workbench.cli import (
     demo_cmd,
     landmarks_cmd,
     mesh_cmd,
+    reconstruct_cmd,
     samples_cmd,
     template_cmd,
 )
 from workbench.core.errors import WorkbenchError
 
 _MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd,
-            compare_cmd)
+            compare_cmd, reconstruct_cmd)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,85 @@
+"""``workbench reconstruct`` and ``workbench landmarks suggest`` end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from workbench.cli.main import main
+from workbench.io.case_file import load_case
+from workbench.io.markups import read_landmarks, write_mrk_json
+from workbench.io.meshes import read_mesh, write_mesh
+from workbench.reporting.report import read_report_json, sha256_file, validate_report
+from workbench.services.reference_parts import skull_surface
+
+HEADSQ_FLAGS = ["--anterior", "0,-1,0", "--superior", "0,0,-1", "--left", "1,0,0"]
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory: pytest.TempPathFactory, head_female) -> dict[str, Path]:  # noqa: ANN001
+    folder = tmp_path_factory.mktemp("recon-inputs")
+    paths = {"skull": folder / "skull.ply", "landmarks": folder / "skull.mrk.json",
+             "truth": folder / "truth_skin.ply"}
+    write_mesh(paths["skull"], skull_surface(head_female))
+    write_mrk_json(paths["landmarks"], head_female.skull_landmarks)
+    write_mesh(paths["truth"], head_female.skin)
+    return paths
+
+
+@pytest.mark.render
+def test_reconstruct_writes_face_head_case_and_report(inputs, tmp_path, head_male, capsys):  # noqa: ANN001
+    out = tmp_path / "recon"
+    code = main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
+                 "--sex", "male", "--ensemble", "3", "--truth", str(inputs["truth"]),
+                 "--exclude", "ecm2s", "--override", "g=6.5", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    face = read_mesh(out / "face.ply", units="mm").mesh
+    assert face.n_vertices == head_male.skin.n_vertices
+    assert (out / "head" / "template.json").is_file() and (out / "head" / "muscles.json").is_file()
+    report = read_report_json(out / "report.json")
+    validate_report(report)
+    assert report["template"]["content_hash"] == head_male.content_hash
+    assert report["validation"]["pct_within_2_5mm"] > 75.0  # ~83 % with the exclusions above
+    assert report["ensemble"]["n"] == 3
+    rows = {r["code"]: r for r in report["landmarks"]}
+    assert rows["g"]["source"] == "override" and rows["g"]["depth_mm"] == 6.5
+    assert rows["ecm2s_l"]["source"] == "excluded" and rows["ecm2s_l"]["depth_mm"] is None
+    skull_sha = sha256_file(inputs["skull"])
+    assert any(i["sha256"] == skull_sha and i["role"] == "skull" for i in report["inputs"])
+    assert any(i["role"] == "table" for i in report["inputs"])
+    assert all((out / p).is_file() for p in report["pictures"].values())
+    from pypdf import PdfReader
+
+    text = "".join(page.extract_text() for page in PdfReader(out / "report.pdf").pages)
+    assert report["case_id"] in text and "Hona" in text and skull_sha in text.replace("\n", "")
+    loaded = load_case(out / "case.fcase")
+    assert loaded.case.parameters["template_hash"] == head_male.content_hash
+    assert list(loaded.case.parameters["excluded_landmarks"]) == ["ecm2s"]
+
+
+def test_suggest_then_reconstruct_headsq_bone(headsq_surfaces, tmp_path, capsys):  # noqa: ANN001
+    bone = write_mesh(tmp_path / "bone.ply", headsq_surfaces["bone"])
+    lm_file = tmp_path / "suggested.mrk.json"
+    assert main(["landmarks", "suggest", str(bone), *HEADSQ_FLAGS, "--out", str(lm_file)]) == 0
+    printed = capsys.readouterr().out
+    assert '"absent"' in printed
+    lms = read_landmarks(lm_file, "skull", allow_undefined=True).landmarks
+    assert lms["v"].status == "absent"
+    assert sum(lm.status == "suggested" for lm in lms) >= 35
+    out = tmp_path / "recon"
+    assert main(["reconstruct", str(bone), "--landmarks", str(lm_file), "--no-pictures",
+                 "--truth", str(write_mesh(tmp_path / "skin.ply", headsq_surfaces["skin"])),
+                 "--out", str(out)]) == 0
+    report = read_report_json(out / "report.json")
+    assert "mirrored" in report["frame"]
+    assert report["validation"]["n_vertices"] > 1000
+
+
+def test_reconstruct_refuses_a_skull_in_metres(inputs, tmp_path, capsys):  # noqa: ANN001
+    mesh = read_mesh(inputs["skull"], units="mm").mesh
+    metres = write_mesh(tmp_path / "skull_m.ply", mesh.scaled(0.001))
+    assert main(["reconstruct", str(metres), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "skull_m.ply" in err and ("metre" in err or "units" in err)

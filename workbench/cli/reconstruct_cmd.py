@@ -1,0 +1,179 @@
+"""``workbench reconstruct``: skull → face with dowels, guides, ensemble and report.
+
+Outputs (in ``--out DIR``, all in the skull file's frame and mm):
+``face.ply``, ``head/`` (skin, skull parts, landmarks, muscles as a template
+pack), ``skull_landmarks.mrk.json``, ``case.fcase``, ``report.json``,
+``report.pdf`` and the report pictures in ``pictures/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from workbench.cli.common import add_units_options, write_json
+from workbench.core.errors import InputError
+
+
+def _build(value: str) -> str | float:
+    if value in ("slender", "normal", "obese"):
+        return value
+    try:
+        return float(value.replace("SD", "").replace("sd", "").strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--build must be slender, normal, obese or a number of SDs (e.g. 1 or -1.5), "
+            f"not {value!r}") from None
+
+
+def _vector(text: str) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(t) for t in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3:
+        raise argparse.ArgumentTypeError(f"expected three comma-separated numbers, got {text!r}")
+    return v  # type: ignore[return-value]
+
+
+def add_orientation_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--anterior", type=_vector, default=None, metavar="X,Y,Z",
+                   help="direction the face looks in the file's coordinates (helps the "
+                        "automatic landmark suggestion; sample files know theirs)")
+    p.add_argument("--superior", type=_vector, default=None, metavar="X,Y,Z",
+                   help="the head's up direction in the file's coordinates")
+    p.add_argument("--left", type=_vector, default=None, metavar="X,Y,Z",
+                   help="the subject's left in the file's coordinates (only for mirrored files)")
+
+
+def orientation_of(args: argparse.Namespace, argument: str) -> tuple | None:
+    if args.anterior is not None and args.superior is not None:
+        return (args.anterior, args.superior) + ((args.left,) if args.left else ())
+    if argument.startswith("sample:"):
+        from workbench.io.samples import registry
+
+        sample = registry().get(argument.split(":", 1)[1])
+        if sample is not None and sample.anatomy:
+            a = sample.anatomy
+            return (a["anterior"], a["superior"]) + ((a["left"],) if "left" in a else ())
+    if (args.anterior is None) != (args.superior is None):
+        raise InputError("--anterior/--superior", "give both directions or neither")
+    return None
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reconstruct", help="reconstruct a face over a skull (dowels, guides, report)",
+        description="Fit the reference head over a skull: tissue-depth dowels from a published "
+                    "table, Kähler's nose and mouth guides, non-penetration refits; optional "
+                    "uncertainty ensemble. Without --landmarks the skull landmarks are suggested "
+                    "automatically. Outputs are in the skull file's frame and mm.")
+    p.add_argument("skull", help="skull mesh (PLY/STL/OBJ/VTK/VTP) or sample:NAME")
+    add_units_options(p)
+    p.add_argument("--landmarks", type=Path, default=None, help="skull landmarks (.mrk.json …)")
+    p.add_argument("--table", default="ttable_2023", help="depth table id or CSV file")
+    p.add_argument("--sex", choices=["female", "male"], default="male")
+    p.add_argument("--build", type=_build, default="normal",
+                   help="slender|normal|obese where the table has them, else k for mean + k SD")
+    p.add_argument("--guides", default="default", help="default | none | guides JSON file")
+    p.add_argument("--exclude", action="append", default=[], metavar="CODE",
+                   help="switch a landmark's dowel off (repeatable; e.g. ecm2s for Kähler's cheeks)")
+    p.add_argument("--override", action="append", default=[], metavar="CODE=MM",
+                   help="set a landmark's depth by hand (repeatable)")
+    p.add_argument("--ensemble", type=int, default=0, metavar="N",
+                   help="N fits drawing depths from mean ± SD: a per-vertex spread map")
+    p.add_argument("--template", type=Path, default=None, metavar="PACK",
+                   help="template pack (workbench template build/export) instead of the built-in head")
+    p.add_argument("--truth", default=None, metavar="SKIN_MESH",
+                   help="true skin surface (same frame and units as the skull): adds validation figures")
+    p.add_argument("--examiner", default="")
+    p.add_argument("--no-pictures", action="store_true", help="skip the rendered pictures")
+    add_orientation_options(p)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(handler=run)
+
+
+def _overrides(items: list[str]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        code, _, value = item.partition("=")
+        try:
+            out[code.strip()] = float(value)
+        except ValueError:
+            raise InputError("--override", f"{item!r} is not CODE=MM") from None
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from workbench.io.samples import resolve_input
+    from workbench.services.reconstruction_job import JobSettings, run_reconstruction, write_outputs
+
+    skull_path = resolve_input(args.skull)
+    settings = JobSettings(
+        units=args.units, scale=args.scale, landmarks=args.landmarks, table=args.table,
+        sex=args.sex, build=args.build, guides=args.guides, ensemble=args.ensemble,
+        template=args.template, orientation=orientation_of(args, args.skull),
+        excluded=frozenset(args.exclude), overrides=_overrides(args.override),
+        examiner=args.examiner)
+    result = run_reconstruction(skull_path, settings, progress=lambda m: print(f"  {m}"))
+    files = write_outputs(result, args.out)
+    report = result.report
+    if args.truth is not None:
+        report["validation"] = _validate(args, result)
+    if not args.no_pictures:
+        report["pictures"] = _pictures(args, result)
+    from workbench.reporting.report import write_report_json, write_report_pdf
+
+    write_report_json(report, args.out / "report.json")
+    write_report_pdf(report, args.out / "report.pdf", base_dir=args.out)
+    for name, path in files.items():
+        print(f"wrote {name}: {path}")
+    print(f"wrote report: {args.out / 'report.json'}, {args.out / 'report.pdf'}")
+    fit = report["fit"]
+    summary = {k: fit.get(k) for k in ("max_tip_error_mm", "min_tissue_mm", "penetrating_vertices",
+                                       "refits", "suggested_landmarks", "absent_landmarks")}
+    summary["seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
+    if report["ensemble"]:
+        summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
+    if report["validation"]:
+        summary["validation"] = {k: report["validation"][k] for k in
+                                 ("mean_abs_mm", "pct_within_2_5mm", "pct_within_5mm")}
+    for w in report["warnings"]:
+        print(f"  note: {w}")
+    write_json(summary, None)
+    return 0
+
+
+def _validate(args: argparse.Namespace, result) -> dict:  # noqa: ANN001
+    from workbench.io.meshes import read_mesh
+    from workbench.io.samples import resolve_input
+    from workbench.services.compare import compare_surfaces, face_regions
+
+    truth = read_mesh(resolve_input(args.truth), units="mm" if args.scale is None else "auto",
+                      scale=args.scale).mesh
+    comparison = compare_surfaces(result.recon.face, truth,
+                                  recon_regions=face_regions(result.template))
+    out = comparison.to_json()
+    return {**out.get("figures", {}), "regions": out.get("regions", {}),
+            "truth": str(args.truth), "region": out.get("region")}
+
+
+def _pictures(args: argparse.Namespace, result) -> dict[str, str]:  # noqa: ANN001
+    import numpy as np
+
+    from workbench.render.reconstruction import render_reconstruction
+
+    recon = result.recon
+    active = recon.plan.active()
+    origins = recon.to_input(np.array([d.origin for d in active]))
+    tips = recon.to_input(np.array([d.tip for d in active]))
+    skull = result.opened.case.specimen.mesh
+    try:
+        paths = render_reconstruction(skull, recon.face, (origins, tips), args.out / "pictures",
+                                      frame=recon.input_to_head,
+                                      eyes=recon.mesh_to_input(recon.head.meshes["eyes"]),
+                                      spread=result.spread)
+    except (RuntimeError, OSError, ValueError) as exc:
+        print(f"  note: no pictures (off-screen rendering failed: {exc})")
+        return {}
+    return {k: str(Path(p).relative_to(args.out)) for k, p in paths.items()}

@@ -1,0 +1,276 @@
+"""The whole skull → face job as one scriptable call (used by ``workbench reconstruct``).
+
+Units mm.  Inputs are in the skull file's frame; outputs (face, head,
+landmarks) are mapped back into that frame so they overlay the evidence.
+
+Steps: open the skull as a case (evidence kept, units checked), suggest
+landmarks when none are given, fit the reference head
+(:mod:`workbench.services.reconstruct`) with the dowel plan and the nose /
+mouth guides, optionally an uncertainty ensemble, and assemble the report
+data (pictures are added by the caller, which may render).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench import __version__
+from workbench.commands.case_edits import SetParameter
+from workbench.commands.landmarks import ReplaceLandmarkSet
+from workbench.core.landmarks import LandmarkSet
+from workbench.core.mesh import Mesh
+from workbench.io.catalogue import load_catalogue
+from workbench.io.case_file import save_case
+from workbench.io.markups import write_mrk_json
+from workbench.io.meshes import write_mesh
+from workbench.io.template_pack import export_template
+from workbench.model.template import TemplateHead
+from workbench.services.case_setup import OpenedCase, start_case_from_skull
+from workbench.services.dowels import DepthSettings
+from workbench.services.guides import apply_guides, classic_guides, guides_from_json, guides_to_json
+from workbench.services.landmark_transfer import TransferResult, transfer_landmarks
+from workbench.services.reconstruct import (
+    FitSettings, Reconstruction, ensemble_spread, fit_head, outward, reconstruct,
+)
+from workbench.services.reference_parts import skull_surface
+from workbench.services.template_cache import reference_head
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class JobSettings:
+    """Everything ``workbench reconstruct`` takes besides the skull file."""
+
+    units: str = "auto"
+    scale: float | None = None
+    landmarks: str | PathLike[str] | None = None
+    table: str = "ttable_2023"
+    sex: str = "male"
+    build: str | float = "normal"
+    guides: str | PathLike[str] = "default"      # "default" | "none" | JSON file
+    ensemble: int = 0
+    template: str | PathLike[str] | None = None
+    orientation: tuple | None = None             # (anterior, superior[, left]) in file coords
+    excluded: frozenset[str] = frozenset()
+    overrides: dict = field(default_factory=dict)
+    examiner: str = ""
+
+
+@dataclass
+class JobResult:
+    opened: OpenedCase
+    template: TemplateHead
+    recon: Reconstruction
+    skull_h: Mesh
+    suggestion: TransferResult | None
+    guides: list
+    spread: np.ndarray | None
+    report: dict[str, Any]
+    seconds: dict[str, float]
+
+
+def _skull_h(skull: Mesh, to_head: np.ndarray) -> Mesh:
+    return outward(Mesh(skull.vertices @ to_head[:3, :3].T + to_head[:3, 3], skull.faces))
+
+
+def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = JobSettings(),
+                       progress: Progress | None = None) -> JobResult:
+    say = progress or (lambda _msg: None)
+    times: dict[str, float] = {}
+    t = time.perf_counter()
+    opened = start_case_from_skull(skull_path, units=settings.units, scale=settings.scale,
+                                   examiner=settings.examiner, landmarks_path=settings.landmarks)
+    case, stack = opened.case, opened.stack
+    skull = case.specimen.mesh
+    head = reference_head(settings.sex, settings.template)
+    times["open"] = time.perf_counter() - t
+    suggestion = None
+    landmarks = case.landmarks.get("skull")
+    if landmarks is None or len(landmarks.defined()) < 4:
+        say("suggesting skull landmarks ...")
+        t = time.perf_counter()
+        suggestion = transfer_landmarks(skull, skull_surface(head), head.skull_landmarks,
+                                        seeds=landmarks, orientation=settings.orientation)
+        landmarks = suggestion.landmarks
+        stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
+                                      label="Suggest skull landmarks"))
+        times["suggest"] = time.perf_counter() - t
+    depth = DepthSettings(table=settings.table, sex=settings.sex, build=settings.build,
+                          overrides=dict(settings.overrides), excluded=frozenset(settings.excluded))
+    fit = FitSettings(depth=depth)
+    say("fitting the reference head ...")
+    t = time.perf_counter()
+    recon = reconstruct(skull, landmarks, head, settings=fit)
+    to_head = recon.input_to_head
+    skull_h = _skull_h(skull, to_head)
+    lms_h = landmarks.transformed(to_head)
+    guides: list = []
+    if str(settings.guides) != "none":
+        if str(settings.guides) == "default":
+            tips = {d.code: d.tip for d in recon.plan.active()}
+            guides = classic_guides(lms_h, skull_h, dowel_tips=tips, sex=settings.sex,
+                                    table_id=settings.table if "/" not in settings.table
+                                    and not settings.table.endswith(".csv") else "ttable_2023")
+        else:
+            import json
+
+            guides = guides_from_json(json.loads(Path(settings.guides).read_text("utf-8")),
+                                      settings.guides)
+        targets = apply_guides(guides, recon.head.skin_landmarks.as_dict())
+        if targets:
+            say(f"second warp with {len(guides)} guides ...")
+            fitted, figures, src, dst = fit_head(head, skull_h, recon.plan,
+                                                 guide_targets=targets, settings=fit)
+            recon = replace(recon, head=fitted, figures=figures, sources=src, targets=dst,
+                            guide_targets=targets)
+    times["fit"] = time.perf_counter() - t
+    spread = None
+    if settings.ensemble > 0:
+        say(f"ensemble of {settings.ensemble} fits ...")
+        t = time.perf_counter()
+        spread = ensemble_spread(recon, head, skull_h, settings.ensemble, settings=fit)
+        times["ensemble"] = time.perf_counter() - t
+    for key, value in (("template_id", head.template_id), ("template_hash", head.content_hash),
+                       ("depth_table", recon.plan.table_id), ("depth_group", recon.plan.group_label),
+                       ("sex", settings.sex), ("build", str(settings.build)),
+                       ("guides", guides_to_json(guides)),
+                       ("excluded_landmarks", sorted(settings.excluded)),
+                       ("depth_overrides", {k: float(v) for k, v in settings.overrides.items()})):
+        stack.push(SetParameter(key=key, value=value))
+    report = build_report(opened, head, recon, landmarks, guides, spread, suggestion, settings)
+    return JobResult(opened, head, recon, skull_h, suggestion, guides, spread, report, times)
+
+
+def _input_record(ev: Any) -> dict[str, Any]:
+    return {"role": "skull" if ev.role == "skull_mesh" else "landmarks", "path": ev.name,
+            "sha256": ev.sha256, "units": ev.units_note or "mm"}
+
+
+def _file_record(role: str, path: str | PathLike[str]) -> dict[str, Any]:
+    from workbench.reporting.report import sha256_file
+
+    return {"role": role, "path": str(path), "sha256": sha256_file(path), "units": "mm"}
+
+
+def _table_file(table: str) -> Path:
+    from workbench.io.tables import tables_dir
+
+    p = Path(table)
+    return p if p.suffix == ".csv" and p.is_file() else tables_dir() / f"{table}.csv"
+
+
+def _dir_in(recon: Reconstruction, direction: np.ndarray) -> list[float]:
+    """A head-frame direction in the input frame (unit length)."""
+    v = np.linalg.inv(recon.input_to_head)[:3, :3] @ np.asarray(direction, float)
+    return [float(x) for x in v / np.linalg.norm(v)]
+
+
+def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
+                 landmarks: LandmarkSet, guides: list, spread: np.ndarray | None,
+                 suggestion: TransferResult | None, settings: JobSettings) -> dict[str, Any]:
+    """The report dict (``reconstruction-report-v1``) without pictures."""
+    from workbench.reporting.report import utc_now
+
+    catalogue = load_catalogue()
+    plan = recon.plan
+    by_code = {d.code: d for d in plan.dowels}
+    rows = []
+    for lm in landmarks:
+        d = by_code.get(lm.code)
+        entry = catalogue.get(lm.code, "skull")
+        rows.append({
+            "code": lm.code, "name": entry.name if entry else lm.code, "status": lm.status,
+            "position_mm": None if not lm.is_defined else [float(v) for v in lm.position],
+            "skin_code": None if d is None else d.skin_code,
+            "table_depth_mm": None if d is None else d.table_depth_mm,
+            "sd_mm": None if d is None else d.sd_mm,
+            "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
+            "source": "none" if d is None else ("excluded" if d.excluded else d.source),
+            "direction": None if d is None else _dir_in(recon, d.direction),
+        })
+    for d in plan.dowels:
+        if d.source == "interpolated":
+            rows.append({"code": d.code, "name": "interpolated site", "status": "suggested",
+                         "position_mm": [float(v) for v in recon.to_input(d.origin[None])[0]],
+                         "skin_code": None, "table_depth_mm": None, "sd_mm": d.sd_mm,
+                         "depth_mm": None if d.excluded else float(d.depth_mm),
+                         "source": "excluded" if d.excluded else "interpolated",
+                         "direction": _dir_in(recon, d.direction)})
+    fit = dict(recon.figures)
+    if suggestion is not None:
+        fit["suggested_landmarks"] = sum(lm.status == "suggested" for lm in suggestion.landmarks)
+        fit["absent_landmarks"] = len(suggestion.absent)
+        fit["suggestion_residual_mm"] = round(suggestion.warp_residual_mm, 3)
+    warnings = list(opened.notes) + list(recon.warnings)
+    if suggestion is not None:
+        warnings += list(suggestion.warnings)
+    return {
+        "@schema": "reconstruction-report-v1",
+        "case_id": opened.case.meta.case_id,
+        "created": utc_now(),
+        "examiner": settings.examiner or None,
+        "software": {"name": "workbench", "version": __version__},
+        "template": {"id": head.template_id, "content_hash": head.content_hash},
+        "frame": "input frame of the skull file (mm); the fit ran in the Frankfort head frame"
+                 + (" (mirrored input: reflection included)" if recon.mirrored_input else ""),
+        "units": "mm",
+        "inputs": [_input_record(ev) for ev in opened.case.evidence]
+        + [_file_record("table", _table_file(settings.table))]
+        + ([_file_record("guides", settings.guides)]
+           if str(settings.guides) not in ("default", "none") else [])
+        + ([_file_record("template", Path(settings.template) / "template.json")]
+           if settings.template is not None else []),
+        "table": {"id": plan.table_id, "title": plan.table_title, "citation": plan.citation,
+                  "group": plan.group_label, "build": str(settings.build)},
+        "landmarks": rows,
+        "guides": guides_to_json(guides),
+        "predictions": [],
+        "fit": fit,
+        "ensemble": None if spread is None else {
+            "n": settings.ensemble,
+            "spread_mm": {"median": float(np.median(spread)),
+                          "p90": float(np.percentile(spread, 90)), "max": float(spread.max())}},
+        "validation": None,
+        "pictures": {},
+        "warnings": warnings,
+    }
+
+
+def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
+    """The fitted head with every part mapped into the skull file's frame."""
+    h = recon.head
+    inv = np.linalg.inv(recon.input_to_head)
+    axis_pts = recon.to_input(np.vstack([h.tmj_axis[0], h.tmj_axis[0] + h.tmj_axis[1]]))
+    return replace(
+        h,
+        meshes={k: recon.mesh_to_input(m) for k, m in h.meshes.items()},
+        skin_landmarks=h.skin_landmarks.transformed(inv),
+        skull_landmarks=h.skull_landmarks.transformed(inv),
+        eye_centres=recon.to_input(h.eye_centres),
+        tmj_axis=np.vstack([axis_pts[0], (axis_pts[1] - axis_pts[0])
+                            / np.linalg.norm(axis_pts[1] - axis_pts[0])]),
+    )
+
+
+def write_outputs(result: JobResult, out: str | PathLike[str]) -> dict[str, Path]:
+    """face.ply, head/ (pack in the input frame), landmarks, case file (no report files)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"face": write_mesh(out / "face.ply", result.recon.face)}
+    head_in = head_in_input_frame(result.recon)
+    export_template(head_in, out / "head")
+    files["head"] = out / "head"
+    write_mrk_json(out / "skull_landmarks.mrk.json", result.opened.case.landmarks["skull"],
+                   coordinate_system="RAS")
+    files["landmarks"] = out / "skull_landmarks.mrk.json"
+    files["case"] = save_case(result.opened.case, out / "case.fcase", result.opened.stack)
+    return files
+
