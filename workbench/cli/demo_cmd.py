@@ -1,9 +1,16 @@
-"""``workbench demo``: the main job on the built-in default case.
+"""``workbench demo``: the main job — skull to face — on the built-in default case.
 
-Until the skull-to-face reconstruction lands, the default case is the CT to
-mesh pipeline on the public ``headsq`` CT sample: bone and skin surfaces, their
-validation reports and dimensions, and a picture when an off-screen renderer
-is available.
+1. **Built-in case** (no download): the project's own female reference skull
+   (cranium, mandible and teeth as one mesh, written to ``builtin/skull.ply``)
+   is reconstructed with the *male* reference head, its landmarks suggested
+   automatically, T-Table dowels, Kähler's guides and a 20-member depth
+   ensemble.  The female reference skin is the known truth, so the report
+   carries validation figures.
+2. **headsq** (public CT sample, when available): bone and skin surfaces are
+   extracted from the CT, the bone is reconstructed the same way and the
+   result is compared with the CT's own skin.
+
+Everything is written to ``--out`` (default ``demo_out/``) with a summary.
 """
 
 from __future__ import annotations
@@ -22,7 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the main pipeline on the built-in default case",
                        description=__doc__)
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder")
-    p.add_argument("--no-picture", action="store_true", help="skip the rendered PNG")
+    p.add_argument("--no-picture", "--no-pictures", dest="no_picture", action="store_true",
+                   help="skip the rendered pictures")
+    p.add_argument("--ensemble", type=int, default=20, help="ensemble size (0 = none)")
+    p.add_argument("--skip-headsq", action="store_true", help="only the built-in case")
     p.set_defaults(handler=run)
 
 
@@ -30,30 +40,72 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    print("fetching sample:headsq (VTK head CT, 64x64x93, 3.2x3.2x1.5 mm)")
-    ct = fetch("headsq")
-    summary: dict = {"input": {"sample": "headsq", "path": str(ct)}, "surfaces": {}}
-    meshes = {}
-    for tissue in ("bone", "skin"):
-        print(f"extracting the {tissue} surface")
-        result = mesh_from_ct(ct, tissue=tissue, progress=progress_printer())
-        path = out / f"headsq_{tissue}.ply"
-        write_mesh(path, result.mesh)
-        meshes[tissue] = result.mesh
-        summary["surfaces"][tissue] = {
-            "file": path.name, "iso": result.iso, "rule": result.rule, "frame": result.frame,
-            **mesh_summary(result.mesh),
-            "validation": result.validation.summary(),
-            "seconds": round(result.timings_s.get("total", 0.0), 3),
-        }
-        print(f"  {result.validation.summary()}")
-        print(f"  extent {[round(float(v), 1) for v in result.mesh.extent]} mm -> {path}")
-    if not args.no_picture:
-        summary["picture"] = _picture(meshes, out / "headsq_surfaces.png")
+    summary: dict = {"builtin": _builtin(out / "builtin", args)}
+    if not args.skip_headsq:
+        summary["headsq"] = _headsq(out / "headsq", args)
     summary["seconds_total"] = round(time.perf_counter() - started, 2)
     write_json(summary, out / "summary.json")
     print(f"wrote {out / 'summary.json'} ({summary['seconds_total']} s)")
     return 0
+
+
+def _figures(report: dict, folder: Path) -> dict:
+    v = report.get("validation") or {}
+    return {
+        "folder": str(folder),
+        "report": "report.pdf",
+        "fit": {k: report["fit"].get(k) for k in ("max_tip_error_mm", "min_tissue_mm",
+                                                  "penetrating_vertices", "suggested_landmarks",
+                                                  "absent_landmarks")},
+        "ensemble_spread_mm": (report.get("ensemble") or {}).get("spread_mm"),
+        "validation": {k: v.get(k) for k in ("mean_abs_mm", "rms_mm", "signed_mean_mm",
+                                             "pct_within_2_5mm", "pct_within_5mm")} if v else None,
+        "seconds": report.get("_seconds"),
+        "picture": (report.get("pictures") or {}).get("face_skull_three_quarter"),
+    }
+
+
+def _builtin(folder: Path, args: argparse.Namespace) -> dict:
+    from workbench.cli.reconstruct_cmd import execute
+    from workbench.services.reconstruction_job import JobSettings
+    from workbench.services.reference_parts import skull_surface
+    from workbench.services.template_cache import reference_head
+
+    print("built-in case: the female reference skull, reconstructed with the male head")
+    folder.mkdir(parents=True, exist_ok=True)
+    female = reference_head("female")
+    skull = write_mesh(folder / "skull.ply", skull_surface(female))
+    truth = write_mesh(folder / "truth_skin.ply", female.skin)
+    settings = JobSettings(sex="male", ensemble=args.ensemble,
+                           orientation=((0, 0, 1), (0, 1, 0)))
+    report = execute(skull, settings, folder, truth=truth, pictures=not args.no_picture,
+                     quiet=True)
+    return _figures(report, folder)
+
+
+def _headsq(folder: Path, args: argparse.Namespace) -> dict | None:
+    from workbench.cli.reconstruct_cmd import execute
+    from workbench.core.errors import WorkbenchError
+    from workbench.services.reconstruction_job import JobSettings
+
+    try:
+        ct = fetch("headsq")
+    except (WorkbenchError, OSError) as exc:
+        print(f"headsq sample not available ({exc}); skipped")
+        return None
+    print("headsq: CT -> bone and skin surfaces -> reconstruction from the bone")
+    folder.mkdir(parents=True, exist_ok=True)
+    surfaces = {}
+    for tissue in ("bone", "skin"):
+        result = mesh_from_ct(ct, tissue=tissue, progress=progress_printer())
+        surfaces[tissue] = {"file": write_mesh(folder / f"{tissue}.ply", result.mesh).name,
+                            **mesh_summary(result.mesh), "iso": result.iso}
+    anatomy = registry()["headsq"].anatomy or {}
+    orientation = (anatomy["anterior"], anatomy["superior"], anatomy["left"])
+    settings = JobSettings(sex="male", ensemble=args.ensemble, orientation=orientation)
+    report = execute(folder / "bone.ply", settings, folder / "reconstruction",
+                     truth=folder / "skin.ply", pictures=not args.no_picture, quiet=True)
+    return {"surfaces": surfaces, **_figures(report, folder / "reconstruction")}
 
 
 def _picture(meshes: dict, path: Path) -> str | None:

@@ -106,33 +106,46 @@ def _overrides(items: list[str]) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     from workbench.io.samples import resolve_input
-    from workbench.services.reconstruction_job import JobSettings, run_reconstruction, write_outputs
+    from workbench.services.reconstruction_job import JobSettings
 
-    skull_path = resolve_input(args.skull)
     settings = JobSettings(
         units=args.units, scale=args.scale, landmarks=args.landmarks, table=args.table,
         sex=args.sex, build=args.build, guides=args.guides, ensemble=args.ensemble,
         template=args.template, orientation=orientation_of(args, args.skull),
         excluded=frozenset(args.exclude), overrides=_overrides(args.override),
         examiner=args.examiner)
-    result = run_reconstruction(skull_path, settings, progress=lambda m: print(f"  {m}"))
-    files = write_outputs(result, args.out)
-    report = result.report
-    if args.truth is not None:
-        report["validation"] = _validate(args, result)
-    if not args.no_pictures:
-        report["pictures"] = _pictures(args, result)
-    from workbench.reporting.report import write_report_json, write_report_pdf
+    truth = None if args.truth is None else resolve_input(args.truth)
+    execute(resolve_input(args.skull), settings, args.out, truth=truth,
+            pictures=not args.no_pictures)
+    return 0
 
-    write_report_json(report, args.out / "report.json")
-    write_report_pdf(report, args.out / "report.pdf", base_dir=args.out)
+
+def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,  # noqa: ANN001
+            pictures: bool = True, quiet: bool = False) -> dict:
+    """Run the job, write every output into ``out``; returns the report dict."""
+    from workbench.reporting.report import write_report_json, write_report_pdf
+    from workbench.services.reconstruction_job import run_reconstruction, write_outputs
+
+    say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}"))
+    result = run_reconstruction(skull_path, settings, progress=say)
+    files = write_outputs(result, out)
+    report = result.report
+    if truth is not None:
+        report["validation"] = _validate(truth, settings.scale, result)
+    if pictures:
+        report["pictures"] = _pictures(out, result)
+    write_report_json(report, out / "report.json")
+    write_report_pdf(report, out / "report.pdf", base_dir=out)
+    report["_seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
+    if quiet:
+        return report
     for name, path in files.items():
         print(f"wrote {name}: {path}")
-    print(f"wrote report: {args.out / 'report.json'}, {args.out / 'report.pdf'}")
+    print(f"wrote report: {out / 'report.json'}, {out / 'report.pdf'}")
     fit = report["fit"]
     summary = {k: fit.get(k) for k in ("max_tip_error_mm", "min_tissue_mm", "penetrating_vertices",
                                        "refits", "suggested_landmarks", "absent_landmarks")}
-    summary["seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
+    summary["seconds"] = report["_seconds"]
     if report["ensemble"]:
         summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
     if report["validation"]:
@@ -141,24 +154,22 @@ def run(args: argparse.Namespace) -> int:
     for w in report["warnings"]:
         print(f"  note: {w}")
     write_json(summary, None)
-    return 0
+    return report
 
 
-def _validate(args: argparse.Namespace, result) -> dict:  # noqa: ANN001
+def _validate(truth_path: Path, scale: float | None, result) -> dict:  # noqa: ANN001
     from workbench.io.meshes import read_mesh
-    from workbench.io.samples import resolve_input
     from workbench.services.compare import compare_surfaces, face_regions
 
-    truth = read_mesh(resolve_input(args.truth), units="mm" if args.scale is None else "auto",
-                      scale=args.scale).mesh
+    truth = read_mesh(truth_path, units="mm" if scale is None else "auto", scale=scale).mesh
     comparison = compare_surfaces(result.recon.face, truth,
                                   recon_regions=face_regions(result.template))
     out = comparison.to_json()
     return {**out.get("figures", {}), "regions": out.get("regions", {}),
-            "truth": str(args.truth), "region": out.get("region")}
+            "truth": str(truth_path), "region": out.get("region")}
 
 
-def _pictures(args: argparse.Namespace, result) -> dict[str, str]:  # noqa: ANN001
+def _pictures(out: Path, result) -> dict[str, str]:  # noqa: ANN001
     import numpy as np
 
     from workbench.render.reconstruction import render_reconstruction
@@ -169,11 +180,11 @@ def _pictures(args: argparse.Namespace, result) -> dict[str, str]:  # noqa: ANN0
     tips = recon.to_input(np.array([d.tip for d in active]))
     skull = result.opened.case.specimen.mesh
     try:
-        paths = render_reconstruction(skull, recon.face, (origins, tips), args.out / "pictures",
+        paths = render_reconstruction(skull, recon.face, (origins, tips), out / "pictures",
                                       frame=recon.input_to_head,
                                       eyes=recon.mesh_to_input(recon.head.meshes["eyes"]),
                                       spread=result.spread)
     except (RuntimeError, OSError, ValueError) as exc:
         print(f"  note: no pictures (off-screen rendering failed: {exc})")
         return {}
-    return {k: str(Path(p).relative_to(args.out)) for k, p in paths.items()}
+    return {k: str(Path(p).relative_to(out)) for k, p in paths.items()}
