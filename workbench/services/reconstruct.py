@@ -31,7 +31,7 @@ Fit (digest §6.4–6.5):
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -147,6 +147,10 @@ def _transform(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.asarray(p, float) @ m[:3, :3].T + m[:3, 3]
 
 
+#: skin points of interpolated sites on a reference head, per (head hash, table, sites)
+_REF_CACHE: dict[tuple, dict[str, np.ndarray]] = {}
+
+
 def reference_correspondences(head: TemplateHead, plan: DowelPlan,
                               settings: DepthSettings) -> dict[str, np.ndarray]:
     """Skin point of the reference head for every dowel code of ``plan`` (head frame).
@@ -159,7 +163,10 @@ def reference_correspondences(head: TemplateHead, plan: DowelPlan,
     out = {d.code: skin[d.skin_code] for d in plan.dowels
            if d.skin_code is not None and d.skin_code in skin}
     wanted = [d.code for d in plan.dowels if d.source == "interpolated"]
-    if wanted:
+    key = (head.content_hash, str(settings.table), tuple(wanted))
+    if wanted and key in _REF_CACHE:
+        out.update(_REF_CACHE[key])
+    elif wanted:
         ref_plan = plan_dowels(skull_surface(head), head.skull_landmarks,
                                replace(settings, overrides={}, excluded=frozenset(),
                                        directions={}, build="normal"))
@@ -169,7 +176,9 @@ def reference_correspondences(head: TemplateHead, plan: DowelPlan,
             codes = list(tips)
             pts = np.array([tips[c].tip for c in codes])
             cp = skin_index.closest_points(pts).points
-            out.update(dict(zip(codes, cp, strict=True)))
+            found = dict(zip(codes, cp, strict=True))
+            _REF_CACHE[key] = found
+            out.update(found)
     return out
 
 
@@ -231,32 +240,16 @@ def _spread(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.array(chosen, dtype=np.int64)
 
 
-def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
-             guide_targets: Mapping[str, np.ndarray] | None = None,
-             settings: FitSettings = FitSettings(), depths: np.ndarray | None = None,
-             extra: tuple[np.ndarray, np.ndarray] | None = None,
-             ref_points: dict[str, np.ndarray] | None = None,
-             skull_index: MeshIndex | None = None) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray]:
-    """Warp ``head`` so its skin meets the dowel tips (all in the head frame).
-
-    ``depths`` (one per dowel of ``plan``) replaces the planned depths (the
-    ensemble); ``extra`` adds fixed correspondences and skips the
-    non-penetration loop (used by the ensemble with the main fit's extras).
-    """
-    t0 = time.perf_counter()
-    ref_points = ref_points if ref_points is not None else reference_correspondences(
-        head, plan, settings.depth)
-    guide_targets = dict(guide_targets or {})
-    src, dst = [], []
-    skin_lms = head.skin_landmarks.as_dict()
-    tip_of = {}
+def _pairs(plan: DowelPlan, ref_points: Mapping[str, np.ndarray], skin_lms: Mapping[str, np.ndarray],
+           guide_targets: Mapping[str, np.ndarray], depths: np.ndarray | None
+           ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Warp correspondences: reference skin points → dowel tips, guided codes → guide targets."""
+    src, dst, tip_of = [], [], {}
     for i, d in enumerate(plan.dowels):
-        if d.excluded or d.code not in ref_points:
-            continue
+        if d.excluded or d.code not in ref_points or d.skin_code in guide_targets:
+            continue  # a guide, when there is one, decides that skin landmark
         depth = d.depth_mm if depths is None else float(depths[i])
         tip = d.origin + depth * d.direction
-        if d.skin_code in guide_targets:
-            continue  # the guide decides this skin landmark
         src.append(ref_points[d.code])
         dst.append(tip)
         tip_of[d.code] = tip
@@ -267,10 +260,46 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
     if len(src) < 4:
         raise LandmarkError(f"only {len(src)} usable dowels; place more skull landmarks "
                             "(at least 4 with table depths)")
-    src_a, dst_a = np.array(src), np.array(dst)
+    return np.array(src), np.array(dst), tip_of
+
+
+GuideFn = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
+
+
+def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
+             guide_targets: Mapping[str, np.ndarray] | None = None,
+             guides: GuideFn | None = None,
+             settings: FitSettings = FitSettings(), depths: np.ndarray | None = None,
+             extra: tuple[np.ndarray, np.ndarray] | None = None,
+             ref_points: dict[str, np.ndarray] | None = None,
+             skull_index: MeshIndex | None = None
+             ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Warp ``head`` so its skin meets the dowel tips (all in the head frame).
+
+    ``guides`` maps the skin landmark positions after the dowel warp to guide
+    targets (the dissertation's second warp, §8.6.5); ``guide_targets`` gives
+    them directly.  ``depths`` (one per dowel of ``plan``) replaces the
+    planned depths (the ensemble); ``extra`` adds fixed correspondences and
+    skips the non-penetration loop (used by the ensemble with the main
+    fit's extras).  Returns the fitted head, figures, the correspondences
+    and the guide targets used.
+    """
+    t0 = time.perf_counter()
+    ref_points = ref_points if ref_points is not None else reference_correspondences(
+        head, plan, settings.depth)
+    guide_targets = dict(guide_targets or {})
+    skin_lms = head.skin_landmarks.as_dict()
+    src_a, dst_a, tip_of = _pairs(plan, ref_points, skin_lms, guide_targets, depths)
     if extra is not None and len(extra[0]):
         src_a, dst_a = np.vstack([src_a, extra[0]]), np.vstack([dst_a, extra[1]])
     warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
+    if guides is not None:
+        codes = list(skin_lms)
+        prefit = dict(zip(codes, warp(np.array([skin_lms[c] for c in codes])), strict=True))
+        guide_targets.update(guides(prefit))
+        if guide_targets:
+            src_a, dst_a, tip_of = _pairs(plan, ref_points, skin_lms, guide_targets, depths)
+            warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
     skin_v = head.skin.vertices
     index = skull_index or MeshIndex(skull_h)
     openings = np.zeros(len(skin_v), dtype=bool)
@@ -326,7 +355,7 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
         "correspondences": len(src_a),
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    return fitted, figures, src_a, dst_a
+    return fitted, figures, src_a, dst_a, guide_targets
 
 
 def _face_bary(index: MeshIndex, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -336,14 +365,21 @@ def _face_bary(index: MeshIndex, pts: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
                 settings: FitSettings = FitSettings(),
-                guide_targets: Mapping[str, np.ndarray] | None = None) -> Reconstruction:
-    """Fit ``head`` over ``skull`` (input frame, mm) from its skull ``landmarks``."""
+                guide_targets: Mapping[str, np.ndarray] | None = None,
+                guides: Callable[[Mesh, LandmarkSet, DowelPlan], GuideFn | None] | None = None
+                ) -> Reconstruction:
+    """Fit ``head`` over ``skull`` (input frame, mm) from its skull ``landmarks``.
+
+    ``guides(skull_h, landmarks_h, plan)`` may return a function giving guide
+    targets from the dowel-fitted skin landmarks (see :func:`fit_head`).
+    """
     to_head, mirrored = input_frame(landmarks)
     skull_h = outward(Mesh(_transform(to_head, skull.vertices), skull.faces))
     lms_h = landmarks.transformed(to_head)
     plan = plan_dowels(skull_h, lms_h, settings.depth)
-    fitted, figures, src, dst = fit_head(head, skull_h, plan, guide_targets=guide_targets,
-                                         settings=settings)
+    guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
+    fitted, figures, src, dst, used = fit_head(head, skull_h, plan, guide_targets=guide_targets,
+                                               guides=guide_fn, settings=settings)
     warnings = list(plan.warnings)
     if mirrored:
         warnings.append("the input is mirrored (left-handed coordinates): the head frame "
@@ -352,7 +388,7 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
         warnings.append(f"{figures['penetrating_vertices']} skin vertices still inside the bone "
                         f"after {figures['refits']} refits")
     return Reconstruction(fitted, to_head, mirrored, plan, src, dst, figures,
-                          dict(guide_targets or {}), tuple(warnings))
+                          used, tuple(warnings))
 
 
 def ensemble_spread(recon: Reconstruction, head: TemplateHead, skull_h: Mesh, n: int, *,

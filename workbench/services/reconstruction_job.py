@@ -37,7 +37,7 @@ from workbench.services.dowels import DepthSettings
 from workbench.services.guides import apply_guides, classic_guides, guides_from_json, guides_to_json
 from workbench.services.landmark_transfer import TransferResult, transfer_landmarks
 from workbench.services.reconstruct import (
-    FitSettings, Reconstruction, ensemble_spread, fit_head, outward, reconstruct,
+    FitSettings, Reconstruction, ensemble_spread, outward, reconstruct,
 )
 from workbench.services.reference_parts import skull_surface
 from workbench.services.template_cache import reference_head
@@ -108,29 +108,26 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
     fit = FitSettings(depth=depth)
     say("fitting the reference head ...")
     t = time.perf_counter()
-    recon = reconstruct(skull, landmarks, head, settings=fit)
-    to_head = recon.input_to_head
-    skull_h = _skull_h(skull, to_head)
-    lms_h = landmarks.transformed(to_head)
-    guides: list = []
-    if str(settings.guides) != "none":
+    chosen: list = []
+
+    def guide_fn(skull_h: Mesh, lms_h: LandmarkSet, plan):  # noqa: ANN001, ANN202
+        if str(settings.guides) == "none":
+            return None
         if str(settings.guides) == "default":
-            tips = {d.code: d.tip for d in recon.plan.active()}
-            guides = classic_guides(lms_h, skull_h, dowel_tips=tips, sex=settings.sex,
-                                    table_id=settings.table if "/" not in settings.table
-                                    and not settings.table.endswith(".csv") else "ttable_2023")
+            tips = {d.code: d.tip for d in plan.active()}
+            table = settings.table if not str(settings.table).endswith(".csv") else "ttable_2023"
+            chosen.extend(classic_guides(lms_h, skull_h, dowel_tips=tips, sex=settings.sex,
+                                         table_id=table))
         else:
             import json
 
-            guides = guides_from_json(json.loads(Path(settings.guides).read_text("utf-8")),
-                                      settings.guides)
-        targets = apply_guides(guides, recon.head.skin_landmarks.as_dict())
-        if targets:
-            say(f"second warp with {len(guides)} guides ...")
-            fitted, figures, src, dst = fit_head(head, skull_h, recon.plan,
-                                                 guide_targets=targets, settings=fit)
-            recon = replace(recon, head=fitted, figures=figures, sources=src, targets=dst,
-                            guide_targets=targets)
+            chosen.extend(guides_from_json(
+                json.loads(Path(settings.guides).read_text("utf-8")), settings.guides))
+        return lambda skin: apply_guides(chosen, skin)
+
+    recon = reconstruct(skull, landmarks, head, settings=fit, guides=guide_fn)
+    guides = chosen
+    skull_h = _skull_h(skull, recon.input_to_head)
     times["fit"] = time.perf_counter() - t
     spread = None
     if settings.ensemble > 0:
