@@ -67,6 +67,8 @@ class FitSettings:
     depth: DepthSettings = field(default_factory=DepthSettings)
     min_tissue_mm: float = 2.0
     max_refits: int = 4
+    #: suggested landmarks below this confidence get no dowel (placed ones always do)
+    min_confidence: float = 0.15
 
 
 @dataclass(frozen=True)
@@ -376,11 +378,22 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
     to_head, mirrored = input_frame(landmarks)
     skull_h = outward(Mesh(_transform(to_head, skull.vertices), skull.faces))
     lms_h = landmarks.transformed(to_head)
+    doubtful = [lm.code for lm in lms_h if lm.status == "suggested"
+                and lm.confidence < settings.min_confidence]
+    if doubtful:
+        # a wrongly placed dowel distorts the whole face (§8.4.3): doubtful
+        # suggestions get no dowel until the user confirms or moves them
+        lms_h = LandmarkSet(lms_h.surface, tuple(
+            lm.moved(lm.position, "absent") if lm.code in doubtful else lm for lm in lms_h))
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
     fitted, figures, src, dst, used = fit_head(head, skull_h, plan, guide_targets=guide_targets,
                                                guides=guide_fn, settings=settings)
     warnings = list(plan.warnings)
+    if doubtful:
+        warnings.append(f"{len(doubtful)} suggested landmarks below confidence "
+                        f"{settings.min_confidence:g} got no dowel (confirm or move them): "
+                        + ", ".join(doubtful))
     if mirrored:
         warnings.append("the input is mirrored (left-handed coordinates): the head frame "
                         "includes a reflection, and results are mapped back the same way")

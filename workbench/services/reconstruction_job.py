@@ -34,7 +34,12 @@ from workbench.io.template_pack import export_template
 from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.dowels import DepthSettings
-from workbench.services.guides import apply_guides, classic_guides, guides_from_json, guides_to_json
+from workbench.core.errors import WorkbenchError
+from workbench.core.isosurface import decimate
+from workbench.services.guide_rules import published_predictions
+from workbench.services.guides import (
+    apply_guides, check_guides, classic_guides, guides_from_json, guides_to_json,
+)
 from workbench.services.landmark_transfer import TransferResult, transfer_landmarks
 from workbench.services.reconstruct import (
     FitSettings, Reconstruction, ensemble_spread, outward, reconstruct,
@@ -43,6 +48,9 @@ from workbench.services.reference_parts import skull_surface
 from workbench.services.template_cache import reference_head
 
 Progress = Callable[[str], None]
+#: skulls larger than this are decimated to WORKING_TRIANGLES for the fit
+MAX_WORKING_TRIANGLES = 250_000
+WORKING_TRIANGLES = 200_000
 
 
 @dataclass(frozen=True)
@@ -92,12 +100,21 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
     skull = case.specimen.mesh
     head = reference_head(settings.sex, settings.template)
     times["open"] = time.perf_counter() - t
+    work = skull
+    if skull.n_faces > MAX_WORKING_TRIANGLES:
+        # Kähler §8.6.4: a 50-250k-triangle working mesh keeps the editor
+        # responsive; the original stays in the case as evidence
+        say(f"decimating the working skull {skull.n_faces} -> {WORKING_TRIANGLES} triangles ...")
+        v, f = decimate(skull.vertices, skull.faces, WORKING_TRIANGLES)
+        work = Mesh(v, f)
+        opened.notes.append(f"working skull decimated from {skull.n_faces} to {work.n_faces} "
+                            "triangles (the original file is kept as evidence)")
     suggestion = None
     landmarks = case.landmarks.get("skull")
     if landmarks is None or len(landmarks.defined()) < 4:
         say("suggesting skull landmarks ...")
         t = time.perf_counter()
-        suggestion = transfer_landmarks(skull, skull_surface(head), head.skull_landmarks,
+        suggestion = transfer_landmarks(work, skull_surface(head), head.skull_landmarks,
                                         seeds=landmarks, orientation=settings.orientation)
         landmarks = suggestion.landmarks
         stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
@@ -109,6 +126,7 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
     say("fitting the reference head ...")
     t = time.perf_counter()
     chosen: list = []
+    rejected: list[str] = []
 
     def guide_fn(skull_h: Mesh, lms_h: LandmarkSet, plan):  # noqa: ANN001, ANN202
         if str(settings.guides) == "none":
@@ -123,11 +141,20 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
 
             chosen.extend(guides_from_json(
                 json.loads(Path(settings.guides).read_text("utf-8")), settings.guides))
-        return lambda skin: apply_guides(chosen, skin)
+        return lambda skin: _plausible_guides(chosen, skin, skull_h, lms_h, rejected)
 
-    recon = reconstruct(skull, landmarks, head, settings=fit, guides=guide_fn)
+    recon = reconstruct(work, landmarks, head, settings=fit, guides=guide_fn)
     guides = chosen
-    skull_h = _skull_h(skull, recon.input_to_head)
+    skull_h = _skull_h(work, recon.input_to_head)
+    lms_h = landmarks.transformed(recon.input_to_head)
+    problems = check_guides([g for g in guides if g.enabled], skull_h, lms_h) if guides else []
+    recon = replace(recon, warnings=recon.warnings + tuple(rejected)
+                    + tuple(f"guide: {p}" for p in problems))
+    try:
+        predictions = published_predictions(lms_h, settings.sex, skull=skull_h)
+    except WorkbenchError as exc:  # informative only: a missing measurement must not stop the job
+        predictions = []
+        opened.notes.append(f"published guide predictions unavailable: {exc}")
     times["fit"] = time.perf_counter() - t
     spread = None
     if settings.ensemble > 0:
@@ -143,7 +170,39 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
                        ("depth_overrides", {k: float(v) for k, v in settings.overrides.items()})):
         stack.push(SetParameter(key=key, value=value))
     report = build_report(opened, head, recon, landmarks, guides, spread, suggestion, settings)
+    report["predictions"] = [
+        {"rule_id": p.rule_id, "label": p.label, "value_mm": float(p.value_mm),
+         "citation": p.citation} for p in predictions if np.isfinite(p.value_mm)]
     return JobResult(opened, head, recon, skull_h, suggestion, guides, spread, report, times)
+
+
+#: a computed guide that would move its skin landmark farther than this from
+#: the tissue-depth fit is taken as a failed skull measurement and switched off
+MAX_GUIDE_SHIFT_MM = 8.0
+
+
+def _plausible_guides(guides: list, skin: dict[str, np.ndarray], skull_h: Mesh,
+                      lms_h: LandmarkSet, rejected: list[str]) -> dict[str, np.ndarray]:
+    """Guide targets, leaving out computed guides that fail their checks.
+
+    A guide set by the user is always applied.  A computed one is switched
+    off (and the reason recorded in ``rejected``) when ``check_guides`` finds
+    it outside the skull or anatomically impossible, or when it would move
+    its landmark more than :data:`MAX_GUIDE_SHIFT_MM` from the tissue-depth
+    fit — never a silently distorted face.
+    """
+    for i, g in enumerate(guides):
+        if not g.enabled or g.source == "user":
+            continue
+        problems = check_guides([g], skull_h, lms_h)
+        shift = max((float(np.linalg.norm(p - skin[c])) for c, p in apply_guides([g], skin).items()),
+                    default=0.0)
+        if problems or shift > MAX_GUIDE_SHIFT_MM:
+            why = problems[0] if problems else f"it would move {', '.join(g.affects)} by {shift:.1f} mm"
+            rejected.append(f"guide {g.id} switched off ({why}); check the skull there or set "
+                            "the guide by hand")
+            guides[i] = replace(g, enabled=False)
+    return apply_guides(guides, skin)
 
 
 def _input_record(ev: Any) -> dict[str, Any]:
@@ -185,6 +244,7 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
         entry = catalogue.get(lm.code, "skull")
         rows.append({
             "code": lm.code, "name": entry.name if entry else lm.code, "status": lm.status,
+            "confidence": float(lm.confidence) if lm.is_defined else None,
             "position_mm": None if not lm.is_defined else [float(v) for v in lm.position],
             "skin_code": None if d is None else d.skin_code,
             "table_depth_mm": None if d is None else d.table_depth_mm,
