@@ -179,6 +179,7 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
 #: a computed guide that would move its skin landmark farther than this from
 #: the tissue-depth fit is taken as a failed skull measurement and switched off
 MAX_GUIDE_SHIFT_MM = 8.0
+MIN_CONFIDENCE = FitSettings().min_confidence
 
 
 def _plausible_guides(guides: list, skin: dict[str, np.ndarray], skull_h: Mesh,
@@ -211,9 +212,15 @@ def _input_record(ev: Any) -> dict[str, Any]:
 
 
 def _file_record(role: str, path: str | PathLike[str]) -> dict[str, Any]:
+    from workbench.io.tables import tables_dir
     from workbench.reporting.report import sha256_file
 
-    return {"role": role, "path": str(path), "sha256": sha256_file(path), "units": "mm"}
+    shown = Path(path)
+    try:  # built-in tables by their place in the project, not this machine's path
+        shown = Path("data_tables") / shown.resolve().relative_to(tables_dir().parent.resolve())
+    except ValueError:
+        pass
+    return {"role": role, "path": str(shown), "sha256": sha256_file(path), "units": "mm"}
 
 
 def _table_file(table: str) -> Path:
@@ -252,6 +259,9 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
             "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
             "source": "none" if d is None else ("excluded" if d.excluded else d.source),
             "direction": None if d is None else _dir_in(recon, d.direction),
+            "note": (f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: no dowel "
+                     "until confirmed or moved") if lm.status == "suggested" and d is None
+            and lm.confidence < MIN_CONFIDENCE else None,
         })
     for d in plan.dowels:
         if d.source == "interpolated":
