@@ -1,10 +1,19 @@
-"""``python -m workbench``: the command line (the desktop window will open from here once it exists)."""
+"""``python -m workbench``: the desktop window without arguments, the command line with them."""
 
 from __future__ import annotations
 
 import sys
 
-from workbench.cli.main import main
+
+def _main() -> int:
+    if len(sys.argv) == 1:
+        from workbench.cli.gui_cmd import launch
+
+        return launch([])
+    from workbench.cli.main import main
+
+    return main()
+
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_main())

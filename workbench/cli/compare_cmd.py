@@ -9,7 +9,6 @@ signed distance: red = reconstruction outside, blue = inside).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np

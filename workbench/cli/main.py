@@ -17,6 +17,7 @@ import workbench
 from workbench.cli import (
     case_cmd,
     compare_cmd,
+    gui_cmd,
     ct_cmd,
     demo_cmd,
     landmarks_cmd,
@@ -28,7 +29,7 @@ from workbench.cli import (
 from workbench.core.errors import WorkbenchError
 
 _MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd,
-            compare_cmd, reconstruct_cmd)
+            compare_cmd, reconstruct_cmd, gui_cmd)
 
 
 def build_parser() -> argparse.ArgumentParser:

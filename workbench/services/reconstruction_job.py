@@ -141,7 +141,7 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
 
             chosen.extend(guides_from_json(
                 json.loads(Path(settings.guides).read_text("utf-8")), settings.guides))
-        return lambda skin: _plausible_guides(chosen, skin, skull_h, lms_h, rejected)
+        return lambda skin: plausible_guides(chosen, skin, skull_h, lms_h, rejected)
 
     recon = reconstruct(work, landmarks, head, settings=fit, guides=guide_fn)
     guides = chosen
@@ -182,7 +182,7 @@ MAX_GUIDE_SHIFT_MM = 8.0
 MIN_CONFIDENCE = FitSettings().min_confidence
 
 
-def _plausible_guides(guides: list, skin: dict[str, np.ndarray], skull_h: Mesh,
+def plausible_guides(guides: list, skin: dict[str, np.ndarray], skull_h: Mesh,
                       lms_h: LandmarkSet, rejected: list[str]) -> dict[str, np.ndarray]:
     """Guide targets, leaving out computed guides that fail their checks.
 

@@ -1,0 +1,76 @@
+"""``workbench gui [CASE]``: open the desktop window (``python -m workbench`` does too).
+
+``--screenshot FILE.png`` opens, loads, runs the asked-for steps, renders,
+saves a picture of the whole window and exits (for tests and documentation;
+headless it needs Xvfb and ``QT_QPA_PLATFORM=xcb``).  Units mm.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from workbench.core.errors import InputError
+
+TOOLS = ("landmarks", "dowels", "reconstruct", "compare")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("gui", help="open the desktop window",
+                       description="The workbench window: skull landmarks, dowels, guides, "
+                                   "reconstruction, comparison and export.")
+    add_arguments(p)
+    p.set_defaults(handler=run)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("case", nargs="?", type=Path, default=None,
+                   help="case file (.fcase) or skull mesh (.ply .stl .obj .vtk .vtp) to open")
+    p.add_argument("--ct", type=Path, default=None, help="CT volume or DICOM folder to open")
+    p.add_argument("--units", choices=["auto", "mm", "cm", "m", "in"], default="auto",
+                   help="units of a skull mesh (default: judged from its size)")
+    p.add_argument("--scale", type=float, default=None, metavar="MM_PER_UNIT",
+                   help="millimetres per file unit of a skull mesh")
+    p.add_argument("--suggest", action="store_true", help="suggest the skull landmarks")
+    p.add_argument("--reconstruct", action="store_true", help="reconstruct the face")
+    p.add_argument("--truth", type=Path, default=None,
+                   help="true skin surface to compare with (same frame, mm)")
+    p.add_argument("--tool", choices=TOOLS, default="landmarks", help="dock shown in front")
+    p.add_argument("--screenshot", type=Path, default=None, metavar="FILE.png",
+                   help="save a picture of the window after loading, then exit")
+    p.add_argument("--size", default="1400x900", help="window size WxH (default 1400x900)")
+
+
+def options_from(args: argparse.Namespace):  # noqa: ANN201 - LaunchOptions
+    from workbench.qt.app import LaunchOptions
+
+    try:
+        w, h = (int(v) for v in str(args.size).lower().split("x"))
+    except ValueError:
+        raise InputError("--size", f"expected WxH, e.g. 1400x900, got {args.size!r}") from None
+    case = skull = None
+    if args.case is not None:
+        if not args.case.exists():
+            raise InputError(args.case, "file not found")
+        if args.case.suffix.lower() == ".fcase":
+            case = args.case
+        else:
+            skull = args.case
+    if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
+        raise InputError(args.screenshot, "the screenshot must be a .png file")
+    return LaunchOptions(case=case, skull=skull, ct=args.ct, units=args.units, scale=args.scale,
+                         suggest=args.suggest, reconstruct=args.reconstruct, truth=args.truth,
+                         tool=args.tool, screenshot=args.screenshot, size=(w, h))
+
+
+def run(args: argparse.Namespace) -> int:
+    from workbench.qt.app import run as run_window
+
+    return run_window(options_from(args))
+
+
+def launch(argv: list[str] | None = None) -> int:
+    """``python -m workbench`` without arguments: parse ``argv`` as ``workbench gui`` does."""
+    parser = argparse.ArgumentParser(prog="workbench gui")
+    add_arguments(parser)
+    return run(parser.parse_args(argv or []))

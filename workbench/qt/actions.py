@@ -1,0 +1,84 @@
+"""Menus and keyboard shortcuts of the main window, declared as data.
+
+One table (:data:`ACTIONS`) lists every action: id, menu, title, shortcut
+and the window method it calls, so a test can check that each exists and
+is wired.  View-menu layer toggles are generated from
+:data:`workbench.qt.scene.LAYERS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from PySide6.QtGui import QAction, QKeySequence
+
+from workbench.qt.scene import LAYERS
+
+
+@dataclass(frozen=True)
+class ActionSpec:
+    id: str
+    menu: str
+    title: str
+    shortcut: str | QKeySequence.StandardKey | None
+    method: str
+    tip: str = ""
+
+
+ACTIONS: tuple[ActionSpec, ...] = (
+    ActionSpec("open_skull", "&File", "Open skull &mesh…", "Ctrl+O", "ask_open_skull",
+               "Start a case from a skull surface (PLY, STL, OBJ, VTK, VTP)"),
+    ActionSpec("open_ct", "&File", "Open &CT…", "Ctrl+Shift+O", "ask_open_ct",
+               "Extract the bone surface of a CT volume and start a case from it"),
+    ActionSpec("open_case", "&File", "Open c&ase…", "Ctrl+Alt+O", "ask_open_case",
+               "Open a saved .fcase file"),
+    ActionSpec("save", "&File", "&Save", QKeySequence.StandardKey.Save, "save",
+               "Save the case (atomic: a failed save leaves the old file)"),
+    ActionSpec("save_as", "&File", "Save &As…", QKeySequence.StandardKey.SaveAs, "ask_save_as"),
+    ActionSpec("export", "&File", "&Export…", "Ctrl+E", "ask_export",
+               "Face meshes, landmarks (.mrk.json, .fcsv) and the PDF report"),
+    ActionSpec("quit", "&File", "&Quit", QKeySequence.StandardKey.Quit, "close"),
+    ActionSpec("undo", "&Edit", "&Undo", QKeySequence.StandardKey.Undo, "undo"),
+    ActionSpec("redo", "&Edit", "&Redo", QKeySequence.StandardKey.Redo, "redo"),
+    ActionSpec("mark_absent", "&Edit", "Mark selected landmark &absent", "A", "mark_absent"),
+    ActionSpec("next_missing", "&Edit", "Select &next missing landmark", "N",
+               "select_next_missing"),
+    ActionSpec("suggest", "&Tools", "&Suggest the rest of the landmarks", "Ctrl+L",
+               "suggest_landmarks"),
+    ActionSpec("reconstruct", "&Tools", "&Reconstruct face", "Ctrl+R", "reconstruct"),
+    ActionSpec("load_truth", "&Tools", "Compare with a &true skin…", "Ctrl+T", "ask_load_truth"),
+    ActionSpec("reset_view", "&View", "Reset &camera", "R", "reset_view"),
+    ActionSpec("screenshot", "&View", "Save &window picture…", "Ctrl+Shift+S", "ask_screenshot"),
+)
+
+
+def build_menus(window: Any) -> dict[str, QAction]:
+    """Create the menus of ``window``; returns ``{action id: QAction}``."""
+    menus: dict[str, Any] = {}
+    out: dict[str, QAction] = {}
+    bar = window.menuBar()
+    for spec in ACTIONS:
+        if spec.menu not in menus:
+            menus[spec.menu] = bar.addMenu(spec.menu)
+        action = QAction(spec.title, window)
+        if spec.shortcut is not None:
+            action.setShortcut(QKeySequence(spec.shortcut))
+        if spec.tip:
+            action.setStatusTip(spec.tip)
+            action.setToolTip(spec.tip)
+        action.triggered.connect(lambda _checked=False, m=spec.method: getattr(window, m)())
+        menus[spec.menu].addAction(action)
+        out[spec.id] = action
+        if spec.id in ("export", "redo"):
+            menus[spec.menu].addSeparator()
+    view = menus["&View"]
+    view.addSeparator()
+    for layer, title in LAYERS.items():
+        action = QAction(title, window)
+        action.setCheckable(True)
+        action.setChecked(True)
+        action.toggled.connect(lambda on, name=layer: window.scene.set_visible(name, on))
+        view.addAction(action)
+        out[f"layer_{layer}"] = action
+    return out

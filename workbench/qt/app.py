@@ -1,0 +1,95 @@
+"""Start the desktop window (``workbench gui``, ``python -m workbench``).
+
+:func:`run` opens the window, optionally loads a case or a skull, runs the
+requested steps (suggest landmarks, reconstruct, compare) and either enters
+the event loop or, with ``screenshot``, waits for the work to finish, saves
+a picture of the whole window (3D view included; needs a real X display or
+Xvfb with ``QT_QPA_PLATFORM=xcb``) and exits.  Units mm throughout.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+os.environ.setdefault("QT_API", "pyside6")
+
+
+@dataclass
+class LaunchOptions:
+    """What to open and do before showing (or photographing) the window."""
+
+    case: Path | None = None
+    skull: Path | None = None
+    ct: Path | None = None
+    units: str = "auto"
+    scale: float | None = None
+    suggest: bool = False
+    reconstruct: bool = False
+    truth: Path | None = None
+    tool: str = "landmarks"
+    screenshot: Path | None = None
+    size: tuple[int, int] = (1400, 900)
+    steps: list[str] = field(default_factory=list)
+
+
+def ensure_app(argv: Sequence[str] | None = None):  # noqa: ANN201 - QApplication
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance()
+    if app is None:
+        app = QApplication(list(argv or sys.argv[:1]))
+        app.setApplicationName("Forensic workbench")
+        app.setOrganizationName("workbench")
+    return app
+
+
+def prepare(window, options: LaunchOptions) -> list[str]:  # noqa: ANN001
+    """Load and run what ``options`` ask for, waiting for each step; returns errors."""
+    if options.case is not None:
+        window.open_case(options.case)
+    elif options.skull is not None:
+        window.open_skull(options.skull, units=options.units, scale=options.scale)
+    elif options.ct is not None:
+        window.open_ct(options.ct)
+    window.wait_idle()
+    if options.suggest:
+        window.suggest_landmarks()
+        window.wait_idle()
+    if options.reconstruct:
+        window.reconstruct()
+        window.wait_idle()
+    if options.truth is not None:
+        window.load_truth(options.truth)
+        window.wait_idle()
+        window.wait_idle()
+    if options.tool in window.docks:
+        window.docks[options.tool].raise_()
+    return list(window.errors)
+
+
+def run(options: LaunchOptions) -> int:
+    """Open the window; with ``options.screenshot`` save a picture and return."""
+    app = ensure_app()
+    from workbench.qt.main_window import MainWindow
+
+    shot = options.screenshot is not None
+    window = MainWindow(auto_update=not shot, interactive=not shot)
+    window.resize(*options.size)
+    window.show()
+    app.processEvents()
+    errors = prepare(window, options)
+    if not shot:
+        return int(app.exec())
+    window.reset_view()
+    window.wait_idle()
+    path = window.save_screenshot(options.screenshot)
+    window.close()
+    for text in errors:
+        print(f"workbench gui: {text.splitlines()[0]} {' '.join(text.splitlines()[1:])}",
+              file=sys.stderr)
+    print(f"wrote {path}")
+    return 2 if errors else 0

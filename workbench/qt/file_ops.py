@@ -1,0 +1,200 @@
+"""File actions of the main window: open a skull mesh, a CT or a case; save; export.
+
+A mixin of :class:`workbench.qt.main_window.MainWindow`.  Reading and
+extraction run in the worker (the window stays responsive); the new case
+replaces the current one on the GUI thread.  Saving is synchronous and
+atomic (:func:`workbench.io.case_file.save_case`): a failed save shows why
+and leaves both the previous file and the open case as they were.
+Everything in mm; a mesh whose size does not look like mm is refused by the
+reader and the window asks for its units.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from PySide6.QtWidgets import QFileDialog
+
+from workbench.core.errors import UnitsError, WorkbenchError
+from workbench.io.case_file import load_case, save_case
+from workbench.qt import dialogs, jobs
+from workbench.services.case_setup import OpenedCase, start_case_from_skull
+
+MESH_FILTER = "Meshes (*.ply *.stl *.obj *.vtk *.vtp);;All files (*)"
+CASE_FILTER = "Case files (*.fcase);;All files (*)"
+CT_FILTER = "Volumes (*.nhdr *.nrrd *.mha *.mhd *.nii *.nii.gz);;All files (*)"
+
+
+def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
+    """Record the known anatomy directions of a public sample (not an undo step)."""
+    from workbench.commands.case_edits import SetParameter
+
+    anatomy = jobs.sample_orientation(source)
+    if anatomy is not None and "orientation" not in opened.case.parameters:
+        opened.stack.push(SetParameter(key="orientation", value=anatomy,
+                                       label="Orientation of the sample file"))
+        opened.stack.clear()
+        opened.stack.set_clean()
+        opened.notes.append(f"{source.name}: a known sample; face toward "
+                            f"{anatomy['anterior']}, up {anatomy['superior']} (file axes)")
+    return opened
+
+
+class FileOpsMixin:
+    """Open/save/export for the main window (see the module docstring)."""
+
+    document: Any
+    runner: Any
+
+    # ------------------------------------------------------------ open
+    def open_skull(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
+        """Start a new case from a skull mesh (in the worker)."""
+        if not self._may_discard():
+            return
+        path = Path(path)
+        self.runner.submit("open", f"Opening {path.name} …",
+                           lambda: _with_orientation(
+                               start_case_from_skull(path, units=units, scale=scale), path),
+                           lambda opened: self._opened(opened, None),
+                           lambda exc: self._open_failed(path, exc))
+
+    def _open_failed(self, path: Path, exc: BaseException) -> None:
+        if isinstance(exc, UnitsError) and self.interactive:
+            factor = dialogs.ask_units(self, path.name, exc.problem)  # type: ignore[arg-type]
+            if factor is not None:
+                self.open_skull(path, scale=factor)
+            return
+        self.show_error(f"Could not open {path.name}", exc)
+
+    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None) -> None:
+        """Extract the bone surface of a CT (worker) and start a case from it.
+
+        The extracted surface (mm, the CT's physical frame) is the case's
+        evidence file; the CT itself stays where it is.
+        """
+        if not self._may_discard():
+            return
+        path = Path(path)
+
+        def work() -> OpenedCase:
+            from workbench.io.meshes import write_mesh
+            from workbench.services.ct_mesh import mesh_from_ct
+
+            result = mesh_from_ct(path, tissue, iso=iso)
+            folder = Path(tempfile.mkdtemp(prefix="workbench-ct-"))
+            stem = path.name.split(".")[0]
+            surface = write_mesh(folder / f"{stem}_{tissue}.ply", result.mesh)
+            opened = start_case_from_skull(surface, units="mm")
+            opened.notes.insert(0, f"{tissue} surface of {path} at iso {result.iso:g} "
+                                   f"{result.units} ({result.rule}), frame {result.frame}")
+            return _with_orientation(opened, path)
+
+        self.runner.submit("open", f"Extracting the {tissue} surface of {path.name} …", work,
+                           lambda opened: self._opened(opened, None),
+                           lambda exc: self.show_error(f"Could not open the CT {path.name}", exc))
+
+    def open_case(self, path: str | Path) -> None:
+        """Open a saved ``.fcase`` (in the worker)."""
+        if not self._may_discard():
+            return
+        path = Path(path)
+        self.runner.submit("open", f"Opening case {path.name} …", lambda: load_case(path),
+                           lambda loaded: self._opened(OpenedCase(loaded.case, None), path),
+                           lambda exc: self.show_error(f"Could not open {path.name}", exc))
+
+    def _opened(self, opened: OpenedCase, path: Path | None) -> None:
+        self.fit = None
+        self.preview = None
+        self.document.replace(opened.case, opened.stack, path, opened.notes)
+        for note in opened.notes:
+            self.messages.append(note)
+        self.status(f"Opened {path.name if path else 'a new case'}: "
+                    f"{opened.case.specimen.mesh.n_faces if opened.case.specimen.mesh else 0} "
+                    "triangles")
+
+    # ------------------------------------------------------------ save
+    def save(self) -> bool:
+        if self.document.path is None:
+            return self.ask_save_as()
+        return self.save_to(self.document.path)
+
+    def save_to(self, path: str | Path) -> bool:
+        """Save atomically; on failure the old file and the open case are unchanged."""
+        path = Path(path)
+        if path.suffix != ".fcase":
+            path = path.with_suffix(".fcase")
+        try:
+            save_case(self.document.case, path, self.document.stack)
+        except (WorkbenchError, OSError) as exc:
+            self.show_error(f"Could not save to {path}", exc)
+            return False
+        self.document.path = path
+        self.document.stack_changed.emit()
+        self.status(f"Saved {path}")
+        return True
+
+    def ask_save_as(self) -> bool:
+        start = str(self.document.path or "case.fcase")
+        name, _ = QFileDialog.getSaveFileName(self, "Save case as", start, CASE_FILTER)
+        return self.save_to(name) if name else False
+
+    # ------------------------------------------------------------ export
+    def export_to(self, folder: str | Path) -> None:
+        """Face (PLY/OBJ/STL), landmarks and the PDF report into ``folder`` (worker)."""
+        case, fit, notes = self.document.case, self.fit, list(self.document.notes)
+        self.runner.submit("export", f"Exporting to {folder} …",
+                           lambda: jobs.export_results(folder, case, fit, notes=notes),
+                           self._exported,
+                           lambda exc: self.show_error(f"Could not export to {folder}", exc))
+
+    def _exported(self, files: dict[str, Path]) -> None:
+        self.exported = files
+        self.status(f"Exported {len(files)} files: " + ", ".join(p.name for p in files.values()))
+
+    # ------------------------------------------------------------ dialogs
+    def ask_open_skull(self) -> None:
+        name, _ = QFileDialog.getOpenFileName(self, "Open skull mesh", "", MESH_FILTER)
+        if name:
+            self.open_skull(name)
+
+    def ask_open_ct(self) -> None:
+        name, _ = QFileDialog.getOpenFileName(self, "Open CT volume (or cancel for a DICOM "
+                                              "folder)", "", CT_FILTER)
+        if not name:
+            name = QFileDialog.getExistingDirectory(self, "Open DICOM folder")
+        if name:
+            self.open_ct(name)
+
+    def ask_open_case(self) -> None:
+        name, _ = QFileDialog.getOpenFileName(self, "Open case", "", CASE_FILTER)
+        if name:
+            self.open_case(name)
+
+    def ask_export(self) -> None:
+        name = QFileDialog.getExistingDirectory(self, "Export into folder")
+        if name:
+            self.export_to(name)
+
+    def ask_load_truth(self) -> None:
+        name, _ = QFileDialog.getOpenFileName(self, "True skin surface (same frame, mm)", "",
+                                              MESH_FILTER)
+        if name:
+            self.load_truth(name)
+
+    def ask_screenshot(self) -> None:
+        name, _ = QFileDialog.getSaveFileName(self, "Save window picture", "window.png",
+                                              "PNG (*.png)")
+        if name:
+            self.save_screenshot(name)
+
+    def _may_discard(self) -> bool:
+        """True if the open case may be replaced (saved, discarded, or clean)."""
+        if not self.document.is_dirty or not self.interactive:
+            return True
+        answer = dialogs.ask_save_changes(self, self.document.path.name if self.document.path
+                                          else "the untitled case")
+        if answer == dialogs.QMessageBox.StandardButton.Save:
+            return self.save()
+        return answer == dialogs.QMessageBox.StandardButton.Discard

@@ -1,0 +1,376 @@
+"""The workbench main window: a 3D view, tool docks, menus, status bar.
+
+Wiring (created in this order in ``__init__``)::
+
+    MainWindow
+    ├── Document            case + CommandStack + file; Qt signals for changes
+    ├── TaskRunner          worker threads; results come back on the GUI thread
+    ├── QtInteractor        central 3D view (pyvistaqt)
+    │   ├── SceneView       named layers: skull, landmarks, dowels, guides, face, truth
+    │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
+    ├── docks               LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel
+    └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
+
+The window holds no geometry logic: edits are commands pushed on the
+document's stack, computations are :mod:`workbench.qt.jobs` functions run in
+the worker, and their results are drawn (derived results such as the fitted
+face are not part of the case; the parameters that produce them are).
+Units mm; the scene is in the specimen's input frame (the skull file's
+coordinates).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar
+
+from workbench.commands.landmarks import PlaceLandmark, ReplaceLandmarkSet
+from workbench.io.catalogue import load_catalogue
+from workbench.qt import dialogs, jobs
+from workbench.qt.actions import build_menus
+from workbench.qt.document import Document
+from workbench.qt.file_ops import FileOpsMixin
+from workbench.qt.panels.compare_panel import ComparePanel
+from workbench.qt.panels.dowels_panel import DowelsPanel
+from workbench.qt.panels.landmarks_panel import LandmarksPanel
+from workbench.qt.panels.reconstruct_panel import ReconstructPanel
+from workbench.qt.picking import ClickPicker
+from workbench.qt.scene import SceneView
+from workbench.qt.workers import TaskRunner
+
+#: the frame needs these (porions, orbitales, nasion) before dowels can be planned
+FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
+
+
+class MainWindow(FileOpsMixin, QMainWindow):
+    """See the module docstring.
+
+    Parameters
+    ----------
+    auto_update : bool or float
+        The QtInteractor's periodic render (False in tests).
+    interactive : bool
+        False: never open modal dialogs (tests, ``--screenshot``); messages
+        go to :attr:`messages` and errors to :attr:`errors`.
+    """
+
+    def __init__(self, *, auto_update: bool | float = True, interactive: bool = True) -> None:
+        super().__init__()
+        from pyvistaqt import QtInteractor
+
+        self.interactive = interactive
+        self.messages: list[str] = []
+        self.errors: list[str] = []
+        self.fit: jobs.FitResult | None = None
+        self.preview: jobs.DowelPreview | None = None
+        self.truth: tuple[str, Any] | None = None
+        self.comparison: Any = None
+        self.exported: dict[str, Path] = {}
+        self.catalogue = load_catalogue()
+        self.document = Document(on_error=self.show_error, parent=self)
+        self.runner = TaskRunner(self)
+
+        self.plotter = QtInteractor(self, auto_update=auto_update)
+        self.plotter.clear_events_for_key("q")  # pyvista's "q" would close the 3D view
+        self.setCentralWidget(self.plotter)
+        self.scene = SceneView(self.plotter)
+        self.picker = ClickPicker(self.plotter, self._skull_actor, self.on_pick)
+
+        self.landmarks_panel = LandmarksPanel(self.document, self.catalogue)
+        self.dowels_panel = DowelsPanel(self.document)
+        self.reconstruct_panel = ReconstructPanel(self.document)
+        self.compare_panel = ComparePanel()
+        self.docks = {}
+        for key, title, panel in (("landmarks", "Skull landmarks", self.landmarks_panel),
+                                  ("dowels", "Dowels", self.dowels_panel),
+                                  ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
+                                  ("compare", "Compare", self.compare_panel)):
+            dock = QDockWidget(title, self)
+            dock.setObjectName(f"dock_{key}")
+            dock.setWidget(panel)
+            self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
+            if self.docks:
+                self.tabifyDockWidget(next(iter(self.docks.values())), dock)
+            self.docks[key] = dock
+        self.docks["landmarks"].raise_()
+        self.actions_by_id = build_menus(self)
+
+        self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 0)
+        self.progress.setMaximumWidth(180)
+        self.progress.hide()
+        self.statusBar().addWidget(self.status_label, 1)
+        self.statusBar().addPermanentWidget(self.progress)
+
+        self.document.case_replaced.connect(self._on_case_replaced)
+        self.document.part_changed.connect(self._on_part)
+        self.document.stack_changed.connect(self._update_title)
+        self.runner.busy_changed.connect(self._on_busy)
+        self.landmarks_panel.selection_changed.connect(lambda _c: self.draw_landmarks())
+        self.landmarks_panel.suggest_requested.connect(self.suggest_landmarks)
+        self.reconstruct_panel.reconstruct_requested.connect(self.reconstruct)
+        self.reconstruct_panel.opacity_changed.connect(lambda v: self.scene.set_opacity("face", v))
+        self.reconstruct_panel.colouring_changed.connect(lambda _v: self.draw_face())
+        self.compare_panel.load_requested.connect(self.ask_load_truth)
+        self.resize(1400, 900)
+        self._update_title()
+
+    # ------------------------------------------------------------ messages
+    def status(self, text: str) -> None:
+        self.status_label.setText(text)
+
+    def show_error(self, what: str, exc: BaseException) -> None:
+        """A readable message (never a traceback); the case stays as it was."""
+        text, _details = dialogs.error_text(what, exc)
+        self.errors.append(text)
+        self.status(text.replace("\n\n", " — ").splitlines()[0])
+        if self.interactive:
+            dialogs.show_error(self, what, exc)
+
+    def _on_busy(self, busy: bool, text: str) -> None:
+        self.progress.setVisible(busy)
+        if busy:
+            self.status(text)
+
+    def _update_title(self) -> None:
+        self.setWindowTitle(self.document.title)
+        stack = self.document.stack
+        undo, redo = self.actions_by_id["undo"], self.actions_by_id["redo"]
+        undo.setEnabled(stack.can_undo)
+        redo.setEnabled(stack.can_redo)
+        undo.setText(f"&Undo {stack.undo_text}" if stack.can_undo else "&Undo")
+        redo.setText(f"&Redo {stack.redo_text}" if stack.can_redo else "&Redo")
+
+    # ------------------------------------------------------------ edit actions
+    def undo(self) -> None:
+        self.document.undo()
+
+    def redo(self) -> None:
+        self.document.redo()
+
+    def mark_absent(self) -> None:
+        self.landmarks_panel.mark_absent()
+
+    def select_next_missing(self) -> None:
+        self.landmarks_panel.select_next_missing()
+
+    def reset_view(self) -> None:
+        axes = jobs.view_axes(self.document.case)
+        self.scene.reset_camera(*(axes or (None, None)))
+
+    # ------------------------------------------------------------ case → scene
+    def _on_case_replaced(self) -> None:
+        self.fit = None
+        self.preview = None
+        self.scene.show_skull(self.document.case.specimen.mesh)
+        self.scene.clear("face")
+        self.scene.clear("guides")
+        self.scene.clear("dowels")
+        self.reconstruct_panel.show_result(None)
+        self.dowels_panel.show_plan(None)
+        self.draw_landmarks()
+        self.reset_view()
+        self.schedule_dowels()
+
+    def _on_part(self, part: str) -> None:
+        if part == "specimen":
+            self.scene.show_skull(self.document.case.specimen.mesh)
+        if part == "landmarks":
+            self.draw_landmarks()
+        if part in ("landmarks", "parameters", "specimen"):
+            self.schedule_dowels()
+            if self.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
+                self.reconstruct()
+
+    def _skull_actor(self) -> Any:
+        actors = self.scene.actors("skull")
+        return actors[0] if actors else None
+
+    def draw_landmarks(self) -> None:
+        lms = self.document.case.landmarks["skull"].defined()
+        code = self.landmarks_panel.selected_code()
+        selected, label = None, ""
+        if code and code in lms:
+            selected = lms[code].position
+            label = f"{code}: {self.catalogue.entry(code, 'skull').name}"
+        self.scene.show_landmarks(lms.positions, [lm.status for lm in lms], selected, label)
+
+    # ------------------------------------------------------------ landmarks
+    def on_pick(self, point: np.ndarray) -> None:
+        """A click on the skull: place the selected landmark there."""
+        code = self.landmarks_panel.selected_code()
+        if not code or not self.landmarks_panel.place_on_click.isChecked():
+            self.status("Select a landmark in the list first, then click on the skull.")
+            return
+        self.document.push(PlaceLandmark(surface="skull", code=code, position=point))
+
+    def suggest_landmarks(self) -> None:
+        """Run the automatic transfer in the worker; apply it as one undoable step."""
+        case = self.document.case
+        if case.specimen.mesh is None:
+            self.status("Open a skull first.")
+            return
+        skull, current = case.specimen.mesh, case.landmarks["skull"]
+        sex, orient = str(jobs.param(case, "sex")), jobs.orientation(case)
+        self.runner.submit("suggest", "Suggesting skull landmarks …",
+                           lambda: jobs.suggest_landmarks(skull, current, sex, orient),
+                           self._apply_suggestion,
+                           lambda exc: self.show_error("Could not suggest landmarks", exc))
+
+    def _apply_suggestion(self, result: tuple) -> None:
+        new_set, transfer = result
+        if self.document.push(ReplaceLandmarkSet("skull", new_set, "Suggest skull landmarks")):
+            n = sum(lm.status == "suggested" for lm in new_set)
+            self.status(f"Suggested {n} landmarks (residual {transfer.warp_residual_mm:.2f} mm, "
+                        f"{self.runner.timings.get('suggest', 0):.1f} s)")
+            self.messages.extend(transfer.warnings)
+
+    # ------------------------------------------------------------ dowels
+    def schedule_dowels(self) -> None:
+        case = self.document.case
+        lms = case.landmarks["skull"]
+        if case.specimen.mesh is None or not all(c in lms.as_dict() for c in FRAME_CODES):
+            self.preview = None
+            self.scene.clear("dowels")
+            self.dowels_panel.show_plan(None, "Dowels appear once the porions and orbitales "
+                                              "are placed (or suggested).")
+            return
+        skull, settings = case.specimen.mesh, jobs.depth_settings(case)
+        self.runner.submit("dowels", "Planning dowels …",
+                           lambda: jobs.preview_dowels(skull, lms, settings),
+                           self._show_dowels, self._dowels_failed)
+
+    def _show_dowels(self, preview: jobs.DowelPreview) -> None:
+        self.preview = preview
+        self.scene.show_dowels(preview.origins, preview.tips)
+        self.dowels_panel.show_plan(preview)
+
+    def _dowels_failed(self, exc: BaseException) -> None:
+        self.preview = None
+        self.scene.clear("dowels")
+        self.dowels_panel.show_plan(None, dialogs.error_text("No dowels", exc)[0])
+
+    # ------------------------------------------------------------ reconstruct
+    def reconstruct(self) -> None:
+        """Fit the face in the worker (guides and ensemble as the panel says)."""
+        case = self.document.case
+        if case.specimen.mesh is None:
+            self.status("Open a skull first.")
+            return
+        skull, lms = case.specimen.mesh, case.landmarks["skull"]
+        settings = jobs.depth_settings(case)
+        try:
+            guides = jobs.user_guides(case)
+        except Exception as exc:  # noqa: BLE001 - shown as a readable message
+            self.show_error("The stored guides are not usable", exc)
+            return
+        use = self.reconstruct_panel.use_guides.isChecked()
+        n = self.reconstruct_panel.ensemble.value()
+        self.runner.submit("fit", "Reconstructing the face …",
+                           lambda: jobs.fit_face(skull, lms, settings, guides, use_guides=use,
+                                                 ensemble=n),
+                           self._show_fit,
+                           lambda exc: self.show_error("Could not reconstruct the face", exc))
+
+    def _show_fit(self, fit: jobs.FitResult) -> None:
+        self.fit = fit
+        self._show_dowels(fit.preview)
+        self.draw_face()
+        self.draw_guides()
+        self.reconstruct_panel.show_result(fit)
+        self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
+        if self.truth is not None:
+            self.compare()
+
+    def draw_face(self) -> None:
+        if self.fit is None:
+            self.scene.clear("face")
+            return
+        spread = self.reconstruct_panel.colouring.currentText() == "spread"
+        if spread and self.fit.spread is not None:
+            self.scene.show_face(self.fit.recon.face, self.fit.spread, "spread mm")
+        else:
+            self.scene.show_face(self.fit.recon.face)
+
+    def draw_guides(self) -> None:
+        if self.fit is None:
+            self.scene.clear("guides")
+            return
+        segments, points = jobs.guide_geometry(self.fit)
+        self.scene.show_guides(segments, points)
+
+    # ------------------------------------------------------------ compare
+    def load_truth(self, path: str | Path, scale: float | None = None) -> None:
+        from workbench.io.meshes import read_mesh
+
+        path = Path(path)
+        self.runner.submit("truth", f"Reading {path.name} …",
+                           lambda: read_mesh(path, units="mm" if scale is None else "auto",
+                                             scale=scale).mesh,
+                           lambda mesh: self._truth_loaded(path.name, mesh),
+                           lambda exc: self.show_error(f"Could not read {path.name}", exc))
+
+    def _truth_loaded(self, name: str, mesh: Any) -> None:
+        self.truth = (name, mesh)
+        self.scene.show_truth(mesh)
+        self.compare_panel.show_comparison(name, None)
+        self.docks["compare"].raise_()
+        if self.fit is not None:
+            self.compare()
+
+    def compare(self) -> None:
+        from workbench.services.compare import compare_surfaces, face_regions
+
+        if self.truth is None or self.fit is None:
+            return
+        name, truth = self.truth
+        face, regions = self.fit.recon.face, face_regions(self.fit.head)
+        self.runner.submit("compare", "Comparing with the true skin …",
+                           lambda: compare_surfaces(face, truth, recon_regions=regions),
+                           self._show_comparison,
+                           lambda exc: self.show_error("Could not compare", exc))
+
+    def _show_comparison(self, comparison: Any) -> None:
+        self.comparison = comparison
+        name, truth = self.truth  # type: ignore[misc]
+        self.scene.show_truth(truth, comparison.truth_vertex_values())
+        self.compare_panel.show_comparison(name, comparison)
+        self.status(f"Compared with {name}: mean |distance| "
+                    f"{comparison.figures['mean_abs_mm']:.2f} mm "
+                    f"({self.runner.timings.get('compare', 0):.1f} s)")
+
+    # ------------------------------------------------------------ pictures and closing
+    def wait_idle(self, timeout_s: float = 120.0) -> bool:
+        """Process events until no worker job is pending (scripts and ``--screenshot``)."""
+        import time
+
+        end = time.monotonic() + timeout_s
+        app = QApplication.instance()
+        while self.runner.busy and time.monotonic() < end:
+            app.processEvents()
+            time.sleep(0.01)
+        app.processEvents()
+        return not self.runner.busy
+
+    def save_screenshot(self, path: str | Path) -> Path:
+        """Render and grab the whole window (3D view included under xcb) to a PNG."""
+        QApplication.instance().processEvents()
+        self.scene.render_now()
+        QApplication.instance().processEvents()
+        path = Path(path)
+        if not self.grab().save(str(path)):
+            raise OSError(f"could not write {path}")
+        return path
+
+    def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt name
+        if self.interactive and not self._may_discard():
+            event.ignore()
+            return
+        self.runner.shutdown()
+        self.plotter.close()
+        super().closeEvent(event)

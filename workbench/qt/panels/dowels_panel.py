@@ -1,0 +1,183 @@
+"""Dowels dock: depth table, sex and build, and a table of the planned depths.
+
+Every edit is a :class:`~workbench.commands.case_edits.SetParameter` on the
+keys :mod:`workbench.qt.jobs` reads (``depth_table``, ``sex``, ``build``,
+``depth_overrides``, ``excluded_landmarks``); the window re-plans the
+dowels in a worker and hands the plan back through :meth:`show_plan`.
+Depths are mm from the skull landmark along the dowel direction.
+"""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import (
+    QAbstractItemView, QComboBox, QFormLayout, QHeaderView, QLabel, QPushButton, QTableWidget,
+    QTableWidgetItem, QVBoxLayout, QWidget,
+)
+
+from workbench.commands.case_edits import SetParameter
+from workbench.io.tables import list_tables, load_depth_table
+from workbench.qt.document import Document
+from workbench.qt.jobs import DowelPreview, param
+
+BUILDS = ("slender", "normal", "obese", "-2", "-1", "1", "2")
+COLUMNS = ("Code", "Table mm", "Depth mm", "Source", "Use")
+
+
+class DowelsPanel(QWidget):
+    """See the module docstring."""
+
+    def __init__(self, document: Document, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.document = document
+        self._refreshing = False
+        self.plan_codes: list[str] = []
+
+        self.table_combo = QComboBox()
+        self.table_combo.addItems(list_tables())
+        self.table_combo.currentTextChanged.connect(
+            lambda v: self._set("depth_table", v, "Choose depth table"))
+        self.sex_combo = QComboBox()
+        self.sex_combo.addItems(["male", "female"])
+        self.sex_combo.currentTextChanged.connect(lambda v: self._set("sex", v, "Set sex"))
+        self.build_combo = QComboBox()
+        self.build_combo.addItems(list(BUILDS))
+        self.build_combo.setToolTip("slender/normal/obese where the table has such groups; "
+                                    "a number k means mean + k SD")
+        self.build_combo.currentTextChanged.connect(lambda v: self._set("build", v, "Set build"))
+        form = QFormLayout()
+        form.addRow("Depth table", self.table_combo)
+        form.addRow("Sex", self.sex_combo)
+        form.addRow("Build", self.build_combo)
+
+        self.citation = QLabel("")
+        self.citation.setWordWrap(True)
+        self.citation.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+
+        self.table = QTableWidget(0, len(COLUMNS))
+        self.table.setHorizontalHeaderLabels(list(COLUMNS))
+        self.table.verticalHeader().setVisible(False)
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.horizontalHeader().setSectionResizeMode(3, QHeaderView.ResizeMode.Stretch)
+        self.table.itemChanged.connect(self._on_item_changed)
+        self.clear_button = QPushButton("Use table depth")
+        self.clear_button.setToolTip("Remove the override of the selected dowel")
+        self.clear_button.clicked.connect(self.clear_override)
+        self.warnings = QLabel("")
+        self.warnings.setWordWrap(True)
+        self.warnings.setStyleSheet("color: #8a5a00")
+
+        layout = QVBoxLayout(self)
+        layout.addLayout(form)
+        layout.addWidget(self.citation)
+        layout.addWidget(self.table, 1)
+        layout.addWidget(self.clear_button)
+        layout.addWidget(self.warnings)
+        document.case_replaced.connect(self.refresh)
+        document.part_changed.connect(lambda part: part == "parameters" and self.refresh())
+        self.refresh()
+
+    # ------------------------------------------------------------ state → widgets
+    def refresh(self) -> None:
+        self._refreshing = True
+        try:
+            case = self.document.case
+            table_id = str(param(case, "depth_table"))
+            if self.table_combo.findText(table_id) < 0:
+                self.table_combo.addItem(table_id)
+            self.table_combo.setCurrentText(table_id)
+            self.sex_combo.setCurrentText(str(param(case, "sex")))
+            build = str(param(case, "build"))
+            if self.build_combo.findText(build) < 0:
+                self.build_combo.addItem(build)
+            self.build_combo.setCurrentText(build)
+            self.citation.setText(_citation(table_id))
+        finally:
+            self._refreshing = False
+
+    def show_plan(self, preview: DowelPreview | None, problem: str = "") -> None:
+        """Fill the depth table from a plan (all dowels, excluded ones unticked)."""
+        self._refreshing = True
+        try:
+            dowels = preview.plan.dowels if preview is not None else ()
+            self.plan_codes = [d.code for d in dowels]
+            self.table.setRowCount(len(dowels))
+            for row, d in enumerate(dowels):
+                cells = [d.code, "" if d.table_depth_mm is None else f"{d.table_depth_mm:.1f}",
+                         f"{d.depth_mm:.1f}", d.source, ""]
+                for col, text in enumerate(cells):
+                    item = QTableWidgetItem(text)
+                    flags = Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsEnabled
+                    if col == 2:
+                        flags |= Qt.ItemFlag.ItemIsEditable
+                        item.setToolTip("Type a depth (mm) to override the table")
+                    if col == 4:
+                        flags |= Qt.ItemFlag.ItemIsUserCheckable
+                        item.setCheckState(Qt.CheckState.Unchecked if d.excluded
+                                           else Qt.CheckState.Checked)
+                    item.setFlags(flags)
+                    self.table.setItem(row, col, item)
+            notes = list(preview.plan.warnings) if preview is not None else []
+            self.warnings.setText("\n".join(([problem] if problem else []) + notes))
+            if preview is not None and preview.plan.citation:
+                self.citation.setText(f"<b>{preview.plan.table_title}</b> — "
+                                      f"{preview.plan.group_label}<br>{preview.plan.citation}")
+        finally:
+            self._refreshing = False
+
+    # ------------------------------------------------------------ widgets → commands
+    def _set(self, key: str, value: object, label: str) -> None:
+        if self._refreshing or param(self.document.case, key) == value:
+            return
+        self.document.push(SetParameter(key=key, value=value, label=label))
+
+    def _on_item_changed(self, item: QTableWidgetItem) -> None:
+        if self._refreshing:
+            return
+        code = self.plan_codes[item.row()]
+        if item.column() == 2:
+            try:
+                depth = float(item.text().replace(",", "."))
+            except ValueError:
+                depth = float("nan")
+            if not depth > 0:
+                self.warnings.setText(f"{code}: the depth must be a positive number of mm")
+                return
+            self.set_depth(code, depth)
+        elif item.column() == 4:
+            self.set_excluded(code, item.checkState() != Qt.CheckState.Checked)
+
+    def set_depth(self, code: str, depth_mm: float) -> None:
+        """Override one dowel's depth (mm)."""
+        overrides = dict(param(self.document.case, "depth_overrides"))
+        overrides[code] = round(float(depth_mm), 2)
+        self.document.push(SetParameter(key="depth_overrides", value=overrides,
+                                        label=f"Set depth of {code} to {depth_mm:.1f} mm"))
+
+    def set_excluded(self, code: str, excluded: bool) -> None:
+        current = [str(c) for c in param(self.document.case, "excluded_landmarks")]
+        new = sorted(set(current) | {code}) if excluded else [c for c in current if c != code]
+        word = "Exclude" if excluded else "Use"
+        self.document.push(SetParameter(key="excluded_landmarks", value=new,
+                                        label=f"{word} dowel {code}"))
+
+    def clear_override(self) -> None:
+        rows = self.table.selectionModel().selectedRows()
+        if not rows:
+            return
+        code = self.plan_codes[rows[0].row()]
+        overrides = dict(param(self.document.case, "depth_overrides"))
+        if code in overrides:
+            del overrides[code]
+            self.document.push(SetParameter(key="depth_overrides", value=overrides,
+                                            label=f"Use the table depth for {code}"))
+
+
+def _citation(table_id: str) -> str:
+    try:
+        table = load_depth_table(table_id)
+    except Exception as exc:  # noqa: BLE001 - shown to the user, not raised
+        return f"table {table_id}: {exc}"
+    sources = table.meta.get("sources", {})
+    title = table.meta.get("title", table_id)
+    return f"<b>{title}</b><br>" + "<br>".join(str(v) for v in list(sources.values())[:3])

@@ -1,0 +1,212 @@
+"""Skull landmarks dock: the catalogue's skull landmarks with status and confidence.
+
+Select a row, then click on the skull (a click, not a drag) to place it:
+the window turns the pick into a :class:`~workbench.commands.landmarks.PlaceLandmark`.
+"Mark absent" pushes ``SetLandmarkStatus(absent)``; "Suggest the rest" asks
+the window to run the automatic transfer in a worker thread.  The panel only
+issues commands and requests; it redraws itself from the case's landmarks.
+Positions are mm in the specimen's input frame.
+"""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QColor
+from PySide6.QtWidgets import (
+    QAbstractItemView, QCheckBox, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel,
+    QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+)
+
+from workbench.commands.case_edits import DeleteParameter, SetParameter
+from workbench.commands.landmarks import DeleteLandmark, SetLandmarkStatus
+from workbench.io.catalogue import LandmarkCatalogue
+from workbench.qt.document import Document
+
+STATUS_TEXT = {"placed": "placed", "suggested": "suggested", "absent": "absent",
+               "missing": "missing"}
+STATUS_BG = {"placed": "#d6f5dd", "suggested": "#ffe3c2", "absent": "#e4e4e4", "missing": ""}
+DIRECTIONS = {"auto": None, "+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0),
+              "-y": (0, -1, 0), "+z": (0, 0, 1), "-z": (0, 0, -1)}
+
+
+class LandmarksPanel(QWidget):
+    """See the module docstring.
+
+    Signals
+    -------
+    selection_changed(str)
+        Code of the selected landmark ('' for none).
+    suggest_requested()
+    """
+
+    selection_changed = Signal(str)
+    suggest_requested = Signal()
+
+    def __init__(self, document: Document, catalogue: LandmarkCatalogue,
+                 parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.document = document
+        self.catalogue = catalogue
+        self.codes = catalogue.codes("skull")
+        self._row = {c: i for i, c in enumerate(self.codes)}
+        self._refreshing = False
+
+        self.table = QTableWidget(len(self.codes), 4)
+        self.table.setHorizontalHeaderLabels(["Code", "Name", "Status", "Conf."])
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.verticalHeader().setVisible(False)
+        self.table.horizontalHeader().setSectionResizeMode(1, QHeaderView.ResizeMode.Stretch)
+        for i, code in enumerate(self.codes):
+            entry = catalogue.entry(code, "skull")
+            self.table.setItem(i, 0, QTableWidgetItem(code))
+            name = QTableWidgetItem(entry.name)
+            name.setToolTip(entry.definition)
+            self.table.setItem(i, 1, name)
+            self.table.setItem(i, 2, QTableWidgetItem("missing"))
+            self.table.setItem(i, 3, QTableWidgetItem(""))
+        self.table.resizeColumnToContents(0)
+        self.table.itemSelectionChanged.connect(self._on_selection)
+
+        self.place_on_click = QCheckBox("Place the selected landmark by clicking the skull")
+        self.place_on_click.setChecked(True)
+        self.description = QLabel("Select a landmark to see its definition.")
+        self.description.setWordWrap(True)
+        self.description.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+
+        self.absent_button = QPushButton("Mark absent")
+        self.absent_button.setToolTip("The anatomy is missing or damaged here (A)")
+        self.absent_button.clicked.connect(self.mark_absent)
+        self.delete_button = QPushButton("Clear")
+        self.delete_button.setToolTip("Forget this landmark (back to missing)")
+        self.delete_button.clicked.connect(self.clear_selected)
+        self.suggest_button = QPushButton("Suggest the rest")
+        self.suggest_button.setToolTip("Transfer the reference head's landmarks onto this skull; "
+                                       "placed landmarks are kept and guide the transfer")
+        self.suggest_button.clicked.connect(self.suggest_requested.emit)
+        buttons = QHBoxLayout()
+        for b in (self.absent_button, self.delete_button, self.suggest_button):
+            buttons.addWidget(b)
+
+        self.anterior = QComboBox()
+        self.superior = QComboBox()
+        for combo in (self.anterior, self.superior):
+            combo.addItems(list(DIRECTIONS))
+            combo.currentTextChanged.connect(self._on_orientation)
+        orient = QFormLayout()
+        orient.addRow("Face looks toward (file axes)", self.anterior)
+        orient.addRow("Up is (file axes)", self.superior)
+
+        self.summary = QLabel("")
+        layout = QVBoxLayout(self)
+        layout.addWidget(self.table, 1)
+        layout.addWidget(self.place_on_click)
+        layout.addLayout(buttons)
+        layout.addLayout(orient)
+        layout.addWidget(self.summary)
+        layout.addWidget(self.description)
+        document.case_replaced.connect(self.refresh)
+        document.part_changed.connect(self._on_part)
+        self.refresh()
+
+    # ------------------------------------------------------------ state → widgets
+    def _on_part(self, part: str) -> None:
+        if part in ("landmarks", "parameters"):
+            self.refresh()
+
+    def refresh(self) -> None:
+        self._refreshing = True
+        try:
+            lms = self.document.case.landmarks["skull"]
+            counts = dict.fromkeys(STATUS_TEXT, 0)
+            for code in self.codes:
+                lm = lms.get(code)
+                status = lm.status if lm is not None else "missing"
+                counts[status] += 1
+                row = self._row[code]
+                item = self.table.item(row, 2)
+                item.setText(STATUS_TEXT[status])
+                conf = "" if lm is None or status != "suggested" else f"{lm.confidence:.2f}"
+                self.table.item(row, 3).setText(conf)
+                colour = STATUS_BG[status]
+                for col in range(4):
+                    cell = self.table.item(row, col)
+                    cell.setBackground(QColor(colour) if colour else QColor(0, 0, 0, 0))
+            self.summary.setText(", ".join(f"{n} {s}" for s, n in counts.items()))
+            value = self.document.case.parameters.get("orientation")
+            self.anterior.setCurrentText(_direction_name(value, "anterior"))
+            self.superior.setCurrentText(_direction_name(value, "superior"))
+            self._show_description()
+        finally:
+            self._refreshing = False
+
+    def _show_description(self) -> None:
+        code = self.selected_code()
+        if not code:
+            return
+        entry = self.catalogue.entry(code, "skull")
+        lm = self.document.case.landmarks["skull"].get(code)
+        where = ""
+        if lm is not None and lm.is_defined:
+            where = " at (" + ", ".join(f"{v:.1f}" for v in lm.position) + ") mm"
+        status = lm.status if lm is not None else "missing"
+        note = f"<br><i>{lm.description}</i>" if lm is not None and lm.description else ""
+        self.description.setText(f"<b>{entry.name}</b> ({code}) — {status}{where}<br>"
+                                 f"{entry.definition}{note}")
+
+    # ------------------------------------------------------------ widgets → commands
+    def selected_code(self) -> str:
+        rows = self.table.selectionModel().selectedRows()
+        return self.codes[rows[0].row()] if rows else ""
+
+    def select(self, code: str) -> None:
+        self.table.selectRow(self._row[code])
+
+    def select_next_missing(self) -> None:
+        """Move the selection to the next landmark without a position."""
+        lms = self.document.case.landmarks["skull"]
+        start = self._row.get(self.selected_code(), -1)
+        order = self.codes[start + 1:] + self.codes[:start + 1]
+        for code in order:
+            lm = lms.get(code)
+            if lm is None or lm.status == "missing":
+                self.select(code)
+                return
+
+    def _on_selection(self) -> None:
+        self._show_description()
+        self.selection_changed.emit(self.selected_code())
+
+    def mark_absent(self) -> None:
+        code = self.selected_code()
+        if code:
+            self.document.push(SetLandmarkStatus(surface="skull", code=code, status="absent"))
+
+    def clear_selected(self) -> None:
+        code = self.selected_code()
+        if code and code in self.document.case.landmarks["skull"]:
+            self.document.push(DeleteLandmark(surface="skull", code=code))
+
+    def _on_orientation(self) -> None:
+        if self._refreshing:
+            return
+        a, s = DIRECTIONS[self.anterior.currentText()], DIRECTIONS[self.superior.currentText()]
+        if a is None or s is None:
+            if "orientation" in self.document.case.parameters:
+                self.document.push(DeleteParameter(key="orientation", label="Automatic orientation"))
+            return
+        if abs(sum(x * y for x, y in zip(a, s, strict=True))) > 0:
+            return  # wait for a perpendicular pair
+        self.document.push(SetParameter(key="orientation", label="Set skull orientation",
+                                        value={"anterior": list(a), "superior": list(s)}))
+
+
+def _direction_name(value: object, key: str) -> str:
+    if not value:
+        return "auto"
+    vec = tuple(int(round(v)) for v in value[key])  # type: ignore[index]
+    for name, d in DIRECTIONS.items():
+        if d == vec:
+            return name
+    return "auto"
