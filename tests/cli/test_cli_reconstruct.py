@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from workbench.cli.main import main
@@ -83,3 +84,32 @@ def test_reconstruct_refuses_a_skull_in_metres(inputs, tmp_path, capsys):  # noq
     assert main(["reconstruct", str(metres), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "skull_m.ply" in err and ("metre" in err or "units" in err)
+
+
+def test_face_is_written_in_the_skull_files_units(inputs, tmp_path):  # noqa: ANN001
+    mesh = read_mesh(inputs["skull"], units="mm").mesh
+    cm = write_mesh(tmp_path / "skull_cm.ply", mesh.scaled(0.1))
+    out = tmp_path / "o"
+    assert main(["reconstruct", str(cm), "--units", "cm", "--no-pictures", "--guides", "none",
+                 "--out", str(out)]) == 0
+    face_cm = read_mesh(out / "face.ply", units="cm").mesh   # cm numbers, read back as mm
+    face_mm = read_mesh(out / "face_mm.ply", units="mm").mesh
+    np.testing.assert_allclose(face_cm.vertices, face_mm.vertices, atol=1e-6)
+    skull_in_file = mesh.scaled(0.1)
+    lo, hi = skull_in_file.bounds
+    raw = read_mesh(out / "face.ply", scale=1.0).mesh.bounds
+    assert raw[1][1] - raw[0][1] < 2 * (hi[1] - lo[1]) + 5  # the same scale as the skull file
+
+
+def test_a_published_rule_replaces_the_classic_guide(inputs, tmp_path, capsys):  # noqa: ANN001
+    out = tmp_path / "rynn"
+    assert main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
+                 "--rule", "no_such_rule", "--no-pictures", "--out", str(out)]) == 2
+    assert "no_such_rule" in capsys.readouterr().err
+    assert main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
+                 "--rule", "nose_rynn2010_prn", "--no-pictures", "--out", str(out)]) == 0
+    report = read_report_json(out / "report.json")
+    guides = {g["id"]: g for g in report["guides"]}
+    assert guides["nose_tip"]["rule_id"] == "nose_rynn2010_prn"
+    assert "Rynn" in guides["nose_tip"]["citation"]
+    assert guides["nose_width_l"]["rule_id"].startswith("kaehler")

@@ -92,3 +92,16 @@ def test_headsq_bone_frame_from_suggested_landmarks(head_male, skull, headsq_sur
 
     d = MeshIndex(headsq_surfaces["bone"]).closest_points(lms.defined().positions).distances
     assert d.max() < 1e-6
+
+
+def test_seeds_on_a_mirrored_scan(head_male, skull):
+    """A left-handed file (x flipped) with a few seeds: the reflection is found."""
+    lms = head_male.skull_landmarks
+    mirrored = Mesh(skull.vertices * [-1.0, 1.0, 1.0], skull.faces[:, ::-1])
+    flip = np.diag([-1.0, 1.0, 1.0, 1.0])
+    seeds = LandmarkSet("skull", tuple(lms[c].moved(lms[c].position * [-1.0, 1.0, 1.0])
+                                       for c in ("n", "po_l", "po_r", "pr", "go_l")))
+    res = transfer_landmarks(mirrored, skull, lms, seeds=seeds)
+    assert np.linalg.det(res.alignment.matrix[:3, :3]) < 0
+    truth = lms.transformed(flip).positions
+    assert np.median(np.linalg.norm(res.landmarks.positions - truth, axis=1)) < 1.0

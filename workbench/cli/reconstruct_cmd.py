@@ -76,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--build", type=_build, default="normal",
                    help="slender|normal|obese where the table has them, else k for mean + k SD")
     p.add_argument("--guides", default="default", help="default | none | guides JSON file")
+    p.add_argument("--rule", action="append", default=[], metavar="RULE_ID",
+                   help="use a published prediction rule instead of the classic guide for its "
+                        "feature (repeatable), e.g. nose_rynn2010_prn, mouth_75pct_rule, "
+                        "eye_guyomarch2012_globe; ids in data_tables/guides/guide_rules.csv")
     p.add_argument("--exclude", action="append", default=[], metavar="CODE",
                    help="switch a landmark's dowel off (repeatable; e.g. ecm2s for Kähler's cheeks)")
     p.add_argument("--override", action="append", default=[], metavar="CODE=MM",
@@ -110,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
 
     settings = JobSettings(
         units=args.units, scale=args.scale, landmarks=args.landmarks, table=args.table,
-        sex=args.sex, build=args.build, guides=args.guides, ensemble=args.ensemble,
+        sex=args.sex, build=args.build, guides=args.guides, rules=tuple(args.rule),
+        ensemble=args.ensemble,
         template=args.template, orientation=orientation_of(args, args.skull),
         excluded=frozenset(args.exclude), overrides=_overrides(args.override),
         examiner=args.examiner)

@@ -201,8 +201,15 @@ def align_to_reference(target: Mesh, reference: Mesh, *,
     starts: list[np.ndarray] = []
     method = "search"
     if seeds is not None and len(seeds[0]) >= 3:
-        m = similarity_transform(np.asarray(seeds[0]), np.asarray(seeds[1]))
-        starts, method = [m], "seeds"
+        # a similarity cannot turn a mirrored scan (e.g. a CT stored in a
+        # left-handed space) into the reference: try the reflected reading
+        # of the seeds too; the ICP below keeps each start's handedness and
+        # the closer fit wins
+        flip = np.diag([-1.0, 1.0, 1.0, 1.0])
+        pts, ref_pts = np.asarray(seeds[0], float), np.asarray(seeds[1], float)
+        starts = [similarity_transform(pts, ref_pts),
+                  similarity_transform(pts * [-1.0, 1.0, 1.0], ref_pts) @ flip]
+        method = "seeds"
     else:
         if orientation is not None:
             rots = [hint_rotation(*orientation)]

@@ -35,10 +35,12 @@ from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.dowels import DepthSettings
 from workbench.core.errors import WorkbenchError
+from workbench.core.units import UNIT_SCALES
 from workbench.core.isosurface import decimate
 from workbench.services.guide_rules import published_predictions
 from workbench.services.guides import (
-    apply_guides, check_guides, classic_guides, guides_from_json, guides_to_json,
+    apply_guides, check_guides, classic_guides, guides_from_json, guides_from_prediction,
+    guides_to_json,
 )
 from workbench.services.landmark_transfer import TransferResult, transfer_landmarks
 from workbench.services.reconstruct import (
@@ -64,6 +66,7 @@ class JobSettings:
     sex: str = "male"
     build: str | float = "normal"
     guides: str | PathLike[str] = "default"      # "default" | "none" | JSON file
+    rules: tuple[str, ...] = ()                  # published rules replacing classic guides
     ensemble: int = 0
     template: str | PathLike[str] | None = None
     orientation: tuple | None = None             # (anterior, superior[, left]) in file coords
@@ -83,6 +86,13 @@ class JobResult:
     spread: np.ndarray | None
     report: dict[str, Any]
     seconds: dict[str, float]
+    settings: JobSettings = field(default_factory=JobSettings)
+
+    @property
+    def file_units_per_mm(self) -> float:
+        """1 / (mm per unit of the skull file): to write results in the file's own units."""
+        mm_per_unit = self.settings.scale or UNIT_SCALES.get(self.settings.units, 1.0)
+        return 1.0 / mm_per_unit
 
 
 def _skull_h(skull: Mesh, to_head: np.ndarray) -> Mesh:
@@ -141,6 +151,18 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
 
             chosen.extend(guides_from_json(
                 json.loads(Path(settings.guides).read_text("utf-8")), settings.guides))
+        if settings.rules:
+            tips = {d.code: d.tip for d in plan.active()}
+            why: list[str] = []
+            preds = published_predictions(lms_h, settings.sex, rules=settings.rules,
+                                          skull=skull_h, dowel_tips=tips, problems=why)
+            for pred in preds:
+                if pred.target:
+                    chosen[:] = guides_from_prediction(pred, chosen)
+            found = {p.rule_id for p in preds}
+            rejected.extend(f"published rule {r} not applied: "
+                            f"{'; '.join(why) or 'no prediction for this skull'}"
+                            for r in settings.rules if r not in found)
         return lambda skin: plausible_guides(chosen, skin, skull_h, lms_h, rejected)
 
     recon = reconstruct(work, landmarks, head, settings=fit, guides=guide_fn)
@@ -173,7 +195,8 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
     report["predictions"] = [
         {"rule_id": p.rule_id, "label": p.label, "value_mm": float(p.value_mm),
          "citation": p.citation} for p in predictions if np.isfinite(p.value_mm)]
-    return JobResult(opened, head, recon, skull_h, suggestion, guides, spread, report, times)
+    return JobResult(opened, head, recon, skull_h, suggestion, guides, spread, report, times,
+                     settings)
 
 
 #: a computed guide that would move its skin landmark farther than this from
@@ -328,10 +351,21 @@ def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
 
 
 def write_outputs(result: JobResult, out: str | PathLike[str]) -> dict[str, Path]:
-    """face.ply, head/ (pack in the input frame), landmarks, case file (no report files)."""
+    """Outputs in the skull file's frame (no report files).
+
+    ``face.ply`` is also in the skull file's **units**, so it overlays the
+    evidence in any viewer; when those are not mm, ``face_mm.ply`` is the
+    same surface in mm.  ``head/`` (a template pack: skin, skull parts,
+    muscles, landmarks) and the landmark file are in mm, as the pack format
+    and the case require.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    files = {"face": write_mesh(out / "face.ply", result.recon.face)}
+    face = result.recon.face
+    k = result.file_units_per_mm
+    files = {"face": write_mesh(out / "face.ply", face if k == 1.0 else face.scaled(k))}
+    if k != 1.0:
+        files["face_mm"] = write_mesh(out / "face_mm.ply", face)
     head_in = head_in_input_frame(result.recon)
     export_template(head_in, out / "head")
     files["head"] = out / "head"
