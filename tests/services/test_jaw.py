@@ -7,12 +7,11 @@ import pytest
 
 from workbench.core.spatial import MeshIndex
 from workbench.services.jaw import axis_rotation, open_jaw
-from workbench.services.template import build_reference_head
 
 
 @pytest.fixture(scope="module")
-def head():  # noqa: ANN201
-    return build_reference_head("female")
+def head(head_female):  # noqa: ANN001, ANN201 - the session's reference head
+    return head_female
 
 
 def test_axis_rotation_keeps_the_axis_and_is_rigid() -> None:

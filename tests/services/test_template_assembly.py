@@ -12,7 +12,9 @@ from workbench.services.template import build_reference_head
 
 @pytest.fixture(scope="module", params=["female", "male"])
 def head(request: pytest.FixtureRequest):  # noqa: ANN201
-    return build_reference_head(request.param)
+    # the session's head: built by build_reference_head in this session's
+    # empty cache (tests/conftest.py), so these tests check a fresh build
+    return request.getfixturevalue(f"head_{request.param}")
 
 
 def test_every_ttable_pair_is_fitted(head) -> None:  # noqa: ANN001
