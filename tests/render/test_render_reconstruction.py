@@ -15,7 +15,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from workbench.core.errors import InputError
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.render.reconstruction import VIEWS, render_reconstruction
 from workbench.services.dowels import DepthSettings, plan_dowels
 
@@ -24,9 +24,7 @@ SIZE = (200, 240)
 
 
 def merge(*meshes: Mesh) -> Mesh:
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
-    return Mesh(np.vstack([m.vertices for m in meshes]),
-                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+    return concatenate(list(meshes))
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ import pypdf
 import pytest
 
 from workbench.core.errors import InputError
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.core.normals import vertex_normals
 from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import write_mrk_json
@@ -42,9 +42,7 @@ CASE_ID = "2024-Hx-0117"
 
 
 def merge(*meshes: Mesh) -> Mesh:
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
-    return Mesh(np.vstack([m.vertices for m in meshes]),
-                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+    return concatenate(list(meshes))
 
 
 def build_report(head, folder: Path, *, render: bool = True, size=(200, 240)) -> dict:  # noqa: ANN001

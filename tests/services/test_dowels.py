@@ -10,7 +10,7 @@ from scipy import stats
 
 from workbench.core.errors import InputError
 from workbench.core.landmarks import Landmark, LandmarkSet
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.core.spatial import MeshIndex
 from workbench.io.tables import load_depth_table
 from workbench.services.dowel_sites import SITE_PATTERN, interpolated_sites
@@ -27,9 +27,7 @@ MANDIBLE_CODES = {"id", "sm", "pg", "gn", "me", "iC_l", "iC_r", "ecm2i_l", "ecm2
 
 
 def _combine(*meshes: Mesh) -> Mesh:
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
-    return Mesh(np.vstack([m.vertices for m in meshes]),
-                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+    return concatenate(list(meshes))
 
 
 @pytest.fixture(scope="module")

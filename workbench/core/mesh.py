@@ -291,6 +291,13 @@ class ValidationReport:
         }
 
 
+def concatenate(meshes: list[Mesh]) -> Mesh:
+    """One mesh holding ``meshes`` in order (vertex ids offset, nothing merged)."""
+    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
+    return Mesh(np.vstack([m.vertices for m in meshes]),
+                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+
+
 def degenerate_face_mask(mesh: Mesh, area_tol_mm2: float = 1e-12) -> np.ndarray:
     """``(m,)`` bool: repeated corner indices or area below ``area_tol_mm2``."""
     f = mesh.faces

@@ -18,7 +18,6 @@ which turns any download attempt into an error).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -26,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from workbench.core.errors import InputError, WorkbenchError
+from workbench.model.evidence import sha256_file
 
 _REGISTRY_PATH = Path(__file__).with_name("sample_registry.json")
 SAMPLE_PREFIX = "sample:"
@@ -70,11 +70,7 @@ def cache_dir() -> Path:
 
 
 def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    return sha256_file(path)[0]
 
 
 def _mirrors() -> list[Path]:

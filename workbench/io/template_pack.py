@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from workbench.core.errors import InputError
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.io.markups import read_mrk_json, write_mrk_json
 from workbench.io.meshes import read_mesh, write_mesh
 from workbench.model.muscles import MuscleGrid
@@ -34,12 +34,6 @@ FILES = {
     "eyes.ply": ("eyes",),
     "tongue.ply": ("tongue",),
 }
-
-
-def _combine(meshes: list[Mesh]) -> Mesh:
-    offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
-    return Mesh(np.vstack([m.vertices for m in meshes]),
-                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
 
 
 def _jsonable(value: Any) -> Any:
@@ -73,7 +67,7 @@ def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Pat
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for name, parts in FILES.items():
-        written.append(write_mesh(out / name, _combine([head.meshes[p] for p in parts])))
+        written.append(write_mesh(out / name, concatenate([head.meshes[p] for p in parts])))
     for name, lmset in (("skin.mrk.json", head.skin_landmarks),
                         ("skull.mrk.json", head.skull_landmarks)):
         write_mrk_json(out / name, lmset, coordinate_system="RAS")

@@ -37,6 +37,7 @@ from workbench.core.errors import WorkbenchError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.model.case import Case
+from workbench.model.evidence import sha256_file
 from workbench.model.template import TemplateHead
 from workbench.services.dowels import DepthSettings, DowelPlan, plan_dowels
 from workbench.services.guides import (
@@ -91,14 +92,13 @@ def sample_orientation(path: str | Path) -> dict[str, list[float]] | None:
     ``{"anterior": [...], "superior": [...] (, "left": [...])}`` in the
     file's coordinates, or None for any other file.
     """
-    import hashlib
 
     from workbench.io.samples import registry
 
     path = Path(path)
     if not path.is_file():
         return None
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    digest = sha256_file(path)[0]
     for sample in registry().values():
         main = [f for f in sample.files if f.path == sample.main]
         if sample.anatomy and main and main[0].sha256 == digest:

@@ -39,7 +39,6 @@ faces):
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -56,6 +55,7 @@ import numpy as np
 
 import workbench
 from workbench.core.errors import InputError
+from workbench.model.evidence import sha256_file as evidence_sha256
 from workbench.reporting.pdf import (
     ACCENT,
     DARK,
@@ -98,14 +98,10 @@ def utc_now() -> str:
 
 def sha256_file(path: PathArg) -> str:
     """SHA-256 (lower-case hex) of a file's bytes, read in 1 MiB blocks."""
-    digest = hashlib.sha256()
     try:
-        with open(path, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
+        return evidence_sha256(path)[0]
     except OSError as exc:
         raise InputError(path, f"cannot read the file to hash it ({exc.strerror or exc})") from None
-    return digest.hexdigest()
 
 
 def to_jsonable(value: Any, where: str = "$") -> Any:

@@ -37,6 +37,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import InputError
+from workbench.core.frame import apply_transform
 from workbench.core.mesh import Mesh
 from workbench.core.tps import similarity_transform
 
@@ -71,13 +72,10 @@ class Alignment:
     method: str
 
     def apply(self, points: np.ndarray) -> np.ndarray:
-        p = np.asarray(points, dtype=float)
-        return p @ self.matrix[:3, :3].T + self.matrix[:3, 3]
+        return apply_transform(self.matrix, points)
 
     def inverse(self, points: np.ndarray) -> np.ndarray:
-        inv = np.linalg.inv(self.matrix)
-        p = np.asarray(points, dtype=float)
-        return p @ inv[:3, :3].T + inv[:3, 3]
+        return apply_transform(np.linalg.inv(self.matrix), points)
 
 
 def surface_samples(mesh: Mesh, n: int, rng: np.random.Generator) -> np.ndarray:

@@ -38,6 +38,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import LandmarkError
+from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
@@ -104,8 +105,7 @@ class Reconstruction:
     warnings: tuple[str, ...] = ()
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
-        inv = np.linalg.inv(self.input_to_head)
-        return np.asarray(points, float) @ inv[:3, :3].T + inv[:3, 3]
+        return apply_transform(np.linalg.inv(self.input_to_head), points)
 
     def mesh_to_input(self, mesh: Mesh) -> Mesh:
         """A head-frame mesh in the input frame, outward winding kept."""
@@ -145,10 +145,6 @@ def outward(mesh: Mesh) -> Mesh:
     return mesh if agree >= 0 else Mesh(mesh.vertices, mesh.faces[:, ::-1])
 
 
-def _transform(m: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return np.asarray(p, float) @ m[:3, :3].T + m[:3, 3]
-
-
 #: skin points of interpolated sites on a reference head, per (head hash, table, sites)
 _REF_CACHE: dict[tuple, dict[str, np.ndarray]] = {}
 
@@ -184,7 +180,7 @@ def reference_correspondences(head: TemplateHead, plan: DowelPlan,
     return out
 
 
-def _warp_head(head: TemplateHead, warp: LandmarkWarp) -> TemplateHead:
+def warp_head(head: TemplateHead, warp: LandmarkWarp) -> TemplateHead:
     meshes = {name: m.with_vertices(warp(m.vertices)) for name, m in head.meshes.items()}
     centres = warp(head.eye_centres)
     # a globe is rigid: move it with its centre, keep its size (§8.3.2)
@@ -340,7 +336,7 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
             dst_a = np.vstack([dst_a, goal[new]])
             n_extra += int(new.sum())
             warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
-    fitted = _warp_head(head, warp)
+    fitted = warp_head(head, warp)
     moved = fitted.skin.vertices
     like = cKDTree(warp(ref_bone))
     _, signed, bone = _thin_spots(moved, index, settings.min_tissue_mm, openings, like)
@@ -376,7 +372,7 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
     targets from the dowel-fitted skin landmarks (see :func:`fit_head`).
     """
     to_head, mirrored = input_frame(landmarks)
-    skull_h = outward(Mesh(_transform(to_head, skull.vertices), skull.faces))
+    skull_h = outward(Mesh(apply_transform(to_head, skull.vertices), skull.faces))
     lms_h = landmarks.transformed(to_head)
     doubtful = [lm.code for lm in lms_h if lm.status == "suggested"
                 and lm.confidence < settings.min_confidence]

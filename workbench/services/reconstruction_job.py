@@ -35,6 +35,7 @@ from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.dowels import DepthSettings
 from workbench.core.errors import WorkbenchError
+from workbench.core.frame import apply_transform
 from workbench.core.units import UNIT_SCALES
 from workbench.core.isosurface import decimate
 from workbench.services.guide_rules import published_predictions
@@ -96,7 +97,7 @@ class JobResult:
 
 
 def _skull_h(skull: Mesh, to_head: np.ndarray) -> Mesh:
-    return outward(Mesh(skull.vertices @ to_head[:3, :3].T + to_head[:3, 3], skull.faces))
+    return outward(Mesh(apply_transform(to_head, skull.vertices), skull.faces))
 
 
 def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = JobSettings(),

@@ -58,17 +58,19 @@ from scipy import sparse
 from scipy.sparse.linalg import spsolve
 
 from workbench.core.errors import InputError
+from workbench.core.frame import apply_transform
 from workbench.core.landmarks import Landmark, LandmarkSet
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.core.normals import vertex_normals
 from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import LandmarkWarp, fit_warp
+from workbench.model.evidence import sha256_file
 from workbench.model.template import TemplateHead
 from workbench.services.alignment import Alignment, align_to_reference
 from workbench.services.landmark_transfer import TransferResult, rim_faces, transfer_landmarks
-from workbench.services.reconstruct import _warp_head, input_frame, outward
-from workbench.services.reference_parts import combine, skull_surface
+from workbench.services.reconstruct import input_frame, outward, warp_head
+from workbench.services.reference_parts import skull_surface
 
 SMOOTHING_MM = 1.5          #: λ of the landmark warp: wrong matches must not crumple the mesh
 FIELD_SMOOTHING_MM = 2.0    #: λ of the smooth projection field
@@ -121,7 +123,7 @@ class BuildResult:
 
 
 def _apply(m: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return np.asarray(p, float).reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    return apply_transform(m, np.reshape(p, (-1, 3)))
 
 
 def _adjacency(mesh: Mesh) -> sparse.csr_matrix:
@@ -297,7 +299,7 @@ def _projected(base: TemplateHead, warped: TemplateHead, skin_h: Mesh, bone_h: M
     skin_proj = _project(warped.skin, skin_h,
                          ~_mask(n_skin, [base.regions[r] for r in UNPROJECTED_REGIONS
                                          if r in base.regions]))
-    bone_w = combine([warped.meshes[p] for p in BONE_PARTS])
+    bone_w = concatenate([warped.meshes[p] for p in BONE_PARTS])
     bone_proj = _project(bone_w, bone_h, np.ones(bone_w.n_vertices, dtype=bool))
     new_skin, skin_ok = _settle(warped.skin, skin_proj)
     new_bone, bone_ok = _settle(bone_w, bone_proj)
@@ -315,7 +317,7 @@ def _projected(base: TemplateHead, warped: TemplateHead, skin_h: Mesh, bone_h: M
         eyes + (centres - warped.eye_centres)[owner])
     axis = field(np.vstack([warped.tmj_axis[0], warped.tmj_axis[0] + 10 * warped.tmj_axis[1]]))
     keep = [base.regions[r] for r in NO_CLEARANCE_REGIONS if r in base.regions]
-    skin_v, pushed, min_tissue = _push_out(new_skin, combine([meshes[p] for p in SKULL_PARTS]),
+    skin_v, pushed, min_tissue = _push_out(new_skin, concatenate([meshes[p] for p in SKULL_PARTS]),
                                            _mask(n_skin, keep + list(base.openings.values())))
     meshes["skin"] = warped.skin.with_vertices(skin_v)
     direction = (axis[1] - axis[0]) / np.linalg.norm(axis[1] - axis[0])
@@ -434,7 +436,7 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
                          hint="check the units and orientation, or give landmark files")
     warp = fit_warp(src, dst, smoothing=SMOOTHING_MM)
     resid = warp.residuals(src, dst)
-    warped = _warp_head(base, warp)
+    warped = warp_head(base, warp)
     seconds["warp"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -492,11 +494,7 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
 
 
 def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    return sha256_file(path)[0]
 
 
 def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLike[str],
