@@ -191,7 +191,6 @@ def warp_head(head: TemplateHead, warp: LandmarkWarp) -> TemplateHead:
     direction = axis_pts[1] - axis_pts[0]
     return replace(
         head,
-        template_id=head.template_id,
         meshes=meshes,
         skin_landmarks=_warp_set(head.skin_landmarks, warp),
         skull_landmarks=_warp_set(head.skull_landmarks, warp),
