@@ -87,6 +87,10 @@ class Reconstruction:
         The dowels used (head frame).
     sources, targets : (k, 3)
         The final correspondences of the warp (head frame).
+    labels : tuple of str
+        What each correspondence is: ``"dowel:<skull code>"``,
+        ``"guide:<skin code>"`` or ``"clearance"`` (a non-penetration
+        point added by a refit); the interactive preview moves targets by it.
     figures : dict
         ``max_tip_error_mm``, ``min_tissue_mm``, ``penetrating_vertices``,
         ``refits``, ``extra_correspondences``, ``seconds``.
@@ -103,6 +107,7 @@ class Reconstruction:
     figures: dict
     guide_targets: Mapping[str, np.ndarray] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    labels: tuple[str, ...] = ()
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         return apply_transform(np.linalg.inv(self.input_to_head), points)
@@ -239,9 +244,12 @@ def _spread(points: np.ndarray, spacing: float) -> np.ndarray:
 
 def _pairs(plan: DowelPlan, ref_points: Mapping[str, np.ndarray], skin_lms: Mapping[str, np.ndarray],
            guide_targets: Mapping[str, np.ndarray], depths: np.ndarray | None
-           ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """Warp correspondences: reference skin points → dowel tips, guided codes → guide targets."""
-    src, dst, tip_of = [], [], {}
+           ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], list[str]]:
+    """Warp correspondences: reference skin points → dowel tips, guided codes → guide targets.
+
+    Also returns a label per correspondence (see :attr:`Reconstruction.labels`).
+    """
+    src, dst, tip_of, labels = [], [], {}, []
     for i, d in enumerate(plan.dowels):
         if d.excluded or d.code not in ref_points or d.skin_code in guide_targets:
             continue  # a guide, when there is one, decides that skin landmark
@@ -250,14 +258,16 @@ def _pairs(plan: DowelPlan, ref_points: Mapping[str, np.ndarray], skin_lms: Mapp
         src.append(ref_points[d.code])
         dst.append(tip)
         tip_of[d.code] = tip
+        labels.append(f"dowel:{d.code}")
     for code, target in guide_targets.items():
         if code in skin_lms:
             src.append(skin_lms[code])
             dst.append(np.asarray(target, float))
+            labels.append(f"guide:{code}")
     if len(src) < 4:
         raise LandmarkError(f"only {len(src)} usable dowels; place more skull landmarks "
                             "(at least 4 with table depths)")
-    return np.array(src), np.array(dst), tip_of
+    return np.array(src), np.array(dst), tip_of, labels
 
 
 GuideFn = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
@@ -270,7 +280,8 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
              extra: tuple[np.ndarray, np.ndarray] | None = None,
              ref_points: dict[str, np.ndarray] | None = None,
              skull_index: MeshIndex | None = None
-             ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+             ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict[str, np.ndarray],
+                        tuple[str, ...]]:
     """Warp ``head`` so its skin meets the dowel tips (all in the head frame).
 
     ``guides`` maps the skin landmark positions after the dowel warp to guide
@@ -278,24 +289,26 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
     them directly.  ``depths`` (one per dowel of ``plan``) replaces the
     planned depths (the ensemble); ``extra`` adds fixed correspondences and
     skips the non-penetration loop (used by the ensemble with the main
-    fit's extras).  Returns the fitted head, figures, the correspondences
-    and the guide targets used.
+    fit's extras).  Returns the fitted head, figures, the correspondences,
+    the guide targets used and a label per correspondence.
     """
     t0 = time.perf_counter()
     ref_points = ref_points if ref_points is not None else reference_correspondences(
         head, plan, settings.depth)
     guide_targets = dict(guide_targets or {})
     skin_lms = head.skin_landmarks.as_dict()
-    src_a, dst_a, tip_of = _pairs(plan, ref_points, skin_lms, guide_targets, depths)
+    src_a, dst_a, tip_of, labels = _pairs(plan, ref_points, skin_lms, guide_targets, depths)
     if extra is not None and len(extra[0]):
         src_a, dst_a = np.vstack([src_a, extra[0]]), np.vstack([dst_a, extra[1]])
+        labels += ["clearance"] * len(extra[0])
     warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
     if guides is not None:
         codes = list(skin_lms)
         prefit = dict(zip(codes, warp(np.array([skin_lms[c] for c in codes])), strict=True))
         guide_targets.update(guides(prefit))
         if guide_targets:
-            src_a, dst_a, tip_of = _pairs(plan, ref_points, skin_lms, guide_targets, depths)
+            src_a, dst_a, tip_of, labels = _pairs(plan, ref_points, skin_lms, guide_targets,
+                                                  depths)
             warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
     skin_v = head.skin.vertices
     index = skull_index or MeshIndex(skull_h)
@@ -333,6 +346,7 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
                 break
             src_a = np.vstack([src_a, skin_v[pick][new]])
             dst_a = np.vstack([dst_a, goal[new]])
+            labels += ["clearance"] * int(new.sum())
             n_extra += int(new.sum())
             warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
     fitted = warp_head(head, warp)
@@ -352,7 +366,7 @@ def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
         "correspondences": len(src_a),
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    return fitted, figures, src_a, dst_a, guide_targets
+    return fitted, figures, src_a, dst_a, guide_targets, tuple(labels)
 
 
 def _face_bary(index: MeshIndex, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -382,8 +396,8 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
             lm.moved(lm.position, "absent") if lm.code in doubtful else lm for lm in lms_h))
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
-    fitted, figures, src, dst, used = fit_head(head, skull_h, plan, guide_targets=guide_targets,
-                                               guides=guide_fn, settings=settings)
+    fitted, figures, src, dst, used, labels = fit_head(
+        head, skull_h, plan, guide_targets=guide_targets, guides=guide_fn, settings=settings)
     warnings = list(plan.warnings)
     if doubtful:
         warnings.append(f"{len(doubtful)} suggested landmarks below confidence "
@@ -396,7 +410,7 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
         warnings.append(f"{figures['penetrating_vertices']} skin vertices still inside the bone "
                         f"after {figures['refits']} refits")
     return Reconstruction(fitted, to_head, mirrored, plan, src, dst, figures,
-                          used, tuple(warnings))
+                          used, tuple(warnings), labels)
 
 
 def ensemble_spread(recon: Reconstruction, head: TemplateHead, skull_h: Mesh, n: int, *,

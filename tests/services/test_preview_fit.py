@@ -1,0 +1,77 @@
+"""The interactive preview re-solves the last fit's warp with moved targets (mm)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.core.tps import fit_warp
+from workbench.services.guides import Guide
+from workbench.services.preview_fit import PreviewFit
+from workbench.services.reconstruct import SMOOTHING, reconstruct
+from workbench.services.reference_parts import skull_surface
+
+
+@pytest.fixture(scope="module")
+def fitted(head_female, head_male):  # noqa: ANN001
+    """The female skull with the male head, shifted so input and head frames differ."""
+    m = np.eye(4)
+    m[:3, 3] = [40.0, -25.0, 300.0]
+    skull = skull_surface(head_female).transformed(m)
+    lms = head_female.skull_landmarks.transformed(m)
+    guide_targets = {"prn": head_male.skin_landmarks["prn"].position + [0.0, 0.0, 3.0]}
+    return skull, lms, reconstruct(skull, lms, head_male, guide_targets=guide_targets)
+
+
+def test_labels_describe_every_correspondence(fitted):  # noqa: ANN001
+    _, _, recon = fitted
+    assert len(recon.labels) == len(recon.sources) == len(recon.targets)
+    kinds = {label.split(":")[0] for label in recon.labels}
+    assert {"dowel", "guide"} <= kinds <= {"dowel", "guide", "clearance"}
+    assert "guide:prn" in recon.labels
+    assert recon.labels.count("clearance") == recon.figures["extra_correspondences"]
+
+
+def test_an_unchanged_preview_is_the_fit(fitted, head_male):  # noqa: ANN001
+    _, _, recon = fitted
+    preview = PreviewFit.from_fit(recon, head_male)
+    np.testing.assert_allclose(preview.skin(), recon.face.vertices, atol=1e-8)
+
+
+def test_moving_a_landmark_moves_its_dowel_tip_and_the_face_near_it(fitted, head_male):  # noqa: ANN001
+    _, lms, recon = fitted
+    preview = PreviewFit.from_fit(recon, head_male)
+    g = lms["g"].position
+    assert preview.move_landmark("g", g + [0.0, 4.0, 0.0])     # 4 mm up (input = head axes here)
+    moved = preview.skin()
+    shift = np.linalg.norm(moved - recon.face.vertices, axis=1)
+    skin_g = head_male.skin_landmarks["g"].position
+    near = np.linalg.norm(head_male.skin.vertices - skin_g, axis=1) < 10.0
+    far = np.linalg.norm(head_male.skin.vertices - skin_g, axis=1) > 80.0
+    assert shift[near].mean() > 2.0
+    assert shift[far].max() < shift[near].mean() / 2
+    # the same as solving the warp from scratch with that one tip moved
+    row = recon.labels.index("dowel:g")
+    targets = recon.targets.copy()
+    targets[row] += recon.input_to_head[:3, :3] @ [0.0, 4.0, 0.0]
+    warp = fit_warp(recon.sources, targets, smoothing=SMOOTHING)
+    np.testing.assert_allclose(preview.skin_head(), warp(head_male.skin.vertices), atol=1e-8)
+    assert not preview.move_landmark("no_such_code", g)
+
+
+def test_moving_a_guide_sets_the_coordinate_it_fixes(fitted, head_male):  # noqa: ANN001
+    _, _, recon = fitted
+    preview = PreviewFit.from_fit(recon, head_male)
+    row = recon.labels.index("guide:prn")
+    y = float(recon.targets[row, 1]) + 5.0
+    guide = Guide(id="nose_tip_y", label="nose tip height", kind="hline", view="frontal",
+                  value=(y,), affects=("prn",), rule_id="test", citation="test")
+    assert preview.move_guide(guide)
+    assert preview.targets[row, 1] == pytest.approx(y)
+    np.testing.assert_allclose(preview.targets[row, [0, 2]], recon.targets[row, [0, 2]])
+    prn = head_male.skin_landmarks["prn"].position
+    i = int(np.argmin(np.linalg.norm(head_male.skin.vertices - prn, axis=1)))
+    assert preview.skin_head()[i, 1] - recon.head.skin.vertices[i, 1] > 3.0
+    off = Guide(id="x", label="x", kind="vline", view="frontal", value=(1.0,),
+                affects=("no_code",), rule_id="t", citation="t")
+    assert not preview.move_guide(off)
