@@ -43,3 +43,7 @@ class UnitsError(InputError):
 
 class LandmarkError(WorkbenchError):
     """Missing, duplicate, unknown or undefined landmarks."""
+
+
+class Cancelled(WorkbenchError):
+    """The user cancelled a running job (raised at its next progress check)."""

@@ -1,13 +1,30 @@
-"""Background work for the window: one worker thread, results back on the GUI thread.
+"""Background work for the window: worker threads, results back on the GUI thread.
 
-Workers run plain functions (:mod:`workbench.qt.jobs`) that return values;
-they never touch the case, Qt widgets or VTK.  The result (or the error) is
-delivered through a queued Qt signal, so the callback runs on the GUI thread,
-which applies it through a command.
+Workers run plain functions (:mod:`workbench.qt.jobs`, services) that return
+values; they never touch the case, Qt widgets or VTK.  The result (or the
+error) is delivered through a queued Qt signal, so the callback runs on the
+GUI thread, which applies it through a command.
 
-Each job has a *channel* name ("suggest", "dowels", "fit" ...).  Submitting
-again on a channel supersedes the earlier job: its result is dropped when
-it arrives (a live preview only shows the newest state).
+Channels
+--------
+Each job has a *channel* name ("suggest", "dowels", "fit", "open" ...).
+Submitting again on a channel supersedes the earlier job: its result is
+dropped when it arrives (a live preview only shows the newest state).
+
+Cancellation and progress (opt-in)
+----------------------------------
+Every job gets a :class:`~workbench.core.cancel.CancelToken` (returned by
+:meth:`TaskRunner.submit`).  :meth:`TaskRunner.cancel` drops the pending
+result of a channel at once, updates the busy state and sets the token;
+superseding a job sets its token too.  A job that wants to stop early
+either checks a token it was given (``token=``) or asks for a progress
+callback (``progress=True``): ``fn`` is then called as ``fn(report)`` and
+``report(step, fraction)`` both checks the token (raising
+:class:`~workbench.core.errors.Cancelled`) and forwards the progress to the
+GUI thread as :attr:`TaskRunner.progress_changed` (queued signal,
+``fraction`` of the whole job, 0..1).  Jobs that opt in and are cancelled
+before they start are not run at all; plain ``fn()`` jobs always run (their
+side effects, e.g. an export, happen even if their result is dropped).
 """
 
 from __future__ import annotations
@@ -19,7 +36,14 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, Qt, Signal
+from PySide6.QtWidgets import QProgressBar
+
+from workbench.core.cancel import CancelToken
+from workbench.core.errors import Cancelled
+
+#: a determinate progress bar runs 0..BAR_STEPS
+BAR_STEPS = 1000
 
 
 @dataclass
@@ -28,7 +52,10 @@ class _Job:
     generation: int
     on_done: Callable[[Any], None]
     on_error: Callable[[BaseException], None] | None
+    token: CancelToken
+    cooperative: bool = False
     started: float = field(default_factory=time.perf_counter)
+    last_report: tuple[str, float] = ("", -1.0)
 
 
 class TaskRunner(QObject):
@@ -38,18 +65,29 @@ class TaskRunner(QObject):
     -------
     busy_changed(bool, str)
         True with a description when work starts, False when all is done.
+    progress_changed(str, str, float)
+        ``(channel, step, fraction)`` of the current job of a channel that
+        asked for progress (GUI thread; reports of superseded or cancelled
+        jobs are dropped).
+    cancelled(str)
+        A channel's pending job was cancelled with :meth:`cancel`.
     """
 
     busy_changed = Signal(bool, str)
+    progress_changed = Signal(str, str, float)
+    cancelled = Signal(str)
     _delivered = Signal(object, object, object)  # job, result, error
+    _progressed = Signal(object, str, float)  # job, step, fraction
 
     def __init__(self, parent: QObject | None = None, max_workers: int = 2) -> None:
         super().__init__(parent)
         self._pool = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="workbench")
         self._generation: dict[str, int] = {}
         self._pending: dict[str, Future] = {}
+        self._tokens: dict[str, CancelToken] = {}
         self.timings: dict[str, float] = {}
-        self._delivered.connect(self._on_delivered)
+        self._delivered.connect(self._on_delivered, Qt.ConnectionType.QueuedConnection)
+        self._progressed.connect(self._on_progressed, Qt.ConnectionType.QueuedConnection)
 
     @property
     def busy(self) -> bool:
@@ -58,24 +96,92 @@ class TaskRunner(QObject):
     def is_running(self, channel: str) -> bool:
         return channel in self._pending
 
-    def submit(self, channel: str, description: str, fn: Callable[[], Any],
+    def token(self, channel: str) -> CancelToken | None:
+        """The cancel token of the channel's pending job (None when idle)."""
+        return self._tokens.get(channel) if channel in self._pending else None
+
+    def submit(self, channel: str, description: str, fn: Callable[..., Any],
                on_done: Callable[[Any], None],
-               on_error: Callable[[BaseException], None] | None = None) -> None:
-        """Run ``fn()`` in a worker; ``on_done(result)`` / ``on_error(exc)`` on the GUI thread."""
+               on_error: Callable[[BaseException], None] | None = None, *,
+               progress: bool = False, token: CancelToken | None = None) -> CancelToken:
+        """Run ``fn`` in a worker; ``on_done(result)`` / ``on_error(exc)`` on the GUI thread.
+
+        Parameters
+        ----------
+        progress : bool
+            Call ``fn(report)`` with a ``report(step, fraction)`` callback
+            that checks the job's token and emits :attr:`progress_changed`;
+            otherwise ``fn()``.
+        token : CancelToken, optional
+            Use this token (e.g. one ``fn`` already closes over) instead of a new one.
+
+        Returns
+        -------
+        CancelToken
+            Set by :meth:`cancel`, by a newer job on the same channel and by
+            :meth:`shutdown`.  A job that ends with
+            :class:`~workbench.core.errors.Cancelled` never calls ``on_error``.
+        """
+        old = self._tokens.get(channel)
+        if old is not None and channel in self._pending:
+            old.cancel("superseded by a newer job")
         generation = self._generation.get(channel, 0) + 1
         self._generation[channel] = generation
-        job = _Job(channel, generation, on_done, on_error)
-        self._pending[channel] = self._pool.submit(self._run, job, fn)
+        token = token if token is not None else CancelToken()
+        job = _Job(channel, generation, on_done, on_error, token,
+                   cooperative=progress or token is not None)
+        self._tokens[channel] = token
+        self._pending[channel] = self._pool.submit(self._run, job, fn, progress)
         self.busy_changed.emit(True, description)
+        return token
 
-    def _run(self, job: _Job, fn: Callable[[], Any]) -> None:
+    def cancel(self, channel: str) -> bool:
+        """Cancel the channel's pending job; False if nothing was pending.
+
+        The result is dropped at once (``on_done``/``on_error`` are never
+        called), the busy state is updated, and the job's token is set so a
+        cooperative job stops at its next check.
+        """
+        future = self._pending.pop(channel, None)
+        if future is None:
+            return False
+        self._generation[channel] = self._generation.get(channel, 0) + 1
+        token = self._tokens.pop(channel, None)
+        if token is not None:
+            token.cancel(f"{channel} cancelled")
+        future.cancel()  # only succeeds if it has not started
+        self.cancelled.emit(channel)
+        if not self._pending:
+            self.busy_changed.emit(False, "")
+        return True
+
+    # ------------------------------------------------------------ worker side
+    def _run(self, job: _Job, fn: Callable[..., Any], progress: bool) -> None:
         try:
-            result = fn()
+            if job.cooperative:
+                job.token.check()  # superseded or cancelled while queued
+            result = fn(lambda step, fraction: self._report(job, step, fraction)) \
+                if progress else fn()
+        except Cancelled as exc:
+            self._emit(job, None, exc)
+            return
         except BaseException as exc:  # delivered to the GUI thread, shown as a dialog
             exc.__dict__.setdefault("worker_traceback", traceback.format_exc())
             self._emit(job, None, exc)
             return
         self._emit(job, result, None)
+
+    def _report(self, job: _Job, step: str, fraction: float) -> None:
+        job.token.check()
+        last_step, last_fraction = job.last_report
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        if step == last_step and abs(fraction - last_fraction) < 0.005 and fraction < 1.0:
+            return  # throttle: at most ~200 updates per job
+        job.last_report = (step, fraction)
+        try:
+            self._progressed.emit(job, step, fraction)
+        except RuntimeError:
+            pass  # the window was closed while the job ran
 
     def _emit(self, job: _Job, result: Any, error: BaseException | None) -> None:
         try:
@@ -83,22 +189,43 @@ class TaskRunner(QObject):
         except RuntimeError:
             pass  # the window was closed while the job ran
 
+    # ------------------------------------------------------------ GUI side
+    def _is_current(self, job: _Job) -> bool:
+        return self._generation.get(job.channel) == job.generation and job.channel in self._pending
+
+    def _on_progressed(self, job: _Job, step: str, fraction: float) -> None:
+        if self._is_current(job):
+            self.progress_changed.emit(job.channel, step, fraction)
+
     def _on_delivered(self, job: _Job, result: Any, error: BaseException | None) -> None:
-        current = self._generation.get(job.channel) == job.generation
+        current = self._is_current(job)
         if current:
             self._pending.pop(job.channel, None)
+            self._tokens.pop(job.channel, None)
             self.timings[job.channel] = time.perf_counter() - job.started
         if not self._pending:
             self.busy_changed.emit(False, "")
-        if not current:
-            return  # superseded by a newer job on the same channel
+        if not current or isinstance(error, Cancelled):
+            return  # superseded by a newer job, or cancelled
         if error is None:
             job.on_done(result)
         elif job.on_error is not None:
             job.on_error(error)
 
     def shutdown(self) -> None:
-        """Stop accepting work; running jobs finish, their results are dropped."""
+        """Stop accepting work; cooperative jobs stop, the others finish; results are dropped."""
         self._generation = {k: v + 1 for k, v in self._generation.items()}
+        for token in self._tokens.values():
+            token.cancel("shut down")
+        self._tokens.clear()
         self._pending.clear()
         self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+def show_fraction(bar: QProgressBar, fraction: float, step: str = "") -> None:
+    """Make ``bar`` determinate and show ``fraction`` (0..1) of the job, ``step`` as tooltip."""
+    if bar.maximum() != BAR_STEPS:
+        bar.setRange(0, BAR_STEPS)
+    bar.setValue(round(min(max(fraction, 0.0), 1.0) * BAR_STEPS))
+    if step:
+        bar.setToolTip(step)
