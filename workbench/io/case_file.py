@@ -21,6 +21,9 @@ Guarantees
   case file or from the original file, re-hashing them on the way.
 - The audit log only grows: a save over the same case writes the old log
   byte-identical and appends.
+- :func:`write_case_snapshot` (autosave) writes the same format, atomically,
+  with no side effect on the case (no ``save`` record, meta and
+  ``source_path`` unchanged).
 - Loading runs the data-only migrations, validates against the schema, builds
   objects through :data:`workbench.model.case.PARTS` only (no class named in
   the file is ever instantiated, nothing is unpickled) and re-hashes every
@@ -379,6 +382,23 @@ def _replace(temp: Path, path: Path) -> None:
             os.close(dir_fd)
 
 
+def _write_case(path: Path, case: Case, doc: dict[str, Any], blobs: dict[str, bytes],
+                audit: bytes, *, guard_audit: bool) -> None:
+    """Write a complete case file to ``path`` atomically; evidence copied from a verified copy.
+
+    ``guard_audit``: refuse to overwrite a file of the same case whose audit log is not a
+    prefix of ``audit`` (see :func:`_check_audit_prefix`).
+    """
+    with contextlib.ExitStack() as stack_of_files:
+        sources = _sources(path, case, stack_of_files)
+        if guard_audit:
+            _check_audit_prefix(path, case, sources, audit)
+        openers = {item: _evidence_source(item, sources)
+                   for item in case.retained_evidence.values()}
+        temp = _write_temp(path, lambda zf: _write_members(zf, doc, blobs, audit, openers))
+    _replace(temp, path)  # after the previous file is closed (needed on Windows)
+
+
 class _Cleanable(Protocol):
     def set_clean(self) -> None: ...
 
@@ -408,16 +428,69 @@ def save_case(case: Case, path: PathArg, stack: _Cleanable | None = None) -> Pat
     record = make_record("save", "Save case", meta.examiner,
                          {"file": path.name, "format_version": CURRENT_VERSION})
     audit = case.audit.encode([record])
-    with contextlib.ExitStack() as stack_of_files:
-        sources = _sources(path, case, stack_of_files)
-        _check_audit_prefix(path, case, sources, audit)
-        openers = {item: _evidence_source(item, sources)
-                   for item in case.retained_evidence.values()}
-        temp = _write_temp(path, lambda zf: _write_members(zf, doc, blobs, audit, openers))
-    _replace(temp, path)  # after the previous file is closed (needed on Windows)
+    _write_case(path, case, doc, blobs, audit, guard_audit=True)
     case.audit.mark_persisted(audit, [record])
     case.replace("meta", meta)
     case.source_path = path
     if stack is not None:
         stack.set_clean()
     return path
+
+
+# ---------------------------------------------------------------- snapshots (autosave)
+def detached_copy(case: Case) -> Case:
+    """A copy of ``case`` that later edits of ``case`` cannot reach.
+
+    For writing a snapshot in a worker thread while the user goes on editing.
+    Cheap: parts are immutable values and are shared (no array is copied);
+    the audit log is carried as its encoded bytes, with the retained evidence
+    and ``source_path``.  The copy has no listeners.
+    """
+    copy = Case()
+    for item in case.retained_evidence.values():
+        copy.retain_evidence(item)
+    for name in PARTS:
+        copy.replace(name, case.part(name))
+    copy.audit = AuditLog(case.audit.encode())
+    copy.source_path = case.source_path
+    return copy
+
+
+def write_case_snapshot(case: Case, path: PathArg) -> Path:
+    """Write ``case`` to ``path`` as a complete ``.fcase``, changing nothing about ``case``.
+
+    The file loads with :func:`load_case` like a saved case, but unlike
+    :func:`save_case` this adds no ``save`` audit record (records not yet
+    saved are written and stay pending in ``case.audit``), leaves
+    ``case.meta``, ``case.source_path`` and any command stack alone, and does
+    not check ``path`` against another session's log (a snapshot file belongs
+    to its writer).  Evidence bytes are copied exactly as by :func:`save_case`
+    (from the previous file at ``path``, the case's source file or the
+    original path, re-hashed), so a snapshot of a case never saved still holds
+    its evidence.  Atomic; thread-safe on a :func:`detached_copy`.
+
+    Returns
+    -------
+    Path
+        ``path``, resolved.
+    """
+    path = Path(path).resolve()
+    doc, blobs = _encode(case, case.meta.to_state())
+    validate_case_json(doc, path)
+    _write_case(path, case, doc, blobs, case.audit.encode(), guard_audit=False)
+    return path
+
+
+def read_case_json(path: PathArg) -> dict[str, Any]:
+    """The migrated, schema-checked ``case.json`` of a case file.
+
+    A quick check that ``path`` is a readable case file: arrays and evidence
+    are neither read nor hashed (:func:`load_case` does that).
+
+    Raises
+    ------
+    CaseFileError
+    """
+    path = Path(path)
+    with _open_zip(path) as archive:
+        return _read_document(archive, path)
