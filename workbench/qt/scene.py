@@ -3,11 +3,20 @@
 Units mm, everything in the specimen's **input frame** (the skull file's
 coordinates), so the evidence, landmarks, dowels and the fitted face overlay.
 
-Layers (``LAYERS``) are replaced as a whole when their data change (one
-actor per layer, addressed by name), keep their visibility and opacity, and
-renders are coalesced: :meth:`SceneView.request_render` schedules one render
-on the next event-loop turn however many layers changed.  The scene never
-writes the case; it only draws what the window hands it.
+Each layer (``LAYERS``) holds one or more actors, is replaced as a whole when
+its data change (addressed by name) and keeps a visibility and an opacity
+that apply to *every* actor of the layer (surfaces, lines, points, labels)
+and survive redraws.  :meth:`SceneView.set_visible` and
+:meth:`SceneView.set_opacity` are the single source of that state: they
+emit :attr:`SceneView.layer_changed` only when the state really changes, so
+the View menu, the Layers dock and the reconstruct panel can all follow it
+(updating their widgets with signals blocked) without feedback loops.
+
+Renders are coalesced: :meth:`SceneView.request_render` schedules one render
+on the next event-loop turn however many layers changed.
+:meth:`SceneView.update_points` moves a layer's vertices in place (no actor
+re-creation) for interactive previews.  The scene never writes the case; it
+only draws what the window hands it.
 """
 
 from __future__ import annotations
@@ -16,31 +25,47 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import QTimer
+from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.core.mesh import Mesh
 from workbench.render.snapshots import to_polydata
 
-#: layer name → menu title
+#: layer name → menu title (also the row order of the Layers dock)
 LAYERS = {
     "skull": "Skull", "landmarks": "Landmarks", "dowels": "Dowels", "guides": "Guides",
-    "face": "Face (skin)", "truth": "True skin (compare)",
+    "muscles": "Muscles", "face": "Face (skin)", "truth": "True skin (compare)",
 }
+#: layers hidden until the user switches them on (everything else starts visible)
+HIDDEN_BY_DEFAULT = frozenset({"muscles"})
+#: starting opacity per layer (1.0 where not listed)
+DEFAULT_OPACITY = {"face": 0.6}
 BONE = (0.93, 0.89, 0.80)
 SKIN = (0.91, 0.72, 0.60)
 STATUS_COLOURS = {"placed": (0.10, 0.70, 0.25), "suggested": (1.0, 0.55, 0.0)}
 SELECTED = (1.0, 0.95, 0.1)
 DOWEL = (0.15, 0.35, 0.85)
 GUIDE = (0.85, 0.10, 0.55)
+MUSCLE = (0.72, 0.12, 0.12)
+MUSCLE_FIBRE = (0.45, 0.04, 0.05)
 
 
-class SceneView:
-    """Named layers over a plotter (``pyvistaqt.QtInteractor`` or ``pv.Plotter``)."""
+class SceneView(QObject):
+    """Named layers over a plotter (``pyvistaqt.QtInteractor`` or ``pv.Plotter``).
 
-    def __init__(self, plotter: Any) -> None:
+    Signals
+    -------
+    layer_changed(str)
+        A layer's visibility or opacity changed (read the new state from
+        :attr:`visible` / :attr:`opacity` or :meth:`layer_state`).
+    """
+
+    layer_changed = Signal(str)
+
+    def __init__(self, plotter: Any, parent: QObject | None = None) -> None:
+        super().__init__(parent)
         self.plotter = plotter
-        self.visible: dict[str, bool] = dict.fromkeys(LAYERS, True)
-        self.opacity: dict[str, float] = {"skull": 1.0, "face": 0.6, "truth": 1.0}
+        self.visible: dict[str, bool] = {k: k not in HIDDEN_BY_DEFAULT for k in LAYERS}
+        self.opacity: dict[str, float] = {k: DEFAULT_OPACITY.get(k, 1.0) for k in LAYERS}
         self._actors: dict[str, list[Any]] = {}
         self._render_pending = False
         self.renders = 0
@@ -73,19 +98,64 @@ class SceneView:
         self.request_render()
 
     def _add(self, layer: str, actor: Any) -> None:
+        """Register ``actor`` under ``layer`` with the layer's visibility and opacity."""
         self._actors.setdefault(layer, []).append(actor)
         actor.SetVisibility(self.visible.get(layer, True))
+        actor.GetProperty().SetOpacity(self.opacity.get(layer, 1.0))
 
     def set_visible(self, layer: str, on: bool) -> None:
-        self.visible[layer] = bool(on)
+        """Show or hide every actor of ``layer`` (kept for later redraws)."""
+        on = bool(on)
+        changed = self.visible.get(layer) != on
+        self.visible[layer] = on
         for actor in self._actors.get(layer, []):
-            actor.SetVisibility(bool(on))
+            actor.SetVisibility(on)
         self.request_render()
+        if changed:
+            self.layer_changed.emit(layer)
 
     def set_opacity(self, layer: str, value: float) -> None:
-        self.opacity[layer] = float(value)
-        for actor in self._actors.get(layer, [])[:1]:
-            actor.GetProperty().SetOpacity(float(value))
+        """Opacity in [0, 1] of every actor of ``layer`` (kept for later redraws)."""
+        value = min(max(float(value), 0.0), 1.0)
+        changed = self.opacity.get(layer) != value
+        self.opacity[layer] = value
+        for actor in self._actors.get(layer, []):
+            actor.GetProperty().SetOpacity(value)
+        self.request_render()
+        if changed:
+            self.layer_changed.emit(layer)
+
+    def layer_state(self) -> dict[str, tuple[bool, float]]:
+        """``{layer: (visible, opacity)}`` for every layer of :data:`LAYERS`."""
+        return {k: (self.visible[k], self.opacity[k]) for k in LAYERS}
+
+    def update_points(self, layer: str, points: np.ndarray) -> None:
+        """Move the vertices of ``layer``'s first actor in place (mm, input frame).
+
+        ``points`` is ``(n, 3)`` with the same count and order as the mesh
+        that was drawn (e.g. the face's vertices).  The actor, its colouring
+        and its state are kept; only the coordinates (and, for smooth-shaded
+        surfaces, the vertex normals) change, then one render is requested.
+        Meant for live previews (a dragged landmark), so it does no other work.
+        """
+        actors = self._actors.get(layer)
+        if not actors:
+            raise KeyError(f"layer {layer!r} has nothing drawn")
+        data = actors[0].GetMapper().GetInput()
+        new = np.asarray(points, dtype=float).reshape(-1, 3)
+        vtk_points = data.GetPoints()
+        if vtk_points is None or new.shape[0] != vtk_points.GetNumberOfPoints():
+            raise ValueError(f"layer {layer!r}: expected {data.GetNumberOfPoints()} points, "
+                             f"got {new.shape[0]}")
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        vtk_to_numpy(vtk_points.GetData())[:] = new
+        vtk_points.Modified()
+        normals = data.GetPointData().GetNormals()
+        if normals is not None and data.GetPolys().IsHomogeneous() == 3:   # triangles only
+            vtk_to_numpy(normals)[:] = _vertex_normals(new, data)
+            normals.Modified()
+        data.Modified()
         self.request_render()
 
     def reset_camera(self, anterior: Sequence[float] | None = None,
@@ -105,7 +175,7 @@ class SceneView:
         if mesh is None:
             return None
         actor = self.plotter.add_mesh(to_polydata(mesh), color=BONE, smooth_shading=True,
-                                      opacity=self.opacity["skull"], pickable=True,
+                                      pickable=True,
                                       name="layer_skull", render=False)
         self._add("skull", actor)
         self.request_render()
@@ -169,7 +239,7 @@ class SceneView:
             poly.point_data[title or "mm"] = np.asarray(scalars, float)
             kw = {"scalars": title or "mm", "cmap": "viridis",
                   "scalar_bar_args": {"title": title or "mm", "vertical": True}}
-        actor = self.plotter.add_mesh(poly, smooth_shading=True, opacity=self.opacity["face"],
+        actor = self.plotter.add_mesh(poly, smooth_shading=True,
                                       pickable=False, render=False, name="layer_face", **kw)
         self._add("face", actor)
         self.request_render()
@@ -187,7 +257,7 @@ class SceneView:
             kw = {"scalars": "signed mm", "cmap": "RdBu_r", "clim": (-limit_mm, limit_mm),
                   "nan_color": (0.6, 0.6, 0.6),
                   "scalar_bar_args": {"title": "signed mm", "vertical": True}}
-        actor = self.plotter.add_mesh(poly, smooth_shading=True, opacity=self.opacity["truth"],
+        actor = self.plotter.add_mesh(poly, smooth_shading=True,
                                       pickable=False, render=False, name="layer_truth", **kw)
         self._add("truth", actor)
         self.request_render()
@@ -212,5 +282,97 @@ class SceneView:
                 name="layer_guides_points"))
         self.request_render()
 
+    def show_muscles(self, muscles: Sequence[Sequence[np.ndarray]]) -> tuple[int, int]:
+        """Muscle grids as red sheets with darker fibre lines (mm, input frame).
+
+        ``muscles`` holds, per muscle, its grid rows as ``(n_i, 3)`` arrays in
+        order (fixed end → free end for a linear muscle, outer → inner ring
+        for a sphincter; see :class:`workbench.model.muscles.MuscleGrid`).
+        Rows are resampled to a common point count; consecutive rows span the
+        sheet, and the rows plus the columns across them are drawn as lines.
+        Returns ``(number of sheet triangles, number of polylines)``.
+        """
+        import pyvista as pv
+
+        self.clear("muscles")
+        pts: list[np.ndarray] = []
+        tris: list[np.ndarray] = []
+        lines: list[np.ndarray] = []
+        offset = 0
+        for rows in muscles:
+            grid = _resampled_grid([np.asarray(r, float).reshape(-1, 3) for r in rows])
+            if grid is None:
+                continue
+            n_rows, n_cols = grid.shape[:2]
+            ids = offset + np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
+            pts.append(grid.reshape(-1, 3))
+            if n_rows > 1 and n_cols > 1:
+                a, b = ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel()
+                c, d = ids[1:, 1:].ravel(), ids[1:, :-1].ravel()
+                tris += [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
+            lines += [ids[i] for i in range(n_rows) if n_cols > 1]
+            lines += [ids[:, j] for j in range(n_cols) if n_rows > 1]
+            offset += n_rows * n_cols
+        if not pts:
+            return 0, 0
+        points = np.vstack(pts)
+        n_tris = 0
+        if tris:
+            faces = np.vstack(tris)
+            n_tris = len(faces)
+            sheet = pv.PolyData(points, np.column_stack([np.full(n_tris, 3), faces]).ravel())
+            self._add("muscles", self.plotter.add_mesh(
+                sheet, color=MUSCLE, smooth_shading=True, pickable=False, render=False,
+                name="layer_muscles_sheets"))
+        if lines:
+            cells = np.concatenate([np.r_[len(line), line] for line in lines])
+            fibres = pv.PolyData(points, lines=cells)
+            self._add("muscles", self.plotter.add_mesh(
+                fibres, color=MUSCLE_FIBRE, line_width=2.5, pickable=False, render=False,
+                name="layer_muscles_fibres"))
+        self.request_render()
+        return n_tris, len(lines)
+
     def _marker_size(self) -> float:
         return 12.0
+
+
+def _resampled_grid(rows: list[np.ndarray]) -> np.ndarray | None:
+    """Rows of unequal length → ``(n_rows, n_cols, 3)``, each row resampled by arc length."""
+    rows = [r for r in rows if len(r)]
+    if not rows:
+        return None
+    n_cols = max(len(r) for r in rows)
+    out = np.empty((len(rows), n_cols, 3))
+    for i, row in enumerate(rows):
+        if len(row) == n_cols:
+            out[i] = row
+            continue
+        if len(row) == 1:
+            out[i] = row[0]
+            continue
+        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(row, axis=0), axis=1))]
+        t = np.linspace(0.0, s[-1], n_cols)
+        out[i] = np.column_stack([np.interp(t, s, row[:, k]) for k in range(3)])
+    return out
+
+
+def _vertex_normals(points: np.ndarray, data: Any) -> np.ndarray:
+    """Unit vertex normals of the triangles of ``data`` at ``points``.
+
+    Sum of the unit normals of the faces around each vertex, as
+    ``vtkPolyDataNormals`` (which pyvista's smooth shading used) computes them,
+    so the shading does not jump on the first update.
+    """
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    cells = vtk_to_numpy(data.GetPolys().GetConnectivityArray()).reshape(-1, 3)
+    t = points[cells]
+    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    cross /= np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
+    n = len(points)
+    flat = cells.ravel()
+    out = np.column_stack([np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n)
+                           for k in range(3)])
+    out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+    return out

@@ -67,6 +67,7 @@ class ReconstructPanel(QWidget):
         self.opacity = QSlider(Qt.Orientation.Horizontal)
         self.opacity.setRange(0, 100)
         self.opacity.setValue(60)
+        self.opacity.setToolTip("Skin opacity (%); the same as the Layers dock's face slider")
         self.opacity.valueChanged.connect(lambda v: self.opacity_changed.emit(v / 100.0))
         form = QFormLayout()
         form.addRow(self.run_button)
@@ -101,6 +102,14 @@ class ReconstructPanel(QWidget):
         layout.addWidget(self.figures)
 
     # ------------------------------------------------------------ results → widgets
+    def show_opacity(self, value: float) -> None:
+        """Show the scene's skin opacity (0–1) on the slider without emitting it back."""
+        blocked = self.opacity.blockSignals(True)
+        try:
+            self.opacity.setValue(round(float(value) * 100))
+        finally:
+            self.opacity.blockSignals(blocked)
+
     def show_result(self, fit: FitResult | None) -> None:
         self._refreshing = True
         try:
