@@ -67,7 +67,7 @@ def _picture_variance(window, tmp_path) -> float:  # noqa: ANN001
 
     path = window.save_screenshot(tmp_path / "window.png")
     image = QImage(str(path))
-    view = window.plotter.geometry()
+    view = window.view_rect()
     pixels = [image.pixelColor(x, y).lightness()
               for x in range(view.left() + 10, view.right() - 10, 17)
               for y in range(view.top() + 10, view.bottom() - 10, 17)]

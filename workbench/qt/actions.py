@@ -3,7 +3,9 @@
 One table (:data:`ACTIONS`) lists every action: id, menu, title, shortcut
 and the window method it calls, so a test can check that each exists and
 is wired.  View-menu layer toggles are generated from
-:data:`workbench.qt.scene.LAYERS`.
+:data:`workbench.qt.scene.LAYERS`; they set the scene's layer visibility and
+follow it back (:attr:`~workbench.qt.scene.SceneView.layer_changed`), so they
+agree with the Layers dock whichever one the user clicks.
 """
 
 from __future__ import annotations
@@ -73,12 +75,38 @@ def build_menus(window: Any) -> dict[str, QAction]:
         if spec.id in ("export", "redo"):
             menus[spec.menu].addSeparator()
     view = menus["&View"]
+    second = QAction("Second &view: guides, frontal / lateral", window)
+    second.setCheckable(True)
+    second.setShortcut(QKeySequence("F2"))
+    second.setStatusTip("The orthographic guide view beside the 3D view (drag the guides there)")
+    second.toggled.connect(window.user_toggled_guide_view)
+    view.addAction(second)
+    out["guide_view"] = second
+    for key, dock in getattr(window, "docks", {}).items():
+        toggle = dock.toggleViewAction()
+        view.addAction(toggle)
+        out[f"dock_{key}"] = toggle
     view.addSeparator()
+    scene = window.scene
     for layer, title in LAYERS.items():
         action = QAction(title, window)
         action.setCheckable(True)
-        action.setChecked(True)
-        action.toggled.connect(lambda on, name=layer: window.scene.set_visible(name, on))
+        action.setChecked(scene.visible[layer])
+        action.setStatusTip(f"Show or hide the {title.lower()} layer (opacity: Layers dock)")
+        action.toggled.connect(lambda on, name=layer: scene.set_visible(name, on))
         view.addAction(action)
         out[f"layer_{layer}"] = action
+    scene.layer_changed.connect(lambda name: _follow_layer(out.get(f"layer_{name}"),
+                                                           scene.visible.get(name, True)))
     return out
+
+
+def _follow_layer(action: QAction | None, visible: bool) -> None:
+    """Tick a View-menu layer toggle to match the scene, without re-emitting ``toggled``."""
+    if action is None or action.isChecked() == visible:
+        return
+    blocked = action.blockSignals(True)
+    try:
+        action.setChecked(visible)
+    finally:
+        action.blockSignals(blocked)

@@ -83,6 +83,11 @@ def run(options: LaunchOptions) -> int:
     app.processEvents()
     errors = prepare(window, options)
     if not shot:
+        from PySide6.QtCore import QTimer
+
+        from workbench.qt.autosave import offer_recovery
+
+        QTimer.singleShot(0, lambda: offer_recovery(window))  # unsaved work of a crash
         return int(app.exec())
     window.reset_view()
     window.wait_idle()

@@ -89,10 +89,23 @@ class Document(QObject):
         return f"{name}{' *' if self.is_dirty else ''} — Forensic workbench"
 
     # ------------------------------------------------------------ commands
-    def push(self, command: Command) -> bool:
-        """Run ``command`` through the stack; ``False`` (and a message) if it was refused."""
+    def push(self, command: Command, merge: bool = True) -> bool:
+        """Run ``command`` through the stack; ``False`` (and a message) if it was refused.
+
+        ``merge=False`` makes it its own undo step even when it could merge
+        with the previous command (one drag of a landmark is one step).
+        """
         try:
-            self.stack.push(command)
+            if merge:
+                self.stack.push(command)
+            else:
+                self.stack.begin_gesture(command.label)
+                try:
+                    self.stack.push(command)
+                except BaseException:
+                    self.stack.abort_gesture()
+                    raise
+                self.stack.commit_gesture()
         except (WorkbenchError, ValueError, KeyError) as exc:
             self._report(f"Could not {command.label[:1].lower() + command.label[1:]}", exc)
             return False

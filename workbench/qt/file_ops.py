@@ -12,6 +12,7 @@ reader and the window asks for its units.
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ from PySide6.QtWidgets import QFileDialog
 
 from workbench.core.errors import UnitsError, WorkbenchError
 from workbench.io.case_file import load_case, save_case
-from workbench.qt import dialogs, jobs
+from workbench.qt import autosave, dialogs, jobs
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 
 MESH_FILTER = "Meshes (*.ply *.stl *.obj *.vtk *.vtp);;All files (*)"
@@ -39,6 +40,37 @@ def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
         opened.stack.set_clean()
         opened.notes.append(f"{source.name}: a known sample; face toward "
                             f"{anatomy['anterior']}, up {anatomy['superior']} (file axes)")
+    return opened
+
+
+def case_from_ct(path: Path, tissue: str, iso: float | None, *, volume: Any = None,
+                 progress: Callable[[str, float], None] | None = None) -> OpenedCase:
+    """Worker side of "Open CT": surface (mm, CT frame) → PLY in a temporary folder → new case.
+
+    ``iso`` in the volume's units (None: the ``tissue`` preset); ``volume``
+    the already read volume of ``path``.  ``progress(step, fraction)`` may
+    raise :class:`~workbench.core.errors.Cancelled` to stop the job.
+    """
+    from workbench.io.meshes import write_mesh
+    from workbench.services.ct_mesh import mesh_from_ct
+
+    def report(step: str, fraction: float) -> None:
+        if progress is not None:
+            progress(step, fraction)
+
+    result = mesh_from_ct(path if volume is None else volume, tissue, iso=iso,
+                          progress=lambda step, f: report(step, 0.7 * f))
+    report("writing the surface", 0.71)
+    folder = Path(tempfile.mkdtemp(prefix="workbench-ct-"))
+    stem = path.name.split(".")[0]
+    surface = write_mesh(folder / f"{stem}_{tissue}.ply", result.mesh)
+    report("starting the case", 0.74)
+    opened = start_case_from_skull(surface, units="mm")
+    opened.notes.insert(0, f"{tissue} surface of {path} at iso {result.iso:g} "
+                           f"{result.units} ({result.rule}), frame {result.frame}")
+    report("orientation", 0.97)
+    opened = _with_orientation(opened, path)
+    report("done", 1.0)
     return opened
 
 
@@ -68,32 +100,51 @@ class FileOpsMixin:
             return
         self.show_error(f"Could not open {path.name}", exc)
 
-    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None) -> None:
-        """Extract the bone surface of a CT (worker) and start a case from it.
+    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None, *,
+                volume: Any = None, finished: Callable[[bool], None] | None = None) -> bool:
+        """Extract the bone surface of a CT (worker, channel "open") and start a case from it.
 
         The extracted surface (mm, the CT's physical frame) is the case's
-        evidence file; the CT itself stays where it is.
+        evidence file; the CT itself stays where it is.  ``iso`` is in the
+        volume's units (HU for CT); None uses the ``tissue`` preset.
+        ``volume`` is the already read :class:`~workbench.core.volume.Volume`
+        of ``path`` (the import dialog's), so it is not read again.  The job
+        reports progress and can be cancelled with ``runner.cancel("open")``
+        (the case is then unchanged).  ``finished(ok)`` is called after the
+        new case is shown (True) or the error was shown (False); never after
+        a cancel.  Returns False if the user kept the current case.
         """
         if not self._may_discard():
-            return
+            return False
         path = Path(path)
 
-        def work() -> OpenedCase:
-            from workbench.io.meshes import write_mesh
-            from workbench.services.ct_mesh import mesh_from_ct
+        def done(opened: OpenedCase) -> None:
+            self._opened(opened, None)
+            if finished is not None:
+                finished(True)
 
-            result = mesh_from_ct(path, tissue, iso=iso)
-            folder = Path(tempfile.mkdtemp(prefix="workbench-ct-"))
-            stem = path.name.split(".")[0]
-            surface = write_mesh(folder / f"{stem}_{tissue}.ply", result.mesh)
-            opened = start_case_from_skull(surface, units="mm")
-            opened.notes.insert(0, f"{tissue} surface of {path} at iso {result.iso:g} "
-                                   f"{result.units} ({result.rule}), frame {result.frame}")
-            return _with_orientation(opened, path)
+        def failed(exc: BaseException) -> None:
+            self.show_error(f"Could not open the CT {path.name}", exc)
+            if finished is not None:
+                finished(False)
 
-        self.runner.submit("open", f"Extracting the {tissue} surface of {path.name} …", work,
-                           lambda opened: self._opened(opened, None),
-                           lambda exc: self.show_error(f"Could not open the CT {path.name}", exc))
+        self.runner.submit("open", f"Extracting the {tissue} surface of {path.name} …",
+                           lambda progress: case_from_ct(path, tissue, iso, volume=volume,
+                                                         progress=progress),
+                           done, failed, progress=True)
+        return True
+
+    def open_ct_dialog(self, path: str | Path) -> Any:
+        """Show the non-modal CT import dialog (threshold preview, then extraction)."""
+        from workbench.qt.ct_import import CtImportDialog
+
+        previous = getattr(self, "ct_dialog", None)
+        if previous is not None and previous.isVisible():
+            previous.close()  # both would use the same worker channels
+        dialog = CtImportDialog(self, path)
+        self.ct_dialog = dialog
+        dialog.show()
+        return dialog
 
     def open_case(self, path: str | Path) -> None:
         """Open a saved ``.fcase`` (in the worker)."""
@@ -132,6 +183,7 @@ class FileOpsMixin:
             return False
         self.document.path = path
         self.document.stack_changed.emit()
+        autosave.forget_snapshot(self)  # the saved file now holds the work
         self.status(f"Saved {path}")
         return True
 
@@ -164,7 +216,9 @@ class FileOpsMixin:
                                               "folder)", "", CT_FILTER)
         if not name:
             name = QFileDialog.getExistingDirectory(self, "Open DICOM folder")
-        if name:
+        if name and self.interactive:
+            self.open_ct_dialog(name)
+        elif name:
             self.open_ct(name)
 
     def ask_open_case(self) -> None:
@@ -197,4 +251,7 @@ class FileOpsMixin:
                                           else "the untitled case")
         if answer == dialogs.QMessageBox.StandardButton.Save:
             return self.save()
-        return answer == dialogs.QMessageBox.StandardButton.Discard
+        if answer == dialogs.QMessageBox.StandardButton.Discard:
+            autosave.forget_snapshot(self)  # a deliberate discard
+            return True
+        return False

@@ -6,9 +6,10 @@ Wiring (created in this order in ``__init__``)::
     ├── Document            case + CommandStack + file; Qt signals for changes
     ├── TaskRunner          worker threads; results come back on the GUI thread
     ├── QtInteractor        central 3D view (pyvistaqt)
-    │   ├── SceneView       named layers: skull, landmarks, dowels, guides, face, truth
+    │   ├── SceneView       named layers: skull, landmarks, dowels, guides, muscles, face, truth
     │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
-    ├── docks               LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel
+    ├── docks               LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel;
+    │                       LayersPanel on the left (visibility + opacity per layer)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
 
 The window holds no geometry logic: edits are commands pushed on the
@@ -25,28 +26,35 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar
+from PySide6.QtCore import QPoint, QRect, Qt
+from PySide6.QtGui import QKeySequence, QShortcut
+from PySide6.QtWidgets import (
+    QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar, QScrollArea, QSplitter, QWidget,
+)
 
 from workbench.commands.landmarks import PlaceLandmark, ReplaceLandmarkSet
 from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, jobs
 from workbench.qt.actions import build_menus
 from workbench.qt.document import Document
+from workbench.qt.drag_ops import DragOpsMixin
 from workbench.qt.file_ops import FileOpsMixin
+from workbench.qt.guide_view import GuideView
+from workbench.qt.lod import InteractiveDetail
 from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
 from workbench.qt.panels.landmarks_panel import LandmarksPanel
+from workbench.qt.panels.layers_panel import LayersPanel
 from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.picking import ClickPicker
 from workbench.qt.scene import SceneView
-from workbench.qt.workers import TaskRunner
+from workbench.qt.workers import TaskRunner, show_fraction
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
 
 
-class MainWindow(FileOpsMixin, QMainWindow):
+class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
     """See the module docstring.
 
     Parameters
@@ -76,9 +84,19 @@ class MainWindow(FileOpsMixin, QMainWindow):
 
         self.plotter = QtInteractor(self, auto_update=auto_update)
         self.plotter.clear_events_for_key("q")  # pyvista's "q" would close the 3D view
-        self.setCentralWidget(self.plotter)
+        # the 3D view and the optional second view (guides, orthographic) side by side
+        self.views = QSplitter(Qt.Orientation.Horizontal, self)
+        self.views.addWidget(self.plotter)
+        self.setCentralWidget(self.views)
         self.scene = SceneView(self.plotter)
-        self.picker = ClickPicker(self.plotter, self._skull_actor, self.on_pick)
+        self.detail = InteractiveDetail(self.plotter, self.runner.submit)
+        self._init_drag()
+        self._skull_poly: Any = None
+        QShortcut(QKeySequence(Qt.Key.Key_Escape), self, activated=self.cancel_drag)
+        self.picker = ClickPicker(self.plotter, self._skull_actor, self.on_pick,
+                                  target_surface=self._skull_surface,
+                                  grab_target=self.grab_target, on_drag=self.on_drag,
+                                  on_drag_start=self.on_drag_start, on_drag_end=self.on_drag_end)
 
         self.landmarks_panel = LandmarksPanel(self.document, self.catalogue)
         self.dowels_panel = DowelsPanel(self.document)
@@ -91,12 +109,25 @@ class MainWindow(FileOpsMixin, QMainWindow):
                                   ("compare", "Compare", self.compare_panel)):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
-            dock.setWidget(panel)
+            dock.setWidget(_scrolling(panel))
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
             if self.docks:
                 self.tabifyDockWidget(next(iter(self.docks.values())), dock)
             self.docks[key] = dock
         self.docks["landmarks"].raise_()
+        self.layers_panel = LayersPanel(self.scene)
+        self.docks["layers"] = dock = QDockWidget("Layers", self)
+        dock.setObjectName("dock_layers")
+        dock.setWidget(_scrolling(self.layers_panel))
+        # below the tool tabs: layers stay in reach whichever tool is open
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock, Qt.Orientation.Vertical)
+        self.resizeDocks([self.docks["landmarks"], dock], [620, 230], Qt.Orientation.Vertical)
+        self.resizeDocks([self.docks["landmarks"]], [420], Qt.Orientation.Horizontal)
+        self.guide_view = GuideView(self)
+        self.views.addWidget(self.guide_view)
+        self.views.setStretchFactor(0, 3)
+        self.views.setStretchFactor(1, 2)
+        self.guide_view.hide()   # shown with the first fit, or from the View menu
         self.actions_by_id = build_menus(self)
 
         self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
@@ -109,16 +140,26 @@ class MainWindow(FileOpsMixin, QMainWindow):
 
         self.document.case_replaced.connect(self._on_case_replaced)
         self.document.part_changed.connect(self._on_part)
+        self.document.part_changed.connect(
+            lambda part: self.guide_view.refresh() if part == "parameters" else None)
         self.document.stack_changed.connect(self._update_title)
         self.runner.busy_changed.connect(self._on_busy)
+        self.runner.progress_changed.connect(
+            lambda _channel, step, f: show_fraction(self.progress, f, step))
         self.landmarks_panel.selection_changed.connect(lambda _c: self.draw_landmarks())
         self.landmarks_panel.suggest_requested.connect(self.suggest_landmarks)
         self.reconstruct_panel.reconstruct_requested.connect(self.reconstruct)
         self.reconstruct_panel.opacity_changed.connect(lambda v: self.scene.set_opacity("face", v))
+        self.scene.layer_changed.connect(lambda layer: layer == "face" and self.reconstruct_panel
+                                         .show_opacity(self.scene.opacity["face"]))
         self.reconstruct_panel.colouring_changed.connect(lambda _v: self.draw_face())
         self.compare_panel.load_requested.connect(self.ask_load_truth)
         self.resize(1400, 900)
         self._update_title()
+
+        from workbench.qt.autosave import install_autosave
+
+        self.autosaver = install_autosave(self)  # snapshots of unsaved work (crash recovery)
 
     # ------------------------------------------------------------ messages
     def status(self, text: str) -> None:
@@ -135,6 +176,7 @@ class MainWindow(FileOpsMixin, QMainWindow):
     def _on_busy(self, busy: bool, text: str) -> None:
         self.progress.setVisible(busy)
         if busy:
+            self.progress.setRange(0, 0)  # indeterminate until the job reports progress
             self.status(text)
 
     def _update_title(self) -> None:
@@ -167,11 +209,13 @@ class MainWindow(FileOpsMixin, QMainWindow):
     def _on_case_replaced(self) -> None:
         self.fit = None
         self.preview = None
-        self.scene.show_skull(self.document.case.specimen.mesh)
+        self.show_skull()
         self.scene.clear("face")
+        self.scene.clear("muscles")
         self.scene.clear("guides")
         self.scene.clear("dowels")
         self.reconstruct_panel.show_result(None)
+        self.guide_view.fit_changed()
         self.dowels_panel.show_plan(None)
         self.draw_landmarks()
         self.reset_view()
@@ -179,7 +223,7 @@ class MainWindow(FileOpsMixin, QMainWindow):
 
     def _on_part(self, part: str) -> None:
         if part == "specimen":
-            self.scene.show_skull(self.document.case.specimen.mesh)
+            self.show_skull()
         if part == "landmarks":
             self.draw_landmarks()
         if part in ("landmarks", "parameters", "specimen"):
@@ -187,18 +231,52 @@ class MainWindow(FileOpsMixin, QMainWindow):
             if self.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
                 self.reconstruct()
 
+    def user_toggled_guide_view(self, on: bool) -> None:
+        """The View-menu toggle: remember a deliberate close (no reopening on the next fit)."""
+        self.guide_view.closed_by_user = not on
+        self.show_guide_view(on)
+
+    def show_guide_view(self, on: bool) -> None:
+        """Show or hide the second view (guides, orthographic) beside the 3D view."""
+        self.guide_view.setVisible(bool(on))
+        action = self.actions_by_id.get("guide_view")
+        if action is not None and action.isChecked() != bool(on):
+            action.blockSignals(True)
+            action.setChecked(bool(on))
+            action.blockSignals(False)
+        if on:
+            self.guide_view.refresh(reset_camera=True)
+
     def _skull_actor(self) -> Any:
         actors = self.scene.actors("skull")
         return actors[0] if actors else None
 
-    def draw_landmarks(self) -> None:
+    def _skull_surface(self) -> Any:
+        """The skull's full-resolution ``vtkPolyData`` as drawn (picking, level of detail)."""
+        return self._skull_poly
+
+    def show_skull(self) -> None:
+        """Draw the case's skull and prepare its light copy for interaction."""
+        import pyvista as pv
+
+        self.detail.set_skull(None, None)
+        actor = self.scene.show_skull(self.document.case.specimen.mesh)
+        self._skull_poly = None if actor is None else pv.wrap(actor.GetMapper().GetInput())
+        self.detail.set_skull(actor, self._skull_poly, self.document.case.specimen.mesh)
+
+    def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None:
+        """Landmarks of the case; ``override`` ({code: position}) draws a drag in progress."""
         lms = self.document.case.landmarks["skull"].defined()
         code = self.landmarks_panel.selected_code()
+        override = override or {}
+        positions = np.array([override.get(lm.code, lm.position) for lm in lms], float)
         selected, label = None, ""
         if code and code in lms:
-            selected = lms[code].position
-            label = f"{code}: {self.catalogue.entry(code, 'skull').name}"
-        self.scene.show_landmarks(lms.positions, [lm.status for lm in lms], selected, label)
+            selected = np.asarray(override.get(code, lms[code].position), float)
+            entry = self.catalogue.entry(code, "skull")
+            label = f"{code}: {entry.name}"
+        self.scene.show_landmarks(positions.reshape(-1, 3), [lm.status for lm in lms],
+                                  selected, label)
 
     # ------------------------------------------------------------ landmarks
     def on_pick(self, point: np.ndarray) -> None:
@@ -281,8 +359,12 @@ class MainWindow(FileOpsMixin, QMainWindow):
         self.fit = fit
         self._show_dowels(fit.preview)
         self.draw_face()
+        self.draw_muscles()
         self.draw_guides()
         self.reconstruct_panel.show_result(fit)
+        if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
+            self.show_guide_view(True)
+        self.guide_view.fit_changed()
         self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if self.truth is not None:
             self.compare()
@@ -296,6 +378,21 @@ class MainWindow(FileOpsMixin, QMainWindow):
             self.scene.show_face(self.fit.recon.face, self.fit.spread, "spread mm")
         else:
             self.scene.show_face(self.fit.recon.face)
+
+    def draw_muscles(self) -> None:
+        """The fitted head's muscle grids (mm, input frame), 4 mm under the fitted skin.
+
+        Each grid rides on the skin (triangle + barycentric weights + depth,
+        see :class:`workbench.model.muscles.MuscleGrid`), so its rows are
+        evaluated on the fitted head's skin and mapped to the input frame.
+        """
+        head = self.fit.recon.head if self.fit is not None else None
+        if head is None or not head.muscles:
+            self.scene.clear("muscles")
+            return
+        to_input = self.fit.recon.to_input
+        self.scene.show_muscles([[to_input(row) for row in grid.rows(head.skin)]
+                                 for grid in head.muscles])
 
     def draw_guides(self) -> None:
         if self.fit is None:
@@ -357,6 +454,10 @@ class MainWindow(FileOpsMixin, QMainWindow):
         app.processEvents()
         return not self.runner.busy
 
+    def view_rect(self) -> QRect:
+        """The 3D view's rectangle in window coordinates (pictures, tests)."""
+        return QRect(self.plotter.mapTo(self, QPoint(0, 0)), self.plotter.size())
+
     def save_screenshot(self, path: str | Path) -> Path:
         """Render and grab the whole window (3D view included under xcb) to a PNG."""
         QApplication.instance().processEvents()
@@ -371,6 +472,17 @@ class MainWindow(FileOpsMixin, QMainWindow):
         if self.interactive and not self._may_discard():
             event.ignore()
             return
+        self.autosaver.close()  # a clean close: the snapshot of unsaved work goes
         self.runner.shutdown()
+        self.guide_view.close_view()
         self.plotter.close()
         super().closeEvent(event)
+
+
+def _scrolling(panel: QWidget) -> QScrollArea:
+    """``panel`` in a scroll area: a long panel never forces the window taller."""
+    area = QScrollArea()
+    area.setWidget(panel)
+    area.setWidgetResizable(True)
+    area.setFrameShape(QScrollArea.Shape.NoFrame)
+    return area

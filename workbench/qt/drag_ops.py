@@ -1,0 +1,160 @@
+"""Live dragging in the main window: a skull landmark along the surface, a guide line.
+
+A mixin of :class:`workbench.qt.main_window.MainWindow`.  While the mouse
+moves nothing is written to the case: the window draws a *preview* — the
+landmark marker, its dowel, and the face re-solved by
+:class:`workbench.services.preview_fit.PreviewFit` from the last full fit
+(a few milliseconds) — and the view draws a lighter skull
+(:mod:`workbench.qt.lod`).  Mouse moves are coalesced: however fast they
+come, one preview is computed and drawn per event-loop turn, with the newest
+position.  On release **one** undoable command is pushed (a
+``MoveLandmark``, or the guide list as a ``SetParameter``), which starts the
+full re-fit in the worker as any other change does.  Esc cancels a drag and
+leaves the case as it was.
+
+Units mm; landmark positions in the input frame, guide values in the head
+frame (see :mod:`workbench.services.guides`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QTimer
+
+from workbench.commands.landmarks import MoveLandmark
+from workbench.services.guides import Guide
+from workbench.services.preview_fit import PreviewFit
+
+
+class DragOpsMixin:
+    """Landmark and guide drags with a live preview (see the module docstring)."""
+
+    document: Any
+    scene: Any
+    fit: Any
+    preview: Any
+    detail: Any
+    landmarks_panel: Any
+    reconstruct_panel: Any
+    picker: Any
+    plotter: Any
+    guide_view: Any = None
+
+    def _init_drag(self) -> None:
+        self.drag_timings: list[float] = []   # seconds per computed preview (tests, benchmarks)
+        self._preview_fit: PreviewFit | None = None
+        self._drag_pending: tuple[str, Any] | None = None
+        self._drag_scheduled = False
+
+    # ------------------------------------------------------------ landmark drags
+    def grab_target(self) -> tuple[str, np.ndarray] | None:
+        """The selected, defined skull landmark (code, input-frame mm), if any."""
+        if not self.landmarks_panel.place_on_click.isChecked():
+            return None
+        code = self.landmarks_panel.selected_code()
+        lm = self.document.case.landmarks["skull"].get(code) if code else None
+        if lm is None or not lm.is_defined:
+            return None
+        return code, np.asarray(lm.position, float)
+
+    def on_drag_start(self, _code: str) -> None:
+        self.detail.begin()
+        self._preview_fit = self._new_preview_fit()
+
+    def on_drag(self, code: str, point: np.ndarray) -> None:
+        self._schedule_drag(("landmark", (code, np.asarray(point, float))))
+
+    def on_drag_end(self, code: str, point: np.ndarray | None) -> None:
+        self._drag_pending, self._preview_fit = None, None
+        self.detail.end(render=False)
+        if point is None:
+            self._redraw_after_drag()
+            return
+        if not self.document.push(MoveLandmark(surface="skull", code=code, position=point),
+                                  merge=False):
+            self._redraw_after_drag()
+
+    def cancel_drag(self) -> None:
+        """Esc: end a landmark drag without moving anything."""
+        if self.picker.dragging is not None:
+            self.picker.finish_drag(cancel=True)
+        self.guide_view.cancel_drag()
+
+    # ------------------------------------------------------------ guide drags
+    def preview_guide(self, guide: Guide) -> None:
+        """Show the face as if ``guide`` had this value (nothing stored yet)."""
+        if self._preview_fit is None:
+            self.detail.begin()
+            self._preview_fit = self._new_preview_fit()
+        self._schedule_drag(("guide", guide))
+
+    def commit_guide(self, row: int, value: tuple[float, ...] | None) -> None:
+        """The guide drag ended: store ``value`` (None: cancelled) as one undoable step."""
+        self._drag_pending, self._preview_fit = None, None
+        self.detail.end(render=False)
+        if value is None:
+            self._redraw_after_drag()
+            return
+        self.reconstruct_panel.set_guide(row, value=value)
+
+    # ------------------------------------------------------------ preview
+    def _new_preview_fit(self) -> PreviewFit | None:
+        if self.fit is None:
+            return None
+        try:
+            return PreviewFit.from_fit(self.fit.recon, self.fit.head)
+        except ValueError:
+            return None
+
+    def _schedule_drag(self, item: tuple[str, Any]) -> None:
+        self._drag_pending = item
+        if not self._drag_scheduled:
+            self._drag_scheduled = True
+            QTimer.singleShot(0, self._apply_drag)
+
+    def _apply_drag(self) -> None:
+        self._drag_scheduled = False
+        item, self._drag_pending = self._drag_pending, None
+        if item is None:
+            return
+        t0 = time.perf_counter()
+        kind, value = item
+        preview = self._preview_fit
+        if kind == "landmark":
+            code, point = value
+            self.draw_landmarks(override={code: point})
+            self._preview_dowel(code, point)
+            moved = preview is not None and preview.move_landmark(code, point)
+        else:
+            moved = preview is not None and preview.move_guide(value)
+            if self.guide_view is not None:
+                self.guide_view.show_dragged(value)
+        if moved and preview is not None and self.scene.has("face"):
+            skin_h = preview.skin_head()
+            self.scene.update_points("face", preview.to_input(skin_h))
+            if self.guide_view is not None:
+                self.guide_view.update_face(skin_h)
+        self.plotter.update()   # one render, in the view's next paint (never two)
+        self.drag_timings.append(time.perf_counter() - t0)
+
+    def _preview_dowel(self, code: str, point: np.ndarray) -> None:
+        p = self.preview
+        if p is None or code not in p.codes:
+            return
+        i = p.codes.index(code)
+        origins, tips = p.origins.copy(), p.tips.copy()
+        tips[i] = point + (tips[i] - origins[i])
+        origins[i] = point
+        self.scene.show_dowels(origins, tips)
+
+    def _redraw_after_drag(self) -> None:
+        self.draw_landmarks()
+        if self.preview is not None:
+            self.scene.show_dowels(self.preview.origins, self.preview.tips)
+        self.draw_face()
+        if self.guide_view is not None:
+            self.guide_view.refresh()
+        self.plotter.update()

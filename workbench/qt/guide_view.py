@@ -1,0 +1,324 @@
+"""The second view: the nose and mouth guides over the face, frontal or lateral, orthographic.
+
+Drawn in the **head frame** of the last fit (mm; x to the subject's left,
+y up, z forward, Frankfort Horizontal at y = 0) with a parallel projection,
+so a vertical guide line *is* ``x = value`` on screen and a lateral guide
+point *is* ``(y, z)``:
+
+* the skull (a light copy, :mod:`workbench.qt.lod`) and the fitted skin;
+* the guides of the reconstruct panel in magenta — vertical lines (x),
+  horizontal lines (y) in the frontal view, points (y, z) in the lateral
+  view — each with its label;
+* the published-rule predictions for the same features in cyan, side by
+  side with the classic guides (:func:`workbench.services.guides.guides_from_prediction`).
+
+A guide is dragged with the left button (press within
+:data:`GRAB_RADIUS_PX` of it): the window previews the re-solved face at
+every move (:meth:`MainWindow.preview_guide`) and stores the new value as
+one undoable step on release (:meth:`MainWindow.commit_guide`), which
+re-fits the face in the worker.  Elsewhere the left button pans and the
+wheel zooms (the view never rotates by accident).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from PySide6.QtWidgets import QButtonGroup, QCheckBox, QHBoxLayout, QLabel, QRadioButton, QVBoxLayout, QWidget
+
+from workbench.qt.lod import decimated
+from workbench.render.snapshots import to_polydata
+from workbench.services.guides import AXES, Guide, guides_from_prediction
+
+GRAB_RADIUS_PX = 8.0
+PRIORITY = 10.0
+GUIDE = (0.85, 0.10, 0.55)
+PREDICTION = (0.10, 0.75, 0.85)
+#: vertical extent of a vline, horizontal extent of an hline (head frame, mm)
+VLINE_Y = (-80.0, 10.0)
+HLINE_X = (-40.0, 40.0)
+
+
+class GuideView(QWidget):
+    """See the module docstring.  ``window`` is the main window (fit, panel, preview)."""
+
+    def __init__(self, window: Any, parent: QWidget | None = None) -> None:
+        from pyvistaqt import QtInteractor
+
+        super().__init__(parent)
+        self.window = window
+        self.side = "frontal"
+        self.closed_by_user = False
+        self.dragging: tuple[int, Guide] | None = None
+        self._skull_light: Any = None
+        self._face_actor: Any = None
+        self._guide_actors: list[Any] = []
+
+        self.frontal = QRadioButton("Frontal")
+        self.lateral = QRadioButton("Lateral")
+        self.frontal.setChecked(True)
+        group = QButtonGroup(self)
+        for b in (self.frontal, self.lateral):
+            group.addButton(b)
+        self.frontal.toggled.connect(lambda on: self.set_side("frontal" if on else "lateral"))
+        self.show_predictions = QCheckBox("Published predictions")
+        self.show_predictions.setChecked(True)
+        self.show_predictions.setToolTip("Cyan: the published prediction rules for the same "
+                                         "features, beside the classic guides (magenta)")
+        self.show_predictions.toggled.connect(lambda _on: self.refresh())
+        self.info = QLabel("Drag a magenta guide; the face follows.")
+        self.info.setWordWrap(True)
+        bar = QHBoxLayout()
+        for w in (self.frontal, self.lateral, self.show_predictions):
+            bar.addWidget(w)
+        bar.addStretch(1)
+
+        self.plotter = QtInteractor(self, auto_update=False)
+        self.plotter.set_background("#1f2329")
+        self.plotter.enable_parallel_projection()
+        self.plotter.enable_2d_style()
+        self.plotter.clear_events_for_key("q")
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(2, 2, 2, 2)
+        layout.addLayout(bar)
+        layout.addWidget(self.plotter, 1)
+        layout.addWidget(self.info)
+        iren = self.plotter.iren.interactor
+        self._tags = {event: iren.AddObserver(event, handler, PRIORITY)
+                      for event, handler in (("LeftButtonPressEvent", self._on_press),
+                                             ("MouseMoveEvent", self._on_move),
+                                             ("LeftButtonReleaseEvent", self._on_release))}
+
+    # ------------------------------------------------------------ content
+    def set_side(self, side: str) -> None:
+        self.side = side
+        self.refresh(reset_camera=True)
+
+    def fit_changed(self) -> None:
+        """A new fit: prepare the light skull in the worker, then draw."""
+        fit = self.window.fit
+        self._skull_light = None
+        if fit is None:
+            self.refresh()
+            return
+        self.window.runner.submit("guide_view", "Preparing the guide view …",
+                                  lambda: decimated(fit.skull_h, 15_000),
+                                  lambda light: self._skull_ready(to_polydata(light)),
+                                  lambda _exc: None)
+        self.refresh(reset_camera=True)
+
+    def _skull_ready(self, light: Any) -> None:
+        self._skull_light = light
+        self.refresh()
+
+    def refresh(self, reset_camera: bool = False) -> None:
+        """Redraw skull, face, guides and predictions from the window's fit."""
+        p = self.plotter
+        if getattr(p, "_closed", False):
+            return
+        p.clear_actors()
+        self._face_actor, self._guide_actors = None, []
+        fit = self.window.fit
+        if fit is None:
+            self.info.setText("The guides appear here once the face is fitted.")
+            p.update()
+            return
+        if self._skull_light is not None:
+            p.add_mesh(self._skull_light, color=(0.93, 0.89, 0.80), pickable=False, render=False,
+                       name="gv_skull")
+        face = to_polydata(fit.recon.head.skin)
+        self._face_actor = p.add_mesh(face, color=(0.91, 0.72, 0.60), opacity=0.45,
+                                      smooth_shading=True, pickable=False, render=False,
+                                      name="gv_face")
+        self._draw_guides()
+        if reset_camera:
+            self._reset_camera()
+        p.update()   # one render, in the widget's paint
+
+    def _front(self) -> float:
+        return float(self.window.fit.recon.head.skin.vertices[:, 2].max()) + 20.0
+
+    def _segment(self, g: Guide) -> np.ndarray | None:
+        """Drawn ends (2, 3) of a frontal guide, or one point (1, 3) of a lateral one."""
+        if g.view != self.side:
+            return None
+        z = self._front()
+        if g.kind == "vline":
+            return np.array([[g.value[0], VLINE_Y[0], z], [g.value[0], VLINE_Y[1], z]])
+        if g.kind == "hline":
+            return np.array([[HLINE_X[0], g.value[0], z], [HLINE_X[1], g.value[0], z]])
+        return np.array([[150.0, g.value[0], g.value[1]]])   # lateral: in front of the head
+
+    def _draw_guides(self) -> None:
+        import pyvista as pv
+
+        p = self.plotter
+        guides = list(self.window.reconstruct_panel.guides)
+        sets = [(guides, GUIDE, 4, "gv_guide")]
+        if self.show_predictions.isChecked():
+            predicted: list[Guide] = []
+            for pred in self.window.fit.predictions:
+                try:
+                    predicted += [g for g in guides_from_prediction(pred, guides)
+                                  if g.view == self.side]
+                except Exception:  # noqa: BLE001 - a prediction that maps to no guide
+                    continue
+            sets.append((predicted, PREDICTION, 2, "gv_pred"))
+        label_points, label_text = [], []
+        for items, colour, width, prefix in sets:
+            for i, g in enumerate(items):
+                seg = self._segment(g)
+                if seg is None or not g.enabled:
+                    continue
+                if len(seg) == 2:
+                    actor = p.add_mesh(pv.Line(seg[0], seg[1]), color=colour, line_width=width,
+                                       pickable=False, render=False, name=f"{prefix}_{i}")
+                else:
+                    actor = p.add_points(seg, color=colour, point_size=14,
+                                         render_points_as_spheres=True, pickable=False,
+                                         render=False, name=f"{prefix}_{i}")
+                if prefix == "gv_guide":
+                    self._guide_actors.append(actor)
+                    label_points.append(seg[0] if g.kind == "hline" else seg[-1])
+                    label_text.append(g.id)
+        if label_points:
+            p.add_point_labels(np.array(label_points), label_text, font_size=10,
+                               text_color=GUIDE, shape_opacity=0.0, show_points=False,
+                               always_visible=True, pickable=False, render=False,
+                               name="gv_labels")
+        self.info.setText("Magenta: guides (drag to move). Cyan: published predictions."
+                          if self.show_predictions.isChecked() else
+                          "Magenta: guides (drag to move).")
+
+    def _reset_camera(self) -> None:
+        fit = self.window.fit
+        skin = fit.recon.head.skin.vertices
+        face = skin[skin[:, 1] > -110.0]
+        centre = np.array([0.0, float(np.median(face[:, 1])) - 20.0,
+                           float(np.median(face[:, 2]))])
+        eye = centre + ([0.0, 0.0, 500.0] if self.side == "frontal" else [500.0, 0.0, 0.0])
+        self.plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 1.0, 0.0)]
+        self.plotter.reset_camera(render=False)
+        self._fit_scale()
+
+    def resizeEvent(self, event: Any) -> None:  # noqa: N802 - Qt name
+        super().resizeEvent(event)
+        if self.window.fit is not None and not getattr(self.plotter, "_closed", False):
+            self._fit_scale()
+
+    def _fit_scale(self) -> None:
+        # parallel scale = half the view's height in mm: show a 160 mm square of the face
+        width, height = self.plotter.width(), self.plotter.height()
+        self.plotter.camera.parallel_scale = 80.0 * max(1.0, height / max(width, 1))
+
+    # ------------------------------------------------------------ live updates
+    def update_face(self, skin_head: np.ndarray) -> None:
+        """New skin vertex positions (head frame) during a drag; no actor is re-created."""
+        if self._face_actor is None:
+            return
+        data = self._face_actor.GetMapper().GetInput()
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        pts = vtk_to_numpy(data.GetPoints().GetData())
+        pts[:] = skin_head
+        data.GetPoints().Modified()
+        self.plotter.update()
+
+    def show_dragged(self, guide: Guide) -> None:
+        """Move the dragged guide's line (or point) to ``guide.value``."""
+        if self.dragging is None:
+            return
+        row, _ = self.dragging
+        guides = self.window.reconstruct_panel.guides
+        drawable = [i for i, g in enumerate(guides) if g.enabled and g.view == self.side]
+        if row not in drawable:
+            return
+        actor = self._guide_actors[drawable.index(row)]
+        seg = self._segment(guide)
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        data = actor.GetMapper().GetInput()
+        pts = vtk_to_numpy(data.GetPoints().GetData())
+        pts[:] = seg if len(pts) == len(seg) else pts
+        data.GetPoints().Modified()
+        self.plotter.update()
+
+    # ------------------------------------------------------------ mouse
+    def _display(self, point: np.ndarray) -> np.ndarray:
+        ren = self.plotter.renderer
+        ren.SetWorldPoint(*np.asarray(point, float), 1.0)
+        ren.WorldToDisplay()
+        return np.array(ren.GetDisplayPoint()[:2], float)
+
+    def _world(self, x: float, y: float) -> np.ndarray:
+        ren = self.plotter.renderer
+        ren.SetDisplayPoint(float(x), float(y), 0.0)
+        ren.DisplayToWorld()
+        wx, wy, wz, w = ren.GetWorldPoint()
+        return np.array([wx, wy, wz]) / w
+
+    def guide_at(self, x: float, y: float) -> int | None:
+        """Row of the guide drawn within :data:`GRAB_RADIUS_PX` of display ``(x, y)``."""
+        if self.window.fit is None:
+            return None
+        best, best_d = None, GRAB_RADIUS_PX
+        for row, g in enumerate(self.window.reconstruct_panel.guides):
+            seg = self._segment(g)
+            if seg is None or not g.enabled:
+                continue
+            ends = [self._display(p) for p in seg]
+            d = _distance_to_segment(np.array([x, y], float), ends[0], ends[-1])
+            if d <= best_d:
+                best, best_d = row, d
+        return best
+
+    def _swallow(self, obj: Any, event: str) -> None:
+        obj.GetCommand(self._tags[event]).SetAbortFlag(1)
+
+    def _position(self) -> tuple[int, int]:
+        x, y = self.plotter.iren.interactor.GetEventPosition()
+        return int(x), int(y)
+
+    def _on_press(self, obj: Any, event: str) -> None:
+        row = self.guide_at(*self._position())
+        if row is None:
+            return
+        self._swallow(obj, event)
+        self.dragging = (row, self.window.reconstruct_panel.guides[row])
+
+    def _on_move(self, obj: Any, event: str) -> None:
+        if self.dragging is None:
+            return
+        self._swallow(obj, event)
+        row, start = self.dragging
+        world = self._world(*self._position())
+        value = tuple(float(world[a]) for a in AXES[start.kind])
+        moved = start.moved(value)
+        self.dragging = (row, moved)
+        self.window.preview_guide(moved)
+
+    def _on_release(self, obj: Any, event: str) -> None:
+        if self.dragging is None:
+            return
+        self._swallow(obj, event)
+        row, guide = self.dragging
+        self.dragging = None
+        original = self.window.reconstruct_panel.guides[row]
+        self.window.commit_guide(row, None if guide.value == original.value else guide.value)
+
+    def cancel_drag(self) -> None:
+        if self.dragging is not None:
+            row, _ = self.dragging
+            self.dragging = None
+            self.window.commit_guide(row, None)
+
+    def close_view(self) -> None:
+        """Finalize the VTK view while its GL context exists (window teardown)."""
+        self.plotter.close()
+
+
+def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    ab = b - a
+    t = 0.0 if not ab.any() else float(np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + t * ab)))

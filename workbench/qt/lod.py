@@ -1,0 +1,117 @@
+"""Lighter drawing while the user rotates the view or drags something.
+
+On a software renderer (llvmpipe under Xvfb, remote desktops) a 100k-triangle
+skull with 4× multisampling takes 130 ms a frame — too slow for a fluid drag.
+While the user interacts, :class:`InteractiveDetail` draws
+
+* the skull from a decimated copy (:data:`LIGHT_TRIANGLES` triangles, made
+  once per skull in the worker thread), and
+* without multisampling,
+
+and restores the full surface and multisampling (one full-quality render)
+when the interaction ends.  Measured on llvmpipe (2 cores, 1200×800 window):
+133 ms → about 40 ms a frame (``benchmarks/bench_gui.py``).
+
+The decimated copy is for drawing only: picking and every measurement use
+the full surface (:mod:`workbench.qt.picking`).  Units mm, input frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from workbench.core.isosurface import decimate
+from workbench.core.mesh import Mesh
+from workbench.render.snapshots import to_polydata
+
+#: triangles of the skull drawn during an interaction
+LIGHT_TRIANGLES = 25_000
+#: surfaces smaller than this are always drawn in full
+MIN_TRIANGLES = 40_000
+
+Submit = Callable[..., None]
+
+
+def decimated(mesh: Mesh, triangles: int = LIGHT_TRIANGLES) -> Mesh:
+    """A copy of ``mesh`` with about ``triangles`` triangles (quadric decimation, mm kept).
+
+    Pure numpy/C (``fast_simplification``), no VTK: it runs in the worker
+    thread, and VTK filters running there beside the GUI thread's rendering
+    corrupted the heap (observed under Xvfb).  The GUI thread turns the
+    result into VTK data.
+    """
+    if mesh.n_faces <= triangles:
+        return mesh
+    v, f = decimate(mesh.vertices, mesh.faces, triangles)
+    return Mesh(v, f)
+
+
+class InteractiveDetail:
+    """See the module docstring.
+
+    Parameters
+    ----------
+    plotter
+        The view (``pyvistaqt.QtInteractor``).
+    submit : callable
+        ``submit(channel, text, fn, on_done, on_error)`` of the window's
+        :class:`~workbench.qt.workers.TaskRunner` (the decimation runs there).
+    """
+
+    def __init__(self, plotter: Any, submit: Submit) -> None:
+        self.plotter = plotter
+        self.submit = submit
+        self.active = False
+        self._actor: Any = None
+        self._full: Any = None
+        self._light: Any = None
+        self._samples = int(plotter.render_window.GetMultiSamples())
+        # the interactor style announces every rotation, pan and zoom
+        iren = plotter.iren.interactor
+        iren.AddObserver("StartInteractionEvent", lambda *_a: self.begin())
+        iren.AddObserver("EndInteractionEvent", lambda *_a: self.end())
+
+    # ------------------------------------------------------------ the surface
+    def set_skull(self, actor: Any, full: Any, mesh: Mesh | None = None) -> None:
+        """The skull ``actor`` draws ``full`` (a ``pyvista.PolyData`` made from ``mesh``).
+
+        The light copy is made in the worker from ``mesh`` (immutable numpy
+        arrays) without VTK; only the GUI thread touches VTK objects.
+        """
+        self.end()
+        self._actor, self._full, self._light = actor, full, None
+        if actor is None or full is None or mesh is None or mesh.n_faces < MIN_TRIANGLES:
+            return
+        self.submit("lod", "Preparing the interactive view …", lambda: decimated(mesh),
+                    lambda light, a=actor: self._ready(a, to_polydata(light)),
+                    lambda _exc: None)
+
+    def _ready(self, actor: Any, light: Any) -> None:
+        if actor is self._actor:
+            self._light = light
+
+    @property
+    def light_ready(self) -> bool:
+        return self._light is not None
+
+    # ------------------------------------------------------------ modes
+    def begin(self) -> None:
+        """Switch to the light drawing (idempotent)."""
+        if self.active:
+            return
+        self.active = True
+        if self._light is not None and self._actor is not None:
+            self._actor.GetMapper().SetInputData(self._light)
+        self.plotter.render_window.SetMultiSamples(0)
+
+    def end(self, render: bool = True) -> None:
+        """Back to full quality, with one render (idempotent)."""
+        if not self.active:
+            return
+        self.active = False
+        if self._actor is not None and self._full is not None:
+            self._actor.GetMapper().SetInputData(self._full)
+        self.plotter.render_window.SetMultiSamples(self._samples)
+        if render and self.plotter.render_window is not None:
+            self.plotter.update()   # one full-quality render in the next paint
