@@ -1,10 +1,36 @@
-"""Window tests never write autosave snapshots into the user's own folder."""
+"""Window tests: a private autosave folder; windows are closed, never deleted mid-session.
+
+Closed windows are kept (strong references) until the session ends instead of
+being deleted with ``deleteLater`` by pytest-qt: deleting a whole window tree
+while the next test's workers and views run crashed intermittently inside
+shiboken (``BindingManager::unregisterWrapper`` in ``QWidget::~QWidget``,
+about one run in three under Xvfb).  Every window's 3D views are still
+finalized in its teardown (``plotter.close()``), so no GL resources are held.
+"""
 
 from __future__ import annotations
 
+import gc
+
 import pytest
+from pytestqt.qtbot import QtBot
+
+_KEPT: list = []
+
+
+def _keep(self, widget, *, before_close_func=None) -> None:  # noqa: ANN001
+    """``qtbot.addWidget``: closed at the end of the test, kept alive until the session ends."""
+    request = self._request
+    request.addfinalizer(lambda: (before_close_func(widget) if before_close_func else None,
+                                  widget.close()))
+    _KEPT.append(widget)
+
+
+QtBot.addWidget = _keep  # type: ignore[method-assign]
 
 
 @pytest.fixture(autouse=True)
 def _private_autosave(monkeypatch, tmp_path_factory):  # noqa: ANN001
     monkeypatch.setenv("WORKBENCH_AUTOSAVE_DIR", str(tmp_path_factory.mktemp("autosave")))
+    yield
+    gc.collect()

@@ -48,6 +48,7 @@ debris.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from time import perf_counter
@@ -187,18 +188,28 @@ def taubin_smooth(
     return v
 
 
+#: fast_simplification keeps its working mesh in process-wide globals
+#: (``Simplify::vertices``/``triangles`` in its Simplify.h): two calls at
+#: once from different threads corrupt the heap, so calls are serialised.
+_SIMPLIFY_LOCK = threading.Lock()
+
+
 def decimate(vertices: np.ndarray, faces: np.ndarray, target_triangles: int):
-    """Quadric decimation to about ``target_triangles`` faces (open borders kept)."""
+    """Quadric decimation to about ``target_triangles`` faces (open borders kept).
+
+    Thread-safe (one decimation at a time, see ``_SIMPLIFY_LOCK``).
+    """
     import fast_simplification
 
     if target_triangles >= len(faces):
         return vertices, faces
-    v, f = fast_simplification.simplify(
-        np.array(vertices, np.float64, order="C"),
-        np.array(faces, np.int64, order="C"),
-        target_count=int(target_triangles),
-        preserve_border=True,  # no-op on closed meshes
-    )
+    v_in = np.array(vertices, np.float64, order="C")
+    f_in = np.array(faces, np.int64, order="C")
+    with _SIMPLIFY_LOCK:
+        v, f = fast_simplification.simplify(
+            v_in, f_in, target_count=int(target_triangles),
+            preserve_border=True,  # no-op on closed meshes
+        )
     return _compact(np.asarray(v, np.float64), np.asarray(f, np.int64))
 
 

@@ -123,10 +123,18 @@ def _single_threaded_blas() -> Iterator[None]:
     process-wide setting, so BLAS calls in other threads are single-threaded
     while a warp runs (slower, never wrong).
     """
-    from threadpoolctl import threadpool_limits
+    global _BLAS_CONTROLLER
+    if _BLAS_CONTROLLER is None:
+        # scanning the loaded libraries costs ~6 ms; do it once (the BLAS is
+        # loaded with numpy, before any warp runs)
+        from threadpoolctl import ThreadpoolController
 
-    with threadpool_limits(limits=1, user_api="blas"):
+        _BLAS_CONTROLLER = ThreadpoolController()
+    with _BLAS_CONTROLLER.limit(limits=1, user_api="blas"):
         yield
+
+
+_BLAS_CONTROLLER = None
 
 
 def _kernel_block(x: np.ndarray, centres: np.ndarray, gram: np.ndarray,

@@ -41,6 +41,7 @@ unsaved work" naming the snapshot.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
@@ -67,6 +68,7 @@ from workbench.io.case_file import (
     write_case_snapshot,
 )
 from workbench.model.case import Case
+from workbench.qt import relay
 from workbench.services.case_setup import OpenedCase
 
 ENV_INTERVAL = "WORKBENCH_AUTOSAVE_S"
@@ -394,7 +396,6 @@ class Autosaver(QObject):
 
     snapshot_written = Signal(str)
     snapshot_failed = Signal(str)
-    _finished = Signal(object)  # the write's Future, delivered on the GUI thread
 
     def __init__(self, document: Any, folder: str | Path | None = None,
                  interval_s: float | None = None, parent: QObject | None = None) -> None:
@@ -415,7 +416,7 @@ class Autosaver(QObject):
         self._closed = False
         self._generation = 0
         self._written = -1
-        self._finished.connect(self._on_finished)
+        self._relay_key = relay.register(self._on_finished)
         for signal in (document.case_replaced, document.part_changed, document.stack_changed):
             signal.connect(self._touch)
         self.timer = QTimer(self)
@@ -460,9 +461,13 @@ class Autosaver(QObject):
         frozen = detached_copy(self.document.case)
         info = self._describe(frozen)
         self.timings = {"gui": 1e3 * (time.perf_counter() - started)}
-        future = self._pool.submit(self._write, frozen, info, self._generation, started)
+        claim = not self._claimed
+        self._claimed = True   # the worker writes the sidecar first when claiming
+        future = self._pool.submit(_write_snapshot, frozen, info, self._generation, started,
+                                   self.folder, self.snapshot_path, self.sidecar_path, claim)
         self._future = future
-        future.add_done_callback(self._deliver)
+        # the worker holds no reference to this QObject (see workbench.qt.relay)
+        future.add_done_callback(functools.partial(relay.post, self._relay_key))
         if wait:
             with contextlib.suppress(Exception):
                 future.result()
@@ -479,22 +484,6 @@ class Autosaver(QObject):
                 "title": path.name if path is not None else "untitled case",
                 "specimen": _specimen_name(case), "undo_steps": len(self.document.stack),
                 "case_id": case.meta.case_id, "examiner": case.meta.examiner}
-
-    def _write(self, frozen: Case, info: dict[str, Any], generation: int,
-               started: float) -> tuple[int, float]:
-        """Worker thread: the snapshot, then its sidecar (claimed first, once)."""
-        self.folder.mkdir(parents=True, exist_ok=True)
-        if not self._claimed:  # a sidecar before the first snapshot: never an orphan .fcase
-            _write_json_atomic(self.sidecar_path, {**info, "written": None})
-            self._claimed = True
-        write_case_snapshot(frozen, self.snapshot_path)
-        now = time.time()
-        _write_json_atomic(self.sidecar_path, {**info, "written": now, "written_utc": _iso(now)})
-        return generation, 1e3 * (time.perf_counter() - started)
-
-    def _deliver(self, future: Future) -> None:
-        with contextlib.suppress(RuntimeError):  # the window is gone
-            self._finished.emit(future)
 
     def _on_finished(self, future: Future) -> None:
         if future is not self._future:
@@ -702,3 +691,19 @@ def offer_recovery(window: Any, folder: str | Path | None = None) -> bool:
             return False
         discard_entry(entry)
     return False
+
+
+def _write_snapshot(frozen: Case, info: dict[str, Any], generation: int, started: float,
+                    folder: Path, snapshot: Path, sidecar: Path,
+                    claim: bool) -> tuple[int, float]:
+    """Worker thread: the snapshot, then its sidecar (with ``claim``, a sidecar first).
+
+    Plain data in and out: the worker never holds the Autosaver (a QObject).
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    if claim:  # a sidecar before the first snapshot: never an orphan .fcase
+        _write_json_atomic(sidecar, {**info, "written": None})
+    write_case_snapshot(frozen, snapshot)
+    now = time.time()
+    _write_json_atomic(sidecar, {**info, "written": now, "written_utc": _iso(now)})
+    return generation, 1e3 * (time.perf_counter() - started)

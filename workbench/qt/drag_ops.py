@@ -1,10 +1,10 @@
 """Live dragging in the main window: a skull landmark along the surface, a guide line.
 
 A mixin of :class:`workbench.qt.main_window.MainWindow`.  While the mouse
-moves nothing is written to the case: the window draws a *preview* — the
-landmark marker, its dowel, and the face re-solved by
+moves nothing is written to the case: the view being dragged in draws a
+*preview* — the landmark marker, its dowel, and the face re-solved by
 :class:`workbench.services.preview_fit.PreviewFit` from the last full fit
-(a few milliseconds) — and the view draws a lighter skull
+(a few milliseconds) — with a lighter skull and no multisampling
 (:mod:`workbench.qt.lod`).  Mouse moves are coalesced: however fast they
 come, one preview is computed and drawn per event-loop turn, with the newest
 position.  On release **one** undoable command is pushed (a
@@ -87,7 +87,6 @@ class DragOpsMixin:
     def preview_guide(self, guide: Guide) -> None:
         """Show the face as if ``guide`` had this value (nothing stored yet)."""
         if self._preview_fit is None:
-            self.detail.begin()
             self._preview_fit = self._new_preview_fit()
         self._schedule_drag(("guide", guide))
 
@@ -116,6 +115,13 @@ class DragOpsMixin:
             QTimer.singleShot(0, self._apply_drag)
 
     def _apply_drag(self) -> None:
+        """Draw the newest dragged state (one per event-loop turn).
+
+        Only the view being dragged in is redrawn: the 3D view for a
+        landmark, the guide view for a guide (on a software renderer each
+        view costs 50–80 ms a frame).  The other view follows with the full
+        re-fit when the drag ends.
+        """
         self._drag_scheduled = False
         item, self._drag_pending = self._drag_pending, None
         if item is None:
@@ -127,17 +133,14 @@ class DragOpsMixin:
             code, point = value
             self.draw_landmarks(override={code: point})
             self._preview_dowel(code, point)
-            moved = preview is not None and preview.move_landmark(code, point)
-        else:
-            moved = preview is not None and preview.move_guide(value)
-            if self.guide_view is not None:
-                self.guide_view.show_dragged(value)
-        if moved and preview is not None and self.scene.has("face"):
-            skin_h = preview.skin_head()
-            self.scene.update_points("face", preview.to_input(skin_h))
-            if self.guide_view is not None:
-                self.guide_view.update_face(skin_h)
-        self.plotter.update()   # one render, in the view's next paint (never two)
+            if preview is not None and preview.move_landmark(code, point) \
+                    and self.scene.has("face"):
+                self.scene.update_points("face", preview.skin())
+            self.plotter.update()   # one render, in the view's next paint (never two)
+        elif self.guide_view is not None:
+            self.guide_view.show_dragged(value)
+            if preview is not None and preview.move_guide(value):
+                self.guide_view.update_face(preview.skin_head())
         self.drag_timings.append(time.perf_counter() - t0)
 
     def _preview_dowel(self, code: str, point: np.ndarray) -> None:

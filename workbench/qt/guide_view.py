@@ -50,10 +50,12 @@ class GuideView(QWidget):
         self.window = window
         self.side = "frontal"
         self.closed_by_user = False
+        self._stale = True
+        self._samples = 0
         self.dragging: tuple[int, Guide] | None = None
         self._skull_light: Any = None
         self._face_actor: Any = None
-        self._guide_actors: list[Any] = []
+        self._guide_slots: dict[int, tuple[Any, int, int]] = {}
 
         self.frontal = QRadioButton("Frontal")
         self.lateral = QRadioButton("Lateral")
@@ -84,7 +86,7 @@ class GuideView(QWidget):
         layout.addLayout(bar)
         layout.addWidget(self.plotter, 1)
         layout.addWidget(self.info)
-        iren = self.plotter.iren.interactor
+        iren = self._iren = self.plotter.iren.interactor
         self._tags = {event: iren.AddObserver(event, handler, PRIORITY)
                       for event, handler in (("LeftButtonPressEvent", self._on_press),
                                              ("MouseMoveEvent", self._on_move),
@@ -117,8 +119,12 @@ class GuideView(QWidget):
         p = self.plotter
         if getattr(p, "_closed", False):
             return
+        if not self.isVisible():
+            self._stale = True   # drawn when shown (hidden views cost nothing)
+            return
+        self._stale = False
         p.clear_actors()
-        self._face_actor, self._guide_actors = None, []
+        self._face_actor, self._guide_slots = None, {}
         fit = self.window.fit
         if fit is None:
             self.info.setText("The guides appear here once the face is fitted.")
@@ -151,11 +157,14 @@ class GuideView(QWidget):
         return np.array([[150.0, g.value[0], g.value[1]]])   # lateral: in front of the head
 
     def _draw_guides(self) -> None:
-        import pyvista as pv
+        """Guides (magenta) and predictions (cyan): one lines and one points actor each.
 
-        p = self.plotter
+        ``self._guide_slots`` maps a guide's row to ``(actor, first point
+        index, number of points)`` so a drag moves its points in place.
+        """
         guides = list(self.window.reconstruct_panel.guides)
-        sets = [(guides, GUIDE, 4, "gv_guide")]
+        self._guide_slots = {}
+        self._add_set(list(enumerate(guides)), GUIDE, 4, "gv_guide", track=True)
         if self.show_predictions.isChecked():
             predicted: list[Guide] = []
             for pred in self.window.fit.predictions:
@@ -164,32 +173,50 @@ class GuideView(QWidget):
                                   if g.view == self.side]
                 except Exception:  # noqa: BLE001 - a prediction that maps to no guide
                     continue
-            sets.append((predicted, PREDICTION, 2, "gv_pred"))
-        label_points, label_text = [], []
-        for items, colour, width, prefix in sets:
-            for i, g in enumerate(items):
-                seg = self._segment(g)
-                if seg is None or not g.enabled:
-                    continue
-                if len(seg) == 2:
-                    actor = p.add_mesh(pv.Line(seg[0], seg[1]), color=colour, line_width=width,
-                                       pickable=False, render=False, name=f"{prefix}_{i}")
-                else:
-                    actor = p.add_points(seg, color=colour, point_size=14,
-                                         render_points_as_spheres=True, pickable=False,
-                                         render=False, name=f"{prefix}_{i}")
-                if prefix == "gv_guide":
-                    self._guide_actors.append(actor)
-                    label_points.append(seg[0] if g.kind == "hline" else seg[-1])
-                    label_text.append(g.id)
-        if label_points:
-            p.add_point_labels(np.array(label_points), label_text, font_size=10,
-                               text_color=GUIDE, shape_opacity=0.0, show_points=False,
-                               always_visible=True, pickable=False, render=False,
-                               name="gv_labels")
+            self._add_set(list(enumerate(predicted)), PREDICTION, 2, "gv_pred", track=False)
         self.info.setText("Magenta: guides (drag to move). Cyan: published predictions."
                           if self.show_predictions.isChecked() else
                           "Magenta: guides (drag to move).")
+
+    def _add_set(self, items: list[tuple[int, Guide]], colour: tuple, width: float,
+                 prefix: str, *, track: bool) -> None:
+        import pyvista as pv
+
+        p = self.plotter
+        lines: list[np.ndarray] = []
+        points: list[np.ndarray] = []
+        slots: list[tuple[int, str, int, int]] = []
+        label_points, label_text = [], []
+        for row, g in items:
+            seg = self._segment(g)
+            if seg is None or not g.enabled:
+                continue
+            target = lines if len(seg) == 2 else points
+            first = sum(len(x) for x in target)
+            target.append(seg)
+            slots.append((row, "lines" if len(seg) == 2 else "points", first, len(seg)))
+            label_points.append(seg[0] if g.kind == "hline" else seg[-1])
+            label_text.append(g.id)
+        actors = {}
+        if lines:
+            pts = np.vstack(lines)
+            n = len(lines)
+            cells = np.column_stack([np.full(n, 2), 2 * np.arange(n), 2 * np.arange(n) + 1])
+            actors["lines"] = p.add_mesh(pv.PolyData(pts, lines=cells.ravel()), color=colour,
+                                         line_width=width, pickable=False, render=False,
+                                         name=f"{prefix}_lines")
+        if points:
+            actors["points"] = p.add_points(np.vstack(points), color=colour, point_size=14,
+                                            render_points_as_spheres=True, pickable=False,
+                                            render=False, name=f"{prefix}_points")
+        if track:
+            self._guide_slots = {row: (actors[kind], first, n)
+                                 for row, kind, first, n in slots}
+            if label_points:
+                p.add_point_labels(np.array(label_points), label_text, font_size=10,
+                                   text_color=colour, shape_opacity=0.0, show_points=False,
+                                   always_visible=True, pickable=False, render=False,
+                                   name=f"{prefix}_labels")
 
     def _reset_camera(self) -> None:
         fit = self.window.fit
@@ -201,6 +228,11 @@ class GuideView(QWidget):
         self.plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 1.0, 0.0)]
         self.plotter.reset_camera(render=False)
         self._fit_scale()
+
+    def showEvent(self, event: Any) -> None:  # noqa: N802 - Qt name
+        super().showEvent(event)
+        if self._stale:
+            self.refresh(reset_camera=True)
 
     def resizeEvent(self, event: Any) -> None:  # noqa: N802 - Qt name
         super().resizeEvent(event)
@@ -226,21 +258,20 @@ class GuideView(QWidget):
         self.plotter.update()
 
     def show_dragged(self, guide: Guide) -> None:
-        """Move the dragged guide's line (or point) to ``guide.value``."""
+        """Move the dragged guide's line (or point) to ``guide.value``, in place."""
         if self.dragging is None:
             return
         row, _ = self.dragging
-        guides = self.window.reconstruct_panel.guides
-        drawable = [i for i, g in enumerate(guides) if g.enabled and g.view == self.side]
-        if row not in drawable:
-            return
-        actor = self._guide_actors[drawable.index(row)]
+        slot = self._guide_slots.get(row)
         seg = self._segment(guide)
+        if slot is None or seg is None or len(seg) != slot[2]:
+            return
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
+        actor, first, n = slot
         data = actor.GetMapper().GetInput()
         pts = vtk_to_numpy(data.GetPoints().GetData())
-        pts[:] = seg if len(pts) == len(seg) else pts
+        pts[first:first + n] = seg
         data.GetPoints().Modified()
         self.plotter.update()
 
@@ -286,6 +317,8 @@ class GuideView(QWidget):
             return
         self._swallow(obj, event)
         self.dragging = (row, self.window.reconstruct_panel.guides[row])
+        self._samples = self.plotter.render_window.GetMultiSamples()
+        self.plotter.render_window.SetMultiSamples(0)   # a lighter frame while dragging
 
     def _on_move(self, obj: Any, event: str) -> None:
         if self.dragging is None:
@@ -304,6 +337,7 @@ class GuideView(QWidget):
         self._swallow(obj, event)
         row, guide = self.dragging
         self.dragging = None
+        self.plotter.render_window.SetMultiSamples(self._samples)
         original = self.window.reconstruct_panel.guides[row]
         self.window.commit_guide(row, None if guide.value == original.value else guide.value)
 
@@ -311,10 +345,14 @@ class GuideView(QWidget):
         if self.dragging is not None:
             row, _ = self.dragging
             self.dragging = None
+            self.plotter.render_window.SetMultiSamples(self._samples)
             self.window.commit_guide(row, None)
 
     def close_view(self) -> None:
-        """Finalize the VTK view while its GL context exists (window teardown)."""
+        """Remove the VTK observers (they hold this widget), then finalize the view."""
+        for tag in self._tags.values():
+            self._iren.RemoveObserver(tag)
+        self._tags = {}
         self.plotter.close()
 
 

@@ -6,11 +6,10 @@ While the user interacts, :class:`InteractiveDetail` draws
 
 * the skull from a decimated copy (:data:`LIGHT_TRIANGLES` triangles, made
   once per skull in the worker thread), and
-* without multisampling,
+* without anti-aliasing (neither multisampling nor FXAA),
 
-and restores the full surface and multisampling (one full-quality render)
-when the interaction ends.  Measured on llvmpipe (2 cores, 1200×800 window):
-133 ms → about 40 ms a frame (``benchmarks/bench_gui.py``).
+and restores the full surface and anti-aliasing (one full-quality render)
+when the interaction ends.  Figures: ``benchmarks/bench_gui.py``.
 
 The decimated copy is for drawing only: picking and every measurement use
 the full surface (:mod:`workbench.qt.picking`).  Units mm, input frame.
@@ -67,10 +66,18 @@ class InteractiveDetail:
         self._full: Any = None
         self._light: Any = None
         self._samples = int(plotter.render_window.GetMultiSamples())
+        self._fxaa = False
         # the interactor style announces every rotation, pan and zoom
-        iren = plotter.iren.interactor
-        iren.AddObserver("StartInteractionEvent", lambda *_a: self.begin())
-        iren.AddObserver("EndInteractionEvent", lambda *_a: self.end())
+        iren = self._iren = plotter.iren.interactor
+        self._tags = [iren.AddObserver("StartInteractionEvent", lambda *_a: self.begin()),
+                      iren.AddObserver("EndInteractionEvent", lambda *_a: self.end())]
+
+    def detach(self) -> None:
+        """Remove the VTK observers and forget the actors (before the view closes)."""
+        for tag in self._tags:
+            self._iren.RemoveObserver(tag)
+        self._tags = []
+        self._actor = self._full = self._light = None
 
     # ------------------------------------------------------------ the surface
     def set_skull(self, actor: Any, full: Any, mesh: Mesh | None = None) -> None:
@@ -103,6 +110,8 @@ class InteractiveDetail:
         self.active = True
         if self._light is not None and self._actor is not None:
             self._actor.GetMapper().SetInputData(self._light)
+        self._fxaa = bool(self.plotter.renderer.GetUseFXAA())
+        self.plotter.renderer.SetUseFXAA(False)
         self.plotter.render_window.SetMultiSamples(0)
 
     def end(self, render: bool = True) -> None:
@@ -113,5 +122,6 @@ class InteractiveDetail:
         if self._actor is not None and self._full is not None:
             self._actor.GetMapper().SetInputData(self._full)
         self.plotter.render_window.SetMultiSamples(self._samples)
+        self.plotter.renderer.SetUseFXAA(self._fxaa)
         if render and self.plotter.render_window is not None:
             self.plotter.update()   # one full-quality render in the next paint

@@ -34,7 +34,7 @@ from PySide6.QtWidgets import (
 
 from workbench.commands.landmarks import PlaceLandmark, ReplaceLandmarkSet
 from workbench.io.catalogue import load_catalogue
-from workbench.qt import dialogs, jobs
+from workbench.qt import dialogs, gc_guard, jobs
 from workbench.qt.actions import build_menus
 from workbench.qt.document import Document
 from workbench.qt.drag_ops import DragOpsMixin
@@ -70,6 +70,8 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         super().__init__()
         from pyvistaqt import QtInteractor
 
+        gc_guard.install()   # cyclic garbage (Qt wrappers) collected on this thread only
+
         self.interactive = interactive
         self.messages: list[str] = []
         self.errors: list[str] = []
@@ -84,6 +86,10 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
 
         self.plotter = QtInteractor(self, auto_update=auto_update)
         self.plotter.clear_events_for_key("q")  # pyvista's "q" would close the 3D view
+        # FXAA instead of 4x multisampling: similar edges at a third of the cost
+        # on software renderers (llvmpipe: 180 → 70 ms a frame, 100k triangles)
+        self.plotter.render_window.SetMultiSamples(0)
+        self.plotter.enable_anti_aliasing("fxaa")
         # the 3D view and the optional second view (guides, orthographic) side by side
         self.views = QSplitter(Qt.Orientation.Horizontal, self)
         self.views.addWidget(self.plotter)
@@ -274,7 +280,8 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         if code and code in lms:
             selected = np.asarray(override.get(code, lms[code].position), float)
             entry = self.catalogue.entry(code, "skull")
-            label = f"{code}: {entry.name}"
+            # no label while dragging: VTK re-places labels every frame (slow)
+            label = "" if override else f"{code}: {entry.name}"
         self.scene.show_landmarks(positions.reshape(-1, 3), [lm.status for lm in lms],
                                   selected, label)
 
@@ -474,6 +481,8 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
             return
         self.autosaver.close()  # a clean close: the snapshot of unsaved work goes
         self.runner.shutdown()
+        self.picker.detach()
+        self.detail.detach()
         self.guide_view.close_view()
         self.plotter.close()
         super().closeEvent(event)

@@ -64,7 +64,7 @@ class ClickPicker:
         self._press: tuple[int, int] | None = None
         self._located: tuple[Any, Any] | None = None
         self._tags: dict[str, int] = {}
-        iren = plotter.iren.interactor
+        iren = self._iren = plotter.iren.interactor
         for event, handler in (("LeftButtonPressEvent", self._on_press),
                                ("MouseMoveEvent", self._on_move),
                                ("LeftButtonReleaseEvent", self._on_release)):
@@ -73,7 +73,24 @@ class ClickPicker:
         # the mouse focus: its release then reaches only the style, so the
         # click is also watched there (pyvista registers release events on
         # the style for this reason).
-        plotter.iren.add_observer("LeftButtonReleaseEvent", self._on_style_release)
+        self._style_observer = (plotter.iren.style,
+                                plotter.iren.style.AddObserver("LeftButtonReleaseEvent",
+                                                               self._on_style_release))
+
+    def detach(self) -> None:
+        """Remove the VTK observers (before the view closes).
+
+        VTK holds these Python callbacks, and through them this tool and the
+        view's wrapper; left in place they are released only when VTK frees
+        the interactor, after Qt may already have deleted the widget.
+        """
+        for tag in self._tags.values():
+            self._iren.RemoveObserver(tag)
+        self._tags.clear()
+        style, tag = self._style_observer
+        style.RemoveObserver(tag)
+        self.target_actor = self.target_surface = None  # type: ignore[assignment]
+        self._located = None
 
     # ------------------------------------------------------------ events
     def _event_position(self) -> tuple[int, int]:
@@ -149,6 +166,8 @@ class ClickPicker:
         """
         from vtkmodules.vtkCommonCore import reference
 
+        if self.target_actor is None:
+            return None
         actor = self.target_actor()
         surface = self.target_surface() if self.target_surface is not None else None
         if actor is None or surface is None or not actor.GetVisibility():

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
+from PySide6.QtWidgets import QWidget
 
 from workbench.core.mesh import Mesh
 from workbench.render.snapshots import to_polydata
@@ -82,7 +83,12 @@ class SceneView(QObject):
         self._render_pending = False
         if getattr(self.plotter, "_closed", False) or self.plotter.render_window is None:
             return
-        self.plotter.render()
+        if isinstance(self.plotter, QWidget):
+            # the widget renders in its paint; rendering here as well would
+            # draw every frame twice (pyvistaqt's paintGL always renders)
+            self.plotter.update()
+        else:
+            self.plotter.render()
         self.renders += 1
 
     # ------------------------------------------------------------ layers
@@ -166,7 +172,7 @@ class SceneView(QObject):
             focus = np.asarray(self.plotter.center, float)
             self.plotter.camera_position = [tuple(focus + 600.0 * a), tuple(focus),
                                             tuple(np.asarray(superior, float))]
-        self.plotter.reset_camera()
+        self.plotter.reset_camera(render=False)
         self.request_render()
 
     # ------------------------------------------------------------ content

@@ -1,9 +1,10 @@
 """Background work for the window: worker threads, results back on the GUI thread.
 
 Workers run plain functions (:mod:`workbench.qt.jobs`, services) that return
-values; they never touch the case, Qt widgets or VTK.  The result (or the
-error) is delivered through a queued Qt signal, so the callback runs on the
-GUI thread, which applies it through a command.
+values; they never touch the case, Qt widgets or VTK, and hold no reference
+to a Qt object (``fn`` must close over data only).  The result (or the
+error) goes back through :mod:`workbench.qt.relay`, so the callback runs on
+the GUI thread, which applies it through a command.
 
 Channels
 --------
@@ -29,6 +30,7 @@ side effects, e.g. an export, happen even if their result is dropped).
 
 from __future__ import annotations
 
+import itertools
 import time
 import traceback
 from collections.abc import Callable
@@ -36,11 +38,12 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
-from PySide6.QtCore import QObject, Qt, Signal
+from PySide6.QtCore import QObject, Signal
 from PySide6.QtWidgets import QProgressBar
 
 from workbench.core.cancel import CancelToken
 from workbench.core.errors import Cancelled
+from workbench.qt import relay
 
 #: a determinate progress bar runs 0..BAR_STEPS
 BAR_STEPS = 1000
@@ -48,6 +51,8 @@ BAR_STEPS = 1000
 
 @dataclass
 class _Job:
+    """GUI-thread side of a job (it holds the callbacks, which reach Qt objects)."""
+
     channel: str
     generation: int
     on_done: Callable[[Any], None]
@@ -55,6 +60,18 @@ class _Job:
     token: CancelToken
     cooperative: bool = False
     started: float = field(default_factory=time.perf_counter)
+
+
+@dataclass
+class _Work:
+    """Worker-thread side of a job: plain data only (see :mod:`workbench.qt.relay`)."""
+
+    key: int                     # the runner's relay key
+    job_id: int
+    fn: Callable[..., Any]
+    progress: bool
+    cooperative: bool
+    token: CancelToken
     last_report: tuple[str, float] = ("", -1.0)
 
 
@@ -76,8 +93,6 @@ class TaskRunner(QObject):
     busy_changed = Signal(bool, str)
     progress_changed = Signal(str, str, float)
     cancelled = Signal(str)
-    _delivered = Signal(object, object, object)  # job, result, error
-    _progressed = Signal(object, str, float)  # job, step, fraction
 
     def __init__(self, parent: QObject | None = None, max_workers: int = 2) -> None:
         super().__init__(parent)
@@ -85,9 +100,10 @@ class TaskRunner(QObject):
         self._generation: dict[str, int] = {}
         self._pending: dict[str, Future] = {}
         self._tokens: dict[str, CancelToken] = {}
+        self._jobs: dict[int, _Job] = {}
+        self._ids = itertools.count(1)
         self.timings: dict[str, float] = {}
-        self._delivered.connect(self._on_delivered, Qt.ConnectionType.QueuedConnection)
-        self._progressed.connect(self._on_progressed, Qt.ConnectionType.QueuedConnection)
+        self._key = relay.register(self._on_posted)
 
     @property
     def busy(self) -> bool:
@@ -130,8 +146,11 @@ class TaskRunner(QObject):
         token = token if token is not None else CancelToken()
         job = _Job(channel, generation, on_done, on_error, token,
                    cooperative=progress or token is not None)
+        job_id = next(self._ids)
+        self._jobs[job_id] = job
         self._tokens[channel] = token
-        self._pending[channel] = self._pool.submit(self._run, job, fn, progress)
+        work = _Work(self._key, job_id, fn, progress, job.cooperative, token)
+        self._pending[channel] = self._pool.submit(_run, work)
         self.busy_changed.emit(True, description)
         return token
 
@@ -155,47 +174,21 @@ class TaskRunner(QObject):
             self.busy_changed.emit(False, "")
         return True
 
-    # ------------------------------------------------------------ worker side
-    def _run(self, job: _Job, fn: Callable[..., Any], progress: bool) -> None:
-        try:
-            if job.cooperative:
-                job.token.check()  # superseded or cancelled while queued
-            result = fn(lambda step, fraction: self._report(job, step, fraction)) \
-                if progress else fn()
-        except Cancelled as exc:
-            self._emit(job, None, exc)
-            return
-        except BaseException as exc:  # delivered to the GUI thread, shown as a dialog
-            exc.__dict__.setdefault("worker_traceback", traceback.format_exc())
-            self._emit(job, None, exc)
-            return
-        self._emit(job, result, None)
-
-    def _report(self, job: _Job, step: str, fraction: float) -> None:
-        job.token.check()
-        last_step, last_fraction = job.last_report
-        fraction = min(max(float(fraction), 0.0), 1.0)
-        if step == last_step and abs(fraction - last_fraction) < 0.005 and fraction < 1.0:
-            return  # throttle: at most ~200 updates per job
-        job.last_report = (step, fraction)
-        try:
-            self._progressed.emit(job, step, fraction)
-        except RuntimeError:
-            pass  # the window was closed while the job ran
-
-    def _emit(self, job: _Job, result: Any, error: BaseException | None) -> None:
-        try:
-            self._delivered.emit(job, result, error)
-        except RuntimeError:
-            pass  # the window was closed while the job ran
-
     # ------------------------------------------------------------ GUI side
     def _is_current(self, job: _Job) -> bool:
         return self._generation.get(job.channel) == job.generation and job.channel in self._pending
 
-    def _on_progressed(self, job: _Job, step: str, fraction: float) -> None:
-        if self._is_current(job):
-            self.progress_changed.emit(job.channel, step, fraction)
+    def _on_posted(self, payload: tuple) -> None:
+        """A worker's message (GUI thread): ``("progress", id, step, f)`` or ``("done", id, result, error)``."""
+        kind, job_id, a, b = payload
+        if kind == "progress":
+            job = self._jobs.get(job_id)
+            if job is not None and self._is_current(job):
+                self.progress_changed.emit(job.channel, a, b)
+            return
+        job = self._jobs.pop(job_id, None)
+        if job is not None:
+            self._on_delivered(job, a, b)
 
     def _on_delivered(self, job: _Job, result: Any, error: BaseException | None) -> None:
         current = self._is_current(job)
@@ -219,7 +212,37 @@ class TaskRunner(QObject):
             token.cancel("shut down")
         self._tokens.clear()
         self._pending.clear()
+        self._jobs.clear()
+        relay.unregister(self._key)
         self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+# ------------------------------------------------------------------ worker thread
+def _run(work: _Work) -> None:
+    """Run one job; post its result (or error) to the GUI thread.  Plain data only."""
+    try:
+        if work.cooperative:
+            work.token.check()  # superseded or cancelled while queued
+        result = work.fn(lambda step, fraction: _report(work, step, fraction)) \
+            if work.progress else work.fn()
+    except Cancelled as exc:
+        relay.post(work.key, ("done", work.job_id, None, exc))
+        return
+    except BaseException as exc:  # delivered to the GUI thread, shown as a dialog
+        exc.__dict__.setdefault("worker_traceback", traceback.format_exc())
+        relay.post(work.key, ("done", work.job_id, None, exc))
+        return
+    relay.post(work.key, ("done", work.job_id, result, None))
+
+
+def _report(work: _Work, step: str, fraction: float) -> None:
+    work.token.check()
+    last_step, last_fraction = work.last_report
+    fraction = min(max(float(fraction), 0.0), 1.0)
+    if step == last_step and abs(fraction - last_fraction) < 0.005 and fraction < 1.0:
+        return  # throttle: at most ~200 updates per job
+    work.last_report = (step, fraction)
+    relay.post(work.key, ("progress", work.job_id, step, fraction))
 
 
 def show_fraction(bar: QProgressBar, fraction: float, step: str = "") -> None:
