@@ -34,3 +34,35 @@ def _private_autosave(monkeypatch, tmp_path_factory):  # noqa: ANN001
     monkeypatch.setenv("WORKBENCH_AUTOSAVE_DIR", str(tmp_path_factory.mktemp("autosave")))
     yield
     gc.collect()
+
+
+@pytest.fixture
+def new_window(qtbot):  # noqa: ANN001
+    """A factory of shown, non-interactive main windows (``new_window(width, height)``).
+
+    Each window's worker and 3D view are shut down in teardown (HEADLESS.md:
+    finalize VTK while the GL context exists).
+    """
+    from workbench.qt.main_window import MainWindow
+
+    made = []
+
+    def make(width: int = 1200, height: int = 800):  # noqa: ANN202
+        w = MainWindow(auto_update=False, interactive=False)
+        qtbot.addWidget(w)
+        w.resize(width, height)
+        w.show()
+        qtbot.waitExposed(w)
+        made.append(w)
+        return w
+
+    yield make
+    for w in made:
+        w.runner.shutdown()
+        w.plotter.close()
+        w.close()
+
+
+@pytest.fixture
+def window(new_window):  # noqa: ANN001
+    return new_window()

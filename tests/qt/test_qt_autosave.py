@@ -48,25 +48,9 @@ def skull_copy(skull_obj, tmp_path) -> Path:  # noqa: ANN001
 
 
 @pytest.fixture
-def make_window(qtbot, folder):  # noqa: ANN001
-    from workbench.qt.main_window import MainWindow
-
-    made = []
-
-    def make():  # noqa: ANN202
-        w = MainWindow(auto_update=False, interactive=False)
-        qtbot.addWidget(w)
-        w.resize(1000, 700)
-        w.show()
-        qtbot.waitExposed(w)
-        made.append(w)
-        return w
-
-    yield make
-    for w in made:
-        w.runner.shutdown()
-        w.plotter.close()     # required: finalize VTK while the GL context exists
-        w.close()
+def make_window(new_window, folder):  # noqa: ANN001
+    """Windows made after the autosave folder is set (see ``folder``)."""
+    return lambda: new_window(1000, 700)
 
 
 @pytest.fixture

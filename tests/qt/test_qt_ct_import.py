@@ -23,21 +23,6 @@ WAIT_MS = 30_000
 
 
 @pytest.fixture
-def window(qtbot):  # noqa: ANN001
-    from workbench.qt.main_window import MainWindow
-
-    w = MainWindow(auto_update=False, interactive=False)
-    qtbot.addWidget(w)
-    w.resize(1200, 800)
-    w.show()
-    qtbot.waitExposed(w)
-    yield w
-    w.runner.shutdown()
-    w.plotter.close()     # required: finalize VTK while the GL context exists
-    w.close()
-
-
-@pytest.fixture
 def dialog(qtbot, window, headsq_nhdr):  # noqa: ANN001
     d = window.open_ct_dialog(headsq_nhdr)
     qtbot.waitExposed(d)

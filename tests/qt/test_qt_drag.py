@@ -25,14 +25,8 @@ pytestmark = pytest.mark.gui
 
 
 @pytest.fixture
-def fitted(qtbot, skull_obj):  # noqa: ANN001
-    from workbench.qt.main_window import MainWindow
-
-    w = MainWindow(auto_update=False, interactive=False)
-    qtbot.addWidget(w)
-    w.resize(1400, 900)
-    w.show()
-    qtbot.waitExposed(w)
+def fitted(qtbot, new_window, skull_obj):  # noqa: ANN001
+    w = new_window(1400, 900)
     w.open_skull(skull_obj, scale=15.0)
     qtbot.waitUntil(lambda: not w.runner.busy, timeout=60_000)
     w.suggest_landmarks()
@@ -40,11 +34,7 @@ def fitted(qtbot, skull_obj):  # noqa: ANN001
     w.reconstruct()
     qtbot.waitUntil(lambda: not w.runner.busy, timeout=120_000)
     assert w.fit is not None and not w.errors, w.errors
-    yield w
-    w.runner.shutdown()
-    w.guide_view.close_view()
-    w.plotter.close()
-    w.close()
+    return w
 
 
 def _widget_pos(plotter, display_xy) -> QPoint:  # noqa: ANN001

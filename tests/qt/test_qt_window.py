@@ -36,21 +36,6 @@ def skin_ply(headsq_surfaces, tmp_path_factory):  # noqa: ANN001
     return write_mesh(tmp_path_factory.mktemp("skin") / "headsq_skin.ply", headsq_surfaces["skin"])
 
 
-@pytest.fixture
-def window(qtbot):  # noqa: ANN001
-    from workbench.qt.main_window import MainWindow
-
-    w = MainWindow(auto_update=False, interactive=False)
-    qtbot.addWidget(w)
-    w.resize(1200, 800)
-    w.show()
-    qtbot.waitExposed(w)
-    yield w
-    w.runner.shutdown()
-    w.plotter.close()     # required: finalize VTK while the GL context exists
-    w.close()
-
-
 def _wait(qtbot, window, timeout=SUGGEST_MS) -> None:  # noqa: ANN001
     qtbot.waitUntil(lambda: not window.runner.busy, timeout=timeout)
     assert not window.errors, window.errors
