@@ -64,7 +64,7 @@ class Heartbeat:
 
 def _wait(app, window, timeout: float = 300.0) -> None:  # noqa: ANN001
     end = time.monotonic() + timeout
-    while window.runner.busy and time.monotonic() < end:
+    while window.busy and time.monotonic() < end:
         app.processEvents()
         time.sleep(0.002)
     for _ in range(5):

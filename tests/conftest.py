@@ -92,6 +92,21 @@ def head_female(_sample_cache: Path):
 
 
 @pytest.fixture(scope="session")
+def skull_obj_suggested(skull_obj: Path, head_male):
+    """``(mesh, landmarks)``: ``skull.obj`` × 15 (mm, its own frame: +y up, face +z) and the
+    male reference head's skull landmarks suggested on it (same frame, mm; ~2 s after the
+    reference head).  Treat both as read-only: the landmark set and mesh are shared."""
+    from workbench.io.meshes import read_mesh
+    from workbench.services.landmark_transfer import transfer_landmarks
+    from workbench.services.reference_parts import skull_surface
+
+    mesh = read_mesh(skull_obj, scale=15.0, kind="skull").mesh
+    result = transfer_landmarks(mesh, skull_surface(head_male), head_male.skull_landmarks,
+                                orientation=((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)))
+    return mesh, result.landmarks
+
+
+@pytest.fixture(scope="session")
 def headsq_surfaces(headsq_nhdr: Path) -> dict:
     """Bone and skin surfaces of the headsq CT (its physical frame, mm)."""
     from workbench.services.ct_mesh import mesh_from_ct

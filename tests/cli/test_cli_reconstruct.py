@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,8 @@ def test_reconstruct_writes_face_head_case_and_report(inputs, tmp_path, head_mal
     face = read_mesh(out / "face.ply", units="mm").mesh
     assert face.n_vertices == head_male.skin.n_vertices
     assert (out / "head" / "template.json").is_file() and (out / "head" / "muscles.json").is_file()
+    pack = json.loads((out / "head" / "template.json").read_text())
+    assert pack["frame"].startswith("the skull file's frame") and pack["units"] == "mm"
     report = read_report_json(out / "report.json")
     validate_report(report)
     assert report["template"]["content_hash"] == head_male.content_hash

@@ -60,7 +60,7 @@ def window(make_window):  # noqa: ANN001
 
 def _open(qtbot, window, path) -> None:  # noqa: ANN001
     window.open_skull(path, scale=15.0)
-    qtbot.waitUntil(lambda: not window.runner.busy, timeout=30_000)
+    qtbot.waitUntil(lambda: not window.busy, timeout=30_000)
     assert not window.errors, window.errors
     assert window.document.has_specimen
 
@@ -70,7 +70,7 @@ def _edit(qtbot, window) -> None:  # noqa: ANN001
     window.landmarks_panel.select("g")
     window.on_pick(np.array(window.document.case.specimen.mesh.vertices[1234]))
     assert window.document.push(SetParameter(key="sex", value="female"))
-    qtbot.waitUntil(lambda: not window.runner.busy, timeout=30_000)
+    qtbot.waitUntil(lambda: not window.busy, timeout=30_000)
     assert window.document.is_dirty
 
 

@@ -28,11 +28,11 @@ pytestmark = pytest.mark.gui
 def fitted(qtbot, new_window, skull_obj):  # noqa: ANN001
     w = new_window(1400, 900)
     w.open_skull(skull_obj, scale=15.0)
-    qtbot.waitUntil(lambda: not w.runner.busy, timeout=60_000)
+    qtbot.waitUntil(lambda: not w.busy, timeout=60_000)
     w.suggest_landmarks()
-    qtbot.waitUntil(lambda: not w.runner.busy, timeout=120_000)
+    qtbot.waitUntil(lambda: not w.busy, timeout=120_000)
     w.reconstruct()
-    qtbot.waitUntil(lambda: not w.runner.busy, timeout=120_000)
+    qtbot.waitUntil(lambda: not w.busy, timeout=120_000)
     assert w.fit is not None and not w.errors, w.errors
     return w
 
@@ -84,7 +84,7 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     assert w.drag_timings, "no preview was drawn during the drag"
     # the face followed during the drag, before the command (and the re-fit) ran
     assert seen and np.abs(seen[0] - face_before).max() > 0.5
-    qtbot.waitUntil(lambda: not w.runner.busy, timeout=120_000)
+    qtbot.waitUntil(lambda: not w.busy, timeout=120_000)
     assert not w.errors, w.errors
 
     w.undo()
@@ -111,7 +111,7 @@ def test_escape_cancels_a_landmark_drag(qtbot, fitted):  # noqa: ANN001
 def test_drag_a_guide_in_the_guide_view(qtbot, fitted):  # noqa: ANN001
     w = fitted
     gv = w.guide_view
-    qtbot.waitUntil(lambda: not w.runner.busy, timeout=30_000)
+    qtbot.waitUntil(lambda: not w.busy, timeout=30_000)
     gv.refresh(reset_camera=True)
     guides = w.reconstruct_panel.guides
     row = next(i for i, g in enumerate(guides) if g.kind == "hline" and g.enabled)
@@ -130,7 +130,7 @@ def test_drag_a_guide_in_the_guide_view(qtbot, fitted):  # noqa: ANN001
     assert stored["source"] == "user"
     assert len(w.document.stack) == n_steps + 1
     assert w.drag_timings
-    qtbot.waitUntil(lambda: not w.runner.busy, timeout=120_000)
+    qtbot.waitUntil(lambda: not w.busy, timeout=120_000)
     assert not w.errors, w.errors
     assert w.fit.recon.guide_targets, "the re-fit used the moved guide"
     code = g.affects[0]

@@ -171,3 +171,41 @@ def test_picture_with_muscles_under_a_faint_skin_is_not_blank(window, tmp_path):
                         for y in range(view.top() + 5, view.bottom() - 5, 7)], float)
     red_off = (colours[:, 0] > colours[:, 1] + 60) & (colours[:, 0] > colours[:, 2] + 60)
     assert red_off.sum() < red.sum() / 4, (red_off.sum(), red.sum())
+
+
+def test_after_paint_runs_behind_the_next_paint_and_after_a_fit(window, qtbot):  # noqa: ANN001
+    """Heavy steps are sequenced behind paints; a new fit fills the guide view only after."""
+    scene = window.scene
+    order: list[tuple[str, int]] = []
+    scene.after_paint(lambda: order.append(("callback", scene.paints)))
+    painted_before = scene.paints
+    assert scene.paint_work_pending and window.busy
+    qtbot.waitUntil(lambda: bool(order), timeout=5_000)
+    assert order[0][1] > painted_before          # ran after (at least) one more render
+    assert not scene.paint_work_pending
+
+    # a hidden view never paints: the callback still runs (fallback timer)
+    window.plotter.hide()
+    try:
+        ran: list[bool] = []
+        scene.after_paint(lambda: ran.append(True))
+        qtbot.waitUntil(lambda: bool(ran), timeout=5_000)
+    finally:
+        window.plotter.show()
+
+    # a new fit's guide view is drawn behind the main view's paint, not with it
+    from dataclasses import replace
+
+    gv, new_fit = window.guide_view, replace(window.fit)
+    refreshed_at: list[int] = []
+    original = gv.refresh
+    gv.refresh = lambda *a, **k: (refreshed_at.append(scene.paints), original(*a, **k))[1]
+    try:
+        main_paints = scene.paints
+        window._show_fit(new_fit)
+        assert gv.drawn_fit is not new_fit and window.busy
+        assert window.wait_idle(60)
+    finally:
+        del gv.refresh
+    assert gv.drawn_fit is new_fit
+    assert refreshed_at and min(refreshed_at) > main_paints

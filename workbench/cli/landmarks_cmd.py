@@ -66,6 +66,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     sg.add_argument("--out", type=Path, required=True, help="output .mrk.json (or .fcsv/.csv/.pp)")
     sg.set_defaults(handler=run_suggest, strict=False)
 
+    sn = lsub.add_parser(
+        "snap", help="snap skull landmarks of a case to the features their definitions name",
+        description="Move skull landmarks of a case file to the anatomical feature their "
+                    "catalogue definition names, near where they are (e.g. glabella to the most "
+                    "anterior midline point within 8 mm), using data_tables/landmarks/"
+                    "snap_rules.csv. Needs both porions and an orbitale (the head frame). "
+                    "Snapped landmarks become 'placed'. The case is saved atomically.")
+    sn.add_argument("case", type=Path, help="case file (.fcase)")
+    which = sn.add_mutually_exclusive_group(required=True)
+    which.add_argument("--code", action="append", default=None, metavar="CODE",
+                       help="landmark to snap (repeatable); one without a rule is only moved "
+                            "onto the midsagittal plane if it is a midline landmark")
+    which.add_argument("--all", action="store_true",
+                       help="every placed or suggested skull landmark that has a snap rule")
+    sn.add_argument("--out", type=Path, default=None,
+                    help="write the result to this case file instead of over CASE")
+    sn.add_argument("--dry-run", action="store_true", help="print what would move; save nothing")
+    sn.set_defaults(handler=run_snap, strict=False)
+
 
 def _read(args: argparse.Namespace):  # noqa: ANN202
     return read_landmarks(args.file, args.surface, catalogue=load_catalogue(),
@@ -173,4 +192,27 @@ def run_suggest(args: argparse.Namespace) -> int:
                       "scale": round(result.alignment.scale, 4)},
         "warp_residual_mm": round(result.warp_residual_mm, 3), "matches": result.matches,
     }, None)
+    return 0
+
+
+def run_snap(args: argparse.Namespace) -> int:
+    from workbench.commands.stack import CommandStack
+    from workbench.io.case_file import load_case, save_case
+    from workbench.services.landmark_placement import SurfacePlacement
+
+    case = load_case(args.case).case
+    if case.specimen.mesh is None:
+        raise LandmarkError(f"{args.case}: the case has no skull mesh to snap on")
+    stack = CommandStack(case)
+    placement = SurfacePlacement(case.specimen.mesh, stack, "skull")
+    results = placement.snap_all_to_features(None if args.all else args.code)
+    for r in results:
+        print(r.explanation)
+    moved = sum(r.moves for r in results)
+    if args.dry_run or not moved:
+        print(f"{moved} landmark(s) would move; nothing saved" if args.dry_run
+              else "nothing moved; case not saved")
+        return 0
+    out = save_case(case, args.out or args.case, stack)
+    print(f"saved {out} ({moved} landmark(s) moved)")
     return 0

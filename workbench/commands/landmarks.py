@@ -97,7 +97,9 @@ class PlaceLandmark(_CodeCommand):
 class MoveLandmark(_CodeCommand):
     """Move an existing defined landmark to ``position`` (mm); it becomes ``placed``.
 
-    Consecutive moves of the same landmark merge into one undo step.
+    Consecutive moves of the same landmark with the same label merge into one
+    undo step (a drag); a differently labelled move (e.g. ``"Snap g to ..."``)
+    stays a step of its own.
     """
 
     position: Any = None
@@ -120,7 +122,7 @@ class MoveLandmark(_CodeCommand):
     def merge_with(self, other: Command) -> bool:
         if not isinstance(other, MoveLandmark):
             return False
-        if (other.surface, other.code) != (self.surface, self.code):
+        if (other.surface, other.code, other.label) != (self.surface, self.code, self.label):
             return False
         self.position = other.position
         return True

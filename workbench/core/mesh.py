@@ -125,6 +125,17 @@ class Mesh:
         return _frozen(0.5 * np.linalg.norm(self.face_cross, axis=1))
 
     @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """``(n, 3)`` unit area-weighted vertex normals, cached (see :mod:`workbench.core.normals`).
+
+        Computing it once in a worker thread spares the GUI thread the work
+        when the mesh is drawn smooth-shaded.
+        """
+        from workbench.core.normals import vertex_normals
+
+        return _frozen(vertex_normals(self))
+
+    @cached_property
     def face_normals(self) -> np.ndarray:
         """``(m, 3)`` unit face normals (zero for degenerate faces)."""
         c = self.face_cross

@@ -61,8 +61,19 @@ def _pairs(head: TemplateHead) -> dict[str, Any]:
     return out
 
 
-def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Path]:
-    """Write ``head`` into ``folder`` (created if needed); returns the files written."""
+#: how ``template.json`` names the frame of a pack written in the head frame
+HEAD_FRAME_TEXT = ("head frame: x to the subject's left (x = 0 midsagittal), y up, z toward "
+                   "the face; Frankfort Horizontal at y = 0; origin between the porions")
+
+
+def export_template(head: TemplateHead, folder: str | PathLike[str], *,
+                    frame: str = HEAD_FRAME_TEXT) -> list[Path]:
+    """Write ``head`` into ``folder`` (created if needed); returns the files written.
+
+    ``frame`` is recorded in ``template.json``: pass another description when
+    the head was mapped out of the head frame first (a fitted head exported in
+    the skull file's frame, for instance).  Units are always mm.
+    """
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -91,8 +102,7 @@ def export_template(head: TemplateHead, folder: str | PathLike[str]) -> list[Pat
         "content_hash": head.content_hash,
         "sex": head.sex,
         "units": "mm",
-        "frame": "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward "
-                 "the face; Frankfort Horizontal at y = 0; origin between the porions",
+        "frame": frame,
         "files": {name: list(parts) for name, parts in FILES.items()},
         # per-part sizes so a reader can split the combined files again
         "part_sizes": {p: [head.meshes[p].n_vertices, head.meshes[p].n_faces] for p in PARTS},

@@ -39,11 +39,15 @@ ACTIONS: tuple[ActionSpec, ...] = (
                "Save the case (atomic: a failed save leaves the old file)"),
     ActionSpec("save_as", "&File", "Save &As…", QKeySequence.StandardKey.SaveAs, "ask_save_as"),
     ActionSpec("export", "&File", "&Export…", "Ctrl+E", "ask_export",
-               "Face meshes, landmarks (.mrk.json, .fcsv) and the PDF report"),
+               "Face and head meshes (PLY/OBJ/STL), landmarks (.mrk.json, .fcsv) and the PDF "
+               "report"),
     ActionSpec("quit", "&File", "&Quit", QKeySequence.StandardKey.Quit, "close"),
     ActionSpec("undo", "&Edit", "&Undo", QKeySequence.StandardKey.Undo, "undo"),
     ActionSpec("redo", "&Edit", "&Redo", QKeySequence.StandardKey.Redo, "redo"),
     ActionSpec("mark_absent", "&Edit", "Mark selected landmark &absent", "A", "mark_absent"),
+    ActionSpec("snap", "&Edit", "Sna&p selected landmark to its feature", "S", "snap_selected",
+               "Move the selected skull landmark to the feature its definition names "
+               "(e.g. the most anterior midline point for glabella), near where it is"),
     ActionSpec("next_missing", "&Edit", "Select &next missing landmark", "N",
                "select_next_missing"),
     ActionSpec("suggest", "&Tools", "&Suggest the rest of the landmarks", "Ctrl+L",

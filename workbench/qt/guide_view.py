@@ -25,9 +25,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QButtonGroup, QCheckBox, QHBoxLayout, QLabel, QRadioButton, QVBoxLayout, QWidget
 
-from workbench.qt.lod import decimated
+from workbench.qt.lod import decimated, with_normals
+from workbench.qt.scene import SMOOTH
 from workbench.render.snapshots import to_polydata
 from workbench.services.guides import AXES, Guide, guides_from_prediction
 
@@ -54,6 +56,7 @@ class GuideView(QWidget):
         self._samples = 0
         self.dragging: tuple[int, Guide] | None = None
         self._skull_light: Any = None
+        self.drawn_fit: Any = None   # the fit the view shows (None: none yet)
         self._face_actor: Any = None
         self._guide_slots: dict[int, tuple[Any, int, int]] = {}
 
@@ -98,21 +101,25 @@ class GuideView(QWidget):
         self.refresh(reset_camera=True)
 
     def fit_changed(self) -> None:
-        """A new fit: prepare the light skull in the worker, then draw."""
+        """A new fit: prepare the light skull in the worker, then draw once.
+
+        The view keeps showing the previous fit for the ~0.2 s the light
+        skull takes, rather than being drawn twice (face first, then skull).
+        """
         fit = self.window.fit
         self._skull_light = None
         if fit is None:
             self.refresh()
             return
         self.window.runner.submit("guide_view", "Preparing the guide view …",
-                                  lambda: decimated(fit.skull_h, 15_000),
-                                  lambda light: self._skull_ready(to_polydata(light)),
-                                  lambda _exc: None)
-        self.refresh(reset_camera=True)
+                                  lambda: with_normals(decimated(fit.skull_h, 15_000)),
+                                  lambda light: self._skull_ready(to_polydata(light,
+                                                                              normals=True)),
+                                  lambda _exc: self.refresh(reset_camera=True))
 
     def _skull_ready(self, light: Any) -> None:
         self._skull_light = light
-        self.refresh()
+        self.refresh(reset_camera=True)
 
     def refresh(self, reset_camera: bool = False) -> None:
         """Redraw skull, face, guides and predictions from the window's fit."""
@@ -127,20 +134,25 @@ class GuideView(QWidget):
         self._face_actor, self._guide_slots = None, {}
         fit = self.window.fit
         if fit is None:
+            self.drawn_fit = None
             self.info.setText("The guides appear here once the face is fitted.")
             p.update()
             return
         if self._skull_light is not None:
-            p.add_mesh(self._skull_light, color=(0.93, 0.89, 0.80), pickable=False, render=False,
-                       name="gv_skull")
-        face = to_polydata(fit.recon.head.skin)
+            p.add_mesh(self._skull_light, color=(0.93, 0.89, 0.80), **SMOOTH, pickable=False,
+                       render=False, name="gv_skull")
+        face = to_polydata(fit.recon.head.skin, normals=True)
         self._face_actor = p.add_mesh(face, color=(0.91, 0.72, 0.60), opacity=0.45,
-                                      smooth_shading=True, pickable=False, render=False,
+                                      **SMOOTH, pickable=False, render=False,
                                       name="gv_face")
         self._draw_guides()
+        self.drawn_fit = fit
         if reset_camera:
             self._reset_camera()
-        p.update()   # one render, in the widget's paint
+        # one render, in the widget's paint, asked for on the next turn: the
+        # drawing above and the (software-GL) paint then block the event
+        # loop one after the other, not as one long stretch
+        QTimer.singleShot(0, p.update)
 
     def _front(self) -> float:
         return float(self.window.fit.recon.head.skin.vertices[:, 2].max()) + 20.0
@@ -226,7 +238,9 @@ class GuideView(QWidget):
                            float(np.median(face[:, 2]))])
         eye = centre + ([0.0, 0.0, 500.0] if self.side == "frontal" else [500.0, 0.0, 0.0])
         self.plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 1.0, 0.0)]
-        self.plotter.reset_camera(render=False)
+        # Plotter.reset_camera always renders (pyvista 0.49 ignores render=False);
+        # the renderer's own reset does not, so the next paint draws it
+        self.plotter.renderer.reset_camera(render=False)
         self._fit_scale()
 
     def showEvent(self, event: Any) -> None:  # noqa: N802 - Qt name

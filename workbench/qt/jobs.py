@@ -241,6 +241,8 @@ def fit_face(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
     preview = DowelPreview(recon.plan, recon.to_input(np.array([d.origin for d in active])),
                            recon.to_input(np.array([d.tip for d in active])),
                            tuple(d.code for d in active))
+    for mesh in (recon.face, recon.head.skin):   # drawn smooth-shaded: normals here, not in
+        _ = mesh.vertex_normals                   # the GUI thread
     return FitResult(recon, head, skull_h, tuple(chosen), spread, preview, tuple(predictions))
 
 
@@ -287,13 +289,23 @@ def guides_state(guides: list[Guide] | tuple[Guide, ...]) -> list[dict[str, Any]
 def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
                    formats: tuple[str, ...] = ("ply", "obj", "stl"),
                    report: bool = True, notes: list[str] | None = None) -> dict[str, Path]:
-    """Face meshes, landmarks (.mrk.json, .fcsv) and the PDF report into ``folder``.
+    """Face and head meshes, landmarks (.mrk.json, .fcsv) and the PDF report into ``folder``.
 
-    All in the skull file's frame, mm.  The report is the one ``workbench
-    reconstruct`` writes (``reconstruction-report-v1``), without pictures.
+    All in the skull file's frame, mm.  ``face.<ext>`` is the fitted skin's
+    face region; ``head/`` holds the whole fitted head: a template pack
+    (PLY parts, landmarks, muscles, ``template.json``; readable by
+    ``workbench template``) plus every part again in the other formats
+    (``head/skull.obj``, ``head/teeth.stl`` ...).  The report is the one
+    ``workbench reconstruct`` writes (``reconstruction-report-v1``), without
+    pictures.
     """
+    from workbench.core.mesh import concatenate
     from workbench.io.markups import write_fcsv, write_mrk_json
     from workbench.io.meshes import write_mesh
+    from workbench.io.template_pack import FILES, export_template
+    from workbench.services.reconstruction_job import (
+        FITTED_HEAD_FRAME_TEXT, head_in_input_frame,
+    )
 
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -308,6 +320,14 @@ def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
         return files
     for ext in formats:
         files[f"face_{ext}"] = write_mesh(out / f"face.{ext}", fit.recon.face)
+    head = head_in_input_frame(fit.recon)
+    for path in export_template(head, out / "head", frame=FITTED_HEAD_FRAME_TEXT):
+        files[f"head/{path.name}"] = path
+    for name, parts in FILES.items():
+        stem = Path(name).stem
+        for ext in (e for e in formats if e != "ply"):
+            files[f"head/{stem}.{ext}"] = write_mesh(
+                out / "head" / f"{stem}.{ext}", concatenate([head.meshes[p] for p in parts]))
     if report:
         files.update(_report(out, case, fit, notes or []))
     return files

@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from workbench.core.isosurface import decimate
+from workbench.core import helper_process
 from workbench.core.mesh import Mesh
 from workbench.render.snapshots import to_polydata
 
@@ -42,8 +42,21 @@ def decimated(mesh: Mesh, triangles: int = LIGHT_TRIANGLES) -> Mesh:
     """
     if mesh.n_faces <= triangles:
         return mesh
-    v, f = decimate(mesh.vertices, mesh.faces, triangles)
+    # fast_simplification keeps the GIL for its whole run (~230 ms at 100k
+    # triangles), which would freeze the GUI thread: run it in the helper process
+    v, f = helper_process.call("workbench.core.isosurface:decimate", mesh.vertices, mesh.faces,
+                               triangles)
     return Mesh(v, f)
+
+
+def with_normals(mesh: Mesh) -> Mesh:
+    """``mesh`` with its :attr:`Mesh.vertex_normals` computed (call in a worker).
+
+    The normals are cached on the mesh, so the GUI thread's
+    ``to_polydata(mesh, normals=True)`` only copies them.
+    """
+    _ = mesh.vertex_normals
+    return mesh
 
 
 class InteractiveDetail:
@@ -90,8 +103,9 @@ class InteractiveDetail:
         self._actor, self._full, self._light = actor, full, None
         if actor is None or full is None or mesh is None or mesh.n_faces < MIN_TRIANGLES:
             return
-        self.submit("lod", "Preparing the interactive view …", lambda: decimated(mesh),
-                    lambda light, a=actor: self._ready(a, to_polydata(light)),
+        self.submit("lod", "Preparing the interactive view …",
+                    lambda: with_normals(decimated(mesh)),
+                    lambda light, a=actor: self._ready(a, to_polydata(light, normals=True)),
                     lambda _exc: None)
 
     def _ready(self, actor: Any, light: Any) -> None:

@@ -32,7 +32,8 @@ from PySide6.QtWidgets import (
     QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar, QScrollArea, QSplitter, QWidget,
 )
 
-from workbench.commands.landmarks import PlaceLandmark, ReplaceLandmarkSet
+from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, ReplaceLandmarkSet
+from workbench.core.errors import WorkbenchError
 from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, gc_guard, jobs
 from workbench.qt.actions import build_menus
@@ -49,6 +50,7 @@ from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.picking import ClickPicker
 from workbench.qt.scene import SceneView
 from workbench.qt.workers import TaskRunner, show_fraction
+from workbench.services.landmark_snap import snap_landmark
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
@@ -142,6 +144,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         self.progress.setMaximumWidth(180)
         self.progress.hide()
         self.statusBar().addWidget(self.status_label, 1)
+        self._busy_text, self._status_before = "", ""
         self.statusBar().addPermanentWidget(self.progress)
 
         self.document.case_replaced.connect(self._on_case_replaced)
@@ -154,6 +157,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
             lambda _channel, step, f: show_fraction(self.progress, f, step))
         self.landmarks_panel.selection_changed.connect(lambda _c: self.draw_landmarks())
         self.landmarks_panel.suggest_requested.connect(self.suggest_landmarks)
+        self.landmarks_panel.snap_requested.connect(lambda _code: self.snap_selected())
         self.reconstruct_panel.reconstruct_requested.connect(self.reconstruct)
         self.reconstruct_panel.opacity_changed.connect(lambda v: self.scene.set_opacity("face", v))
         self.scene.layer_changed.connect(lambda layer: layer == "face" and self.reconstruct_panel
@@ -180,10 +184,18 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
             dialogs.show_error(self, what, exc)
 
     def _on_busy(self, busy: bool, text: str) -> None:
+        """Progress bar and the job's text; when idle again, the message from before."""
         self.progress.setVisible(busy)
         if busy:
             self.progress.setRange(0, 0)  # indeterminate until the job reports progress
+            if not self._busy_text:
+                self._status_before = self.status_label.text()
+            self._busy_text = text
             self.status(text)
+            return
+        if self._busy_text and self.status_label.text() == self._busy_text:
+            self.status(self._status_before)   # nothing newer was said meanwhile
+        self._busy_text = ""
 
     def _update_title(self) -> None:
         self.setWindowTitle(self.document.title)
@@ -200,6 +212,32 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
 
     def redo(self) -> None:
         self.document.redo()
+
+    def snap_selected(self) -> None:
+        """Snap the selected skull landmark to the feature its definition names ("Snap", S).
+
+        Computed on the GUI thread (a few ms; the search structures are built
+        in the worker when the skull opens) and pushed as one undoable move.
+        """
+        code = self.landmarks_panel.selected_code()
+        case = self.document.case
+        if not code:
+            self.status("Select a landmark in the list first, then Snap (S).")
+            return
+        if case.specimen.mesh is None:
+            self.status("Open a skull first.")
+            return
+        try:
+            result = snap_landmark(case.specimen.mesh, case.landmarks["skull"], code,
+                                   catalogue=self.catalogue)
+        except (WorkbenchError, ValueError) as exc:
+            self.show_error(f"Could not snap {code}", exc)
+            return
+        if result.moves and not self.document.push(MoveLandmark(
+                surface="skull", code=result.code, position=result.position,
+                label=result.label)):
+            return
+        self.status(result.explanation)
 
     def mark_absent(self) -> None:
         self.landmarks_panel.mark_absent()
@@ -242,15 +280,18 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         self.guide_view.closed_by_user = not on
         self.show_guide_view(on)
 
-    def show_guide_view(self, on: bool) -> None:
-        """Show or hide the second view (guides, orthographic) beside the 3D view."""
+    def show_guide_view(self, on: bool, draw: bool = True) -> None:
+        """Show or hide the second view (guides, orthographic) beside the 3D view.
+
+        ``draw=False`` shows it without drawing (the caller fills it later).
+        """
         self.guide_view.setVisible(bool(on))
         action = self.actions_by_id.get("guide_view")
         if action is not None and action.isChecked() != bool(on):
             action.blockSignals(True)
             action.setChecked(bool(on))
             action.blockSignals(False)
-        if on:
+        if on and draw:
             self.guide_view.refresh(reset_camera=True)
 
     def _skull_actor(self) -> Any:
@@ -369,12 +410,23 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         self.draw_muscles()
         self.draw_guides()
         self.reconstruct_panel.show_result(fit)
-        if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
-            self.show_guide_view(True)
-        self.guide_view.fit_changed()
         self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if self.truth is not None:
             self.compare()
+        # the guide view after the main view's paint: its drawing and paint
+        # would otherwise join that paint in one long block of the event loop
+        self.scene.after_paint(lambda f=fit: self._show_fit_in_guide_view(f))
+
+    def _show_fit_in_guide_view(self, fit: jobs.FitResult) -> None:
+        if fit is not self.fit or getattr(self.guide_view.plotter, "_closed", False):
+            return   # a newer fit (or none) is on its way, or the window closed
+        if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
+            # showing it narrows the main view, which repaints: fill the new
+            # view after that paint, not in the same one
+            self.show_guide_view(True, draw=False)
+            self.scene.after_paint(lambda f=fit: self._show_fit_in_guide_view(f))
+            return
+        self.guide_view.fit_changed()
 
     def draw_face(self) -> None:
         if self.fit is None:
@@ -449,17 +501,22 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
                     f"({self.runner.timings.get('compare', 0):.1f} s)")
 
     # ------------------------------------------------------------ pictures and closing
+    @property
+    def busy(self) -> bool:
+        """A worker job is pending, or drawing is queued behind the next paint."""
+        return self.runner.busy or self.scene.paint_work_pending
+
     def wait_idle(self, timeout_s: float = 120.0) -> bool:
-        """Process events until no worker job is pending (scripts and ``--screenshot``)."""
+        """Process events until nothing is pending (scripts and ``--screenshot``)."""
         import time
 
         end = time.monotonic() + timeout_s
         app = QApplication.instance()
-        while self.runner.busy and time.monotonic() < end:
+        while self.busy and time.monotonic() < end:
             app.processEvents()
             time.sleep(0.01)
         app.processEvents()
-        return not self.runner.busy
+        return not self.busy
 
     def view_rect(self) -> QRect:
         """The 3D view's rectangle in window coordinates (pictures, tests)."""
@@ -483,6 +540,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         self.runner.shutdown()
         self.picker.detach()
         self.detail.detach()
+        self.scene.detach()
         self.guide_view.close_view()
         self.plotter.close()
         super().closeEvent(event)

@@ -41,6 +41,10 @@ HIDDEN_BY_DEFAULT = frozenset({"muscles"})
 #: starting opacity per layer (1.0 where not listed)
 DEFAULT_OPACITY = {"face": 0.6}
 BONE = (0.93, 0.89, 0.80)
+#: smooth shading from the point normals a mesh brings (``to_polydata(mesh,
+#: normals=True)``): pyvista's ``smooth_shading=True`` would run VTK's normals
+#: filter on the GUI thread each time (80 ms for a 100k-triangle skull)
+SMOOTH: dict[str, Any] = {"smooth_shading": False, "interpolation": "phong"}
 SKIN = (0.91, 0.72, 0.60)
 STATUS_COLOURS = {"placed": (0.10, 0.70, 0.25), "suggested": (1.0, 0.55, 0.0)}
 SELECTED = (1.0, 0.95, 0.1)
@@ -70,7 +74,15 @@ class SceneView(QObject):
         self._actors: dict[str, list[Any]] = {}
         self._render_pending = False
         self.renders = 0
+        self.paints = 0   # renders VTK finished (the widget's paints included)
+        self._after_paint: list[Any] = []
+        self._paint_fallback = QTimer(self)
+        self._paint_fallback.setSingleShot(True)
+        self._paint_fallback.timeout.connect(self._run_after_paint)
         plotter.set_background("#2b2f36", top="#59606b")
+        window = getattr(plotter, "render_window", None)
+        self._end_observer = (None if window is None else
+                              window.AddObserver("EndEvent", self._rendered))
 
     # ------------------------------------------------------------ rendering
     def request_render(self) -> None:
@@ -90,6 +102,42 @@ class SceneView(QObject):
         else:
             self.plotter.render()
         self.renders += 1
+
+    def after_paint(self, callback: Any) -> None:
+        """Call ``callback()`` on a later event-loop turn than the view's next render.
+
+        Sequences heavy steps so that each blocks the event loop on its own
+        (with software OpenGL one render of a new scene takes ~200 ms; work
+        queued behind it would lengthen that block).  If no render happens
+        within 0.5 s (a hidden view), the callback runs anyway.
+        """
+        self._after_paint.append(callback)
+        self.request_render()
+        self._paint_fallback.start(500)
+
+    @property
+    def paint_work_pending(self) -> bool:
+        """Callbacks wait for the next paint (see :meth:`after_paint`)."""
+        return bool(self._after_paint)
+
+    def _rendered(self, *_args: Any) -> None:
+        self.paints += 1
+        if self._after_paint:
+            self._paint_fallback.start(1)   # not now: we are inside the paint
+
+    def _run_after_paint(self) -> None:
+        callbacks, self._after_paint = self._after_paint, []
+        for callback in callbacks:
+            callback()
+
+    def detach(self) -> None:
+        """Remove the VTK observer and drop queued callbacks (the window closes)."""
+        self._after_paint = []
+        self._paint_fallback.stop()
+        window = getattr(self.plotter, "render_window", None)
+        if self._end_observer is not None and window is not None:
+            window.RemoveObserver(self._end_observer)
+        self._end_observer = None
 
     # ------------------------------------------------------------ layers
     def actors(self, layer: str) -> list[Any]:
@@ -172,7 +220,9 @@ class SceneView(QObject):
             focus = np.asarray(self.plotter.center, float)
             self.plotter.camera_position = [tuple(focus + 600.0 * a), tuple(focus),
                                             tuple(np.asarray(superior, float))]
-        self.plotter.reset_camera(render=False)
+        # Plotter.reset_camera always renders (pyvista 0.49 ignores render=False);
+        # the renderer's own reset does not, so the next paint draws it
+        self.plotter.renderer.reset_camera(render=False)
         self.request_render()
 
     # ------------------------------------------------------------ content
@@ -180,9 +230,8 @@ class SceneView(QObject):
         self.clear("skull")
         if mesh is None:
             return None
-        actor = self.plotter.add_mesh(to_polydata(mesh), color=BONE, smooth_shading=True,
-                                      pickable=True,
-                                      name="layer_skull", render=False)
+        actor = self.plotter.add_mesh(to_polydata(mesh, normals=True), color=BONE, **SMOOTH,
+                                      pickable=True, name="layer_skull", render=False)
         self._add("skull", actor)
         self.request_render()
         return actor
@@ -239,13 +288,13 @@ class SceneView(QObject):
         self.clear("face")
         if mesh is None:
             return
-        poly = to_polydata(mesh)
+        poly = to_polydata(mesh, normals=True)
         kw: dict[str, Any] = {"color": SKIN}
         if scalars is not None:
             poly.point_data[title or "mm"] = np.asarray(scalars, float)
             kw = {"scalars": title or "mm", "cmap": "viridis",
                   "scalar_bar_args": {"title": title or "mm", "vertical": True}}
-        actor = self.plotter.add_mesh(poly, smooth_shading=True,
+        actor = self.plotter.add_mesh(poly, **SMOOTH,
                                       pickable=False, render=False, name="layer_face", **kw)
         self._add("face", actor)
         self.request_render()
@@ -256,14 +305,14 @@ class SceneView(QObject):
         self.clear("truth")
         if mesh is None:
             return
-        poly = to_polydata(mesh)
+        poly = to_polydata(mesh, normals=True)
         kw: dict[str, Any] = {"color": (0.7, 0.7, 0.75)}
         if signed_mm is not None:
             poly.point_data["signed mm"] = np.asarray(signed_mm, float)
             kw = {"scalars": "signed mm", "cmap": "RdBu_r", "clim": (-limit_mm, limit_mm),
                   "nan_color": (0.6, 0.6, 0.6),
                   "scalar_bar_args": {"title": "signed mm", "vertical": True}}
-        actor = self.plotter.add_mesh(poly, smooth_shading=True,
+        actor = self.plotter.add_mesh(poly, **SMOOTH,
                                       pickable=False, render=False, name="layer_truth", **kw)
         self._add("truth", actor)
         self.request_render()
@@ -366,16 +415,14 @@ def _resampled_grid(rows: list[np.ndarray]) -> np.ndarray | None:
 def _vertex_normals(points: np.ndarray, data: Any) -> np.ndarray:
     """Unit vertex normals of the triangles of ``data`` at ``points``.
 
-    Sum of the unit normals of the faces around each vertex, as
-    ``vtkPolyDataNormals`` (which pyvista's smooth shading used) computes them,
-    so the shading does not jump on the first update.
+    Area-weighted, as :attr:`Mesh.vertex_normals` (the normals the surface
+    was first drawn with), so the shading does not jump on the first update.
     """
     from vtkmodules.util.numpy_support import vtk_to_numpy
 
     cells = vtk_to_numpy(data.GetPolys().GetConnectivityArray()).reshape(-1, 3)
     t = points[cells]
-    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    cross /= np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
+    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])   # length = 2 × area
     n = len(points)
     flat = cells.ravel()
     out = np.column_stack([np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n)

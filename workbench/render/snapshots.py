@@ -47,11 +47,21 @@ def _prefer_headless_gl() -> None:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 
-def to_polydata(mesh: Mesh):  # noqa: ANN201 - pyvista type
+def to_polydata(mesh: Mesh, *, normals: bool = False):  # noqa: ANN201 - pyvista type
+    """``mesh`` as ``pyvista.PolyData`` (mm, same frame).
+
+    With ``normals`` the mesh's cached :attr:`Mesh.vertex_normals` become the
+    active point normals, so a renderer can shade it smoothly (Gouraud)
+    without running VTK's normals filter on the drawing thread.
+    """
     import pyvista as pv
 
-    faces = np.hstack([np.full((mesh.n_faces, 1), 3, np.int64), mesh.faces]).ravel()
-    return pv.PolyData(np.asarray(mesh.vertices), faces)
+    poly = pv.PolyData.from_regular_faces(np.asarray(mesh.vertices, float),
+                                          np.asarray(mesh.faces, np.int64))
+    if normals:
+        poly.point_data["Normals"] = np.asarray(mesh.vertex_normals, float)
+        poly.point_data.active_normals_name = "Normals"
+    return poly
 
 
 def render_surfaces(

@@ -237,7 +237,7 @@ def interpolated_sites(skull: Mesh, landmarks: LandmarkSet, *,
         reach.append((out, 0.25 * chord))
     sites = []
     if rules:
-        caster = caster or RayCaster(skull)
+        caster = caster or RayCaster.shared(skull)
         o, d = np.asarray(origins), np.asarray(directions)
         limit = np.array([a + b for a, b in reach])
         hits = caster.first_hits(o, -d, max_distance=float(limit.max()), cull_backfaces=True)

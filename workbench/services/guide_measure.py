@@ -283,7 +283,7 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
     m = SkullMeasures()
     p = {c: _pos(lms, c) for c in lms.codes}
     p = {c: v for c, v in p.items() if v is not None}
-    caster = RayCaster(skull) if skull is not None and skull.n_faces else None
+    caster = RayCaster.shared(skull) if skull is not None and skull.n_faces else None
     z0 = float(skull.vertices[:, 2].max() + 5.0) if caster else 0.0
 
     # nose width: the widest aperture (frontal rays on the mesh, else the bony alare)

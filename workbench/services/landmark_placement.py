@@ -4,7 +4,9 @@ The scriptable side of the landmark editor (Kähler §8.6.4: "pick a point on
 the skull surface to create a landmark, then slide it on the surface to
 fine-tune").  Every position handed in is snapped to the surface (closest
 point, via the mesh's spatial index) before it becomes a command on the
-case's one undo stack, so a landmark never floats off the bone.  Codes are
+case's one undo stack, so a landmark never floats off the bone.
+:meth:`SurfacePlacement.snap_to_feature` moves a skull landmark to the
+feature its definition names (:mod:`workbench.services.landmark_snap`).  Codes are
 checked against the landmark catalogue (labels such as ``"Nasion"`` or
 ``"zy l"`` are normalised to their codes).
 
@@ -24,6 +26,8 @@ from workbench.core.landmarks import Landmark
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
+from workbench.io.snap_rules import load_snap_rules
+from workbench.services.landmark_snap import SnapResult, snap_landmark
 
 #: a point handed in farther than this from the surface is refused, not snapped
 MAX_SNAP_MM = 20.0
@@ -98,6 +102,49 @@ class SurfacePlacement:
         for _ in range(steps):
             p = self.snap(p + step)
         return self.move(code, p)
+
+    def snap_to_feature(self, code: str) -> SnapResult:
+        """Move skull landmark ``code`` to the feature its definition names, near where it is.
+
+        One undo step labelled e.g. ``"Snap g to most anterior midline point"``
+        (a ``MoveLandmark``; the landmark becomes ``placed``); nothing is
+        pushed when the snap would move it less than 0.01 mm.  Needs the head
+        frame (both porions and an orbitale); positions mm, input frame.  See
+        :func:`~workbench.services.landmark_snap.snap_landmark`.
+        """
+        if self.surface != "skull":
+            raise LandmarkError("snapping to a feature is defined for skull landmarks only")
+        result = snap_landmark(self.mesh, self.stack.case.landmarks["skull"], self.code(code),
+                               catalogue=self.catalogue)
+        if result.moves:
+            self.stack.push(MoveLandmark(surface="skull", code=result.code,
+                                         position=result.position, label=result.label))
+        return result
+
+    def snap_all_to_features(self, codes: list[str] | None = None) -> list[SnapResult]:
+        """Snap several skull landmarks at once, as one undo step (mm, input frame).
+
+        ``codes`` default: every placed or suggested landmark that has a snap
+        rule.  All are computed from the landmarks as they are before the
+        call (same head frame for all, order does not matter), then applied.
+        """
+        if self.surface != "skull":
+            raise LandmarkError("snapping to a feature is defined for skull landmarks only")
+        current = self.stack.case.landmarks["skull"]
+        if codes is None:
+            rules = load_snap_rules()
+            codes = [lm.code for lm in current if lm.is_defined and lm.code in rules]
+        results = [snap_landmark(self.mesh, current, self.code(c), catalogue=self.catalogue)
+                   for c in codes]
+        moves = [MoveLandmark(surface="skull", code=r.code, position=r.position, label=r.label)
+                 for r in results if r.moves]
+        if len(moves) == 1:
+            self.stack.push(moves[0])
+        elif moves:
+            with self.stack.group(f"Snap {len(moves)} skull landmarks to their features"):
+                for move in moves:
+                    self.stack.push(move)
+        return results
 
     def mark_absent(self, code: str) -> Landmark:
         """The anatomy is missing or damaged: the landmark gets no position and no dowel."""

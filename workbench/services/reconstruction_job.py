@@ -335,6 +335,11 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
     }
 
 
+#: the frame ``template.json`` records for a fitted head written by the jobs
+FITTED_HEAD_FRAME_TEXT = ("the skull file's frame (input frame of the evidence), mm; the fit "
+                          "ran in the Frankfort head frame and was mapped back")
+
+
 def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
     """The fitted head with every part mapped into the skull file's frame."""
     h = recon.head
@@ -368,7 +373,7 @@ def write_outputs(result: JobResult, out: str | PathLike[str]) -> dict[str, Path
     if k != 1.0:
         files["face_mm"] = write_mesh(out / "face_mm.ply", face)
     head_in = head_in_input_frame(result.recon)
-    export_template(head_in, out / "head")
+    export_template(head_in, out / "head", frame=FITTED_HEAD_FRAME_TEXT)
     files["head"] = out / "head"
     write_mrk_json(out / "skull_landmarks.mrk.json", result.opened.case.landmarks["skull"],
                    coordinate_system="RAS")

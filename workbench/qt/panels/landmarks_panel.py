@@ -2,8 +2,10 @@
 
 Select a row, then click on the skull (a click, not a drag) to place it:
 the window turns the pick into a :class:`~workbench.commands.landmarks.PlaceLandmark`.
-"Mark absent" pushes ``SetLandmarkStatus(absent)``; "Suggest the rest" asks
-the window to run the automatic transfer in a worker thread.  The panel only
+"Mark absent" pushes ``SetLandmarkStatus(absent)``; "Snap" asks the window to
+move the selected landmark to the feature its definition names
+(:mod:`workbench.services.landmark_snap`); "Suggest the rest" asks the window
+to run the automatic transfer in a worker thread.  The panel only
 issues commands and requests; it redraws itself from the case's landmarks.
 Positions are mm in the specimen's input frame.
 """
@@ -36,10 +38,13 @@ class LandmarksPanel(QWidget):
     -------
     selection_changed(str)
         Code of the selected landmark ('' for none).
+    snap_requested(str)
+        Code of the landmark to snap to its feature (the selected one).
     suggest_requested()
     """
 
     selection_changed = Signal(str)
+    snap_requested = Signal(str)
     suggest_requested = Signal()
 
     def __init__(self, document: Document, catalogue: LandmarkCatalogue,
@@ -78,6 +83,11 @@ class LandmarksPanel(QWidget):
         self.absent_button = QPushButton("Mark absent")
         self.absent_button.setToolTip("The anatomy is missing or damaged here (A)")
         self.absent_button.clicked.connect(self.mark_absent)
+        self.snap_button = QPushButton("Snap")
+        self.snap_button.setToolTip("Move the selected landmark to the feature its definition "
+                                    "names, near where it is, e.g. glabella to the most "
+                                    "anterior midline point (S)")
+        self.snap_button.clicked.connect(self.request_snap)
         self.delete_button = QPushButton("Clear")
         self.delete_button.setToolTip("Forget this landmark (back to missing)")
         self.delete_button.clicked.connect(self.clear_selected)
@@ -86,7 +96,7 @@ class LandmarksPanel(QWidget):
                                        "placed landmarks are kept and guide the transfer")
         self.suggest_button.clicked.connect(self.suggest_requested.emit)
         buttons = QHBoxLayout()
-        for b in (self.absent_button, self.delete_button, self.suggest_button):
+        for b in (self.absent_button, self.snap_button, self.delete_button, self.suggest_button):
             buttons.addWidget(b)
 
         self.anterior = QComboBox()
@@ -182,6 +192,11 @@ class LandmarksPanel(QWidget):
         code = self.selected_code()
         if code:
             self.document.push(SetLandmarkStatus(surface="skull", code=code, status="absent"))
+
+    def request_snap(self) -> None:
+        code = self.selected_code()
+        if code:
+            self.snap_requested.emit(code)
 
     def clear_selected(self) -> None:
         code = self.selected_code()

@@ -1,0 +1,164 @@
+"""Run a C extension that holds the GIL in a helper process.
+
+Why: some compiled libraries keep Python's global interpreter lock for their
+whole call.  ``fast_simplification.simplify`` holds it for ~230 ms on a
+100k-triangle skull (measured; numpy and scipy release it in their long
+loops).  Called from a worker thread of the desktop window, such a call
+freezes the GUI thread for as long, whatever thread it runs on.  Run in a
+separate process instead, the worker thread only waits on a pipe, which
+releases the lock.
+
+How: one long-lived child (``python -m workbench.core.helper_process``),
+started on first use, reads requests from stdin and answers on stdout:
+length-prefixed pickles of ``(function name, args)`` → ``(ok, value)``.
+Only functions listed in :data:`ALLOWED` may be called.  Calls are
+serialised (one at a time).  If the child cannot be started, the call runs
+in-process instead (same result, only the GUI may stutter); a child that
+dies during a call raises ``RuntimeError`` (the input is not retried here,
+it might crash this process too) and is replaced at the next call.
+:func:`status` says why the last call did not run in the child.  The child
+is stopped at exit.
+
+Arrays cross as pickles (a 100k-triangle mesh is ~3.6 MB: a few ms).
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import importlib
+import os
+import pickle
+import struct
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any, BinaryIO
+
+#: the functions a child may run: "module:function"
+ALLOWED = frozenset({"workbench.core.isosurface:decimate"})
+
+_HEADER = struct.Struct("<Q")
+_lock = threading.Lock()
+_child: subprocess.Popen | None = None
+_problem = ""
+
+
+def _resolve(name: str) -> Callable[..., Any]:
+    if name not in ALLOWED:
+        raise ValueError(f"{name!r} may not run in the helper process")
+    module, func = name.split(":")
+    return getattr(importlib.import_module(module), func)
+
+
+def _send(stream: BinaryIO, obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def _receive(stream: BinaryIO) -> Any:
+    head = stream.read(_HEADER.size)
+    if len(head) < _HEADER.size:
+        raise EOFError("the helper process closed its pipe")
+    size = _HEADER.unpack(head)[0]
+    data = stream.read(size)
+    if len(data) < size:
+        raise EOFError("the helper process closed its pipe mid-message")
+    return pickle.loads(data)  # noqa: S301 - our own child, over our own pipe
+
+
+def _start() -> subprocess.Popen:
+    env = dict(os.environ)
+    # the child must import this package from wherever the parent did
+    env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+    env.setdefault("OMP_NUM_THREADS", "1")
+    return subprocess.Popen([sys.executable, "-m", "workbench.core.helper_process"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
+                            close_fds=True)
+
+
+def _stop() -> None:
+    global _child
+    child, _child = _child, None
+    if child is None:
+        return
+    try:
+        child.stdin.close()  # type: ignore[union-attr]  # the child's read ends, it exits
+        child.wait(timeout=2.0)
+    except (OSError, subprocess.TimeoutExpired):
+        child.kill()
+        child.wait()
+    finally:
+        for pipe in (child.stdin, child.stdout):
+            with contextlib.suppress(OSError):
+                pipe.close()  # type: ignore[union-attr]
+
+
+atexit.register(_stop)
+
+
+def call(name: str, *args: Any) -> Any:
+    """``name(*args)`` in the helper process (in-process if it is unavailable).
+
+    ``name`` is ``"module:function"`` from :data:`ALLOWED`.  Exceptions
+    raised by the function are raised here again.  Thread-safe.
+    """
+    global _child, _problem
+    fn = _resolve(name)
+    if os.environ.get("WORKBENCH_NO_HELPER_PROCESS"):
+        return fn(*args)
+    with _lock:
+        if _child is None or _child.poll() is not None:   # first call, or the child died
+            _stop()
+            try:
+                _child = _start()
+            except OSError as exc:
+                _problem = f"helper process could not start ({exc}); running in-process"
+                return fn(*args)
+        try:
+            _send(_child.stdin, (name, args))  # type: ignore[arg-type]
+            ok, value = _receive(_child.stdout)  # type: ignore[arg-type]
+        except Exception as exc:  # noqa: BLE001 - broken pipe, crashed child, odd reply
+            # not re-run in-process: an input that crashed the child would
+            # crash this process too (fast_simplification does not check indices)
+            _stop()
+            _problem = f"helper process failed during {name} ({exc})"
+            raise RuntimeError(f"{name.split(':')[1]} failed in the helper process; the "
+                               "input mesh may be corrupt") from exc
+        _problem = ""
+    if ok:
+        return value
+    raise value
+
+
+def status() -> str:
+    """Empty when the last call ran in the helper process; else why it did not."""
+    return _problem
+
+
+def _serve() -> None:
+    """The child's loop: one request at a time until stdin closes."""
+    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # stray prints must not corrupt the reply stream
+    while True:
+        try:
+            name, args = _receive(stdin)
+        except EOFError:
+            return
+        try:
+            reply = (True, _resolve(name)(*args))
+        except Exception as exc:  # noqa: BLE001 - handed back to the caller
+            reply = (False, exc)
+        try:
+            if not reply[0]:  # exceptions with odd constructors may not unpickle
+                pickle.loads(pickle.dumps(reply))  # noqa: S301
+        except Exception:  # noqa: BLE001
+            reply = (False, RuntimeError(f"{name}: {type(reply[1]).__name__}: {reply[1]}"))
+        _send(stdout, reply)
+
+
+if __name__ == "__main__":
+    _serve()
