@@ -25,15 +25,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from PySide6.QtCore import QPoint, QRect, Qt
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar, QScrollArea, QSplitter, QWidget,
 )
 
-from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, ReplaceLandmarkSet
-from workbench.core.errors import WorkbenchError
 from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, gc_guard, jobs
 from workbench.qt.actions import build_menus
@@ -41,6 +38,7 @@ from workbench.qt.document import Document
 from workbench.qt.drag_ops import DragOpsMixin
 from workbench.qt.file_ops import FileOpsMixin
 from workbench.qt.guide_view import GuideView
+from workbench.qt.landmark_ops import LandmarkOpsMixin
 from workbench.qt.lod import InteractiveDetail
 from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
@@ -50,13 +48,12 @@ from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.picking import ClickPicker
 from workbench.qt.scene import SceneView
 from workbench.qt.workers import TaskRunner, show_fraction
-from workbench.services.landmark_snap import snap_landmark
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
 
 
-class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
+class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
     """See the module docstring.
 
     Parameters
@@ -213,32 +210,6 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
     def redo(self) -> None:
         self.document.redo()
 
-    def snap_selected(self) -> None:
-        """Snap the selected skull landmark to the feature its definition names ("Snap", S).
-
-        Computed on the GUI thread (a few ms; the search structures are built
-        in the worker when the skull opens) and pushed as one undoable move.
-        """
-        code = self.landmarks_panel.selected_code()
-        case = self.document.case
-        if not code:
-            self.status("Select a landmark in the list first, then Snap (S).")
-            return
-        if case.specimen.mesh is None:
-            self.status("Open a skull first.")
-            return
-        try:
-            result = snap_landmark(case.specimen.mesh, case.landmarks["skull"], code,
-                                   catalogue=self.catalogue)
-        except (WorkbenchError, ValueError) as exc:
-            self.show_error(f"Could not snap {code}", exc)
-            return
-        if result.moves and not self.document.push(MoveLandmark(
-                surface="skull", code=result.code, position=result.position,
-                label=result.label)):
-            return
-        self.status(result.explanation)
-
     def mark_absent(self) -> None:
         self.landmarks_panel.mark_absent()
 
@@ -310,51 +281,6 @@ class MainWindow(FileOpsMixin, DragOpsMixin, QMainWindow):
         actor = self.scene.show_skull(self.document.case.specimen.mesh)
         self._skull_poly = None if actor is None else pv.wrap(actor.GetMapper().GetInput())
         self.detail.set_skull(actor, self._skull_poly, self.document.case.specimen.mesh)
-
-    def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None:
-        """Landmarks of the case; ``override`` ({code: position}) draws a drag in progress."""
-        lms = self.document.case.landmarks["skull"].defined()
-        code = self.landmarks_panel.selected_code()
-        override = override or {}
-        positions = np.array([override.get(lm.code, lm.position) for lm in lms], float)
-        selected, label = None, ""
-        if code and code in lms:
-            selected = np.asarray(override.get(code, lms[code].position), float)
-            entry = self.catalogue.entry(code, "skull")
-            # no label while dragging: VTK re-places labels every frame (slow)
-            label = "" if override else f"{code}: {entry.name}"
-        self.scene.show_landmarks(positions.reshape(-1, 3), [lm.status for lm in lms],
-                                  selected, label)
-
-    # ------------------------------------------------------------ landmarks
-    def on_pick(self, point: np.ndarray) -> None:
-        """A click on the skull: place the selected landmark there."""
-        code = self.landmarks_panel.selected_code()
-        if not code or not self.landmarks_panel.place_on_click.isChecked():
-            self.status("Select a landmark in the list first, then click on the skull.")
-            return
-        self.document.push(PlaceLandmark(surface="skull", code=code, position=point))
-
-    def suggest_landmarks(self) -> None:
-        """Run the automatic transfer in the worker; apply it as one undoable step."""
-        case = self.document.case
-        if case.specimen.mesh is None:
-            self.status("Open a skull first.")
-            return
-        skull, current = case.specimen.mesh, case.landmarks["skull"]
-        sex, orient = str(jobs.param(case, "sex")), jobs.orientation(case)
-        self.runner.submit("suggest", "Suggesting skull landmarks …",
-                           lambda: jobs.suggest_landmarks(skull, current, sex, orient),
-                           self._apply_suggestion,
-                           lambda exc: self.show_error("Could not suggest landmarks", exc))
-
-    def _apply_suggestion(self, result: tuple) -> None:
-        new_set, transfer = result
-        if self.document.push(ReplaceLandmarkSet("skull", new_set, "Suggest skull landmarks")):
-            n = sum(lm.status == "suggested" for lm in new_set)
-            self.status(f"Suggested {n} landmarks (residual {transfer.warp_residual_mm:.2f} mm, "
-                        f"{self.runner.timings.get('suggest', 0):.1f} s)")
-            self.messages.extend(transfer.warnings)
 
     # ------------------------------------------------------------ dowels
     def schedule_dowels(self) -> None:

@@ -1,0 +1,101 @@
+"""Skull landmark operations of the main window: draw, place by click, suggest, snap.
+
+A mixin of :class:`workbench.qt.main_window.MainWindow`; every change is
+an undoable command pushed on the window's document.  Suggesting runs in
+the worker; snapping is computed on the GUI thread (a few ms: the search
+structures are built in the worker when the skull opens).  Positions are mm
+in the skull file's (input) frame.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, ReplaceLandmarkSet
+from workbench.core.errors import WorkbenchError
+from workbench.qt import jobs
+from workbench.services.landmark_snap import snap_landmark
+
+
+class LandmarkOpsMixin:
+    """Landmark drawing and editing for the main window (see the module docstring)."""
+
+    document: Any
+    scene: Any
+    catalogue: Any
+    landmarks_panel: Any
+    runner: Any
+    messages: list[str]
+
+    def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None:
+        """Landmarks of the case; ``override`` ({code: position}) draws a drag in progress."""
+        lms = self.document.case.landmarks["skull"].defined()
+        code = self.landmarks_panel.selected_code()
+        override = override or {}
+        positions = np.array([override.get(lm.code, lm.position) for lm in lms], float)
+        selected, label = None, ""
+        if code and code in lms:
+            selected = np.asarray(override.get(code, lms[code].position), float)
+            entry = self.catalogue.entry(code, "skull")
+            # no label while dragging: VTK re-places labels every frame (slow)
+            label = "" if override else f"{code}: {entry.name}"
+        self.scene.show_landmarks(positions.reshape(-1, 3), [lm.status for lm in lms],
+                                  selected, label)
+
+    # ------------------------------------------------------------ landmarks
+    def on_pick(self, point: np.ndarray) -> None:
+        """A click on the skull: place the selected landmark there."""
+        code = self.landmarks_panel.selected_code()
+        if not code or not self.landmarks_panel.place_on_click.isChecked():
+            self.status("Select a landmark in the list first, then click on the skull.")
+            return
+        self.document.push(PlaceLandmark(surface="skull", code=code, position=point))
+
+    def suggest_landmarks(self) -> None:
+        """Run the automatic transfer in the worker; apply it as one undoable step."""
+        case = self.document.case
+        if case.specimen.mesh is None:
+            self.status("Open a skull first.")
+            return
+        skull, current = case.specimen.mesh, case.landmarks["skull"]
+        sex, orient = str(jobs.param(case, "sex")), jobs.orientation(case)
+        self.runner.submit("suggest", "Suggesting skull landmarks …",
+                           lambda: jobs.suggest_landmarks(skull, current, sex, orient),
+                           self._apply_suggestion,
+                           lambda exc: self.show_error("Could not suggest landmarks", exc))
+
+    def _apply_suggestion(self, result: tuple) -> None:
+        new_set, transfer = result
+        if self.document.push(ReplaceLandmarkSet("skull", new_set, "Suggest skull landmarks")):
+            n = sum(lm.status == "suggested" for lm in new_set)
+            self.status(f"Suggested {n} landmarks (residual {transfer.warp_residual_mm:.2f} mm, "
+                        f"{self.runner.timings.get('suggest', 0):.1f} s)")
+            self.messages.extend(transfer.warnings)
+
+    def snap_selected(self) -> None:
+        """Snap the selected skull landmark to the feature its definition names ("Snap", S).
+
+        Computed on the GUI thread (a few ms; the search structures are built
+        in the worker when the skull opens) and pushed as one undoable move.
+        """
+        code = self.landmarks_panel.selected_code()
+        case = self.document.case
+        if not code:
+            self.status("Select a landmark in the list first, then Snap (S).")
+            return
+        if case.specimen.mesh is None:
+            self.status("Open a skull first.")
+            return
+        try:
+            result = snap_landmark(case.specimen.mesh, case.landmarks["skull"], code,
+                                   catalogue=self.catalogue)
+        except (WorkbenchError, ValueError) as exc:
+            self.show_error(f"Could not snap {code}", exc)
+            return
+        if result.moves and not self.document.push(MoveLandmark(
+                surface="skull", code=result.code, position=result.position,
+                label=result.label)):
+            return
+        self.status(result.explanation)
