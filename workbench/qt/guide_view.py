@@ -149,10 +149,15 @@ class GuideView(QWidget):
         self.drawn_fit = fit
         if reset_camera:
             self._reset_camera()
-        # one render, in the widget's paint, asked for on the next turn: the
+        # one render, in the widget's paint, asked for on a later turn: the
         # drawing above and the (software-GL) paint then block the event
-        # loop one after the other, not as one long stretch
-        QTimer.singleShot(0, p.update)
+        # loop one after the other, not as one long stretch; and after the
+        # main view's pending paint (views of one window paint together)
+        scene = getattr(self.window, "scene", None)
+        if scene is not None and scene.render_queued:
+            scene.after_paint(p.update, render=False)
+        else:
+            QTimer.singleShot(0, p.update)
 
     def _front(self) -> float:
         return float(self.window.fit.recon.head.skin.vertices[:, 2].max()) + 20.0

@@ -75,6 +75,7 @@ class SceneView(QObject):
         self._render_pending = False
         self.renders = 0
         self.paints = 0   # renders VTK finished (the widget's paints included)
+        self._awaiting_paint = False
         self._after_paint: list[Any] = []
         self._paint_fallback = QTimer(self)
         self._paint_fallback.setSingleShot(True)
@@ -98,12 +99,18 @@ class SceneView(QObject):
         if isinstance(self.plotter, QWidget):
             # the widget renders in its paint; rendering here as well would
             # draw every frame twice (pyvistaqt's paintGL always renders)
+            self._awaiting_paint = self.plotter.isVisible()
             self.plotter.update()
         else:
             self.plotter.render()
         self.renders += 1
 
-    def after_paint(self, callback: Any) -> None:
+    @property
+    def render_queued(self) -> bool:
+        """A render was asked for and the view has not painted it yet."""
+        return self._render_pending or self._awaiting_paint
+
+    def after_paint(self, callback: Any, render: bool = True) -> None:
         """Call ``callback()`` on a later event-loop turn than the view's next render.
 
         Sequences heavy steps so that each blocks the event loop on its own
@@ -112,7 +119,8 @@ class SceneView(QObject):
         within 0.5 s (a hidden view), the callback runs anyway.
         """
         self._after_paint.append(callback)
-        self.request_render()
+        if render:
+            self.request_render()
         self._paint_fallback.start(500)
 
     @property
@@ -122,6 +130,7 @@ class SceneView(QObject):
 
     def _rendered(self, *_args: Any) -> None:
         self.paints += 1
+        self._awaiting_paint = False
         if self._after_paint:
             self._paint_fallback.start(1)   # not now: we are inside the paint
 
