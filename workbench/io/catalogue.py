@@ -246,16 +246,24 @@ def load_catalogue(path: str | os.PathLike[str] | None = None) -> LandmarkCatalo
     return _CACHE[key]
 
 
-def _read(csv_path: Path) -> LandmarkCatalogue:
+def read_table_rows(path: Path, columns: tuple[str, ...]) -> list[dict[str, str]]:
+    """Rows of a UTF-8 CSV table whose header must be exactly ``columns``.
+
+    InputError naming ``path`` for wrong columns or an unreadable file.
+    """
     try:
-        with open(csv_path, newline="", encoding="utf-8") as fh:
+        with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != COLUMNS:
-                raise InputError(csv_path, f"columns must be {', '.join(COLUMNS)}; "
-                                           f"found {', '.join(reader.fieldnames or ())}")
-            rows = list(reader)
+            if tuple(reader.fieldnames or ()) != columns:
+                raise InputError(path, f"columns must be {', '.join(columns)}; "
+                                       f"found {', '.join(reader.fieldnames or ())}")
+            return list(reader)
     except (UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(csv_path, f"not a readable CSV table ({exc})") from None
+        raise InputError(path, f"not a readable CSV table ({exc})") from None
+
+
+def _read(csv_path: Path) -> LandmarkCatalogue:
+    rows = read_table_rows(csv_path, COLUMNS)
     meta_path = csv_path.with_name(csv_path.name.removesuffix(".csv") + ".meta.json")
     sources: dict[str, str] | None = None
     if meta_path.exists():

@@ -15,7 +15,6 @@ subject's left, y up perpendicular to Frankfort Horizontal, z forward; mm);
 
 from __future__ import annotations
 
-import csv
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.errors import InputError
-from workbench.io.catalogue import LandmarkCatalogue, default_catalogue_path, load_catalogue
+from workbench.io.catalogue import (
+    LandmarkCatalogue, default_catalogue_path, load_catalogue, read_table_rows,
+)
 
 COLUMNS = ("code", "rule", "direction", "radius_mm", "midline", "between", "source", "note")
 RULES = ("extremum", "deepest")
@@ -124,15 +125,7 @@ def load_snap_rules(path: str | os.PathLike[str] | None = None,
 
 
 def _read(path: Path, catalogue: LandmarkCatalogue) -> dict[str, SnapRule]:
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != COLUMNS:
-                raise InputError(path, f"columns must be {', '.join(COLUMNS)}; "
-                                       f"found {', '.join(reader.fieldnames or ())}")
-            rows = list(reader)
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(path, f"not a readable CSV table ({exc})") from None
+    rows = read_table_rows(path, COLUMNS)
     rules: dict[str, SnapRule] = {}
     for line, row in enumerate(rows, start=2):
         rule = _row(path, line, row, catalogue)

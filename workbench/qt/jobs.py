@@ -323,11 +323,11 @@ def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
     head = head_in_input_frame(fit.recon)
     for path in export_template(head, out / "head", frame=FITTED_HEAD_FRAME_TEXT):
         files[f"head/{path.name}"] = path
+    others = [e for e in formats if e != "ply"]   # the pack already wrote the PLY files
     for name, parts in FILES.items():
-        stem = Path(name).stem
-        for ext in (e for e in formats if e != "ply"):
-            files[f"head/{stem}.{ext}"] = write_mesh(
-                out / "head" / f"{stem}.{ext}", concatenate([head.meshes[p] for p in parts]))
+        stem, mesh = Path(name).stem, concatenate([head.meshes[p] for p in parts])
+        for ext in others:
+            files[f"head/{stem}.{ext}"] = write_mesh(out / "head" / f"{stem}.{ext}", mesh)
     if report:
         files.update(_report(out, case, fit, notes or []))
     return files

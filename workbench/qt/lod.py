@@ -35,10 +35,10 @@ Submit = Callable[..., None]
 def decimated(mesh: Mesh, triangles: int = LIGHT_TRIANGLES) -> Mesh:
     """A copy of ``mesh`` with about ``triangles`` triangles (quadric decimation, mm kept).
 
-    Pure numpy/C (``fast_simplification``), no VTK: it runs in the worker
-    thread, and VTK filters running there beside the GUI thread's rendering
-    corrupted the heap (observed under Xvfb).  The GUI thread turns the
-    result into VTK data.
+    ``fast_simplification``, no VTK (VTK filters in a worker thread beside
+    the GUI thread's rendering corrupted the heap, observed under Xvfb), run
+    in the helper process because it holds the GIL throughout.  Called from
+    the worker thread; the GUI thread turns the result into VTK data.
     """
     if mesh.n_faces <= triangles:
         return mesh
