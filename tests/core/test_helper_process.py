@@ -53,3 +53,36 @@ def test_a_dead_child_is_replaced_and_a_missing_one_falls_back(skull, monkeypatc
     _, f = helper_process.call(DECIMATE, skull.vertices, skull.faces, 30_000)
     assert len(f) <= 30_000 and helper_process._child is None
     assert "in-process" in helper_process.status()
+
+
+def test_run_stays_in_process_unless_the_thread_opted_in(skull, monkeypatch) -> None:  # noqa: ANN001
+    """Scripts and the command line never start a second process; the
+    window's worker threads (which call offload_here) use the helper."""
+    import threading
+
+    monkeypatch.delenv("WORKBENCH_NO_HELPER_PROCESS", raising=False)
+    helper_process._stop()
+    _, f = helper_process.run(DECIMATE, skull.vertices, skull.faces, 30_000)
+    assert len(f) <= 30_000 and helper_process._child is None and not helper_process.offloading()
+
+    seen = {}
+
+    def worker() -> None:
+        helper_process.offload_here()
+        seen["offloading"] = helper_process.offloading()
+        seen["faces"] = len(helper_process.run(DECIMATE, skull.vertices, skull.faces, 30_000)[1])
+        seen["child"] = helper_process._child
+
+    t = threading.Thread(target=worker)
+    t.start()
+    t.join()
+    assert seen["offloading"] and seen["faces"] <= 30_000 and seen["child"] is not None
+    assert not helper_process.offloading()   # per thread: this one did not opt in
+
+
+def test_only_marked_workbench_functions_may_run() -> None:
+    for name in ("os:system", "workbench.core.mesh:Mesh", "workbench.core.isosurface:nothing",
+                 "workbench.core.isosurface", "builtins:eval"):
+        with pytest.raises(ValueError, match="may not run"):
+            helper_process._resolve(name)
+    assert helper_process._resolve(DECIMATE) is decimate

@@ -157,3 +157,76 @@ def test_directions_are_normalised_and_validated():
         caster.first_hits(np.zeros((2, 3)), np.ones((3, 3)))
     with pytest.raises(ValueError):
         RayCaster(sphere_mesh(), "optix")
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_a_rigid_copy_casts_on_the_originals_scene_with_the_same_hits(skull, mirror):
+    """Frame-aligned copies of a skull (a fit makes two) borrow the skull's
+    scene; hits, distances and culling equal those of a scene of their own."""
+    m = np.eye(4)
+    m[:3, :3] = _rotation([0.3, 1.0, -0.2], 0.7) @ (np.diag([-1.0, 1, 1]) if mirror else np.eye(3))
+    m[:3, 3] = [12.0, -40.0, 7.5]
+    copy = skull.transformed(m)
+    again = copy.transformed(np.linalg.inv(m))     # chains back to the first mesh
+    assert copy.rigid_source[0] is skull and again.rigid_source[0] is skull
+    np.testing.assert_allclose(again.rigid_source[1], np.eye(4), atol=1e-12)
+    assert skull.scaled(2.0).rigid_source is None
+    assert skull.transformed(np.diag([2.0, 2.0, 2.0, 1.0])).rigid_source is None
+
+    borrowed = RayCaster.shared(copy)
+    assert borrowed._scene is RayCaster.shared(skull)._scene   # no scene of its own
+    own = RayCaster(copy, "embree")
+    o, d = skull_rays(copy, 2000, np.random.default_rng(3))
+    for cull in (False, True):
+        a = borrowed.first_hits(o, d, cull_backfaces=cull)
+        b = own.first_hits(o, d, cull_backfaces=cull)
+        assert 0.3 < a.hit.mean() < 1.0
+        same = a.hit == b.hit
+        assert same.mean() > 0.998          # single-precision ties at edges aside
+        both = a.hit & b.hit
+        np.testing.assert_allclose(a.distance[both], b.distance[both], atol=1e-4)
+        np.testing.assert_allclose(a.points[both], b.points[both], atol=1e-4)
+    # rays from inside the bone leave it through back faces first: culling
+    # must skip those on the borrowed scene exactly as on an own one
+    f = np.random.default_rng(4).integers(0, copy.n_faces, 500)
+    o = copy.triangles[f].mean(axis=1) - 0.2 * copy.face_normals[f]
+    d = -copy.face_normals[f]
+    a = borrowed.first_hits(o, d, cull_backfaces=True)
+    b = own.first_hits(o, d, cull_backfaces=True)
+    plain = borrowed.first_hits(o, d)
+    assert (a.face_ids != plain.face_ids).mean() > 0.5
+    assert (a.face_ids == b.face_ids).mean() > 0.99
+
+
+def test_embree_slabs_are_watertight_and_agree_with_one_scene(skull, casters, monkeypatch):
+    """Many small scenes (slabs) give the hits of one: no ray slips through a
+    seam between slabs, the nearest slab's hit wins, face ids are global."""
+    import workbench.core.raycast as rc
+
+    monkeypatch.setattr(rc, "EMBREE_CHUNK", 7_000)
+    sliced = RayCaster(skull, "embree")
+    assert len(sliced._scene) == -(-skull.n_faces // 7_000)
+    reference = casters[1]
+    o, d = skull_rays(skull, 3000, np.random.default_rng(5))
+    # plus rays aimed at vertices and edge midpoints (seams of slabs run along edges)
+    f = np.random.default_rng(6).integers(0, skull.n_faces, 500)
+    tri = skull.triangles[f]
+    aims = np.vstack([tri[:, 0], 0.5 * (tri[:, 0] + tri[:, 1])])
+    normals = np.vstack([skull.face_normals[f]] * 2)
+    o = np.vstack([o, aims + 20.0 * normals])
+    d = np.vstack([d, -normals])
+    for cull in (False, True):
+        a = sliced.first_hits(o, d, cull_backfaces=cull)
+        b = reference.first_hits(o, d, cull_backfaces=cull)
+        np.testing.assert_array_equal(a.hit, b.hit)
+        np.testing.assert_allclose(a.distance[a.hit], b.distance[b.hit], atol=1e-5)
+        differ = a.face_ids != b.face_ids
+        assert differ[:3000].mean() < 0.01   # random rays: rare ties
+        # rays aimed at vertices and edges: either face of the tie, same point
+        np.testing.assert_allclose(a.points[differ & a.hit], b.points[differ & a.hit], atol=1e-5)

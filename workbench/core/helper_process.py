@@ -11,8 +11,8 @@ releases the lock.
 How: one long-lived child (``python -m workbench.core.helper_process``),
 started on first use, reads requests from stdin and answers on stdout:
 length-prefixed pickles of ``(function name, args)`` → ``(ok, value)``.
-Only functions listed in :data:`ALLOWED` may be called.  Calls are
-serialised (one at a time).  If the child cannot be started, the call runs
+Only functions marked with :func:`runnable` in ``workbench`` modules may be
+called.  Calls are serialised (one at a time).  If the child cannot be started, the call runs
 in-process instead (same result, only the GUI may stutter); a child that
 dies during a call raises ``RuntimeError`` (the input is not retried here,
 it might crash this process too) and is replaced at the next call.
@@ -20,6 +20,11 @@ it might crash this process too) and is replaced at the next call.
 is stopped at exit.
 
 Arrays cross as pickles (a 100k-triangle mesh is ~3.6 MB: a few ms).
+
+Who uses it: library code calls :func:`run`, which runs the function right
+there, unless the calling thread has opted in with :func:`offload_here`
+(the desktop window's worker threads do); then it goes to the child.
+Command-line runs and scripts thus never start a second process.
 """
 
 from __future__ import annotations
@@ -34,22 +39,50 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
-from typing import Any, BinaryIO
-
-#: the functions a child may run: "module:function"
-ALLOWED = frozenset({"workbench.core.isosurface:decimate"})
+from typing import Any, BinaryIO, TypeVar
 
 _HEADER = struct.Struct("<Q")
 _lock = threading.Lock()
 _child: subprocess.Popen | None = None
 _problem = ""
+_thread = threading.local()
+_MARK = "_workbench_helper_process"
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def runnable(fn: F) -> F:
+    """Mark ``fn`` as one the helper process may run (arguments and result must pickle)."""
+    setattr(fn, _MARK, True)
+    return fn
 
 
 def _resolve(name: str) -> Callable[..., Any]:
-    if name not in ALLOWED:
-        raise ValueError(f"{name!r} may not run in the helper process")
-    module, func = name.split(":")
-    return getattr(importlib.import_module(module), func)
+    module, _, func = name.partition(":")
+    refused = ValueError(f"{name!r} may not run in the helper process")
+    if not module.startswith("workbench.") or not func:
+        raise refused
+    fn = getattr(importlib.import_module(module), func, None)
+    if fn is None or not getattr(fn, _MARK, False):
+        raise refused
+    return fn
+
+
+def offload_here(on: bool = True) -> None:
+    """Let :func:`run` calls made by the calling thread go to the helper process."""
+    _thread.offload = bool(on)
+
+
+def offloading() -> bool:
+    """Whether the calling thread opted in with :func:`offload_here`."""
+    return bool(getattr(_thread, "offload", False))
+
+
+def run(name: str, *args: Any) -> Any:
+    """``name(*args)``: in the helper process if this thread opted in, else right here."""
+    if offloading():
+        return call(name, *args)
+    return _resolve(name)(*args)
 
 
 def _send(stream: BinaryIO, obj: Any) -> None:
@@ -103,7 +136,7 @@ atexit.register(_stop)
 def call(name: str, *args: Any) -> Any:
     """``name(*args)`` in the helper process (in-process if it is unavailable).
 
-    ``name`` is ``"module:function"`` from :data:`ALLOWED`.  Exceptions
+    ``name`` is ``"module:function"`` of a :func:`runnable` function.  Exceptions
     raised by the function are raised here again.  Thread-safe.
     """
     global _child, _problem
@@ -143,6 +176,8 @@ def _serve() -> None:
     """The child's loop: one request at a time until stdin closes."""
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # stray prints must not corrupt the reply stream
+    with contextlib.suppress(AttributeError, OSError):
+        os.nice(10)   # background work: the window's renderer comes first
     while True:
         try:
             name, args = _receive(stdin)

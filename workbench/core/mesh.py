@@ -85,11 +85,34 @@ class Mesh:
         return Mesh(vertices, self.faces)
 
     def transformed(self, matrix: np.ndarray) -> Mesh:
-        """Apply a 4x4 homogeneous transform; flips winding if it mirrors."""
+        """Apply a 4x4 homogeneous transform; flips winding if it mirrors.
+
+        When the transform is rigid (rotation, maybe a mirror, and a shift;
+        no scaling) the new mesh remembers where it came from (see
+        :attr:`rigid_source`), so search structures of the original can
+        serve it too.
+        """
         matrix = np.asarray(matrix, dtype=np.float64)
-        v = self.vertices @ matrix[:3, :3].T + matrix[:3, 3]
-        faces = self.faces if np.linalg.det(matrix[:3, :3]) > 0 else self.faces[:, ::-1]
-        return Mesh(v, faces)
+        rot = matrix[:3, :3]
+        v = self.vertices @ rot.T + matrix[:3, 3]
+        faces = self.faces if np.linalg.det(rot) > 0 else self.faces[:, ::-1]
+        out = Mesh(v, faces)
+        if np.allclose(rot.T @ rot, np.eye(3), rtol=0.0, atol=1e-9) \
+                and np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+            back = np.eye(4)
+            back[:3, :3], back[:3, 3] = rot.T, -rot.T @ matrix[:3, 3]
+            source = self.rigid_source
+            if source is not None:   # chain back to the first mesh
+                back = source[1] @ back
+            out.__dict__["_rigid_source"] = (self if source is None else source[0], back)
+        return out
+
+    @property
+    def rigid_source(self) -> tuple[Mesh, np.ndarray] | None:
+        """``(original, this → original 4x4)`` if this mesh is a rigid copy made by
+        :meth:`transformed` (same faces in the same order; winding flipped with a
+        mirror, so outward normals stay outward), else None."""
+        return self.__dict__.get("_rigid_source")
 
     def scaled(self, factor: float) -> Mesh:
         return Mesh(self.vertices * float(factor), self.faces)

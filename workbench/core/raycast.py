@@ -6,7 +6,8 @@ not be normalised (they are normalised here, so ``t`` is always in mm).
 One small interface, :class:`RayCaster`, with two backends:
 
 ``"embree"``
-    Intel Embree through the ``embreex`` binding (a BVH in single precision,
+    Intel Embree through the ``embreex`` binding (BVHs over slabs of at
+    most :data:`EMBREE_CHUNK` triangles, in single precision,
     robust (watertight) traversal; about 1 µs per ray).  Hits are re-measured
     in double precision on the hit triangle, so reported points lie on the
     triangle's plane to ~1e-12 mm.
@@ -101,21 +102,49 @@ class RayCaster:
         self._scene = _build_embree(mesh) if backend == "embree" else None
         self._tree = LeafTree(mesh) if backend == "numpy" else None
         self._lock = threading.Lock()   # one embree query at a time on a shared caster
+        self._to_base: np.ndarray | None = None   # set on casters borrowing another's scene
 
     @staticmethod
     def shared(mesh: Mesh) -> RayCaster:
         """The one caster of ``mesh`` (built on first use, then reused; thread-safe).
 
-        Building the embree scene of a 100k-triangle skull takes 80-170 ms and
-        keeps the GIL meanwhile (it stalls a GUI thread), so callers that cast
+        Building the embree scenes of a 100k-triangle skull takes ~110-160 ms
+        (in GIL-holding steps of ~25 ms, see :func:`_build_embree`), so callers that cast
         against the same mesh object again and again share one.  The caster
         lives as long as the mesh (kept in the mesh's attribute dictionary).
         """
         with _SHARED_LOCK:
             caster = mesh.__dict__.get("_shared_ray_caster")
             if caster is None:
-                caster = RayCaster(mesh)
+                source = mesh.rigid_source
+                caster = RayCaster(mesh) if source is None else \
+                    RayCaster._borrowed(mesh, RayCaster._shared_locked(source[0]), source[1])
                 mesh.__dict__["_shared_ray_caster"] = caster
+        return caster
+
+    @staticmethod
+    def _shared_locked(mesh: Mesh) -> RayCaster:
+        caster = mesh.__dict__.get("_shared_ray_caster")
+        if caster is None:
+            caster = mesh.__dict__["_shared_ray_caster"] = RayCaster(mesh)
+        return caster
+
+    @staticmethod
+    def _borrowed(mesh: Mesh, base: RayCaster, to_base: np.ndarray) -> RayCaster:
+        """A caster of ``mesh`` that casts against ``base``'s structure.
+
+        ``mesh`` is a rigid copy of ``base.mesh`` (:meth:`Mesh.transformed`:
+        same faces, same order) and ``to_base`` maps it onto the original.
+        Rays are mapped into the original's frame, cast there, and the hits
+        re-measured on ``mesh``'s own triangles; a rigid map keeps lengths,
+        so distances and face ids carry over unchanged.  Saves rebuilding a
+        scene (~110-160 ms, mostly holding the GIL) for every frame-aligned copy of a
+        skull.
+        """
+        caster = object.__new__(RayCaster)
+        caster.mesh, caster.backend = mesh, base.backend
+        caster._scene, caster._tree, caster._lock = base._scene, base._tree, base._lock
+        caster._to_base = np.asarray(to_base, dtype=np.float64)
         return caster
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray, *,
@@ -157,16 +186,26 @@ class RayCaster:
         return self._finish(o, d, face, np.where(hit, t, np.inf))
 
     def _cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._to_base is not None:
+            rot = self._to_base[:3, :3]
+            o, d = o @ rot.T + self._to_base[:3, 3], d @ rot.T
         if self.backend == "embree":
             return self._embree(o, d)
         return _tree_cast(self._tree, o, d)
 
     def _embree(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        o32, d32 = o.astype(np.float32), d.astype(np.float32)
+        face = np.full(len(o), -1, np.int64)
+        t = np.full(len(o), np.inf)
         with self._lock:
-            res = self._scene.run(o.astype(np.float32), d.astype(np.float32), output=1)
-        face = res["primID"].astype(np.int64)
-        face[res["geomID"] < 0] = -1
-        return face, np.where(face >= 0, res["tfar"].astype(np.float64), np.inf)
+            for scene, ids in self._scene:
+                res = scene.run(o32, d32, output=1)
+                hit = res["geomID"] >= 0
+                tc = np.where(hit, res["tfar"].astype(np.float64), np.inf)
+                nearer = tc < t
+                t[nearer] = tc[nearer]
+                face[nearer] = ids[res["primID"][nearer]]
+        return face, t
 
     def _finish(self, o: np.ndarray, d: np.ndarray, face: np.ndarray, t: np.ndarray) -> RayHits:
         hit = face >= 0
@@ -272,10 +311,34 @@ def _embree_available() -> bool:
     return True
 
 
-def _build_embree(mesh: Mesh):  # noqa: ANN202 - embreex has no type stubs
+#: triangles per Embree scene (see :func:`_build_embree`)
+EMBREE_CHUNK = 25_000
+
+
+def _build_embree(mesh: Mesh) -> list[tuple[object, np.ndarray]]:
+    """Embree scenes over slabs of the mesh: ``[(scene, face ids of its triangles)]``.
+
+    Building one scene keeps the GIL for its whole length (~110 ms for
+    100k triangles, plus ~30 ms committing it on the first query), which
+    freezes the window's GUI thread even when a worker thread builds it.
+    Slabs of at most :data:`EMBREE_CHUNK` triangles along the mesh's longest
+    axis build in ~25 ms each, with the GIL free in between; each is
+    committed here by one query.  A cast asks every slab and keeps the
+    nearest hit (a few µs per ray more).
+    """
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
-    scene = rtcore_scene.EmbreeScene(robust=True)  # watertight at shared edges
-    TriangleMesh(scene=scene, vertices=mesh.triangles.astype(np.float32))
-    return scene
+    tri = mesh.triangles.astype(np.float32)
+    centres = tri.mean(axis=1)
+    axis = int(np.argmax(np.ptp(centres, axis=0)))
+    order = np.argsort(centres[:, axis], kind="stable")
+    chunks = np.array_split(order, max(1, -(-len(order) // EMBREE_CHUNK)))
+    probe = (np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32))
+    scenes = []
+    for ids in chunks:
+        scene = rtcore_scene.EmbreeScene(robust=True)  # watertight at shared edges
+        TriangleMesh(scene=scene, vertices=tri[ids])
+        scene.run(*probe, output=1)   # commit (build the BVH) now, not in a query
+        scenes.append((scene, ids.astype(np.int64)))
+    return scenes

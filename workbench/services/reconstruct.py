@@ -385,7 +385,9 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
     targets from the dowel-fitted skin landmarks (see :func:`fit_head`).
     """
     to_head, mirrored = input_frame(landmarks)
-    skull_h = outward(Mesh(apply_transform(to_head, skull.vertices), skull.faces))
+    # a rigid copy (Mesh.transformed) shares the input skull's ray-casting
+    # scene instead of building its own for every fit
+    skull_h = outward(skull.transformed(to_head))
     lms_h = landmarks.transformed(to_head)
     doubtful = [lm.code for lm in lms_h if lm.status == "suggested"
                 and lm.confidence < settings.min_confidence]

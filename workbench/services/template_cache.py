@@ -11,6 +11,7 @@ z forward, Frankfort Horizontal at y = 0).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -18,6 +19,7 @@ import tempfile
 from os import PathLike
 from pathlib import Path
 
+from workbench.core import helper_process
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.io.template_pack import export_template, load_template_pack
 from workbench.model.template import TemplateHead
@@ -57,6 +59,25 @@ def cache_root() -> Path:
     return Path(platformdirs.user_cache_dir("forensic-workbench")) / "templates"
 
 
+def cached_folder(sex: str, root: Path | None = None) -> Path:
+    """Where the up-to-date built-in head for ``sex`` is (or will be) cached."""
+    return (root or cache_root()) / f"{sex}-{source_key()}"
+
+
+@helper_process.runnable
+def build_cached(sex: str, root: str) -> bool:
+    """Make sure the built-in head for ``sex`` is cached under ``root``; True if it is now.
+
+    The build keeps the GIL for long stretches (MINPACK least squares, mesh
+    decimation: up to ~0.5 s each), so the desktop window's workers have it
+    run in the helper process and then read the cached pack.  ``root`` is
+    passed along because the helper's environment is the one it started
+    with.
+    """
+    _cached_head(sex, Path(root))
+    return (cached_folder(sex, Path(root)) / "template.json").is_file()
+
+
 def reference_head(sex: str = "male", pack: str | PathLike[str] | None = None, *,
                    use_cache: bool = True) -> TemplateHead:
     """The head to work with: ``pack`` if given, else the built-in head for ``sex``.
@@ -64,16 +85,29 @@ def reference_head(sex: str = "male", pack: str | PathLike[str] | None = None, *
     A pack is read as it is (its own sex wins; ``sex`` is ignored).  The
     built-in head comes from the cache when an up-to-date copy is there and
     is built (and cached) otherwise.  A damaged cache entry is rebuilt.
+    On a thread that offloads to the helper process (the window's workers,
+    :func:`workbench.core.helper_process.offload_here`) the build runs there.
     """
     if pack is not None:
         return load_template_pack(pack)
     if sex not in SEXES:
         raise InputError("--sex", f"unknown sex {sex!r}", hint="use female or male")
+    if not use_cache:
+        from workbench.services.template import build_reference_head
+
+        return build_reference_head(sex)
+    root = cache_root()
+    if helper_process.offloading() and not (cached_folder(sex, root) / "template.json").is_file():
+        with contextlib.suppress(RuntimeError, WorkbenchError, OSError):
+            helper_process.call("workbench.services.template_cache:build_cached", sex, str(root))
+            # (if that failed, the head is built below, in this process)
+    return _cached_head(sex, root)
+
+
+def _cached_head(sex: str, root: Path) -> TemplateHead:
     from workbench.services.template import build_reference_head
 
-    if not use_cache:
-        return build_reference_head(sex)
-    folder = cache_root() / f"{sex}-{source_key()}"
+    folder = cached_folder(sex, root)
     if (folder / "template.json").is_file():
         try:
             return load_template_pack(folder)
