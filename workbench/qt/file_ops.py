@@ -19,6 +19,7 @@ from typing import Any
 from PySide6.QtWidgets import QFileDialog
 
 from workbench.core.errors import UnitsError, WorkbenchError
+from workbench.core.raycast import RayCaster
 from workbench.io.case_file import load_case, save_case
 from workbench.qt import autosave, dialogs, jobs
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
@@ -45,16 +46,21 @@ def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
 
 
 def _drawable(opened: Any) -> Any:
-    """Worker side: the skull's vertex normals and snap index, cached on the mesh.
+    """Worker side: the skull's vertex normals, snap index and ray-casting scene,
+    cached on the mesh.
 
     ``opened`` is an ``OpenedCase`` or a loaded case file; either has
     ``.case``.  Spares the GUI thread ~50 ms (drawing) and ~0.1 s (first
-    Snap) on a 100k-triangle skull.
+    Snap) on a 100k-triangle skull.  The ray-casting scenes (~110-160 ms,
+    in steps that hold the GIL for ~25 ms each) are built here, before the
+    skull is drawn; every fit's frame-aligned copy of the skull borrows
+    them (:meth:`RayCaster.shared`).
     """
     mesh = opened.case.specimen.mesh
-    if mesh is not None:
+    if mesh is not None and mesh.n_faces:
         _ = mesh.vertex_normals
         snap_index(mesh).warm()   # the first Snap then takes ms, not ~0.1 s
+        RayCaster.shared(mesh)
     return opened
 
 

@@ -86,7 +86,8 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.plotter = QtInteractor(self, auto_update=auto_update)
         self.plotter.clear_events_for_key("q")  # pyvista's "q" would close the 3D view
         # FXAA instead of 4x multisampling: similar edges at a third of the cost
-        # on software renderers (llvmpipe: 180 → 70 ms a frame, 100k triangles)
+        # (llvmpipe: 180 → 70 ms a frame, 100k triangles); a software renderer
+        # then goes without either (SceneView.tune)
         self.plotter.render_window.SetMultiSamples(0)
         self.plotter.enable_anti_aliasing("fxaa")
         # the 3D view and the optional second view (guides, orthographic) side by side
@@ -129,6 +130,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.resizeDocks([self.docks["landmarks"], dock], [620, 230], Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"]], [420], Qt.Orientation.Horizontal)
         self.guide_view = GuideView(self)
+        self.scene.also_tune(self.guide_view.plotter)
         self.views.addWidget(self.guide_view)
         self.views.setStretchFactor(0, 3)
         self.views.setStretchFactor(1, 2)
@@ -256,6 +258,8 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
 
         ``draw=False`` shows it without drawing (the caller fills it later).
         """
+        if on and not draw:
+            self.guide_view.stale = False   # not even what it missed while hidden
         self.guide_view.setVisible(bool(on))
         action = self.actions_by_id.get("guide_view")
         if action is not None and action.isChecked() != bool(on):
@@ -331,12 +335,25 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
 
     def _show_fit(self, fit: jobs.FitResult) -> None:
         self.fit = fit
+        self.reconstruct_panel.show_result(fit)
+        self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
+        if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
+            # the first fit opens the guide view.  Both views then repaint
+            # in one pass (the main view narrows, the new one appears), so
+            # open it while both are cheap to draw (the new one empty, the
+            # main one without the face) and draw the fit after that paint
+            self.show_guide_view(True, draw=False)
+            self.scene.after_paint(lambda f=fit: self._draw_fit(f), render=False)
+        else:
+            self._draw_fit(fit)
+
+    def _draw_fit(self, fit: jobs.FitResult) -> None:
+        if fit is not self.fit or getattr(self.plotter, "_closed", False):
+            return   # a newer fit (or none) is on its way, or the window closed
         self._show_dowels(fit.preview)
         self.draw_face()
         self.draw_muscles()
         self.draw_guides()
-        self.reconstruct_panel.show_result(fit)
-        self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if self.truth is not None:
             self.compare()
         # the guide view after the main view's paint: its drawing and paint
@@ -345,12 +362,6 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
 
     def _show_fit_in_guide_view(self, fit: jobs.FitResult) -> None:
         if fit is not self.fit or getattr(self.guide_view.plotter, "_closed", False):
-            return   # a newer fit (or none) is on its way, or the window closed
-        if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
-            # showing it narrows the main view, which repaints: fill the new
-            # view after that paint, not in the same one
-            self.show_guide_view(True, draw=False)
-            self.scene.after_paint(lambda f=fit: self._show_fit_in_guide_view(f))
             return
         self.guide_view.fit_changed()
 

@@ -31,6 +31,8 @@ side effects, e.g. an export, happen even if their result is dropped).
 from __future__ import annotations
 
 import itertools
+import os
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -41,6 +43,7 @@ from typing import Any
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtWidgets import QProgressBar
 
+from workbench.core import helper_process
 from workbench.core.cancel import CancelToken
 from workbench.core.errors import Cancelled
 from workbench.qt import relay
@@ -96,7 +99,8 @@ class TaskRunner(QObject):
 
     def __init__(self, parent: QObject | None = None, max_workers: int = 2) -> None:
         super().__init__(parent)
-        self._pool = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="workbench")
+        self._pool = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="workbench",
+                                        initializer=background_priority)
         self._generation: dict[str, int] = {}
         self._pending: dict[str, Future] = {}
         self._tokens: dict[str, CancelToken] = {}
@@ -218,6 +222,34 @@ class TaskRunner(QObject):
 
 
 # ------------------------------------------------------------------ worker thread
+#: nice value of worker threads (0 normal .. 19 lowest)
+BACKGROUND_NICE = 10
+
+
+def background_priority() -> None:
+    """Set up a worker thread: lower CPU priority, GIL-heavy calls offloaded.
+
+    Priority: VTK releases the GIL while it renders, and a software
+    renderer (llvmpipe) renders on every core: a worker computing at the
+    same time takes half the CPU of a 2-core machine and doubles the frame
+    time, i.e. how long the event loop is blocked.  At nice 10 a worker gets
+    about a tenth of a core the renderer wants and all the rest.  Linux
+    keeps the nice value per thread (and threads a worker starts inherit
+    it); elsewhere this is a no-op.
+
+    Offloading: library calls that keep the GIL for long (mesh decimation,
+    building the reference head) run in the helper process
+    (:func:`workbench.core.helper_process.run`), so they cannot stall the
+    GUI thread.
+    """
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)
+    except (AttributeError, OSError):   # no setpriority (Windows), or not per thread
+        pass
+    # and calls that hold the GIL for long go to the helper process
+    helper_process.offload_here()
+
+
 def _run(work: _Work) -> None:
     """Run one job; post its result (or error) to the GUI thread.  Plain data only."""
     try:
