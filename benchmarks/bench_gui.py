@@ -10,7 +10,8 @@ the skull (30 mouse moves) and a horizontal guide in the guide view
 
 * the time per drawn preview (re-solved face + render) and the rate it allows;
 * the longest gap of a 10 ms heartbeat timer (the longest time the event
-  loop was blocked) during opening, suggesting, fitting and the drags;
+  loop was blocked) during opening, suggesting, fitting, the drags, undo,
+  redo, saving, exporting (meshes and the PDF report) and comparing;
 * the worker times of the jobs.
 
 Run (needs an X server; Xvfb is enough)::
@@ -200,6 +201,22 @@ def main(argv: list[str] | None = None) -> int:
     blocks["guide drag"] = beat.stop()
     guide_times = np.array(window.drag_timings)
     step("re-fit after the guide", lambda: None)
+
+    # the rest of a session: undo/redo (each re-fits), save, export, compare
+    import tempfile
+
+    from workbench.io.meshes import write_mesh
+
+    out = Path(tempfile.mkdtemp(prefix="bench-gui-"))
+    truth = write_mesh(out / "truth.ply", window.fit.recon.face)  # any skin will do
+    step("undo", window.undo)
+    step("redo", window.redo)
+    step("save", lambda: window.save_to(out / "case.fcase"))
+    step("export", lambda: window.export_to(out / "export"))
+    step("compare", lambda: window.load_truth(truth))
+    if window.errors or window.comparison is None:
+        print("failed:", window.errors, file=sys.stderr)
+        return 1
 
     print(f"skull: {n_tri} triangles; window 1400x900; "
           f"renderer: {_renderer(window)}; FXAA "

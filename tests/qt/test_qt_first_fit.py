@@ -72,3 +72,14 @@ def test_first_fit_opens_the_guide_view_before_drawing_the_face(
     smoothing = not is_software_gl(scene.gl_renderer)
     assert bool(window.plotter.renderer.GetUseFXAA()) is smoothing
     assert bool(gv.plotter.renderer.GetUseFXAA()) is smoothing
+
+    # a colour map adds its bar without an immediate render (the next paint
+    # draws it), inside the view's right edge
+    paints = scene.paints
+    face_mesh = window.fit.recon.face
+    scene.show_face(face_mesh, np.linspace(-3.0, 3.0, face_mesh.n_vertices), "spread mm")
+    assert scene.paints == paints
+    bar = window.plotter.scalar_bars["spread mm"]
+    x, _ = bar.GetPositionCoordinate().GetValue()[:2]
+    assert 0.0 < x and x + bar.GetWidth() <= 0.95
+    window.draw_face()

@@ -114,7 +114,8 @@ def schema_dir() -> Path:
 
 
 @lru_cache(maxsize=1)
-def _validator() -> jsonschema.Draft202012Validator:
+def case_validator() -> jsonschema.Draft202012Validator:
+    """The checked validator of ``case.schema.json`` (built once: ~75 ms)."""
     schema = json.loads((schema_dir() / "case.schema.json").read_text(encoding="utf-8"))
     jsonschema.Draft202012Validator.check_schema(schema)
     return jsonschema.Draft202012Validator(schema)
@@ -122,7 +123,7 @@ def _validator() -> jsonschema.Draft202012Validator:
 
 def validate_case_json(doc: Any, source: PathArg) -> None:
     """Raise :class:`CaseFileError` naming the first schema violation in ``doc``."""
-    error = jsonschema.exceptions.best_match(_validator().iter_errors(doc))
+    error = jsonschema.exceptions.best_match(case_validator().iter_errors(doc))
     if error is not None:
         message = error.message if len(error.message) < 300 else error.message[:300] + "..."
         raise CaseFileError(source, f"case.json does not match {SCHEMA_ID} at "
@@ -334,7 +335,11 @@ def _write_members(archive: zipfile.ZipFile, doc: dict[str, Any], blobs: dict[st
     text = json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False)
     archive.writestr(_zip_info(CASE_JSON, zipfile.ZIP_DEFLATED), text.encode("utf-8"))
     for sha, data in blobs.items():
-        archive.writestr(_zip_info(f"arrays/{sha}.npy", zipfile.ZIP_DEFLATED), data)
+        # fastest deflate level: a 100k-triangle mesh's arrays compress in
+        # ~55 ms instead of ~210 ms (the default, 6), 4% larger; the window
+        # saves on its GUI thread
+        archive.writestr(_zip_info(f"arrays/{sha}.npy", zipfile.ZIP_DEFLATED), data,
+                         compresslevel=1)
     for item, opener in openers.items():
         info = _zip_info(f"evidence/{item.name}", zipfile.ZIP_STORED, item.size)
         with opener() as source, archive.open(info, "w") as target:

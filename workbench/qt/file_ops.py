@@ -20,7 +20,7 @@ from PySide6.QtWidgets import QFileDialog
 
 from workbench.core.errors import UnitsError, WorkbenchError
 from workbench.core.raycast import RayCaster
-from workbench.io.case_file import load_case, save_case
+from workbench.io.case_file import case_validator, load_case, save_case
 from workbench.qt import autosave, dialogs, jobs
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.landmark_snap import snap_index
@@ -61,6 +61,7 @@ def _drawable(opened: Any) -> Any:
         _ = mesh.vertex_normals
         snap_index(mesh).warm()   # the first Snap then takes ms, not ~0.1 s
         RayCaster.shared(mesh)
+    case_validator()              # (~75 ms, else paid by the first Save on the GUI thread)
     return opened
 
 
