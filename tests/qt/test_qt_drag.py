@@ -64,12 +64,17 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     camera = w.plotter.camera_position
     face_actor = w.scene.actors("face")[0]
     face_before = np.array(face_actor.GetMapper().GetInput().GetPoints().GetData())
+    w.scene.set_visible("muscles", True)       # shown muscles follow the preview too
+    muscle_actor = w.scene.actors("muscles")[0]
+    muscles_before = np.array(muscle_actor.GetMapper().GetInput().GetPoints().GetData())
     start = _widget_pos(w.plotter, w.picker.display_position(before.position))
     n_steps = len(w.document.stack)
     seen: list[np.ndarray] = []
+    seen_muscles: list[np.ndarray] = []
     w.scene.render_now()
-    w.document.part_changed.connect(lambda _p: seen.append(
-        np.array(face_actor.GetMapper().GetInput().GetPoints().GetData())))
+    w.document.part_changed.connect(lambda _p: (
+        seen.append(np.array(face_actor.GetMapper().GetInput().GetPoints().GetData())),
+        seen_muscles.append(np.array(muscle_actor.GetMapper().GetInput().GetPoints().GetData()))))
 
     _drag(qtbot, w.plotter, start, [(0, -3 * k) for k in range(1, 9)])
 
@@ -84,6 +89,8 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     assert w.drag_timings, "no preview was drawn during the drag"
     # the face followed during the drag, before the command (and the re-fit) ran
     assert seen and np.abs(seen[0] - face_before).max() > 0.5
+    # (the actor drawn before the drag: moved in place, not re-created)
+    assert seen_muscles and np.abs(seen_muscles[0] - muscles_before).max() > 0.2
     qtbot.waitUntil(lambda: not w.busy, timeout=120_000)
     assert not w.errors, w.errors
 

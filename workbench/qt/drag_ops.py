@@ -25,6 +25,7 @@ import numpy as np
 from PySide6.QtCore import QTimer
 
 from workbench.commands.landmarks import MoveLandmark
+from workbench.core.spatial import MeshIndex
 from workbench.services.guides import Guide
 from workbench.services.preview_fit import PreviewFit
 
@@ -133,15 +134,40 @@ class DragOpsMixin:
             code, point = value
             self.draw_landmarks(override={code: point})
             self._preview_dowel(code, point)
-            if preview is not None and preview.move_landmark(code, point) \
-                    and self.scene.has("face"):
-                self.scene.update_points("face", preview.skin())
+            if preview is not None and preview.move_landmark(code, point):
+                skin = preview.skin()
+                if self.scene.has("face"):
+                    self.scene.update_points("face", skin)
+                if self.scene.has("muscles") and self.scene.visible.get("muscles"):
+                    self._preview_muscles(skin)
             self.plotter.update()   # one render, in the view's next paint (never two)
         elif self.guide_view is not None:
             self.guide_view.show_dragged(value)
             if preview is not None and preview.move_guide(value):
                 self.guide_view.update_face(preview.skin_head())
         self.drag_timings.append(time.perf_counter() - t0)
+
+    def _preview_muscles(self, skin: np.ndarray) -> None:
+        """Carry the drawn muscles along with the previewed skin (input frame, mm).
+
+        Each drawn muscle point is tied once per fit to the skin triangle
+        nearest to it (barycentric weights; the grids lie 4 mm under the
+        skin) and moves by that triangle's displacement.  The normal's turn
+        is left out (sub-millimetre for a preview); the re-fit after the
+        drag draws them exactly.  ~0.1 ms a frame, against ~20 ms for
+        re-evaluating the grids.
+        """
+        fit = self.fit
+        binding = getattr(self, "_muscle_binding", None)
+        if binding is None or binding[0] is not fit:
+            face = fit.recon.face
+            drawn = self.scene.layer_points("muscles")
+            near = MeshIndex(face).closest_points(drawn)
+            binding = (fit, face.faces[near.face_ids], near.barycentric, drawn, face.vertices)
+            self._muscle_binding = binding
+        _, corners, weights, drawn, rest = binding
+        moved = np.einsum("kj,kjc->kc", weights, skin[corners] - rest[corners])
+        self.scene.move_layer_points("muscles", drawn + moved)
 
     def _preview_dowel(self, code: str, point: np.ndarray) -> None:
         p = self.preview

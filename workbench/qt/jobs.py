@@ -48,6 +48,7 @@ from workbench.services.landmark_transfer import TransferResult, transfer_landma
 from workbench.services.reconstruct import (
     FitSettings, Reconstruction, ensemble_spread, input_frame, outward, reconstruct,
 )
+from workbench.services.reconstruction_job import plausible_guides
 from workbench.services.reference_parts import skull_surface
 from workbench.services.template_cache import reference_head
 
@@ -249,8 +250,6 @@ def fit_face(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
 def _guide_targets(guides: list[Guide], skin: dict[str, np.ndarray], skull_h: Mesh,
                    lms_h: LandmarkSet, rejected: list[str]) -> dict[str, np.ndarray]:
     """Guide targets through the job's plausibility filter (the CLI applies the same)."""
-    from workbench.services.reconstruction_job import plausible_guides
-
     return plausible_guides(guides, skin, skull_h, lms_h, rejected)
 
 

@@ -47,7 +47,7 @@ from workbench.qt.panels.layers_panel import LayersPanel
 from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.picking import ClickPicker
 from workbench.qt.scene import SceneView
-from workbench.qt.workers import TaskRunner, show_fraction
+from workbench.qt.workers import TaskRunner, preload, show_fraction
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
@@ -82,6 +82,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.catalogue = load_catalogue()
         self.document = Document(on_error=self.show_error, parent=self)
         self.runner = TaskRunner(self)
+        preload()   # what the workers will import, before the event loop runs
 
         self.plotter = QtInteractor(self, auto_update=auto_update)
         self.plotter.clear_events_for_key("q")  # pyvista's "q" would close the 3D view

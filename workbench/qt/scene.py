@@ -272,12 +272,16 @@ class SceneView(QObject):
         actors = self._actors.get(layer)
         if not actors:
             raise KeyError(f"layer {layer!r} has nothing drawn")
-        data = actors[0].GetMapper().GetInput()
+        self._move_points(actors, 0, points)
+        self.request_render()
+
+    @staticmethod
+    def _move_points(actors: list[Any], index: int, points: np.ndarray) -> None:
+        data = actors[index].GetMapper().GetInput()
         new = np.asarray(points, dtype=float).reshape(-1, 3)
         vtk_points = data.GetPoints()
         if vtk_points is None or new.shape[0] != vtk_points.GetNumberOfPoints():
-            raise ValueError(f"layer {layer!r}: expected {data.GetNumberOfPoints()} points, "
-                             f"got {new.shape[0]}")
+            raise ValueError(f"expected {data.GetNumberOfPoints()} points, got {new.shape[0]}")
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
         vtk_to_numpy(vtk_points.GetData())[:] = new
@@ -287,7 +291,6 @@ class SceneView(QObject):
             vtk_to_numpy(normals)[:] = _vertex_normals(new, data)
             normals.Modified()
         data.Modified()
-        self.request_render()
 
     def reset_camera(self, anterior: Sequence[float] | None = None,
                      superior: Sequence[float] | None = None) -> None:
@@ -429,31 +432,10 @@ class SceneView(QObject):
         import pyvista as pv
 
         self.clear("muscles")
-        pts: list[np.ndarray] = []
-        tris: list[np.ndarray] = []
-        lines: list[np.ndarray] = []
-        offset = 0
-        for rows in muscles:
-            grid = _resampled_grid([np.asarray(r, float).reshape(-1, 3) for r in rows])
-            if grid is None:
-                continue
-            n_rows, n_cols = grid.shape[:2]
-            ids = offset + np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
-            pts.append(grid.reshape(-1, 3))
-            if n_rows > 1 and n_cols > 1:
-                a, b = ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel()
-                c, d = ids[1:, 1:].ravel(), ids[1:, :-1].ravel()
-                tris += [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
-            lines += [ids[i] for i in range(n_rows) if n_cols > 1]
-            lines += [ids[:, j] for j in range(n_cols) if n_rows > 1]
-            offset += n_rows * n_cols
-        if not pts:
+        points, faces, lines = _muscle_geometry(muscles)
+        if not len(points):
             return 0, 0
-        points = np.vstack(pts)
-        n_tris = 0
-        if tris:
-            faces = np.vstack(tris)
-            n_tris = len(faces)
+        if len(faces):
             # normals from numpy (Mesh.vertex_normals), not VTK's normals
             # filter: that took ~50 ms of the GUI thread per fit
             sheet = to_polydata(Mesh(points, faces), normals=True)
@@ -467,10 +449,56 @@ class SceneView(QObject):
                 fibres, color=MUSCLE_FIBRE, line_width=2.5, pickable=False, render=False,
                 name="layer_muscles_fibres"))
         self.request_render()
-        return n_tris, len(lines)
+        return len(faces), len(lines)
+
+    def layer_points(self, layer: str) -> np.ndarray:
+        """The drawn points of ``layer``'s first actor (mm, input frame; a copy)."""
+        actors = self._actors.get(layer)
+        if not actors:
+            raise KeyError(f"layer {layer!r} has nothing drawn")
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        return np.array(vtk_to_numpy(actors[0].GetMapper().GetInput().GetPoints().GetData()),
+                        dtype=float)
+
+    def move_layer_points(self, layer: str, points: np.ndarray) -> None:
+        """Move the points of every actor of ``layer`` in place (they share one layout,
+        as the muscle sheets and fibres do); one render is requested."""
+        actors = self._actors.get(layer)
+        if not actors:
+            raise KeyError(f"layer {layer!r} has nothing drawn")
+        for i in range(len(actors)):
+            self._move_points(actors, i, points)
+        self.request_render()
 
     def _marker_size(self) -> float:
         return 12.0
+
+
+def _muscle_geometry(muscles: Sequence[Sequence[np.ndarray]]
+                     ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Points, sheet triangles and fibre polylines (point ids) of muscle grids."""
+    pts: list[np.ndarray] = []
+    tris: list[np.ndarray] = []
+    lines: list[np.ndarray] = []
+    offset = 0
+    for rows in muscles:
+        grid = _resampled_grid([np.asarray(r, float).reshape(-1, 3) for r in rows])
+        if grid is None:
+            continue
+        n_rows, n_cols = grid.shape[:2]
+        ids = offset + np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
+        pts.append(grid.reshape(-1, 3))
+        if n_rows > 1 and n_cols > 1:
+            a, b = ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel()
+            c, d = ids[1:, 1:].ravel(), ids[1:, :-1].ravel()
+            tris += [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
+        lines += [ids[i] for i in range(n_rows) if n_cols > 1]
+        lines += [ids[:, j] for j in range(n_cols) if n_rows > 1]
+        offset += n_rows * n_cols
+    points = np.vstack(pts) if pts else np.zeros((0, 3))
+    faces = np.vstack(tris) if tris else np.zeros((0, 3), np.int64)
+    return points, faces, lines
 
 
 def _resampled_grid(rows: list[np.ndarray]) -> np.ndarray | None:

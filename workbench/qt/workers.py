@@ -30,6 +30,8 @@ side effects, e.g. an export, happen even if their result is dropped).
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 import itertools
 import os
 import threading
@@ -222,6 +224,19 @@ class TaskRunner(QObject):
 
 
 # ------------------------------------------------------------------ worker thread
+#: modules the jobs import on first use; importing (compiling, loading a
+#: shared library) holds the GIL, so the window imports them before it shows
+PRELOAD = ("embreex.rtcore_scene", "embreex.mesh_construction", "threadpoolctl",
+           "workbench.core.isosurface", "workbench.io.samples")
+
+
+def preload() -> None:
+    """Import :data:`PRELOAD` now (those not installed are skipped)."""
+    for name in PRELOAD:
+        with contextlib.suppress(ImportError):
+            importlib.import_module(name)
+
+
 #: nice value of worker threads (0 normal .. 19 lowest)
 BACKGROUND_NICE = 10
 
