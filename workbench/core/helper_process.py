@@ -12,12 +12,14 @@ How: one long-lived child (``python -m workbench.core.helper_process``),
 started on first use, reads requests from stdin and answers on stdout:
 length-prefixed pickles of ``(function name, args)`` → ``(ok, value)``.
 Only functions marked with :func:`runnable` in ``workbench`` modules may be
-called.  Calls are serialised (one at a time).  If the child cannot be started, the call runs
-in-process instead (same result, only the GUI may stutter); a child that
-dies during a call raises ``RuntimeError`` (the input is not retried here,
-it might crash this process too) and is replaced at the next call.
-:func:`status` says why the last call did not run in the child.  The child
-is stopped at exit.
+called.  Calls are serialised (one at a time).  If the child cannot be
+started, the call runs in-process instead (same result, only the GUI may
+stutter); a child that dies during a call raises ``RuntimeError`` (the
+input is not retried here, it might crash this process too) and is replaced
+at the next call.  :func:`status` says why the last call did not run in the
+child.  The child runs at a lower CPU priority (nice 10) and is stopped at
+exit.  Its environment is the one it started with: pass what may change
+(folders, settings) as arguments.
 
 Arrays cross as pickles (a 100k-triangle mesh is ~3.6 MB: a few ms).
 

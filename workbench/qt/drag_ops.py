@@ -49,6 +49,7 @@ class DragOpsMixin:
         self._preview_fit: PreviewFit | None = None
         self._drag_pending: tuple[str, Any] | None = None
         self._drag_scheduled = False
+        self._muscle_binding: tuple | None = None   # see _preview_muscles
 
     # ------------------------------------------------------------ landmark drags
     def grab_target(self) -> tuple[str, np.ndarray] | None:
@@ -158,7 +159,7 @@ class DragOpsMixin:
         re-evaluating the grids.
         """
         fit = self.fit
-        binding = getattr(self, "_muscle_binding", None)
+        binding = self._muscle_binding
         if binding is None or binding[0] is not fit:
             face = fit.recon.face
             drawn = self.scene.layer_points("muscles")

@@ -81,8 +81,9 @@ class GuideView(QWidget):
         bar.addStretch(1)
 
         self.plotter = QtInteractor(self, auto_update=False)
-        # FXAA, not 4x multisampling, as in the 3D view (llvmpipe: 73 → 42 ms
-        # a frame for this view)
+        # no 4x multisampling (llvmpipe: 73 → 42 ms a frame for this view);
+        # FXAA as in the 3D view, dropped with it on a software renderer
+        # (SceneView.tune)
         self.plotter.render_window.SetMultiSamples(0)
         self.plotter.enable_anti_aliasing("fxaa")
         self.plotter.set_background("#1f2329")
