@@ -119,12 +119,6 @@ def _qt_pos(plotter, xy):  # noqa: ANN001, ANN202
     return QPoint(int(round(xy[0] / ratio)), int(round((h - xy[1]) / ratio)))
 
 
-def _renderer(window) -> str:  # noqa: ANN001
-    info = window.plotter.render_window.ReportCapabilities()
-    line = next((ln for ln in info.splitlines() if "renderer string" in ln), "")
-    return line.split(":", 1)[-1].strip() or "unknown"
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("skull", nargs="?", default=str(DEFAULT_SKULL))
@@ -176,29 +170,25 @@ def main(argv: list[str] | None = None) -> int:
     window.detail.end()
     app.processEvents()
 
-    # a landmark drag
-    window.landmarks_panel.select("g")
-    window.scene.render_now()
-    g = window.document.case.landmarks["skull"]["g"].position
-    start = _qt_pos(window.plotter, window.picker.display_position(g))
-    window.drag_timings.clear()
-    beat.start()
-    lm_frames = _drag(app, window.plotter, start, [(0, -k) for k in range(1, 31)], beat)
-    blocks["landmark drag"] = beat.stop()
-    lm_times = np.array(window.drag_timings)
-    step("re-fit after the drag", lambda: None)
+    def landmark_drag(name: str, offsets) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+        """Drag the glabella; (move → frame seconds, preview seconds); the block in ``blocks``."""
+        window.landmarks_panel.select("g")
+        window.scene.render_now()
+        _wait(app, window)
+        g = window.document.case.landmarks["skull"]["g"].position
+        start = _qt_pos(window.plotter, window.picker.display_position(g))
+        window.drag_timings.clear()
+        beat.start()
+        frames = _drag(app, window.plotter, start, offsets, beat)
+        blocks[name] = beat.stop()
+        return frames, np.array(window.drag_timings)
 
+    lm_frames, lm_times = landmark_drag("landmark drag", [(0, -k) for k in range(1, 31)])
+    step("re-fit after the drag", lambda: None)
     # the same with the muscles layer shown (they follow the preview too)
     window.scene.set_visible("muscles", True)
-    window.scene.render_now()
-    _wait(app, window)
-    g = window.document.case.landmarks["skull"]["g"].position
-    start = _qt_pos(window.plotter, window.picker.display_position(g))
-    window.drag_timings.clear()
-    beat.start()
-    mu_frames = _drag(app, window.plotter, start, [(0, k) for k in range(1, 16)], beat)
-    blocks["landmark drag, muscles shown"] = beat.stop()
-    mu_times = np.array(window.drag_timings)
+    mu_frames, mu_times = landmark_drag("landmark drag, muscles shown",
+                                        [(0, k) for k in range(1, 16)])
     step("re-fit after it", lambda: None)
     window.scene.set_visible("muscles", False)
 
@@ -233,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
     print(f"skull: {n_tri} triangles; window 1400x900; "
-          f"renderer: {_renderer(window)}; FXAA "
+          f"renderer: {window.scene.gl_renderer}; FXAA "
           f"{'on' if window.plotter.renderer.GetUseFXAA() else 'off (software renderer)'}")
     print(f"one render of the main view: full quality {render_ms['full']:.0f} ms, "
           f"interactive (light skull, no edge smoothing) {render_ms['light']:.0f} ms")

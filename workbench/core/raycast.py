@@ -114,19 +114,16 @@ class RayCaster:
         lives as long as the mesh (kept in the mesh's attribute dictionary).
         """
         with _SHARED_LOCK:
-            caster = mesh.__dict__.get("_shared_ray_caster")
-            if caster is None:
-                source = mesh.rigid_source
-                caster = RayCaster(mesh) if source is None else \
-                    RayCaster._borrowed(mesh, RayCaster._shared_locked(source[0]), source[1])
-                mesh.__dict__["_shared_ray_caster"] = caster
-        return caster
+            return RayCaster._shared_locked(mesh)
 
     @staticmethod
     def _shared_locked(mesh: Mesh) -> RayCaster:
         caster = mesh.__dict__.get("_shared_ray_caster")
         if caster is None:
-            caster = mesh.__dict__["_shared_ray_caster"] = RayCaster(mesh)
+            source = mesh.rigid_source   # a rigid copy borrows the original's scenes
+            caster = RayCaster(mesh) if source is None else \
+                RayCaster._borrowed(mesh, RayCaster._shared_locked(source[0]), source[1])
+            mesh.__dict__["_shared_ray_caster"] = caster
         return caster
 
     @staticmethod

@@ -272,12 +272,12 @@ class SceneView(QObject):
         actors = self._actors.get(layer)
         if not actors:
             raise KeyError(f"layer {layer!r} has nothing drawn")
-        self._move_points(actors, 0, points)
+        self._move_points(actors[0], points)
         self.request_render()
 
     @staticmethod
-    def _move_points(actors: list[Any], index: int, points: np.ndarray) -> None:
-        data = actors[index].GetMapper().GetInput()
+    def _move_points(actor: Any, points: np.ndarray) -> None:
+        data = actor.GetMapper().GetInput()
         new = np.asarray(points, dtype=float).reshape(-1, 3)
         vtk_points = data.GetPoints()
         if vtk_points is None or new.shape[0] != vtk_points.GetNumberOfPoints():
@@ -467,8 +467,8 @@ class SceneView(QObject):
         actors = self._actors.get(layer)
         if not actors:
             raise KeyError(f"layer {layer!r} has nothing drawn")
-        for i in range(len(actors)):
-            self._move_points(actors, i, points)
+        for actor in actors:
+            self._move_points(actor, points)
         self.request_render()
 
     def _marker_size(self) -> float:

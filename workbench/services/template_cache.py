@@ -74,8 +74,9 @@ def build_cached(sex: str, root: str) -> bool:
     passed along because the helper's environment is the one it started
     with.
     """
-    _cached_head(sex, Path(root))
-    return (cached_folder(sex, Path(root)) / "template.json").is_file()
+    folder = cached_folder(sex, Path(root))
+    _cached_head(sex, folder)
+    return (folder / "template.json").is_file()
 
 
 def reference_head(sex: str = "male", pack: str | PathLike[str] | None = None, *,
@@ -97,17 +98,18 @@ def reference_head(sex: str = "male", pack: str | PathLike[str] | None = None, *
 
         return build_reference_head(sex)
     root = cache_root()
-    if helper_process.offloading() and not (cached_folder(sex, root) / "template.json").is_file():
+    folder = cached_folder(sex, root)
+    if helper_process.offloading() and not (folder / "template.json").is_file():
         with contextlib.suppress(RuntimeError, WorkbenchError, OSError):
             helper_process.call("workbench.services.template_cache:build_cached", sex, str(root))
             # (if that failed, the head is built below, in this process)
-    return _cached_head(sex, root)
+    return _cached_head(sex, folder)
 
 
-def _cached_head(sex: str, root: Path) -> TemplateHead:
+def _cached_head(sex: str, folder: Path) -> TemplateHead:
+    """The head cached in ``folder``, built and published there if missing or damaged."""
     from workbench.services.template import build_reference_head
 
-    folder = cached_folder(sex, root)
     if (folder / "template.json").is_file():
         try:
             return load_template_pack(folder)
