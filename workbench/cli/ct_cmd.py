@@ -1,4 +1,10 @@
-"""``workbench mesh-from-ct``: bone or skin surface of a CT volume."""
+"""``workbench mesh-from-ct``: bone or skin surface of a CT volume.
+
+The mesh is written in the volume's physical frame (LPS or RAS) in mm.  When
+the volume is registered sample data that must carry a credit line (the NLM
+Visible Human CTs), the credit is printed (also with ``--quiet``), goes into
+the JSON report, and into a PLY output's header as ``comment credit: ...``.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +12,9 @@ import argparse
 from pathlib import Path
 
 from workbench.cli.common import progress_printer, write_json
+from workbench.io.mesh_formats import ply
 from workbench.io.meshes import write_mesh
-from workbench.io.samples import resolve_input
+from workbench.io.samples import credit_comment, resolve_input
 from workbench.services.ct_mesh import mesh_from_ct
 
 
@@ -45,9 +52,17 @@ def run(args: argparse.Namespace) -> int:
         smooth_iterations=args.smooth, largest_component=not args.all_components,
         progress=progress_printer(not args.quiet),
     )
-    write_mesh(args.out, result.mesh)
+    if result.credit and args.out.suffix.lower() == ".ply":
+        ply.write(args.out, result.mesh, comments=[credit_comment(result.credit)])
+    else:
+        write_mesh(args.out, result.mesh)
     if args.report:
         write_json(result.to_dict(), args.report)
+    if result.credit:
+        print(f"credit: {result.credit}")
+        if args.out.suffix.lower() != ".ply":
+            print(f"  note: {args.out.suffix} files have no header comments to carry this credit; "
+                  "keep it with the mesh (a .ply output or the --report JSON records it)")
     if not args.quiet:
         print(f"{args.tissue} surface at iso {result.iso:g} ({result.rule})")
         print(f"  {result.summary}")

@@ -1,10 +1,30 @@
 """Registry of real public sample data, fetched on demand into the user's cache.
 
-Each sample is one or more files with a download URL and a SHA-256; the
-registry lives in ``sample_registry.json`` beside this module.  Files are
-downloaded with pooch into the cache folder (``WORKBENCH_DATA_DIR`` if set,
-else the platform's user cache, e.g. ``~/.cache/forensic-workbench/samples``)
-and verified by hash before use.
+Each sample is one or more files with a SHA-256 and (usually) a download
+URL; the registry lives in ``sample_registry.json`` beside this module.
+Files are downloaded with pooch into the cache folder (``WORKBENCH_DATA_DIR``
+if set, else the platform's user cache, e.g.
+``~/.cache/forensic-workbench/samples``) and verified by hash before use.
+A sample's ``main`` is the path handed to readers: one of its files, or the
+folder that holds them (a DICOM series).  Coordinates in a sample's
+``anatomy`` hint are in the file's own physical frame (mm): RAS for NIfTI,
+LPS for DICOM, as :mod:`workbench.io.volumes` reports it.
+
+Mirror-only files
+-----------------
+A file without a ``url`` (e.g. a frozen NIfTI copy made from a public DICOM
+series) can only come from a local mirror or the cache; :func:`fetch` says so
+when it is missing and names the sample it was made from (``derived_from``),
+which can be downloaded instead.
+
+Credit
+------
+Some data must carry a credit line wherever they are shown (the NLM Visible
+Human data: "Courtesy of the U.S. National Library of Medicine" plus a note
+that the copy is a frozen snapshot).  ``Sample.credit`` holds it;
+:func:`credit_for` finds it for a local file or DICOM folder by SHA-256, and
+:func:`credit_for_mesh_file` reads it back from the ``comment credit: ...``
+header line that ``workbench mesh-from-ct`` writes into PLY meshes.
 
 Local mirrors
 -------------
@@ -31,16 +51,41 @@ _REGISTRY_PATH = Path(__file__).with_name("sample_registry.json")
 SAMPLE_PREFIX = "sample:"
 
 
+#: PLY header comment key under which derived meshes carry a sample's credit
+CREDIT_COMMENT_KEY = "credit:"
+
+
 @dataclass(frozen=True)
 class SampleFile:
+    """One registered file.
+
+    ``path`` is relative to the cache folder; ``url`` is None for a file with
+    no public download (mirror or cache only); ``mirror`` is the path relative
+    to a mirror folder (e.g. the shared data folder), None if no mirror holds it.
+    """
+
     path: str
     sha256: str
-    url: str
-    mirror: str
+    url: str | None = None
+    mirror: str | None = None
+
+    @property
+    def mirror_only(self) -> bool:
+        """True when the file cannot be downloaded (no public URL)."""
+        return not self.url
 
 
 @dataclass(frozen=True)
 class Sample:
+    """A registered sample.
+
+    ``extra_files`` are other files of the same data (e.g. a 2 mm resample)
+    that :func:`fetch` does not need; they are known by hash so that meshes
+    made from them carry the sample's ``credit``.  ``derived_from`` names the
+    sample this one was made from (the one to download when a mirror-only
+    file is missing).
+    """
+
     name: str
     main: str
     kind: str
@@ -48,6 +93,14 @@ class Sample:
     licence: str
     files: tuple[SampleFile, ...]
     anatomy: dict | None = None
+    credit: str | None = None
+    extra_files: tuple[SampleFile, ...] = ()
+    derived_from: str | None = None
+
+    @property
+    def mirror_only_files(self) -> tuple[SampleFile, ...]:
+        """Files of ``files`` that have no public URL."""
+        return tuple(f for f in self.files if f.mirror_only)
 
 
 def registry() -> dict[str, Sample]:
@@ -55,7 +108,9 @@ def registry() -> dict[str, Sample]:
     raw = json.loads(_REGISTRY_PATH.read_text(encoding="utf-8"))
     return {
         name: Sample(name, s["main"], s["kind"], s["description"], s["licence"],
-                     tuple(SampleFile(**f) for f in s["files"]), s.get("anatomy"))
+                     tuple(SampleFile(**f) for f in s["files"]), s.get("anatomy"),
+                     s.get("credit"), tuple(SampleFile(**f) for f in s.get("extra_files", ())),
+                     s.get("derived_from"))
         for name, s in raw["samples"].items()
     }
 
@@ -97,6 +152,8 @@ def _from_mirror(entry: SampleFile, mirrors: list[Path]) -> Path | None:
     target = cache_dir() / entry.path
     if target.exists() and _sha256(target) == entry.sha256:
         return target
+    if entry.mirror is None:
+        return None
     for mirror in mirrors:
         candidate = mirror / entry.mirror
         if candidate.is_file() and _sha256(candidate) == entry.sha256:
@@ -114,8 +171,10 @@ def fetch(name: str, *, progress: bool = False) -> Path:
     Raises
     ------
     WorkbenchError
-        Unknown sample, or the download failed (the message says which file
-        and how to seed the cache by hand).
+        Unknown sample; a mirror-only file (no public URL) that is neither in
+        the cache nor in a mirror (the message names the sample to download
+        instead); or the download failed (the message says which file and
+        how to seed the cache by hand).
     """
     samples = registry()
     if name not in samples:
@@ -123,9 +182,32 @@ def fetch(name: str, *, progress: bool = False) -> Path:
     sample = samples[name]
     mirrors = _mirrors()
     missing = [f for f in sample.files if _from_mirror(f, mirrors) is None]
+    unreachable = [f for f in missing if f.mirror_only]
+    if unreachable:
+        raise WorkbenchError(_mirror_only_message(sample, unreachable, mirrors))
     if missing:
         _download(missing, progress)
     return cache_dir() / sample.main
+
+
+def _mirror_only_message(sample: Sample, files: list[SampleFile], mirrors: list[Path]) -> str:
+    root = cache_dir()
+    names = ", ".join(f.path for f in files)
+    where = ", ".join(str(m) for m in mirrors) or "none set"
+    message = (
+        f"sample {sample.name!r}: {names} has no public download URL (it can only come from "
+        f"a local mirror or the cache) and was not found in the cache ({root}) or in the "
+        f"mirrors of WORKBENCH_SAMPLE_MIRRORS ({where}). Point "
+        "WORKBENCH_SAMPLE_MIRRORS at a folder that holds it"
+    )
+    if files[0].mirror:
+        message += f" as {files[0].mirror}"
+    if sample.derived_from:
+        message += (
+            f", or download the original data it was made from instead: "
+            f"workbench samples fetch {sample.derived_from} (sample:{sample.derived_from})"
+        )
+    return message + "."
 
 
 def _download(files: list[SampleFile], progress: bool) -> None:
@@ -152,6 +234,80 @@ def _download(files: list[SampleFile], progress: bool) -> None:
                 f"Copy it by hand into {root / f.path}, or point WORKBENCH_SAMPLE_MIRRORS "
                 "at a folder that holds it."
             ) from exc
+
+
+def _credited_files() -> dict[str, str]:
+    """SHA-256 -> credit of every registered file (main and extra) of a sample with a credit."""
+    table: dict[str, str] = {}
+    for sample in registry().values():
+        if sample.credit:
+            for f in sample.files + sample.extra_files:
+                table.setdefault(f.sha256, sample.credit)
+    return table
+
+
+def credit_for(path: str | os.PathLike[str]) -> str | None:
+    """The credit line of the sample a local file or DICOM folder came from, or None.
+
+    A file matches when its SHA-256 is that of any registered file (main or
+    extra) of a sample with a credit, wherever the file lives and whatever it
+    is called.  A folder matches when it is a sample's ``main`` folder in the
+    cache, or when a file in it (searched recursively, as the DICOM reader
+    does) named like a registered file of a credited sample has that file's
+    SHA-256 (only such files are hashed, so a large unrelated series costs
+    nothing).  Anything else, or a missing path, gives None.
+    """
+    path = Path(path).expanduser()
+    samples = [s for s in registry().values() if s.credit]
+    if not samples:
+        return None
+    if path.is_file():
+        return _credited_files().get(_sha256(path))
+    if not path.is_dir():
+        return None
+    root = cache_dir()
+    resolved = path.resolve()
+    for sample in samples:
+        if (root / sample.main).resolve() == resolved:
+            return sample.credit
+    by_name: dict[str, dict[str, str]] = {}
+    for sample in samples:
+        for f in sample.files + sample.extra_files:
+            by_name.setdefault(Path(f.path).name, {})[f.sha256] = sample.credit or ""
+    for candidate in sorted(path.rglob("*")):
+        table = by_name.get(candidate.name)
+        if table and candidate.is_file():
+            credit = table.get(_sha256(candidate))
+            if credit:
+                return credit
+    return None
+
+
+def credit_for_mesh_file(path: str | os.PathLike[str]) -> str | None:
+    """The credit a mesh file carries in its header (PLY ``comment credit: ...``), or None.
+
+    Only PLY headers are read (other formats have no header comments); a
+    missing or unreadable file gives None.  Several credit comments are
+    joined with a space.
+    """
+    from workbench.io.mesh_formats import ply
+
+    path = Path(path).expanduser()
+    if path.suffix.lower() != ".ply" or not path.is_file():
+        return None
+    try:
+        comments = ply.header_comments(path)
+    except (OSError, WorkbenchError):
+        return None
+    credits = [c[len(CREDIT_COMMENT_KEY):].strip() for c in comments
+               if c.startswith(CREDIT_COMMENT_KEY)]
+    credits = [c for c in credits if c]
+    return " ".join(credits) if credits else None
+
+
+def credit_comment(credit: str) -> str:
+    """The PLY header comment (without ``comment``) that carries ``credit``."""
+    return f"{CREDIT_COMMENT_KEY} {' '.join(credit.split())}"
 
 
 def resolve_input(argument: str) -> Path:

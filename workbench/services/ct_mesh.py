@@ -4,6 +4,11 @@ The mesh is returned in millimetres in the volume's physical frame (LPS for
 DICOM/NRRD/MetaImage, RAS for NIfTI; recorded in the result), with outward
 normals.  Nothing is written to disk here; the caller saves the mesh.
 
+When the volume is (a file of) a registered sample whose data must carry a
+credit line (the NLM Visible Human CTs), the result's ``credit`` holds it
+(:func:`workbench.io.samples.credit_for`, matched by SHA-256), so the caller
+can show it and write it into the mesh file (PLY ``comment credit: ...``).
+
 Progress is reported through an optional ``progress(step, fraction)``
 callback (``fraction`` of the whole job, 0..1), so the service can run in a
 worker thread or be wrapped in a generator by a GUI/CLI without changes.
@@ -20,6 +25,7 @@ from typing import Any
 from workbench.core.isosurface import TISSUES, IsoChoice, choose_iso, extract_isosurface
 from workbench.core.mesh import Mesh, ValidationReport, validate
 from workbench.core.volume import Volume
+from workbench.io.samples import credit_for
 from workbench.io.volumes import read_volume
 
 Progress = Callable[[str, float], None]
@@ -56,6 +62,10 @@ class CTMeshResult:
         The input path or the volume's source.
     warnings : tuple of str
         Reader warnings (ignored series, irregular spacing, assumed frame).
+    credit : str or None
+        Credit line the source data require wherever they (or meshes made
+        from them) are shown, e.g. "Courtesy of the U.S. National Library of
+        Medicine. ..." for the Visible Human CTs; None for other data.
     """
 
     mesh: Mesh
@@ -69,6 +79,7 @@ class CTMeshResult:
     stats: dict[str, Any] = field(default_factory=dict)
     source: str = ""
     warnings: tuple[str, ...] = ()
+    credit: str | None = None
 
     @property
     def summary(self) -> str:
@@ -91,6 +102,7 @@ class CTMeshResult:
             "validation": self.validation.to_dict() | {"summary": self.summary},
             "stats": {k: v for k, v in self.stats.items() if k != "timings_s"},
             "warnings": list(self.warnings),
+            "credit": self.credit,
         }
 
 
@@ -129,6 +141,8 @@ def mesh_from_ct(
     Returns
     -------
     CTMeshResult
+        ``credit`` is looked up from the input path (for a loaded volume:
+        from ``volume.source`` when that is an existing path).
     """
     if tissue not in TISSUES:
         raise ValueError(f"tissue must be one of {TISSUES}, got {tissue!r}")
@@ -185,4 +199,20 @@ def mesh_from_ct(
         stats=dict(result.stats),
         source=str(path_or_volume) if not isinstance(path_or_volume, Volume) else volume.source,
         warnings=tuple(volume.metadata.get("warnings", ())),
+        credit=_credit(path_or_volume),
     )
+
+
+def _credit(path_or_volume: str | PathLike[str] | Volume) -> str | None:
+    """Credit of the sample the input came from (by SHA-256), or None.
+
+    A source that cannot be hashed (a description instead of a path, an
+    unreadable file) has no known credit; the extraction itself never fails here.
+    """
+    source = path_or_volume.source if isinstance(path_or_volume, Volume) else path_or_volume
+    if not source:
+        return None
+    try:
+        return credit_for(source)
+    except (OSError, ValueError):
+        return None

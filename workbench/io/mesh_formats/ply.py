@@ -5,15 +5,25 @@ element's ``vertex_indices`` / ``vertex_index`` list (any count and index
 type); other elements and properties are skipped.  Polygons are split into
 triangle fans.  Writes double-precision vertices and ``uchar int`` faces with a
 ``comment units: mm`` line.
+
+Header comments: :func:`encode` and :func:`write` take extra ``comments``
+(one header line each, e.g. ``credit: Courtesy of ...`` for data that must
+carry a credit); :func:`read` returns them in :attr:`PlyMesh.comments`, and
+:func:`header_comments` reads only the header of a file.  Vertex units are
+those of the file (mm for files this module writes).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
+from workbench.core.errors import InputError
+from workbench.core.mesh import Mesh
 from workbench.io.mesh_formats._common import (
     UNITS_NOTE,
     WRITER_NAME,
@@ -31,6 +41,14 @@ _TYPES = {
 }
 _FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
 _FACE_LISTS = ("vertex_indices", "vertex_index")
+_HEADER_LIMIT = 1 << 20  # header_comments reads at most this many bytes looking for end_header
+
+
+@dataclass
+class PlyMesh(ParsedMesh):
+    """:class:`ParsedMesh` plus the header's ``comment`` lines (text after ``comment``)."""
+
+    comments: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -246,8 +264,19 @@ def _binary_rows(
     return counts, flat, pos
 
 
-def read(path: Path, data: bytes) -> ParsedMesh:
-    """Parse PLY bytes; vertices in file units."""
+def _comments(data: bytes, end: int) -> list[str]:
+    """Text of the ``comment`` lines before byte ``end`` (the ``end_header`` keyword)."""
+    text = data[:end].decode("utf-8", errors="replace")
+    out = []
+    for line in text.splitlines():
+        words = line.split(None, 1)
+        if words and words[0] == "comment":
+            out.append(words[1].strip() if len(words) > 1 else "")
+    return out
+
+
+def read(path: Path, data: bytes) -> PlyMesh:
+    """Parse PLY bytes; vertices in file units, header comments in ``comments``."""
     r = Reader(path, data, "PLY")
     fmt, elements, start = _parse_header(r)
     names = {e.name for e in elements}
@@ -255,15 +284,60 @@ def read(path: Path, data: bytes) -> ParsedMesh:
     if extra:
         r.note(f"PLY elements ignored: {', '.join(extra)}")
     if fmt == "ascii":
-        return _read_ascii(r, elements, start)
-    return _read_binary(r, elements, start, _FORMATS[fmt])
+        parsed = _read_ascii(r, elements, start)
+    else:
+        parsed = _read_binary(r, elements, start, _FORMATS[fmt])
+    comments = _comments(data, data.find(b"end_header"))
+    return PlyMesh(parsed.vertices, parsed.faces, parsed.messages, comments)
 
 
-def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:
-    """PLY bytes: binary little endian (default) or ascii, double vertices."""
+def header_comments(source: str | PathLike[str] | bytes) -> list[str]:
+    """The ``comment`` lines of a PLY header (text after ``comment``), without reading the body.
+
+    ``source`` is a path or the file's bytes.  Raises
+    :class:`~workbench.core.errors.InputError` when it is not a PLY file
+    (no ``ply`` magic line or no ``end_header`` within the first MiB).
+    """
+    if isinstance(source, bytes):
+        path, data = Path("<bytes>"), source[:_HEADER_LIMIT]
+    else:
+        path = Path(source)
+        with open(path, "rb") as stream:
+            data = stream.read(_HEADER_LIMIT)
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        raise Reader(path, data, "PLY").fail("not a PLY file (missing 'ply' magic line or "
+                                             "'end_header')")
+    return _comments(data, end)
+
+
+def _comment_lines(comments: Iterable[str]) -> str:
+    lines = []
+    for comment in comments:
+        text = str(comment)
+        if "\n" in text or "\r" in text:
+            raise ValueError(f"a PLY header comment must be one line, got {text!r}")
+        if not text.isascii():
+            raise ValueError(f"a PLY header comment must be ASCII text, got {text!r}")
+        if "end_header" in text:
+            raise ValueError("a PLY header comment cannot contain 'end_header'")
+        lines.append(f"comment {text}\n")
+    return "".join(lines)
+
+
+def encode(
+    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, comments: Iterable[str] = ()
+) -> bytes:
+    """PLY bytes: binary little endian (default) or ascii, double vertices.
+
+    ``comments`` are extra header lines (``comment TEXT``), written after
+    the units and writer comments; each must be one line of ASCII text
+    (ValueError otherwise).
+    """
     fmt = "binary_little_endian" if binary else "ascii"
     header = (
         f"ply\nformat {fmt} 1.0\ncomment {UNITS_NOTE}\ncomment written by {WRITER_NAME}\n"
+        f"{_comment_lines(comments)}"
         f"element vertex {len(vertices)}\n"
         "property double x\nproperty double y\nproperty double z\n"
         f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n"
@@ -275,3 +349,31 @@ def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> byte
         return header + np.ascontiguousarray(vertices, "<f8").tobytes() + rec.tobytes()
     body = format_rows("%r %r %r\n", vertices) + format_rows("3 %d %d %d\n", faces)
     return header + body.encode("ascii")
+
+
+def write(
+    path: str | PathLike[str], mesh: Mesh, binary: bool = True, comments: Iterable[str] = ()
+) -> Path:
+    """Write a PLY mesh (vertices in mm) atomically with extra header ``comments``.
+
+    Same checks, errors and atomic write as
+    :func:`workbench.io.meshes.write_mesh` (which writes no extra comments);
+    raises ValueError for a comment that is not one line of ASCII text.
+    """
+    from workbench.io.meshes import _atomic_write  # meshes imports this module
+
+    path = Path(path)
+    if path.suffix.lower() != ".ply":
+        raise InputError(path, "expected a .ply file name for a PLY mesh with header comments")
+    if not isinstance(mesh, Mesh):
+        raise InputError(path, f"expected a Mesh to write, got {type(mesh).__name__}")
+    if not path.parent.is_dir():
+        raise InputError(path, "the folder does not exist", "create it first")
+    if path.is_dir():
+        raise InputError(path, "is a folder, cannot write a mesh file there")
+    payload = encode(mesh.vertices, np.asarray(mesh.faces), binary=binary, comments=comments)
+    try:
+        _atomic_write(path, payload)
+    except OSError as exc:
+        raise InputError(path, f"cannot be written ({exc.strerror or exc})") from None
+    return path
