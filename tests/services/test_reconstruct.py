@@ -1,13 +1,16 @@
-"""Skull → face fit (services.reconstruct): accuracy on known pairs, frames, incomplete skulls."""
+"""Skull → face fit (services.reconstruct): accuracy on known pairs, frames, incomplete skulls.
+
+The generated pair (the project's female skull under its female skin, fitted
+with the male head) checks the machinery; the real CT cases are judged in
+``benchmarks/bench_validation.py`` and ``tests/services/test_validation_real.py``.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from workbench.core.errors import LandmarkError
-from workbench.core.landmarks import LandmarkSet
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.services.compare import compare_surfaces, face_regions
 from workbench.services.reconstruct import ensemble_spread, reconstruct
 from workbench.services.reference_parts import skull_surface
@@ -31,10 +34,13 @@ def female_case(head_female, head_male):  # noqa: ANN001
 def test_female_face_from_female_skull_with_the_male_head(female_case, head_female, head_male):
     _, recon = female_case
     c = compare_surfaces(recon.face, head_female.skin, recon_regions=face_regions(head_male))
-    assert c.figures["pct_within_2_5mm"] > 90.0
-    assert c.figures["mean_abs_mm"] < 1.5
+    assert c.figures["pct_within_2_5mm"] > 95.0
+    assert c.figures["mean_abs_mm"] < 1.2
     assert recon.figures["penetrating_vertices"] == 0
-    assert recon.figures["max_tip_error_mm"] < 2.0
+    # the landmarks the user placed are hard constraints of the registration
+    assert recon.figures["registration"]["orientation"]["method"] == "seeds"
+    assert recon.figures["face_observed_fraction"] > 0.95
+    assert not recon.inferred[np.asarray(head_male.regions["face"])].any()
     # the muscles ride on the fitted skin: same grids, new positions
     assert [m.code for m in recon.head.muscles] == [m.code for m in head_male.muscles]
 
@@ -45,7 +51,10 @@ def test_result_is_in_the_input_frame(female_case, head_female, head_male):
     moved_skull = skull.transformed(m)
     moved = reconstruct(moved_skull, head_female.skull_landmarks.transformed(m), head_male)
     expected = recon.face.vertices @ m[:3, :3].T + m[:3, 3]
-    np.testing.assert_allclose(moved.face.vertices, expected, atol=1e-6)
+    # the fit is equivariant up to rounding (Embree's single-precision exposure test of the
+    # orientation samples is the only step that is not exact)
+    diff = np.linalg.norm(moved.face.vertices - expected, axis=1)
+    assert np.median(diff) < 0.1 and diff.max() < 1.5
     assert not moved.mirrored_input
 
 
@@ -55,27 +64,37 @@ def test_mirrored_input_is_detected_and_mapped_back(female_case, head_female, he
     mirrored = Mesh(skull.vertices * [-1, 1, 1], skull.faces[:, ::-1])
     result = reconstruct(mirrored, head_female.skull_landmarks.transformed(flip), head_male)
     assert result.mirrored_input
-    np.testing.assert_allclose(result.face.vertices, recon.face.vertices * [-1, 1, 1], atol=1e-6)
+    diff = np.linalg.norm(result.face.vertices - recon.face.vertices * [-1, 1, 1], axis=1)
+    assert np.median(diff) < 0.1 and diff.max() < 1.5
     assert result.face.volume * recon.face.volume > 0   # outward winding kept
 
 
 def test_missing_mandible_still_gives_a_face_and_says_so(head_female, head_male):
-    cranium = head_female.meshes["cranium"]
-    parts = head_female.skull_landmark_part
-    lms = LandmarkSet("skull", tuple(
-        lm if parts.get(lm.code) == "cranium" else lm.moved(lm.position, "absent")
-        for lm in head_female.skull_landmarks))
-    recon = reconstruct(cranium, lms, head_male)
+    cranium = concatenate([head_female.meshes["cranium"], head_female.meshes["upper_teeth"]])
+    recon = reconstruct(cranium, None, head_male, hint=((0, 0, 1), (0, 1, 0)))
     assert recon.face.n_vertices == head_male.skin.n_vertices
-    assert any("absent" in w or "mandib" in w for w in recon.warnings)
+    assert not recon.registration.part("mandible").present
+    assert any("mandible" in w for w in recon.warnings)
     assert np.isfinite(recon.face.vertices).all()
+    # the chin has no bone under it: inferred, and marked so
+    chin = head_male.skin_landmarks["pg"].position
+    near = np.linalg.norm(head_male.skin.vertices - chin, axis=1) < 10.0
+    assert recon.inferred[near].all()
+    forehead = head_male.skin_landmarks["g"].position
+    assert not recon.inferred[np.linalg.norm(head_male.skin.vertices - forehead, axis=1) < 10].any()
 
 
-def test_too_few_landmarks_is_a_clear_error(head_female, head_male):
-    keep = ("po_l", "po_r", "or_l", "n")
-    lms = LandmarkSet("skull", tuple(head_female.skull_landmarks[c] for c in keep))
-    with pytest.raises(LandmarkError, match="dowels"):
-        reconstruct(skull_surface(head_female), lms, head_male)
+def test_no_landmarks_needed_the_registration_finds_them(head_female, head_male):
+    recon = reconstruct(skull_surface(head_female), None, head_male)
+    found = recon.landmarks.as_dict()
+    truth = head_female.skull_landmarks.as_dict()
+    common = [c for c in ("g", "n", "pr", "pg", "po_l", "po_r", "or_l", "or_r", "zy_l", "go_r")
+              if c in found]
+    assert len(common) >= 8
+    err = [np.linalg.norm(found[c] - truth[c]) for c in common]   # both in the input frame
+    assert np.median(err) < 2.0
+    c = compare_surfaces(recon.face, head_female.skin, recon_regions=face_regions(head_male))
+    assert c.figures["pct_within_2_5mm"] > 90.0
 
 
 def test_ensemble_spread_follows_the_table_sds(female_case, head_male):
@@ -84,7 +103,13 @@ def test_ensemble_spread_follows_the_table_sds(female_case, head_male):
     spread = ensemble_spread(recon, head_male, skull_h, 8, seed=3)
     assert spread.shape == (head_male.skin.n_vertices,)
     face = np.asarray(head_male.regions["face"])
-    # T-Table SDs are 1-6 mm: the face moves by millimetres between members
+    # T-Table SDs are 1-7 mm: the face moves by millimetres between members
     assert 0.3 < np.median(spread[face]) < 6.0
     again = ensemble_spread(recon, head_male, skull_h, 8, seed=3)
     np.testing.assert_array_equal(spread, again)
+    # thick-tissue sites (the cheeks, SD 7 mm) spread more than the forehead (SD 1 mm)
+    v = head_male.skin.vertices
+    g = head_male.skin_landmarks["g"].position
+    cheek = head_male.skin_landmarks["sM2_l"].position
+    assert (np.median(spread[np.linalg.norm(v - cheek, axis=1) < 8])
+            > np.median(spread[np.linalg.norm(v - g, axis=1) < 8]))

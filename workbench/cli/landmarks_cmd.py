@@ -168,9 +168,9 @@ def run_suggest(args: argparse.Namespace) -> int:
             m = np.eye(4)
             m[:3, :3] *= read.scale_applied
             seeds = seeds.transformed(m)
-    reference = skull_surface(head) if args.surface == "skull" else head.skin
-    refs = head.skull_landmarks if args.surface == "skull" else head.skin_landmarks
-    result = transfer_landmarks(read.mesh, reference, refs, seeds=seeds,
+    if args.surface == "skull":
+        return _suggest_skull(args, read, head, seeds)
+    result = transfer_landmarks(read.mesh, head.skin, head.skin_landmarks, seeds=seeds,
                                 orientation=orientation_of(args, args.mesh))
     lms = result.landmarks
     if read.scale_applied != 1.0:  # back to the file's units
@@ -191,6 +191,40 @@ def run_suggest(args: argparse.Namespace) -> int:
         "alignment": {"method": result.alignment.method, "rms_mm": round(result.alignment.rms_mm, 2),
                       "scale": round(result.alignment.scale, 4)},
         "warp_residual_mm": round(result.warp_residual_mm, 3), "matches": result.matches,
+    }, None)
+    return 0
+
+
+def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:  # noqa: ANN001
+    """Skull landmarks from the dense registration of the reference skull (issue 11)."""
+    import numpy as np
+
+    from workbench.cli.reconstruct_cmd import orientation_of
+    from workbench.services.skull_registration import mirror_from_landmarks, register_skull
+
+    reg = register_skull(read.mesh, head, hint=orientation_of(args, args.mesh), seeds=seeds,
+                         mirror=mirror_from_landmarks(seeds))
+    lms = reg.landmarks
+    if read.scale_applied != 1.0:  # back to the file's units
+        m = np.eye(4)
+        m[:3, :3] /= read.scale_applied
+        lms = lms.transformed(m)
+    options = {"coordinate_system": "RAS"} if args.out.suffix in (".json", ".fcsv") else {}
+    write_landmarks(args.out, lms, **options)
+    for w in reg.warnings:
+        print(f"note: {w}")
+    o = reg.figures["orientation"]
+    write_json({
+        "file": str(args.out), "surface": "skull", "template": head.template_id,
+        "method": "dense registration of the reference skull",
+        "placed": [lm.code for lm in lms if lm.status == "placed"],
+        "suggested": {lm.code: round(lm.confidence, 2) for lm in lms if lm.status == "suggested"},
+        "absent": [lm.code for lm in lms if not lm.is_defined],
+        "parts": {p.name: {"present": p.present, "observed_fraction": p.observed_fraction}
+                  for p in reg.parts},
+        "alignment": {"method": o["method"], "handedness": o["handedness"],
+                      "mirrored": o["mirrored"], "scale": round(1.0 / o["reference_scale"], 4)},
+        "median_bone_distance_mm": reg.figures["median_observed_distance_mm"],
     }, None)
     return 0
 

@@ -163,15 +163,33 @@ def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,
 
 
 def _validate(truth_path: Path, scale: float | None, result) -> dict:  # noqa: ANN001
+    """The project's metric (VALIDATION.md) on the true skin, beside a uniform 6 mm offset.
+
+    The anterior direction is the fitted head frame's (no other is known
+    here); ``workbench validate`` takes it from its manifest.
+    """
+    import numpy as np
+
+    from workbench.core.face_metric import ScoreMask, unit
+    from workbench.core.offset_surface import uniform_offset
     from workbench.io.meshes import read_mesh
-    from workbench.services.compare import compare_surfaces, face_regions
+    from workbench.services.compare import REGION_NAMES, face_regions
+    from workbench.services.validation import score_surfaces
 
     truth = read_mesh(truth_path, units="mm" if scale is None else "auto", scale=scale).mesh
-    comparison = compare_surfaces(result.recon.face, truth,
-                                  recon_regions=face_regions(result.template))
-    out = comparison.to_json()
-    return {**out.get("figures", {}), "regions": out.get("regions", {}),
-            "truth": str(truth_path), "region": out.get("region")}
+    recon = result.recon
+    bone = result.opened.case.specimen.mesh
+    anterior = unit(np.linalg.inv(recon.input_to_head)[:3, :3] @ [0.0, 0.0, 1.0])
+    _, (mine, base) = score_surfaces(
+        truth, bone, [("reconstruction", recon.face), ("uniform_6mm_offset", uniform_offset(bone))],
+        anterior, ScoreMask(), labels_from=recon.face, vertex_regions=face_regions(result.template),
+        region_names=REGION_NAMES)
+    return {**mine.figures, "regions": mine.regions, "truth": str(truth_path),
+            "region": "face (VALIDATION.md metric)",
+            "metric": "VALIDATION.md: outermost, anterior-facing true-skin vertices in front of "
+                      "the bone centre and within 35 mm of the bone; distance to the "
+                      "reconstruction (positive: outside)",
+            "baseline": {"method": "uniform 6 mm offset of the bone", **base.figures}}
 
 
 def _pictures(out: Path, result) -> dict[str, str]:  # noqa: ANN001

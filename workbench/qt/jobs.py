@@ -44,7 +44,9 @@ from workbench.services.guides import (
     Guide, classic_guides, guides_from_json, guides_to_json,
 )
 from workbench.services.guide_rules import published_predictions
-from workbench.services.landmark_transfer import TransferResult, transfer_landmarks
+from workbench.services.skull_registration import (
+    SkullRegistration, mirror_from_landmarks, register_skull,
+)
 from workbench.services.reconstruct import (
     FitSettings, Reconstruction, ensemble_spread, input_frame, outward, reconstruct,
 )
@@ -143,22 +145,22 @@ def _thaw(value: Any) -> Any:
 
 # ------------------------------------------------------------------ suggest
 def suggest_landmarks(skull: Mesh, current: LandmarkSet, sex: str,
-                      orient: tuple | None) -> tuple[LandmarkSet, TransferResult]:
-    """Suggest the skull landmarks not placed yet (input frame, mm).
+                      orient: tuple | None) -> tuple[LandmarkSet, SkullRegistration]:
+    """Suggest the skull landmarks not placed yet (input frame, mm), by the dense registration.
 
-    Landmarks the user placed are seeds and stay as they are; landmarks the
-    user marked absent stay absent.  Returns the new set and the transfer
-    result (residual, warnings).
+    Landmarks the user placed are seeds (and hard constraints) and stay as
+    they are; landmarks the user marked absent stay absent.  Returns the new
+    set and the registration (figures, warnings; reused by the fit).
     """
     head = reference_head(sex)
     placed = LandmarkSet("skull", tuple(lm for lm in current if lm.status == "placed"))
-    result = transfer_landmarks(skull, skull_surface(head), head.skull_landmarks,
-                                seeds=placed if len(placed) else None, orientation=orient)
-    # marked absent by a person (SetLandmarkStatus gives confidence 1; the transfer 0)
+    reg = register_skull(skull, head, hint=orient, seeds=placed if len(placed) else None,
+                         mirror=mirror_from_landmarks(current))
+    # marked absent by a person (SetLandmarkStatus gives confidence 1; the registration 0)
     user_absent = {lm.code: lm for lm in current if lm.status == "absent" and lm.confidence > 0.5}
-    merged = [user_absent.get(lm.code, lm) for lm in result.landmarks]
-    extra = [lm for lm in current if lm.code not in result.landmarks]
-    return LandmarkSet("skull", tuple(merged + extra)), result
+    merged = [user_absent.get(lm.code, lm) for lm in reg.landmarks]
+    extra = [lm for lm in current if lm.code not in reg.landmarks]
+    return LandmarkSet("skull", tuple(merged + extra)), reg
 
 
 # ------------------------------------------------------------------ dowels
@@ -176,9 +178,21 @@ def _to(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.asarray(p, float).reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
 
-def preview_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings) -> DowelPreview:
-    """Plan the dowels (head frame) and map them back for display."""
-    to_head, _ = input_frame(landmarks)
+def preview_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
+                   orient: tuple | None = None) -> DowelPreview:
+    """Plan the dowels (head frame) and map them back for display.
+
+    The head frame comes from the landmarks' porions and orbitales, or —
+    when they do not define one — from the dense registration of the skull.
+    """
+    try:
+        to_head, _ = input_frame(landmarks)
+    except (WorkbenchError, ValueError):
+        head = reference_head(str(settings.sex or "male"))
+        placed = LandmarkSet("skull", tuple(lm for lm in landmarks if lm.status == "placed"))
+        to_head = register_skull(skull, head, hint=orient,
+                                 seeds=placed if len(placed) else None,
+                                 mirror=mirror_from_landmarks(landmarks)).input_to_head
     skull_h = outward(skull.transformed(to_head))
     plan = plan_dowels(skull_h, landmarks.transformed(to_head), settings)
     active = plan.active()
@@ -204,7 +218,7 @@ class FitResult:
 
 def fit_face(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
              guides: list[Guide] | None, *, use_guides: bool = True,
-             ensemble: int = 0) -> FitResult:
+             ensemble: int = 0, orient: tuple | None = None) -> FitResult:
     """Reconstruct the face as ``workbench reconstruct`` does (guides: the second warp).
 
     ``guides`` None computes Kähler's classic guides from the skull; a list
@@ -228,7 +242,7 @@ def fit_face(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
             chosen.extend(guides)
         return lambda skin: _guide_targets(chosen, skin, skull_h, lms_h, rejected)
 
-    recon = reconstruct(skull, landmarks, head, settings=fit, guides=guide_fn)
+    recon = reconstruct(skull, landmarks, head, settings=fit, guides=guide_fn, hint=orient)
     recon = replace(recon, warnings=recon.warnings + tuple(rejected))
     skull_h = outward(skull.transformed(recon.input_to_head))
     spread = ensemble_spread(recon, head, skull_h, ensemble, settings=fit) if ensemble else None

@@ -67,12 +67,13 @@ class LandmarkOpsMixin:
                            lambda exc: self.show_error("Could not suggest landmarks", exc))
 
     def _apply_suggestion(self, result: tuple) -> None:
-        new_set, transfer = result
+        new_set, reg = result
         if self.document.push(ReplaceLandmarkSet("skull", new_set, "Suggest skull landmarks")):
             n = sum(lm.status == "suggested" for lm in new_set)
-            self.status(f"Suggested {n} landmarks (residual {transfer.warp_residual_mm:.2f} mm, "
-                        f"{self.runner.timings.get('suggest', 0):.1f} s)")
-            self.messages.extend(transfer.warnings)
+            d = reg.figures.get("median_observed_distance_mm")
+            self.status(f"Suggested {n} landmarks by the dense registration (median bone "
+                        f"distance {d:.2f} mm, {self.runner.timings.get('suggest', 0):.1f} s)")
+            self.messages.extend(reg.warnings)
 
     def snap_selected(self) -> None:
         """Snap the selected skull landmark to the feature its definition names ("Snap", S).

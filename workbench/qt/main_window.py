@@ -330,7 +330,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         n = self.reconstruct_panel.ensemble.value()
         self.runner.submit("fit", "Reconstructing the face …",
                            lambda: jobs.fit_face(skull, lms, settings, guides, use_guides=use,
-                                                 ensemble=n),
+                                                 ensemble=n, orient=jobs.orientation(case)),
                            self._show_fit,
                            lambda exc: self.show_error("Could not reconstruct the face", exc))
 

@@ -367,8 +367,8 @@ def _validation(pdf: ReportPDF, v: dict[str, Any], pictures: list[tuple[str, Pat
     if v.get("truth"):
         pdf.para(f"Truth surface: {v['truth']}" + (f"; region: {v['region']}" if v.get("region")
                                                      else ""), size=8.5)
-    pdf.para("Signed distance from each vertex of the true skin to the reconstruction "
-             "(positive = reconstruction outside).", size=8, color=GREY)
+    pdf.para(v.get("metric") or "Signed distance from each vertex of the true skin to the "
+             "reconstruction (positive = reconstruction outside).", size=8, color=GREY)
     pdf.ln(1)
     keys = ["mean_abs_mm", "rms_mm", "signed_mean_mm", "signed_sd_mm", "pct_within_2_5mm",
             "pct_within_5mm"]
@@ -383,6 +383,8 @@ def _validation(pdf: ReportPDF, v: dict[str, Any], pictures: list[tuple[str, Pat
         return num(100.0 * value if key == "coverage" and value is not None else value)
 
     rows = [("whole", *(cell(v, k) for k in keys))]
+    if v.get("baseline"):
+        rows.append(("6 mm offset (whole)", *(cell(v["baseline"], k) for k in keys)))
     rows += [(name, *(cell(fig, k) for k in keys)) for name, fig in (v.get("regions") or {}).items()]
     styles = [pdf.face("B")] + [None] * (len(rows) - 1)
     width = 150 / len(keys)

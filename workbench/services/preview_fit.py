@@ -50,7 +50,7 @@ class PreviewFit:
     sources: np.ndarray            # (k, 3) reference skin points, head frame
     targets: np.ndarray            # (k, 3) current targets, head frame (edited in place)
     labels: tuple[str, ...]
-    skin_vertices: np.ndarray      # (n, 3) reference skin, head frame
+    skin_vertices: np.ndarray      # (n, 3) the skin the last warp applies to, head frame
     input_to_head: np.ndarray      # (4, 4)
     dowels: dict[str, tuple[float, np.ndarray]]   # skull code → (depth mm, unit direction)
     _rows: dict[str, np.ndarray] = field(default_factory=dict)
@@ -60,13 +60,15 @@ class PreviewFit:
         """The preview of ``recon``, a fit of ``reference`` (the unwarped head)."""
         if len(recon.labels) != len(recon.sources):
             raise ValueError("the fit carries no correspondence labels; fit it again")
-        dowels = {d.code: (float(d.depth_mm), np.asarray(d.direction, float))
+        depths = dict(recon.dowel_depths)
+        dowels = {d.code: (float(depths.get(d.code, d.depth_mm)), np.asarray(d.direction, float))
                   for d in recon.plan.dowels if not d.excluded}
+        base = recon.base_skin if recon.base_skin is not None else reference.skin.vertices
         rows: dict[str, list[int]] = {}
         for i, label in enumerate(recon.labels):
             rows.setdefault(label, []).append(i)
         return cls(np.array(recon.sources, float), np.array(recon.targets, float),
-                   tuple(recon.labels), np.array(reference.skin.vertices, float),
+                   tuple(recon.labels), np.array(base, float),
                    np.array(recon.input_to_head, float), dowels,
                    {k: np.array(v, dtype=np.int64) for k, v in rows.items()})
 
@@ -79,7 +81,26 @@ class PreviewFit:
         depth, direction = self.dowels[code]
         origin = apply_transform(self.input_to_head, np.asarray(position_input, float)[None])[0]
         self.targets[rows] = origin + depth * direction
+        self._release_anchors(self.sources[rows])
         return True
+
+    def _release_anchors(self, points: np.ndarray) -> None:
+        """Anchors near a dragged correspondence stop holding the skin (they would fight it)."""
+        from workbench.services.reconstruct import ANCHOR_CLEARANCE_MM
+
+        anchor = np.array([lab == "anchor" for lab in self.labels])
+        if not anchor.any():
+            return
+        d = np.min(np.linalg.norm(self.sources[:, None] - np.asarray(points)[None], axis=2), axis=1)
+        drop = anchor & (d < ANCHOR_CLEARANCE_MM)
+        if drop.any():
+            keep = ~drop
+            self.sources, self.targets = self.sources[keep], self.targets[keep]
+            self.labels = tuple(lab for lab, k in zip(self.labels, keep, strict=True) if k)
+            rows: dict[str, list[int]] = {}
+            for i, label in enumerate(self.labels):
+                rows.setdefault(label, []).append(i)
+            self._rows = {k: np.array(v, dtype=np.int64) for k, v in rows.items()}
 
     def move_guide(self, guide: Guide) -> bool:
         """Apply ``guide`` (its value, head frame mm) to the skin landmarks it affects.
@@ -96,6 +117,7 @@ class PreviewFit:
                 continue
             for axis, value in zip(AXES[guide.kind], guide.value, strict=True):
                 self.targets[rows, axis] = float(value)
+            self._release_anchors(self.sources[rows])
             moved = True
         return moved
 

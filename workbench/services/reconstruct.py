@@ -1,31 +1,40 @@
-"""Skull → face: fit the reference head over a landmarked skull (Kähler 2003, §8.6.5).
+"""Skull → face: the reference head carried onto a real skull and its soft tissue modelled.
 
-Units mm.  The skull and its landmarks come in the **input frame** (scanner
-or CT coordinates); the work happens in the head frame (x to the subject's
-left, y up, z forward, Frankfort Horizontal at y = 0) computed from the
-porions, orbitales and midline landmarks; every result can be mapped back
-(:meth:`Reconstruction.to_input`) so the face overlays the evidence.  A
-mirrored input (e.g. a CT stored in a left-handed space) is handled by a
-reflection in that map, and the triangle winding is restored on the way
-back.
+Units mm.  The skull comes in the **input frame** (a CT's physical frame, a
+scanner's frame, any axes); the work happens in the target's head frame (x
+to the subject's left, x = 0 midsagittal, y up, z toward the face,
+Frankfort Horizontal at y = 0) found by the registration; every result maps
+back (:meth:`Reconstruction.to_input`) so the face overlays the evidence.
+A mirrored input is handled by a reflection in that map.
 
-Fit (digest §6.4–6.5):
+The fit (issue 11; Kähler 2003 §8.6 made dense):
 
-1. Dowels (:mod:`workbench.services.dowels`): tip q_i = s_i + d_i n_i for
-   every skull landmark with a table depth, plus interpolated sites on the
-   cranium and mandible.
-2. The reference head's paired skin landmarks p_i (and, for interpolated
-   sites, the skin point above the same site on the reference skull) are
-   warped onto the tips: one landmark warp (φ(r) = r, §8.3.1) moves skin,
-   muscles (they ride on the skin), eyes, teeth and the reference skull
-   parts together.
-3. Guides (nose, mouth, lips, eyes) replace the coordinates they control of
-   their skin landmarks' targets and the warp is solved again (the
-   dissertation's "second warp", folded into one solve here).
-4. Non-penetration: skin vertices closer to the skull than
-   ``min_tissue_mm`` (or inside it) get extra correspondences that put them
-   at that thickness along the skull normal, and the warp is re-solved,
-   until none is left (or ``max_refits`` rounds).
+1. **Dense registration** of the reference skull onto the bone, part by
+   part (:mod:`workbench.services.skull_registration`): orientation from the
+   bone alone (or a hint, or the user's landmarks), the mandible with its own
+   pose, missing parts detected, landmarks with confidences, the Frankfort
+   frame.
+2. **Carry**: the whole reference head — skin, muscles, eyes, teeth,
+   tongue — follows the skull's displacement field (one smooth φ(r) = r
+   warp, §8.3.1, fitted densely on the registered skull).
+3. **Tissue model** (:mod:`workbench.services.tissue_model`): the
+   reference's own thickness calibrated to the depth table, build variants
+   and region factors, nose, lips, lids and ears keeping their shape.
+4. **Dowels** are planned at the registered landmarks on the target bone
+   (:mod:`workbench.services.dowels`): the sparse view of the field.  By
+   default each shows the model's depth along it; a user's override (or
+   ``pin_dowels``) pulls the skin through its tip.
+5. **Guides** (nose, mouth, lips, eyes) set the coordinates they control of
+   their skin landmarks in one last warp — Kähler's "second warp" — whose
+   other correspondences hold the skin where the model put it
+   (``anchor``), at the dowels (``dowel:<code>``) and off the bone
+   (``clearance``: no skin closer than ``min_tissue_mm`` to the *target*
+   bone).  The interactive preview (:mod:`workbench.services.preview_fit`)
+   re-solves exactly this warp.
+6. **Observed / inferred**: a skin vertex over bone the registration
+   observed is *observed*; over missing bone (no mandible, a defect, a cut
+   vault) its shape is the reference's prior and it is *inferred*
+   (:attr:`Reconstruction.observed`, 0..1 per skin vertex).
 """
 
 from __future__ import annotations
@@ -40,36 +49,46 @@ from scipy.spatial import cKDTree
 from workbench.core.errors import LandmarkError
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
+from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
+from workbench.core.thickness import adjacency, smooth_field
 from workbench.core.tps import LandmarkWarp, fit_warp
 from workbench.model.template import TemplateHead
-from workbench.services.dowels import DepthSettings, DowelPlan, depth_samples, plan_dowels
+from workbench.services.dowels import DepthSettings, DowelPlan, plan_dowels
 from workbench.services.frame import head_frame_from_landmarks
-from workbench.services.reference_parts import skull_surface
+from workbench.services.tissue_model import TissueField, TissueSettings, apply_field, tissue_field
 
-#: spacing of the extra non-penetration correspondences (mm)
-CLEARANCE_SPACING_MM = 8.0
-#: skin vertices farther than this from any bone are not checked (bone missing there)
-BONE_SEARCH_MM = 30.0
-#: bone farther than this from the warped reference skull is not the skull (vertebrae ...)
-SKULL_LIKE_MM = 8.0
-#: warp regularisation λ (mm): suggested landmarks are noisy, and an exact
-#: interpolation of every tip crumples the skin between close dowels
+#: warp regularisation λ (mm) of the final (guide) warp
 SMOOTHING = 1.0
+#: anchors of the final warp: one per cell of this size (mm) ...
+ANCHOR_SPACING_MM = 9.0
+#: ... and none this close to a point the warp moves (mm); the interactive preview drops
+#: the anchors this close to a dragged dowel, so the skin around it follows the drag
+ANCHOR_CLEARANCE_MM = 12.0
+#: spacing of the non-penetration correspondences (mm)
+CLEARANCE_SPACING_MM = 6.0
+#: skin vertices farther than this from the target bone are not checked (bone missing there)
+BONE_SEARCH_MM = 30.0
 #: skin regions never pushed off the bone (the neck stump meets the spine)
 NO_CLEARANCE_REGIONS = ("neck",)
+#: a skin vertex is observed when the bone beneath it is (smoothed weight above this)
+OBSERVED_LEVEL = 0.5
 
 
 @dataclass(frozen=True)
 class FitSettings:
-    """What the fit uses beyond the dowels."""
+    """What the fit uses besides the skull and the reference head."""
 
     depth: DepthSettings = field(default_factory=DepthSettings)
-    min_tissue_mm: float = 2.0
-    max_refits: int = 4
+    tissue: TissueSettings = field(default_factory=TissueSettings)
+    max_refits: int = 3
     #: suggested landmarks below this confidence get no dowel (placed ones always do)
-    min_confidence: float = 0.15
+    min_confidence: float = 0.3
+
+    @property
+    def min_tissue_mm(self) -> float:
+        return self.tissue.min_tissue_mm
 
 
 @dataclass(frozen=True)
@@ -79,23 +98,29 @@ class Reconstruction:
     Attributes
     ----------
     head : TemplateHead
-        The reference head warped onto the skull, in the head frame (mm).
+        The reference head carried onto the skull, in the head frame (mm).
     input_to_head : (4, 4)
         Map of input coordinates into the head frame (a reflection included
         when ``mirrored_input``).
     plan : DowelPlan
-        The dowels used (head frame).
+        The dowels (head frame).
     sources, targets : (k, 3)
-        The final correspondences of the warp (head frame).
+        The correspondences of the final warp (head frame).
     labels : tuple of str
-        What each correspondence is: ``"dowel:<skull code>"``,
-        ``"guide:<skin code>"`` or ``"clearance"`` (a non-penetration
-        point added by a refit); the interactive preview moves targets by it.
-    figures : dict
-        ``max_tip_error_mm``, ``min_tissue_mm``, ``penetrating_vertices``,
-        ``refits``, ``extra_correspondences``, ``seconds``.
-    guide_targets : dict
-        Skin code → target position set by guides (head frame).
+        Per correspondence: ``"anchor"``, ``"dowel:<skull code>"``,
+        ``"guide:<skin code>"`` or ``"clearance"``.
+    base_skin : (n_skin, 3)
+        The skin the final warp is applied to (carried and tissue-modelled).
+    dowel_depths : dict
+        Skull code → the depth its correspondence holds (mm).
+    observed : (n_skin,)
+        0..1 per skin vertex: how much real bone the registration found under
+        it (below :data:`OBSERVED_LEVEL`: inferred from the reference).
+    landmarks : LandmarkSet
+        The skull landmarks used (input frame).
+    registration : SkullRegistration or None
+    tissue : TissueField or None
+    figures, warnings, guide_targets
     """
 
     head: TemplateHead
@@ -108,20 +133,32 @@ class Reconstruction:
     guide_targets: Mapping[str, np.ndarray] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     labels: tuple[str, ...] = ()
+    base_skin: np.ndarray | None = None
+    dowel_depths: Mapping[str, float] = field(default_factory=dict)
+    observed: np.ndarray | None = None
+    landmarks: LandmarkSet | None = None
+    registration: object | None = None
+    tissue: TissueField | None = None
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         return apply_transform(np.linalg.inv(self.input_to_head), points)
 
     def mesh_to_input(self, mesh: Mesh) -> Mesh:
         """A head-frame mesh in the input frame, outward winding kept."""
-        out = Mesh(self.to_input(mesh.vertices),
-                   mesh.faces[:, ::-1] if self.mirrored_input else mesh.faces)
-        return out
+        return Mesh(self.to_input(mesh.vertices),
+                    mesh.faces[:, ::-1] if self.mirrored_input else mesh.faces)
 
     @property
     def face(self) -> Mesh:
         """The fitted skin in the input frame."""
         return self.mesh_to_input(self.head.skin)
+
+    @property
+    def inferred(self) -> np.ndarray:
+        """``(n_skin,)`` bool: skin over missing bone, shaped by the reference alone."""
+        if self.observed is None:
+            return np.zeros(self.head.skin.n_vertices, bool)
+        return self.observed < OBSERVED_LEVEL
 
 
 def input_frame(landmarks: LandmarkSet) -> tuple[np.ndarray, bool]:
@@ -141,54 +178,19 @@ def input_frame(landmarks: LandmarkSet) -> tuple[np.ndarray, bool]:
 def outward(mesh: Mesh) -> Mesh:
     """``mesh`` with its triangles wound so normals point away from its centre.
 
-    Inside/outside tests need outward normals; scanner and CT meshes (and
-    mirrored files) come either way.  Judged by the area-weighted agreement
-    of face normals with the direction from the centroid.
+    Judged by the area-weighted agreement of face normals with the direction
+    from the centroid (scanner and CT meshes, and mirrored files, come either way).
     """
     centres = mesh.triangles.mean(axis=1)
     agree = np.einsum("ij,ij->i", mesh.face_cross, centres - centres.mean(axis=0)).sum()
     return mesh if agree >= 0 else Mesh(mesh.vertices, mesh.faces[:, ::-1])
 
 
-#: skin points of interpolated sites on a reference head, per (head hash, table, sites)
-_REF_CACHE: dict[tuple, dict[str, np.ndarray]] = {}
-
-
-def reference_correspondences(head: TemplateHead, plan: DowelPlan,
-                              settings: DepthSettings) -> dict[str, np.ndarray]:
-    """Skin point of the reference head for every dowel code of ``plan`` (head frame).
-
-    Table dowels use the paired skin landmark.  Interpolated sites are
-    planned on the reference skull with the same pattern; their skin point
-    is where the reference's own dowel from that site meets its skin.
-    """
-    skin = head.skin_landmarks.as_dict()
-    out = {d.code: skin[d.skin_code] for d in plan.dowels
-           if d.skin_code is not None and d.skin_code in skin}
-    wanted = [d.code for d in plan.dowels if d.source == "interpolated"]
-    key = (head.content_hash, str(settings.table), tuple(wanted))
-    if wanted and key in _REF_CACHE:
-        out.update(_REF_CACHE[key])
-    elif wanted:
-        ref_plan = plan_dowels(skull_surface(head), head.skull_landmarks,
-                               replace(settings, overrides={}, excluded=frozenset(),
-                                       directions={}, build="normal"))
-        skin_index = MeshIndex(head.skin)
-        tips = {d.code: d for d in ref_plan.dowels if d.code in wanted}
-        if tips:
-            codes = list(tips)
-            pts = np.array([tips[c].tip for c in codes])
-            cp = skin_index.closest_points(pts).points
-            found = dict(zip(codes, cp, strict=True))
-            _REF_CACHE[key] = found
-            out.update(found)
-    return out
-
-
-def warp_head(head: TemplateHead, warp: LandmarkWarp) -> TemplateHead:
+def warp_head(head: TemplateHead, warp: LandmarkWarp | Callable[[np.ndarray], np.ndarray]
+              ) -> TemplateHead:
+    """Every part of ``head`` moved by ``warp``; the eyes rigidly with their centres (§8.3.2)."""
     meshes = {name: m.with_vertices(warp(m.vertices)) for name, m in head.meshes.items()}
     centres = warp(head.eye_centres)
-    # a globe is rigid: move it with its centre, keep its size (§8.3.2)
     eyes = head.meshes["eyes"].vertices
     owner = np.linalg.norm(eyes[:, None] - head.eye_centres[None], axis=2).argmin(axis=1)
     meshes["eyes"] = head.meshes["eyes"].with_vertices(eyes + (centres - head.eye_centres)[owner])
@@ -204,7 +206,7 @@ def warp_head(head: TemplateHead, warp: LandmarkWarp) -> TemplateHead:
     )
 
 
-def _warp_set(lms: LandmarkSet, warp: LandmarkWarp) -> LandmarkSet:
+def _warp_set(lms: LandmarkSet, warp: Callable[[np.ndarray], np.ndarray]) -> LandmarkSet:
     defined = [lm for lm in lms if lm.is_defined]
     if not defined:
         return lms
@@ -213,227 +215,276 @@ def _warp_set(lms: LandmarkSet, warp: LandmarkWarp) -> LandmarkSet:
     return LandmarkSet(lms.surface, tuple(new.get(lm.code, lm) for lm in lms))
 
 
-def _thin_spots(skin: np.ndarray, skull_index: MeshIndex, min_tissue: float,
-                exclude: np.ndarray, skull_like: cKDTree | None = None
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Skin vertices closer than ``min_tissue`` to the bone (or inside it).
-
-    Only bone the reference skull accounts for counts: with ``skull_like``
-    (a k-d tree of the warped reference skull) a closest bone point farther
-    than :data:`SKULL_LIKE_MM` from it — a vertebra, the hyoid, a CT
-    artefact — is ignored.
-    """
-    cp = skull_index.closest_points(skin)
-    signed = skull_index.signed_distance(skin)
-    near = (cp.distances < BONE_SEARCH_MM) & ~exclude
-    if skull_like is not None:
-        d, _ = skull_like.query(cp.points)
-        near &= d < SKULL_LIKE_MM
-    thin = near & (signed < min_tissue)
-    return thin, signed, cp.points
+def _mask(n: int, head: TemplateHead, names: tuple[str, ...]) -> np.ndarray:
+    m = np.zeros(n, bool)
+    for name in names:
+        if name in head.regions:
+            m[np.asarray(head.regions[name], dtype=np.int64)] = True
+    return m
 
 
 def _spread(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Indices of a subset of ``points`` no two closer than ``spacing`` (greedy)."""
-    chosen: list[int] = []
-    for i, p in enumerate(points):
-        if all(np.linalg.norm(points[j] - p) >= spacing for j in chosen):
-            chosen.append(i)
-    return np.array(chosen, dtype=np.int64)
-
-
-def _pairs(plan: DowelPlan, ref_points: Mapping[str, np.ndarray], skin_lms: Mapping[str, np.ndarray],
-           guide_targets: Mapping[str, np.ndarray], depths: np.ndarray | None
-           ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], list[str]]:
-    """Warp correspondences: reference skin points → dowel tips, guided codes → guide targets.
-
-    Also returns a label per correspondence (see :attr:`Reconstruction.labels`).
-    """
-    src, dst, tip_of, labels = [], [], {}, []
-    for i, d in enumerate(plan.dowels):
-        if d.excluded or d.code not in ref_points or d.skin_code in guide_targets:
-            continue  # a guide, when there is one, decides that skin landmark
-        depth = d.depth_mm if depths is None else float(depths[i])
-        tip = d.origin + depth * d.direction
-        src.append(ref_points[d.code])
-        dst.append(tip)
-        tip_of[d.code] = tip
-        labels.append(f"dowel:{d.code}")
-    for code, target in guide_targets.items():
-        if code in skin_lms:
-            src.append(skin_lms[code])
-            dst.append(np.asarray(target, float))
-            labels.append(f"guide:{code}")
-    if len(src) < 4:
-        raise LandmarkError(f"only {len(src)} usable dowels; place more skull landmarks "
-                            "(at least 4 with table depths)")
-    return np.array(src), np.array(dst), tip_of, labels
+    """Indices of one point per occupied ``spacing`` cell (the first in index order)."""
+    _, first = np.unique(np.floor(points / spacing).astype(np.int64), axis=0, return_index=True)
+    return np.sort(first)
 
 
 GuideFn = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
 
 
-def fit_head(head: TemplateHead, skull_h: Mesh, plan: DowelPlan, *,
-             guide_targets: Mapping[str, np.ndarray] | None = None,
-             guides: GuideFn | None = None,
-             settings: FitSettings = FitSettings(), depths: np.ndarray | None = None,
-             extra: tuple[np.ndarray, np.ndarray] | None = None,
-             ref_points: dict[str, np.ndarray] | None = None,
-             skull_index: MeshIndex | None = None
-             ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict[str, np.ndarray],
-                        tuple[str, ...]]:
-    """Warp ``head`` so its skin meets the dowel tips (all in the head frame).
+def _skin_observed(head_skin: Mesh, reg: object) -> np.ndarray:
+    """0..1 per skin vertex from the observed weights of the registered bone under it."""
+    parts = ("cranium", "upper_teeth", "mandible", "lower_teeth")
+    bone = concatenate([reg.meshes[p] for p in parts])
+    weight = np.concatenate([reg.observed[p] for p in parts])
+    cp = MeshIndex(bone).closest_points(head_skin.vertices)
+    w = np.einsum("ij,ij->i", cp.barycentric, weight[bone.faces[cp.face_ids]])
+    # observed weights are per-vertex match strengths; a neighbourhood of them is the evidence
+    w = smooth_field(adjacency(head_skin), np.clip(w / 0.6, 0.0, 1.0), 8)
+    return np.clip(w, 0.0, 1.0)
 
-    ``guides`` maps the skin landmark positions after the dowel warp to guide
-    targets (the dissertation's second warp, §8.6.5); ``guide_targets`` gives
-    them directly.  ``depths`` (one per dowel of ``plan``) replaces the
-    planned depths (the ensemble); ``extra`` adds fixed correspondences and
-    skips the non-penetration loop (used by the ensemble with the main
-    fit's extras).  Returns the fitted head, figures, the correspondences,
-    the guide targets used and a label per correspondence.
+
+def _dowel_hits(plan: DowelPlan, skin: Mesh) -> dict[str, tuple[float, np.ndarray]]:
+    """Per active dowel: the skin's depth along it and the skin point there."""
+    active = plan.active()
+    if not active:
+        return {}
+    o = np.array([d.origin for d in active])
+    dr = np.array([d.direction for d in active])
+    hits = RayCaster(skin).first_hits(o, dr, max_distance=80.0)
+    return {d.code: (float(hits.distance[i]), hits.points[i])
+            for i, d in enumerate(active) if hits.hit[i]}
+
+
+def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
+             guide_targets: Mapping[str, np.ndarray] | None = None,
+             guides: GuideFn | None = None, settings: FitSettings = FitSettings(),
+             tissue: TissueField | None = None, depths: np.ndarray | None = None
+             ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict, tuple[str, ...],
+                        np.ndarray, dict[str, float]]:
+    """Carry ``head`` with the registration, model the tissue, warp to dowels and guides.
+
+    Returns the fitted head (head frame), figures, the final warp's
+    correspondences and labels, the guide targets used, the base skin and
+    the depth each dowel correspondence holds.
     """
+    from workbench.services.skull_registration import carry_head
+
     t0 = time.perf_counter()
-    ref_points = ref_points if ref_points is not None else reference_correspondences(
-        head, plan, settings.depth)
-    guide_targets = dict(guide_targets or {})
-    skin_lms = head.skin_landmarks.as_dict()
-    src_a, dst_a, tip_of, labels = _pairs(plan, ref_points, skin_lms, guide_targets, depths)
-    if extra is not None and len(extra[0]):
-        src_a, dst_a = np.vstack([src_a, extra[0]]), np.vstack([dst_a, extra[1]])
-        labels += ["clearance"] * len(extra[0])
-    warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
+    carried = carry_head(head, reg)
+    field_ = tissue if tissue is not None else tissue_field(head, settings.depth, settings.tissue)
+    base = carried.skin.with_vertices(apply_field(carried.skin, field_))
+    n = base.n_vertices
+    skin_codes = list(carried.skin_landmarks.as_dict())
+    # skin landmarks ride on the skin: re-read them from the modelled skin (same vertex weights)
+    lm_index = MeshIndex(carried.skin)
+    lm_pos = carried.skin_landmarks.as_dict()
+    cp = lm_index.closest_points(np.array([lm_pos[c] for c in skin_codes]))
+    on_base = np.einsum("ij,ijk->ik", cp.barycentric, base.vertices[base.faces[cp.face_ids]])
+    prefit = dict(zip(skin_codes, on_base, strict=True))
+    used_guides = dict(guide_targets or {})
     if guides is not None:
-        codes = list(skin_lms)
-        prefit = dict(zip(codes, warp(np.array([skin_lms[c] for c in codes])), strict=True))
-        guide_targets.update(guides(prefit))
-        if guide_targets:
-            src_a, dst_a, tip_of, labels = _pairs(plan, ref_points, skin_lms, guide_targets,
-                                                  depths)
-            warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
-    skin_v = head.skin.vertices
-    index = skull_index or MeshIndex(skull_h)
-    openings = np.zeros(len(skin_v), dtype=bool)
+        used_guides.update(guides(prefit))
+    hits = _dowel_hits(plan, base)
+    src, dst, labels = [], [], []
+    held: dict[str, float] = {}
+    guided_pts = np.array([prefit[c] for c in used_guides if c in prefit]).reshape(-1, 3)
+    for i, d in enumerate(plan.dowels):
+        if d.excluded or d.code not in hits:
+            continue
+        depth_now, point = hits[d.code]
+        pinned = settings.tissue.pin_dowels or d.source == "override" or depths is not None
+        if d.skin_code in used_guides and not d.source == "override":
+            continue   # a guide decides that skin landmark
+        if not pinned and len(guided_pts) and \
+                np.min(np.linalg.norm(guided_pts - point, axis=1)) < ANCHOR_CLEARANCE_MM:
+            continue   # a held dowel beside a guided point would fight the guide
+        depth = (float(depths[i]) if depths is not None else d.depth_mm) if pinned else depth_now
+        src.append(point)
+        dst.append(d.origin + depth * d.direction)
+        labels.append(f"dowel:{d.code}")
+        held[d.code] = depth
+    for code, target in used_guides.items():
+        if code in prefit:
+            src.append(prefit[code])
+            dst.append(np.asarray(target, float))
+            labels.append(f"guide:{code}")
+    moving = [np.asarray(a) for a, b in zip(src, dst, strict=True)
+              if np.linalg.norm(np.asarray(b) - np.asarray(a)) > 0.05]
+    anchors = _spread(base.vertices, ANCHOR_SPACING_MM)
+    if moving:
+        near = cKDTree(np.array(moving)).query(base.vertices[anchors])[0]
+        anchors = anchors[near > ANCHOR_CLEARANCE_MM]
+    src += list(base.vertices[anchors])
+    dst += list(base.vertices[anchors])
+    labels += ["anchor"] * len(anchors)
+    src_a, dst_a = np.array(src), np.array(dst)
+
+    # no skin inside (or too close to) the target bone: clearance correspondences
+    target = reg.target_h
+    index = MeshIndex(target)
+    exempt = _mask(n, head, NO_CLEARANCE_REGIONS)
     for loop in head.openings.values():
-        openings[np.asarray(loop, dtype=np.int64)] = True
-    for name in NO_CLEARANCE_REGIONS:
-        if name in head.regions:
-            openings[np.asarray(head.regions[name], dtype=np.int64)] = True
-    ref_bone = skull_surface(head).vertices[::3]
+        exempt[np.asarray(loop, dtype=np.int64)] = True
+    t_weight = reg.target_weight
     refits = 0
-    n_extra = 0
-    if extra is None:
-        for refits in range(1, settings.max_refits + 1):  # noqa: B007
-            moved = warp(skin_v)
-            thin, signed, bone = _thin_spots(moved, index, settings.min_tissue_mm, openings,
-                                             cKDTree(warp(ref_bone)))
-            if not thin.any():
-                refits -= 1
-                break
-            ids = np.flatnonzero(thin)
-            ids = ids[np.argsort(signed[ids])]  # worst first
-            pick = ids[_spread(moved[ids], CLEARANCE_SPACING_MM)]
-            outward = moved[pick] - bone[pick]
-            lengths = np.linalg.norm(outward, axis=1, keepdims=True)
-            normals = index.pseudo_normals(*_face_bary(index, moved[pick]))
-            outward = np.where(signed[pick, None] > 0.05, outward / np.maximum(lengths, 1e-9),
-                               normals)
-            goal = bone[pick] + (settings.min_tissue_mm + 0.5) * outward
-            # dowel targets stay exact; a new point too close to an existing
-            # correspondence would fight it, so it is left out
-            gap = np.min(np.linalg.norm(skin_v[pick][:, None] - src_a[None], axis=2), axis=1)
-            new = gap > 3.0
-            if not new.any():
-                break
-            src_a = np.vstack([src_a, skin_v[pick][new]])
-            dst_a = np.vstack([dst_a, goal[new]])
-            labels += ["clearance"] * int(new.sum())
-            n_extra += int(new.sum())
-            warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
-    fitted = warp_head(head, warp)
-    moved = fitted.skin.vertices
-    like = cKDTree(warp(ref_bone))
-    _, signed, bone = _thin_spots(moved, index, settings.min_tissue_mm, openings, like)
-    checked = ((np.linalg.norm(bone - moved, axis=1) < BONE_SEARCH_MM)
-               & (like.query(bone)[0] < SKULL_LIKE_MM))
-    tip_err = [float(np.linalg.norm(warp(ref_points[c][None])[0] - t)) for c, t in tip_of.items()]
+    extra = 0
+    for refits in range(settings.max_refits + 1):  # noqa: B007
+        warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
+        moved = warp(base.vertices)
+        thin, signed, bone_pt, normal, checked = _thin_spots(moved, index, t_weight,
+                                                             settings.min_tissue_mm, exempt)
+        if not thin.any() or refits == settings.max_refits:
+            break
+        ids = np.flatnonzero(thin)
+        ids = ids[np.argsort(signed[ids])]
+        pick = ids[_spread(moved[ids], CLEARANCE_SPACING_MM)]
+        goal = bone_pt[pick] + (settings.min_tissue_mm + 0.5) * normal[pick]
+        # a clearance point lands where the skin is: hold its base vertex to the goal
+        keep = cKDTree(src_a).query(base.vertices[pick])[0] > 1.5
+        if not keep.any():
+            break
+        src_a = np.vstack([src_a, base.vertices[pick][keep]])
+        dst_a = np.vstack([dst_a, goal[keep]])
+        labels += ["clearance"] * int(keep.sum())
+        extra += int(keep.sum())
+    meshes = {**carried.meshes, "skin": base.with_vertices(moved), "cranium": reg.meshes["cranium"]}
+    if reg.part("mandible").present:
+        meshes["mandible"] = reg.meshes["mandible"]
+    on_skin = LandmarkSet("skin", tuple(lm.moved(prefit[lm.code], lm.status)
+                                        if lm.code in prefit else lm
+                                        for lm in carried.skin_landmarks))
+    fitted = replace(carried, meshes=meshes, skin_landmarks=_warp_set(on_skin, warp))
+    tip_err = [float(np.linalg.norm(warp(s[None])[0] - t)) for s, t, lab
+               in zip(src_a, dst_a, labels, strict=False) if lab.startswith("dowel:")]
     figures = {
         "max_tip_error_mm": max(tip_err) if tip_err else 0.0,
-        "min_tissue_mm": float(signed[checked & ~openings].min()) if checked.any() else None,
-        "penetrating_vertices": int(((signed < 0) & checked & ~openings).sum()),
-        "thin_vertices": int(((signed < settings.min_tissue_mm) & checked & ~openings).sum()),
+        "min_tissue_mm": float(signed[checked].min()) if checked.any() else None,
+        "penetrating_vertices": int(((signed < 0) & checked).sum()),
+        "thin_vertices": int(((signed < settings.min_tissue_mm) & checked).sum()),
         "refits": int(refits),
-        "extra_correspondences": int(n_extra),
+        "extra_correspondences": int(extra),
         "correspondences": len(src_a),
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    return fitted, figures, src_a, dst_a, guide_targets, tuple(labels)
+    return (fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held)
 
 
-def _face_bary(index: MeshIndex, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    cp = index.closest_points(pts)
-    return cp.face_ids, cp.barycentric
+def _thin_spots(skin: np.ndarray, index: MeshIndex, weight: np.ndarray, min_tissue: float,
+                exempt: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Skin vertices closer than ``min_tissue`` to believed target bone (or inside it).
+
+    Returns ``(thin, signed distance, closest bone point, bone normal, checked)``;
+    only vertices within :data:`BONE_SEARCH_MM` of bone the registration
+    believes (not the C-spine, not a hole rim) are checked.
+    """
+    cp = index.closest_points(skin)
+    normals = index.pseudo_normals(cp.face_ids, cp.barycentric)
+    side = np.einsum("ij,ij->i", skin - cp.points, normals)
+    signed = np.where(side < 0, -cp.distances, cp.distances)
+    tri = index.mesh.faces[cp.face_ids]
+    believed = np.einsum("ij,ij->i", cp.barycentric, weight[tri]) > 0.5
+    near = (cp.distances < BONE_SEARCH_MM) & believed & ~exempt
+    thin = near & (signed < min_tissue)
+    return thin, signed, cp.points, normals, near
 
 
-def reconstruct(skull: Mesh, landmarks: LandmarkSet, head: TemplateHead, *,
+def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, *,
                 settings: FitSettings = FitSettings(),
                 guide_targets: Mapping[str, np.ndarray] | None = None,
-                guides: Callable[[Mesh, LandmarkSet, DowelPlan], GuideFn | None] | None = None
-                ) -> Reconstruction:
-    """Fit ``head`` over ``skull`` (input frame, mm) from its skull ``landmarks``.
+                guides: Callable[[Mesh, LandmarkSet, DowelPlan], GuideFn | None] | None = None,
+                hint: tuple | None = None, registration: object | None = None,
+                progress: Callable[[str], None] | None = None) -> Reconstruction:
+    """Fit ``head`` over ``skull`` (input frame, mm); see the module docstring.
 
-    ``guides(skull_h, landmarks_h, plan)`` may return a function giving guide
-    targets from the dowel-fitted skin landmarks (see :func:`fit_head`).
+    ``landmarks`` (input frame) may be None: the registration finds them.
+    Landmarks the user *placed* are seeds and hard constraints of the
+    registration and keep their positions; suggested ones are replaced by
+    the registration's.  ``guides(skull_h, landmarks_h, plan)`` may return
+    a function giving guide targets from the skin landmarks before the last
+    warp.  ``registration`` reuses an earlier
+    :func:`~workbench.services.skull_registration.register_skull` result
+    of the same skull (a refit after an edit).
     """
-    to_head, mirrored = input_frame(landmarks)
-    # a rigid copy (Mesh.transformed) shares the input skull's ray-casting
-    # scene instead of building its own for every fit
-    skull_h = outward(skull.transformed(to_head))
-    lms_h = landmarks.transformed(to_head)
+    from workbench.services.skull_registration import mirror_from_landmarks, register_skull
+
+    t0 = time.perf_counter()
+    reg = registration or register_skull(skull, head, hint=hint, seeds=landmarks,
+                                         mirror=mirror_from_landmarks(landmarks),
+                                         progress=progress)
+    to_head, mirrored = reg.input_to_head, reg.mirrored
+    lms = _merge_landmarks(reg.landmarks, landmarks)
+    lms_h = lms.transformed(to_head)
     doubtful = [lm.code for lm in lms_h if lm.status == "suggested"
                 and lm.confidence < settings.min_confidence]
     if doubtful:
-        # a wrongly placed dowel distorts the whole face (§8.4.3): doubtful
-        # suggestions get no dowel until the user confirms or moves them
         lms_h = LandmarkSet(lms_h.surface, tuple(
             lm.moved(lm.position, "absent") if lm.code in doubtful else lm for lm in lms_h))
+    skull_h = reg.target_h
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
-    fitted, figures, src, dst, used, labels = fit_head(
-        head, skull_h, plan, guide_targets=guide_targets, guides=guide_fn, settings=settings)
-    warnings = list(plan.warnings)
+    fitted, figures, src, dst, used, labels, base, held = fit_head(
+        head, reg, plan, guide_targets=guide_targets, guides=guide_fn, settings=settings)
+    observed = _skin_observed(fitted.skin, reg)
+    face = np.asarray(head.regions.get("face", np.arange(head.skin.n_vertices)), dtype=np.int64)
+    figures["registration"] = reg.figures
+    figures["face_observed_fraction"] = round(float(np.mean(observed[face] >= OBSERVED_LEVEL)), 4)
+    figures["seconds_total"] = round(time.perf_counter() - t0, 3)
+    warnings = list(reg.warnings) + list(plan.warnings)
     if doubtful:
-        warnings.append(f"{len(doubtful)} suggested landmarks below confidence "
+        warnings.append(f"{len(doubtful)} landmarks found with confidence below "
                         f"{settings.min_confidence:g} got no dowel (confirm or move them): "
                         + ", ".join(doubtful))
-    if mirrored:
-        warnings.append("the input is mirrored (left-handed coordinates): the head frame "
-                        "includes a reflection, and results are mapped back the same way")
+    inferred = 1.0 - figures["face_observed_fraction"]
+    if inferred > 0.05:
+        warnings.append(f"{100 * inferred:.0f} % of the face lies over missing bone and is "
+                        "inferred from the reference head (marked in the head pack, the report "
+                        "and the pictures)")
     if figures["penetrating_vertices"]:
         warnings.append(f"{figures['penetrating_vertices']} skin vertices still inside the bone "
                         f"after {figures['refits']} refits")
-    return Reconstruction(fitted, to_head, mirrored, plan, src, dst, figures,
-                          used, tuple(warnings), labels)
+    return Reconstruction(fitted, to_head, mirrored, plan, src, dst, figures, used,
+                          tuple(warnings), labels, base, held, observed, lms, reg,
+                          tissue_field(head, settings.depth, settings.tissue))
 
 
-def ensemble_spread(recon: Reconstruction, head: TemplateHead, skull_h: Mesh, n: int, *,
-                    seed: int = 0, settings: FitSettings = FitSettings()) -> np.ndarray:
+def _merge_landmarks(found: LandmarkSet, given: LandmarkSet | None) -> LandmarkSet:
+    """The registration's landmarks, with the user's placed (and absent-by-hand) ones kept."""
+    if given is None:
+        return found
+    keep = {lm.code: lm for lm in given
+            if lm.status == "placed" or (lm.status == "absent" and lm.confidence > 0.5)}
+    out = [keep.get(lm.code, lm) for lm in found]
+    out += [lm for c, lm in keep.items() if c not in found]
+    return LandmarkSet("skull", tuple(out))
+
+
+def ensemble_spread(recon: Reconstruction, head: TemplateHead, skull_h: Mesh | None = None,
+                    n: int = 20, *, seed: int = 0, settings: FitSettings = FitSettings()
+                    ) -> np.ndarray:
     """Per-skin-vertex spread (mm, RMS distance from the mean) over ``n`` depth draws.
 
-    Each member redraws every dowel depth from its table mean ± SD
-    (:func:`~workbench.services.dowels.depth_samples`) and re-solves the warp
-    with the main fit's guide targets and non-penetration correspondences.
+    Each member redraws every site depth of the tissue model from its table
+    mean ± SD (independent normal draws); the change reaches the skin
+    through the model's influence matrix, so a member costs a matrix
+    product.  Over inferred skin (no bone beneath) the reference's prior is
+    the only source: :data:`PRIOR_SD_MM` is added in quadrature there.
     """
+    field_ = recon.tissue or tissue_field(head, settings.depth, settings.tissue)
     rng = np.random.default_rng(seed)
-    ref_points = reference_correspondences(head, recon.plan, settings.depth)
-    n_main = len(recon.sources) - recon.figures["extra_correspondences"]
-    extra = (recon.sources[n_main:], recon.targets[n_main:])
-    index = MeshIndex(skull_h)
-    runs = []
-    for _ in range(n):
-        depths = depth_samples(recon.plan, rng)
-        fitted, *_ = fit_head(head, skull_h, recon.plan, guide_targets=recon.guide_targets,
-                              settings=settings, depths=depths, extra=extra,
-                              ref_points=ref_points, skull_index=index)
-        runs.append(fitted.skin.vertices)
-    stack = np.stack(runs)
-    return np.sqrt(((stack - stack.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
+    n_skin = head.skin.n_vertices
+    if field_.sites and n > 0:
+        sd = np.array([s.sd_mm or 0.0 for s in field_.sites])
+        draws = rng.standard_normal((n, len(sd))) * sd
+        offsets = draws @ field_.influence.T          # (n, n_skin) mm along the normal
+        var = ((offsets - offsets.mean(axis=0)) ** 2).mean(axis=0)
+    else:
+        var = np.zeros(n_skin)
+    if recon.observed is not None:
+        var = var + (PRIOR_SD_MM * (1.0 - recon.observed)) ** 2
+    return np.sqrt(var)
+
+
+#: shape uncertainty of skin over missing bone (the reference's prior alone), mm
+PRIOR_SD_MM = 5.0

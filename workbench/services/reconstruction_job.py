@@ -49,6 +49,7 @@ from workbench.services.reconstruct import (
 )
 from workbench.services.reference_parts import skull_surface
 from workbench.services.template_cache import reference_head
+from workbench.services.tissue_model import TissueSettings
 
 Progress = Callable[[str], None]
 #: skulls larger than this are decimated to WORKING_TRIANGLES for the fit
@@ -74,6 +75,7 @@ class JobSettings:
     excluded: frozenset[str] = frozenset()
     overrides: dict = field(default_factory=dict)
     examiner: str = ""
+    tissue: TissueSettings = field(default_factory=TissueSettings)
 
 
 @dataclass
@@ -97,7 +99,8 @@ class JobResult:
 
 
 def _skull_h(skull: Mesh, to_head: np.ndarray) -> Mesh:
-    return outward(Mesh(apply_transform(to_head, skull.vertices), skull.faces))
+    faces = skull.faces if np.linalg.det(to_head[:3, :3]) > 0 else skull.faces[:, ::-1]
+    return outward(Mesh(apply_transform(to_head, skull.vertices), faces))
 
 
 def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = JobSettings(),
@@ -121,20 +124,13 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
         opened.notes.append(f"working skull decimated from {skull.n_faces} to {work.n_faces} "
                             "triangles (the original file is kept as evidence)")
     suggestion = None
-    landmarks = case.landmarks.get("skull")
-    if landmarks is None or len(landmarks.defined()) < 4:
-        say("suggesting skull landmarks ...")
-        t = time.perf_counter()
-        suggestion = transfer_landmarks(work, skull_surface(head), head.skull_landmarks,
-                                        seeds=landmarks, orientation=settings.orientation)
-        landmarks = suggestion.landmarks
-        stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
-                                      label="Suggest skull landmarks"))
-        times["suggest"] = time.perf_counter() - t
+    given = case.landmarks.get("skull")
+    if given is not None and not len(given):
+        given = None
     depth = DepthSettings(table=settings.table, sex=settings.sex, build=settings.build,
                           overrides=dict(settings.overrides), excluded=frozenset(settings.excluded))
-    fit = FitSettings(depth=depth)
-    say("fitting the reference head ...")
+    fit = FitSettings(depth=depth, tissue=settings.tissue)
+    say("registering the reference skull and fitting the head ...")
     t = time.perf_counter()
     chosen: list = []
     rejected: list[str] = []
@@ -166,7 +162,11 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
                             for r in settings.rules if r not in found)
         return lambda skin: plausible_guides(chosen, skin, skull_h, lms_h, rejected)
 
-    recon = reconstruct(work, landmarks, head, settings=fit, guides=guide_fn)
+    recon = reconstruct(work, given, head, settings=fit, guides=guide_fn,
+                        hint=settings.orientation, progress=say)
+    landmarks = recon.landmarks
+    stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
+                                  label="Skull landmarks from the dense registration"))
     guides = chosen
     skull_h = _skull_h(work, recon.input_to_head)
     lms_h = landmarks.transformed(recon.input_to_head)
@@ -295,14 +295,24 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
                          "depth_mm": None if d.excluded else float(d.depth_mm),
                          "source": "excluded" if d.excluded else "interpolated",
                          "direction": _dir_in(recon, d.direction)})
-    fit = dict(recon.figures)
+    fit = {k: v for k, v in recon.figures.items() if k != "registration"}
+    fit["suggested_landmarks"] = sum(lm.status == "suggested" for lm in landmarks)
+    fit["placed_landmarks"] = sum(lm.status == "placed" for lm in landmarks)
+    fit["absent_landmarks"] = sum(not lm.is_defined for lm in landmarks)
     if suggestion is not None:
-        fit["suggested_landmarks"] = sum(lm.status == "suggested" for lm in suggestion.landmarks)
-        fit["absent_landmarks"] = len(suggestion.absent)
         fit["suggestion_residual_mm"] = round(suggestion.warp_residual_mm, 3)
     warnings = list(opened.notes) + list(recon.warnings)
     if suggestion is not None:
         warnings += list(suggestion.warnings)
+    reg = recon.registration
+    registration = None if reg is None else {
+        "method": "dense registration of the reference skull onto the bone (orientation search, "
+                  "per-part coarse-to-fine non-rigid), soft tissue carried by the skull's "
+                  "displacement field",
+        **reg.figures,
+        "parts": [{"name": p.name, "present": p.present, "observed_fraction": p.observed_fraction,
+                   "note": p.note} for p in reg.parts],
+    }
     return {
         "@schema": "reconstruction-report-v1",
         "case_id": opened.case.meta.case_id,
@@ -325,6 +335,13 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
         "guides": guides_to_json(guides),
         "predictions": [],
         "fit": fit,
+        "registration": registration,
+        "tissue": None if recon.tissue is None else recon.tissue.to_json(),
+        "inferred": None if recon.observed is None else {
+            "face_observed_fraction": recon.figures.get("face_observed_fraction"),
+            "note": "skin over bone the registration did not find (missing mandible, defects, a "
+                    "cut vault) takes the reference head's shape; it is marked inferred per "
+                    "vertex (head/observed.npy, the pictures and the uncertainty map)"},
         "ensemble": None if spread is None else {
             "n": settings.ensemble,
             "spread_mm": {"median": float(np.median(spread)),

@@ -1,0 +1,556 @@
+"""Dense registration of the reference skull onto a target skull, part by part.
+
+Units mm.  Input: the target bone surface in its **input frame** (a CT's
+physical frame, a scanner's frame, any axes, any handedness) and a
+reference head (head frame: x to the subject's left, x = 0 midsagittal,
+y up, z toward the face, Frankfort Horizontal at y = 0).  Output: the map
+of the input into the *target's own* head frame (mm, rigid, a reflection
+when the input is mirrored) and the reference skull — cranium with upper
+teeth, mandible with lower teeth — registered onto the target in that
+frame, with per-vertex evidence ("observed" where real bone supports it).
+
+Steps:
+
+1. **Orientation** (:func:`workbench.core.rigid_search.search_pose`): from
+   the bone alone, or an orientation hint, or three or more landmarks the
+   user placed (seeds).  The similarity found is split into a rigid map of
+   the input (its head frame, mm kept) and a uniform scale applied to the
+   *reference*, so the target is never resized.
+2. **Target weights**: vertices near a hole rim or the edge of the field
+   of view (:data:`RIM_MM`) and vertices far from the reference skull
+   (:data:`EXTRA_MM`: C-spine, hyoid, tubes, pins, the CT table) fade to
+   zero weight.
+3. **Mandible pose**: open or shifted jaws are normal, so the mandible
+   gets its own rigid pose (starts rotated about the jaw axis), and is
+   declared **missing** when too little of it finds bone
+   (:data:`PRESENT_FRACTION`); a missing mandible follows the cranium and is
+   marked inferred.
+4. **Non-rigid** (:func:`workbench.core.nonrigid.register`): coarse to fine,
+   both parts at once, independently; user-placed landmarks are hard
+   constraints.
+5. **Landmarks** ride on the registered surface (same triangle, same
+   barycentric weights); a landmark whose surface is observed is
+   *suggested* with a confidence, one over missing bone is *absent* (its
+   carried position is kept in :attr:`SkullRegistration.inferred`).
+6. **Frankfort frame** from the registered porions and orbitales (observed
+   or inferred — never refused; which ones were inferred is reported).
+
+Deterministic (seeded sampling, no data-dependent random choices).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from workbench.core.errors import InputError
+from workbench.core.frame import apply_transform
+from workbench.core.landmarks import Landmark, LandmarkSet
+from workbench.core.mesh import Mesh, boundary_loops, concatenate
+from workbench.core.nonrigid import Registration, Target, register, smoothstep, soft_match
+from workbench.core.normals import vertex_normals
+from workbench.core.rigid_search import PoseResult, search_pose
+from workbench.core.spatial import MeshIndex
+from workbench.core.tps import LandmarkWarp, fit_warp
+from workbench.model.template import TemplateHead
+from workbench.services.frame import head_frame_from_landmarks
+
+#: target vertices this close to a hole rim or the field-of-view edge fade out (mm)
+RIM_MM = 5.0
+#: target vertices farther than EXTRA_MM[0] from the posed reference skull start to fade,
+#: beyond EXTRA_MM[1] they are ignored (mm)
+EXTRA_MM = (10.0, 20.0)
+#: a part is present when at least this fraction of it finds bone of its own after its pose
+PRESENT_FRACTION = 0.25
+#: bone this far from the reference cranium can belong to a mandible (mm)
+EXCLUSIVE_MM = 5.0
+#: a mandible pose opens the jaw at most this much and moves the joint at most this far
+MAX_JAW_DEG = 45.0
+MAX_JOINT_SHIFT_MM = 20.0
+#: a vertex is "observed" when its final match weight exceeds this
+OBSERVED_WEIGHT = 0.3
+#: teeth are decimated to about this many triangles for the registration
+TEETH_TRIANGLES = 3000
+#: jaw openings tried as starts of the mandible pose (degrees about the jaw axis)
+JAW_STARTS_DEG = (-8.0, 0.0, 8.0, 16.0, 24.0, 32.0)
+FH_CODES = ("po_l", "po_r", "or_l", "or_r")
+
+PART_OF = {"cranium": 0, "upper_teeth": 0, "mandible": 1, "lower_teeth": 1}
+PART_NAMES = ("cranium", "mandible")
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class PartReport:
+    """What the registration found for one part of the reference skull."""
+
+    name: str
+    present: bool
+    observed_fraction: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class SkullRegistration:
+    """The reference skull on a target skull (see the module docstring).
+
+    Attributes
+    ----------
+    input_to_head : (4, 4)
+        Rigid map of input coordinates into the target's head frame (mm); a
+        reflection included when ``mirrored``.
+    mirrored : bool
+    reference_scale : float
+        Uniform scale applied to the reference head before the non-rigid step.
+    meshes : mapping
+        Registered reference parts (head frame, mm): ``cranium``,
+        ``upper_teeth``, ``mandible``, ``lower_teeth`` — the registration
+        resolution (teeth decimated).
+    rest : mapping
+        The same parts as laid out in the (scaled) reference, before the
+        mandible pose and the non-rigid step: the field ``rest → meshes``
+        carries the rest of the head (:func:`carry_head`).
+    observed : mapping
+        Per part, per vertex weight 0..1 of the final match to real bone.
+    landmarks : LandmarkSet
+        Skull landmarks in the **input frame**: suggested (observed) or absent.
+    inferred : mapping
+        Code → head-frame position carried by the registration, for every
+        reference landmark (observed or not).
+    target_h : Mesh
+        The target bone in the head frame (outward).
+    target_weight : (n_target_vertices,)
+    parts : tuple of PartReport
+    pose : PoseResult
+    settle : (4, 4)
+        Rigid correction from the oriented reference's frame to the target's
+        own Frankfort frame (the last step of ``input_to_head``).
+    figures : dict
+    warnings : tuple of str
+    """
+
+    input_to_head: np.ndarray
+    mirrored: bool
+    reference_scale: float
+    meshes: Mapping[str, Mesh]
+    rest: Mapping[str, Mesh]
+    observed: Mapping[str, np.ndarray]
+    landmarks: LandmarkSet
+    inferred: Mapping[str, np.ndarray]
+    target_h: Mesh
+    target_weight: np.ndarray
+    parts: tuple[PartReport, ...]
+    pose: PoseResult
+    settle: np.ndarray = field(default_factory=lambda: np.eye(4))
+    figures: dict = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+    def part(self, name: str) -> PartReport:
+        return next(p for p in self.parts if p.name == name)
+
+    def displacement_samples(self, spacing_mm: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+        """A spread subset of (rest, registered) vertex pairs of every part (head frame)."""
+        rest = concatenate([self.rest[p] for p in PART_OF]).vertices
+        moved = concatenate([self.meshes[p] for p in PART_OF]).vertices
+        _, first = np.unique(np.floor(rest / spacing_mm).astype(np.int64), axis=0,
+                             return_index=True)
+        pick = np.sort(first)
+        return rest[pick], moved[pick]
+
+
+def _apply(m: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return apply_transform(m, np.reshape(p, (-1, 3)))
+
+
+def _registration_parts(head: TemplateHead, scale: float) -> dict[str, Mesh]:
+    """Reference skull parts at registration resolution, scaled about the head-frame origin."""
+    from workbench.core.isosurface import decimate
+
+    out = {}
+    for name in PART_OF:
+        m = head.meshes[name]
+        if name.endswith("teeth") and m.n_faces > TEETH_TRIANGLES:
+            m = Mesh(*decimate(m.vertices, m.faces, TEETH_TRIANGLES))
+        out[name] = m.scaled(scale)
+    return out
+
+
+def target_weights(target_h: Mesh, reference: Mesh) -> tuple[np.ndarray, dict]:
+    """Per target vertex belief 0..1: hole rims and extra anatomy fade out."""
+    w = np.ones(target_h.n_vertices)
+    loops = boundary_loops(target_h)
+    rim_fraction = 0.0
+    if loops:
+        rim = np.concatenate(loops)
+        d, _ = cKDTree(target_h.vertices[rim]).query(target_h.vertices)
+        fade = smoothstep(d / RIM_MM)
+        rim_fraction = float(np.mean(fade < 0.5))
+        w *= fade
+    d, _ = cKDTree(reference.vertices).query(target_h.vertices)
+    extra = 1.0 - smoothstep((d - EXTRA_MM[0]) / (EXTRA_MM[1] - EXTRA_MM[0]))
+    w *= extra
+    areas = np.zeros(target_h.n_vertices)
+    np.add.at(areas, target_h.faces.ravel(), np.repeat(target_h.face_areas / 3.0, 3))
+    figures = {
+        "target_rim_fraction": round(rim_fraction, 4),
+        "target_extra_area_fraction": round(float(areas[extra < 0.5].sum() / areas.sum()), 4),
+        "target_open_boundaries": len(loops),
+    }
+    return w, figures
+
+
+def _rotation_about(axis_point: np.ndarray, axis_dir: np.ndarray, deg: float) -> np.ndarray:
+    a = axis_dir / np.linalg.norm(axis_dir)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    th = np.radians(deg)
+    r = np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * k @ k
+    m = np.eye(4)
+    m[:3, :3] = r
+    m[:3, 3] = axis_point - r @ axis_point
+    return m
+
+
+def _rigid_fit(points: np.ndarray, normals: np.ndarray, target: Target, tree: cKDTree,
+               rounds: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robust rigid ICP of a point set onto the target.
+
+    Returns the 4x4 map and, at the end, each point's match weight and matched point.
+    """
+    from workbench.core.rigid_search import _rigid_update
+
+    m = np.eye(4)
+    tp, tn, tw = target.mesh.vertices, target.normals, target.weights
+    w = np.zeros(len(points))
+    q = points
+    for i, sigma in enumerate(np.geomspace(8.0, 3.0, rounds)):
+        p = _apply(m, points)
+        n = normals @ m[:3, :3].T
+        q, agree, dist, blend, j = soft_match(p, n, tree, tp, tn)
+        w = (blend * tw[j]).sum(axis=1) * agree * np.exp(-0.5 * (dist / sigma) ** 2)
+        if w.sum() < 1e-6 or i == rounds - 1:
+            break
+        r, t = _rigid_update(p, q, w)
+        step = np.eye(4)
+        step[:3, :3], step[:3, 3] = r, t
+        m = step @ m
+    return m, w, q
+
+
+def _pose_mandible(mandible: Mesh, teeth: Mesh, cranium: Mesh, head: TemplateHead,
+                   scale: float, target: Target, tree: cKDTree) -> tuple[np.ndarray, float]:
+    """Best rigid pose of the mandible (with its teeth) over several jaw openings.
+
+    Returns the pose and the fraction of mandible points that found bone of
+    their own: matched (weight > 0.5) to target bone farther than
+    :data:`EXCLUSIVE_MM` from the reference cranium — a mandible that slid
+    onto the maxilla or the skull base has matched the cranium, not a jaw.
+    Poses that open the jaw more than :data:`MAX_JAW_DEG` or move the jaw
+    joint more than :data:`MAX_JOINT_SHIFT_MM` are not a mandible either.
+    """
+    pts = np.vstack([mandible.vertices, teeth.vertices])
+    nrm = np.vstack([vertex_normals(mandible), vertex_normals(teeth)])
+    axis_point = scale * head.tmj_axis[0]
+    # opening turns the chin down and back: a positive turn about +x (the subject's left)
+    axis = head.tmj_axis[1] * (1.0 if head.tmj_axis[1][0] >= 0 else -1.0)
+    cranium_tree = cKDTree(cranium.vertices)
+    best = (np.eye(4), 0.0)
+    for deg in JAW_STARTS_DEG:
+        start = _rotation_about(axis_point, axis, deg)
+        p0 = _apply(start, pts)
+        n0 = nrm @ start[:3, :3].T
+        m, w, q = _rigid_fit(p0, n0, target, tree)
+        pose = m @ start
+        angle = np.degrees(np.arccos(np.clip((np.trace(pose[:3, :3]) - 1) / 2, -1.0, 1.0)))
+        shift = np.linalg.norm(_apply(pose, axis_point[None])[0] - axis_point)
+        if angle > MAX_JAW_DEG or shift > MAX_JOINT_SHIFT_MM:
+            continue
+        own = cranium_tree.query(q)[0] > EXCLUSIVE_MM
+        frac = float(np.mean((w > 0.5) & own))
+        if frac > best[1]:
+            best = (pose, frac)
+    return best
+
+
+def _carry_landmarks(head: TemplateHead, rest: Mapping[str, Mesh], moved: Mapping[str, Mesh],
+                     observed: Mapping[str, np.ndarray], scale: float
+                     ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """Reference skull landmarks carried by the registration; per code its support 0..1."""
+    out: dict[str, np.ndarray] = {}
+    support: dict[str, float] = {}
+    groups = {"cranium": ("cranium", "upper_teeth"), "mandible": ("mandible", "lower_teeth"),
+              "teeth": ("upper_teeth", "lower_teeth")}
+    lms = [lm for lm in head.skull_landmarks if lm.is_defined]
+    pos = scale * np.array([lm.position for lm in lms])
+    found = {name: MeshIndex(rest[name]).closest_points(pos) for name in rest}
+    for i, lm in enumerate(lms):
+        names = groups.get(head.skull_landmark_part.get(lm.code, "cranium"), ("cranium",))
+        name = min(names, key=lambda nm: found[nm].distances[i])
+        cp = found[name]
+        tri = rest[name].faces[cp.face_ids[i]]
+        bary = cp.barycentric[i]
+        offset = pos[i] - cp.points[i]
+        out[lm.code] = bary @ moved[name].vertices[tri] + offset
+        support[lm.code] = float(bary @ observed[name][tri])
+    return out, support
+
+
+def reference_in_frame(head: TemplateHead, reg: SkullRegistration) -> TemplateHead:
+    """``head`` scaled by the registration's reference scale and settled in its frame."""
+    from dataclasses import replace
+
+    k = reg.reference_scale
+    m = reg.settle @ np.diag([k, k, k, 1.0])
+    axis = _apply(m, np.vstack([head.tmj_axis[0], head.tmj_axis[0] + head.tmj_axis[1]]))
+    return replace(
+        head, meshes={p: x.with_vertices(_apply(m, x.vertices)) for p, x in head.meshes.items()},
+        skin_landmarks=head.skin_landmarks.transformed(m),
+        skull_landmarks=head.skull_landmarks.transformed(m),
+        eye_centres=_apply(m, head.eye_centres), eye_radius=head.eye_radius * k,
+        tmj_axis=np.vstack([axis[0], (axis[1] - axis[0]) / np.linalg.norm(axis[1] - axis[0])]))
+
+
+def skull_field(reg: SkullRegistration, smoothing_mm: float = 1.0) -> LandmarkWarp:
+    """The registration as a smooth space warp (φ(r) = r, Kähler §8.3.1) on a spread subset."""
+    rest, moved = reg.displacement_samples()
+    return fit_warp(rest, moved, smoothing=smoothing_mm)
+
+
+def carry_head(head: TemplateHead, reg: SkullRegistration) -> TemplateHead:
+    """The whole reference head carried by the skull's displacement field (head frame, mm).
+
+    Skin, muscles (on the skin), eyes (rigidly, with their centres), teeth,
+    tongue and landmarks follow the warp fitted to the registered skull; the
+    skull parts are the registered ones where observed.
+    """
+    from workbench.services.reconstruct import warp_head
+
+    return warp_head(reference_in_frame(head, reg), skull_field(reg))
+
+
+def mirror_from_landmarks(landmarks: LandmarkSet | None) -> str:
+    """``"yes"``/``"no"`` when labelled landmarks tell the file's handedness, else ``"auto"``.
+
+    A skull's shape cannot tell a mirrored file, but landmarks labelled
+    ``_l``/``_r`` with the porions, orbitales and midline points can
+    (:func:`workbench.services.frame.head_frame_from_landmarks` checks which
+    way up the labelled Frankfort plane makes the face).
+    """
+    if landmarks is None:
+        return "auto"
+    from workbench.core.errors import LandmarkError
+
+    try:
+        from workbench.services.reconstruct import input_frame
+
+        _, mirrored = input_frame(landmarks)
+    except (LandmarkError, ValueError, np.linalg.LinAlgError):
+        return "auto"
+    return "yes" if mirrored else "no"
+
+
+_CACHE: dict[str, SkullRegistration] = {}
+_CACHE_SIZE = 4
+
+
+def _cache_key(skull: Mesh, head: TemplateHead, hint: tuple | None, seeds: LandmarkSet | None,
+               mirror: str) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(skull.vertices).tobytes())
+    h.update(np.ascontiguousarray(skull.faces).tobytes())
+    h.update(head.content_hash.encode())
+    h.update(repr((hint, mirror)).encode())
+    for lm in (seeds or ()):
+        if lm.status == "placed":
+            h.update(lm.code.encode())
+            h.update(np.ascontiguousarray(lm.position).tobytes())
+    return h.hexdigest()
+
+
+def register_skull(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
+                   seeds: LandmarkSet | None = None, mirror: str = "auto",
+                   progress: Progress | None = None) -> SkullRegistration:
+    """Register ``head``'s skull onto ``skull`` (input frame, mm); see the module docstring.
+
+    ``seeds`` are skull landmarks the user placed (input frame): three or
+    more start the orientation, and every one is a hard constraint.  The
+    last few results are kept (keyed by the skull's content, the head, the
+    hint and the placed seeds), so the window's "Suggest" and the fit after
+    it register once.
+    """
+    key = _cache_key(skull, head, hint, seeds, mirror)
+    if key in _CACHE:
+        return _CACHE[key]
+    result = _register(skull, head, hint=hint, seeds=seeds, mirror=mirror, progress=progress)
+    _CACHE[key] = result
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.pop(next(iter(_CACHE)))
+    return result
+
+
+def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
+                   seeds: LandmarkSet | None = None, mirror: str = "auto",
+              progress: Progress | None = None) -> SkullRegistration:
+    say = progress or (lambda _m: None)
+    t0 = time.perf_counter()
+    seconds: dict[str, float] = {}
+    warnings: list[str] = []
+    if skull.n_faces < 100:
+        raise InputError("skull", f"has only {skull.n_faces} triangles; a skull surface is needed")
+    ref_full = concatenate([head.meshes[p] for p in PART_OF])
+    ref_lms = head.skull_landmarks.as_dict()
+    seed_pairs = None
+    placed = {} if seeds is None else {lm.code: lm.position for lm in seeds
+                                       if lm.status == "placed" and lm.code in ref_lms}
+    if len(placed) >= 3:
+        codes = sorted(placed)
+        seed_pairs = (np.array([placed[c] for c in codes]), np.array([ref_lms[c] for c in codes]))
+    say("orienting the skull ...")
+    pose = search_pose(skull, ref_full, hint=hint, seeds=seed_pairs, mirror=mirror)
+    seconds["orientation"] = time.perf_counter() - t0
+    lin = pose.matrix[:3, :3]
+    s = pose.scale
+    rigid = np.eye(4)
+    rigid[:3, :3] = lin / s
+    rigid[:3, 3] = pose.matrix[:3, 3] / s
+    mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
+    k = 1.0 / s   # the reference is scaled instead of the target
+    target_h = Mesh(_apply(rigid, skull.vertices),
+                    skull.faces[:, ::-1] if mirrored else skull.faces)
+    if target_h.volume < 0:
+        target_h = Mesh(target_h.vertices, target_h.faces[:, ::-1])
+
+    t = time.perf_counter()
+    parts = _registration_parts(head, k)
+    layout = dict(parts)   # the scaled reference before the jaw pose: what the field maps from
+    weights, tfig = target_weights(target_h, concatenate(list(parts.values())))
+    if not (weights > 0.05).any():
+        raise InputError("skull", "no part of the surface lies near the reference skull after "
+                         "orientation", hint="check the units and that the file holds a skull")
+    target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 8000))
+    tree = cKDTree(target_h.vertices)
+    seconds["target"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    say("posing the mandible ...")
+    jaw, jaw_fraction = _pose_mandible(parts["mandible"], parts["lower_teeth"],
+                                       concatenate([parts["cranium"], parts["upper_teeth"]]),
+                                       head, k, target, tree)
+    mandible_present = jaw_fraction >= PRESENT_FRACTION
+    if mandible_present:
+        for name in ("mandible", "lower_teeth"):
+            parts[name] = Mesh(_apply(jaw, parts[name].vertices), parts[name].faces)
+    else:
+        warnings.append(f"no mandible found (only {100 * jaw_fraction:.0f} % of the reference "
+                        "mandible finds bone): it follows the cranium and the lower face is "
+                        "inferred from the reference")
+    seconds["mandible"] = time.perf_counter() - t
+
+    names = list(PART_OF)
+    src = concatenate([parts[p] for p in names])
+    offsets = np.cumsum([0] + [parts[p].n_vertices for p in names])
+    labels = np.concatenate([np.full(parts[p].n_vertices, PART_OF[p] if mandible_present else 0)
+                             for p in names])
+    active = np.ones(src.n_vertices, bool)
+    if not mandible_present:
+        for p in ("mandible", "lower_teeth"):
+            i = names.index(p)
+            active[offsets[i]:offsets[i + 1]] = False
+    hard = None
+    if seeds is not None:
+        user = [(c, p) for c, p in placed.items()]
+        if user:
+            rest_all = src.vertices
+            ids = []
+            pts = []
+            tree_src = cKDTree(rest_all)
+            for code, pos in user:
+                _, vid = tree_src.query(k * ref_lms[code])
+                ids.append(int(vid))
+                pts.append(_apply(rigid, pos[None])[0])
+            hard = (np.array(ids), np.array(pts))
+    say("registering the reference skull onto the bone ...")
+    t = time.perf_counter()
+    reg: Registration = register(src, target, parts=labels, active=active, hard=hard)
+    seconds["nonrigid"] = time.perf_counter() - t
+
+    moved, observed, rest = {}, {}, {}
+    for i, p in enumerate(names):
+        sl = slice(offsets[i], offsets[i + 1])
+        moved[p] = Mesh(reg.vertices[sl], parts[p].faces)
+        rest[p] = layout[p]
+        observed[p] = np.where(active[sl], reg.weights[sl], 0.0)
+    reports = []
+    for part, members in (("cranium", ("cranium", "upper_teeth")),
+                          ("mandible", ("mandible", "lower_teeth"))):
+        frac = float(np.mean(np.concatenate([observed[m] for m in members]) > OBSERVED_WEIGHT))
+        present = part == "cranium" or mandible_present
+        note = "" if present else "missing: follows the cranium (inferred)"
+        reports.append(PartReport(part, present, round(frac, 4), note))
+
+    carried, support = _carry_landmarks(head, rest, moved, observed, k)
+    # the target's own Frankfort frame from the registered porions and orbitales
+    fh_set = LandmarkSet("skull", tuple(Landmark(c, carried[c], "suggested", 1.0)
+                                        for c in carried))
+    inferred_fh = [c for c in FH_CODES if support.get(c, 0.0) < OBSERVED_WEIGHT]
+    if inferred_fh:
+        warnings.append("Frankfort Horizontal from the registered reference: "
+                        + ", ".join(inferred_fh) + " not on observed bone (inferred)")
+    fh = head_frame_from_landmarks(fh_set).input_to_head
+    settle = fh if np.isfinite(fh).all() else np.eye(4)
+    input_to_head = settle @ rigid
+    moved = {p: Mesh(_apply(settle, m.vertices), m.faces) for p, m in moved.items()}
+    rest = {p: Mesh(_apply(settle, m.vertices), m.faces) for p, m in rest.items()}
+    target_h = Mesh(_apply(settle, target_h.vertices), target_h.faces)
+    carried = {c: _apply(settle, p[None])[0] for c, p in carried.items()}
+    back = np.linalg.inv(input_to_head)
+    lms = []
+    for lm in head.skull_landmarks:
+        if lm.code not in carried:
+            continue
+        sup = support[lm.code]
+        if lm.code in placed:
+            lms.append(Landmark(lm.code, placed[lm.code], "placed", 1.0, lm.description))
+        elif sup >= OBSERVED_WEIGHT:
+            lms.append(Landmark(lm.code, _apply(back, carried[lm.code][None])[0], "suggested",
+                                round(min(1.0, sup), 3), "from the dense skull registration"))
+        else:
+            lms.append(Landmark(lm.code, np.full(3, np.nan), "absent", 0.0,
+                                "no bone under the registered reference (inferred position "
+                                "kept by the registration)"))
+    landmarks = LandmarkSet("skull", tuple(lms))
+    seconds["total"] = time.perf_counter() - t0
+    figures = {
+        "orientation": {"method": pose.method, "cost": round(pose.cost, 4),
+                        "matched_fraction": round(pose.matched_fraction, 4),
+                        "handedness": pose.handedness, "mirrored": mirrored,
+                        "reference_scale": round(k, 4)},
+        "mandible_pose_fraction": round(jaw_fraction, 4),
+        "observed_fraction": {r.name: r.observed_fraction for r in reports},
+        "median_observed_distance_mm": round(float(np.median(
+            reg.distances[reg.weights > OBSERVED_WEIGHT])) if (reg.weights > OBSERVED_WEIGHT).any()
+            else float("nan"), 3),
+        "iterations": reg.iterations,
+        **tfig,
+        "seconds": {kk: round(v, 3) for kk, v in seconds.items()},
+    }
+    if mirrored:
+        warnings.append("the input is mirrored (left-handed coordinates): the head frame "
+                        "includes a reflection, and results are mapped back the same way")
+    if pose.handedness == "assumed":
+        figures["orientation"]["handedness_note"] = (
+            "a skull is nearly symmetric, so its shape cannot tell a mirrored file; the file's "
+            "handedness was kept (give an orientation with 'left' or left/right landmarks)")
+    if tfig["target_extra_area_fraction"] > 0.02:
+        warnings.append(f"{100 * tfig['target_extra_area_fraction']:.0f} % of the bone surface "
+                        "lies far from any skull part (C-spine, hyoid, apparatus, debris) and "
+                        "was ignored")
+    return SkullRegistration(input_to_head, mirrored, k, moved, rest, observed, landmarks,
+                             carried, target_h, weights, tuple(reports), pose, settle, figures,
+                             tuple(warnings))
