@@ -25,11 +25,12 @@ from workbench.cli import (
     reconstruct_cmd,
     samples_cmd,
     template_cmd,
+    validate_cmd,
 )
 from workbench.core.errors import WorkbenchError
 
 _MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd,
-            compare_cmd, reconstruct_cmd, gui_cmd)
+            compare_cmd, reconstruct_cmd, validate_cmd, gui_cmd)
 
 
 def build_parser() -> argparse.ArgumentParser:

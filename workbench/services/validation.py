@@ -1,0 +1,462 @@
+"""Validation on real skull/skin pairs: ``workbench validate MANIFEST.csv --out DIR``.
+
+Units mm; every case in its own input frame (a CT's physical frame).  Each
+case of a manifest is reconstructed from its skull by the same job as
+``workbench reconstruct``, and scored with the project's metric
+(:mod:`workbench.core.face_metric`, ``VALIDATION.md``) beside the uniform
+6 mm offset of the same bone (:mod:`workbench.core.offset_surface`) on the
+*same* truth points.
+
+Manifest (CSV, one row per case; paths relative to the manifest; any path
+may be ``sample:NAME``):
+
+========== ============================================================
+column     meaning
+========== ============================================================
+id         case id (required, unique)
+skull      skull mesh, or a CT volume (DICOM folder, NIfTI, NRRD, MetaImage)
+truth      true skin mesh, or a CT volume (often the same CT as ``skull``)
+units      units of mesh files (``mm``, ``cm``, ``m``, ``auto``); default auto
+mask       ``none`` | ``clip_patch:MM`` | ``behind_clip:MM`` (see ScoreMask)
+anterior   ``x,y,z`` in the file frame (orientation hint, and the metric's
+           anterior); ``superior`` and ``left`` likewise
+sex        ``female`` | ``male`` (depth table group, built-in head)
+build      ``normal`` | ``slender`` | ``obese`` | k (mean + k SD)
+tissue     ``table`` | ``reference`` (see tissue_model)
+template   a template pack instead of the built-in head
+bone_iso   CT level of the bone surface (default: the preset for the data)
+skin_iso   CT level of the skin surface
+========== ============================================================
+
+With ``leave_one_out`` a reference pack is built from every case's own
+skin and bone (``workbench template build``; cached under
+``DIR/references``) and each case is reconstructed with the packs of *all
+other* cases, their per-vertex median being the face (the consensus) —
+the case scored is never among its references.  ``identity`` adds the
+identity test: the case's own pack, tissue model ``reference``.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.core.errors import InputError, WorkbenchError
+from workbench.core.face_metric import (
+    ScoreMask,
+    region_labels,
+    score,
+    scored_vertices,
+    unit,
+)
+from workbench.core.mesh import Mesh
+
+Progress = Callable[[str], None]
+COLUMNS = ("id", "skull", "truth", "units", "mask", "anterior", "superior", "left", "sex",
+           "build", "tissue", "template", "bone_iso", "skin_iso")
+VOLUME_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mhd", ".mha", ".dcm")
+OFFSET_MM = 6.0
+
+
+@dataclass(frozen=True)
+class ValidationCase:
+    """One manifest row (paths resolved)."""
+
+    case_id: str
+    skull: Path
+    truth: Path
+    units: str = "auto"
+    mask: ScoreMask = field(default_factory=ScoreMask)
+    orientation: tuple | None = None
+    sex: str = "male"
+    build: str | float = "normal"
+    tissue: str = "table"
+    template: Path | None = None
+    bone_iso: float | None = None
+    skin_iso: float | None = None
+
+
+def _vector(text: str, where: str) -> tuple[float, float, float] | None:
+    text = (text or "").strip()
+    if not text:
+        return None
+    try:
+        v = tuple(float(t) for t in text.replace(";", ",").split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3 or not np.isfinite(v).all() or not np.linalg.norm(v) > 0:
+        raise InputError(where, f"{text!r} is not a direction x,y,z")
+    return v  # type: ignore[return-value]
+
+
+def _resolve(text: str, base: Path, where: str) -> Path:
+    from workbench.io.samples import resolve_input
+
+    text = text.strip()
+    if not text:
+        raise InputError(where, "is empty")
+    if text.startswith("sample:"):
+        return resolve_input(text)
+    p = Path(text).expanduser()
+    p = p if p.is_absolute() else base / p
+    if not p.exists():
+        raise InputError(where, f"no such file or folder: {p}")
+    return p
+
+
+def read_manifest(path: str | Path) -> list[ValidationCase]:
+    """The cases of a manifest CSV; clear errors name the file, row and column."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "no such manifest file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot be read as UTF-8 text ({exc})") from None
+    reader = csv.DictReader(line for line in text.splitlines() if not line.startswith("#"))
+    header = [h.strip() for h in (reader.fieldnames or [])]
+    unknown = sorted(set(header) - set(COLUMNS))
+    if unknown:
+        raise InputError(path, f"unknown columns {', '.join(unknown)}",
+                         f"columns: {', '.join(COLUMNS)}")
+    for need in ("id", "skull", "truth"):
+        if need not in header:
+            raise InputError(path, f"has no {need!r} column")
+    rows = list(reader)
+    if not rows:
+        raise InputError(path, "has no cases (a header row and one row per case are needed)")
+    cases, seen = [], set()
+    for i, row in enumerate(rows, start=2):
+        where = f"{path.name} row {i}"
+        cid = (row.get("id") or "").strip()
+        if not cid:
+            raise InputError(where, "has no id")
+        if cid in seen:
+            raise InputError(where, f"id {cid!r} is used twice")
+        seen.add(cid)
+        vec = {k: _vector(row.get(k) or "", f"{where} column {k}")
+               for k in ("anterior", "superior", "left")}
+        orientation = None
+        if vec["anterior"] is not None or vec["superior"] is not None:
+            if vec["anterior"] is None or vec["superior"] is None:
+                raise InputError(where, "give both anterior and superior, or neither")
+            orientation = (vec["anterior"], vec["superior"]) + (
+                (vec["left"],) if vec["left"] is not None else ())
+        try:
+            mask = ScoreMask.parse(row.get("mask"))
+        except ValueError as exc:
+            raise InputError(f"{where} column mask", str(exc)) from None
+        isos = {}
+        for k in ("bone_iso", "skin_iso"):
+            t = (row.get(k) or "").strip()
+            try:
+                isos[k] = float(t) if t else None
+            except ValueError:
+                raise InputError(f"{where} column {k}", f"{t!r} is not a number") from None
+        build_text = (row.get("build") or "normal").strip() or "normal"
+        build: str | float = build_text
+        if build_text not in ("slender", "normal", "obese"):
+            try:
+                build = float(build_text)
+            except ValueError:
+                raise InputError(f"{where} column build", f"unknown build {build_text!r}") from None
+        template = (row.get("template") or "").strip()
+        cases.append(ValidationCase(
+            cid, _resolve(row["skull"], path.parent, f"{where} column skull"),
+            _resolve(row["truth"], path.parent, f"{where} column truth"),
+            (row.get("units") or "auto").strip() or "auto", mask, orientation,
+            (row.get("sex") or "male").strip() or "male", build,
+            (row.get("tissue") or "table").strip() or "table",
+            _resolve(template, path.parent, f"{where} column template") if template else None,
+            isos["bone_iso"], isos["skin_iso"]))
+    return cases
+
+
+def is_volume(path: Path) -> bool:
+    name = path.name.lower()
+    return path.is_dir() or any(name.endswith(s) for s in VOLUME_SUFFIXES)
+
+
+def _digest(path: Path) -> str:
+    from workbench.model.evidence import sha256_file
+
+    if path.is_dir():
+        h = hashlib.sha256()
+        for f in sorted(p for p in path.iterdir() if p.is_file()):
+            h.update(f.name.encode())
+            h.update(sha256_file(f)[0].encode())
+        return h.hexdigest()
+    return sha256_file(path)[0]
+
+
+def case_surfaces(case: ValidationCase, work: Path, progress: Progress | None = None
+                  ) -> tuple[Path, Path]:
+    """Bone and true-skin mesh files of a case (extracted from CT volumes when needed).
+
+    Extracted surfaces are cached in ``work`` under the volume's SHA-256 and
+    level, so a rerun does not extract them again.
+    """
+    from workbench.io.meshes import write_mesh
+    from workbench.services.ct_mesh import mesh_from_ct
+
+    say = progress or (lambda _m: None)
+    work.mkdir(parents=True, exist_ok=True)
+    out = []
+    for path, tissue, iso in ((case.skull, "bone", case.bone_iso), (case.truth, "skin",
+                                                                     case.skin_iso)):
+        if not is_volume(path):
+            out.append(path)
+            continue
+        key = hashlib.sha256(f"{_digest(path)}:{tissue}:{iso}".encode()).hexdigest()[:16]
+        target = work / f"{tissue}-{key}.ply"
+        if not target.is_file():
+            say(f"extracting the {tissue} surface of {path.name} ...")
+            result = mesh_from_ct(path, tissue=tissue, iso=iso)
+            tmp = target.with_name(target.name + ".part.ply")
+            write_mesh(tmp, result.mesh)
+            tmp.replace(target)
+        out.append(target)
+    return out[0], out[1]
+
+
+@dataclass
+class MethodScore:
+    """Figures of one surface on a case's scored truth points."""
+
+    name: str
+    figures: dict[str, Any]
+    regions: dict[str, dict[str, Any]]
+    signed_mm: np.ndarray
+
+
+@dataclass
+class CaseResult:
+    """Everything ``validate`` measured on one case."""
+
+    case_id: str
+    status: str = "ok"
+    error: str = ""
+    n_points: int = 0
+    scores: list[MethodScore] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    files: dict[str, Path] = field(default_factory=dict)
+    anterior: np.ndarray | None = None
+    superior: np.ndarray | None = None
+    truth_ids: np.ndarray | None = None
+    notes: dict[str, Any] = field(default_factory=dict)
+
+    def score_of(self, name: str) -> MethodScore | None:
+        return next((s for s in self.scores if s.name == name), None)
+
+
+def _load(path: Path, units: str) -> Mesh:
+    from workbench.io.meshes import read_mesh
+
+    return read_mesh(path, units=units if units != "auto" else "auto", kind="skull").mesh
+
+
+def consensus_face(faces: Sequence[Mesh]) -> tuple[Mesh, np.ndarray]:
+    """Per-vertex median of faces of one topology, and the spread between them (mm).
+
+    The spread is the median distance of the members from the median face.
+    """
+    if not faces:
+        raise WorkbenchError("no reconstructions to combine")
+    n = faces[0].n_vertices
+    if any(f.n_vertices != n or f.n_faces != faces[0].n_faces for f in faces):
+        raise WorkbenchError("the reference heads do not share one skin topology (they must "
+                             "all be built from the same base head): no consensus possible")
+    stack = np.stack([f.vertices for f in faces])
+    med = np.median(stack, axis=0)
+    spread = np.median(np.linalg.norm(stack - med, axis=2), axis=0)
+    return Mesh(med, faces[0].faces), spread
+
+
+def score_surfaces(truth: Mesh, bone: Mesh, surfaces: Sequence[tuple[str, Mesh]],
+                   anterior: np.ndarray, mask: ScoreMask, *, labels_from: Mesh | None = None,
+                   vertex_regions: dict | None = None, region_names: Sequence[str] = ()
+                   ) -> tuple[np.ndarray, list[MethodScore]]:
+    """Score every surface on the same truth points (the metric's selection)."""
+    ids = scored_vertices(truth, bone, anterior, mask)
+    if len(ids) == 0:
+        raise WorkbenchError("no truth-skin vertex passes the metric's selection (check the "
+                             "anterior direction, the frame and the mask)")
+    labels = None
+    if labels_from is not None and vertex_regions:
+        labels = region_labels(truth.vertices[ids], labels_from, vertex_regions, region_names)
+    out = []
+    for name, surf in surfaces:
+        s = score(surf, truth, ids, labels=labels, region_names=region_names)
+        out.append(MethodScore(name, s["all"], s["regions"], s["signed_mm"]))
+    return ids, out
+
+
+def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
+             tissue: str | None = None, label: str = "reconstruction",
+             progress: Progress | None = None) -> tuple[CaseResult, Any]:
+    """Reconstruct one case and score it beside the uniform offset (``out``: its folder).
+
+    ``templates`` (two or more): one reconstruction per reference pack and
+    their per-vertex median scored.  Returns the result and the job result
+    of the (first) reconstruction (for pictures), or None when it failed.
+    """
+    from workbench.core.offset_surface import uniform_offset
+    from workbench.io.meshes import write_mesh
+    from workbench.services.compare import REGION_NAMES, face_regions
+    from workbench.services.reconstruction_job import JobSettings, run_reconstruction, write_outputs
+    from workbench.services.tissue_model import TissueSettings
+
+    say = progress or (lambda _m: None)
+    res = CaseResult(case.case_id)
+    t0 = time.perf_counter()
+    try:
+        bone_path, truth_path = case_surfaces(case, out / "inputs", say)
+        units = "mm" if is_volume(case.skull) else case.units
+        bone = _load(bone_path, units)
+        truth = _load(truth_path, "mm" if is_volume(case.truth) else case.units)
+        res.seconds["surfaces"] = time.perf_counter() - t0
+        packs = list(templates) or ([case.template] if case.template else [None])
+        settings = JobSettings(units=units, sex=case.sex, build=case.build,
+                               orientation=case.orientation,
+                               tissue=TissueSettings(model=tissue or case.tissue))
+        faces, first = [], None
+        t = time.perf_counter()
+        for i, pack in enumerate(packs):
+            say(f"{case.case_id}: reconstructing"
+                + (f" with reference {i + 1}/{len(packs)}" if len(packs) > 1 else "") + " ...")
+            job = run_reconstruction(bone_path, replace(settings, template=pack))
+            folder = out / (label if len(packs) == 1 else f"{label}-ref{i + 1}")
+            write_outputs(job, folder)
+            faces.append(job.recon.face)   # mm, the skull file's frame
+            first = first or job
+            res.warnings += [f"{label}: {w}" for w in job.report["warnings"]]
+        res.seconds[label] = time.perf_counter() - t
+        face = faces[0]
+        if len(faces) > 1:
+            face, spread = consensus_face(faces)
+            write_mesh(out / f"{label}_consensus.ply", face)
+            np.save(out / f"{label}_reference_spread.npy", spread)
+            res.notes["reference_spread_mm"] = {"median": float(np.median(spread)),
+                                                "p90": float(np.percentile(spread, 90))}
+        res.files[label] = out / label / "face.ply" if len(faces) == 1 else \
+            out / f"{label}_consensus.ply"
+        recon = first.recon
+        if case.orientation is not None:
+            ant = unit(case.orientation[0])
+            sup = unit(case.orientation[1])
+        else:
+            back = np.linalg.inv(recon.input_to_head)[:3, :3]
+            ant, sup = unit(back @ [0.0, 0.0, 1.0]), unit(back @ [0.0, 1.0, 0.0])
+            res.notes["anterior"] = "from the reconstruction's head frame (no anterior given)"
+        res.anterior, res.superior = ant, sup
+        t = time.perf_counter()
+        offset_file = out / "inputs" / f"offset{OFFSET_MM:g}-{_digest(bone_path)[:16]}.ply"
+        if offset_file.is_file():
+            offset = _load(offset_file, "mm")
+        else:
+            say(f"{case.case_id}: uniform {OFFSET_MM:g} mm offset of the bone ...")
+            offset = uniform_offset(bone, OFFSET_MM)
+            write_mesh(offset_file, offset)
+        res.seconds["offset"] = time.perf_counter() - t
+        ids, scores = score_surfaces(
+            truth, bone, [(label, face), (f"uniform_{OFFSET_MM:g}mm_offset", offset)], ant,
+            case.mask, labels_from=face, vertex_regions=face_regions(first.template),
+            region_names=REGION_NAMES)
+        res.truth_ids, res.n_points, res.scores = ids, len(ids), scores
+        res.files["truth"], res.files["bone"] = truth_path, bone_path
+        res.notes["observed_face_fraction"] = recon.figures.get("face_observed_fraction")
+        res.notes["registration"] = {k: recon.figures.get("registration", {}).get(k)
+                                     for k in ("orientation", "observed_fraction")}
+        return res, first
+    except WorkbenchError as exc:
+        res.status, res.error = "failed", str(exc)
+        return res, None
+    finally:
+        res.seconds["total"] = time.perf_counter() - t0
+
+
+def build_references(cases: Sequence[ValidationCase], out: Path, *,
+                     progress: Progress | None = None) -> dict[str, Path | str]:
+    """A reference pack per case from its own skin and bone (cached); case id → pack or error."""
+    from workbench.services.template_build import build_template_pack
+
+    say = progress or (lambda _m: None)
+    packs: dict[str, Path | str] = {}
+    for case in cases:
+        folder = out / case.case_id
+        stamp = folder / "built_from.json"
+        try:
+            bone, skin = case_surfaces(case, out.parent / case.case_id / "inputs", say)
+            key = {"skin": _digest(skin), "skull": _digest(bone), "sex": case.sex}
+            if stamp.is_file() and json.loads(stamp.read_text("utf-8")) == key:
+                packs[case.case_id] = folder
+                continue
+            say(f"{case.case_id}: building a reference head from its own skin and bone ...")
+            tmp = out / f".{case.case_id}.part"
+            units = "mm" if is_volume(case.skull) else case.units
+            build_template_pack(skin, bone, tmp, sex=case.sex, units=units,
+                                orientation=case.orientation)
+            (tmp / "built_from.json").write_text(json.dumps(key), "utf-8")
+            if folder.exists():
+                import shutil
+
+                shutil.rmtree(folder)
+            tmp.rename(folder)
+            packs[case.case_id] = folder
+        except WorkbenchError as exc:
+            packs[case.case_id] = f"no reference pack: {exc}"
+    return packs
+
+
+def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out: bool = False,
+                   identity: bool = False, progress: Progress | None = None,
+                   on_case: Callable[[CaseResult, Any, str], None] | None = None
+                   ) -> list[tuple[CaseResult, str]]:
+    """Every case with the built-in head, and with the reference library when asked.
+
+    Returns ``(result, method label)`` pairs; ``on_case`` is called after each
+    (for pictures) with the job result of the reconstruction.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    results: list[tuple[CaseResult, str]] = []
+
+    def done(res: CaseResult, job: Any, label: str) -> None:
+        results.append((res, label))
+        if on_case is not None:
+            on_case(res, job, label)
+
+    for case in cases:
+        res, job = run_case(case, out / case.case_id, progress=progress)
+        done(res, job, "reconstruction")
+    if leave_one_out or identity:
+        packs = build_references(cases, out / "references", progress=progress)
+        for case in cases:
+            if leave_one_out:
+                others = [p for cid, p in packs.items() if cid != case.case_id
+                          and isinstance(p, Path)]
+                if others:
+                    res, job = run_case(case, out / case.case_id, templates=others,
+                                        label="library_loo", progress=progress)
+                    res.notes["references"] = [p.name for p in others]
+                else:
+                    res = CaseResult(case.case_id, "failed", "no other reference pack")
+                    job = None
+                done(res, job, "library_loo")
+            own = packs.get(case.case_id)
+            if identity:
+                if isinstance(own, Path):
+                    res, job = run_case(case, out / case.case_id, templates=[own],
+                                        tissue="reference", label="identity", progress=progress)
+                else:
+                    res, job = CaseResult(case.case_id, "failed", str(own)), None
+                done(res, job, "identity")
+    return results
