@@ -69,6 +69,9 @@ PULL_WEIGHT = 1.0
 AFFINE_ROUNDS = 10
 AFFINE_SCALE_MM = (15.0, 6.0)
 AFFINE_STIFFNESS = 0.05
+#: weight of each level's own displacement relative to the mean data weight of a node: keeps
+#: a node the data barely reach from running away
+EPSILON = 1e-3
 #: neighbours considered by a soft match
 MATCH_K = 8
 
@@ -87,9 +90,9 @@ class Level:
 DEFAULT_LEVELS = (
     Level(40.0, 2.0, 12.0, 6),
     Level(24.0, 1.0, 9.0, 6),
-    Level(14.0, 0.6, 7.0, 6),
-    Level(8.0, 0.4, 5.0, 8),
-    Level(5.0, 0.3, 4.0, 6),
+    Level(14.0, 0.6, 6.0, 6),
+    Level(8.0, 0.5, 4.0, 6),
+    Level(5.0, 0.4, 3.0, 5),
 )
 
 
@@ -199,13 +202,19 @@ def _level_field(points: np.ndarray, part: np.ndarray, spacing: float) -> _Level
         offset += len(nid)
     phi = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                             shape=(len(points), len(nodes)))
-    # node graph: within 2.2 spacings, same part only
+    # node graph: within 2.2 spacings, and each node's 6 nearest, same part only (so no
+    # node is left without neighbours: a node the data barely reach must follow them)
     tree = cKDTree(points[nodes])
     pairs = tree.query_pairs(2.2 * spacing, output_type="ndarray")
+    k = min(7, len(nodes))
+    if k > 1:
+        _, nn = tree.query(points[nodes], k=k)
+        knn = np.column_stack([np.repeat(np.arange(len(nodes)), k - 1), nn[:, 1:].ravel()])
+        pairs = np.vstack([pairs.reshape(-1, 2), knn])
     pairs = pairs[npart[pairs[:, 0]] == npart[pairs[:, 1]]]
     a = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
                           shape=(len(nodes), len(nodes)))
-    a = (a + a.T).tocsr()
+    a = ((a + a.T) > 0).astype(float).tocsr()
     lap = sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a
     return _LevelField(phi, lap.tocsr())
 
@@ -396,7 +405,7 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
                 a = a + h.T @ sparse.diags(wh) @ h
                 rhs += h.T @ (wh[:, None] * (pts - x[ids] - u[ids]))
             system = (a + level.stiffness * scale * lap
-                      + 1e-6 * scale * sparse.identity(m)).tocsr()
+                      + EPSILON * scale * sparse.identity(m)).tocsr()
             new = _solve_spd(system, rhs, c)
             step = float(np.abs(new - c).max())
             c = new
