@@ -118,3 +118,21 @@ def test_a_published_rule_replaces_the_classic_guide(inputs, tmp_path, capsys): 
     assert guides["nose_tip"]["rule_id"] == "nose_rynn2010_prn"
     assert "Rynn" in guides["nose_tip"]["citation"]
     assert guides["nose_width_l"]["rule_id"].startswith("kaehler")
+
+
+def test_a_library_of_reference_packs_gives_their_median_face(inputs, tmp_path,
+                                                             head_male):  # noqa: ANN001
+    from workbench.io.template_pack import export_template
+
+    a = export_template(head_male, tmp_path / "a")[0].parent
+    b = export_template(head_male, tmp_path / "b")[0].parent
+    out = tmp_path / "lib"
+    assert main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
+                 "--template", str(a), "--template", str(b),
+                 "--tissue", "reference", "--guides", "none", "--no-pictures",
+                 "--out", str(out)]) == 0
+    report = read_report_json(out / "report.json")
+    assert [h["path"] for h in report["references"]["heads"]] == [str(a), str(b)]
+    # two identical references: the median is either fit, and they agree
+    assert report["references"]["spread_between_mm"]["p90"] < 1e-6
+    assert report["tissue"]["model"] == "reference"

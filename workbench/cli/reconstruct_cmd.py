@@ -86,8 +86,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="set a landmark's depth by hand (repeatable)")
     p.add_argument("--ensemble", type=int, default=0, metavar="N",
                    help="N fits drawing depths from mean ± SD: a per-vertex spread map")
-    p.add_argument("--template", type=Path, default=None, metavar="PACK",
-                   help="template pack (workbench template build/export) instead of the built-in head")
+    p.add_argument("--template", type=Path, action="append", default=None, metavar="PACK",
+                   help="template pack (workbench template build/export) instead of the built-in "
+                        "head; repeat it for a library: one fit per pack, the face their "
+                        "per-vertex median, the spread between them in the report")
+    p.add_argument("--tissue", choices=["table", "reference"], default="table",
+                   help="table: the reference's thickness calibrated to the depth table "
+                        "(default); reference: the reference head's own thickness (a pack "
+                        "built from a real CT)")
     p.add_argument("--truth", default=None, metavar="SKIN_MESH",
                    help="true skin surface (same frame and units as the skull): adds validation figures")
     p.add_argument("--examiner", default="")
@@ -111,12 +117,16 @@ def _overrides(items: list[str]) -> dict[str, float]:
 def run(args: argparse.Namespace) -> int:
     from workbench.io.samples import resolve_input
     from workbench.services.reconstruction_job import JobSettings
+    from workbench.services.tissue_model import TissueSettings
 
     settings = JobSettings(
         units=args.units, scale=args.scale, landmarks=args.landmarks, table=args.table,
         sex=args.sex, build=args.build, guides=args.guides, rules=tuple(args.rule),
         ensemble=args.ensemble,
-        template=args.template, orientation=orientation_of(args, args.skull),
+        template=args.template[0] if args.template else None,
+        templates=tuple(args.template or ()),
+        tissue=TissueSettings(model=args.tissue),
+        orientation=orientation_of(args, args.skull),
         excluded=frozenset(args.exclude), overrides=_overrides(args.override),
         examiner=args.examiner)
     truth = None if args.truth is None else resolve_input(args.truth)
@@ -206,7 +216,7 @@ def _pictures(out: Path, result) -> dict[str, str]:  # noqa: ANN001
         paths = render_reconstruction(skull, recon.face, (origins, tips), out / "pictures",
                                       frame=recon.input_to_head,
                                       eyes=recon.mesh_to_input(recon.head.meshes["eyes"]),
-                                      spread=result.spread)
+                                      spread=result.spread, inferred=recon.inferred)
     except (RuntimeError, OSError, ValueError) as exc:
         print(f"  note: no pictures (off-screen rendering failed: {exc})")
         return {}

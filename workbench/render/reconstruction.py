@@ -42,6 +42,10 @@ FACE_OPACITY = 0.4
 NECK_MARGIN_MM = 20.0
 
 
+#: colour of skin over missing bone
+INFERRED = "#8fa3b8"
+
+
 def render_reconstruction(
     skull: Mesh,
     face: Mesh | None,
@@ -50,6 +54,7 @@ def render_reconstruction(
     *,
     frame: np.ndarray | None = None,
     spread: np.ndarray | None = None,
+    inferred: np.ndarray | None = None,
     prefix: str = "recon",
     eyes: Mesh | None = None,
     size: tuple[int, int] = (600, 700),
@@ -71,6 +76,9 @@ def render_reconstruction(
         Per-vertex ensemble spread of the face in mm (adds the ``spread`` picture).
     eyes : Mesh, optional
         Eyeballs drawn with the face, so the eye openings are not see-through.
+    inferred : (face.n_vertices,) bool, optional
+        Skin over bone the registration did not find (shaped by the reference
+        alone); with any, the ``inferred`` picture shows it in blue-grey.
     size : (width, height)
         Pixels per view.
     """
@@ -90,6 +98,8 @@ def render_reconstruction(
         face_pd = to_polydata(face)
         if spread is not None:
             face_pd["spread_mm"] = np.asarray(spread, float)
+        if inferred is not None:
+            face_pd["inferred"] = np.asarray(inferred, float)
         face_pd = face_pd.clip(normal=superior, origin=superior * floor, invert=False)
     cameras = {v: _camera(np.vstack(framed), v, anterior, superior, size) for v in views}
     peg = _pegs(pv, origins, tips) if len(origins) else None
@@ -138,6 +148,19 @@ def render_reconstruction(
 
         written["spread"] = _shoot(pv, out / f"{prefix}_spread.png", size,
                                    [(cameras[v], v) for v in views], coloured)
+    if inferred is not None and face_pd is not None and np.any(inferred):
+
+        def marked(p, v) -> None:  # noqa: ANN001
+            p.add_mesh(face_pd, scalars="inferred", cmap=[SKIN, INFERRED], clim=(0.0, 1.0),
+                       smooth_shading=True, show_scalar_bar=False, specular=0.1)
+            if eyes_pd is not None:
+                p.add_mesh(eyes_pd, color=EYE, smooth_shading=True)
+            if v == views[0]:
+                p.add_text("blue-grey: no bone under the skin (inferred from the reference)",
+                           position="lower_left", font_size=9, color="#333333")
+
+        written["inferred"] = _shoot(pv, out / f"{prefix}_inferred.png", size,
+                                     [(cameras[v], v) for v in views], marked)
     return written
 
 

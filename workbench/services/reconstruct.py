@@ -233,14 +233,19 @@ GuideFn = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
 
 
 def _skin_observed(head_skin: Mesh, reg: object) -> np.ndarray:
-    """0..1 per skin vertex from the observed weights of the registered bone under it."""
-    parts = ("cranium", "upper_teeth", "mandible", "lower_teeth")
+    """0..1 per skin vertex from the observed weights of the registered bone under it.
+
+    Cranium and mandible only: teeth rarely match a CT's (metal, roots,
+    missing teeth) and are no evidence of missing *bone*.  Smoothed over the
+    skin, so one weak match is no "missing bone".
+    """
+    parts = ("cranium", "mandible")
     bone = concatenate([reg.meshes[p] for p in parts])
     weight = np.concatenate([reg.observed[p] for p in parts])
     cp = MeshIndex(bone).closest_points(head_skin.vertices)
     w = np.einsum("ij,ij->i", cp.barycentric, weight[bone.faces[cp.face_ids]])
     # observed weights are per-vertex match strengths; a neighbourhood of them is the evidence
-    w = smooth_field(adjacency(head_skin), np.clip(w / 0.6, 0.0, 1.0), 8)
+    w = smooth_field(adjacency(head_skin), np.clip(w / 0.6, 0.0, 1.0), 16)
     return np.clip(w, 0.0, 1.0)
 
 

@@ -71,6 +71,8 @@ class JobSettings:
     rules: tuple[str, ...] = ()                  # published rules replacing classic guides
     ensemble: int = 0
     template: str | PathLike[str] | None = None
+    #: two or more reference packs: one fit each, the face their per-vertex median
+    templates: tuple = ()
     orientation: tuple | None = None             # (anterior, superior[, left]) in file coords
     excluded: frozenset[str] = frozenset()
     overrides: dict = field(default_factory=dict)
@@ -164,6 +166,9 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
 
     recon = reconstruct(work, given, head, settings=fit, guides=guide_fn,
                         hint=settings.orientation, progress=say)
+    references = None
+    if len(settings.templates) > 1:
+        recon, references = _consensus(recon, work, given, settings, fit, say)
     landmarks = recon.landmarks
     stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
                                   label="Skull landmarks from the dense registration"))
@@ -193,11 +198,52 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
                        ("depth_overrides", {k: float(v) for k, v in settings.overrides.items()})):
         stack.push(SetParameter(key=key, value=value))
     report = build_report(opened, head, recon, landmarks, guides, spread, suggestion, settings)
+    if references is not None and spread is None:
+        spread = references["spread"]   # the pictures' spread map: between the references
+    if references is not None:
+        report["references"] = {
+            "method": "one fit per reference head, the face their per-vertex median (input frame)",
+            "heads": references["heads"],
+            "spread_between_mm": {"median": float(np.median(references["spread"])),
+                                  "p90": float(np.percentile(references["spread"], 90))}}
     report["predictions"] = [
         {"rule_id": p.rule_id, "label": p.label, "value_mm": float(p.value_mm),
          "citation": p.citation} for p in predictions if np.isfinite(p.value_mm)]
     return JobResult(opened, head, recon, skull_h, suggestion, guides, spread, report, times,
                      settings)
+
+
+def _consensus(first: Reconstruction, work: Mesh, given: LandmarkSet | None,
+               settings: JobSettings, fit: FitSettings, say: Progress
+               ) -> tuple[Reconstruction, dict]:
+    """Fit every reference pack of ``settings.templates``; the face is their per-vertex median.
+
+    All packs must share the first one's skin topology (packs built from the
+    same base head do).  The spread between them (median distance of the
+    members from the median face, mm) comes back with the head list.
+    """
+    faces = [first.face]
+    heads = [{"id": first.head.template_id, "path": str(settings.templates[0])}]
+    for i, pack in enumerate(settings.templates[1:], start=2):
+        say(f"reference {i}/{len(settings.templates)} ...")
+        other = reconstruct(work, given, reference_head(settings.sex, pack), settings=fit,
+                            hint=settings.orientation)
+        if other.head.skin.n_vertices != first.head.skin.n_vertices or \
+                other.head.skin.n_faces != first.head.skin.n_faces:
+            raise WorkbenchError(f"reference {pack} does not share the skin topology of "
+                                 f"{settings.templates[0]} (packs must be built from one base head)")
+        faces.append(other.face)
+        heads.append({"id": other.head.template_id, "path": str(pack)})
+    stack = np.stack([f.vertices for f in faces])
+    median = np.median(stack, axis=0)
+    spread = np.median(np.linalg.norm(stack - median, axis=2), axis=0)
+    skin_h = apply_transform(first.input_to_head, median)
+    head = replace(first.head, meshes={**first.head.meshes,
+                                       "skin": first.head.skin.with_vertices(skin_h)})
+    recon = replace(first, head=head, warnings=first.warnings + (
+        f"face = per-vertex median of {len(faces)} reference heads (spread between them: median "
+        f"{np.median(spread):.1f} mm)",))
+    return recon, {"heads": heads, "spread": spread}
 
 
 #: a computed guide that would move its skin landmark farther than this from
@@ -358,8 +404,15 @@ FITTED_HEAD_FRAME_TEXT = ("the skull file's frame (input frame of the evidence),
 
 
 def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
-    """The fitted head with every part mapped into the skull file's frame."""
+    """The fitted head with every part mapped into the skull file's frame.
+
+    Skin vertices over bone the registration did not find are the region
+    ``inferred`` (their shape is the reference's prior).
+    """
     h = recon.head
+    if recon.observed is not None:
+        # the skin over missing bone, as a region of the pack (template.json)
+        h = replace(h, regions={**h.regions, "inferred": np.flatnonzero(recon.inferred)})
     inv = np.linalg.inv(recon.input_to_head)
     axis_pts = recon.to_input(np.vstack([h.tmj_axis[0], h.tmj_axis[0] + h.tmj_axis[1]]))
     return replace(
