@@ -64,8 +64,10 @@ def test_mirrored_input_is_detected_and_mapped_back(female_case, head_female, he
     mirrored = Mesh(skull.vertices * [-1, 1, 1], skull.faces[:, ::-1])
     result = reconstruct(mirrored, head_female.skull_landmarks.transformed(flip), head_male)
     assert result.mirrored_input
+    # reversed triangles draw other orientation samples, so the fit is the mirror image up to
+    # that sampling (and the clearance points it picks): a few vertices move by a few mm
     diff = np.linalg.norm(result.face.vertices - recon.face.vertices * [-1, 1, 1], axis=1)
-    assert np.median(diff) < 0.1 and diff.max() < 1.5
+    assert np.median(diff) < 0.1 and np.percentile(diff, 99) < 1.0 and diff.max() < 3.0
     assert result.face.volume * recon.face.volume > 0   # outward winding kept
 
 

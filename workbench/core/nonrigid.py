@@ -69,9 +69,17 @@ PULL_WEIGHT = 1.0
 AFFINE_ROUNDS = 10
 AFFINE_SCALE_MM = (15.0, 6.0)
 AFFINE_STIFFNESS = 0.05
+#: spacing of the source subsample the affine stage matches (mm)
+AFFINE_SAMPLE_MM = 4.0
 #: weight of each level's own displacement relative to the mean data weight of a node: keeps
 #: a node the data barely reach from running away
 EPSILON = 1e-3
+#: data points per node spacing used by a level (a subsample of the source vertices)
+SAMPLES_PER_SPACING = 6.0
+#: scale of the soft minimum over agreeing neighbour distances (mm)
+SOFTMIN_MM = 0.5
+#: a level stops when no node moves more than this in an iteration (mm)
+CONVERGED_MM = 0.05
 #: neighbours considered by a soft match
 MATCH_K = 8
 
@@ -115,7 +123,6 @@ class Target:
     mesh: Mesh
     weights: np.ndarray
     pull_stride: int = 4
-    index: MeshIndex = field(init=False, repr=False)
     normals: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -123,8 +130,14 @@ class Target:
         if w.shape != (self.mesh.n_vertices,):
             raise ValueError("target weights need one value per target vertex")
         object.__setattr__(self, "weights", w)
-        object.__setattr__(self, "index", MeshIndex(self.mesh))
         object.__setattr__(self, "normals", vertex_normals(self.mesh))
+
+    @property
+    def index(self) -> MeshIndex:
+        """Exact closest-point index of the target (built on first use)."""
+        if "_index" not in self.__dict__:
+            object.__setattr__(self, "_index", MeshIndex(self.mesh))
+        return self.__dict__["_index"]
 
 
 @dataclass(frozen=True)
@@ -139,7 +152,7 @@ class Registration:
         Final source → target weight per source vertex (0..1): how well the
         vertex is supported by target surface ("observed" when high).
     distances : (n,)
-        Distance of each registered vertex to the target (mm).
+        Distance of each registered vertex to the nearest target vertex (mm).
     iterations : int
     """
 
@@ -242,8 +255,10 @@ def soft_match(points: np.ndarray, normals: np.ndarray, tree: cKDTree, cloud: np
     """Normal-compatible soft closest points of ``points`` on a point ``cloud``.
 
     Among the ``k`` nearest cloud points, those whose normal agrees with the
-    query's (cos > 0) are blended with Gaussian weights in distance (σ =
-    max(0.5 mm, half the nearest agreeing distance)) and normal agreement.
+    query's (cos > 0) are blended with Gaussian weights around the (soft)
+    nearest agreeing distance (σ = max(0.5 mm, half that distance)) and
+    normal agreement; every weight varies continuously with the query, also
+    when the neighbour set changes (a taper to the first point left out).
     Taking the nearest *agreeing* surface keeps a template between the inner
     and outer table of a vault (or the two walls of a sinus) from sticking to
     the wrong one, and the blend makes the match vary continuously as the
@@ -252,14 +267,27 @@ def soft_match(points: np.ndarray, normals: np.ndarray, tree: cKDTree, cloud: np
     Returns ``(matched points (n, 3), agreement (n,) in [0, 1], distance (n,),
     blend (n, k) weights over the returned neighbour ids (n, k))``.
     """
-    d, j = tree.query(points, k=k, workers=-1)
+    d, j = tree.query(points, k=k + 1, workers=-1)
+    d, j = d.reshape(len(points), k + 1), j.reshape(len(points), k + 1)
+    # a neighbour's weight fades to zero as it reaches the first one left out, so the set
+    # of k neighbours can change (ties) without the match jumping
+    span = np.maximum(d[:, -1:] - d[:, :1], 1e-9)
+    taper = smoothstep((d[:, -1:] - d[:, :k]) / span)
+    d, j = d[:, :k], j[:, :k]
     cos = np.einsum("ikj,ij->ik", cloud_normals[j], normals)
     agree = smoothstep(cos / 0.5)
-    d_ok = np.where(agree > 0, d, np.inf)
-    nearest = d_ok.min(axis=1)
-    sigma = np.maximum(0.5, 0.5 * np.where(np.isfinite(nearest), nearest, 1.0))
-    w = agree * np.exp(-0.5 * ((d - nearest[:, None]) / sigma[:, None]) ** 2)
-    w = np.where(np.isfinite(d_ok), w, 0.0)
+    mass = agree * taper
+    # soft minimum of the agreeing distances (scale SOFTMIN_MM): continuous in the
+    # agreements, unlike "the nearest point whose normal agrees"
+    d0 = d[:, :1]
+    total_mass = (mass * np.exp(-(d - d0) / SOFTMIN_MM)).sum(axis=1)
+    with np.errstate(divide="ignore"):
+        ref = d0[:, 0] - SOFTMIN_MM * np.log(total_mass)
+    ok = np.isfinite(ref)
+    ref = np.where(ok, ref, 0.0)
+    sigma = np.maximum(0.5, 0.5 * ref)
+    w = mass * np.exp(-0.5 * ((d - ref[:, None]) / sigma[:, None]) ** 2)
+    w = np.where(ok[:, None], w, 0.0)
     total = w.sum(axis=1)
     has = total > 1e-12
     blend = np.where(has[:, None], w / np.where(has, total, 1.0)[:, None], 0.0)
@@ -279,12 +307,16 @@ def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.nda
     ones = np.ones((n, 1))
     xh = np.hstack([x, ones])                      # rows [x, 1]
     labels = np.unique(parts)
+    sel = np.flatnonzero(active)
+    sel = sel[grid_nodes(x[sel], AFFINE_SAMPLE_MM)]   # a template-side subsample
     for tau in np.geomspace(*AFFINE_SCALE_MM, max(rounds, 1))[:rounds]:
         y = x + u
         normals = vertex_normals(Mesh(y, source.faces))
-        p, agree, dist, blend, j = soft_match(y, normals, t_tree, t_pts, t_nrm)
-        w = (blend * t_w[j]).sum(axis=1) * agree * np.exp(-0.5 * (dist / tau) ** 2) * active
-        yact = np.flatnonzero(active)
+        p = np.zeros_like(x)
+        w = np.zeros(n)
+        p[sel], agree, dist, blend, j = soft_match(y[sel], normals[sel], t_tree, t_pts, t_nrm)
+        w[sel] = (blend * t_w[j]).sum(axis=1) * agree * np.exp(-0.5 * (dist / tau) ** 2)
+        yact = sel
         pm, agree_b, dist_b, blend_b, jb = soft_match(q, q_n, cKDTree(y[yact]), y[yact],
                                                       normals[yact])
         wb = PULL_WEIGHT * q_w * agree_b * np.exp(-0.5 * (dist_b / tau) ** 2)
@@ -295,7 +327,8 @@ def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.nda
             # push rows: x_i -> p_i ; pull rows: blend of x over the matched source vertices -> q
             own_b = np.where(mine[src_of_q], blend_b, 0.0)
             share = own_b.sum(axis=1)
-            keep = share > 0.5
+            # a sample counts for this part as much as it matched this part's vertices
+            keep = share > 1e-9
             a_rows = [xh[mine]]
             b_rows = [p[mine]]
             weights = [w[mine]]
@@ -303,15 +336,15 @@ def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.nda
                 bl = own_b[keep] / share[keep, None]
                 a_rows.append(np.einsum("ik,ikj->ij", bl, xh[src_of_q[keep]]))
                 b_rows.append(q[keep])
-                weights.append(wb[keep])
+                weights.append(wb[keep] * share[keep])
             if hard is not None and len(hard[0]):
                 ids = np.asarray(hard[0], np.int64)
-                sel = mine[ids]
-                if sel.any():
-                    a_rows.append(xh[ids[sel]])
-                    b_rows.append(np.asarray(hard[1], float)[sel])
-                    weights.append(np.full(int(sel.sum()), HARD_WEIGHT * max(w[mine].mean(),
-                                                                             1e-6)))
+                held = mine[ids]
+                if held.any():
+                    a_rows.append(xh[ids[held]])
+                    b_rows.append(np.asarray(hard[1], float)[held])
+                    weights.append(np.full(int(held.sum()), HARD_WEIGHT * max(w[mine].mean(),
+                                                                              1e-6)))
             a = np.vstack(a_rows)
             b = np.vstack(b_rows)
             ww = np.concatenate(weights)
@@ -363,7 +396,6 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
     t_tree = cKDTree(t_pts)
     q, q_n, q_w = t_pts[samples], t_nrm[samples], t_w[samples]
     u = np.zeros_like(x)
-    w_f = np.zeros(n)
     total_iter = 0
     if affine_rounds:
         u = _affine_stage(source, x, parts, active, t_tree, t_pts, t_nrm, t_w, q, q_n, q_w,
@@ -374,18 +406,23 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
         phi, lap = fld.phi, fld.laplacian
         m = phi.shape[1]
         c = np.zeros((m, 3))
+        # a coarse level needs no more data points than about six per node spacing: a
+        # subsample chosen on the template (so it never depends on the target)
+        sel = np.flatnonzero(active)
+        sel = sel[grid_nodes(x[sel], level.spacing_mm / SAMPLES_PER_SPACING)]
+        phi_s = phi[sel]
         for _ in range(level.iterations):
             total_iter += 1
             y = x + u + phi @ c
             moved_n = vertex_normals(Mesh(y, source.faces))
             # push: source vertex → nearest agreeing target surface
-            p, agree, dist, blend, j = soft_match(y, moved_n, t_tree, t_pts, t_nrm)
+            p, agree, dist, blend, j = soft_match(y[sel], moved_n[sel], t_tree, t_pts, t_nrm)
             tw = (blend * t_w[j]).sum(axis=1)
-            w_f = tw * agree * np.exp(-0.5 * (dist / level.scale_mm) ** 2) * active
-            a_push = phi.T @ sparse.diags(w_f) @ phi
-            rhs = phi.T @ (w_f[:, None] * (p - x - u))
+            w_s = tw * agree * np.exp(-0.5 * (dist / level.scale_mm) ** 2)
+            a_push = phi_s.T @ sparse.diags(w_s) @ phi_s
+            rhs = phi_s.T @ (w_s[:, None] * (p - x[sel] - u[sel]))
             # pull: target sample → nearest agreeing moved source vertices (blend of them)
-            yact = np.flatnonzero(active)
+            yact = sel
             src_tree = cKDTree(y[yact])
             pm, agree_b, dist_b, blend_b, jb = soft_match(q, q_n, src_tree, y[yact],
                                                           moved_n[yact])
@@ -409,9 +446,13 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
             new = _solve_spd(system, rhs, c)
             step = float(np.abs(new - c).max())
             c = new
-            if step < 0.01:
+            if step < CONVERGED_MM:
                 break
         u = u + phi @ c
     y = x + u
-    cp = target.index.closest_points(y)
-    return Registration(y, w_f, cp.distances, total_iter)
+    # the final match of every source vertex: its evidence weight and distance
+    normals = vertex_normals(Mesh(y, source.faces))
+    p, agree, dist, blend, j = soft_match(y, normals, t_tree, t_pts, t_nrm)
+    scale = levels[-1].scale_mm if levels else AFFINE_SCALE_MM[-1]
+    w_f = (blend * t_w[j]).sum(axis=1) * agree * np.exp(-0.5 * (dist / scale) ** 2) * active
+    return Registration(y, w_f, dist, total_iter)

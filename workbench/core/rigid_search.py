@@ -489,8 +489,9 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
     small = _Cloud(exposed.points[:150], exposed.normals[:150])
     cloud = _Cloud(exposed.points[:n_samples], exposed.normals[:n_samples])
     scorer = _Scorer(ref)
-    grid = _Grid(ref)
-    own = _Grid(surface_samples(target, 8 * n_samples, rng))
+    searching = hint is None and not (seeds is not None and len(seeds[0]) >= 3)
+    grid = _Grid(ref) if searching else None
+    own = _Grid(surface_samples(target, 8 * n_samples, rng)) if searching else None
     handed_by = None
     rot_sets: dict[bool, list[np.ndarray]] = {}
     method = "search"
@@ -516,14 +517,13 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
         if method == "hint":
             trials = []
             for r in rot_sets[flipped]:
-                for shift in itertools.product((-40.0, -20.0, 0.0, 20.0, 40.0),
-                                               (-20.0, 0.0, 20.0)):
+                for shift in itertools.product((-36.0, -12.0, 12.0, 36.0), (-15.0, 15.0)):
                     t = (ref.points.mean(axis=0) - (small.points @ r.T).mean(axis=0)
                          + np.array([0.0, *shift]))
                     lin, tt, c = _icp(scorer, small, r, t, rounds=5, sigma_mm=SEARCH_SIGMA_MM)
                     trials.append((c, lin, tt))
             trials.sort(key=lambda x: x[0])
-            trials = trials[:6]
+            trials = trials[:4]
         else:
             flipped_small = _Cloud(small.points @ f.T, small.normals @ f.T)
             cands = []

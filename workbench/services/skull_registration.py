@@ -76,7 +76,7 @@ OBSERVED_WEIGHT = 0.3
 #: teeth are decimated to about this many triangles for the registration
 TEETH_TRIANGLES = 3000
 #: jaw openings tried as starts of the mandible pose (degrees about the jaw axis)
-JAW_STARTS_DEG = (-8.0, 0.0, 8.0, 16.0, 24.0, 32.0)
+JAW_STARTS_DEG = (-6.0, 4.0, 14.0, 26.0)
 FH_CODES = ("po_l", "po_r", "or_l", "or_r")
 
 PART_OF = {"cranium": 0, "upper_teeth": 0, "mandible": 1, "lower_teeth": 1}
@@ -216,7 +216,7 @@ def _rotation_about(axis_point: np.ndarray, axis_dir: np.ndarray, deg: float) ->
 
 
 def _rigid_fit(points: np.ndarray, normals: np.ndarray, target: Target, tree: cKDTree,
-               rounds: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               rounds: int = 9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust rigid ICP of a point set onto the target.
 
     Returns the 4x4 map and, at the end, each point's match weight and matched point.
@@ -433,7 +433,7 @@ def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
     if not (weights > 0.05).any():
         raise InputError("skull", "no part of the surface lies near the reference skull after "
                          "orientation", hint="check the units and that the file holds a skull")
-    target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 8000))
+    target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 6000))
     tree = cKDTree(target_h.vertices)
     seconds["target"] = time.perf_counter() - t
 
