@@ -200,3 +200,23 @@ def test_the_index_cache_lets_a_mesh_go(skull):  # noqa: ANN001
     del copy
     gc.collect()
     assert gone() is None
+
+
+def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):  # noqa: ANN001
+    from workbench.core.landmarks import LandmarkSet
+    from workbench.services.landmark_snap import snap_suggested
+    from workbench.services.reference_parts import skull_surface
+
+    skull = skull_surface(head_female)
+    lms = head_female.skull_landmarks
+    # glabella suggested 6 mm too low, nasion placed 4 mm off: only glabella moves
+    g, n = lms["g"], lms["n"]
+    moved = LandmarkSet("skull", tuple(
+        g.moved(g.position + [0.0, -6.0, -1.0], "suggested") if lm.code == "g" else
+        n.moved(n.position + [0.0, 0.0, 4.0], "placed") if lm.code == "n" else lm
+        for lm in lms))
+    out, notes = snap_suggested(skull, moved)
+    assert any(note.startswith("g ") for note in notes)
+    assert np.linalg.norm(out["g"].position - g.position) < 3.0
+    np.testing.assert_array_equal(out["n"].position, moved["n"].position)
+    assert out["g"].status == "suggested"

@@ -283,8 +283,22 @@ def symmetry_planes(cloud: _Cloud, own: _Grid, keep: int = 3
     return out
 
 
-def _plane_poses(grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray
-                 ) -> list[tuple[float, np.ndarray, np.ndarray]]:
+def _width_scale(ref: _Cloud, cloud: _Cloud, left: np.ndarray) -> float:
+    """Provisional scale (reference / target) from the skull widths across the midline.
+
+    The width (2nd to 98th percentile of the samples along the left-right
+    axis: zygomas, temporal and parietal bones) barely depends on a missing
+    vault or mandible, so the starts of two skulls of different size are
+    compared near their common size; the scale is fitted properly after the
+    orientation (:func:`_fit_scale`).
+    """
+    lo, hi = np.percentile(cloud.points @ (left / np.linalg.norm(left)), [2, 98])
+    rlo, rhi = np.percentile(ref.points[:, 0], [2, 98])
+    return float(np.clip((rhi - rlo) / max(hi - lo, 1e-6), *SCALE_RANGE))
+
+
+def _plane_poses(grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray,
+                 scale: float = 1.0) -> list[tuple[float, np.ndarray, np.ndarray]]:
     """Poses putting the plane ``u · x = d`` on x = 0: both sides, every turn about it.
 
     Scored by the reference fit over a grid of in-plane translations;
@@ -299,12 +313,12 @@ def _plane_poses(grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np
         c0 = np.cross(a, b0)
         for th in np.radians(np.arange(0.0, 360.0, TURN_STEP_DEG)):
             b = np.cos(th) * b0 + np.sin(th) * c0
-            r = np.vstack([a, b, np.cross(a, b)])
+            r = scale * np.vstack([a, b, np.cross(a, b)])
             p = small.points @ r.T
             t0 = centre - p.mean(axis=0)
-            ts = np.column_stack([np.full(len(offs), -side * d),
+            ts = np.column_stack([np.full(len(offs), -side * d * scale),
                                   t0[1] + offs[:, 0], t0[2] + offs[:, 1]])
-            n = small.normals @ r.T
+            n = small.normals @ r.T / scale
             loss = grid.loss(p[None] + ts[:, None], np.broadcast_to(n, (len(ts),) + n.shape))
             k = int(np.argmin(loss))
             out.append((float(loss[k]), r, ts[k]))
@@ -516,7 +530,8 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
         f = FLIP if flipped else np.eye(3)
         if method == "hint":
             trials = []
-            for r in rot_sets[flipped]:
+            for r0 in rot_sets[flipped]:
+                r = _width_scale(ref, cloud, r0[0]) * r0
                 for shift in itertools.product((-36.0, -12.0, 12.0, 36.0), (-15.0, 15.0)):
                     t = (ref.points.mean(axis=0) - (small.points @ r.T).mean(axis=0)
                          + np.array([0.0, *shift]))
@@ -529,7 +544,8 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
             cands = []
             for _, u, d in planes:
                 uf = f @ u
-                cands += _plane_poses(grid, flipped_small, uf, d, ref.points.mean(axis=0))
+                s0 = _width_scale(ref, cloud, u)
+                cands += _plane_poses(grid, flipped_small, uf, d, ref.points.mean(axis=0), s0)
             cands.sort(key=lambda x: x[0])
             trials = [(c, r @ f, t) for c, r, t in _distinct(cands, REFINED)]
         for c, lin, tt in trials:

@@ -310,3 +310,38 @@ def _onto_midline(index: PatchIndex, to_head: np.ndarray, start: np.ndarray,
     return SnapResult(code, start, end, moved, "the midsagittal plane", None, True,
                       f"{code} has no snap rule (its definition names no extremum): moved onto "
                       f"the midsagittal plane, {moved:.1f} mm")
+
+
+def snap_suggested(mesh: Mesh, landmarks: LandmarkSet, *,
+                   catalogue: LandmarkCatalogue | None = None
+                   ) -> tuple[LandmarkSet, list[str]]:
+    """Every *suggested* landmark with a snap rule moved to its feature (input frame, mm).
+
+    Used after the dense registration: the registration puts a landmark
+    where the reference's landmark lands, the rule then puts it on the
+    feature its definition names (most anterior, lowest, deepest ...).
+    Placed landmarks are the user's and never move.  Returns the new set and
+    one note per moved landmark; without a head frame (no porions or
+    orbitales) nothing moves and the note says why.
+    """
+    catalogue = catalogue or load_catalogue()
+    rules = load_snap_rules()
+    todo = [lm.code for lm in landmarks if lm.status == "suggested" and lm.code in rules]
+    if not todo:
+        return landmarks, []
+    try:
+        snap_frame(landmarks)
+    except LandmarkError as exc:
+        return landmarks, [f"landmarks not snapped to their features: {exc}"]
+    out, notes = landmarks, []
+    for code in todo:
+        try:
+            result = snap_landmark(mesh, landmarks, code, rules=rules, catalogue=catalogue)
+        except LandmarkError as exc:
+            notes.append(f"{code} not snapped: {exc}")
+            continue
+        if result.moves and result.settled:
+            lm = out[code]
+            out = out.with_landmark(lm.moved(result.position, "suggested"))
+            notes.append(result.explanation)
+    return out, notes

@@ -85,6 +85,8 @@ class FitSettings:
     max_refits: int = 3
     #: suggested landmarks below this confidence get no dowel (placed ones always do)
     min_confidence: float = 0.3
+    #: move the registration's landmarks to the features their definitions name
+    snap_landmarks: bool = True
 
     @property
     def min_tissue_mm(self) -> float:
@@ -420,6 +422,11 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
                                          progress=progress)
     to_head, mirrored = reg.input_to_head, reg.mirrored
     lms = _merge_landmarks(reg.landmarks, landmarks)
+    snapped: list[str] = []
+    if settings.snap_landmarks:
+        from workbench.services.landmark_snap import snap_suggested
+
+        lms, snapped = snap_suggested(skull, lms)
     lms_h = lms.transformed(to_head)
     doubtful = [lm.code for lm in lms_h if lm.status == "suggested"
                 and lm.confidence < settings.min_confidence]
@@ -434,6 +441,7 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
     observed = _skin_observed(fitted.skin, reg)
     face = np.asarray(head.regions.get("face", np.arange(head.skin.n_vertices)), dtype=np.int64)
     figures["registration"] = reg.figures
+    figures["snapped_landmarks"] = sum(" moved " in n for n in snapped)
     figures["face_observed_fraction"] = round(float(np.mean(observed[face] >= OBSERVED_LEVEL)), 4)
     figures["seconds_total"] = round(time.perf_counter() - t0, 3)
     warnings = list(reg.warnings) + list(plan.warnings)

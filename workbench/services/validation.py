@@ -18,14 +18,19 @@ skull      skull mesh, or a CT volume (DICOM folder, NIfTI, NRRD, MetaImage)
 truth      true skin mesh, or a CT volume (often the same CT as ``skull``)
 units      units of mesh files (``mm``, ``cm``, ``m``, ``auto``); default auto
 mask       ``none`` | ``clip_patch:MM`` | ``behind_clip:MM`` (see ScoreMask)
-anterior   ``x,y,z`` in the file frame (orientation hint, and the metric's
-           anterior); ``superior`` and ``left`` likewise
+anterior   ``x,y,z`` in the file frame (the metric's anterior, and the
+           orientation hint); ``superior`` and ``left`` likewise
+orient     ``hint`` (default: the reconstruction is told the directions) or
+           ``auto`` (it orients the skull from the bone alone; the
+           directions only pick the metric's points)
 sex        ``female`` | ``male`` (depth table group, built-in head)
 build      ``normal`` | ``slender`` | ``obese`` | k (mean + k SD)
 tissue     ``table`` | ``reference`` (see tissue_model)
 template   a template pack instead of the built-in head
 bone_iso   CT level of the bone surface (default: the preset for the data)
 skin_iso   CT level of the skin surface
+subject    who the case is (default: its id); cases of one subject (a skull
+           and a cut copy of it) never serve as each other's references
 ========== ============================================================
 
 With ``leave_one_out`` a reference pack is built from every case's own
@@ -60,8 +65,8 @@ from workbench.core.face_metric import (
 from workbench.core.mesh import Mesh
 
 Progress = Callable[[str], None]
-COLUMNS = ("id", "skull", "truth", "units", "mask", "anterior", "superior", "left", "sex",
-           "build", "tissue", "template", "bone_iso", "skin_iso")
+COLUMNS = ("id", "skull", "truth", "units", "mask", "anterior", "superior", "left", "orient",
+           "sex", "build", "tissue", "template", "bone_iso", "skin_iso", "subject")
 VOLUME_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mhd", ".mha", ".dcm")
 OFFSET_MM = 6.0
 
@@ -82,6 +87,12 @@ class ValidationCase:
     template: Path | None = None
     bone_iso: float | None = None
     skin_iso: float | None = None
+    subject: str = ""
+    orient: str = "hint"
+
+    @property
+    def who(self) -> str:
+        return self.subject or self.case_id
 
 
 def _vector(text: str, where: str) -> tuple[float, float, float] | None:
@@ -169,6 +180,9 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
             except ValueError:
                 raise InputError(f"{where} column build", f"unknown build {build_text!r}") from None
         template = (row.get("template") or "").strip()
+        orient = (row.get("orient") or "hint").strip() or "hint"
+        if orient not in ("hint", "auto"):
+            raise InputError(f"{where} column orient", f"{orient!r} is not hint or auto")
         cases.append(ValidationCase(
             cid, _resolve(row["skull"], path.parent, f"{where} column skull"),
             _resolve(row["truth"], path.parent, f"{where} column truth"),
@@ -176,7 +190,7 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
             (row.get("sex") or "male").strip() or "male", build,
             (row.get("tissue") or "table").strip() or "table",
             _resolve(template, path.parent, f"{where} column template") if template else None,
-            isos["bone_iso"], isos["skin_iso"]))
+            isos["bone_iso"], isos["skin_iso"], (row.get("subject") or "").strip(), orient))
     return cases
 
 
@@ -326,7 +340,7 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
         res.seconds["surfaces"] = time.perf_counter() - t0
         packs = list(templates) or ([case.template] if case.template else [None])
         settings = JobSettings(units=units, sex=case.sex, build=case.build,
-                               orientation=case.orientation,
+                               orientation=case.orientation if case.orient == "hint" else None,
                                tissue=TissueSettings(model=tissue or case.tissue))
         faces, first = [], None
         t = time.perf_counter()
@@ -386,22 +400,28 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
 
 def build_references(cases: Sequence[ValidationCase], out: Path, *,
                      progress: Progress | None = None) -> dict[str, Path | str]:
-    """A reference pack per case from its own skin and bone (cached); case id → pack or error."""
+    """A reference pack per subject from its first case's skin and bone (cached).
+
+    Returns subject → pack folder, or the reason there is none.
+    """
     from workbench.services.template_build import build_template_pack
 
     say = progress or (lambda _m: None)
     packs: dict[str, Path | str] = {}
+    first_of: dict[str, ValidationCase] = {}
     for case in cases:
-        folder = out / case.case_id
+        first_of.setdefault(case.who, case)
+    for who, case in first_of.items():
+        folder = out / who
         stamp = folder / "built_from.json"
         try:
             bone, skin = case_surfaces(case, out.parent / case.case_id / "inputs", say)
             key = {"skin": _digest(skin), "skull": _digest(bone), "sex": case.sex}
             if stamp.is_file() and json.loads(stamp.read_text("utf-8")) == key:
-                packs[case.case_id] = folder
+                packs[who] = folder
                 continue
-            say(f"{case.case_id}: building a reference head from its own skin and bone ...")
-            tmp = out / f".{case.case_id}.part"
+            say(f"{who}: building a reference head from its own skin and bone ...")
+            tmp = out / f".{who}.part"
             units = "mm" if is_volume(case.skull) else case.units
             build_template_pack(skin, bone, tmp, sex=case.sex, units=units,
                                 orientation=case.orientation)
@@ -411,9 +431,9 @@ def build_references(cases: Sequence[ValidationCase], out: Path, *,
 
                 shutil.rmtree(folder)
             tmp.rename(folder)
-            packs[case.case_id] = folder
+            packs[who] = folder
         except WorkbenchError as exc:
-            packs[case.case_id] = f"no reference pack: {exc}"
+            packs[who] = f"no reference pack: {exc}"
     return packs
 
 
@@ -441,7 +461,7 @@ def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out:
         packs = build_references(cases, out / "references", progress=progress)
         for case in cases:
             if leave_one_out:
-                others = [p for cid, p in packs.items() if cid != case.case_id
+                others = [p for who, p in packs.items() if who != case.who
                           and isinstance(p, Path)]
                 if others:
                     res, job = run_case(case, out / case.case_id, templates=others,
@@ -451,7 +471,7 @@ def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out:
                     res = CaseResult(case.case_id, "failed", "no other reference pack")
                     job = None
                 done(res, job, "library_loo")
-            own = packs.get(case.case_id)
+            own = packs.get(case.who)
             if identity:
                 if isinstance(own, Path):
                     res, job = run_case(case, out / case.case_id, templates=[own],
