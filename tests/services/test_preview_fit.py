@@ -27,7 +27,7 @@ def test_labels_describe_every_correspondence(fitted):  # noqa: ANN001
     _, _, recon = fitted
     assert len(recon.labels) == len(recon.sources) == len(recon.targets)
     kinds = {label.split(":")[0] for label in recon.labels}
-    assert {"dowel", "guide", "anchor"} <= kinds <= {"dowel", "guide", "clearance", "anchor"}
+    assert {"dowel", "guide", "anchor"} <= kinds <= {"dowel", "guide", "clearance", "anchor", "eye"}
     assert "guide:prn" in recon.labels
     assert recon.labels.count("clearance") == recon.figures["extra_correspondences"]
     # anchors hold the modelled skin: their targets are their sources

@@ -12,8 +12,18 @@ import pytest
 
 from workbench.core.mesh import Mesh, concatenate
 from workbench.services.compare import compare_surfaces, face_regions
-from workbench.services.reconstruct import ensemble_spread, reconstruct
+from workbench.core.landmarks import LandmarkSet
+from workbench.services.reconstruct import (
+    FitSettings, ensemble_spread, eye_moves, reconstruct,
+)
 from workbench.services.reference_parts import skull_surface
+from workbench.services.tissue_model import TissueSettings
+
+#: the generated heads place their eyes by Stephan 2002's tangent rule (corneal apex 8.4 mm in
+#: front of ectoconchion); the fit's default, Stephan et al. 2009 (16 mm), moves eyes and lids
+#: away from the generated truth — the comparisons with the generated skin keep the reference's
+#: eyes, and the placement is tested on its own below
+SAME_EYES = FitSettings(tissue=TissueSettings(eyes="reference"))
 
 
 def _rigid(deg: float, t) -> np.ndarray:  # noqa: ANN001
@@ -28,7 +38,7 @@ def _rigid(deg: float, t) -> np.ndarray:  # noqa: ANN001
 def female_case(head_female, head_male):  # noqa: ANN001
     """The female skull reconstructed with the male reference head (truth: the female skin)."""
     skull = skull_surface(head_female)
-    return skull, reconstruct(skull, head_female.skull_landmarks, head_male)
+    return skull, reconstruct(skull, head_female.skull_landmarks, head_male, settings=SAME_EYES)
 
 
 def test_female_face_from_female_skull_with_the_male_head(female_case, head_female, head_male):
@@ -49,7 +59,8 @@ def test_result_is_in_the_input_frame(female_case, head_female, head_male):
     skull, recon = female_case
     m = _rigid(35.0, [100.0, -40.0, 900.0])
     moved_skull = skull.transformed(m)
-    moved = reconstruct(moved_skull, head_female.skull_landmarks.transformed(m), head_male)
+    moved = reconstruct(moved_skull, head_female.skull_landmarks.transformed(m), head_male,
+                        settings=SAME_EYES)
     expected = recon.face.vertices @ m[:3, :3].T + m[:3, 3]
     # the fit is equivariant up to rounding (Embree's single-precision exposure test of the
     # orientation samples is the only step that is not exact)
@@ -62,7 +73,8 @@ def test_mirrored_input_is_detected_and_mapped_back(female_case, head_female, he
     skull, recon = female_case
     flip = np.diag([-1.0, 1.0, 1.0, 1.0])   # a file with its x axis flipped, labels unchanged
     mirrored = Mesh(skull.vertices * [-1, 1, 1], skull.faces[:, ::-1])
-    result = reconstruct(mirrored, head_female.skull_landmarks.transformed(flip), head_male)
+    result = reconstruct(mirrored, head_female.skull_landmarks.transformed(flip), head_male,
+                         settings=SAME_EYES)
     assert result.mirrored_input
     # reversed triangles draw other orientation samples, so the fit is the mirror image up to
     # that sampling (and the clearance points it picks): a few vertices move by a few mm
@@ -87,7 +99,7 @@ def test_missing_mandible_still_gives_a_face_and_says_so(head_female, head_male)
 
 
 def test_no_landmarks_needed_the_registration_finds_them(head_female, head_male):
-    recon = reconstruct(skull_surface(head_female), None, head_male)
+    recon = reconstruct(skull_surface(head_female), None, head_male, settings=SAME_EYES)
     found = recon.landmarks.as_dict()
     truth = head_female.skull_landmarks.as_dict()
     common = [c for c in ("g", "n", "pr", "pg", "po_l", "po_r", "or_l", "or_r", "zy_l", "go_r")
@@ -115,3 +127,45 @@ def test_ensemble_spread_follows_the_table_sds(female_case, head_male):
     cheek = head_male.skin_landmarks["sM2_l"].position
     assert (np.median(spread[np.linalg.norm(v - cheek, axis=1) < 8])
             > np.median(spread[np.linalg.norm(v - g, axis=1) < 8]))
+
+
+def test_eyes_and_lids_go_to_the_published_projection(female_case, head_female, head_male):
+    skull, same = female_case
+    recon = reconstruct(skull, head_female.skull_landmarks, head_male,
+                        registration=same.registration)
+    lms = recon.landmarks.transformed(recon.input_to_head).as_dict()
+    eyes, centres = recon.head.meshes["eyes"].vertices, recon.head.eye_centres
+    owner = np.linalg.norm(eyes[:, None] - centres[None], axis=2).argmin(axis=1)
+    for i in (0, 1):
+        side = "l" if centres[i, 0] > 0 else "r"
+        apex = eyes[owner == i, 2].max()
+        assert apex - lms[f"ec_{side}"][2] == pytest.approx(16.0, abs=0.05)   # Stephan 2009
+        shift = recon.figures[f"eye_{side}_shift_mm"]
+        assert 4.0 < shift < 12.0   # the generated head's eyes sit 8.4 mm in front of ec
+        # the lids go with their globe, the rest of the face stays
+        lids = np.asarray(head_male.regions[f"eyelid_upper_{side}"])
+        moved = recon.head.skin.vertices[lids] - same.head.skin.vertices[lids]
+        assert np.median(moved[:, 2]) == pytest.approx(shift, abs=1.0)
+    far = np.linalg.norm(head_male.skin.vertices - head_male.skin_landmarks["pg"].position,
+                         axis=1) < 15
+    d = np.linalg.norm(recon.head.skin.vertices[far] - same.head.skin.vertices[far], axis=1)
+    assert np.median(d) < 0.2
+    assert same.figures["eye_placement"] == "reference"
+    assert "eye_l_shift_mm" not in same.figures
+
+
+def test_an_implausible_orbit_leaves_the_eye_and_says_why(head_male):
+    lms = head_male.skull_landmarks
+    ec = lms["ec_l"]
+    bad = LandmarkSet("skull", tuple(lm.moved(lm.position + [0, 0, 30.0]) if lm.code == "ec_l"
+                                     else lm for lm in lms if lm.code != "ec_r"))
+    moves, figures, notes = eye_moves(head_male, bad, "stephan2009", {})
+    assert moves == {}
+    assert any("ec_l" in n and "check" in n for n in notes)
+    assert any("no ectoconchion ec_r" in n for n in notes)
+    assert ec.is_defined
+    # a guide for the eye centre wins over the rule
+    target = head_male.eye_centres[0] + [1.0, 0.0, 2.0]
+    moves, figures, _ = eye_moves(head_male, lms, "stephan2009", {"eye_centre_l": target})
+    np.testing.assert_allclose(moves[0], [1.0, 0.0, 2.0])
+    assert figures["eye_l_by"] == "guide"

@@ -121,3 +121,22 @@ def test_landmarks_sit_on_the_ct_surfaces_or_are_marked_absent(built):
     # every landmark keeps a position, on the pack's own surfaces
     d_skin = MeshIndex(pack.skin).closest_points(pack.skin_landmarks.positions).distances
     assert d_skin.max() < 1e-6
+
+
+def test_eyeballs_sit_behind_the_scanned_lids(built, head_male):
+    """The globes keep the reference's depth relative to the palpebral opening, on the scan."""
+    pack = built["pack"]
+    eyes, centres = pack.meshes["eyes"].vertices, pack.eye_centres
+    ref_eyes = head_male.meshes["eyes"].vertices
+    ref_own = np.linalg.norm(ref_eyes - head_male.eye_centres[0], axis=1) < 20
+    ref_gap = (ref_eyes[ref_own, 2].max()
+               - head_male.skin.vertices[np.asarray(head_male.openings["eye_l"]), 2].mean())
+    for i in (0, 1):
+        side = "l" if centres[i, 0] > 0 else "r"
+        loop = np.asarray(pack.openings[f"eye_{side}"])
+        own = np.linalg.norm(eyes - centres[i], axis=1) < 20
+        gap = eyes[own, 2].max() - pack.skin.vertices[loop, 2].mean()
+        # the reference's gap (1.9 mm) as carried onto the skull: within a millimetre or two
+        assert abs(gap - ref_gap) < 2.0
+    shifts = built["result"].figures["eye_shift_mm"]
+    assert len(shifts) == 2 and all(2.0 < v < 15 for v in shifts.values())

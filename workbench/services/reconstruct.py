@@ -74,6 +74,10 @@ BONE_SEARCH_MM = 30.0
 NO_CLEARANCE_REGIONS = ("neck",)
 #: a skin vertex is observed when the bone beneath it is (smoothed weight above this)
 OBSERVED_LEVEL = 0.5
+#: an eye placement rule moving a globe farther than this is taken as a bad landmark (mm)
+EYE_MAX_SHIFT_MM = 15.0
+#: spacing of the lid correspondences that carry the lids with their eyeball (mm)
+LID_SPACING_MM = 4.0
 
 
 @dataclass(frozen=True)
@@ -110,7 +114,8 @@ class Reconstruction:
         The correspondences of the final warp (head frame).
     labels : tuple of str
         Per correspondence: ``"anchor"``, ``"dowel:<skull code>"``,
-        ``"guide:<skin code>"`` or ``"clearance"``.
+        ``"guide:<skin code>"``, ``"eye:<side>"`` (lids following their eyeball) or
+        ``"clearance"``.
     base_skin : (n_skin, 3)
         The skin the final warp is applied to (carried and tissue-modelled).
     dowel_depths : dict
@@ -263,14 +268,102 @@ def _dowel_hits(plan: DowelPlan, skin: Mesh) -> dict[str, tuple[float, np.ndarra
             for i, d in enumerate(active) if hits.hit[i]}
 
 
+def _eye_sides(head: TemplateHead) -> list[tuple[int, str]]:
+    """(index into ``eye_centres``, side) — left is +x in the head frame."""
+    return [(i, "l" if head.eye_centres[i, 0] > 0 else "r") for i in range(len(head.eye_centres))]
+
+
+def _lid_vertices(head: TemplateHead, i: int, side: str) -> np.ndarray:
+    """Skin vertices of the lids over eye ``i``: the lid regions and the palpebral opening."""
+    groups = [head.regions[r] for r in (f"eyelid_upper_{side}", f"eyelid_lower_{side}")
+              if r in head.regions]
+    if f"eye_{side}" in head.openings:
+        groups.append(head.openings[f"eye_{side}"])
+    if groups:
+        return np.unique(np.concatenate([np.asarray(g, dtype=np.int64) for g in groups]))
+    # a reference without regions: the skin just in front of the globe
+    d = head.skin.vertices - head.eye_centres[i]
+    near = (np.linalg.norm(d, axis=1) < head.eye_radius + 6.0) & (d[:, 2] > 0)
+    return np.flatnonzero(near)
+
+
+def eye_moves(head: TemplateHead, landmarks_h: LandmarkSet | None, placement: str,
+              guided: Mapping[str, np.ndarray]) -> tuple[dict[int, np.ndarray], dict, list[str]]:
+    """How far each eyeball (and the lids over it) moves: ``{eye index: (3,) mm}``.
+
+    A guide for ``eye_centre_<side>`` (a published eye rule, or set by the
+    user) puts the centre there.  Otherwise, with ``placement ==
+    "stephan2009"``, the globe moves along z (head frame) until its corneal
+    apex lies 16 mm (``stephan2009_globe_projection``) in front of the registered
+    ectoconchion of its side — Stephan, Huang & Davidson 2009 (corneal apex
+    about 16 mm in front of the lateral orbital margin; ectoconchion stands
+    for the margin as in :mod:`workbench.services.guide_measure`).  Returns
+    the moves, flat figures (``eye_placement``, ``eye_<side>_by``,
+    ``eye_<side>_shift_mm``, ``eye_<side>_apex_in_front_of_ec_mm``) and
+    notes (an eye left where it was, and why).
+    """
+    from workbench.services.guide_measure import constant
+
+    moves: dict[int, np.ndarray] = {}
+    figures: dict = {"eye_placement": placement}
+    notes: list[str] = []
+    eyes = head.meshes.get("eyes")
+    if eyes is None or not len(head.eye_centres):
+        return moves, figures, notes
+    owner = np.linalg.norm(eyes.vertices[:, None] - head.eye_centres[None], axis=2).argmin(axis=1)
+    lms = {lm.code: lm for lm in landmarks_h} if landmarks_h is not None else {}
+    for i, side in _eye_sides(head):
+        code = f"eye_centre_{side}"
+        if code in guided:
+            moves[i] = np.asarray(guided[code], float).reshape(3) - head.eye_centres[i]
+            figures[f"eye_{side}_by"] = "guide"
+            figures[f"eye_{side}_shift_mm"] = round(float(np.linalg.norm(moves[i])), 2)
+            continue
+        if placement != "stephan2009":
+            continue
+        ec = lms.get(f"ec_{side}")
+        if ec is None or not ec.is_defined:
+            notes.append(f"eye ({side}): no ectoconchion ec_{side} on the skull; the eyeball "
+                         "stays where the reference has it")
+            continue
+        apex = float(eyes.vertices[owner == i, 2].max())
+        dz = float(ec.position[2]) + constant("stephan2009_globe_projection") - apex
+        if abs(dz) > EYE_MAX_SHIFT_MM:
+            notes.append(f"eye ({side}): the published projection would move the eyeball "
+                         f"{dz:+.1f} mm (more than {EYE_MAX_SHIFT_MM:g} mm); check ec_{side} — "
+                         "the eyeball stays where the reference has it")
+            continue
+        moves[i] = np.array([0.0, 0.0, dz])
+        figures[f"eye_{side}_by"] = "stephan2009"
+        figures[f"eye_{side}_shift_mm"] = round(dz, 2)
+        figures[f"eye_{side}_apex_in_front_of_ec_mm"] = round(apex + dz - float(ec.position[2]), 2)
+    return moves, figures, notes
+
+
+def move_eyes(head: TemplateHead, moves: Mapping[int, np.ndarray]) -> TemplateHead:
+    """``head`` with its eyeballs translated by ``moves`` (skin unchanged)."""
+    if not moves:
+        return head
+    eyes = head.meshes["eyes"].vertices
+    owner = np.linalg.norm(eyes[:, None] - head.eye_centres[None], axis=2).argmin(axis=1)
+    shift = np.zeros_like(head.eye_centres)
+    for i, m in moves.items():
+        shift[i] = m
+    meshes = {**head.meshes, "eyes": head.meshes["eyes"].with_vertices(eyes + shift[owner])}
+    return replace(head, meshes=meshes, eye_centres=head.eye_centres + shift)
+
+
 def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
              guide_targets: Mapping[str, np.ndarray] | None = None,
              guides: GuideFn | None = None, settings: FitSettings = FitSettings(),
-             tissue: TissueField | None = None, depths: np.ndarray | None = None
+             tissue: TissueField | None = None, depths: np.ndarray | None = None,
+             landmarks_h: LandmarkSet | None = None
              ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict, tuple[str, ...],
                         np.ndarray, dict[str, float]]:
     """Carry ``head`` with the registration, model the tissue, warp to dowels and guides.
 
+    ``landmarks_h`` (the skull landmarks, head frame) place the eyeballs
+    (:func:`eye_moves`); the lids follow their globe in the final warp.
     Returns the fitted head (head frame), figures, the final warp's
     correspondences and labels, the guide targets used, the base skin and
     the depth each dowel correspondence holds.
@@ -290,8 +383,13 @@ def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
     on_base = np.einsum("ij,ijk->ik", cp.barycentric, base.vertices[base.faces[cp.face_ids]])
     prefit = dict(zip(skin_codes, on_base, strict=True))
     used_guides = dict(guide_targets or {})
+    centres = {f"eye_centre_{side}": carried.eye_centres[i] for i, side in _eye_sides(carried)}
     if guides is not None:
-        used_guides.update(guides(prefit))
+        used_guides.update(guides({**prefit, **centres}))
+    moves, eye_figures, eye_notes = eye_moves(carried, landmarks_h, settings.tissue.eyes,
+                                              {c: used_guides.pop(c) for c in centres
+                                               if c in used_guides})
+    carried = move_eyes(carried, moves)
     hits = _dowel_hits(plan, base)
     src, dst, labels = [], [], []
     held: dict[str, float] = {}
@@ -316,12 +414,21 @@ def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
             src.append(prefit[code])
             dst.append(np.asarray(target, float))
             labels.append(f"guide:{code}")
+    for i, side in _eye_sides(carried):
+        if i in moves and np.linalg.norm(moves[i]) > 0.05:   # the lids go with their eyeball
+            lids = _lid_vertices(carried, i, side)
+            lids = lids[_spread(base.vertices[lids], LID_SPACING_MM)]
+            src += list(base.vertices[lids])
+            dst += list(base.vertices[lids] + moves[i])
+            labels += [f"eye:{side}"] * len(lids)
     moving = [np.asarray(a) for a, b in zip(src, dst, strict=True)
               if np.linalg.norm(np.asarray(b) - np.asarray(a)) > 0.05]
     anchors = _spread(base.vertices, ANCHOR_SPACING_MM)
     if moving:
         near = cKDTree(np.array(moving)).query(base.vertices[anchors])[0]
         anchors = anchors[near > ANCHOR_CLEARANCE_MM]
+    if src:   # nor on a point held in place (a guide already where it wants its landmark)
+        anchors = anchors[cKDTree(np.array(src)).query(base.vertices[anchors])[0] > 0.5]
     src += list(base.vertices[anchors])
     dst += list(base.vertices[anchors])
     labels += ["anchor"] * len(anchors)
@@ -372,6 +479,8 @@ def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
         "refits": int(refits),
         "extra_correspondences": int(extra),
         "correspondences": len(src_a),
+        **eye_figures,
+        "eye_notes": eye_notes,
         "seconds": round(time.perf_counter() - t0, 3),
     }
     return (fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held)
@@ -437,14 +546,15 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
     fitted, figures, src, dst, used, labels, base, held = fit_head(
-        head, reg, plan, guide_targets=guide_targets, guides=guide_fn, settings=settings)
+        head, reg, plan, guide_targets=guide_targets, guides=guide_fn, settings=settings,
+        landmarks_h=lms_h)
     observed = _skin_observed(fitted.skin, reg)
     face = np.asarray(head.regions.get("face", np.arange(head.skin.n_vertices)), dtype=np.int64)
     figures["registration"] = reg.figures
     figures["snapped_landmarks"] = sum(" moved " in n for n in snapped)
     figures["face_observed_fraction"] = round(float(np.mean(observed[face] >= OBSERVED_LEVEL)), 4)
     figures["seconds_total"] = round(time.perf_counter() - t0, 3)
-    warnings = list(reg.warnings) + list(plan.warnings)
+    warnings = list(reg.warnings) + list(plan.warnings) + list(figures.pop("eye_notes"))
     if doubtful:
         warnings.append(f"{len(doubtful)} landmarks found with confidence below "
                         f"{settings.min_confidence:g} got no dowel (confirm or move them): "

@@ -51,7 +51,7 @@ from workbench.core.nonrigid import Level, Target, register, smoothstep
 from workbench.core.spatial import MeshIndex
 from workbench.model.evidence import sha256_file
 from workbench.model.template import TemplateHead
-from workbench.services.reconstruct import outward
+from workbench.services.reconstruct import move_eyes, outward
 from workbench.services.skull_registration import SkullRegistration
 
 MIN_TISSUE_MM = 1.0         #: skin kept at least this far outside the skull
@@ -160,6 +160,38 @@ def _carry_on(base_mesh: Mesh, new_mesh: Mesh, points: np.ndarray) -> np.ndarray
     return np.einsum("ij,ijk->ik", cp.barycentric, tri) + (points - cp.points)
 
 
+#: changes whenever the build method does (a cached pack of another version is rebuilt)
+BUILD_VERSION = 2
+
+
+def _eyes_behind_lids(carried: TemplateHead, skin_v: np.ndarray,
+                     on_scan: np.ndarray) -> dict[int, np.ndarray]:
+    """Moves (mm, along z of the head frame) putting each eyeball behind the scanned lids.
+
+    The eyeballs come with the skull's field, the lids with the skin scan;
+    a globe keeps the reference's depth relative to its palpebral opening
+    (corneal apex minus the opening's mean z), measured on the carried head.
+    Eyes whose opening the scan does not show stay where they are.
+    """
+    eyes = carried.meshes.get("eyes")
+    if eyes is None:
+        return {}
+    owner = np.linalg.norm(eyes.vertices[:, None] - carried.eye_centres[None], axis=2).argmin(1)
+    moves = {}
+    for i in range(len(carried.eye_centres)):
+        side = "l" if carried.eye_centres[i, 0] > 0 else "r"
+        loop = carried.openings.get(f"eye_{side}")
+        if loop is None or not (owner == i).any():
+            continue
+        loop = np.asarray(loop, dtype=np.int64)
+        if on_scan[loop].mean() < 0.5:
+            continue
+        apex = float(eyes.vertices[owner == i, 2].max())
+        gap = apex - float(carried.skin.vertices[loop, 2].mean())
+        moves[i] = np.array([0.0, 0.0, float(skin_v[loop, 2].mean()) + gap - apex])
+    return moves
+
+
 # ------------------------------------------------------------------ entry points
 def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
                    skin_seeds: LandmarkSet | None = None, skull_seeds: LandmarkSet | None = None,
@@ -219,6 +251,9 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
                                            concatenate([meshes[p] for p in SKULL_PARTS]),
                                            _mask(n_skin, keep + list(base.openings.values())))
     meshes["skin"] = carried.skin.with_vertices(skin_v)
+    eye_shift = _eyes_behind_lids(carried, skin_v, on_scan)
+    carried = move_eyes(replace(carried, meshes=meshes), eye_shift)
+    meshes = dict(carried.meshes)
     seconds["skin"] = time.perf_counter() - t
 
     # landmarks: skull with the registered skull, skin with the registered skin
@@ -260,6 +295,7 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
         if near.any() else 0.0,
         "face_median_distance_mm": float(np.median(cp.distances[near])) if near.any() else None,
         "pushed_out_vertices": pushed,
+        "eye_shift_mm": {str(i): round(float(m[2]), 2) for i, m in eye_shift.items()},
         "min_tissue_before_push_mm": min_tissue,
         "scan_not_head_area_fraction": round(not_head, 4),
         "skull_registration": {k: reg.figures[k] for k in ("orientation", "observed_fraction",
@@ -285,7 +321,7 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
                   "skin": [] if skin_seeds is None else list(skin_seeds.codes)},
         "settings": {"min_tissue_mm": MIN_TISSUE_MM, "skin_extra_mm": list(SKIN_EXTRA_MM),
                      "skin_rim_mm": SKIN_RIM_MM},
-        "figures": figures, "warnings": list(warnings),
+        "figures": figures, "warnings": list(warnings), "build_version": BUILD_VERSION,
     }
     head = replace(head, template_id=f"{base.template_id}/built/{digest}", provenance=provenance)
     return BuildResult(head, to_head, bool(mirrored), reg, on_scan, figures, tuple(warnings))

@@ -51,6 +51,11 @@ from workbench.services.dowels import DepthSettings, plan_dowels
 from workbench.services.reference_parts import skull_surface
 
 MODELS = ("table", "reference")
+#: where the eyeballs go: ``stephan2009`` — corneal apex 16 mm in front of the
+#: lateral orbital margin (ectoconchion), Stephan, Huang & Davidson 2009
+#: (``data_tables/guides/guide_constants.csv``); ``reference`` — where the
+#: reference head has them, carried with its skull
+EYE_PLACEMENTS = ("stephan2009", "reference")
 #: regions a factor can be set for (:func:`workbench.services.compare.face_regions`)
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 #: skin regions of the reference head that keep their shape
@@ -82,6 +87,11 @@ class TissueSettings:
         values.  Off by default: on the real CTs (``benchmarks/``) the
         blends are further from the true tissue than the reference's own
         thickness between landmarks.
+    eyes : "stephan2009" | "reference"
+        Depth of the eyeballs, and of the lids over them (see
+        :data:`EYE_PLACEMENTS`).  The built-in reference's corneal apex lies
+        8.4 mm in front of its ectoconchion, half the published figure; the
+        lids of the real CTs lie 12.6-20 mm in front of theirs.
     """
 
     model: str = "table"
@@ -90,11 +100,15 @@ class TissueSettings:
     min_tissue_mm: float = 2.0
     smoothing_mm: float = 20.0
     interpolated_sites: bool = False
+    eyes: str = "stephan2009"
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
             raise InputError("tissue", f"unknown tissue model {self.model!r}",
                              f"use {' or '.join(MODELS)}")
+        if self.eyes not in EYE_PLACEMENTS:
+            raise InputError("eyes", f"unknown eye placement {self.eyes!r}",
+                             f"use {' or '.join(EYE_PLACEMENTS)}")
         for region, f in self.region_factors.items():
             if region not in REGIONS:
                 raise InputError("region factor", f"unknown region {region!r}",

@@ -33,12 +33,14 @@ subject    who the case is (default: its id); cases of one subject (a skull
            and a cut copy of it) never serve as each other's references
 ========== ============================================================
 
-With ``leave_one_out`` a reference pack is built from every case's own
-skin and bone (``workbench template build``; cached under
-``DIR/references``) and each case is reconstructed with the packs of *all
-other* cases, their per-vertex median being the face (the consensus) —
-the case scored is never among its references.  ``identity`` adds the
-identity test: the case's own pack, tissue model ``reference``.
+With ``leave_one_out`` a reference pack is built from every subject's skin
+and bone (``workbench template build``; cached under ``DIR/references``)
+and each case is reconstructed with the packs of *all other* subjects,
+their per-vertex median being the face (the consensus), with the tissue
+model ``reference`` (the references' own, real tissue) — the case scored is
+never among its references.  ``identity`` adds the identity test: the
+subject's own pack, tissue model ``reference``, no guides (it isolates the
+registration from the tissue model).
 """
 
 from __future__ import annotations
@@ -315,7 +317,7 @@ def score_surfaces(truth: Mesh, bone: Mesh, surfaces: Sequence[tuple[str, Mesh]]
 
 
 def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
-             tissue: str | None = None, label: str = "reconstruction",
+             tissue: str | None = None, guides: str = "default", label: str = "reconstruction",
              progress: Progress | None = None) -> tuple[CaseResult, Any]:
     """Reconstruct one case and score it beside the uniform offset (``out``: its folder).
 
@@ -341,7 +343,8 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
         packs = list(templates) or ([case.template] if case.template else [None])
         settings = JobSettings(units=units, sex=case.sex, build=case.build,
                                orientation=case.orientation if case.orient == "hint" else None,
-                               tissue=TissueSettings(model=tissue or case.tissue))
+                               tissue=TissueSettings(model=tissue or case.tissue),
+                               guides=guides)
         faces, first = [], None
         t = time.perf_counter()
         for i, pack in enumerate(packs):
@@ -404,7 +407,7 @@ def build_references(cases: Sequence[ValidationCase], out: Path, *,
 
     Returns subject → pack folder, or the reason there is none.
     """
-    from workbench.services.template_build import build_template_pack
+    from workbench.services.template_build import BUILD_VERSION, build_template_pack
 
     say = progress or (lambda _m: None)
     packs: dict[str, Path | str] = {}
@@ -416,7 +419,8 @@ def build_references(cases: Sequence[ValidationCase], out: Path, *,
         stamp = folder / "built_from.json"
         try:
             bone, skin = case_surfaces(case, out.parent / case.case_id / "inputs", say)
-            key = {"skin": _digest(skin), "skull": _digest(bone), "sex": case.sex}
+            key = {"skin": _digest(skin), "skull": _digest(bone), "sex": case.sex,
+                   "build_version": BUILD_VERSION}
             if stamp.is_file() and json.loads(stamp.read_text("utf-8")) == key:
                 packs[who] = folder
                 continue
@@ -464,8 +468,10 @@ def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out:
                 others = [p for who, p in packs.items() if who != case.who
                           and isinstance(p, Path)]
                 if others:
+                    # the references are real people: their own tissue, not the table's
                     res, job = run_case(case, out / case.case_id, templates=others,
-                                        label="library_loo", progress=progress)
+                                        tissue="reference", label="library_loo",
+                                        progress=progress)
                     res.notes["references"] = [p.name for p in others]
                 else:
                     res = CaseResult(case.case_id, "failed", "no other reference pack")
@@ -474,8 +480,10 @@ def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out:
             own = packs.get(case.who)
             if identity:
                 if isinstance(own, Path):
+                    # the identity test isolates the registration: no tissue model, no guides
                     res, job = run_case(case, out / case.case_id, templates=[own],
-                                        tissue="reference", label="identity", progress=progress)
+                                        tissue="reference", guides="none", label="identity",
+                                        progress=progress)
                 else:
                     res, job = CaseResult(case.case_id, "failed", str(own)), None
                 done(res, job, "identity")
