@@ -59,7 +59,12 @@ def test_reconstruct_writes_face_head_case_and_report(inputs, tmp_path, head_mal
     assert report["case_id"] in text and "Hona" in text and skull_sha in text.replace("\n", "")
     loaded = load_case(out / "case.fcase")
     assert loaded.case.parameters["template_hash"] == head_male.content_hash
-    assert list(loaded.case.parameters["excluded_landmarks"]) == ["ecm2s"]
+    assert loaded.case.dowels.excluded == ("ecm2s",)
+    assert dict(loaded.case.dowels.overrides) == {"g": 6.5} and loaded.case.dowels.sex == "male"
+    assert loaded.case.guides is None          # computed from the skull, not stored
+    assert report["parameters"]["dowels"]["excluded"] == ["ecm2s"]
+    ops = [r["command"] for r in loaded.audit_records if r["action"] == "do"]
+    assert "SetDowelSettings" in ops and "SetParameter" in ops
 
 
 def test_suggest_then_reconstruct_headsq_bone(headsq_surfaces, tmp_path, capsys):  # noqa: ANN001

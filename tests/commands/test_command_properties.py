@@ -17,7 +17,7 @@ from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
-from workbench.commands import case_edits, landmarks, stack
+from workbench.commands import case_edits, landmarks, reconstruction_setup, stack
 from workbench.commands.case_edits import (
     AddEvidence,
     DeleteParameter,
@@ -35,6 +35,13 @@ from workbench.commands.landmarks import (
     ReplaceLandmarkSet,
     SetLandmarkStatus,
 )
+from workbench.commands.reconstruction_setup import (
+    SetDepthOverride,
+    SetDowelExclusion,
+    SetDowelSettings,
+    SetGuides,
+    SetOrientation,
+)
 from workbench.commands.stack import Command, CommandStack, MacroCommand
 from workbench.core.errors import WorkbenchError
 from workbench.core.landmarks import Landmark, LandmarkSet
@@ -42,6 +49,7 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
 from workbench.model.meta import CaseMeta
+from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.specimen import Specimen
 from workbench.model.state import states_equal
 
@@ -64,6 +72,9 @@ def base_case() -> Case:
         evidence=(EvidenceFile("skull.obj", SHA_A, 10, "skull_mesh"),),
         specimen=Specimen(tetra(), "mm", None),
         landmarks={"skull": skull, "skin": LandmarkSet.from_points("skin", {"prn": (0, 1, 2)})},
+        dowels=DowelSettings(overrides={"g": 5.0}, excluded=("zy_l",)),
+        orientation=Orientation((0, 0, 1), (0, 1, 0)),
+        guides=GuideList(({"id": "nose_tip", "value": [-20.0, 95.0]},)),
         parameters={"depth_table": "t0", "build": "average"},
     )
 
@@ -95,6 +106,19 @@ FACTORIES: dict[str, Callable[[], Command]] = {
     "set examiner": lambda: SetExaminer("Someone Else"),
     "set notes": lambda: SetNotes("skull received 2024-05-01"),
     "add evidence": lambda: AddEvidence(EvidenceFile("ct.nrrd", SHA_B, 99, "ct_volume")),
+    "set dowel table": lambda: SetDowelSettings(table="rhine_1983_sw_native_american"),
+    "set dowel sex and build": lambda: SetDowelSettings(sex="female", build=-1.0),
+    "set tissue model": lambda: SetDowelSettings(tissue_model="reference",
+                                                 region_factors={"nose": 1.3}),
+    "set depth override": lambda: SetDepthOverride("n", 6.5),
+    "change depth override": lambda: SetDepthOverride("g", 7.0),
+    "clear depth override": lambda: SetDepthOverride("g", None),
+    "exclude dowel": lambda: SetDowelExclusion("n", True),
+    "use dowel": lambda: SetDowelExclusion("zy_l", False),
+    "set orientation": lambda: SetOrientation(Orientation((0, -1, 0), (0, 0, -1), (1, 0, 0))),
+    "automatic orientation": lambda: SetOrientation(None),
+    "set guides": lambda: SetGuides([{"id": "lip_parting", "kind": "hline", "value": [-70.0]}]),
+    "recompute guides": lambda: SetGuides(None),
     "macro": lambda: MacroCommand(
         commands=[PlaceLandmark("skull", "g", [1, 2, 3]), MoveLandmark("skull", "g", [4, 5, 6]),
                   SetParameter("build", "obese")], label="Macro"),
@@ -105,7 +129,7 @@ ABSTRACT = {Command, LandmarkCommand, ReplacePartCommand}
 
 def concrete_command_types() -> set[type]:
     found = set()
-    for module in (stack, landmarks, case_edits):
+    for module in (stack, landmarks, case_edits, reconstruction_setup):
         for obj in vars(module).values():
             if (isinstance(obj, type) and issubclass(obj, Command) and obj not in ABSTRACT
                     and obj.__module__ == module.__name__ and not obj.__name__.startswith("_")):
@@ -167,6 +191,15 @@ command_strategy = st.one_of(
     st.builds(SetParameter, st.sampled_from(["build", "depth_table", "x"]),
               st.one_of(st.integers(-5, 5), st.text(max_size=3), st.lists(st.booleans()))),
     st.builds(DeleteParameter, st.sampled_from(["build", "x"])),
+    st.builds(lambda b: SetDowelSettings(build=b), st.sampled_from(["normal", "obese", 1.0, -2])),
+    st.builds(lambda sex: SetDowelSettings(sex=sex), st.sampled_from(["female", "male"])),
+    st.builds(SetDepthOverride, CODES, st.one_of(st.none(), st.floats(0.5, 30))),
+    st.builds(SetDowelExclusion, CODES, st.booleans()),
+    st.builds(lambda o: SetOrientation(o), st.sampled_from(
+        [None, ((0, 0, 1), (0, 1, 0)), ((0, -1, 0), (0, 0, -1))])),
+    st.builds(lambda ids: SetGuides(None if ids is None else [{"id": i, "value": [1.0]}
+                                                             for i in ids]),
+              st.one_of(st.none(), st.lists(st.sampled_from(["a", "b"]), unique=True))),
     st.builds(lambda s: SetSpecimen(tetra(s)), st.sampled_from([0.5, 1.0, 2.0])),
     st.builds(SetExaminer, st.text(max_size=5)),
     st.builds(lambda n, sha: AddEvidence(EvidenceFile(n, sha, 10, "other")),

@@ -18,6 +18,12 @@ import pytest
 import workbench
 from workbench.commands.case_edits import AddEvidence, SetExaminer, SetParameter, SetSpecimen
 from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, SetLandmarkStatus
+from workbench.commands.reconstruction_setup import (
+    SetDepthOverride,
+    SetDowelSettings,
+    SetGuides,
+    SetOrientation,
+)
 from workbench.commands.stack import CommandStack
 from workbench.core.errors import WorkbenchError
 from workbench.core.mesh import Mesh
@@ -26,6 +32,7 @@ from workbench.io.case_file import CaseFileError, evidence_bytes, load_case, sav
 from workbench.io.migrations import MigrationError, migrate
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
+from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.state import npy_bytes
 
 
@@ -61,8 +68,12 @@ def session(skull_obj: Path, skull_mesh: Mesh) -> tuple[Case, CommandStack]:
     stack.push(PlaceLandmark("skull", "g", skull_mesh.vertices[20]))
     stack.push(SetLandmarkStatus("skull", "pg", "absent"))
     stack.push(PlaceLandmark("skin", "prn", [0.1, 0.2, 0.3]))
-    stack.push(SetParameter("depth_table", "stephan_2013"))
-    stack.push(SetParameter("guides", {"nose": {"projection_mm": 17.5}}))
+    stack.push(SetDowelSettings(table="stephan_2013", sex="female", build=-1.5,
+                                excluded=("ecm2s_l",)))
+    stack.push(SetDepthOverride("g", 6.5))
+    stack.push(SetOrientation(((0, 0, 1), (0, 1, 0))))
+    stack.push(SetGuides([{"id": "nose_tip", "value": [20.0, 95.5], "source": "user"}]))
+    stack.push(SetParameter("nose_notes", {"nose": {"projection_mm": 17.5}}))
     stack.push(SetParameter("look_alike", {"@array": "not an array ref", "dtype": None}))
     return case, stack
 
@@ -131,8 +142,13 @@ def test_zip_layout(saved: Path, skull_obj: Path) -> None:
             np.load(io.BytesIO(data), allow_pickle=False)
     assert names[0] == "case.json"
     assert "audit.jsonl" in names
-    assert doc["@schema"] == "case-schema-v1"
-    assert doc["format_version"] == 1
+    assert doc["@schema"] == "case-schema-v2"
+    assert doc["format_version"] == 2
+    assert doc["dowels"] == {"table": "stephan_2013", "sex": "female", "build": -1.5,
+                             "overrides": {"g": 6.5}, "excluded": ["ecm2s_l"],
+                             "tissue_model": "table", "region_factors": {}}
+    assert doc["orientation"] == {"anterior": [0, 0, 1], "superior": [0, 1, 0], "left": None}
+    assert doc["guides"][0]["id"] == "nose_tip"
     assert doc["software"].endswith(workbench.__version__)
     assert evidence_info.compress_type == zipfile.ZIP_STORED
     assert len(array_members(saved)) == 2
@@ -224,7 +240,13 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
         p, lambda d: d["landmarks"]["skull"]["landmarks"][0].update(status="lost")),
         r"landmarks.*skull"),
     "class name in file": (lambda p: _set_doc(
-        p, lambda d: d["specimen"].update({"@class": "os.system"})), "case-schema-v1"),
+        p, lambda d: d["specimen"].update({"@class": "os.system"})), "case-schema-v2"),
+    "negative dowel depth": (lambda p: _set_doc(
+        p, lambda d: d["dowels"]["overrides"].update(g=-2.0)), r"dowels.*overrides"),
+    "unknown build": (lambda p: _set_doc(p, lambda d: d["dowels"].update(build="slim")),
+                      r"dowels.*build"),
+    "parallel orientation": (lambda p: _set_doc(
+        p, lambda d: d["orientation"].update(superior=[0, 0, 2])), "parallel"),
     "missing array": (lambda p: drop_member(p, array_members(p)[0]), "missing from the case file"),
     "missing case.json": (lambda p: drop_member(p, "case.json"), "case.json is missing"),
     "newer format": (lambda p: _set_doc(p, lambda d: d.update(format_version=7)), "newer version"),
@@ -409,13 +431,14 @@ def test_v0_file_is_migrated(v0_file: Path, tmp_path: Path) -> None:
     assert case.landmarks["skull"]["n"].position.tolist() == [0, 5, 9]
     assert case.landmarks["skin"]["prn"].status == "placed"
     assert [e.name for e in case.evidence] == ["skull.stl"]
-    assert case.parameters["depth_table"] == "old_table"
+    assert case.dowels.table == "old_table"
+    assert "depth_table" not in case.parameters
     assert loaded.audit_records == ()
     assert not loaded.tampered
     # saving writes the current format and keeps the evidence bytes
     new = save_case(case, tmp_path / "new.fcase")
     with zipfile.ZipFile(new) as archive:
-        assert json.loads(archive.read("case.json"))["format_version"] == 1
+        assert json.loads(archive.read("case.json"))["format_version"] == 2
     assert load_case(new).case.equals(case)
     assert evidence_bytes(new, "skull.stl") == evidence_bytes(v0_file, "skull.stl")
 
@@ -425,16 +448,17 @@ def test_migrate_is_pure_and_ordered(v0_file: Path) -> None:
         doc = json.loads(archive.read("case.json"))
     snapshot = json.dumps(doc, sort_keys=True)
     new, applied = migrate(doc)
-    assert applied == [0]
-    assert new["format_version"] == 1
+    assert applied == [0, 1]
+    assert new["format_version"] == 2
     assert json.dumps(doc, sort_keys=True) == snapshot
     assert migrate(new) == (new, [])
-    steps = {0: lambda d: {**d, "format_version": 1, "seen": [0]}}
-    assert migrate({"format_version": 0}, steps)[0]["seen"] == [0]
+    steps = {0: lambda d: {**d, "format_version": 1, "seen": [0]},
+             1: lambda d: {**d, "format_version": 2, "seen": [*d["seen"], 1]}}
+    assert migrate({"format_version": 0}, steps)[0]["seen"] == [0, 1]
     with pytest.raises(MigrationError, match="no migration from format_version -1"):
         migrate({"format_version": -1})
     with pytest.raises(MigrationError, match="newer"):
-        migrate({"format_version": 2})
+        migrate({"format_version": 3})
     with pytest.raises(MigrationError, match="integer"):
         migrate({"format_version": "1"})
     with pytest.raises(MigrationError, match="cannot upgrade format_version 0"):
@@ -451,3 +475,73 @@ def test_schema_found_in_wheel_data_first(tmp_path: Path, monkeypatch) -> None:
     shutil.copy(case_file.schema_dir() / "case.schema.json", wheel_schemas)
     monkeypatch.setattr(workbench, "__file__", str(package / "__init__.py"))
     assert case_file.schema_dir() == wheel_schemas
+
+
+# ---------------------------------------------------------------- format 1 -> 2
+V1_GUIDE = {"id": "nose_tip", "label": "Nose tip", "kind": "point", "view": "lateral",
+            "value": [-20.0, 95.0], "affects": ["prn"], "rule_id": "kaehler_nose_tip",
+            "citation": "Kähler 2003", "source": "user", "enabled": True, "derivation": ""}
+
+
+def _v1_file(v0_file: Path, path: Path, parameters: dict) -> Path:
+    """A format-1 case file as the 0.1 software wrote it, with ``parameters``."""
+    from workbench.io.migrations import v0_to_v1
+
+    with zipfile.ZipFile(v0_file) as source:
+        members = {n: source.read(n) for n in source.namelist()}
+    doc = v0_to_v1(json.loads(members.pop("case.json")))
+    doc["parameters"] = parameters
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("case.json", json.dumps(doc))
+        for name, data in members.items():
+            archive.writestr(name, data)
+    return path
+
+
+def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None:
+    old = {"depth_table": "ttable_2023", "sex": "female", "build": "1.5",
+           "depth_overrides": {"g": 6.5, "n": 7}, "excluded_landmarks": ["ecm2s_r", "ecm2s_l"],
+           "guides": [V1_GUIDE], "orientation": {"anterior": [0, -2, 0], "superior": [0, 0, -1]},
+           "template_hash": "abc123", "look_alike": {"@array": "x"}}
+    path = _v1_file(v0_file, tmp_path / "v1.fcase", old)
+    with zipfile.ZipFile(path) as archive:
+        doc = json.loads(archive.read("case.json"))
+    assert doc["format_version"] == 1 and doc["@schema"] == "case-schema-v1"
+    assert migrate(doc)[1] == [1]
+    loaded = load_case(path)
+    case = loaded.case
+    assert case.dowels == DowelSettings(table="ttable_2023", sex="female", build=1.5,
+                                        overrides={"g": 6.5, "n": 7.0},
+                                        excluded=("ecm2s_l", "ecm2s_r"))
+    assert case.orientation == Orientation((0, -1, 0), (0, 0, -1))
+    assert case.guides == GuideList((V1_GUIDE,))
+    from workbench.services.guides import guides_from_json
+
+    assert guides_from_json(case.guides.to_state())[0].value == (-20.0, 95.0)
+    # parameters that are not settings stay as they were
+    assert thaw(case.parameters) == {"template_hash": "abc123", "look_alike": {"@array": "x"}}
+    assert not loaded.tampered and case.meta.case_id == V0_CASE_ID
+    # saved again: format 2, same case, evidence bytes untouched
+    new = save_case(case, tmp_path / "v2.fcase")
+    with zipfile.ZipFile(new) as archive:
+        assert json.loads(archive.read("case.json"))["format_version"] == 2
+    again = load_case(new).case
+    assert again.equals(case) and again.dowels == case.dowels
+    assert evidence_bytes(new, "skull.stl") == evidence_bytes(path, "skull.stl")
+
+
+def test_v1_values_that_are_not_settings_stay_parameters(v0_file: Path, tmp_path: Path) -> None:
+    old = {"build": "slim", "sex": "unknown", "guides": {"nose": {"projection_mm": 17.5}},
+           "orientation": {}, "depth_overrides": {"g": -1}, "excluded_landmarks": "g",
+           "depth_table": "stephan_2013"}
+    case = load_case(_v1_file(v0_file, tmp_path / "odd.fcase", old)).case
+    assert case.dowels == DowelSettings(table="stephan_2013")
+    assert case.orientation is None and case.guides is None
+    assert thaw(case.parameters) == {k: v for k, v in old.items()
+                                     if k not in ("orientation", "depth_table")}
+
+
+def thaw(value: object) -> object:
+    from workbench.model.state import thaw_json
+
+    return thaw_json(value)

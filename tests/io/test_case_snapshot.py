@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from workbench.commands.case_edits import SetParameter
+from workbench.commands.reconstruction_setup import SetDowelSettings
 from workbench.commands.landmarks import PlaceLandmark
 from workbench.commands.stack import CommandStack
 from workbench.io.case_file import (
@@ -37,11 +38,12 @@ def skull_copy(skull_obj: Path, tmp_path: Path) -> Path:
 
 @pytest.fixture
 def edited(skull_copy: Path) -> tuple[Case, CommandStack]:
-    """A never-saved case: the skull (x15 to mm), one placed landmark, one parameter."""
+    """A never-saved case: the skull (x15 to mm), a placed landmark, dowels, a parameter."""
     opened = start_case_from_skull(skull_copy, scale=15.0, examiner="A. Examiner")
     case, stack = opened.case, opened.stack
     stack.push(PlaceLandmark("skull", "g", case.specimen.mesh.vertices[123]))
-    stack.push(SetParameter("depth_table", "stephan_2013"))
+    stack.push(SetDowelSettings(table="stephan_2013"))
+    stack.push(SetParameter("template_id", "male-v1"))
     return case, stack
 
 
@@ -88,7 +90,7 @@ def test_snapshot_over_itself_and_after_a_save(edited, tmp_path: Path) -> None:
 
     saved = save_case(case, tmp_path / "case.fcase", stack)
     persisted = case.audit.persisted_bytes
-    stack.push(SetParameter("sex", "female"))
+    stack.push(SetDowelSettings(sex="female"))
     before = _observable(case)
     write_case_snapshot(case, snap)
     _same(before, _observable(case))
@@ -97,7 +99,7 @@ def test_snapshot_over_itself_and_after_a_save(edited, tmp_path: Path) -> None:
         audit = archive.read("audit.jsonl")
     assert audit.startswith(persisted) and audit == case.audit.encode()
     # the snapshot is never written over the saved file
-    assert load_case(saved).case.parameters.get("sex") is None
+    assert load_case(saved).case.dowels.sex == "male"
 
 
 def test_evidence_survives_in_the_snapshot_when_the_original_is_gone(

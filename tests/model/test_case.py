@@ -21,6 +21,7 @@ from workbench.model.case import PARTS, Case, EvidenceConflictError
 from workbench.model.evidence import EvidenceFile, sha256_file
 from workbench.model.landmarks import landmark_set_from_state, landmark_set_to_state
 from workbench.model.meta import CaseMeta
+from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.specimen import Specimen
 from workbench.model.state import (
     freeze_json,
@@ -55,7 +56,12 @@ def full_case() -> Case:
         evidence=(EvidenceFile("skull.obj", SHA, 12, "skull_mesh", "/x/skull.obj", "unitless"),),
         specimen=Specimen(tetra(), "mm", transform),
         landmarks={"skull": skull, "skin": skin},
-        parameters={"depth_table": "stephan_2013", "guides": {"nose": [1, 2.5, None, True]}},
+        dowels=DowelSettings(table="stephan_2013", sex="female", build=-1.0,
+                             overrides={"g": 6.5}, excluded=("ecm2s_l",),
+                             tissue_model="reference", region_factors={"nose": 1.2}),
+        orientation=Orientation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0)),
+        guides=GuideList(({"id": "nose_tip", "value": [-20.0, 95.0], "source": "user"},)),
+        parameters={"template_id": "male-v1", "notes": {"nose": [1, 2.5, None, True]}},
     )
 
 
@@ -106,6 +112,8 @@ def test_default_case_is_empty_and_round_trips() -> None:
     assert set(case.landmarks) == {"skin", "skull"}
     assert all(len(s) == 0 for s in case.landmarks.values())
     assert dict(case.parameters) == {}
+    assert case.dowels == DowelSettings() and case.dowels.table == "ttable_2023"
+    assert case.orientation is None and case.guides is None
     assert json_round_trip(case).equals(case)
 
 
@@ -131,6 +139,12 @@ def test_equals_sees_small_differences() -> None:
     c = Case.from_state(a.to_state())
     c.replace("parameters", {**thaw_json(c.parameters), "depth_table": "other"})
     assert not a.equals(c)
+    e = Case.from_state(a.to_state())
+    e.replace("dowels", e.dowels.with_override("g", 6.6))
+    assert not a.equals(e)
+    f = Case.from_state(a.to_state())
+    f.replace("orientation", None)
+    assert not a.equals(f)
     d = Case.from_state(a.to_state())
     d.replace("specimen", Specimen(tetra(), "cm", a.specimen.input_to_head))
     assert not a.equals(d)
@@ -144,7 +158,10 @@ def test_replace_emits_changed_with_part_name() -> None:
     case.replace("parameters", {"build": "average"})
     case.set_landmark_set(LandmarkSet.from_points("skull", {"n": (0, 0, 0)}))
     case.replace("specimen", Specimen(tetra()))
-    assert seen == ["parameters", "landmarks", "specimen"]
+    case.replace("dowels", DowelSettings(sex="female"))
+    case.replace("orientation", Orientation((0, 0, 1), (0, 1, 0)))
+    case.replace("guides", GuideList())
+    assert seen == ["parameters", "landmarks", "specimen", "dowels", "orientation", "guides"]
 
 
 @pytest.mark.parametrize(
@@ -158,6 +175,10 @@ def test_replace_emits_changed_with_part_name() -> None:
         ("parameters", {"x": float("nan")}),
         ("parameters", {"x": object()}),
         ("parameters", {1: "x"}),
+        ("dowels", None),
+        ("dowels", {"table": "ttable_2023"}),
+        ("orientation", ((0, 0, 1), (0, 1, 0))),
+        ("guides", [{"id": "a", "value": [1.0]}]),
     ],
 )
 def test_invalid_replace_raises_and_changes_nothing(name: str, value: object) -> None:
@@ -173,11 +194,15 @@ def test_invalid_replace_raises_and_changes_nothing(name: str, value: object) ->
 
 def test_unknown_parts_are_refused() -> None:
     with pytest.raises(TypeError, match="unknown case parts"):
-        Case(dowels=())
+        Case(growth=())
     with pytest.raises(KeyError):
-        Case().replace("dowels", ())
+        Case().replace("growth", ())
     with pytest.raises(ValueError, match="unknown parts"):
-        Case.from_state({**Case().to_state(), "dowels": []})
+        Case.from_state({**Case().to_state(), "growth": []})
+    state = Case().to_state()
+    del state["dowels"]
+    with pytest.raises(ValueError, match="missing parts"):
+        Case.from_state(state)
 
 
 def test_parts_cannot_be_mutated_in_place() -> None:
@@ -189,7 +214,11 @@ def test_parts_cannot_be_mutated_in_place() -> None:
     with pytest.raises(TypeError):
         case.parameters["depth_table"] = "x"  # type: ignore[index]
     with pytest.raises(TypeError):
-        case.parameters["guides"]["nose"][0] = 5  # type: ignore[index]
+        case.parameters["notes"]["nose"][0] = 5  # type: ignore[index]
+    with pytest.raises(TypeError):
+        case.dowels.overrides["g"] = 1.0  # type: ignore[index]
+    with pytest.raises(TypeError):
+        case.guides.guides[0]["value"] = [1.0]  # type: ignore[index, union-attr]
     with pytest.raises(TypeError):
         case.landmarks["skin"] = LandmarkSet("skin")  # type: ignore[index]
 

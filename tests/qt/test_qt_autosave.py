@@ -24,7 +24,7 @@ if os.environ.get("QT_QPA_PLATFORM") != "xcb":
 
 from PySide6.QtWidgets import QMessageBox  # noqa: E402
 
-from workbench.commands.case_edits import SetParameter  # noqa: E402
+from workbench.commands.reconstruction_setup import SetDowelSettings  # noqa: E402
 from workbench.io.case_file import evidence_bytes, load_case  # noqa: E402
 from workbench.qt import autosave, dialogs  # noqa: E402
 from workbench.qt.autosave import find_recoverable, recover  # noqa: E402
@@ -66,10 +66,10 @@ def _open(qtbot, window, path) -> None:  # noqa: ANN001
 
 
 def _edit(qtbot, window) -> None:  # noqa: ANN001
-    """Place glabella with a pick on the skull and set a parameter (two undo steps)."""
+    """Place glabella with a pick on the skull and set the sex of the dowels (two undo steps)."""
     window.landmarks_panel.select("g")
     window.on_pick(np.array(window.document.case.specimen.mesh.vertices[1234]))
-    assert window.document.push(SetParameter(key="sex", value="female"))
+    assert window.document.push(SetDowelSettings(sex="female"))
     qtbot.waitUntil(lambda: not window.busy, timeout=30_000)
     assert window.document.is_dirty
 
@@ -132,7 +132,7 @@ def test_crash_then_recover_an_untitled_case(qtbot, make_window, folder, skull_c
     g = doc.case.landmarks["skull"]["g"]
     np.testing.assert_array_equal(g.position, crashed.specimen.mesh.vertices[1234])
     assert g.status == "placed"
-    assert doc.case.parameters["sex"] == "female"
+    assert doc.case.dowels.sex == "female"
     assert doc.case.specimen.mesh.equals(crashed.specimen.mesh)
     assert doc.case.specimen.mesh.n_faces == 100_002
     assert len(second.scene.actors("skull")) == 1
@@ -153,7 +153,7 @@ def test_crash_then_recover_an_untitled_case(qtbot, make_window, folder, skull_c
     assert evidence_bytes(target, "skull.obj") == original_bytes
     reopened = load_case(target).case
     assert reopened.landmarks["skull"]["g"].status == "placed"
-    assert reopened.parameters["sex"] == "female"
+    assert reopened.dowels.sex == "female"
 
 
 def test_recovered_case_saves_to_its_original_file_only_when_saved(
@@ -180,7 +180,7 @@ def test_recovered_case_saves_to_its_original_file_only_when_saved(
     assert second.save()  # Save (not Save As): the original file
     assert list(folder.iterdir()) == []
     loaded = load_case(case_path)
-    assert loaded.case.parameters["sex"] == "female"
+    assert loaded.case.dowels.sex == "female"
     assert loaded.case.landmarks["skull"]["g"].status == "placed"
     actions = [(r["action"], r["operation"]) for r in loaded.audit_records]
     assert ("do", "Recover unsaved work") in actions and actions[-1][0] == "save"
@@ -221,7 +221,7 @@ def test_clean_close_save_discard_and_undo_remove_the_snapshot(
     assert window.save_to(tmp_path / "case.fcase") and not saver.has_snapshot
 
     # a clean close (with unsaved work written) removes it
-    window.document.push(SetParameter(key="sex", value="male"))
+    window.document.push(SetDowelSettings(sex="male"))
     assert saver.autosave(wait=True) and saver.has_snapshot
     window.close()
     assert list(folder.iterdir()) == []
@@ -327,11 +327,11 @@ def test_a_failed_autosave_is_a_message_and_the_case_is_unaffected(make_window, 
     folder.parent.mkdir(exist_ok=True)
     folder.write_text("a file where the autosave folder should be", encoding="utf-8")
     window = make_window()
-    assert window.document.push(SetParameter(key="sex", value="female"))
+    assert window.document.push(SetDowelSettings(sex="female"))
     assert window.autosaver.autosave(wait=True)
     assert window.autosaver.last_error.startswith("Autosave failed")
     assert any(m.startswith("Autosave failed") for m in window.messages)
     assert window.status_label.text().startswith("Autosave failed")
     assert not window.errors and window.document.is_dirty
-    assert window.document.case.parameters["sex"] == "female"
+    assert window.document.case.dowels.sex == "female"
     window.close()  # closes cleanly although nothing could be written

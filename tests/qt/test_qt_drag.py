@@ -132,7 +132,7 @@ def test_drag_a_guide_in_the_guide_view(qtbot, fitted):  # noqa: ANN001
 
     _drag(qtbot, gv.plotter, start, [(0, -2 * k) for k in range(1, 8)])   # up on screen
 
-    stored = w.document.case.parameters["guides"][row]
+    stored = w.document.case.guides.to_state()[row]
     assert stored["value"][0] > g.value[0] + 1.0          # moved up: y grows (head frame)
     assert stored["source"] == "user"
     assert len(w.document.stack) == n_steps + 1

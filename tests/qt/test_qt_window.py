@@ -1,7 +1,7 @@
 """The workbench window end to end under Xvfb (QT_QPA_PLATFORM=xcb): real skulls, real services.
 
 Run with ``QT_QPA_PLATFORM=xcb python -m pytest --xvfb-backend xvfb tests/qt``.
-Asserts on the case (landmark statuses, parameters, undo/redo, save → reopen)
+Asserts on the case (landmark statuses, dowel settings, guides, undo/redo, save → reopen)
 and on the scene (layer actors, a non-blank picture of the whole window).
 """
 
@@ -66,7 +66,7 @@ def test_open_skull_shows_it_and_the_window_picture_is_not_blank(qtbot, window, 
     assert len(window.scene.actors("skull")) == 1
     assert window.document.case.specimen.mesh.n_faces == 100_002
     # a known public sample: its orientation is recorded without an undo step
-    assert window.document.case.parameters["orientation"]["anterior"] == (0.0, 0.0, 1.0)
+    assert window.document.case.orientation.anterior == (0.0, 0.0, 1.0)
     assert not window.document.is_dirty and "*" not in window.windowTitle()
     assert _picture_variance(window, tmp_path) > 50.0
 
@@ -111,7 +111,8 @@ def test_suggest_dowels_guides_reconstruct_save_reopen_compare_export(
     _open(qtbot, window, bone_ply, units="mm")
     window.landmarks_panel.anterior.setCurrentText("-y")
     window.landmarks_panel.superior.setCurrentText("-z")
-    assert window.document.case.parameters["orientation"]["superior"] == (0, 0, -1)
+    assert window.document.case.orientation.superior == (0, 0, -1)
+    assert window.document.stack.undo_text == "Set skull orientation"
 
     window.suggest_landmarks()
     _wait(qtbot, window)
@@ -123,13 +124,15 @@ def test_suggest_dowels_guides_reconstruct_save_reopen_compare_export(
     n_dowels = len(window.preview.codes)
     assert window.dowels_panel.table.rowCount() == len(window.preview.plan.dowels)
 
-    # override a depth: a parameter command, the plan follows
+    # override a depth: a typed command on the dowel settings, the plan follows
     window.dowels_panel.set_depth("g", 9.0)
     _wait(qtbot, window)
-    assert window.document.case.parameters["depth_overrides"]["g"] == 9.0
+    assert window.document.case.dowels.overrides["g"] == 9.0
+    assert window.document.stack.undo_text == "Set depth of g to 9.0 mm"
     assert window.preview.plan["g"].depth_mm == 9.0 and window.preview.plan["g"].source == "override"
     window.dowels_panel.set_excluded("n", True)
     _wait(qtbot, window)
+    assert window.document.case.dowels.excluded == ("n",)
     assert len(window.preview.codes) == n_dowels - 1
 
     window.reconstruct()
@@ -143,16 +146,16 @@ def test_suggest_dowels_guides_reconstruct_save_reopen_compare_export(
     old = window.fit.guides[row]
     window.reconstruct_panel.set_guide(row, value=(old.value[0] - 3.0,))
     _wait(qtbot, window)
-    stored = window.document.case.parameters["guides"]
+    stored = window.document.case.guides.to_state()
     assert stored[row]["value"][0] == pytest.approx(old.value[0] - 3.0)
     assert not np.allclose(window.fit.recon.face.vertices, face_before)
 
     window.reconstruct_panel.auto_refit.setChecked(False)   # undo/redo: the case only
     window.undo()                                  # the guide move
-    assert "guides" not in window.document.case.parameters
+    assert window.document.case.guides is None
     assert not window.runner.is_running("fit")
     window.redo()
-    assert window.document.case.parameters["guides"][row]["source"] == "user"
+    assert window.document.case.guides.guides[row]["source"] == "user"
     _wait(qtbot, window)
 
     saved = tmp_path / "headsq.fcase"

@@ -22,18 +22,31 @@ Format history
     where ``ref`` is ``{"sha256", "dtype", "shape"}`` naming
     ``arrays/<sha256>.npy``.  Only placed landmarks existed.
 1
-    Current layout, see ``data_tables/schemas/case.schema.json``.
+    Parts ``meta``, ``evidence``, ``evidence_store``, ``specimen``,
+    ``landmarks`` and ``parameters``; the reconstruction settings were
+    free-form ``parameters`` keys: ``depth_table``, ``sex``, ``build``
+    (word or number as text), ``depth_overrides`` ``{code: mm}``,
+    ``excluded_landmarks`` ``[code]``, ``guides`` (list of guide dicts) and
+    ``orientation`` ``{"anterior", "superior"[, "left"]}``.
+2
+    Current layout, see ``data_tables/schemas/case.schema.json``: those keys
+    became the typed parts ``dowels``, ``orientation`` and ``guides``
+    (:mod:`workbench.model.reconstruction_setup`).  :func:`v1_to_v2` moves a
+    key only if its value is valid for its part; an unusable old value (a
+    build word no table knows, a malformed guide list...) stays in
+    ``parameters`` unchanged, so the file still opens and nothing is lost.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any
 
-CURRENT_VERSION = 1
-SCHEMA_ID = "case-schema-v1"
+CURRENT_VERSION = 2
+SCHEMA_ID = "case-schema-v2"
 
 Migration = Callable[[dict[str, Any]], dict[str, Any]]
 
@@ -81,7 +94,7 @@ def v0_to_v1(doc: dict[str, Any]) -> dict[str, Any]:
     evidence = [_evidence_v0(item) for item in doc.get("evidence", [])]
     landmarks = doc.get("landmarks", {})
     return {
-        "@schema": SCHEMA_ID,
+        "@schema": "case-schema-v1",
         "format_version": 1,
         "software": software,
         "meta": {
@@ -104,8 +117,131 @@ def v0_to_v1(doc: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+# ---------------------------------------------------------------- 1 -> 2
+_SEXES = ("female", "male")
+_BUILDS = ("slender", "normal", "obese")
+_MAX_DEPTH_MM = 100.0
+_MAX_AXIS_COS = 0.99
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _build_v1(value: Any) -> str | float | None:
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if text in _BUILDS:
+            return text
+        try:
+            value = float(text.removesuffix("sd").strip())
+        except ValueError:
+            return None
+    return _number(value)
+
+
+def _overrides_v1(value: Any) -> dict[str, float] | None:
+    if not isinstance(value, Mapping):
+        return None
+    out = {}
+    for code, depth in value.items():
+        mm = _number(depth)
+        if not (isinstance(code, str) and code.strip()) or mm is None \
+                or not 0.0 < mm <= _MAX_DEPTH_MM:
+            return None
+        out[code.strip()] = mm
+    return dict(sorted(out.items()))
+
+
+def _codes_v1(value: Any) -> list[str] | None:
+    if not isinstance(value, list) or not all(isinstance(c, str) and c.strip() for c in value):
+        return None
+    return sorted({c.strip() for c in value})
+
+
+def _vector_v1(value: Any) -> list[float] | None:
+    if not isinstance(value, list) or len(value) != 3:
+        return None
+    v = [_number(x) for x in value]
+    if any(x is None for x in v) or math.hypot(*v) < 1e-9:  # type: ignore[misc]
+        return None
+    return v  # type: ignore[return-value]
+
+
+def _orientation_v1(value: Any) -> dict[str, Any] | None:
+    if not isinstance(value, Mapping) or set(value) - {"anterior", "superior", "left"}:
+        return None
+    a, s = _vector_v1(value.get("anterior")), _vector_v1(value.get("superior"))
+    left = _vector_v1(value["left"]) if value.get("left") is not None else None
+    if a is None or s is None or (value.get("left") is not None and left is None):
+        return None
+    cos = sum(x * y for x, y in zip(a, s, strict=True)) / (math.hypot(*a) * math.hypot(*s))
+    if abs(cos) > _MAX_AXIS_COS:
+        return None
+    return {"anterior": a, "superior": s, "left": left}
+
+
+def _guides_v1(value: Any) -> list[Any] | None:
+    if not isinstance(value, list):
+        return None
+    ids = []
+    for item in value:
+        if not isinstance(item, Mapping) or not isinstance(item.get("id"), str) \
+                or not item["id"]:
+            return None
+        v = item.get("value")
+        if not isinstance(v, list) or len(v) not in (1, 2) or any(_number(x) is None for x in v):
+            return None
+        ids.append(item["id"])
+    return copy.deepcopy(value) if len(set(ids)) == len(ids) else None
+
+
+#: old parameter key -> (part, field or None for the whole part, converter)
+_MOVED_V1: Mapping[str, tuple[str, str | None, Callable[[Any], Any]]] = MappingProxyType({
+    "depth_table": ("dowels", "table",
+                    lambda v: v.strip() if isinstance(v, str) and v.strip() else None),
+    "sex": ("dowels", "sex", lambda v: v if v in _SEXES else None),
+    "build": ("dowels", "build", _build_v1),
+    "depth_overrides": ("dowels", "overrides", _overrides_v1),
+    "excluded_landmarks": ("dowels", "excluded", _codes_v1),
+    "orientation": ("orientation", None, _orientation_v1),
+    "guides": ("guides", None, _guides_v1),
+})
+
+
+def v1_to_v2(doc: dict[str, Any]) -> dict[str, Any]:
+    """Format 1 → 2: the reconstruction parameters become the typed parts (see above)."""
+    parameters = dict(doc["parameters"])
+    parts: dict[str, Any] = {
+        "dowels": {"table": "ttable_2023", "sex": "male", "build": "normal", "overrides": {},
+                   "excluded": [], "tissue_model": "table", "region_factors": {}},
+        "orientation": None,
+        "guides": None,
+    }
+    for key, (part, name, convert) in _MOVED_V1.items():
+        if key not in parameters:
+            continue
+        if name is None and parameters[key] in (None, {}):
+            del parameters[key]   # the old spelling of "automatic" / "computed"
+            continue
+        value = convert(parameters[key])
+        if value is None:
+            continue   # not usable as a setting: stays a loose parameter
+        if name is None:
+            parts[part] = value
+        else:
+            parts[part][name] = value
+        del parameters[key]
+    out = {k: v for k, v in doc.items() if k != "parameters"}
+    out.update({"@schema": "case-schema-v2", "format_version": 2, **parts,
+                "parameters": parameters})
+    return out
+
+
 #: ``{from_version: upgrade to from_version + 1}``.
-MIGRATIONS: Mapping[int, Migration] = MappingProxyType({0: v0_to_v1})
+MIGRATIONS: Mapping[int, Migration] = MappingProxyType({0: v0_to_v1, 1: v1_to_v2})
 
 
 def document_version(doc: Mapping[str, Any]) -> int:

@@ -6,7 +6,8 @@ from workbench.model.audit import AuditLog
 from workbench.model.case import PARTS, Case, EvidenceConflictError
 from workbench.model.evidence import EvidenceFile
 from workbench.model.meta import CaseMeta
+from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.specimen import Specimen
 
-__all__ = ["PARTS", "AuditLog", "Case", "CaseMeta", "EvidenceConflictError", "EvidenceFile",
-           "Specimen"]
+__all__ = ["PARTS", "AuditLog", "Case", "CaseMeta", "DowelSettings", "EvidenceConflictError",
+           "EvidenceFile", "GuideList", "Orientation", "Specimen"]

@@ -2,15 +2,22 @@
 
 A :class:`Case` is a small set of named *parts*, each an immutable value:
 
-========== ===================================================================
-part       value
-========== ===================================================================
-meta       :class:`~workbench.model.meta.CaseMeta`
-evidence   tuple of :class:`~workbench.model.evidence.EvidenceFile` (visible)
-specimen   :class:`~workbench.model.specimen.Specimen`
-landmarks  read-only ``{surface: LandmarkSet}`` for ``"skull"`` and ``"skin"``
-parameters read-only ``{str: JSON value}`` (depth table id, build, guide settings...)
-========== ===================================================================
+=========== ==================================================================
+part        value
+=========== ==================================================================
+meta        :class:`~workbench.model.meta.CaseMeta`
+evidence    tuple of :class:`~workbench.model.evidence.EvidenceFile` (visible)
+specimen    :class:`~workbench.model.specimen.Specimen`
+landmarks   read-only ``{surface: LandmarkSet}`` for ``"skull"`` and ``"skin"``
+dowels      :class:`~workbench.model.reconstruction_setup.DowelSettings` (depth
+            table, sex, build, overrides, exclusions, tissue model)
+orientation :class:`~workbench.model.reconstruction_setup.Orientation` of the
+            skull file, or ``None`` (found from the bone)
+guides      :class:`~workbench.model.reconstruction_setup.GuideList` set by the
+            user, or ``None`` (computed from the skull)
+parameters  read-only ``{str: JSON value}``: other settings and provenance of
+            results (template id and hash, depth group)
+=========== ==================================================================
 
 Parts are replaced, never mutated in place (:meth:`Case.replace`), so a
 command can keep the previous value by reference for undo and views can
@@ -18,8 +25,8 @@ compare by identity.  Every replacement emits ``case.events.changed(part)``.
 
 Each part has ``to_state`` / ``from_state`` through the explicit registry
 :data:`PARTS`; ``Case.from_state(case.to_state())`` equals the case.  New
-features add a registry entry or a ``parameters`` key, never a class name in
-the file.
+features add a registry entry (a typed part with its own commands) or, for
+loose values, a ``parameters`` key; never a class name in the file.
 
 Two things travel with a case but are *not* part of its undoable state:
 ``audit`` (the append-only :class:`~workbench.model.audit.AuditLog`) and
@@ -67,6 +74,14 @@ from workbench.model.landmarks import (
     landmarks_to_state,
 )
 from workbench.model.meta import CaseMeta
+from workbench.model.reconstruction_setup import (
+    DowelSettings,
+    GuideList,
+    Orientation,
+    guides_from_state,
+    optional_to_state,
+    orientation_from_state,
+)
 from workbench.model.specimen import Specimen
 from workbench.model.state import freeze_json, states_equal, thaw_json
 
@@ -82,6 +97,11 @@ def _check_type(cls: type) -> Callable[[Any], Any]:
         return value
 
     return check
+
+
+def _check_optional(cls: type) -> Callable[[Any], Any]:
+    check = _check_type(cls)
+    return lambda value: None if value is None else check(value)
 
 
 @dataclass(frozen=True)
@@ -111,6 +131,16 @@ PARTS: Mapping[str, PartCodec] = MappingProxyType(
         "landmarks": PartCodec(
             coerce_landmarks, landmarks_to_state, landmarks_from_state, empty_landmarks
         ),
+        "dowels": PartCodec(
+            _check_type(DowelSettings), DowelSettings.to_state, DowelSettings.from_state,
+            DowelSettings,
+        ),
+        "orientation": PartCodec(
+            _check_optional(Orientation), optional_to_state, orientation_from_state, lambda: None
+        ),
+        "guides": PartCodec(
+            _check_optional(GuideList), optional_to_state, guides_from_state, lambda: None
+        ),
         "parameters": PartCodec(
             lambda v: freeze_json(v, "parameters"),
             thaw_json,
@@ -135,7 +165,8 @@ class Case:
     **parts
         Initial part values by name (see :data:`PARTS`); missing parts get
         their defaults (a fresh :class:`CaseMeta`, no evidence, empty
-        specimen, empty landmark sets, no parameters).
+        specimen, empty landmark sets, default dowel settings, automatic
+        orientation, computed guides, no parameters).
     """
 
     def __init__(self, **parts: Any) -> None:
@@ -169,6 +200,18 @@ class Case:
     @property
     def landmarks(self) -> Mapping[str, LandmarkSet]:
         return self._parts["landmarks"]
+
+    @property
+    def dowels(self) -> DowelSettings:
+        return self._parts["dowels"]
+
+    @property
+    def orientation(self) -> Orientation | None:
+        return self._parts["orientation"]
+
+    @property
+    def guides(self) -> GuideList | None:
+        return self._parts["guides"]
 
     @property
     def parameters(self) -> Mapping[str, Any]:

@@ -30,7 +30,7 @@ class Document(QObject):
     case_replaced()
         A different case was opened (everything must be redrawn).
     part_changed(str)
-        A part of the current case was replaced (``"landmarks"``, ``"parameters"`` ...).
+        A part of the current case was replaced (``"landmarks"``, ``"dowels"`` ...).
     stack_changed()
         Undo/redo availability, labels or the dirty flag may have changed.
     """

@@ -8,7 +8,7 @@ moves nothing is written to the case: the view being dragged in draws a
 (:mod:`workbench.qt.lod`).  Mouse moves are coalesced: however fast they
 come, one preview is computed and drawn per event-loop turn, with the newest
 position.  On release **one** undoable command is pushed (a
-``MoveLandmark``, or the guide list as a ``SetParameter``), which starts the
+``MoveLandmark``, or the guide list as a ``SetGuides``), which starts the
 full re-fit in the worker as any other change does.  Esc cancels a drag and
 leaves the case as it was.
 

@@ -32,12 +32,12 @@ CT_FILTER = "Volumes (*.nhdr *.nrrd *.mha *.mhd *.nii *.nii.gz);;All files (*)"
 
 def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
     """Record the known anatomy directions of a public sample (not an undo step)."""
-    from workbench.commands.case_edits import SetParameter
+    from workbench.commands.reconstruction_setup import SetOrientation
 
     anatomy = jobs.sample_orientation(source)
-    if anatomy is not None and "orientation" not in opened.case.parameters:
-        opened.stack.push(SetParameter(key="orientation", value=anatomy,
-                                       label="Orientation of the sample file"))
+    if anatomy is not None and opened.case.orientation is None:
+        opened.stack.push(SetOrientation(jobs.anatomy_orientation(anatomy),
+                                         label="Orientation of the sample file"))
         opened.stack.clear()
         opened.stack.set_clean()
         opened.notes.append(f"{source.name}: a known sample; face toward "

@@ -1,21 +1,26 @@
 """The window's background jobs: plain functions over the services, no Qt, no VTK.
 
 The window runs these in a worker thread (:mod:`workbench.qt.workers`) and
-applies their results on the GUI thread through undoable commands.  They
-read the case's parameters with the same keys ``workbench reconstruct``
-writes (:func:`workbench.services.reconstruction_job.run_reconstruction`):
+applies their results on the GUI thread through undoable commands.  The
+settings are the case's typed parts, the same ``workbench reconstruct``
+records (:func:`workbench.services.reconstruction_job.run_reconstruction`):
 
-=================== ==========================================================
-key                 value
-=================== ==========================================================
-depth_table         table id (``workbench.io.tables.list_tables``)
-sex                 "female" | "male" (depth group and reference head)
-build               "slender" | "normal" | "obese" or a number k (mean + k SD)
-depth_overrides     ``{skull code: depth mm}``
-excluded_landmarks  list of skull codes whose dowels are off
-guides              list of guide dicts (``guides_to_json``); absent = computed
-orientation         ``{"anterior": [x,y,z], "superior": [x,y,z]}`` of the file
-=================== ==========================================================
+=========== ================================================================
+part        value
+=========== ================================================================
+dowels      :class:`~workbench.model.reconstruction_setup.DowelSettings`:
+            depth table, sex, build, overrides (mm), excluded codes
+orientation :class:`~workbench.model.reconstruction_setup.Orientation` of
+            the skull file, or None (found from the bone)
+guides      :class:`~workbench.model.reconstruction_setup.GuideList` set by
+            the user, or None (computed from the skull)
+=========== ================================================================
+
+The fit is the one pipeline of the command line: :func:`fit_inputs` takes a
+snapshot of the case on the GUI thread, :func:`fit_face` runs
+:func:`workbench.services.reconstruction_service.run_fit` on it in the
+worker, and :func:`export_results` writes the report with the same builder
+(:func:`workbench.services.reconstruction_job.build_report`).
 
 Units mm.  Landmarks, dowels and the face are returned in the **input frame**
 (the skull file's frame) so they overlay the specimen; the fit itself runs in
@@ -25,11 +30,7 @@ Horizontal at y = 0).
 
 from __future__ import annotations
 
-import json
-from collections.abc import Mapping
-from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -38,55 +39,34 @@ from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.evidence import sha256_file
-from workbench.model.template import TemplateHead
-from workbench.services.dowels import DepthSettings, DowelPlan, plan_dowels
-from workbench.services.guides import (
-    Guide, classic_guides, guides_from_json, guides_to_json,
+from workbench.model.reconstruction_setup import GuideList, Orientation
+from workbench.services.dowels import DepthSettings, plan_dowels
+from workbench.services.fit_guides import stored_guides
+from workbench.services.guides import Guide, guides_to_json
+from workbench.services.reconstruct import input_frame, outward
+from workbench.services.reconstruction_service import (
+    DowelPreview, FitInputs, FitResult, run_fit,
 )
-from workbench.services.guide_rules import published_predictions
+from workbench.services.reconstruction_service import depth_settings as _depth_settings
 from workbench.services.skull_registration import (
     SkullRegistration, mirror_from_landmarks, register_skull,
 )
-from workbench.services.reconstruct import (
-    FitSettings, Reconstruction, ensemble_spread, input_frame, outward, reconstruct,
-)
-from workbench.services.reconstruction_job import plausible_guides
-from workbench.services.reference_parts import skull_surface
 from workbench.services.template_cache import reference_head
 
-DEFAULTS: dict[str, Any] = {"depth_table": "ttable_2023", "sex": "male", "build": "normal",
-                            "depth_overrides": {}, "excluded_landmarks": []}
-
-
-def param(case: Case, key: str) -> Any:
-    """``case.parameters[key]`` or the window's default for it."""
-    return case.parameters.get(key, DEFAULTS.get(key))
-
-
-def build_value(text: Any) -> str | float:
-    """``"normal"`` stays a word; ``"1.5"`` becomes k = 1.5 SD."""
-    text = str(text)
-    if text in ("slender", "normal", "obese"):
-        return text
-    return float(text)
+__all__ = ["DowelPreview", "FitInputs", "FitResult", "depth_settings", "export_results",
+           "fit_face", "fit_inputs", "guide_geometry", "guides_state", "orientation",
+           "preview_dowels", "sample_orientation", "suggest_landmarks", "user_guides",
+           "view_axes"]
 
 
 def depth_settings(case: Case) -> DepthSettings:
-    """The dowel settings the case's parameters describe."""
-    return DepthSettings(
-        table=str(param(case, "depth_table")), sex=str(param(case, "sex")),
-        build=build_value(param(case, "build")),
-        overrides={str(k): float(v) for k, v in dict(param(case, "depth_overrides")).items()},
-        excluded=frozenset(str(c) for c in param(case, "excluded_landmarks")))
+    """The dowel planner's settings for the case's ``dowels`` part."""
+    return _depth_settings(case.dowels)
 
 
 def orientation(case: Case) -> tuple | None:
-    """``(anterior, superior)`` in file coordinates, or None (automatic)."""
-    value = case.parameters.get("orientation")
-    if not value:
-        return None
-    out = (tuple(value["anterior"]), tuple(value["superior"]))
-    return out + ((tuple(value["left"]),) if "left" in value else ())
+    """``(anterior, superior[, left])`` in file coordinates, or None (automatic)."""
+    return None if case.orientation is None else case.orientation.hint
 
 
 def sample_orientation(path: str | Path) -> dict[str, list[float]] | None:
@@ -110,18 +90,23 @@ def sample_orientation(path: str | Path) -> dict[str, list[float]] | None:
     return None
 
 
+def anatomy_orientation(anatomy: dict[str, list[float]]) -> Orientation:
+    """:func:`sample_orientation`'s directions as the case's orientation value."""
+    return Orientation(anatomy["anterior"], anatomy["superior"], anatomy.get("left"))
+
+
 def view_axes(case: Case) -> tuple[np.ndarray, np.ndarray] | None:
     """``(anterior, superior)`` unit vectors in the input frame for the camera.
 
     From the head frame of the skull landmarks when they define one, else
-    from the ``orientation`` parameter, else None.
+    from the case's orientation, else None.
     """
     try:
         to_head, _ = input_frame(case.landmarks["skull"])
     except (WorkbenchError, ValueError, KeyError, np.linalg.LinAlgError):
-        orient = orientation(case)
-        return None if orient is None else (np.array(orient[0], float),
-                                            np.array(orient[1], float))
+        orient = case.orientation
+        return None if orient is None else (np.array(orient.anterior, float),
+                                            np.array(orient.superior, float))
     back = np.linalg.inv(to_head)[:3, :3]
     a, s = back @ [0.0, 0.0, 1.0], back @ [0.0, 1.0, 0.0]
     return a / np.linalg.norm(a), s / np.linalg.norm(s)
@@ -129,18 +114,7 @@ def view_axes(case: Case) -> tuple[np.ndarray, np.ndarray] | None:
 
 def user_guides(case: Case) -> list[Guide] | None:
     """Guides stored in the case (edited by the user), or None (compute them)."""
-    value = case.parameters.get("guides")
-    if value is None:
-        return None
-    return guides_from_json(json.loads(json.dumps(_thaw(value))), "case guides")
-
-
-def _thaw(value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return {k: _thaw(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_thaw(v) for v in value]
-    return value
+    return stored_guides(case.guides)
 
 
 # ------------------------------------------------------------------ suggest
@@ -164,16 +138,6 @@ def suggest_landmarks(skull: Mesh, current: LandmarkSet, sex: str,
 
 
 # ------------------------------------------------------------------ dowels
-@dataclass(frozen=True)
-class DowelPreview:
-    """A dowel plan with origins and tips mapped into the input frame."""
-
-    plan: DowelPlan
-    origins: np.ndarray   # (n, 3) input frame mm, active dowels
-    tips: np.ndarray      # (n, 3)
-    codes: tuple[str, ...]
-
-
 def _to(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.asarray(p, float).reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
@@ -203,68 +167,20 @@ def preview_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
 
 
 # ------------------------------------------------------------------ fit
-@dataclass(frozen=True)
-class FitResult:
-    """A reconstruction with the guides it used and, optionally, its spread."""
-
-    recon: Reconstruction
-    head: TemplateHead
-    skull_h: Mesh
-    guides: tuple[Guide, ...]
-    spread: np.ndarray | None   # (n_skin_vertices,) mm or None
-    preview: DowelPreview
-    predictions: tuple = ()     # published-rule predictions (guide_rules.Prediction)
+def fit_inputs(case: Case, *, use_guides: bool = True, ensemble: int = 0) -> FitInputs:
+    """GUI thread: the snapshot of ``case`` the worker fits (stored guides checked here)."""
+    return FitInputs.from_case(case, use_guides=use_guides, ensemble=ensemble)
 
 
-def fit_face(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
-             guides: list[Guide] | None, *, use_guides: bool = True,
-             ensemble: int = 0, orient: tuple | None = None) -> FitResult:
-    """Reconstruct the face as ``workbench reconstruct`` does (guides: the second warp).
+def fit_face(inputs: FitInputs) -> FitResult:
+    """Worker: reconstruct the face exactly as ``workbench reconstruct`` does.
 
-    ``guides`` None computes Kähler's classic guides from the skull; a list
-    uses the stored guides.  Computed guides that fail their plausibility
-    checks are switched off with a warning, as in the command-line job.
+    Stored guides are used as they are; without them Kähler's classic guides
+    are computed from the skull, and computed guides that fail their
+    plausibility checks are switched off with a warning
+    (:func:`workbench.services.reconstruction_service.run_fit`).
     """
-    head = reference_head(str(settings.sex or "male"))
-    fit = FitSettings(depth=settings)
-    chosen: list[Guide] = []
-    rejected: list[str] = []
-
-    def guide_fn(skull_h: Mesh, lms_h: LandmarkSet, plan: DowelPlan):  # noqa: ANN202
-        if not use_guides:
-            return None
-        if guides is None:
-            tips = {d.code: d.tip for d in plan.active()}
-            table = settings.table if not str(settings.table).endswith(".csv") else "ttable_2023"
-            chosen.extend(classic_guides(lms_h, skull_h, dowel_tips=tips, sex=settings.sex,
-                                         table_id=table))
-        else:
-            chosen.extend(guides)
-        return lambda skin: _guide_targets(chosen, skin, skull_h, lms_h, rejected)
-
-    recon = reconstruct(skull, landmarks, head, settings=fit, guides=guide_fn, hint=orient)
-    recon = replace(recon, warnings=recon.warnings + tuple(rejected))
-    skull_h = outward(skull.transformed(recon.input_to_head))
-    spread = ensemble_spread(recon, head, skull_h, ensemble, settings=fit) if ensemble else None
-    try:
-        predictions = published_predictions(
-            landmarks.transformed(recon.input_to_head), settings.sex, skull=skull_h,
-            dowel_tips={d.code: d.tip for d in recon.plan.active()}, problems=[])
-    except WorkbenchError:
-        predictions = []   # informative only
-    active = recon.plan.active()
-    preview = DowelPreview(recon.plan, recon.to_input(np.array([d.origin for d in active])),
-                           recon.to_input(np.array([d.tip for d in active])),
-                           tuple(d.code for d in active))
-    for mesh in (recon.face, recon.head.skin):   # drawn smooth-shaded: normals here, not in
-        _ = mesh.vertex_normals                   # the GUI thread
-    return FitResult(recon, head, skull_h, tuple(chosen), spread, preview, tuple(predictions))
-
-
-def _guide_targets(guides: list[Guide], skin: dict[str, np.ndarray], skull_h: Mesh,
-                   lms_h: LandmarkSet, rejected: list[str]) -> dict[str, np.ndarray]:
-    """Guide targets through the job's plausibility filter (the CLI applies the same)."""
-    return plausible_guides(guides, skin, skull_h, lms_h, rejected)
+    return run_fit(inputs)
 
 
 def guide_geometry(fit: FitResult) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
@@ -293,9 +209,9 @@ def guide_geometry(fit: FitResult) -> tuple[list[tuple[np.ndarray, np.ndarray]],
     return segments, pts
 
 
-def guides_state(guides: list[Guide] | tuple[Guide, ...]) -> list[dict[str, Any]]:
-    """Guides as the JSON value stored under the ``guides`` parameter."""
-    return guides_to_json(guides)
+def guides_state(guides: list[Guide] | tuple[Guide, ...]) -> GuideList:
+    """Guides as the case's ``guides`` part (``SetGuides``)."""
+    return GuideList(tuple(guides_to_json(guides)))
 
 
 # ------------------------------------------------------------------ export
@@ -347,17 +263,9 @@ def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
 
 
 def _report(out: Path, case: Case, fit: FitResult, notes: list[str]) -> dict[str, Path]:
-    from workbench.commands.stack import CommandStack
     from workbench.reporting.report import write_report_json, write_report_pdf
-    from workbench.services.case_setup import OpenedCase
-    from workbench.services.reconstruction_job import JobSettings, build_report
+    from workbench.services.reconstruction_job import build_report
 
-    s = depth_settings(case)
-    settings = JobSettings(table=s.table, sex=str(s.sex), build=s.build,
-                           excluded=s.excluded, overrides=dict(s.overrides),
-                           examiner=case.meta.examiner)
-    opened = OpenedCase(case, CommandStack(case, audit=lambda _r: None), list(notes))
-    report = build_report(opened, fit.head, fit.recon, case.landmarks["skull"],
-                          list(fit.guides), fit.spread, None, settings)
+    report = build_report(case, fit, notes=notes)
     return {"report_json": write_report_json(report, out / "report.json"),
             "report_pdf": write_report_pdf(report, out / "report.pdf", base_dir=out)}

@@ -60,7 +60,7 @@ class LandmarkOpsMixin:
             self.status("Open a skull first.")
             return
         skull, current = case.specimen.mesh, case.landmarks["skull"]
-        sex, orient = str(jobs.param(case, "sex")), jobs.orientation(case)
+        sex, orient = case.dowels.sex, jobs.orientation(case)
         self.runner.submit("suggest", "Suggesting skull landmarks …",
                            lambda: jobs.suggest_landmarks(skull, current, sex, orient),
                            self._apply_suggestion,

@@ -15,7 +15,9 @@ Wiring (created in this order in ``__init__``)::
 The window holds no geometry logic: edits are commands pushed on the
 document's stack, computations are :mod:`workbench.qt.jobs` functions run in
 the worker, and their results are drawn (derived results such as the fitted
-face are not part of the case; the parameters that produce them are).
+face are not part of the case; the typed settings that produce them are:
+the ``dowels``, ``orientation`` and ``guides`` parts, and the fit is the
+command line's own pipeline, :func:`workbench.qt.jobs.fit_face`).
 Units mm; the scene is in the specimen's input frame (the skull file's
 coordinates).
 """
@@ -51,6 +53,8 @@ from workbench.qt.workers import TaskRunner, preload, show_fraction
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
+#: case parts the dowels and the fit depend on: a change re-plans (and re-fits)
+FIT_PARTS = ("specimen", "landmarks", "dowels", "orientation", "guides")
 
 
 class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
@@ -150,7 +154,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.document.case_replaced.connect(self._on_case_replaced)
         self.document.part_changed.connect(self._on_part)
         self.document.part_changed.connect(
-            lambda part: self.guide_view.refresh() if part == "parameters" else None)
+            lambda part: self.guide_view.refresh() if part == "guides" else None)
         self.document.stack_changed.connect(self._update_title)
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
@@ -244,7 +248,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
             self.show_skull()
         if part == "landmarks":
             self.draw_landmarks()
-        if part in ("landmarks", "parameters", "specimen"):
+        if part in FIT_PARTS:
             self.schedule_dowels()
             if self.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
                 self.reconstruct()
@@ -319,18 +323,15 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         if case.specimen.mesh is None:
             self.status("Open a skull first.")
             return
-        skull, lms = case.specimen.mesh, case.landmarks["skull"]
-        settings = jobs.depth_settings(case)
-        try:
-            guides = jobs.user_guides(case)
+        panel = self.reconstruct_panel
+        try:   # the snapshot the worker fits; the user may go on editing the case
+            inputs = jobs.fit_inputs(case, use_guides=panel.use_guides.isChecked(),
+                                     ensemble=panel.ensemble.value())
         except Exception as exc:  # noqa: BLE001 - shown as a readable message
             self.show_error("The stored guides are not usable", exc)
             return
-        use = self.reconstruct_panel.use_guides.isChecked()
-        n = self.reconstruct_panel.ensemble.value()
         self.runner.submit("fit", "Reconstructing the face …",
-                           lambda: jobs.fit_face(skull, lms, settings, guides, use_guides=use,
-                                                 ensemble=n, orient=jobs.orientation(case)),
+                           lambda: jobs.fit_face(inputs),
                            self._show_fit,
                            lambda exc: self.show_error("Could not reconstruct the face", exc))
 

@@ -127,6 +127,9 @@ def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) ->
             "head_frame_set": specimen.input_to_head is not None,
         },
         "landmarks": landmarks,
+        "dowels": case.dowels.to_state(),
+        "orientation": None if case.orientation is None else case.orientation.to_state(),
+        "guides": None if case.guides is None else list(case.guides.ids),
         "parameters": dict(case.parameters),
         "audit": [{k: r.get(k) for k in ("time", "action", "operation", "examiner") if k in r}
                   for r in loaded.audit_records],

@@ -3,17 +3,20 @@
 Units mm.  Inputs are in the skull file's frame; outputs (face, head,
 landmarks) are mapped back into that frame so they overlay the evidence.
 
-Steps: open the skull as a case (evidence kept, units checked), suggest
-landmarks when none are given, fit the reference head
-(:mod:`workbench.services.reconstruct`) with the dowel plan and the nose /
-mouth guides, optionally an uncertainty ensemble, and assemble the report
-data (pictures are added by the caller, which may render).
+Steps: open the skull as a case (evidence kept, units checked), record the
+job's settings on the case as typed, undoable commands (dowel settings,
+orientation, a guides file), run the one reconstruction pipeline
+(:func:`workbench.services.reconstruction_service.run_fit`, the same the
+window runs), push the landmark set the fit used and the provenance of the
+result, and assemble the report data with :func:`build_report` (the one
+report builder of the command line and the window; pictures are added by
+the caller, which may render).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
@@ -24,37 +27,34 @@ import numpy as np
 from workbench import __version__
 from workbench.commands.case_edits import SetParameter
 from workbench.commands.landmarks import ReplaceLandmarkSet
+from workbench.commands.reconstruction_setup import SetDowelSettings, SetGuides, SetOrientation
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
-from workbench.io.catalogue import load_catalogue
+from workbench.core.units import UNIT_SCALES
 from workbench.io.case_file import save_case
+from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import write_mrk_json
 from workbench.io.meshes import write_mesh
 from workbench.io.template_pack import export_template
+from workbench.model.case import Case
+from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
-from workbench.services.dowels import DepthSettings
-from workbench.core.errors import WorkbenchError
-from workbench.core.frame import apply_transform
-from workbench.core.units import UNIT_SCALES
-from workbench.core.isosurface import decimate
-from workbench.services.guide_rules import published_predictions
-from workbench.services.guides import (
-    apply_guides, check_guides, classic_guides, guides_from_json, guides_from_prediction,
-    guides_to_json,
+from workbench.services.fit_guides import MAX_GUIDE_SHIFT_MM, plausible_guides
+from workbench.services.guides import guides_from_json, guides_to_json
+from workbench.services.landmark_transfer import TransferResult
+from workbench.services.reconstruct import FitSettings, Reconstruction
+from workbench.services.reconstruction_service import (
+    MAX_WORKING_TRIANGLES, WORKING_TRIANGLES, FitInputs, FitResult, run_fit,
 )
-from workbench.services.landmark_transfer import TransferResult, transfer_landmarks
-from workbench.services.reconstruct import (
-    FitSettings, Reconstruction, ensemble_spread, outward, reconstruct,
-)
-from workbench.services.reference_parts import skull_surface
-from workbench.services.template_cache import reference_head
 from workbench.services.tissue_model import TissueSettings
 
+__all__ = ["FITTED_HEAD_FRAME_TEXT", "MAX_GUIDE_SHIFT_MM", "MAX_WORKING_TRIANGLES",
+           "MIN_CONFIDENCE", "WORKING_TRIANGLES", "JobResult", "JobSettings", "build_report",
+           "head_in_input_frame", "plausible_guides", "run_reconstruction", "write_outputs"]
+
 Progress = Callable[[str], None]
-#: skulls larger than this are decimated to WORKING_TRIANGLES for the fit
-MAX_WORKING_TRIANGLES = 250_000
-WORKING_TRIANGLES = 200_000
+MIN_CONFIDENCE = FitSettings().min_confidence
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,14 @@ class JobSettings:
     excluded: frozenset[str] = frozenset()
     overrides: dict = field(default_factory=dict)
     examiner: str = ""
+    #: ``model`` and ``region_factors`` become the case's dowel settings; the
+    #: other fields are fit internals passed on as they are
     tissue: TissueSettings = field(default_factory=TissueSettings)
+
+    @property
+    def guides_file(self) -> Path | None:
+        """The guides JSON file, or None for ``"default"`` / ``"none"``."""
+        return None if str(self.guides) in ("default", "none") else Path(self.guides)
 
 
 @dataclass
@@ -92,6 +99,7 @@ class JobResult:
     report: dict[str, Any]
     seconds: dict[str, float]
     settings: JobSettings = field(default_factory=JobSettings)
+    fit: FitResult | None = None
 
     @property
     def file_units_per_mm(self) -> float:
@@ -100,180 +108,48 @@ class JobResult:
         return 1.0 / mm_per_unit
 
 
-def _skull_h(skull: Mesh, to_head: np.ndarray) -> Mesh:
-    faces = skull.faces if np.linalg.det(to_head[:3, :3]) > 0 else skull.faces[:, ::-1]
-    return outward(Mesh(apply_transform(to_head, skull.vertices), faces))
+def record_settings(opened: OpenedCase, settings: JobSettings) -> None:
+    """The job's settings as typed commands on the case (each one undo step, audited)."""
+    stack = opened.stack
+    stack.push(SetDowelSettings(
+        table=settings.table, sex=settings.sex, build=settings.build,
+        overrides={k: float(v) for k, v in settings.overrides.items()},
+        excluded=tuple(settings.excluded), tissue_model=settings.tissue.model,
+        region_factors=dict(settings.tissue.region_factors), label="Dowel settings of the job"))
+    if settings.orientation is not None:
+        stack.push(SetOrientation(Orientation.from_hint(settings.orientation),
+                                  label="Orientation of the skull file"))
+    if settings.guides_file is not None:
+        guides = guides_from_json(settings.guides_file)    # checked, names the file
+        stack.push(SetGuides(GuideList(tuple(guides_to_json(guides))),
+                             label=f"Guides from {settings.guides_file.name}"))
 
 
 def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = JobSettings(),
                        progress: Progress | None = None) -> JobResult:
+    """Open the skull as a case and reconstruct the face (see the module docstring)."""
     say = progress or (lambda _msg: None)
     times: dict[str, float] = {}
     t = time.perf_counter()
     opened = start_case_from_skull(skull_path, units=settings.units, scale=settings.scale,
                                    examiner=settings.examiner, landmarks_path=settings.landmarks)
     case, stack = opened.case, opened.stack
-    skull = case.specimen.mesh
-    head = reference_head(settings.sex, settings.template)
+    record_settings(opened, settings)
+    inputs = FitInputs.from_case(case, template=settings.template, templates=settings.templates,
+                                 rules=settings.rules, use_guides=str(settings.guides) != "none",
+                                 ensemble=settings.ensemble, tissue=settings.tissue)
     times["open"] = time.perf_counter() - t
-    work = skull
-    if skull.n_faces > MAX_WORKING_TRIANGLES:
-        # Kähler §8.6.4: a 50-250k-triangle working mesh keeps the editor
-        # responsive; the original stays in the case as evidence
-        say(f"decimating the working skull {skull.n_faces} -> {WORKING_TRIANGLES} triangles ...")
-        v, f = decimate(skull.vertices, skull.faces, WORKING_TRIANGLES)
-        work = Mesh(v, f)
-        opened.notes.append(f"working skull decimated from {skull.n_faces} to {work.n_faces} "
-                            "triangles (the original file is kept as evidence)")
-    suggestion = None
-    given = case.landmarks.get("skull")
-    if given is not None and not len(given):
-        given = None
-    depth = DepthSettings(table=settings.table, sex=settings.sex, build=settings.build,
-                          overrides=dict(settings.overrides), excluded=frozenset(settings.excluded))
-    fit = FitSettings(depth=depth, tissue=settings.tissue)
-    say("registering the reference skull and fitting the head ...")
-    t = time.perf_counter()
-    chosen: list = []
-    rejected: list[str] = []
-
-    def guide_fn(skull_h: Mesh, lms_h: LandmarkSet, plan):  # noqa: ANN001, ANN202
-        if str(settings.guides) == "none":
-            return None
-        if str(settings.guides) == "default":
-            tips = {d.code: d.tip for d in plan.active()}
-            table = settings.table if not str(settings.table).endswith(".csv") else "ttable_2023"
-            chosen.extend(classic_guides(lms_h, skull_h, dowel_tips=tips, sex=settings.sex,
-                                         table_id=table))
-        else:
-            import json
-
-            chosen.extend(guides_from_json(
-                json.loads(Path(settings.guides).read_text("utf-8")), settings.guides))
-        if settings.rules:
-            tips = {d.code: d.tip for d in plan.active()}
-            why: list[str] = []
-            preds = published_predictions(lms_h, settings.sex, rules=settings.rules,
-                                          skull=skull_h, dowel_tips=tips, problems=why)
-            for pred in preds:
-                if pred.target:
-                    chosen[:] = guides_from_prediction(pred, chosen)
-            found = {p.rule_id for p in preds}
-            rejected.extend(f"published rule {r} not applied: "
-                            f"{'; '.join(why) or 'no prediction for this skull'}"
-                            for r in settings.rules if r not in found)
-        return lambda skin: plausible_guides(chosen, skin, skull_h, lms_h, rejected)
-
-    recon = reconstruct(work, given, head, settings=fit, guides=guide_fn,
-                        hint=settings.orientation, progress=say)
-    references = None
-    if len(settings.templates) > 1:
-        recon, references = _consensus(recon, work, given, settings, fit, say)
-    landmarks = recon.landmarks
-    stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
+    fit = run_fit(inputs, progress=say)
+    times.update(fit.seconds)
+    stack.push(ReplaceLandmarkSet(surface="skull", new_set=fit.recon.landmarks,
                                   label="Skull landmarks from the dense registration"))
-    guides = chosen
-    skull_h = _skull_h(work, recon.input_to_head)
-    lms_h = landmarks.transformed(recon.input_to_head)
-    problems = check_guides([g for g in guides if g.enabled], skull_h, lms_h) if guides else []
-    recon = replace(recon, warnings=recon.warnings + tuple(rejected)
-                    + tuple(f"guide: {p}" for p in problems))
-    try:
-        predictions = published_predictions(lms_h, settings.sex, skull=skull_h)
-    except WorkbenchError as exc:  # informative only: a missing measurement must not stop the job
-        predictions = []
-        opened.notes.append(f"published guide predictions unavailable: {exc}")
-    times["fit"] = time.perf_counter() - t
-    spread = None
-    if settings.ensemble > 0:
-        say(f"ensemble of {settings.ensemble} fits ...")
-        t = time.perf_counter()
-        spread = ensemble_spread(recon, head, skull_h, settings.ensemble, settings=fit)
-        times["ensemble"] = time.perf_counter() - t
-    for key, value in (("template_id", head.template_id), ("template_hash", head.content_hash),
-                       ("depth_table", recon.plan.table_id), ("depth_group", recon.plan.group_label),
-                       ("sex", settings.sex), ("build", str(settings.build)),
-                       ("guides", guides_to_json(guides)),
-                       ("excluded_landmarks", sorted(settings.excluded)),
-                       ("depth_overrides", {k: float(v) for k, v in settings.overrides.items()})):
+    for key, value in (("template_id", fit.head.template_id),
+                       ("template_hash", fit.head.content_hash),
+                       ("depth_group", fit.recon.plan.group_label)):
         stack.push(SetParameter(key=key, value=value))
-    report = build_report(opened, head, recon, landmarks, guides, spread, suggestion, settings)
-    if references is not None and spread is None:
-        spread = references["spread"]   # the pictures' spread map: between the references
-    if references is not None:
-        report["references"] = {
-            "method": "one fit per reference head, the face their per-vertex median (input frame)",
-            "heads": references["heads"],
-            "spread_between_mm": {"median": float(np.median(references["spread"])),
-                                  "p90": float(np.percentile(references["spread"], 90))}}
-    report["predictions"] = [
-        {"rule_id": p.rule_id, "label": p.label, "value_mm": float(p.value_mm),
-         "citation": p.citation} for p in predictions if np.isfinite(p.value_mm)]
-    return JobResult(opened, head, recon, skull_h, suggestion, guides, spread, report, times,
-                     settings)
-
-
-def _consensus(first: Reconstruction, work: Mesh, given: LandmarkSet | None,
-               settings: JobSettings, fit: FitSettings, say: Progress
-               ) -> tuple[Reconstruction, dict]:
-    """Fit every reference pack of ``settings.templates``; the face is their per-vertex median.
-
-    All packs must share the first one's skin topology (packs built from the
-    same base head do).  The spread between them (median distance of the
-    members from the median face, mm) comes back with the head list.
-    """
-    faces = [first.face]
-    heads = [{"id": first.head.template_id, "path": str(settings.templates[0])}]
-    for i, pack in enumerate(settings.templates[1:], start=2):
-        say(f"reference {i}/{len(settings.templates)} ...")
-        other = reconstruct(work, given, reference_head(settings.sex, pack), settings=fit,
-                            hint=settings.orientation)
-        if other.head.skin.n_vertices != first.head.skin.n_vertices or \
-                other.head.skin.n_faces != first.head.skin.n_faces:
-            raise WorkbenchError(f"reference {pack} does not share the skin topology of "
-                                 f"{settings.templates[0]} (packs must be built from one base head)")
-        faces.append(other.face)
-        heads.append({"id": other.head.template_id, "path": str(pack)})
-    stack = np.stack([f.vertices for f in faces])
-    median = np.median(stack, axis=0)
-    spread = np.median(np.linalg.norm(stack - median, axis=2), axis=0)
-    skin_h = apply_transform(first.input_to_head, median)
-    head = replace(first.head, meshes={**first.head.meshes,
-                                       "skin": first.head.skin.with_vertices(skin_h)})
-    recon = replace(first, head=head, warnings=first.warnings + (
-        f"face = per-vertex median of {len(faces)} reference heads (spread between them: median "
-        f"{np.median(spread):.1f} mm)",))
-    return recon, {"heads": heads, "spread": spread}
-
-
-#: a computed guide that would move its skin landmark farther than this from
-#: the tissue-depth fit is taken as a failed skull measurement and switched off
-MAX_GUIDE_SHIFT_MM = 8.0
-MIN_CONFIDENCE = FitSettings().min_confidence
-
-
-def plausible_guides(guides: list, skin: dict[str, np.ndarray], skull_h: Mesh,
-                      lms_h: LandmarkSet, rejected: list[str]) -> dict[str, np.ndarray]:
-    """Guide targets, leaving out computed guides that fail their checks.
-
-    A guide set by the user is always applied.  A computed one is switched
-    off (and the reason recorded in ``rejected``) when ``check_guides`` finds
-    it outside the skull or anatomically impossible, or when it would move
-    its landmark more than :data:`MAX_GUIDE_SHIFT_MM` from the tissue-depth
-    fit — never a silently distorted face.
-    """
-    for i, g in enumerate(guides):
-        if not g.enabled or g.source == "user":
-            continue
-        problems = check_guides([g], skull_h, lms_h)
-        shift = max((float(np.linalg.norm(p - skin[c])) for c, p in apply_guides([g], skin).items()),
-                    default=0.0)
-        if problems or shift > MAX_GUIDE_SHIFT_MM:
-            why = problems[0] if problems else f"it would move {', '.join(g.affects)} by {shift:.1f} mm"
-            rejected.append(f"guide {g.id} switched off ({why}); check the skull there or set "
-                            "the guide by hand")
-            guides[i] = replace(g, enabled=False)
-    return apply_guides(guides, skin)
+    report = build_report(case, fit, notes=opened.notes, guides_file=settings.guides_file)
+    return JobResult(opened, fit.head, fit.recon, fit.skull_h, None, list(fit.guides),
+                     fit.spread_map, report, times, settings, fit)
 
 
 def _input_record(ev: Any) -> dict[str, Any]:
@@ -306,12 +182,22 @@ def _dir_in(recon: Reconstruction, direction: np.ndarray) -> list[float]:
     return [float(x) for x in v / np.linalg.norm(v)]
 
 
-def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
-                 landmarks: LandmarkSet, guides: list, spread: np.ndarray | None,
-                 suggestion: TransferResult | None, settings: JobSettings) -> dict[str, Any]:
-    """The report dict (``reconstruction-report-v1``) without pictures."""
+def build_report(case: Case, fit: FitResult, *, notes: Sequence[str] = (),
+                 guides_file: str | PathLike[str] | None = None,
+                 suggestion: TransferResult | None = None) -> dict[str, Any]:
+    """The report dict (``reconstruction-report-v1``) of one fit, without pictures.
+
+    The one report builder of ``workbench reconstruct`` and the window's
+    export.  ``case`` gives the identity and the evidence; ``fit`` (with the
+    :class:`FitInputs` it ran with) everything else.  Landmark rows are those
+    the fit used (input frame, mm).  ``notes`` are the caller's (opening the
+    skull...); ``guides_file`` is recorded (with its SHA-256) as an input.
+    """
     from workbench.reporting.report import utc_now
 
+    inputs = fit.inputs if fit.inputs is not None else FitInputs.from_case(case)
+    head, recon, spread = fit.head, fit.recon, fit.spread
+    landmarks = recon.landmarks or inputs.landmarks or LandmarkSet("skull")
     catalogue = load_catalogue()
     plan = recon.plan
     by_code = {d.code: d for d in plan.dowels}
@@ -329,8 +215,8 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
             "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
             "source": "none" if d is None else ("excluded" if d.excluded else d.source),
             "direction": None if d is None else _dir_in(recon, d.direction),
-            "note": (f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: no dowel "
-                     "until confirmed or moved") if lm.status == "suggested" and d is None
+            "note": (f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: "
+                     "no dowel until confirmed or moved") if lm.status == "suggested" and d is None
             and lm.confidence < MIN_CONFIDENCE else None,
         })
     for d in plan.dowels:
@@ -341,13 +227,13 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
                          "depth_mm": None if d.excluded else float(d.depth_mm),
                          "source": "excluded" if d.excluded else "interpolated",
                          "direction": _dir_in(recon, d.direction)})
-    fit = {k: v for k, v in recon.figures.items() if k != "registration"}
-    fit["suggested_landmarks"] = sum(lm.status == "suggested" for lm in landmarks)
-    fit["placed_landmarks"] = sum(lm.status == "placed" for lm in landmarks)
-    fit["absent_landmarks"] = sum(not lm.is_defined for lm in landmarks)
+    figures = {k: v for k, v in recon.figures.items() if k != "registration"}
+    figures["suggested_landmarks"] = sum(lm.status == "suggested" for lm in landmarks)
+    figures["placed_landmarks"] = sum(lm.status == "placed" for lm in landmarks)
+    figures["absent_landmarks"] = sum(not lm.is_defined for lm in landmarks)
     if suggestion is not None:
-        fit["suggestion_residual_mm"] = round(suggestion.warp_residual_mm, 3)
-    warnings = list(opened.notes) + list(recon.warnings)
+        figures["suggestion_residual_mm"] = round(suggestion.warp_residual_mm, 3)
+    warnings = list(notes) + list(fit.warnings)
     if suggestion is not None:
         warnings += list(suggestion.warnings)
     reg = recon.registration
@@ -359,28 +245,31 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
         "parts": [{"name": p.name, "present": p.present, "observed_fraction": p.observed_fraction,
                    "note": p.note} for p in reg.parts],
     }
-    return {
+    dowels = inputs.dowels
+    report = {
         "@schema": "reconstruction-report-v1",
-        "case_id": opened.case.meta.case_id,
+        "case_id": case.meta.case_id,
         "created": utc_now(),
-        "examiner": settings.examiner or None,
+        "examiner": inputs.examiner or case.meta.examiner or None,
         "software": {"name": "workbench", "version": __version__},
         "template": {"id": head.template_id, "content_hash": head.content_hash},
         "frame": "input frame of the skull file (mm); the fit ran in the Frankfort head frame"
                  + (" (mirrored input: reflection included)" if recon.mirrored_input else ""),
         "units": "mm",
-        "inputs": [_input_record(ev) for ev in opened.case.evidence]
-        + [_file_record("table", _table_file(settings.table))]
-        + ([_file_record("guides", settings.guides)]
-           if str(settings.guides) not in ("default", "none") else [])
-        + ([_file_record("template", Path(settings.template) / "template.json")]
-           if settings.template is not None else []),
+        "inputs": [_input_record(ev) for ev in case.evidence]
+        + [_file_record("table", _table_file(dowels.table))]
+        + ([_file_record("guides", guides_file)] if guides_file is not None else [])
+        + [_file_record("template", Path(p) / "template.json")
+           for p in (inputs.templates or ([inputs.template] if inputs.template else []))],
         "table": {"id": plan.table_id, "title": plan.table_title, "citation": plan.citation,
-                  "group": plan.group_label, "build": str(settings.build)},
+                  "group": plan.group_label, "build": dowels.build_text},
+        "parameters": _run_parameters(inputs),
         "landmarks": rows,
-        "guides": guides_to_json(guides),
-        "predictions": [],
-        "fit": fit,
+        "guides": guides_to_json(fit.guides),
+        "predictions": [
+            {"rule_id": p.rule_id, "label": p.label, "value_mm": float(p.value_mm),
+             "citation": p.citation} for p in fit.predictions if np.isfinite(p.value_mm)],
+        "fit": figures,
         "registration": registration,
         "tissue": None if recon.tissue is None else recon.tissue.to_json(),
         "inferred": None if recon.observed is None else {
@@ -389,13 +278,31 @@ def build_report(opened: OpenedCase, head: TemplateHead, recon: Reconstruction,
                     "cut vault) takes the reference head's shape; it is marked inferred per "
                     "vertex (head/observed.npy, the pictures and the uncertainty map)"},
         "ensemble": None if spread is None else {
-            "n": settings.ensemble,
+            "n": inputs.ensemble,
             "spread_mm": {"median": float(np.median(spread)),
                           "p90": float(np.percentile(spread, 90)), "max": float(spread.max())}},
         "validation": None,
         "pictures": {},
         "warnings": warnings,
     }
+    if fit.references is not None:
+        between = fit.references["spread"]
+        report["references"] = {
+            "method": "one fit per reference head, the face their per-vertex median (input frame)",
+            "heads": fit.references["heads"],
+            "spread_between_mm": {"median": float(np.median(between)),
+                                  "p90": float(np.percentile(between, 90))}}
+    return report
+
+
+def _run_parameters(inputs: FitInputs) -> dict[str, Any]:
+    """The settings of the run as the report records them (the case's typed parts)."""
+    guides = "none" if not inputs.use_guides else (
+        "computed from the skull" if inputs.guides is None else "set in the case")
+    return {"dowels": inputs.dowels.to_state(),
+            "orientation": None if inputs.orientation is None else inputs.orientation.to_state(),
+            "guides": guides, "rules": list(inputs.rules), "ensemble": inputs.ensemble,
+            "tissue_model": inputs.dowels.tissue_model}
 
 
 #: the frame ``template.json`` records for a fitted head written by the jobs

@@ -1,10 +1,13 @@
 """Dowels dock: depth table, sex and build, and a table of the planned depths.
 
-Every edit is a :class:`~workbench.commands.case_edits.SetParameter` on the
-keys :mod:`workbench.qt.jobs` reads (``depth_table``, ``sex``, ``build``,
-``depth_overrides``, ``excluded_landmarks``); the window re-plans the
-dowels in a worker and hands the plan back through :meth:`show_plan`.
-Depths are mm from the skull landmark along the dowel direction.
+Every edit is an undoable command on the case's ``dowels`` part
+(:class:`~workbench.model.reconstruction_setup.DowelSettings`):
+:class:`~workbench.commands.reconstruction_setup.SetDowelSettings` for the
+table, sex and build, ``SetDepthOverride`` and ``SetDowelExclusion`` for one
+dowel.  The panel follows the part (``changed("dowels")``); the window
+re-plans the dowels in a worker and hands the plan back through
+:meth:`show_plan`.  Depths are mm from the skull landmark along the dowel
+direction.
 """
 
 from __future__ import annotations
@@ -15,10 +18,14 @@ from PySide6.QtWidgets import (
     QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
-from workbench.commands.case_edits import SetParameter
+from workbench.commands.reconstruction_setup import (
+    SetDepthOverride, SetDowelExclusion, SetDowelSettings,
+)
+from workbench.core.errors import WorkbenchError
 from workbench.io.tables import list_tables, load_depth_table
+from workbench.model.reconstruction_setup import parse_build
 from workbench.qt.document import Document
-from workbench.qt.jobs import DowelPreview, param
+from workbench.qt.jobs import DowelPreview
 
 BUILDS = ("slender", "normal", "obese", "-2", "-1", "1", "2")
 COLUMNS = ("Code", "Table mm", "Depth mm", "Source", "Use")
@@ -35,16 +42,15 @@ class DowelsPanel(QWidget):
 
         self.table_combo = QComboBox()
         self.table_combo.addItems(list_tables())
-        self.table_combo.currentTextChanged.connect(
-            lambda v: self._set("depth_table", v, "Choose depth table"))
+        self.table_combo.currentTextChanged.connect(lambda v: self._set("table", v))
         self.sex_combo = QComboBox()
         self.sex_combo.addItems(["male", "female"])
-        self.sex_combo.currentTextChanged.connect(lambda v: self._set("sex", v, "Set sex"))
+        self.sex_combo.currentTextChanged.connect(lambda v: self._set("sex", v))
         self.build_combo = QComboBox()
         self.build_combo.addItems(list(BUILDS))
         self.build_combo.setToolTip("slender/normal/obese where the table has such groups; "
                                     "a number k means mean + k SD")
-        self.build_combo.currentTextChanged.connect(lambda v: self._set("build", v, "Set build"))
+        self.build_combo.currentTextChanged.connect(lambda v: self._set("build", v))
         form = QFormLayout()
         form.addRow("Depth table", self.table_combo)
         form.addRow("Sex", self.sex_combo)
@@ -74,20 +80,20 @@ class DowelsPanel(QWidget):
         layout.addWidget(self.clear_button)
         layout.addWidget(self.warnings)
         document.case_replaced.connect(self.refresh)
-        document.part_changed.connect(lambda part: part == "parameters" and self.refresh())
+        document.part_changed.connect(lambda part: part == "dowels" and self.refresh())
         self.refresh()
 
     # ------------------------------------------------------------ state → widgets
     def refresh(self) -> None:
         self._refreshing = True
         try:
-            case = self.document.case
-            table_id = str(param(case, "depth_table"))
+            dowels = self.document.case.dowels
+            table_id = dowels.table
             if self.table_combo.findText(table_id) < 0:
                 self.table_combo.addItem(table_id)
             self.table_combo.setCurrentText(table_id)
-            self.sex_combo.setCurrentText(str(param(case, "sex")))
-            build = str(param(case, "build"))
+            self.sex_combo.setCurrentText(dowels.sex)
+            build = dowels.build_text
             if self.build_combo.findText(build) < 0:
                 self.build_combo.addItem(build)
             self.build_combo.setCurrentText(build)
@@ -126,10 +132,18 @@ class DowelsPanel(QWidget):
             self._refreshing = False
 
     # ------------------------------------------------------------ widgets → commands
-    def _set(self, key: str, value: object, label: str) -> None:
-        if self._refreshing or param(self.document.case, key) == value:
+    def _set(self, name: str, text: str) -> None:
+        """Table, sex or build from a combo box (one undoable command)."""
+        if self._refreshing:
             return
-        self.document.push(SetParameter(key=key, value=value, label=label))
+        try:
+            value = parse_build(text) if name == "build" else text
+        except WorkbenchError as exc:
+            self.warnings.setText(str(exc))
+            return
+        if getattr(self.document.case.dowels, name) == value:
+            return
+        self.document.push(SetDowelSettings(**{name: value}))
 
     def _on_item_changed(self, item: QTableWidgetItem) -> None:
         if self._refreshing:
@@ -148,29 +162,26 @@ class DowelsPanel(QWidget):
             self.set_excluded(code, item.checkState() != Qt.CheckState.Checked)
 
     def set_depth(self, code: str, depth_mm: float) -> None:
-        """Override one dowel's depth (mm)."""
-        overrides = dict(param(self.document.case, "depth_overrides"))
-        overrides[code] = round(float(depth_mm), 2)
-        self.document.push(SetParameter(key="depth_overrides", value=overrides,
-                                        label=f"Set depth of {code} to {depth_mm:.1f} mm"))
+        """Override one dowel's depth (mm, kept to 0.01 mm)."""
+        try:
+            command = SetDepthOverride(code, round(float(depth_mm), 2))
+        except WorkbenchError as exc:
+            self.warnings.setText(str(exc))
+            return
+        self.document.push(command)
 
     def set_excluded(self, code: str, excluded: bool) -> None:
-        current = [str(c) for c in param(self.document.case, "excluded_landmarks")]
-        new = sorted(set(current) | {code}) if excluded else [c for c in current if c != code]
-        word = "Exclude" if excluded else "Use"
-        self.document.push(SetParameter(key="excluded_landmarks", value=new,
-                                        label=f"{word} dowel {code}"))
+        """Switch one dowel off (``excluded``) or back on."""
+        if (code in self.document.case.dowels.excluded) != bool(excluded):
+            self.document.push(SetDowelExclusion(code, bool(excluded)))
 
     def clear_override(self) -> None:
         rows = self.table.selectionModel().selectedRows()
         if not rows:
             return
         code = self.plan_codes[rows[0].row()]
-        overrides = dict(param(self.document.case, "depth_overrides"))
-        if code in overrides:
-            del overrides[code]
-            self.document.push(SetParameter(key="depth_overrides", value=overrides,
-                                            label=f"Use the table depth for {code}"))
+        if code in self.document.case.dowels.overrides:
+            self.document.push(SetDepthOverride(code, None))
 
 
 def _citation(table_id: str) -> str:

@@ -19,9 +19,10 @@ from PySide6.QtWidgets import (
     QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
-from workbench.commands.case_edits import DeleteParameter, SetParameter
 from workbench.commands.landmarks import DeleteLandmark, SetLandmarkStatus
+from workbench.commands.reconstruction_setup import SetOrientation
 from workbench.io.catalogue import LandmarkCatalogue
+from workbench.model.reconstruction_setup import Orientation
 from workbench.qt.document import Document
 
 STATUS_TEXT = {"placed": "placed", "suggested": "suggested", "absent": "absent",
@@ -122,7 +123,7 @@ class LandmarksPanel(QWidget):
 
     # ------------------------------------------------------------ state → widgets
     def _on_part(self, part: str) -> None:
-        if part in ("landmarks", "parameters"):
+        if part in ("landmarks", "orientation"):
             self.refresh()
 
     def refresh(self) -> None:
@@ -144,9 +145,9 @@ class LandmarksPanel(QWidget):
                     cell = self.table.item(row, col)
                     cell.setBackground(QColor(colour) if colour else QColor(0, 0, 0, 0))
             self.summary.setText(", ".join(f"{n} {s}" for s, n in counts.items()))
-            value = self.document.case.parameters.get("orientation")
-            self.anterior.setCurrentText(_direction_name(value, "anterior"))
-            self.superior.setCurrentText(_direction_name(value, "superior"))
+            orient = self.document.case.orientation
+            self.anterior.setCurrentText(_direction_name(orient, "anterior"))
+            self.superior.setCurrentText(_direction_name(orient, "superior"))
             self._show_description()
         finally:
             self._refreshing = False
@@ -208,19 +209,21 @@ class LandmarksPanel(QWidget):
             return
         a, s = DIRECTIONS[self.anterior.currentText()], DIRECTIONS[self.superior.currentText()]
         if a is None or s is None:
-            if "orientation" in self.document.case.parameters:
-                self.document.push(DeleteParameter(key="orientation", label="Automatic orientation"))
+            if self.document.case.orientation is not None:
+                self.document.push(SetOrientation(None))
             return
         if abs(sum(x * y for x, y in zip(a, s, strict=True))) > 0:
             return  # wait for a perpendicular pair
-        self.document.push(SetParameter(key="orientation", label="Set skull orientation",
-                                        value={"anterior": list(a), "superior": list(s)}))
+        new = Orientation(a, s)
+        if new != self.document.case.orientation:
+            self.document.push(SetOrientation(new))
 
 
-def _direction_name(value: object, key: str) -> str:
-    if not value:
+def _direction_name(orient: Orientation | None, key: str) -> str:
+    """The combo box entry of one direction (``"auto"`` if none or not along an axis)."""
+    if orient is None:
         return "auto"
-    vec = tuple(int(round(v)) for v in value[key])  # type: ignore[index]
+    vec = tuple(int(round(v)) for v in getattr(orient, key))
     for name, d in DIRECTIONS.items():
         if d == vec:
             return name

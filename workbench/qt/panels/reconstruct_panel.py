@@ -3,9 +3,10 @@
 The fit runs in a worker (the window's ``reconstruct`` request).  Guides are
 listed with their values (mm, head frame: a vertical line fixes x, a
 horizontal line y, a lateral point (y, z)); editing a value stores the whole
-guide list under the ``guides`` parameter with a
-:class:`~workbench.commands.case_edits.SetParameter` and, with "Re-fit on
-change", the window fits again.  Published-rule predictions for the same
+guide list as the case's ``guides`` part with a
+:class:`~workbench.commands.reconstruction_setup.SetGuides` and, with
+"Re-fit on change", the window fits again ("Recompute" sets the part back
+to None: guides computed from the skull).  Published-rule predictions for the same
 features are shown beside them for comparison.
 """
 
@@ -17,9 +18,11 @@ from PySide6.QtWidgets import (
     QPushButton, QSlider, QSpinBox, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
-from workbench.commands.case_edits import DeleteParameter, SetParameter
+from workbench.commands.reconstruction_setup import SetGuides
+from workbench.core.errors import WorkbenchError
 from workbench.qt.document import Document
-from workbench.qt.jobs import FitResult, guides_state
+from workbench.qt.jobs import FitResult, guides_state, user_guides
+from workbench.services.guides import Guide
 
 GUIDE_COLUMNS = ("Guide", "Value mm", "On", "Rule")
 FIGURES = (("max_tip_error_mm", "largest dowel-tip error", "mm"),
@@ -100,6 +103,7 @@ class ReconstructPanel(QWidget):
         layout.addWidget(QLabel("<b>Published predictions</b>"))
         layout.addWidget(self.predictions)
         layout.addWidget(self.figures)
+        document.part_changed.connect(self._on_part)
 
     # ------------------------------------------------------------ results → widgets
     def show_opacity(self, value: float) -> None:
@@ -110,26 +114,49 @@ class ReconstructPanel(QWidget):
         finally:
             self.opacity.blockSignals(blocked)
 
+    def _on_part(self, part: str) -> None:
+        """The case's guides changed (an edit, undo, redo): list the stored ones.
+
+        When the part goes back to None (computed guides), the list stays
+        until the next fit computes them.
+        """
+        stored = self.document.case.guides
+        if part != "guides" or stored is None or stored == guides_state(self.guides):
+            return   # (the list shown is what was just stored: an edit in this table)
+        try:
+            guides = user_guides(self.document.case)
+        except WorkbenchError as exc:
+            self.figures.setText(f"stored guides not usable: {exc}")
+            return
+        self._refreshing = True
+        try:
+            self._show_guides(guides or [])
+        finally:
+            self._refreshing = False
+
+    def _show_guides(self, guides: list[Guide]) -> None:
+        self.guides = list(guides)
+        self.guide_table.setRowCount(len(self.guides))
+        for row, g in enumerate(self.guides):
+            value = ", ".join(f"{v:.1f}" for v in g.value)
+            cells = [f"{g.label} [{g.kind}]", value, "", g.rule_id]
+            for col, text in enumerate(cells):
+                item = QTableWidgetItem(text)
+                flags = Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsEnabled
+                if col == 1:
+                    flags |= Qt.ItemFlag.ItemIsEditable
+                if col == 2:
+                    flags |= Qt.ItemFlag.ItemIsUserCheckable
+                    item.setCheckState(Qt.CheckState.Checked if g.enabled
+                                       else Qt.CheckState.Unchecked)
+                item.setFlags(flags)
+                item.setToolTip(f"{g.citation}\n{g.derivation}\nsource: {g.source}")
+                self.guide_table.setItem(row, col, item)
+
     def show_result(self, fit: FitResult | None) -> None:
         self._refreshing = True
         try:
-            self.guides = list(fit.guides) if fit is not None else []
-            self.guide_table.setRowCount(len(self.guides))
-            for row, g in enumerate(self.guides):
-                value = ", ".join(f"{v:.1f}" for v in g.value)
-                cells = [f"{g.label} [{g.kind}]", value, "", g.rule_id]
-                for col, text in enumerate(cells):
-                    item = QTableWidgetItem(text)
-                    flags = Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsEnabled
-                    if col == 1:
-                        flags |= Qt.ItemFlag.ItemIsEditable
-                    if col == 2:
-                        flags |= Qt.ItemFlag.ItemIsUserCheckable
-                        item.setCheckState(Qt.CheckState.Checked if g.enabled
-                                           else Qt.CheckState.Unchecked)
-                    item.setFlags(flags)
-                    item.setToolTip(f"{g.citation}\n{g.derivation}\nsource: {g.source}")
-                    self.guide_table.setItem(row, col, item)
+            self._show_guides(list(fit.guides) if fit is not None else [])
             if fit is None:
                 self.figures.setText("Not fitted yet.")
                 self.predictions.setText("")
@@ -139,7 +166,7 @@ class ReconstructPanel(QWidget):
             if fit.spread is not None:
                 lines.append(f"ensemble spread: median {_num(float(_median(fit.spread)))} mm, "
                              f"max {_num(float(fit.spread.max()))} mm")
-            lines += [f"note: {w}" for w in fit.recon.warnings]
+            lines += [f"note: {w}" for w in fit.warnings]
             self.figures.setText("\n".join(lines))
             self.predictions.setText("\n".join(
                 f"{p.label}: {p.quantity} {p.value_mm:.1f} mm" for p in fit.predictions[:8]))
@@ -177,12 +204,11 @@ class ReconstructPanel(QWidget):
         guides[row] = new
         self.guides = guides
         what = "Move" if value is not None else ("Use" if enabled else "Switch off")
-        self.document.push(SetParameter(key="guides", value=guides_state(guides),
-                                        label=f"{what} guide {g.id}"))
+        self.document.push(SetGuides(guides_state(guides), label=f"{what} guide {g.id}"))
 
     def recompute_guides(self) -> None:
-        if "guides" in self.document.case.parameters:
-            self.document.push(DeleteParameter(key="guides", label="Recompute guides"))
+        if self.document.case.guides is not None:
+            self.document.push(SetGuides(None, label="Recompute guides"))
 
 
 def _num(value: object) -> str:
