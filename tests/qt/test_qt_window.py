@@ -236,3 +236,18 @@ def test_gui_command_screenshot(qtbot, skull_obj, tmp_path):  # noqa: ANN001
     assert (image.width(), image.height()) == (900, 600)
     centre = [image.pixelColor(x, 300).lightness() for x in range(50, 550, 10)]
     assert np.var(centre) > 20.0
+
+
+def test_gui_command_names_a_missing_input(tmp_path):  # noqa: ANN001
+    import argparse
+
+    from workbench.cli import gui_cmd
+    from workbench.core.errors import InputError
+
+    parser = argparse.ArgumentParser()
+    gui_cmd.register(parser.add_subparsers())
+    missing = tmp_path / "nowhere" / "skull.ply"
+    for argv in (["gui", str(missing)], ["gui", "--ct", str(missing)],
+                 ["gui", "--truth", str(missing)]):
+        with pytest.raises(InputError, match="skull.ply"):
+            gui_cmd.options_from(parser.parse_args(argv))

@@ -24,17 +24,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("case", nargs="?", type=Path, default=None,
-                   help="case file (.fcase) or skull mesh (.ply .stl .obj .vtk .vtp) to open")
-    p.add_argument("--ct", type=Path, default=None, help="CT volume or DICOM folder to open")
+    p.add_argument("case", nargs="?", default=None,
+                   help="case file (.fcase) or skull mesh (.ply .stl .obj .vtk .vtp) to open, "
+                        "or sample:NAME")
+    p.add_argument("--ct", default=None,
+                   help="CT volume or DICOM folder to open, or sample:NAME (e.g. sample:headsq)")
     p.add_argument("--units", choices=["auto", "mm", "cm", "m", "in"], default="auto",
                    help="units of a skull mesh (default: judged from its size)")
     p.add_argument("--scale", type=float, default=None, metavar="MM_PER_UNIT",
                    help="millimetres per file unit of a skull mesh")
     p.add_argument("--suggest", action="store_true", help="suggest the skull landmarks")
     p.add_argument("--reconstruct", action="store_true", help="reconstruct the face")
-    p.add_argument("--truth", type=Path, default=None,
-                   help="true skin surface to compare with (same frame, mm)")
+    p.add_argument("--truth", default=None,
+                   help="true skin surface to compare with (same frame, mm), or sample:NAME")
     p.add_argument("--tool", choices=TOOLS, default="landmarks", help="dock shown in front")
     p.add_argument("--screenshot", type=Path, default=None, metavar="FILE.png",
                    help="save a picture of the window after loading, then exit")
@@ -48,18 +50,21 @@ def options_from(args: argparse.Namespace):  # noqa: ANN201 - LaunchOptions
         w, h = (int(v) for v in str(args.size).lower().split("x"))
     except ValueError:
         raise InputError("--size", f"expected WxH, e.g. 1400x900, got {args.size!r}") from None
+    from workbench.io.samples import resolve_input
+
     case = skull = None
     if args.case is not None:
-        if not args.case.exists():
-            raise InputError(args.case, "file not found")
-        if args.case.suffix.lower() == ".fcase":
-            case = args.case
+        path = resolve_input(str(args.case))
+        if path.suffix.lower() == ".fcase":
+            case = path
         else:
-            skull = args.case
+            skull = path
+    ct = None if args.ct is None else resolve_input(str(args.ct))
+    truth = None if args.truth is None else resolve_input(str(args.truth))
     if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
         raise InputError(args.screenshot, "the screenshot must be a .png file")
-    return LaunchOptions(case=case, skull=skull, ct=args.ct, units=args.units, scale=args.scale,
-                         suggest=args.suggest, reconstruct=args.reconstruct, truth=args.truth,
+    return LaunchOptions(case=case, skull=skull, ct=ct, units=args.units, scale=args.scale,
+                         suggest=args.suggest, reconstruct=args.reconstruct, truth=truth,
                          tool=args.tool, screenshot=args.screenshot, size=(w, h))
 
 
