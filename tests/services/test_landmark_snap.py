@@ -102,6 +102,20 @@ def test_snapping_is_idempotent_for_every_rule(skull):  # noqa: ANN001
         assert again.moved_mm < 0.5, (code, first.explanation, again.explanation)
 
 
+def test_snap_result_is_a_fixed_point_from_perturbed_starts(skull):  # noqa: ANN001
+    """Whatever the start near the feature, snapping the result again keeps it (< 0.5 mm)."""
+    mesh, lms, _, index = skull
+    rng = np.random.default_rng(7)
+    for code in ("sm", "ss", "g", "pg"):
+        for offset in rng.normal(0.0, 2.0, (4, 3)):
+            start = index.closest_points((lms[code].position + offset)[None]).points[0]
+            first = snap_landmark(mesh, lms, code, start)
+            if not first.settled or first.moved_mm == 0.0 and first.rule is None:
+                continue
+            again = snap_landmark(mesh, _with(lms, code, first.position), code)
+            assert again.moved_mm < 0.5, (code, offset, first.explanation, again.explanation)
+
+
 def test_lateral_and_deepest_rules_follow_the_head_frame(skull):  # noqa: ANN001
     mesh, lms, to_head, _ = skull
     for code, sign in (("zy_l", 1.0), ("zy_r", -1.0)):
