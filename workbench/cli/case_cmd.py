@@ -26,11 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     new.add_argument("--out", type=Path, required=True, help="case file to write (.fcase)")
     new.set_defaults(handler=run_new)
 
-    info = csub.add_parser("info", help="summary, evidence check and audit log (JSON)")
+    info = csub.add_parser("info", help="summary, evidence check and audit log (JSON)",
+                           description="audit_chain.status is 'verified (N records)', "
+                                       "'NOT VERIFIED: ...' naming the first bad record, or "
+                                       "'audit log predates the hash chain (not verifiable)'")
     info.add_argument("case", type=Path)
     info.add_argument("--allow-tampered", action="store_true",
-                      help="report a case whose evidence no longer matches its hashes "
-                           "instead of refusing it")
+                      help="report a case whose evidence no longer matches its hashes, or "
+                           "whose audit log was edited, instead of refusing it")
     info.set_defaults(handler=run_info)
 
     ev = csub.add_parser("evidence", help="extract an original evidence file")

@@ -10,7 +10,8 @@ Layout
 ``evidence/<name>``
     Original evidence files, byte-for-byte (stored, not compressed).
 ``audit.jsonl``
-    Append-only audit log (see :mod:`workbench.model.audit`).
+    Append-only audit log (see :mod:`workbench.model.audit`), hash-chained;
+    ``case.json`` ``audit_chain`` anchors its head and length.
 
 Guarantees
 ----------
@@ -27,8 +28,13 @@ Guarantees
 - Loading runs the data-only migrations, validates against the schema, builds
   objects through :data:`workbench.model.case.PARTS` only (no class named in
   the file is ever instantiated, nothing is unpickled) and re-hashes every
-  array and evidence file.  A mismatch is refused unless
-  ``allow_tampered=True``, which loads and reports it in ``evidence_status``.
+  array and evidence file, and checks the audit log's hash chain against its
+  anchor.  A mismatch (or an edited, deleted, reordered or added audit
+  record) is refused unless ``allow_tampered=True``, which loads and reports
+  it in ``evidence_status`` (the log under ``audit.jsonl``) and
+  ``audit_chain``.  A log written before the chain existed loads as
+  ``audit_chain.state == "unchained"`` (not verifiable, not an error); the
+  next save chains the new records onto it.
 """
 
 from __future__ import annotations
@@ -55,7 +61,14 @@ import numpy as np
 import workbench
 from workbench.core.errors import InputError
 from workbench.io.migrations import CURRENT_VERSION, SCHEMA_ID, MigrationError, migrate
-from workbench.model.audit import AuditLog, make_record
+from workbench.model.audit import (
+    AuditLog,
+    ChainStatus,
+    chain_anchor,
+    make_record,
+    parse_records,
+    verify_chain,
+)
 from workbench.model.case import PARTS, Case
 from workbench.model.evidence import (
     EvidenceFile,
@@ -90,12 +103,16 @@ class LoadedCase:
         The stored audit log, oldest first.
     evidence_status : mapping
         ``{member: "ok" or what is wrong}`` for every ``evidence/...`` and
-        ``arrays/...`` member the case refers to.
+        ``arrays/...`` member the case refers to, and ``audit.jsonl`` (its
+        hash chain) when the file has a log.
+    audit_chain : ChainStatus
+        The audit log's hash-chain check (``.summary()`` for people).
     """
 
     case: Case
     audit_records: tuple[dict[str, Any], ...]
     evidence_status: Mapping[str, str]
+    audit_chain: ChainStatus = ChainStatus("unchained", 0)
 
     @property
     def tampered(self) -> bool:
@@ -225,7 +242,8 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
     ------
     CaseFileError
         Not a zip, truncated, invalid JSON, schema violation, missing member,
-        or (unless ``allow_tampered``) an array or evidence hash mismatch.
+        or (unless ``allow_tampered``) an array or evidence hash mismatch or a
+        broken audit chain (naming the first bad record).
     """
     path = Path(path)
     status: dict[str, str] = {}
@@ -235,21 +253,34 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
         case = _build_case(doc, lambda ref: _load_array(archive, path, status, ref), path)
         for item in store:
             status[f"evidence/{item.name}"] = _evidence_status(archive, item)
-        audit_bytes = archive.read(AUDIT) if AUDIT in archive.namelist() else b""
+        has_log = AUDIT in archive.namelist()
+        audit_bytes = archive.read(AUDIT) if has_log else b""
+    chain, damaged = _check_chain(audit_bytes, case, doc.get("audit_chain"))
+    if not chain.ok or (has_log and damaged is None):
+        status[AUDIT] = OK if chain.ok else chain.problem
     bad = {member: s for member, s in status.items() if s != OK}
     if bad and not allow_tampered:
         listing = "; ".join(f"{member}: {s}" for member, s in bad.items())
         raise CaseFileError(path, f"integrity check failed, refusing to open: {listing}",
                             "it was modified or damaged outside the workbench; "
                             "load with allow_tampered=True to inspect it")
-    try:
-        case.audit = AuditLog(audit_bytes)
-    except ValueError as error:
-        raise CaseFileError(path, f"the audit log is damaged ({error})") from None
+    if damaged is not None:
+        raise CaseFileError(path, f"the audit log is damaged ({damaged})")
+    case.audit = AuditLog(audit_bytes, case.meta.case_id)
     for item in store:
         case.retain_evidence(item)
     case.source_path = path.resolve()
-    return LoadedCase(case, case.audit.records, MappingProxyType(status))
+    return LoadedCase(case, case.audit.records, MappingProxyType(status), chain)
+
+
+def _check_chain(audit_bytes: bytes, case: Case,
+                 anchor: Mapping[str, Any] | None) -> tuple[ChainStatus, ValueError | None]:
+    """The audit log's chain status, or the parse error of a log that is not JSON lines."""
+    try:
+        records = parse_records(audit_bytes)
+    except ValueError as error:
+        return ChainStatus("unchained", 0), error
+    return verify_chain(records, case.meta.case_id, anchor), None
 
 
 def evidence_bytes(path: PathArg, name: str, *, allow_tampered: bool = False) -> bytes:
@@ -267,8 +298,9 @@ def evidence_bytes(path: PathArg, name: str, *, allow_tampered: bool = False) ->
 
 
 # ---------------------------------------------------------------- writing
-def _encode(case: Case, meta_state: dict[str, Any]) -> tuple[dict[str, Any], dict[str, bytes]]:
-    """``case.json`` document and ``{sha256: npy bytes}`` for ``case``."""
+def _encode(case: Case, meta_state: dict[str, Any],
+            audit: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """``case.json`` document and ``{sha256: npy bytes}`` for ``case`` with log ``audit``."""
     doc: dict[str, Any] = {"@schema": SCHEMA_ID, "format_version": CURRENT_VERSION,
                            "software": f"forensic-workbench {workbench.__version__}"}
     blobs: dict[str, bytes] = {}
@@ -281,7 +313,14 @@ def _encode(case: Case, meta_state: dict[str, Any]) -> tuple[dict[str, Any], dic
         doc[name] = state
         if name == "evidence":
             doc["evidence_store"] = [e.to_state() for e in case.retained_evidence.values()]
+    doc["audit_chain"] = chain_anchor(parse_records(audit))
     return doc, blobs
+
+
+def _bound_log(case: Case) -> AuditLog:
+    """``case.audit``, told its case id (the chain's genesis) before it is encoded."""
+    case.audit.case_id = case.meta.case_id
+    return case.audit
 
 
 def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[zipfile.ZipFile]:
@@ -428,11 +467,11 @@ def save_case(case: Case, path: PathArg, stack: _Cleanable | None = None) -> Pat
     """
     path = Path(path).resolve()
     meta = case.meta.touched()
-    doc, blobs = _encode(case, meta.to_state())
-    validate_case_json(doc, path)
     record = make_record("save", "Save case", meta.examiner,
                          {"file": path.name, "format_version": CURRENT_VERSION})
-    audit = case.audit.encode([record])
+    audit = _bound_log(case).encode([record])
+    doc, blobs = _encode(case, meta.to_state(), audit)
+    validate_case_json(doc, path)
     _write_case(path, case, doc, blobs, audit, guard_audit=True)
     case.audit.mark_persisted(audit, [record])
     case.replace("meta", meta)
@@ -456,7 +495,7 @@ def detached_copy(case: Case) -> Case:
         copy.retain_evidence(item)
     for name in PARTS:
         copy.replace(name, case.part(name))
-    copy.audit = AuditLog(case.audit.encode())
+    copy.audit = AuditLog(_bound_log(case).encode(), case.meta.case_id)
     copy.source_path = case.source_path
     return copy
 
@@ -480,9 +519,10 @@ def write_case_snapshot(case: Case, path: PathArg) -> Path:
         ``path``, resolved.
     """
     path = Path(path).resolve()
-    doc, blobs = _encode(case, case.meta.to_state())
+    audit = _bound_log(case).encode()
+    doc, blobs = _encode(case, case.meta.to_state(), audit)
     validate_case_json(doc, path)
-    _write_case(path, case, doc, blobs, case.audit.encode(), guard_audit=False)
+    _write_case(path, case, doc, blobs, audit, guard_audit=False)
     return path
 
 

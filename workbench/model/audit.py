@@ -24,17 +24,44 @@ parameters : dict
     JSON parameters of the command (positions in mm, input frame).
 table_ids : list of str
     Ids of data tables the operation used.
+
+Hash chain
+----------
+Records written by a case file also carry two chain fields (added when they
+are first written, see :meth:`AuditLog.encode`; :attr:`AuditLog.records`
+leaves them out):
+
+seq : int
+    The record's position in the log, from 0.
+prev : str
+    SHA-256 (hex) of the previous record's canonical encoding
+    (:func:`encode_record`: the JSON line with keys sorted, chain fields
+    included, and its newline).  The first chained record's ``prev`` is
+    :func:`genesis`: SHA-256 of ``"forensic-workbench audit chain v1"``,
+    the case id and the canonical lines of any records that predate the
+    chain (logs written before the chain existed), so a log is bound to its
+    case and an older prefix is sealed as one block.
+
+The case file anchors the head (:func:`chain_anchor`: hash of the last
+record, record count, count of records that predate the chain) in
+``case.json``; :func:`verify_chain` checks a log against it and names the
+first bad record.  The chain shows edits made without recomputing it; it is
+not a signature (whoever knows this scheme can rebuild a consistent log).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from workbench.model.meta import now_iso
 
 ACTIONS = ("do", "undo", "redo", "abort", "save")
+CHAIN_FIELDS = ("prev", "seq")
+GENESIS_TAG = b"forensic-workbench audit chain v1"
 
 
 def make_record(
@@ -88,6 +115,171 @@ def parse_records(data: bytes) -> list[dict[str, Any]]:
     return records
 
 
+def record_hash(record: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of ``record``'s canonical encoding (:func:`encode_record`)."""
+    return hashlib.sha256(encode_record(record)).hexdigest()
+
+
+def genesis(case_id: str, older: Sequence[Mapping[str, Any]] = ()) -> str:
+    """The ``prev`` of a case's first chained record.
+
+    SHA-256 of the tag, the case id and the canonical lines of the ``older``
+    records (those written before the chain existed, which carry no ``prev``).
+    """
+    digest = hashlib.sha256(GENESIS_TAG + b"\0" + case_id.encode("utf-8") + b"\0")
+    for record in older:
+        digest.update(encode_record(record))
+    return digest.hexdigest()
+
+
+def chain_anchor(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """What ``case.json`` stores to pin a log: head hash, record count, unchained prefix."""
+    older = next((i for i, r in enumerate(records) if "prev" in r), len(records))
+    head = record_hash(records[-1]) if records else ""
+    return {"head": head, "records": len(records), "unchained": older}
+
+
+@dataclass(frozen=True)
+class ChainStatus:
+    """Result of :func:`verify_chain`.
+
+    Attributes
+    ----------
+    state : str
+        ``"verified"``, ``"unchained"`` (the log predates the hash chain and
+        cannot be checked) or ``"broken"``.
+    records : int
+        Records in the log.
+    unchained : int
+        Leading records that predate the chain (checked only as one block).
+    index : int or None
+        First bad record (``"broken"`` only; may equal ``records`` for a
+        record missing at the end).
+    problem : str
+        What is wrong, one sentence (``"broken"`` only).
+    """
+
+    state: str
+    records: int
+    unchained: int = 0
+    index: int | None = None
+    problem: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """Not broken (a log that predates the chain is not an integrity failure)."""
+        return self.state != "broken"
+
+    def summary(self) -> str:
+        if self.state == "unchained":
+            return "audit log predates the hash chain (not verifiable)"
+        if self.state == "broken":
+            return f"NOT VERIFIED: {self.problem}"
+        older = (f"; the first {self.unchained} predate the hash chain and are sealed as "
+                 "one block" if self.unchained else "")
+        return f"verified ({self.records} records{older})"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"status": self.summary(), "state": self.state, "records": self.records,
+                "unchained": self.unchained, "first_bad_record": self.index}
+
+
+def _name(records: Sequence[Mapping[str, Any]], index: int) -> str:
+    if not 0 <= index < len(records):
+        return f"record {index}"
+    r = records[index]
+    what = " ".join(str(r.get(k, "?")) for k in ("action", "operation") if r.get(k))
+    return f"record {index} ({r.get('time', 'no time')}, {what or 'no action'})"
+
+
+def _has_chain_fields(record: Mapping[str, Any]) -> bool:
+    seq = record.get("seq")
+    return (isinstance(record.get("prev"), str) and isinstance(seq, int)
+            and not isinstance(seq, bool))
+
+
+def _broken(records: Sequence[Mapping[str, Any]], older: int, index: int,
+            problem: str) -> ChainStatus:
+    return ChainStatus("broken", len(records), older, index, problem)
+
+
+def verify_chain(records: Sequence[Mapping[str, Any]], case_id: str,
+                 anchor: Mapping[str, Any] | None) -> ChainStatus:
+    """Check ``records`` (parsed ``audit.jsonl``) against the chain and its ``anchor``.
+
+    ``anchor`` is the ``case.json`` entry written by :func:`chain_anchor`, or
+    ``None`` for a file written before the chain existed.
+    """
+    n = len(records)
+    if anchor is None:
+        chained = next((i for i, r in enumerate(records) if "prev" in r), None)
+        if chained is None:
+            return ChainStatus("unchained", n, n)
+        return _broken(records, chained, chained, f"{_name(records, chained)} carries a chain "
+                       "hash but case.json has no audit chain anchor (it was removed)")
+    older = int(anchor["unchained"])
+    for i in range(min(older, n)):
+        if "prev" in records[i]:
+            return _broken(records, older, i, f"{_name(records, i)} carries a chain hash but "
+                           f"the anchor says the first {older} records predate the chain")
+    links = [genesis(case_id, records[:older]) if n >= older else ""]
+    links += [record_hash(r) for r in records[older:]]
+    for i in range(older, n):
+        record = records[i]
+        if not _has_chain_fields(record):
+            return _broken(records, older, i, f"{_name(records, i)} has no valid chain fields "
+                           "(edited or inserted)")
+        seq = record["seq"]
+        if seq != i:
+            return _broken(records, older, i, _order_problem(records, i, seq))
+        if record["prev"] != links[i - older]:
+            return _broken(records, older, *_edit_problem(records, older, i, links, anchor))
+    expected = int(anchor["records"])
+    if n < expected:
+        last = f"; the log ends with {_name(records, n - 1)}" if n else ""
+        return _broken(records, older, n, f"record {n} is missing: the anchor counts {expected} "
+                       f"records, the log has {n} (deleted at the end){last}")
+    if n > expected:
+        return _broken(records, older, expected, f"{_name(records, expected)} was added after "
+                       f"the last save: the anchor counts {expected} records, the log has {n}")
+    if n and links[-1] != anchor["head"]:
+        return _broken(records, older, n - 1, f"{_name(records, n - 1)} was edited, or the "
+                       "anchor in case.json was: the last record's hash does not match it")
+    return ChainStatus("verified", n, older)
+
+
+def _order_problem(records: Sequence[Mapping[str, Any]], i: int, seq: int) -> str:
+    """Why the record at position ``i`` carries sequence number ``seq``."""
+    if seq < i:
+        return (f"{_name(records, i)} was inserted or duplicated: it claims the position of "
+                f"record {seq}")
+    later = next((j for j in range(i + 1, len(records)) if records[j].get("seq") == i), None)
+    if later is not None:
+        return (f"records reordered: {_name(records, i)} was written as record {seq}, and "
+                f"the one written as record {i} is now at position {later}")
+    return (f"record {i} is missing (deleted): position {i} holds "
+            f"{_name(records, i)}, written as record {seq}")
+
+
+def _edit_problem(records: Sequence[Mapping[str, Any]], older: int, i: int,
+                  links: Sequence[str], anchor: Mapping[str, Any]) -> tuple[int, str]:
+    """The record at ``i`` does not follow its predecessor: which one changed."""
+    if i + 1 < len(records):
+        next_ok = records[i + 1].get("prev") == links[i + 1 - older]
+    else:
+        next_ok = links[-1] == anchor["head"]
+    if not next_ok:
+        return i, f"{_name(records, i)} was edited (its chain hash does not match)"
+    if i == 0:
+        return i, (f"{_name(records, i)} does not start this case's chain (the log was "
+                   "copied from another case, or the case id was changed)")
+    if i == older:
+        return i - 1, (f"the first {older} records, which predate the chain, were edited, "
+                       f"reordered or deleted (up to {_name(records, i - 1)})")
+    return i - 1, (f"{_name(records, i - 1)} was edited: its hash does not match the "
+                   f"next record's prev")
+
+
 class AuditLog:
     """Append-only list of audit records.
 
@@ -95,20 +287,26 @@ class AuditLog:
     ----------
     persisted : bytes
         ``audit.jsonl`` bytes already stored in a case file.
+    case_id : str, optional
+        The case the log belongs to; it sets the chain's :func:`genesis`.  The
+        case file sets it before writing (a log with no chained record yet
+        cannot be encoded for a file without it).
     """
 
-    def __init__(self, persisted: bytes = b"") -> None:
+    def __init__(self, persisted: bytes = b"", case_id: str | None = None) -> None:
         self._persisted_bytes = bytes(persisted)
         self._records = parse_records(self._persisted_bytes)
         self._n_persisted = len(self._records)
+        self.case_id = case_id
 
     def __len__(self) -> int:
         return len(self._records)
 
     @property
     def records(self) -> tuple[dict[str, Any], ...]:
-        """Every record, oldest first (copies)."""
-        return tuple(json.loads(json.dumps(r)) for r in self._records)
+        """Every record, oldest first (copies, without the chain fields)."""
+        return tuple(json.loads(json.dumps({k: v for k, v in r.items() if k not in CHAIN_FIELDS}))
+                     for r in self._records)
 
     @property
     def pending(self) -> tuple[dict[str, Any], ...]:
@@ -128,14 +326,33 @@ class AuditLog:
     def __call__(self, record: Mapping[str, Any]) -> None:
         self.append(record)
 
+    def _last_link(self) -> str:
+        """The ``prev`` of the next record written after the persisted ones."""
+        persisted = self._records[: self._n_persisted]
+        if persisted and "prev" in persisted[-1]:
+            return record_hash(persisted[-1])
+        return genesis(self.case_id or "", persisted)
+
     def encode(self, extra: Sequence[Mapping[str, Any]] = ()) -> bytes:
-        """Persisted bytes + pending records + ``extra``, as ``audit.jsonl`` bytes."""
+        """Persisted bytes + pending records + ``extra``, as ``audit.jsonl`` bytes.
+
+        Pending and extra records are chained here (``seq`` and ``prev``, see
+        the module docstring); the persisted bytes are kept as they are.
+        """
+        link, lines = self._last_link(), []
         tail = [*self._records[self._n_persisted :], *extra]
-        return self._persisted_bytes + b"".join(encode_record(r) for r in tail)
+        for seq, record in enumerate(tail, start=self._n_persisted):
+            chained = {k: v for k, v in record.items() if k not in CHAIN_FIELDS}
+            line = encode_record({**chained, "prev": link, "seq": seq})
+            link = hashlib.sha256(line).hexdigest()
+            lines.append(line)
+        return self._persisted_bytes + b"".join(lines)
 
     def mark_persisted(self, data: bytes, extra: Sequence[Mapping[str, Any]] = ()) -> None:
         """Record that ``data`` (from :meth:`encode` with ``extra``) is now on disk."""
-        for record in extra:
-            self.append(record)
+        written = parse_records(data)
+        n_pending = len(written) - len(extra) - self._n_persisted
+        later = self._records[self._n_persisted + n_pending :]
+        self._records = [*written, *later]
         self._persisted_bytes = bytes(data)
-        self._n_persisted = len(self._records)
+        self._n_persisted = len(written)

@@ -27,6 +27,7 @@ from workbench.io.meshes import read_mesh
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
 from workbench.model.meta import CaseMeta
+from workbench.model.state import thaw_json
 
 
 @dataclass
@@ -83,7 +84,8 @@ def start_case_from_skull(
             if factor != 1.0:
                 landmarks = landmarks.transformed(_scale_matrix(factor))
             notes += list(result.messages)
-            stack.push(AddEvidence(evidence=EvidenceFile.from_path(landmarks_path, "skull_landmarks")))
+            stack.push(AddEvidence(evidence=EvidenceFile.from_path(landmarks_path,
+                                                                   "skull_landmarks")))
             stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
                                           label=f"Import landmarks {Path(landmarks_path).name}"))
     stack.set_clean()
@@ -97,7 +99,12 @@ def _scale_matrix(factor: float) -> np.ndarray:
 
 
 def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) -> dict[str, Any]:
-    """JSON-able summary of a saved case: meta, evidence check, specimen, landmarks, audit."""
+    """JSON-able summary of a saved case: meta, evidence check, specimen, landmarks, audit.
+
+    ``audit_chain["status"]`` is ``"verified (N records)"``, ``"NOT VERIFIED: ..."``
+    (naming the first bad record; only with ``allow_tampered``, else loading
+    refuses) or ``"audit log predates the hash chain (not verifiable)"``.
+    """
     loaded = load_case(path, allow_tampered=allow_tampered)
     case = loaded.case
     specimen = case.specimen
@@ -117,10 +124,12 @@ def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) ->
         "software_version": case.meta.software_version,
         "evidence": [
             {"name": e.name, "role": e.role, "sha256": e.sha256, "size": e.size,
-             "units_note": e.units_note, "status": loaded.evidence_status.get(f"evidence/{e.name}", "?")}
+             "units_note": e.units_note,
+             "status": loaded.evidence_status.get(f"evidence/{e.name}", "?")}
             for e in case.evidence
         ],
         "tampered": loaded.tampered,
+        "audit_chain": loaded.audit_chain.to_json(),
         "specimen": None if specimen.mesh is None else {
             "n_vertices": specimen.mesh.n_vertices, "n_faces": specimen.mesh.n_faces,
             "units": specimen.units, "extent_mm": specimen.mesh.extent.tolist(),
@@ -130,7 +139,7 @@ def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) ->
         "dowels": case.dowels.to_state(),
         "orientation": None if case.orientation is None else case.orientation.to_state(),
         "guides": None if case.guides is None else list(case.guides.ids),
-        "parameters": dict(case.parameters),
+        "parameters": thaw_json(case.parameters),  # nested values are frozen mappings
         "audit": [{k: r.get(k) for k in ("time", "action", "operation", "examiner") if k in r}
                   for r in loaded.audit_records],
     }
