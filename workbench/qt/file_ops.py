@@ -175,8 +175,25 @@ class FileOpsMixin:
         path = Path(path)
         self.runner.submit("open", f"Opening case {path.name} …",
                            lambda: _drawable(load_case(path)),
-                           lambda loaded: self._opened(OpenedCase(loaded.case, None), path),
+                           lambda loaded: self._opened_case(loaded, path),
                            lambda exc: self.show_error(f"Could not open {path.name}", exc))
+
+    def _opened_case(self, loaded: Any, path: Path) -> None:
+        """A loaded case file in the window, with its integrity and face notes.
+
+        A case that fails its evidence, array or audit-chain check never gets
+        here: loading refuses it and the error names the first problem.
+        """
+        self._opened(OpenedCase(loaded.case, None), path)
+        chain = loaded.audit_chain.summary()
+        audit = chain if chain.startswith("audit log") else f"audit log {chain}"
+        notes = [f"{path.name}: evidence and arrays match their hashes; {audit}"]
+        if "template_hash" in loaded.case.parameters:
+            notes.append(f"{path.name} was reconstructed before, but a case file keeps the "
+                         "settings, not the face: Reconstruct face (Ctrl+R) fits it again")
+        for note in notes:
+            self.messages.append(note)
+        self.status(f"{self.status_label.text()}; {audit}")
 
     def _opened(self, opened: OpenedCase, path: Path | None) -> None:
         self.fit = None
