@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import add_units_options, write_json
+from workbench.cli.common import add_force_option, add_units_options, output_path, write_json
 from workbench.io.case_file import evidence_bytes, save_case
 from workbench.io.samples import resolve_input
 from workbench.services.case_setup import describe_case, start_case_from_skull
@@ -24,6 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="skull landmarks to import (.mrk.json .fcsv .pp .csv)")
     new.add_argument("--examiner", default="")
     new.add_argument("--out", type=Path, required=True, help="case file to write (.fcase)")
+    add_force_option(new)
     new.set_defaults(handler=run_new)
 
     info = csub.add_parser("info", help="summary, evidence check and audit log (JSON)",
@@ -40,13 +41,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("case", type=Path)
     ev.add_argument("name", help="evidence file name (see 'case info')")
     ev.add_argument("--out", type=Path, required=True)
+    add_force_option(ev)
     ev.set_defaults(handler=run_evidence)
 
 
 def run_new(args: argparse.Namespace) -> int:
-    opened = start_case_from_skull(resolve_input(args.skull), units=args.units, scale=args.scale,
+    from workbench.io.outputs import check_output_file
+
+    skull = resolve_input(args.skull)
+    check_output_file(args.out, [skull, args.landmarks], args.force)  # before the work
+    opened = start_case_from_skull(skull, units=args.units, scale=args.scale,
                                    examiner=args.examiner, landmarks_path=args.landmarks)
-    save_case(opened.case, args.out, opened.stack)
+    with output_path(args.out, args, skull, args.landmarks) as out:
+        save_case(opened.case, out, opened.stack)
     for note in opened.notes:
         print(f"note: {note}")
     print(f"wrote {args.out} (case {opened.case.meta.case_id})")
@@ -59,11 +66,13 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_evidence(args: argparse.Namespace) -> int:
-    data = evidence_bytes(args.case, args.name)
-    if args.out.exists():
-        from workbench.core.errors import InputError
+    from workbench.io.outputs import check_output_file
 
-        raise InputError(args.out, "already exists; refusing to overwrite", "choose another --out")
-    args.out.write_bytes(data)
+    check_output_file(args.out, [args.case], args.force)
+    data = evidence_bytes(args.case, args.name)
+    with output_path(args.out, args, args.case) as out:
+        tmp = out.with_name(f".{out.name}.part")
+        tmp.write_bytes(data)
+        tmp.replace(out)
     print(f"wrote {args.out} ({len(data)} bytes, verified against the recorded SHA-256)")
     return 0

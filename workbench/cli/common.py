@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from workbench.core.errors import WorkbenchError
 from workbench.core.mesh import Mesh
 from workbench.core.units import UNIT_SCALES, resolve_units
 from workbench.io.meshes import MeshReadResult, read_mesh
@@ -24,6 +25,47 @@ def add_units_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--scale", type=float, default=None, metavar="FACTOR",
                         help="explicit factor from file units to mm (instead of --units)")
+
+
+def add_force_option(parser: argparse.ArgumentParser, folder: bool = False) -> None:
+    """``--force``: replace an existing output, keeping the old one as a numbered backup."""
+    kept = "DIR.1, DIR.2 ..." if folder else "NAME.1.EXT, NAME.2.EXT ..."
+    parser.add_argument(
+        "--force", action="store_true",
+        help=f"replace an existing output; the old one is kept as {kept}. Inputs are never "
+             "replaced, not even with --force")
+
+
+def output_path(path: Path, args: argparse.Namespace, *inputs: Any):  # noqa: ANN201
+    """Context manager yielding ``path`` to write atomically (see ``workbench.io.outputs``).
+
+    Refuses an output that is one of ``inputs`` (paths or ``sample:NAME``), or
+    that exists unless ``--force`` (then kept as ``NAME.1.EXT``).
+    """
+    from workbench.io.outputs import output_file
+
+    return output_file(path, _input_paths(inputs), getattr(args, "force", False), notify=print)
+
+
+def _input_paths(inputs: tuple[Any, ...]) -> list[Path]:
+    found = []
+    for item in inputs:
+        if item is None:
+            continue
+        text = str(item)
+        if text.startswith("sample:"):
+            try:
+                found.append(resolve_input(text))
+            except (WorkbenchError, OSError):  # an unknown sample is reported by its reader
+                continue
+        else:
+            found.append(Path(text))
+    return found
+
+
+def input_paths(*inputs: Any) -> list[Path]:
+    """Inputs as paths (``sample:NAME`` resolved, None dropped), for the output checks."""
+    return _input_paths(inputs)
 
 
 def load_mesh(argument: str, args: argparse.Namespace, kind: str = "head") -> MeshReadResult:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.cli.common import add_units_options, load_mesh, write_json
+from workbench.cli.common import add_force_option, add_units_options, load_mesh, write_json
 from workbench.core.errors import InputError
 from workbench.core.units import UNIT_SCALES
 from workbench.services.compare import REGION_NAMES
@@ -24,8 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "compare", help="validate a reconstruction against the true skin (signed distances, JSON)",
         description="For every vertex of the true skin (e.g. the CT skin of the same person) the "
                     "signed distance to the reconstruction (mm; positive = reconstruction outside "
-                    "the true skin): mean absolute, RMS, signed mean and SD, % within 2.5 and 5 mm, "
-                    "overall and per face region. Both meshes must be in the same frame.")
+                    "the true skin): mean absolute, RMS, signed mean and SD, % within 2.5 and "
+                    "5 mm, overall and per face region. Both meshes must be in the same frame.")
     p.add_argument("recon", help="reconstructed skin (e.g. face.ply from workbench reconstruct)")
     p.add_argument("truth", help="true skin surface (mesh file or sample:NAME)")
     add_units_options(p)
@@ -49,7 +49,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", choices=["auto", "HEAD", "LPS", "RAS"], default="auto",
                    help="frame of the meshes, to aim the heat-map views (auto: from the template "
                         "fit when the reconstruction has its topology, else HEAD)")
-    p.add_argument("--out", type=Path, default=None, help="write compare.json and heatmap.png here")
+    p.add_argument("--out", type=Path, default=None,
+                   help="write compare.json and heatmap.png into this folder (a new one; it "
+                        "must not hold an input)")
+    add_force_option(p, folder=True)
     p.set_defaults(handler=run)
 
 
@@ -78,6 +81,12 @@ def run(args: argparse.Namespace) -> int:
     if args.region not in ("face", "all", *REGION_NAMES):
         raise InputError("--region", f"unknown region {args.region!r}",
                          f"use face, all or one of: {', '.join(REGION_NAMES)}")
+    if args.out is not None:
+        from workbench.cli.common import input_paths
+        from workbench.io.outputs import check_output_folder
+
+        check_output_folder(args.out, input_paths(args.recon, args.truth, args.template),
+                            args.force)
     recon_read = load_mesh(args.recon, args, kind="head")
     truth_args = argparse.Namespace(units=args.truth_units, scale=args.truth_scale)
     truth_read = load_mesh(args.truth, truth_args, kind="face")
@@ -111,9 +120,14 @@ def run(args: argparse.Namespace) -> int:
             frame = template_orientation(recon, skin)
         else:
             frame = "HEAD"
-        picture = render_heatmap(truth, result.truth_vertex_values(), args.out / "heatmap.png",
-                                 clim=(-args.clim, args.clim), frame=frame)
-        data["files"] = {"json": str(args.out / "compare.json"), "heatmap": str(picture)}
-        write_json(data, args.out / "compare.json")
+        from workbench.io.outputs import staged_folder
+
+        inputs = [recon_read.source_path, truth_read.source_path, args.template]
+        data["files"] = {"json": str(args.out / "compare.json"),
+                         "heatmap": str(args.out / "heatmap.png")}
+        with staged_folder(args.out, args.force, inputs, notify=print) as folder:
+            render_heatmap(truth, result.truth_vertex_values(), folder / "heatmap.png",
+                           clim=(-args.clim, args.clim), frame=frame)
+            write_json(data, folder / "compare.json")
     write_json(data, None)
     return 0

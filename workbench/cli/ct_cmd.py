@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import progress_printer, write_json
+from workbench.cli.common import add_force_option, output_path, progress_printer, write_json
 from workbench.io.mesh_formats import ply
 from workbench.io.meshes import write_mesh
 from workbench.io.samples import credit_comment, resolve_input
@@ -42,22 +42,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", type=Path, default=None,
                    help="also write a JSON report (iso rule, timings, validation)")
     p.add_argument("--quiet", action="store_true")
+    add_force_option(p)
     p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from workbench.core.errors import InputError
+    from workbench.io.outputs import check_output_file, same_file
+
     source = resolve_input(args.volume)
+    check_output_file(args.out, [source], args.force)        # before the extraction
+    if args.report is not None:
+        if same_file(args.report, args.out):
+            raise InputError(args.report, "is also the --out mesh", "give the report its own name")
+        check_output_file(args.report, [source], args.force)
     result = mesh_from_ct(
         source, tissue=args.tissue, iso=args.iso, target_triangles=args.target_triangles,
         smooth_iterations=args.smooth, largest_component=not args.all_components,
         progress=progress_printer(not args.quiet),
     )
-    if result.credit and args.out.suffix.lower() == ".ply":
-        ply.write(args.out, result.mesh, comments=[credit_comment(result.credit)])
-    else:
-        write_mesh(args.out, result.mesh)
+    with output_path(args.out, args, source) as out:
+        if result.credit and out.suffix.lower() == ".ply":
+            ply.write(out, result.mesh, comments=[credit_comment(result.credit)])
+        else:
+            write_mesh(out, result.mesh)
     if args.report:
-        write_json(result.to_dict(), args.report)
+        with output_path(args.report, args, source) as report:
+            write_json(result.to_dict(), report)
     if result.credit:
         print(f"credit: {result.credit}")
         if args.out.suffix.lower() != ".ply":

@@ -13,6 +13,11 @@
    beside a uniform 6 mm offset of the bone.
 
 Everything is written to ``--out`` (default ``demo_out/``) with a summary.
+The folder is written as a whole (a failed or interrupted demo leaves the
+previous one as it was).  A previous demo's folder is replaced without
+``--force``: everything in it is made again from built-in data, so keeping
+each run would only pile up copies.  Any other non-empty folder is refused
+unless ``--force``, which keeps it as ``DIR.1``.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import argparse
 import time
 from pathlib import Path
 
-from workbench.cli.common import mesh_summary, progress_printer, write_json
+from workbench.cli.common import add_force_option, mesh_summary, progress_printer, write_json
 from workbench.io.meshes import write_mesh
 from workbench.io.samples import fetch, registry
 from workbench.services.ct_mesh import mesh_from_ct
@@ -35,19 +40,59 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="skip the rendered pictures")
     p.add_argument("--ensemble", type=int, default=20, help="ensemble size (0 = none)")
     p.add_argument("--skip-headsq", action="store_true", help="only the built-in case")
+    add_force_option(p, folder=True)
     p.set_defaults(handler=run)
 
 
+#: written into every demo folder, so the next demo knows it may replace it
+DEMO_MARK = ".workbench-demo"
+
+
+def _is_demo_output(folder: Path) -> bool:
+    """A folder an earlier ``workbench demo`` wrote (its mark, or its summary)."""
+    if (folder / DEMO_MARK).is_file():
+        return True
+    import json
+
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(summary, dict) and "builtin" in summary and "seconds_total" in summary
+
+
+def _shown(value, temp: Path, final: Path):  # noqa: ANN001, ANN202
+    """``value`` with the staged folder's name in strings replaced by the final one."""
+    if isinstance(value, str):
+        return value.replace(str(temp), str(final))
+    if isinstance(value, dict):
+        return {k: _shown(v, temp, final) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_shown(v, temp, final) for v in value]
+    return value
+
+
 def run(args: argparse.Namespace) -> int:
+    import os
+
+    from workbench.io.outputs import staged_folder
+
     started = time.perf_counter()
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    summary: dict = {"builtin": _builtin(out / "builtin", args)}
-    if not args.skip_headsq:
-        summary["headsq"] = _headsq(out / "headsq", args)
-    summary["seconds_total"] = round(time.perf_counter() - started, 2)
-    write_json(summary, out / "summary.json")
-    print(f"wrote {out / 'summary.json'} ({summary['seconds_total']} s)")
+    final = Path(os.path.abspath(args.out))
+    # A previous demo is replaced (no backup) without --force; see the module docstring.
+    previous_demo = _is_demo_output(final)
+    replace_demo = previous_demo and not args.force
+    with staged_folder(final, args.force or previous_demo, discard_existing=replace_demo,
+                       notify=print) as out:
+        (out / DEMO_MARK).write_text("written by workbench demo; the next demo replaces this "
+                                     "folder\n", encoding="utf-8")
+        summary: dict = {"builtin": _builtin(out / "builtin", args)}
+        if not args.skip_headsq:
+            summary["headsq"] = _headsq(out / "headsq", args)
+        summary["seconds_total"] = round(time.perf_counter() - started, 2)
+        summary = _shown(summary, out, final)
+        write_json(summary, out / "summary.json")
+    print(f"wrote {args.out / 'summary.json'} ({summary['seconds_total']} s)")
     return 0
 
 
@@ -83,8 +128,9 @@ def _builtin(folder: Path, args: argparse.Namespace) -> dict:
     truth = write_mesh(folder / "truth_skin.ply", female.skin)
     settings = JobSettings(sex="male", ensemble=args.ensemble,
                            orientation=((0, 0, 1), (0, 1, 0)))
+    # the demo's own folder (staged by run()): the skull written above stays beside the face
     report = execute(skull, settings, folder, truth=truth, pictures=not args.no_picture,
-                     quiet=True)
+                     quiet=True, staged=True)
     return _figures(report, folder)
 
 
@@ -109,7 +155,8 @@ def _headsq(folder: Path, args: argparse.Namespace) -> dict | None:
     orientation = (anatomy["anterior"], anatomy["superior"], anatomy["left"])
     settings = JobSettings(sex="male", ensemble=args.ensemble, orientation=orientation)
     report = execute(folder / "bone.ply", settings, folder / "reconstruction",
-                     truth=folder / "skin.ply", pictures=not args.no_picture, quiet=True)
+                     truth=folder / "skin.ply", pictures=not args.no_picture, quiet=True,
+                     staged=True)
     return {"surfaces": surfaces, **_figures(report, folder / "reconstruction")}
 
 

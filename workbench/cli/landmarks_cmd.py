@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import add_units_options, load_mesh, write_json
+from workbench.cli.common import (
+    add_force_option, add_units_options, input_paths, load_mesh, output_path, write_json,
+)
 from workbench.core.errors import LandmarkError
 from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import read_landmarks, write_landmarks
@@ -28,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("out", type=Path)
             q.add_argument("--coordinate-system", choices=["LPS", "RAS"], default="LPS",
                            help="for .mrk.json/.fcsv output (default LPS, as Slicer writes)")
+            add_force_option(q)
         q.add_argument("--surface", choices=["skull", "skin"], required=True)
         q.add_argument("--strict", action="store_true",
                        help="fail on unknown, duplicate or undefined points")
@@ -45,6 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="mesh in the same frame and units as the landmarks")
     add_units_options(fr)
     fr.add_argument("--out", type=Path, default=None, help="where to write the aligned mesh")
+    add_force_option(fr)
     fr.set_defaults(handler=run_frame, strict=False)
 
     sg = lsub.add_parser(
@@ -64,6 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     add_orientation_options(sg)
     sg.add_argument("--out", type=Path, required=True, help="output .mrk.json (or .fcsv/.csv/.pp)")
+    add_force_option(sg)
     sg.set_defaults(handler=run_suggest, strict=False)
 
     sn = lsub.add_parser(
@@ -81,7 +86,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     which.add_argument("--all", action="store_true",
                        help="every placed or suggested skull landmark that has a snap rule")
     sn.add_argument("--out", type=Path, default=None,
-                    help="write the result to this case file instead of over CASE")
+                    help="write the result to this case file instead of over CASE (an existing "
+                         "file only with --force)")
+    add_force_option(sn)
     sn.add_argument("--dry-run", action="store_true", help="print what would move; save nothing")
     sn.set_defaults(handler=run_snap, strict=False)
 
@@ -111,13 +118,17 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_convert(args: argparse.Namespace) -> int:
+    from workbench.io.outputs import check_output_file
+
+    check_output_file(args.out, [args.file], args.force)
     result = _read(args)
     if not len(result.landmarks):
         raise LandmarkError(f"{args.file}: no recognised landmarks to write")
     kwargs = {}
     if args.out.suffix.lower() in (".json", ".fcsv") or args.out.name.endswith(".mrk.json"):
         kwargs["coordinate_system"] = args.coordinate_system
-    write_landmarks(args.out, result.landmarks, **kwargs)
+    with output_path(args.out, args, args.file) as out:
+        write_landmarks(out, result.landmarks, **kwargs)
     for message in result.messages:
         print(f"note: {message}")
     print(f"wrote {len(result.landmarks)} landmarks to {args.out}")
@@ -128,6 +139,10 @@ def run_frame(args: argparse.Namespace) -> int:
     from workbench.io.meshes import write_mesh
     from workbench.services.frame import head_frame_from_landmarks
 
+    if args.apply and args.out is not None:
+        from workbench.io.outputs import check_output_file
+
+        check_output_file(args.out, input_paths(args.file, args.apply), args.force)
     result = _read(args)
     frame = head_frame_from_landmarks(result.landmarks)
     head = result.landmarks.transformed(frame.input_to_head)
@@ -145,8 +160,9 @@ def run_frame(args: argparse.Namespace) -> int:
     if args.apply:
         if args.out is None:
             raise LandmarkError("--apply needs --out for the aligned copy")
-        mesh = load_mesh(args.apply, args, kind="skull").mesh
-        write_mesh(args.out, mesh.transformed(frame.input_to_head))
+        read = load_mesh(args.apply, args, kind="skull")
+        with output_path(args.out, args, args.file, read.source_path) as out:
+            write_mesh(out, read.mesh.transformed(frame.input_to_head))
         print(f"wrote {args.out} (head frame, mm)")
     return 0
 
@@ -154,9 +170,11 @@ def run_frame(args: argparse.Namespace) -> int:
 def run_suggest(args: argparse.Namespace) -> int:
     from workbench.cli.reconstruct_cmd import orientation_of
     from workbench.services.landmark_transfer import transfer_landmarks
-    from workbench.services.reference_parts import skull_surface
     from workbench.services.template_cache import reference_head
 
+    from workbench.io.outputs import check_output_file
+
+    check_output_file(args.out, input_paths(args.mesh, args.seed, args.template), args.force)
     read = load_mesh(args.mesh, args, kind="skull" if args.surface == "skull" else "head")
     head = reference_head(args.sex, args.template)
     seeds = None
@@ -179,8 +197,7 @@ def run_suggest(args: argparse.Namespace) -> int:
         m = np.eye(4)
         m[:3, :3] /= read.scale_applied
         lms = lms.transformed(m)
-    options = {"coordinate_system": "RAS"} if args.out.suffix in (".json", ".fcsv") else {}
-    write_landmarks(args.out, lms, **options)
+    _write_suggested(args, read, lms)
     for w in result.warnings:
         print(f"note: {w}")
     write_json({
@@ -188,11 +205,18 @@ def run_suggest(args: argparse.Namespace) -> int:
         "placed": [lm.code for lm in lms if lm.status == "placed"],
         "suggested": {lm.code: round(lm.confidence, 2) for lm in lms if lm.status == "suggested"},
         "absent": list(result.absent),
-        "alignment": {"method": result.alignment.method, "rms_mm": round(result.alignment.rms_mm, 2),
+        "alignment": {"method": result.alignment.method,
+                      "rms_mm": round(result.alignment.rms_mm, 2),
                       "scale": round(result.alignment.scale, 4)},
         "warp_residual_mm": round(result.warp_residual_mm, 3), "matches": result.matches,
     }, None)
     return 0
+
+
+def _write_suggested(args: argparse.Namespace, read, lms) -> None:  # noqa: ANN001
+    options = {"coordinate_system": "RAS"} if args.out.suffix in (".json", ".fcsv") else {}
+    with output_path(args.out, args, read.source_path, args.seed, args.template) as out:
+        write_landmarks(out, lms, **options)
 
 
 def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:  # noqa: ANN001
@@ -209,8 +233,7 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:  # noqa:
         m = np.eye(4)
         m[:3, :3] /= read.scale_applied
         lms = lms.transformed(m)
-    options = {"coordinate_system": "RAS"} if args.out.suffix in (".json", ".fcsv") else {}
-    write_landmarks(args.out, lms, **options)
+    _write_suggested(args, read, lms)
     for w in reg.warnings:
         print(f"note: {w}")
     o = reg.figures["orientation"]
@@ -234,6 +257,14 @@ def run_snap(args: argparse.Namespace) -> int:
     from workbench.io.case_file import load_case, save_case
     from workbench.services.landmark_placement import SurfacePlacement
 
+    from workbench.core.errors import InputError
+    from workbench.io.outputs import check_output_file, same_file
+
+    if args.out is not None:
+        if same_file(args.out, args.case):
+            raise InputError(args.out, "is the case being snapped",
+                             "leave --out away to update the case in place")
+        check_output_file(args.out, [args.case], args.force)
     case = load_case(args.case).case
     if case.specimen.mesh is None:
         raise LandmarkError(f"{args.case}: the case has no skull mesh to snap on")
@@ -247,6 +278,10 @@ def run_snap(args: argparse.Namespace) -> int:
         print(f"{moved} landmark(s) would move; nothing saved" if args.dry_run
               else "nothing moved; case not saved")
         return 0
-    out = save_case(case, args.out or args.case, stack)
+    if args.out is None:   # the case itself, in place: an atomic save with its audit log
+        out = save_case(case, args.case, stack)
+    else:
+        with output_path(args.out, args, args.case) as target:
+            out = save_case(case, target, stack)
     print(f"saved {out} ({moved} landmark(s) moved)")
     return 0

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import add_units_options, load_mesh, mesh_summary, write_json
+from workbench.cli.common import (
+    add_force_option, add_units_options, load_mesh, mesh_summary, output_path, write_json,
+)
 from workbench.core.mesh import validate
 from workbench.core.repair import clean, fill_small_holes, keep_largest_component
 from workbench.io.meshes import write_mesh
@@ -13,7 +15,8 @@ from workbench.io.meshes import write_mesh
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("mesh", help="inspect, check and convert mesh files",
-                       description="Inspect, check and convert mesh files (PLY, STL, OBJ, VTK, VTP).")
+                       description="Inspect, check and convert mesh files "
+                                   "(PLY, STL, OBJ, VTK, VTP).")
     msub = p.add_subparsers(dest="mesh_command", metavar="ACTION", required=True)
 
     info = msub.add_parser("info", help="size, units judgement and validation report (JSON)")
@@ -22,7 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="what the mesh shows (sets the plausible size range for units)")
     info.add_argument("--units", choices=["auto", "mm", "cm", "m", "in"], default="auto")
     info.add_argument("--scale", type=float, default=None, metavar="FACTOR")
-    info.add_argument("--out", type=Path, default=None, help="write the JSON here instead of stdout")
+    info.add_argument("--out", type=Path, default=None,
+                      help="write the JSON here instead of stdout")
+    add_force_option(info)
     info.set_defaults(handler=run_info)
 
     conv = msub.add_parser("convert", help="convert to another format (and to mm)")
@@ -32,10 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     conv.add_argument("--kind", choices=["head", "skull", "face"], default="head")
     conv.add_argument("--clean", action="store_true",
                       help="remove NaN vertices, degenerate/duplicate triangles, unused vertices")
-    conv.add_argument("--largest-component", action="store_true", help="keep only the largest piece")
+    conv.add_argument("--largest-component", action="store_true",
+                      help="keep only the largest piece")
     conv.add_argument("--fill-holes", type=int, default=0, metavar="MAX_EDGES",
                       help="close holes bounded by at most this many edges")
     conv.add_argument("--ascii", action="store_true", help="text encoding where the format has one")
+    add_force_option(conv)
     conv.set_defaults(handler=run_convert)
 
 
@@ -61,11 +68,19 @@ def run_info(args: argparse.Namespace) -> int:
         "validation": report.to_dict() | {"problems": report.problems()},
         "messages": list(result.messages),
     }
-    write_json(data, args.out)
+    if args.out is None:
+        write_json(data, None)
+    else:
+        with output_path(args.out, args, path) as out:
+            write_json(data, out)
     return 0
 
 
 def run_convert(args: argparse.Namespace) -> int:
+    from workbench.cli.common import input_paths
+    from workbench.io.outputs import check_output_file
+
+    check_output_file(args.out, input_paths(args.mesh), args.force)
     result = load_mesh(args.mesh, args, kind=args.kind)
     mesh = result.mesh
     notes: list[str] = []
@@ -80,7 +95,8 @@ def run_convert(args: argparse.Namespace) -> int:
         step = keep_largest_component(mesh)
         mesh = step.mesh
         notes += [step.message] if step.changed else []
-    write_mesh(args.out, mesh, binary=not args.ascii)
+    with output_path(args.out, args, result.source_path) as out:
+        write_mesh(out, mesh, binary=not args.ascii)
     for note in [*result.messages, *notes]:
         print(f"note: {note}")
     print(f"wrote {args.out}: {mesh.n_vertices} vertices, {mesh.n_faces} triangles (mm)")

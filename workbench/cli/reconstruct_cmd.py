@@ -9,9 +9,10 @@ pack), ``skull_landmarks.mrk.json``, ``case.fcase``, ``report.json``,
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
-from workbench.cli.common import add_units_options, write_json
+from workbench.cli.common import add_force_option, add_units_options, write_json
 from workbench.core.errors import InputError
 
 
@@ -81,7 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "feature (repeatable), e.g. nose_rynn2010_prn, mouth_75pct_rule, "
                         "eye_guyomarch2012_globe; ids in data_tables/guides/guide_rules.csv")
     p.add_argument("--exclude", action="append", default=[], metavar="CODE",
-                   help="switch a landmark's dowel off (repeatable; e.g. ecm2s for Kähler's cheeks)")
+                   help="switch a landmark's dowel off (repeatable; e.g. ecm2s for Kähler's "
+                        "cheeks)")
     p.add_argument("--override", action="append", default=[], metavar="CODE=MM",
                    help="set a landmark's depth by hand (repeatable)")
     p.add_argument("--ensemble", type=int, default=0, metavar="N",
@@ -95,11 +97,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(default); reference: the reference head's own thickness (a pack "
                         "built from a real CT)")
     p.add_argument("--truth", default=None, metavar="SKIN_MESH",
-                   help="true skin surface (same frame and units as the skull): adds validation figures")
+                   help="true skin surface (same frame and units as the skull): adds "
+                        "validation figures")
     p.add_argument("--examiner", default="")
     p.add_argument("--no-pictures", action="store_true", help="skip the rendered pictures")
     add_orientation_options(p)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder; it must not hold any input (it is replaced as a whole)")
+    add_force_option(p, folder=True)
     p.set_defaults(handler=run)
 
 
@@ -131,32 +136,42 @@ def run(args: argparse.Namespace) -> int:
         examiner=args.examiner)
     truth = None if args.truth is None else resolve_input(args.truth)
     execute(resolve_input(args.skull), settings, args.out, truth=truth,
-            pictures=not args.no_pictures)
+            pictures=not args.no_pictures, force=args.force)
     return 0
 
 
 def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,  # noqa: ANN001
-            pictures: bool = True, quiet: bool = False) -> dict:
-    """Run the job, write every output into ``out``; returns the report dict."""
-    from workbench.reporting.report import write_report_json, write_report_pdf
-    from workbench.services.reconstruction_job import run_reconstruction, write_outputs
+            pictures: bool = True, quiet: bool = False, force: bool = False,
+            staged: bool = False) -> dict:
+    """Run the job, write every output into ``out``; returns the report dict.
+
+    ``out`` is checked before the fit and written as a whole
+    (:func:`workbench.io.outputs.staged_folder`): it may not hold an input,
+    an existing folder is replaced only with ``force`` (kept as ``DIR.1``),
+    and a failure leaves it as it was.  ``staged=True``: ``out`` is a fresh
+    folder the caller staged (``workbench demo``), written straight into.
+    """
+    from workbench.io.outputs import check_output_folder, relocate, staged_folder
+    from workbench.services.reconstruction_job import job_inputs, run_reconstruction
 
     say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}"))
+    inputs = job_inputs(skull_path, settings, truth)
+    if not staged:
+        check_output_folder(out, inputs, force)   # before the fit, which takes a while
     result = run_reconstruction(skull_path, settings, progress=say)
-    files = write_outputs(result, out)
+    if staged:
+        files = _write_all(result, out, truth, settings, pictures)
+    else:
+        with staged_folder(out, force, inputs, notify=None if quiet else print) as temp:
+            files = _write_all(result, temp, truth, settings, pictures)
+        files = relocate(files, temp, Path(os.path.abspath(out)))
+        result.opened.case.source_path = files["case"]
     report = result.report
-    if truth is not None:
-        report["validation"] = _validate(truth, settings.scale, result)
-    if pictures:
-        report["pictures"] = _pictures(out, result)
-    write_report_json(report, out / "report.json")
-    write_report_pdf(report, out / "report.pdf", base_dir=out)
     report["_seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
     if quiet:
         return report
     for name, path in files.items():
         print(f"wrote {name}: {path}")
-    print(f"wrote report: {out / 'report.json'}, {out / 'report.pdf'}")
     fit = report["fit"]
     summary = {k: fit.get(k) for k in ("max_tip_error_mm", "min_tissue_mm", "penetrating_vertices",
                                        "refits", "suggested_landmarks", "absent_landmarks")}
@@ -170,6 +185,23 @@ def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,
         print(f"  note: {w}")
     write_json(summary, None)
     return report
+
+
+def _write_all(result, out: Path, truth: Path | None, settings,  # noqa: ANN001
+               pictures: bool) -> dict[str, Path]:
+    """The job's files, validation figures, pictures and report, all into ``out``."""
+    from workbench.reporting.report import write_report_json, write_report_pdf
+    from workbench.services.reconstruction_job import write_outputs
+
+    files = write_outputs(result, out, staged=True)
+    report = result.report
+    if truth is not None:
+        report["validation"] = _validate(truth, settings.scale, result)
+    if pictures:
+        report["pictures"] = _pictures(out, result)
+    files["report"] = write_report_json(report, out / "report.json")
+    files["report_pdf"] = write_report_pdf(report, out / "report.pdf", base_dir=out)
+    return files
 
 
 def _validate(truth_path: Path, scale: float | None, result) -> dict:  # noqa: ANN001

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import add_units_options, write_json
+from workbench.cli.common import add_force_option, add_units_options, write_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,14 +19,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("template", help="the reference head: export it, or build one for a person",
                        description="The anatomical reference head (skin, skull, mandible, teeth, "
-                                   "eyes, tongue, landmarks) built from the project's own data; mm, "
-                                   "head frame (Frankfort Horizontal, x = 0 midsagittal).")
+                                   "eyes, tongue, landmarks) built from the project's own data; "
+                                   "mm, head frame (Frankfort Horizontal, x = 0 midsagittal).")
     tsub = p.add_subparsers(dest="template_command", metavar="ACTION", required=True)
     ex = tsub.add_parser("export", help="write the template's meshes and landmarks to a folder")
     ex.add_argument("--sex", choices=["female", "male"], default="male")
     ex.add_argument("--template", type=Path, default=None, metavar="PACK",
                     help="export this template pack again instead of the built-in head")
     ex.add_argument("--out", type=Path, required=True)
+    add_force_option(ex, folder=True)
     ex.set_defaults(handler=run_export)
 
     b = tsub.add_parser(
@@ -49,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--sex", choices=["female", "male"], default="male",
                    help="which built-in head to start from")
     b.add_argument("--out", type=Path, required=True, metavar="PACK")
+    add_force_option(b, folder=True)
     b.set_defaults(handler=run_build)
 
     r = sub.add_parser("render", help="pictures of built-in assets")
@@ -58,6 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     rt.add_argument("--template", type=Path, default=None, metavar="PACK",
                     help="render this template pack instead of the built-in head")
     rt.add_argument("--out", type=Path, required=True)
+    add_force_option(rt, folder=True)
     rt.set_defaults(handler=run_render)
 
 
@@ -71,20 +74,28 @@ def _head(args: argparse.Namespace):  # noqa: ANN202
 
 
 def run_export(args: argparse.Namespace) -> int:
+    from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.template_pack import export_template
 
+    check_output_folder(args.out, [args.template], args.force)
     head = _head(args)
-    for path in export_template(head, args.out):
+    files = write_folder(args.out, lambda folder: export_template(head, folder),
+                         force=args.force, inputs=[args.template], notify=print)
+    for path in files:
         print(f"wrote {path}")
     print(f"template {head.template_id} (content hash {head.content_hash[:16]}...)")
     return 0
 
 
 def run_render(args: argparse.Namespace) -> int:
+    from workbench.io.outputs import check_output_folder, write_folder
     from workbench.render.template import render_template
 
+    check_output_folder(args.out, [args.template], args.force)
     head = _head(args)
-    for path in render_template(head, args.out):
+    files = write_folder(args.out, lambda folder: render_template(head, folder),
+                         force=args.force, inputs=[args.template], notify=print)
+    for path in files:
         print(f"wrote {path}")
     return 0
 
@@ -101,7 +112,7 @@ def run_build(args: argparse.Namespace) -> int:
         resolve_input(args.skin), resolve_input(args.skull), args.out, sex=args.sex,
         units=args.units, scale=args.scale, skin_landmarks=args.landmarks_skin,
         skull_landmarks=args.landmarks_skull, orientation=orientation,
-        progress=lambda m: print(f"  {m}"))
+        progress=lambda m: print(f"  {m}"), force=args.force)
     for path in files:
         print(f"wrote {path}")
     for w in result.warnings:

@@ -24,7 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "bone_iso, skin_iso; skull and truth may be meshes or CT volumes) and score "
                     "it with the project's metric beside a uniform 6 mm offset of the bone.")
     p.add_argument("manifest", type=Path)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder; it must not hold the manifest or any case's files (it is "
+                        "replaced as a whole; with --force a previous run's extracted surfaces "
+                        "and reference packs are reused)")
     p.add_argument("--leave-one-out", action="store_true",
                    help="also reconstruct each case with reference heads built from all other "
                         "cases (their per-vertex median), never its own")
@@ -34,15 +37,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cases", default=None, metavar="ID,ID",
                    help="only these case ids")
     p.add_argument("--no-pictures", action="store_true")
+    from workbench.cli.common import add_force_option
+
+    add_force_option(p, folder=True)
     p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench import __version__
     from workbench.core.errors import InputError
-    from workbench.reporting.validation_report import markdown, rows, write_csv, write_pdf
-    from workbench.services.compare import REGION_NAMES
-    from workbench.services.validation import read_manifest, run_validation
+    from workbench.io.outputs import check_output_folder, staged_folder
+    from workbench.services.validation import read_manifest, reuse_caches, validation_inputs
 
     cases = read_manifest(args.manifest)
     if args.cases:
@@ -51,8 +55,23 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise InputError(args.manifest, f"no cases {', '.join(unknown)}")
         cases = [c for c in cases if c.case_id in wanted]
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    inputs = [args.manifest, *validation_inputs(cases)]
+    check_output_folder(args.out, inputs, args.force)   # the cases take minutes each
+    with staged_folder(args.out, args.force, inputs, notify=print) as out:
+        reuse_caches(args.out, out)
+        ok = _run(args, cases, out)
+    final = args.out
+    print(f"wrote {final / 'results.csv'}, {final / 'results.md'}, {final / 'results.pdf'}")
+    return 0 if ok else 2
+
+
+def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
+    """Every case, the tables and the PDF, into the staged folder ``out``."""
+    from workbench import __version__
+    from workbench.reporting.validation_report import markdown, rows, write_csv, write_pdf
+    from workbench.services.compare import REGION_NAMES
+    from workbench.services.validation import run_validation
+
     pictures: dict[tuple[str, str], list[tuple[str, Path]]] = {}
 
     def on_case(res: Any, job: Any, label: str) -> None:
@@ -69,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
     results = run_validation(cases, out, leave_one_out=args.leave_one_out,
                              identity=args.identity, progress=lambda m: print(f"  {m}"),
-                             on_case=on_case)
+                             on_case=on_case, staged=True)
     credits = sorted({c for case in cases for p in (case.skull, case.truth)
                       if (c := _credit(p))})
     table = rows(results, REGION_NAMES)
@@ -79,8 +98,7 @@ def run(args: argparse.Namespace) -> int:
     tmp.replace(out / "results.md")
     write_pdf(results, REGION_NAMES, out / "results.pdf", pictures, credits,
               software=f"workbench {__version__}")
-    print(f"wrote {out / 'results.csv'}, {out / 'results.md'}, {out / 'results.pdf'}")
-    return 0 if all(r.status == "ok" for r, _ in results) else 2
+    return all(r.status == "ok" for r, _ in results)
 
 
 def _credit(path: Path) -> str | None:

@@ -345,5 +345,5 @@ def relocate(value: T, temp: Path, final: Path) -> T:
     if isinstance(value, dict):
         return {k: relocate(v, temp, final) for k, v in value.items()}  # type: ignore[return-value]
     if isinstance(value, (list, tuple)):
-        return type(value)(relocate(v, temp, final) for v in value)  # type: ignore[return-value]
+        return type(value)(relocate(v, temp, final) for v in value)
     return value

@@ -15,6 +15,7 @@ the caller, which may render).
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -35,6 +36,7 @@ from workbench.io.case_file import save_case
 from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import write_mrk_json
 from workbench.io.meshes import write_mesh
+from workbench.io.outputs import relocate, staged_folder
 from workbench.io.template_pack import export_template
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import GuideList, Orientation
@@ -51,7 +53,8 @@ from workbench.services.tissue_model import TissueSettings
 
 __all__ = ["FITTED_HEAD_FRAME_TEXT", "MAX_GUIDE_SHIFT_MM", "MAX_WORKING_TRIANGLES",
            "MIN_CONFIDENCE", "WORKING_TRIANGLES", "JobResult", "JobSettings", "build_report",
-           "head_in_input_frame", "plausible_guides", "run_reconstruction", "write_outputs"]
+           "head_in_input_frame", "job_inputs", "plausible_guides", "run_reconstruction",
+           "write_outputs"]
 
 Progress = Callable[[str], None]
 MIN_CONFIDENCE = FitSettings().min_confidence
@@ -333,7 +336,29 @@ def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
     )
 
 
-def write_outputs(result: JobResult, out: str | PathLike[str]) -> dict[str, Path]:
+def job_inputs(skull_path: str | PathLike[str] | None, settings: JobSettings,
+               *extra: str | PathLike[str] | None) -> list[Path]:
+    """Every file or folder a job reads: skull, landmarks, guides, table CSV, packs, ``extra``.
+
+    Outputs are checked against these (:mod:`workbench.io.outputs`): none may
+    be replaced, and none may lie inside the output folder.
+    """
+    found = [skull_path, settings.landmarks, settings.guides_file, settings.template,
+             *settings.templates, *extra]
+    table = Path(settings.table)
+    if table.suffix == ".csv" and table.is_file():
+        found.append(table)
+    return [Path(p) for p in found if p is not None]
+
+
+def _result_inputs(result: JobResult) -> list[Path]:
+    originals = [ev.original_path for ev in result.opened.case.evidence
+                 if getattr(ev, "original_path", None)]
+    return job_inputs(None, result.settings, *originals)
+
+
+def write_outputs(result: JobResult, out: str | PathLike[str], *, force: bool = False,
+                  staged: bool = False) -> dict[str, Path]:
     """Outputs in the skull file's frame (no report files).
 
     ``face.ply`` is also in the skull file's **units**, so it overlays the
@@ -341,8 +366,24 @@ def write_outputs(result: JobResult, out: str | PathLike[str]) -> dict[str, Path
     same surface in mm.  ``head/`` (a template pack: skin, skull parts,
     muscles, landmarks) and the landmark file are in mm, as the pack format
     and the case require.
+
+    ``out`` is written as a whole (:func:`workbench.io.outputs.staged_folder`):
+    a folder holding one of the job's inputs is refused, an existing one
+    only replaced with ``force`` (kept as ``DIR.1``), and a failure leaves it
+    as it was.  ``staged=True``: ``out`` is a fresh folder the caller staged
+    itself (``workbench reconstruct`` adds the report to it); it is written
+    straight into.
     """
-    out = Path(out)
+    if staged:
+        return _write_into(result, Path(out))
+    final = Path(os.path.abspath(out))
+    with staged_folder(final, force, _result_inputs(result)) as temp:
+        files = _write_into(result, temp)
+    result.opened.case.source_path = final / "case.fcase"
+    return relocate(files, temp, final)
+
+
+def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     face = result.recon.face
     k = result.file_units_per_mm
@@ -357,4 +398,3 @@ def write_outputs(result: JobResult, out: str | PathLike[str]) -> dict[str, Path
     files["landmarks"] = out / "skull_landmarks.mrk.json"
     files["case"] = save_case(result.opened.case, out / "case.fcase", result.opened.stack)
     return files
-

@@ -337,20 +337,31 @@ def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLi
                         skin_landmarks: str | PathLike[str] | None = None,
                         skull_landmarks: str | PathLike[str] | None = None,
                         orientation: tuple | None = None, base: TemplateHead | None = None,
-                        progress: Progress | None = None) -> tuple[BuildResult, list[Path]]:
+                        progress: Progress | None = None, force: bool = False,
+                        staged: bool = False) -> tuple[BuildResult, list[Path]]:
     """Read the inputs, :func:`build_template` on ``base`` (default: the built-in
     head of ``sex``), and write the pack to ``out``.
 
     Meshes and landmark files share one frame and one unit (``units`` or
     ``scale`` converts both to mm).  Returns the result and the files written.
+
+    ``out`` is written as a whole (:func:`workbench.io.outputs.staged_folder`):
+    a folder holding an input is refused, an existing pack is replaced only
+    with ``force`` (kept as ``PACK.1``) and a failure leaves it as it was.
+    ``staged=True``: ``out`` is a private folder of the caller, written
+    straight into.
     """
     from workbench.core.units import resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.markups import read_landmarks
     from workbench.io.meshes import read_mesh
+    from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.template_pack import export_template
     from workbench.services.template_cache import reference_head
 
+    sources = [skin_path, skull_path, skin_landmarks, skull_landmarks]
+    if not staged:
+        check_output_folder(out, sources, force)    # before the build, which takes a while
     meshes, factors, inputs = {}, {}, []
     for role, path, kind in (("skin", Path(skin_path), "head"),
                              ("skull", Path(skull_path), "skull")):
@@ -371,4 +382,7 @@ def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLi
     result = build_template(meshes["skin"], meshes["skull"], base or reference_head(sex),
                             skin_seeds=seeds["skin"], skull_seeds=seeds["skull"],
                             orientation=orientation, inputs=inputs, progress=progress)
-    return result, export_template(result.head, out)
+    if staged:
+        return result, export_template(result.head, out)
+    return result, write_folder(out, lambda folder: export_template(result.head, folder),
+                                force=force, inputs=sources)

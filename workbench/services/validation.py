@@ -48,6 +48,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -426,9 +427,13 @@ def build_references(cases: Sequence[ValidationCase], out: Path, *,
                 continue
             say(f"{who}: building a reference head from its own skin and bone ...")
             tmp = out / f".{who}.part"
+            if tmp.exists():     # left by an interrupted run: this cache is ours to rebuild
+                import shutil
+
+                shutil.rmtree(tmp)
             units = "mm" if is_volume(case.skull) else case.units
             build_template_pack(skin, bone, tmp, sex=case.sex, units=units,
-                                orientation=case.orientation)
+                                orientation=case.orientation, staged=True)
             (tmp / "built_from.json").write_text(json.dumps(key), "utf-8")
             if folder.exists():
                 import shutil
@@ -441,15 +446,64 @@ def build_references(cases: Sequence[ValidationCase], out: Path, *,
     return packs
 
 
+def validation_inputs(cases: Sequence[ValidationCase]) -> list[Path]:
+    """Every file or folder the cases read (skulls, truths, template packs)."""
+    return [p for c in cases for p in (c.skull, c.truth, c.template) if p is not None]
+
+
+def reuse_caches(previous: Path, fresh: Path) -> None:
+    """Copy the extracted surfaces (``CASE/inputs``) and reference packs of a previous run.
+
+    They are keyed by the SHA-256 of their sources, so a rerun does not
+    extract or build them again; everything else is made anew.
+    """
+    import shutil
+
+    if not previous.is_dir():
+        return
+    folders = [(previous / "references", fresh / "references")]
+    folders += [(d / "inputs", fresh / d.name / "inputs") for d in previous.iterdir()
+                if d.is_dir() and not d.name.startswith(".")]
+    for source, target in folders:
+        if source.is_dir() and not target.exists():
+            shutil.copytree(source, target, ignore=shutil.ignore_patterns(".*"))
+
+
 def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out: bool = False,
                    identity: bool = False, progress: Progress | None = None,
-                   on_case: Callable[[CaseResult, Any, str], None] | None = None
-                   ) -> list[tuple[CaseResult, str]]:
+                   on_case: Callable[[CaseResult, Any, str], None] | None = None,
+                   force: bool = False, staged: bool = False) -> list[tuple[CaseResult, str]]:
     """Every case with the built-in head, and with the reference library when asked.
 
     Returns ``(result, method label)`` pairs; ``on_case`` is called after each
     (for pictures) with the job result of the reconstruction.
+
+    ``out`` is written as a whole (:func:`workbench.io.outputs.staged_folder`):
+    a folder holding an input is refused, an existing one is replaced only
+    with ``force`` (kept as ``DIR.1``; its cached surfaces and reference packs
+    are reused) and a failure leaves it as it was.  ``staged=True``: ``out``
+    is a fresh folder the caller staged (``workbench validate`` adds its
+    tables), written straight into.
     """
+    if staged:
+        return _run_validation(cases, Path(out), leave_one_out=leave_one_out, identity=identity,
+                               progress=progress, on_case=on_case)
+    from workbench.io.outputs import relocate, staged_folder
+
+    final = Path(os.path.abspath(out))
+    with staged_folder(final, force, validation_inputs(cases)) as temp:
+        reuse_caches(final, temp)
+        results = _run_validation(cases, temp, leave_one_out=leave_one_out, identity=identity,
+                                  progress=progress, on_case=on_case)
+    for res, _ in results:
+        res.files = relocate(res.files, temp, final)
+    return results
+
+
+def _run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out: bool,
+                    identity: bool, progress: Progress | None,
+                    on_case: Callable[[CaseResult, Any, str], None] | None
+                    ) -> list[tuple[CaseResult, str]]:
     out.mkdir(parents=True, exist_ok=True)
     results: list[tuple[CaseResult, str]] = []
 
