@@ -160,6 +160,8 @@ class _SetMetaField(Command):
         self._old = old
 
     def undo(self, case: Case) -> None:
+        if self._old is None:
+            raise RuntimeError(f"{self.label!r} was undone before it was done")
         case.replace("meta", replace(case.meta, **{self.field_name: self._old}))
 
 

@@ -131,7 +131,7 @@ def oriented_boxes(points: np.ndarray) -> np.ndarray:
 def box_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
     """Squared distance from points ``p`` ``(m, 3)`` to oriented boxes ``box`` ``(m, 15)``."""
     rx, ry, rz = p[:, 0] - box[:, 0], p[:, 1] - box[:, 1], p[:, 2] - box[:, 2]
-    total = None
+    total: np.ndarray | None = None
     for axis in range(3):
         col = 3 + 3 * axis
         x = rx * box[:, col]
@@ -142,6 +142,7 @@ def box_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
         np.maximum(x, 0.0, out=x)
         x *= x
         total = x if total is None else np.add(total, x, out=total)
+    assert total is not None   # three axes summed
     return total
 
 
@@ -150,7 +151,7 @@ def aabb_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
 
     Box rows: centre (3), half extents (3).
     """
-    total = None
+    total: np.ndarray | None = None
     for axis in range(3):
         x = p[:, axis] - box[:, axis]
         np.abs(x, out=x)
@@ -158,6 +159,7 @@ def aabb_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
         np.maximum(x, 0.0, out=x)
         x *= x
         total = x if total is None else np.add(total, x, out=total)
+    assert total is not None   # three axes summed
     return total
 
 

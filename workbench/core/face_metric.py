@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -178,10 +179,11 @@ def score(recon: Mesh, truth: Mesh, ids: np.ndarray, *,
     split the figures by face region.
     """
     signed = signed_errors(truth.vertices[ids], recon)
-    out = {"all": summarize(signed), "regions": {}}
+    regions: dict[str, dict[str, float | int | None]] = {}
+    out: dict[str, Any] = {"all": summarize(signed), "regions": regions}
     if labels is not None:
         for k, name in enumerate(region_names):
-            out["regions"][name] = summarize(signed[labels == k])
+            regions[name] = summarize(signed[labels == k])
     out["signed_mm"] = signed
     return out
 

@@ -103,7 +103,11 @@ class LandmarkSet:
             raise ValueError(f"surface must be one of {SURFACES}, got {self.surface!r}")
         object.__setattr__(self, "landmarks", tuple(self.landmarks))
         seen: set[str] = set()
-        dups = [lm.code for lm in self.landmarks if lm.code in seen or seen.add(lm.code)]
+        dups: list[str] = []
+        for lm in self.landmarks:
+            if lm.code in seen:
+                dups.append(lm.code)
+            seen.add(lm.code)
         if dups:
             raise ValueError(f"duplicate landmark codes in {self.surface} set: {', '.join(dups)}")
 

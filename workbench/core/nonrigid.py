@@ -251,7 +251,7 @@ def _solve_spd(a: sparse.csr_matrix, b: np.ndarray, x0: np.ndarray) -> np.ndarra
 
 def soft_match(points: np.ndarray, normals: np.ndarray, tree: cKDTree, cloud: np.ndarray,
                cloud_normals: np.ndarray, k: int = MATCH_K
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Normal-compatible soft closest points of ``points`` on a point ``cloud``.
 
     Among the ``k`` nearest cloud points, those whose normal agrees with the

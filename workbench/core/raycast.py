@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -188,12 +189,16 @@ class RayCaster:
             o, d = o @ rot.T + self._to_base[:3, 3], d @ rot.T
         if self.backend == "embree":
             return self._embree(o, d)
+        if self._tree is None:
+            raise RuntimeError("numpy ray-casting backend without its leaf tree")
         return _tree_cast(self._tree, o, d)
 
     def _embree(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         o32, d32 = o.astype(np.float32), d.astype(np.float32)
         face = np.full(len(o), -1, np.int64)
         t = np.full(len(o), np.inf)
+        if self._scene is None:
+            raise RuntimeError("embree ray-casting backend without its scenes")
         with self._lock:
             for scene, ids in self._scene:
                 res = scene.run(o32, d32, output=1)
@@ -312,7 +317,7 @@ def _embree_available() -> bool:
 EMBREE_CHUNK = 25_000
 
 
-def _build_embree(mesh: Mesh) -> list[tuple[object, np.ndarray]]:
+def _build_embree(mesh: Mesh) -> list[tuple[Any, np.ndarray]]:
     """Embree scenes over slabs of the mesh: ``[(scene, face ids of its triangles)]``.
 
     Building one scene keeps the GIL for its whole length (~110 ms for

@@ -255,11 +255,11 @@ def symmetry_planes(cloud: _Cloud, own: _Grid, keep: int = 3
     found = []
     for u in dirs:
         u = u / np.linalg.norm(u)
-        d = float(np.median(cloud.points @ u)) + offsets
-        p, n = _reflect(cloud.points, cloud.normals, u, d)
+        shifts = float(np.median(cloud.points @ u)) + offsets
+        p, n = _reflect(cloud.points, cloud.normals, u, shifts)
         loss = own.loss(p, n)
         k = int(np.argmin(loss))
-        found.append((float(loss[k]), u, float(d[k])))
+        found.append((float(loss[k]), u, float(shifts[k])))
     found.sort(key=lambda x: x[0])
     best: list[tuple[float, np.ndarray, float]] = []
     for c, u, d in found:
@@ -524,6 +524,8 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
         # the shape cannot tell a mirrored skull (it is bilaterally symmetric): keep the
         # file's handedness unless told otherwise
         handedness = [mirror == "yes"]
+        if grid is None or own is None:   # built above whenever the search runs
+            raise RuntimeError("search_pose: the pose search needs the distance grids")
         planes = symmetry_planes(cloud, own)
     best: dict[bool, tuple[float, np.ndarray, np.ndarray]] = {}
     for flipped in handedness:
@@ -541,6 +543,8 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
             trials = trials[:4]
         else:
             flipped_small = _Cloud(small.points @ f.T, small.normals @ f.T)
+            if grid is None:
+                raise RuntimeError("search_pose: the pose search needs the reference grid")
             cands = []
             for _, u, d in planes:
                 uf = f @ u
@@ -557,10 +561,11 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
                 best[flipped] = (c, lin, tt)
     ratio = float("nan")
     if len(best) == 2:
-        proper, flipped = best[False][0], best[True][0]
-        choose = flipped < MIRROR_MARGIN * proper
-        handed_by = "shape" if (choose or proper < MIRROR_MARGIN * flipped) else "assumed"
-        ratio = float(max(proper, flipped) / max(min(proper, flipped), 1e-9))
+        proper_cost, flipped_cost = best[False][0], best[True][0]
+        choose = flipped_cost < MIRROR_MARGIN * proper_cost
+        handed_by = ("shape" if (choose or proper_cost < MIRROR_MARGIN * flipped_cost)
+                     else "assumed")
+        ratio = float(max(proper_cost, flipped_cost) / max(min(proper_cost, flipped_cost), 1e-9))
     else:
         choose = handedness[0]
         handed_by = handed_by or "assumed"

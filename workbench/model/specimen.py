@@ -75,10 +75,8 @@ class Specimen:
             return False
         if (self.mesh is None) != (other.mesh is None):
             return False
-        if self.mesh is not None and not self.mesh.equals(other.mesh):  # type: ignore[arg-type]
+        if self.mesh is not None and other.mesh is not None and not self.mesh.equals(other.mesh):
             return False
-        if (self.input_to_head is None) != (other.input_to_head is None):
-            return False
-        return self.input_to_head is None or bool(
-            np.array_equal(self.input_to_head, other.input_to_head)
-        )
+        if self.input_to_head is None or other.input_to_head is None:
+            return self.input_to_head is None and other.input_to_head is None
+        return bool(np.array_equal(self.input_to_head, other.input_to_head))

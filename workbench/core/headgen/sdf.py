@@ -63,7 +63,8 @@ def _frame(rotation: np.ndarray | None) -> np.ndarray:
     return np.eye(3) if rotation is None else np.asarray(rotation, float)
 
 
-def rotation_to(axis: np.ndarray, up: np.ndarray = (0.0, 1.0, 0.0)) -> np.ndarray:
+def rotation_to(axis: np.ndarray,
+                up: np.ndarray | tuple[float, float, float] = (0.0, 1.0, 0.0)) -> np.ndarray:
     """Rows (e1, e2, e3) of an orthonormal frame with e3 along ``axis`` and e2 near ``up``."""
     e3 = np.asarray(axis, float) / np.linalg.norm(axis)
     e1 = np.cross(np.asarray(up, float), e3)

@@ -325,6 +325,8 @@ def _closest_on_midline_edges(p: np.ndarray, v: np.ndarray, faces: np.ndarray) -
             d = float(np.linalg.norm(p - q))
             if d < best_d:
                 best, best_d = q, d
+    if best is None:
+        raise ValueError("no midline edge (both ends at x = 0) among the given faces")
     return best
 
 

@@ -295,7 +295,8 @@ def build_skull(sex: str = "male") -> SkullTemplate:
     else:
         rays = {k: _Rays(m) for k, m in meshes.items()}
     left = _place_left(rays["cranium"], rays["mandible"], h)
-    placed, normals = dict(left), {}
+    placed = dict(left)
+    normals: dict[str, np.ndarray] = {}
     for part, mesh in meshes.items():
         codes = [c for c in left if left[c][1] == part]
         normals.update(zip(codes, normals_within_radius(mesh, np.array([left[c][0] for c in codes]), 5.0)))

@@ -8,6 +8,8 @@ the subject's left, y up, z forward).  Split out of
 
 from __future__ import annotations
 
+from typing import overload
+
 import numpy as np
 
 from workbench.core.headgen import sdf as S
@@ -226,7 +228,13 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     return g
 
 
-def _symmetric(points: np.ndarray, radii: np.ndarray, ups: np.ndarray | None = None):
+@overload
+def _symmetric(points: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+@overload
+def _symmetric(points: np.ndarray, radii: np.ndarray, ups: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def _symmetric(points: np.ndarray, radii: np.ndarray, ups: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Control points of a left half-arch starting on the midline, continued through its mirror image.
 
     A sweep that merely started at ``x = 0`` would end in a flat cap there,
