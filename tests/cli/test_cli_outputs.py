@@ -363,3 +363,21 @@ def test_demo_refuses_a_folder_that_is_not_a_previous_demo(tmp_path: Path, capsy
     assert not _is_demo_output(out)
     (out / DEMO_MARK).write_text("")
     assert _is_demo_output(out)
+
+
+def test_services_called_from_scripts_refuse_the_same_clashes(ball: Path, tmp_path: Path) -> None:
+    from workbench.services.template_build import build_template_pack
+    from workbench.services.validation import ValidationCase, run_validation
+
+    before = _sha(ball)
+    existing = tmp_path / "pack"
+    existing.mkdir()
+    (existing / "mine.txt").write_text("keep")
+    with pytest.raises(InputError, match="use --force"):
+        build_template_pack(ball, ball, existing, units="mm")
+    with pytest.raises(InputError, match="an input of this command"):
+        build_template_pack(ball, ball, tmp_path, units="mm", force=True)
+    with pytest.raises(InputError, match="an input of this command"):
+        run_validation([ValidationCase("c1", ball, ball, units="mm")], tmp_path, force=True)
+    assert _sha(ball) == before and (existing / "mine.txt").read_text() == "keep"
+    _no_partials(tmp_path)
