@@ -386,7 +386,7 @@ def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
     centres = {f"eye_centre_{side}": carried.eye_centres[i] for i, side in _eye_sides(carried)}
     if guides is not None:
         used_guides.update(guides({**prefit, **centres}))
-    moves, eye_figures, eye_notes = eye_moves(carried, landmarks_h, settings.tissue.eyes,
+    moves, eye_figures, eye_notes = eye_moves(carried, landmarks_h, settings.tissue.eye_rule,
                                               {c: used_guides.pop(c) for c in centres
                                                if c in used_guides})
     carried = move_eyes(carried, moves)

@@ -55,7 +55,7 @@ MODELS = ("table", "reference")
 #: lateral orbital margin (ectoconchion), Stephan, Huang & Davidson 2009
 #: (``data_tables/guides/guide_constants.csv``); ``reference`` — where the
 #: reference head has them, carried with its skull
-EYE_PLACEMENTS = ("stephan2009", "reference")
+EYE_PLACEMENTS = ("auto", "stephan2009", "reference")
 #: regions a factor can be set for (:func:`workbench.services.compare.face_regions`)
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 #: skin regions of the reference head that keep their shape
@@ -87,11 +87,15 @@ class TissueSettings:
         values.  Off by default: on the real CTs (``benchmarks/``) the
         blends are further from the true tissue than the reference's own
         thickness between landmarks.
-    eyes : "stephan2009" | "reference"
+    eyes : "auto" | "stephan2009" | "reference"
         Depth of the eyeballs, and of the lids over them (see
         :data:`EYE_PLACEMENTS`).  The built-in reference's corneal apex lies
         8.4 mm in front of its ectoconchion, half the published figure; the
-        lids of the real CTs lie 12.6-20 mm in front of theirs.
+        lids of the real CTs lie 12.6-20 mm in front of theirs.  ``auto``
+        (default) follows the tissue model: the published projection with
+        ``table``; with ``reference`` the reference person's own eyes, carried
+        like the rest of their soft tissue (a pack built from a CT has its
+        globes behind that person's scanned lids).
     """
 
     model: str = "table"
@@ -100,7 +104,14 @@ class TissueSettings:
     min_tissue_mm: float = 2.0
     smoothing_mm: float = 20.0
     interpolated_sites: bool = False
-    eyes: str = "stephan2009"
+    eyes: str = "auto"
+
+    @property
+    def eye_rule(self) -> str:
+        """The eye placement in force: ``"stephan2009"`` or ``"reference"``."""
+        if self.eyes != "auto":
+            return self.eyes
+        return "reference" if self.model == "reference" else "stephan2009"
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
