@@ -8,7 +8,10 @@
 # rendering (and Xvfb for the GUI tests) come from apt: installed when run as
 # root, otherwise the exact apt-get line is printed and the script stops.
 # The virtual environment lives in .venv (override with WORKBENCH_VENV) and
-# is reused while pyproject.toml is unchanged.
+# is reused while pyproject.toml and packaging/constraints.txt are unchanged.
+# Every Python package is installed at the version pinned in
+# packaging/constraints.txt (the versions CI passes with); to move to newer
+# releases run packaging/update_constraints.sh.
 set -euo pipefail
 
 mode="${1:-}"
@@ -52,7 +55,8 @@ if ! "$py" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)'; t
 fi
 venv="${WORKBENCH_VENV:-$root/.venv}"
 extras="$([ "$mode" = test ] && echo "[test]" || echo "")"
-base_stamp="$venv/.workbench-install-$(sha256sum pyproject.toml setup.py | sha256sum | cut -c1-16)"
+constraints="$root/packaging/constraints.txt"
+base_stamp="$venv/.workbench-install-$(sha256sum pyproject.toml setup.py "$constraints" | sha256sum | cut -c1-16)"
 stamp="$base_stamp${extras:+-test}"
 if [ ! -x "$venv/bin/python" ]; then
   "$py" -m venv "$venv"
@@ -60,8 +64,8 @@ fi
 # a test install (with the [test] extra) also serves the demo
 if [ ! -f "$stamp" ] && ! { [ "$mode" = demo ] && [ -f "$base_stamp-test" ]; }; then
   echo "installing the workbench and its dependencies into $venv"
-  "$venv/bin/python" -m pip install -q --upgrade pip
-  "$venv/bin/python" -m pip install -q -e ".$extras"
+  "$venv/bin/python" -m pip install -q --upgrade pip -c "$constraints"
+  "$venv/bin/python" -m pip install -q -e ".$extras" -c "$constraints"
   rm -f "$venv"/.workbench-install-*
   touch "$stamp"
 fi
