@@ -119,8 +119,9 @@ class LandmarkCatalogue:
             short = re.sub(r"\s*\([^)]*\)$", "", e.name)
             names = [e.name, *([short] if short != e.name else []), *e.aliases]
             side = e.side if e.is_bilateral else None
-            keys = ([(e.surface, e.code, None)] if side is None
-                    else [(e.surface, e.code, "*"), (e.surface, e.base, side)])
+            keys: list[tuple[str, str, str | None]] = (
+                [(e.surface, e.code, None)] if side is None
+                else [(e.surface, e.code, "*"), (e.surface, e.base, side)])
             for alias in names:
                 if side is None:
                     keys.append((e.surface, alias, None))
@@ -307,9 +308,11 @@ def _check(path: Path, entries: Iterable[CatalogueEntry]) -> None:
     keys = {(e.surface, e.code): e for e in entries}
     problems = []
     if len(keys) != len(entries):
-        seen: set = set()
-        problems += [f"duplicate {e.surface} code {e.code!r}" for e in entries
-                     if (e.surface, e.code) in seen or seen.add((e.surface, e.code))]
+        seen: set[tuple[str, str]] = set()
+        for e in entries:
+            if (e.surface, e.code) in seen:
+                problems.append(f"duplicate {e.surface} code {e.code!r}")
+            seen.add((e.surface, e.code))
     other = {"skin": "skull", "skull": "skin"}
     for e in entries:
         pair = keys.get((e.surface, e.bilateral_pair))

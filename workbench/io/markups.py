@@ -200,9 +200,9 @@ def _csv_rows(path: Path, body: str) -> list[list[str]]:
 def _coordinate_system(value: object, path: Path | None = None) -> str:
     """``"RAS"`` / ``"LPS"`` from a file's value (``0`` / ``1`` in old .fcsv) or an argument."""
     mapped = {"RAS": "RAS", "0": "RAS", "LPS": "LPS", "1": "LPS"}.get(str(value).strip().upper())
-    if mapped is None and path is None:
-        raise ValueError(f"coordinate_system must be 'LPS' or 'RAS', got {value!r}")
     if mapped is None:
+        if path is None:
+            raise ValueError(f"coordinate_system must be 'LPS' or 'RAS', got {value!r}")
         raise InputError(path, f"unsupported coordinate system {value!r}", hint="expected LPS or RAS")
     return mapped
 
@@ -228,7 +228,9 @@ def read_mrk_json(path: PathLike, surface: str, catalogue: LandmarkCatalogue | N
     units = mk.get("coordinateUnits", "mm")
     if (units[0] if isinstance(units, list) and units else units) != "mm":
         raise InputError(path, f"coordinates are in {units!r}", hint="convert the points to mm first")
-    info = mk.get(KEY) if isinstance(mk.get(KEY), dict) else {}
+    info = mk.get(KEY)
+    if not isinstance(info, dict):
+        info = {}
     if info.get("surface") not in (None, surface):
         messages.append(f"file holds {info['surface']} landmarks, read as {surface}")
     points, cps = [], mk.get("controlPoints", [])
@@ -371,8 +373,11 @@ def read_csv(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None =
     rows = [dict(zip(names, r, strict=False)) for r in table[1:]]
     fields = set(names)
     label_col = next((c for c in ("code", "label", "name") if c in fields), None)
-    xyz_cols = [next((c for c in (f"{a}_mm", a) if c in fields), None) for a in "xyz"]
-    if table and (label_col is None or None in xyz_cols):
+    found = [next((c for c in (f"{a}_mm", a) if c in fields), None) for a in "xyz"]
+    xyz_cols = [c for c in found if c is not None]
+    if not table:
+        return _build(path, surface, [], catalogue, allow_undefined, strict, [])
+    if label_col is None or len(xyz_cols) != 3:
         raise InputError(path, "needs columns code (or label/name) and x_mm, y_mm, z_mm")
     points = []
     for n, row in enumerate(rows, start=1):

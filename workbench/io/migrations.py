@@ -164,10 +164,10 @@ def _codes_v1(value: Any) -> list[str] | None:
 def _vector_v1(value: Any) -> list[float] | None:
     if not isinstance(value, list) or len(value) != 3:
         return None
-    v = [_number(x) for x in value]
-    if any(x is None for x in v) or math.hypot(*v) < 1e-9:  # type: ignore[misc]
+    v = [n for n in (_number(x) for x in value) if n is not None]
+    if len(v) != 3 or math.hypot(*v) < 1e-9:
         return None
-    return v  # type: ignore[return-value]
+    return v
 
 
 def _orientation_v1(value: Any) -> dict[str, Any] | None:

@@ -191,7 +191,7 @@ BUILD_LABELS = ("slender", "normal", "obese", "pooled")
 _POOLED_WORDS = ("all", "both", "any", "mixed", "combined")
 
 
-def _read_rows(path: Path) -> list[tuple[int, dict[str, str]]]:
+def _read_rows(path: Path) -> list[tuple[int, dict[str, str | None]]]:
     """Data rows with their line numbers in the file (comment lines ``#`` are skipped)."""
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -207,7 +207,7 @@ def _read_rows(path: Path) -> list[tuple[int, dict[str, str]]]:
         header = kept[0][0] if kept else 1
         raise InputError(path, f"line {header}: missing columns: {', '.join(missing)}",
                          f"expected columns: {', '.join(COLUMNS)}")
-    rows = []
+    rows: list[tuple[int, dict[str, str | None]]] = []
     for row in reader:
         line = kept[reader.line_num - 1][0]  # the row's last physical line
         if None in row:

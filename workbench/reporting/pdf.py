@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from fpdf import FPDF, FontFace
+from fpdf.util import Padding
 from PIL import Image
 
 FONT_DIRS = ("/usr/share/fonts/truetype/dejavu", "/usr/share/fonts/TTF", "/usr/share/fonts/dejavu",
@@ -164,10 +165,10 @@ class ReportPDF(FPDF):
         self.set_fill_color(*fill)
         self.font(9, "B")
         self.multi_cell(0, 5, self.t(title), fill=True, new_x="LMARGIN", new_y="NEXT", align="L",
-                        padding=(1.5, 2, 0, 2))
+                        padding=Padding(1.5, 2, 0, 2))
         self.font(8.5)
         self.multi_cell(0, 4.2, self.t("\n".join(f"• {line}" for line in lines)), fill=True,
-                        new_x="LMARGIN", new_y="NEXT", align="L", padding=(0.5, 2, 1.5, 2))
+                        new_x="LMARGIN", new_y="NEXT", align="L", padding=Padding(0.5, 2, 1.5, 2))
         self.set_fill_color(255, 255, 255)
         self.ln(1)
 
@@ -225,7 +226,7 @@ class ReportPDF(FPDF):
             title_h = 6.0 if title and start == 0 else 0.0
             if self.get_y() + title_h + row_h > self.page_break_trigger:
                 self.add_page()
-            if title_h:
+            if title and title_h:
                 self.subheading(title)
             top = self.get_y()
             for k, ((caption, path), h) in enumerate(zip(row, heights, strict=True)):

@@ -164,7 +164,7 @@ def _check_consistency(doc: Mapping[str, Any]) -> None:
             seen.add(item[field])
 
 
-def _atomic_write(path: PathArg, write: Callable[[Path], None]) -> Path:
+def _atomic_write(path: PathArg, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then move it into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -188,12 +188,12 @@ def _section_loop(
             s.words(1)
             s.skip_metadata()
         elif key == "POINTS":
-            _, n, typ = s.words(3)[:3]
-            n = _int(r, n, "number of points")
+            _, n_word, typ = s.words(3)[:3]
+            n = _int(r, n_word, "number of points")
             points = s.array(3 * n, _dtype(r, typ), "the points").reshape(n, 3)
         elif key in _CELLS:
-            _, a, b = s.words(3)[:3]
-            a, b = _int(r, a, f"{key} count"), _int(r, b, f"{key} size")
+            _, a_word, b_word = s.words(3)[:3]
+            a, b = _int(r, a_word, f"{key} count"), _int(r, b_word, f"{key} size")
             if s.peek().upper() == b"OFFSETS":
                 typ = s.words(2)[1]
                 offsets = s.array(a, _dtype(r, typ), f"the {key} offsets").astype(np.int64)
@@ -214,7 +214,8 @@ def _section_loop(
 def read(path: Path, data: bytes) -> ParsedMesh:
     """Parse legacy VTK bytes; vertices in file units."""
     r = Reader(path, data, "VTK")
-    lines, pos = [], 0
+    lines: list[bytes] = []
+    pos = 0
     while len(lines) < 4:
         end = data.find(b"\n", pos)
         if end < 0:

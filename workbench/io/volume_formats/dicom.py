@@ -25,11 +25,15 @@ from __future__ import annotations
 
 from collections import defaultdict
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.core.volume import Volume
+
+if TYPE_CHECKING:
+    from pydicom.dataset import Dataset
 
 _GEOMETRY_TAGS = (
     "ImagePositionPatient",
@@ -40,13 +44,13 @@ _GEOMETRY_TAGS = (
 )
 
 
-def _scan(folder: Path) -> tuple[list[tuple[Path, object]], list[str], int]:
+def _scan(folder: Path) -> tuple[list[tuple[Path, Dataset]], list[str], int]:
     """Headers of all DICOM image files below ``folder``; also skipped-file notes."""
     import pydicom
     from pydicom.errors import InvalidDicomError
 
     files = sorted(p for p in folder.rglob("*") if p.is_file() and p.name.upper() != "DICOMDIR")
-    headers: list[tuple[Path, object]] = []
+    headers: list[tuple[Path, Dataset]] = []
     skipped: list[str] = []
     for f in files:
         try:
@@ -71,8 +75,9 @@ def _float_list(ds, tag: str, n: int, path: Path) -> np.ndarray:
     return values
 
 
-def _pick_series(folder, headers, wanted):
-    groups: dict[str, list] = defaultdict(list)
+def _pick_series(folder: Path, headers: list[tuple[Path, Dataset]], wanted: str | None
+                 ) -> tuple[str, list[tuple[Path, Dataset]], list[dict[str, Any]]]:
+    groups: dict[str, list[tuple[Path, Dataset]]] = defaultdict(list)
     for f, ds in headers:
         groups[str(ds.SeriesInstanceUID)].append((f, ds))
     uid = wanted or max(groups, key=lambda u: len(groups[u]))
@@ -188,7 +193,7 @@ def _pixels(series) -> tuple[list[np.ndarray], list[float], list[float]]:
 def _rescale(arrays, slopes, intercepts) -> np.ndarray:
     triples = list(zip(arrays, slopes, intercepts, strict=True))
     integral = all(float(s).is_integer() and float(b).is_integer() for _, s, b in triples)
-    dtype = np.float32
+    dtype: type[np.generic] = np.float32
     if integral:
         lo = min(min(a.min() * s, a.max() * s) + b for a, s, b in triples)
         hi = max(max(a.min() * s, a.max() * s) + b for a, s, b in triples)

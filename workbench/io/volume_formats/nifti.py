@@ -48,6 +48,8 @@ def _scaled(raw: np.ndarray, slope: float, inter: float) -> np.ndarray:
 def read_nifti(path: Path) -> Volume:
     """Read a 3-D scalar NIfTI image; physical frame RAS, mm."""
     import nibabel as nib  # local import: nibabel is slow to import
+    from nibabel.nifti1 import Nifti1Header
+    from nibabel.spatialimages import SpatialImage
 
     path = Path(path)
     if not path.exists():
@@ -56,6 +58,8 @@ def read_nifti(path: Path) -> Volume:
         img = nib.load(str(path))
     except Exception as exc:  # nibabel raises many types for bad files
         raise InputError(path, f"cannot read NIfTI file: {exc}") from None
+    if not isinstance(img, SpatialImage):
+        raise InputError(path, f"not a volume image ({type(img).__name__})")
     shape = img.shape
     if len(shape) == 4 and shape[3] == 1:
         shape = shape[:3]
@@ -78,13 +82,11 @@ def read_nifti(path: Path) -> Volume:
     warnings: list[str] = []
     header = img.header
     factor = 1.0
-    try:
+    if isinstance(header, Nifti1Header):  # NIfTI-1 and -2; others have no units API
         space_unit = header.get_xyzt_units()[0]
         factor = _SPACE_UNITS_TO_MM.get(space_unit, 1.0)
         if space_unit == "unknown":
             warnings.append("NIfTI spatial units are unset; assuming mm")
-    except Exception:  # pragma: no cover - header without units API
-        pass
     affine = np.asarray(img.affine, dtype=np.float64)
     axes = affine[:3, :3] * factor
     spacing = np.linalg.norm(axes, axis=0)
@@ -93,10 +95,12 @@ def read_nifti(path: Path) -> Volume:
     direction = axes / spacing
     origin = affine[:3, 3] * factor
     codes = {}
-    try:
-        codes = {"sform_code": int(header["sform_code"]), "qform_code": int(header["qform_code"])}
-    except Exception:  # pragma: no cover - NIfTI-2 headers without codes
-        pass
+    if isinstance(header, Nifti1Header):
+        try:
+            codes = {"sform_code": int(header["sform_code"]),
+                     "qform_code": int(header["qform_code"])}
+        except Exception:  # pragma: no cover - NIfTI-2 headers without codes
+            pass
     metadata = {
         "format": "NIfTI",
         "affine": affine.tolist(),
