@@ -15,13 +15,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
 from workbench.core.mesh import Mesh
 from workbench.render.snapshots import _AXES, _prefer_headless_gl, to_polydata, view_directions
 
-CMAP = "RdBu_r"  # blue (negative) - white - red (positive)
+if TYPE_CHECKING:
+    from pyvista.plotting._typing import ScalarBarArgs
+
+CMAP: Final = "RdBu_r"  # blue (negative) - white - red (positive)
 NAN_COLOUR = "#7a7a7a"  # darker than the lit white of 0 mm
 LEGEND = "red: reconstruction outside the true skin   blue: inside   grey: not compared"
 
@@ -51,6 +55,8 @@ def render_heatmap(
         raise ValueError(f"need one value per vertex ({mesh.n_vertices}), got {len(values)}")
     if not clim[0] < clim[1]:
         raise ValueError(f"clim must be (low, high) with low < high, got {clim}")
+    anterior: Sequence[float]
+    superior: Sequence[float]
     if frame is None or isinstance(frame, str):
         anterior, superior = _AXES[(frame or "HEAD").upper()]
     else:
@@ -65,12 +71,12 @@ def render_heatmap(
     centre = mesh.bounds.mean(axis=0)
     radius = float(np.linalg.norm(mesh.extent))
     plotter = pv.Plotter(off_screen=True, shape=(1, len(views)),
-                         window_size=(size[0] * len(views), size[1]), border=False)
+                         window_size=[size[0] * len(views), size[1]], border=False)
     try:
         for col, view in enumerate(views):
             plotter.subplot(0, col)
-            plotter.set_background("white")
-            bar = None
+            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub: functools.wraps types it unbound
+            bar: ScalarBarArgs | None = None
             if col == len(views) - 1:  # one bar, in the last panel
                 bar = {"title": bar_title, "color": "black", "n_labels": 5, "fmt": "%.1f",
                        "vertical": True, "position_x": 0.8, "position_y": 0.12,
@@ -84,7 +90,7 @@ def render_heatmap(
             plotter.camera.focal_point = centre
             plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
             plotter.camera.up = up
-            plotter.reset_camera()
+            plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub: functools.wraps types it unbound
             plotter.camera.zoom(1.1)
             label = view.replace("_", " ")
             plotter.add_text(f"{title}: {label}" if col == 0 and title else label,

@@ -23,7 +23,8 @@ _AXES = {
 }
 
 
-def view_directions(view: str, anterior: np.ndarray, superior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def view_directions(view: str, anterior: Sequence[float] | np.ndarray,
+                    superior: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Camera direction (from the focus toward the camera) and view-up for a named view.
 
     "front" looks at the face, "side" at the subject's right profile,
@@ -56,8 +57,9 @@ def to_polydata(mesh: Mesh, *, normals: bool = False):  # noqa: ANN201 - pyvista
     """
     import pyvista as pv
 
-    poly = pv.PolyData.from_regular_faces(np.asarray(mesh.vertices, float),
-                                          np.asarray(mesh.faces, np.int64))
+    poly = pv.PolyData.from_regular_faces(
+        np.asarray(mesh.vertices, float),
+        np.asarray(mesh.faces, np.int64))  # type: ignore[arg-type]  # pyvista stub: NDArray[int]
     if normals:
         poly.point_data["Normals"] = np.asarray(mesh.vertex_normals, float)
         poly.point_data.active_normals_name = "Normals"
@@ -89,11 +91,11 @@ def render_surfaces(
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     plotter = pv.Plotter(off_screen=True, shape=(1, len(views)),
-                         window_size=(size[0] * len(views), size[1]), border=False)
+                         window_size=[size[0] * len(views), size[1]], border=False)
     try:
         for col, view in enumerate(views):
             plotter.subplot(0, col)
-            plotter.set_background("white")
+            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub: functools.wraps types it unbound
             for mesh, colour, opacity in layers:
                 plotter.add_mesh(to_polydata(mesh), color=colour, opacity=opacity,
                                  smooth_shading=True, specular=0.2)
@@ -107,7 +109,8 @@ def render_surfaces(
             plotter.camera.focal_point = centre
             plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
             plotter.camera.up = up
-            plotter.reset_camera()  # keep the direction, fit the distance to the bounds
+            # keep the direction, fit the distance to the bounds
+            plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub: functools.wraps types it unbound
             plotter.camera.zoom(1.15)
             plotter.add_text(view.replace("_", " "), font_size=10, color="black")
         plotter.screenshot(str(path))

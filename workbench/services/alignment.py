@@ -238,6 +238,8 @@ def align_to_reference(target: Mesh, reference: Mesh, *,
         lin, t, rms = _icp(src, tree, ref, lin, t, rounds=25)
         if best is None or rms < best[0]:
             best = (rms, lin, t)
+    if best is None:
+        raise RuntimeError("rigid alignment: no start pose to refine")
     rms, lin, t = best
     if method == "search":
         lin, t, rms = _scale_if_complete(src, ref, tree, lin, t, rms)

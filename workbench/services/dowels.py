@@ -202,6 +202,8 @@ def plan_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings = D
             if c in overrides:
                 depth, source, sd_or_none = overrides[c], "override", None
             else:
+                if mean is None:  # ``want`` keeps only codes with a table row or an override
+                    raise RuntimeError(f"no table row for {c}")
                 if k and sd_or_none is None:
                     no_sd.append(c)
                 depth, source = mean + (k * sd_or_none if k and sd_or_none else 0.0), "table"

@@ -45,6 +45,8 @@ def head_frame_from_landmarks(landmarks: LandmarkSet) -> HeadFrame:
     or_r = defined.get("or_r")
     if or_l is None:  # classic FH uses the left orbitale; use the right one alone if needed
         or_l, or_r = or_r, None
+    if or_l is None:  # ruled out by the check above
+        raise LandmarkError("the Frankfort Horizontal needs an orbitale")
     surface = landmarks.surface
 
     def pick(codes: tuple[str, ...]) -> list:

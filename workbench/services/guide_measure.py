@@ -281,10 +281,16 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
     """Everything the guide rules need, from landmarks, the mesh (optional) and cited constants."""
     sex = sex_code(sex)
     m = SkullMeasures()
-    p = {c: _pos(lms, c) for c in lms.codes}
-    p = {c: v for c, v in p.items() if v is not None}
-    caster = RayCaster.shared(skull) if skull is not None and skull.n_faces else None
-    z0 = float(skull.vertices[:, 2].max() + 5.0) if caster else 0.0
+    p: dict[str, np.ndarray] = {}
+    for c in lms.codes:
+        pos = _pos(lms, c)
+        if pos is not None:
+            p[c] = pos
+    caster: RayCaster | None = None
+    z0 = 0.0
+    if skull is not None and skull.n_faces:
+        caster = RayCaster.shared(skull)
+        z0 = float(skull.vertices[:, 2].max() + 5.0)
 
     # nose width: the widest aperture (frontal rays on the mesh, else the bony alare)
     ys = None
@@ -293,7 +299,8 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
         hi = p["rhi"][1] if "rhi" in p else lo + 40.0
         ys = np.arange(lo, hi, 0.5)
     for side, sign in SIDES:
-        got = _aperture_width(caster, z0, ys, sign) if ys is not None else None
+        got = (_aperture_width(caster, z0, ys, sign)
+               if caster is not None and ys is not None else None)
         if got is not None:
             m.put(f"aperture_x_{side}", sign * got,
                   "widest nasal aperture in the frontal view (rays on the skull mesh)")

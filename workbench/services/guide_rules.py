@@ -143,7 +143,9 @@ def _rynn_point(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Pred
 
 def _eye_centres(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Prediction:
     half = 0.5 * constant("eye_axial_length")
-    target, inputs, proj = {}, {}, []
+    target: dict[str, np.ndarray] = {}
+    inputs: dict[str, float] = {}
+    proj: list[float] = []
     for side, sign in SIDES:
         if f"OBH_{side}" not in m:
             continue

@@ -246,7 +246,7 @@ def guides_from_prediction(pred: Prediction, guides: list[Guide]) -> list[Guide]
         raise InputError(pred.rule_id, "this rule predicts a value only, not a position")
     for code, pos in pred.target.items():
         x, y, z = (float(v) for v in np.asarray(pos, float).reshape(3))
-        wanted = []
+        wanted: list[tuple[str, tuple[float, ...]]] = []
         if math.isfinite(x) and code not in ("prn", "sto", "ls", "li"):  # midline codes keep x = 0
             wanted.append(("vline", (x,)))
         if math.isfinite(z):
@@ -260,9 +260,10 @@ def guides_from_prediction(pred: Prediction, guides: list[Guide]) -> list[Guide]
                     raise InputError(pred.rule_id, f"the rule fixes only z of {code} and there is "
                                      "no lateral guide to take y from")
                 value = (out[idx[0]].value[0], value[1])
-            new = {"rule_id": pred.rule_id, "citation": pred.citation, "source": "computed",
-                   "value": value,
-                   "derivation": f"{pred.label}: {pred.quantity} = {pred.value_mm:.1f} mm"}
+            new: dict[str, Any] = {
+                "rule_id": pred.rule_id, "citation": pred.citation, "source": "computed",
+                "value": value,
+                "derivation": f"{pred.label}: {pred.quantity} = {pred.value_mm:.1f} mm"}
             if idx:
                 for i in idx:
                     out[i] = replace(out[i], **new)

@@ -71,12 +71,19 @@ class SurfacePlacement:
         lms = self.stack.case.landmarks.get(self.surface)
         return None if lms is None else lms.get(self.code(code))
 
+    def _edited(self, code: str) -> Landmark:
+        """The landmark ``code`` just edited (it is in the set now)."""
+        lm = self.landmark(code)
+        if lm is None:
+            raise LandmarkError(f"{code} is not in the {self.surface} landmarks after the edit")
+        return lm
+
     # ------------------------------------------------------------------ edits
     def place(self, code: str, point: np.ndarray) -> Landmark:
         """Place (or re-place) ``code`` at the surface point nearest ``point``."""
         c = self.code(code)
         self.stack.push(PlaceLandmark(surface=self.surface, code=c, position=self.snap(point)))
-        return self.landmark(c)
+        return self._edited(c)
 
     def move(self, code: str, point: np.ndarray) -> Landmark:
         """Move a placed or suggested landmark to the surface point nearest ``point``.
@@ -85,7 +92,7 @@ class SurfacePlacement:
         """
         c = self.code(code)
         self.stack.push(MoveLandmark(surface=self.surface, code=c, position=self.snap(point)))
-        return self.landmark(c)
+        return self._edited(c)
 
     def slide(self, code: str, offset_mm: np.ndarray, steps: int = 4) -> Landmark:
         """Slide ``code`` over the surface by ``offset_mm``, staying on it.
@@ -150,13 +157,13 @@ class SurfacePlacement:
         """The anatomy is missing or damaged: the landmark gets no position and no dowel."""
         c = self.code(code)
         self.stack.push(SetLandmarkStatus(surface=self.surface, code=c, status="absent"))
-        return self.landmark(c)
+        return self._edited(c)
 
     def confirm(self, code: str) -> Landmark:
         """Turn a suggested landmark into a placed one (confidence 1)."""
         c = self.code(code)
         self.stack.push(SetLandmarkStatus(surface=self.surface, code=c, status="placed"))
-        return self.landmark(c)
+        return self._edited(c)
 
     def delete(self, code: str) -> None:
         self.stack.push(DeleteLandmark(surface=self.surface, code=self.code(code)))

@@ -269,16 +269,15 @@ def _climb(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: Snap
     from every start (a single search moved sm by a further 1.36 mm when
     snapped twice on another machine's reference head).
     """
-    point: np.ndarray | None = None
-    found: np.ndarray | str = start
+    point = start
     for _ in range(1 + MAX_CLIMBS):
-        point = found
         found = _search(index, to_head, point, rule, radius_at(point), code, limits)
         if isinstance(found, str):
             return (found, True) if point is start else (point, True)
         if np.linalg.norm(found - point) < SETTLED_MM:
             return found, True
-    return found, False
+        point = found
+    return point, False
 
 
 def _search(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: SnapRule,

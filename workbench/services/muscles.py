@@ -159,7 +159,7 @@ def _mouth_arcs(ctx: _Ctx) -> tuple[np.ndarray, np.ndarray]:
     arc1 = loop[a:b + 1]
     arc2 = np.vstack([loop[b:], loop[:a + 1]])
     upper, lower = (arc1, arc2) if arc1[:, 1].mean() > arc2[:, 1].mean() else (arc2, arc1)
-    return tuple(arc[np.argsort(arc[:, 0])] for arc in (upper, lower))
+    return upper[np.argsort(upper[:, 0])], lower[np.argsort(lower[:, 0])]
 
 
 def _oris_rings(ctx: _Ctx, upper: bool) -> list[np.ndarray]:
@@ -250,7 +250,11 @@ def layout_muscles(skin: SkinTemplate) -> tuple[MuscleGrid, ...]:
             continue
         rows, outward, axis_pt = _left_or_midline_grid(ctx, row, specs)
         fid, bary = _project(ctx, np.vstack(rows), outward)
-        axis = _axis(ctx, axis_pt) if row["kind"] == "sphincter" else None
+        axis = None
+        if row["kind"] == "sphincter":
+            if axis_pt is None:
+                raise ValueError(f"sphincter {row['code']} has no axis point")
+            axis = _axis(ctx, axis_pt)
         built[row["code"]] = MuscleGrid(row["code"], row["name"], row["kind"], row["attachment"], row["side"],
                                         tuple(len(r) for r in rows), _surface(fid, bary, GRID_DEPTH_MM), axis)
     faces = skin.mesh.faces

@@ -272,6 +272,8 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     if len(inputs.templates) > 1:
         recon, references = library_consensus(recon, work, inputs, say)
     skull_h = outward(work.transformed(recon.input_to_head))
+    if recon.landmarks is None:  # reconstruct() always records the landmarks it used
+        raise RuntimeError("the reconstruction carries no skull landmarks")
     lms_h = recon.landmarks.transformed(recon.input_to_head)
     rejected = tuple(guides.rejected)
     recon = replace(recon, warnings=recon.warnings + rejected
