@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from workbench.core.errors import InputError
 from workbench.model.reconstruction_setup import (
     FACTOR_RANGE,
+    MAX_DEPTH_MM,
     REGIONS,
     TISSUE_MODELS,
     DowelSettings,
@@ -57,7 +58,7 @@ def test_dowels_normalise_and_compare_by_value() -> None:
     build=st.one_of(st.sampled_from(["slender", "normal", "obese"]),
                     st.floats(-4, 4, allow_nan=False)),
     overrides=st.dictionaries(st.sampled_from(["g", "n", "pg", "i:vault_1"]),
-                              st.floats(0.1, 100, allow_nan=False), max_size=3),
+                              st.floats(0.1, MAX_DEPTH_MM, allow_nan=False), max_size=3),
     excluded=st.lists(st.sampled_from(["g", "ecm2s_l", "zy_r"]), max_size=3),
     model=st.sampled_from(TISSUE_MODELS),
     factors=st.dictionaries(st.sampled_from(REGIONS), st.floats(*FACTOR_RANGE), max_size=3),

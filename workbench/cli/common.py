@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
 
 from workbench.core.errors import WorkbenchError
 from workbench.core.mesh import Mesh
-from workbench.core.units import UNIT_SCALES, resolve_units
+from workbench.core.units import UNIT_SCALES, check_units_choice, resolve_units
 from workbench.io.meshes import MeshReadResult, read_mesh
 from workbench.io.samples import resolve_input
 
@@ -68,17 +69,26 @@ def input_paths(*inputs: Any) -> list[Path]:
     return _input_paths(inputs)
 
 
-def load_mesh(argument: str, args: argparse.Namespace, kind: str = "head") -> MeshReadResult:
+def load_mesh(argument: str, args: argparse.Namespace, kind: str = "head",
+              options: tuple[str, str] = ("--units", "--scale"),
+              check_skull: bool = False) -> MeshReadResult:
     """Read a mesh (path or ``sample:NAME``) applying the user's units policy.
 
-    Raises ``UnitsError`` when ``--units auto`` and the size does not look like mm.
+    Raises ``UnitsError`` when ``--units auto`` and the size does not look like mm,
+    and ``InputError`` for both units and a scale (``options`` are their names), or,
+    with ``check_skull``, a mesh that cannot be a skull in mm (size, triangles, topology).
     """
     path = resolve_input(argument)
     units = getattr(args, "units", "auto")
     scale = getattr(args, "scale", None)
+    check_units_choice(units, scale, units_option=options[0], scale_option=options[1])
     result = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind=kind)
     if scale is None and units == "auto":
         resolve_units(result.units, "auto", source=str(path))
+    if check_skull:
+        from workbench.services.input_checks import check_skull_mesh
+
+        check_skull_mesh(result.mesh, path, units_note=result.units.confirmed)
     return result
 
 
@@ -102,14 +112,26 @@ def _json_default(value: Any) -> Any:
 
 
 def mesh_summary(mesh: Mesh) -> dict[str, Any]:
+    """Counts, bounds, extent and area (mm); a value that is not finite is None (JSON null)."""
     lo, hi = mesh.bounds
     return {
         "n_vertices": mesh.n_vertices,
         "n_faces": mesh.n_faces,
-        "bounds_mm": [lo.tolist(), hi.tolist()],
-        "extent_mm": (hi - lo).tolist(),
-        "area_mm2": mesh.area,
+        "bounds_mm": [_finite_or_none(lo), _finite_or_none(hi)],
+        "extent_mm": _finite_or_none(hi - lo),
+        "area_mm2": _finite_or_none(mesh.area),
     }
+
+
+def _finite_or_none(value: Any) -> Any:
+    """Numbers as they are, NaN and infinities as None (valid JSON), arrays element-wise."""
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    if isinstance(value, list):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def progress_printer(enabled: bool = True):  # noqa: ANN201 - returns a callback

@@ -78,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.clim > 0:
         raise InputError("--clim", f"must be positive, got {args.clim}")
+    if not args.max_distance > 0:
+        raise InputError("--max-distance", f"must be a positive number of mm, got "
+                         f"{args.max_distance}")
     if args.region not in ("face", "all", *REGION_NAMES):
         raise InputError("--region", f"unknown region {args.region!r}",
                          f"use face, all or one of: {', '.join(REGION_NAMES)}")
@@ -85,11 +88,15 @@ def run(args: argparse.Namespace) -> int:
         from workbench.cli.common import input_paths
         from workbench.io.outputs import check_output_folder
 
+        from workbench.services.input_checks import check_output_location
+
+        check_output_location(args.out)
         check_output_folder(args.out, input_paths(args.recon, args.truth, args.template),
                             args.force)
     recon_read = load_mesh(args.recon, args, kind="head")
     truth_args = argparse.Namespace(units=args.truth_units, scale=args.truth_scale)
-    truth_read = load_mesh(args.truth, truth_args, kind="face")
+    truth_read = load_mesh(args.truth, truth_args, kind="face",
+                           options=("--truth-units", "--truth-scale"))
     recon, truth = recon_read.mesh, truth_read.mesh
 
     name, skin, skin_regions, landmarks = _template_skin(args)
@@ -104,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
             "use --region all, or compare the face.ply written by workbench reconstruct "
             "(PLY, OBJ or VTP keep the vertex order; STL does not)")
     result = compare_surfaces(recon, truth, recon_regions=regions, region=args.region,
-                              max_distance_mm=args.max_distance)
+                              max_distance_mm=args.max_distance,
+                              truth_name=str(truth_read.source_path))
 
     data = {"reconstruction": str(recon_read.source_path),
             "truth": str(truth_read.source_path),

@@ -143,7 +143,10 @@ def run_frame(args: argparse.Namespace) -> int:
         from workbench.io.outputs import check_output_file
 
         check_output_file(args.out, input_paths(args.file, args.apply), args.force)
+    from workbench.services.input_checks import check_landmark_geometry
+
     result = _read(args)
+    check_landmark_geometry(result.landmarks, args.file)
     frame = head_frame_from_landmarks(result.landmarks)
     head = result.landmarks.transformed(frame.input_to_head)
     write_json({
@@ -175,7 +178,8 @@ def run_suggest(args: argparse.Namespace) -> int:
     from workbench.io.outputs import check_output_file
 
     check_output_file(args.out, input_paths(args.mesh, args.seed, args.template), args.force)
-    read = load_mesh(args.mesh, args, kind="skull" if args.surface == "skull" else "head")
+    read = load_mesh(args.mesh, args, kind="skull" if args.surface == "skull" else "head",
+                     check_skull=args.surface == "skull")
     head = reference_head(args.sex, args.template)
     seeds = None
     if args.seed is not None:

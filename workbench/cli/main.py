@@ -63,18 +63,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WorkbenchError as exc:
         print(f"workbench {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        # a file the command could not read or write (a folder where a file is
+        # expected, no permission, disk full): name the path and the problem
+        if exc.filename is None or args.debug:
+            return _unexpected(args, exc)
+        where = f"{exc.filename}" + (f" -> {exc.filename2}" if exc.filename2 else "")
+        print(f"workbench {args.command}: error: {where}: cannot be read or written "
+              f"({exc.strerror or exc})", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # last resort: never a bare traceback for users
-        if args.debug:
-            raise
-        print(
-            f"workbench {args.command}: unexpected error: {type(exc).__name__}: {exc}\n"
-            "(rerun with --debug for the full traceback, and please report it)",
-            file=sys.stderr,
-        )
-        return 1
+        return _unexpected(args, exc)
+
+
+def _unexpected(args: argparse.Namespace, exc: Exception) -> int:
+    if args.debug:
+        raise exc
+    print(
+        f"workbench {args.command}: unexpected error: {type(exc).__name__}: {exc}\n"
+        "(rerun with --debug for the full traceback, and please report it)",
+        file=sys.stderr,
+    )
+    return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -51,8 +51,10 @@ def run_info(args: argparse.Namespace) -> int:
     from workbench.io.samples import resolve_input
 
     path = resolve_input(args.mesh)
-    result = read_mesh(path, units=args.units if args.scale is None else "auto",
-                       scale=args.scale, kind=args.kind)
+    # units and scale go in as given (both at once are refused); a damaged file is
+    # inspected, not refused: its NaN vertices are counted in the validation report
+    result = read_mesh(path, units=args.units, scale=args.scale, kind=args.kind,
+                       allow_nonfinite=True)
     report = validate(result.mesh)
     data = {
         "file": str(path),

@@ -9,22 +9,29 @@ pack), ``skull_landmarks.mrk.json``, ``case.fcase``, ``report.json``,
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 
 from workbench.cli.common import add_force_option, add_units_options, write_json
 from workbench.core.errors import InputError
+from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check_tissue_depth
 
 
 def _build(value: str) -> str | float:
     if value in ("slender", "normal", "obese"):
         return value
     try:
-        return float(value.replace("SD", "").replace("sd", "").strip())
+        k = float(value.replace("SD", "").replace("sd", "").strip())
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--build must be slender, normal, obese or a number of SDs (e.g. 1 or -1.5), "
             f"not {value!r}") from None
+    if not math.isfinite(k) or abs(k) > MAX_BUILD_SD:
+        raise argparse.ArgumentTypeError(
+            f"--build {value}: k must be a finite number of SDs within ±{MAX_BUILD_SD:g} SD "
+            "(mean + k SD of the table group)")
+    return k
 
 
 def _vector(text: str) -> tuple[float, float, float]:
@@ -47,7 +54,26 @@ def add_orientation_options(p: argparse.ArgumentParser) -> None:
                    help="the subject's left in the file's coordinates (only for mirrored files)")
 
 
+def _check_directions(args: argparse.Namespace) -> None:
+    """Zero, non-finite or parallel ``--anterior/--superior/--left`` are refused by name."""
+    from workbench.model.reconstruction_setup import MAX_AXIS_COS
+
+    given = {f"--{k}": getattr(args, k, None) for k in ("anterior", "superior", "left")}
+    for option, v in given.items():
+        if v is not None and not (all(math.isfinite(c) for c in v) and any(v)):
+            raise InputError(option, f"{','.join(f'{c:g}' for c in v)} is not a direction "
+                             "(zero or non-finite vector)", "give three numbers, e.g. 0,0,1")
+    a, s = given["--anterior"], given["--superior"]
+    if a is not None and s is not None:
+        cos = sum(x * y for x, y in zip(a, s, strict=True)) / (math.hypot(*a) * math.hypot(*s))
+        if abs(cos) > MAX_AXIS_COS:
+            raise InputError("--anterior/--superior", "the two directions are (nearly) parallel "
+                             f"(angle {math.degrees(math.acos(min(1.0, abs(cos)))):.1f} degrees)",
+                             "anterior (face) and superior (up) must be about 90 degrees apart")
+
+
 def orientation_of(args: argparse.Namespace, argument: str) -> tuple | None:
+    _check_directions(args)
     if args.anterior is not None and args.superior is not None:
         return (args.anterior, args.superior) + ((args.left,) if args.left else ())
     if argument.startswith("sample:"):
@@ -113,17 +139,23 @@ def _overrides(items: list[str]) -> dict[str, float]:
     for item in items:
         code, _, value = item.partition("=")
         try:
-            out[code.strip()] = float(value)
+            depth = float(value)
         except ValueError:
             raise InputError("--override", f"{item!r} is not CODE=MM") from None
+        out[code.strip()] = check_tissue_depth(depth, f"--override {item}")
     return out
 
 
 def run(args: argparse.Namespace) -> int:
     from workbench.io.samples import resolve_input
     from workbench.services.reconstruction_job import JobSettings
+    from workbench.services.input_checks import check_output_location
     from workbench.services.tissue_model import TissueSettings
 
+    check_count(args.ensemble, "--ensemble", 0, MAX_ENSEMBLE,
+                why=f"the spread map settles by ~50 fits; more than {MAX_ENSEMBLE} only takes "
+                    "longer")
+    check_output_location(args.out)
     settings = JobSettings(
         units=args.units, scale=args.scale, landmarks=args.landmarks, table=args.table,
         sex=args.sex, build=args.build, guides=args.guides, rules=tuple(args.rule),

@@ -180,6 +180,20 @@ def resolve_units(
     return unit_scale(requested)
 
 
+def check_units_choice(units: str | None, scale: float | None, *, units_option: str = "--units",
+                       scale_option: str = "--scale") -> None:
+    """Refuse a unit name together with a scale factor: one of them would be ignored.
+
+    ``units`` None or "auto" with any ``scale`` is fine, as is a unit without a scale.
+    """
+    if scale is not None and units not in (None, "auto"):
+        shown = f"{scale:g}" if isinstance(scale, (int, float)) else repr(scale)
+        raise InputError(f"{units_option} {units} with {scale_option} {shown}",
+                         "give either units or a scale factor, not both",
+                         f"{units_option} {units} means {UNIT_SCALES.get(units, '?')} mm per "
+                         f"unit; {scale_option} sets the mm per unit itself")
+
+
 def unit_scale(unit: str) -> float:
     """Millimetres per ``unit`` ("mm", "cm", "m", "in"; "inch"/"inches" accepted).
 

@@ -32,6 +32,7 @@ from workbench.core.mesh import Mesh
 from workbench.core.units import (
     UNIT_SCALES,
     UnitsReport,
+    check_units_choice,
     detect_units,
     detect_units_from_extent,
     unit_scale,
@@ -107,14 +108,15 @@ def _load_bytes(path: Path) -> bytes:
 def _check_scale(path: Path, units: str, scale: float | None) -> float | None:
     if scale is None:
         return None
-    if units not in ("auto", None):
-        raise InputError(path, "give either units or a scale factor, not both")
+    check_units_choice(units, scale)
     try:
         value = float(scale)
     except (TypeError, ValueError):
-        raise InputError(path, f"scale must be a number, got {scale!r}") from None
+        raise InputError(path, f"the scale factor (--scale) must be a number, "
+                         f"got {scale!r}") from None
     if not math.isfinite(value) or value <= 0:
-        raise InputError(path, f"scale must be a positive number, got {scale!r}")
+        raise InputError(path, f"the scale factor (--scale) must be a positive number of mm "
+                         f"per file unit, got {scale!r}")
     return value
 
 
@@ -124,6 +126,7 @@ def read_mesh(
     scale: float | None = None,
     *,
     kind: str = "head",
+    allow_nonfinite: bool = False,
 ) -> MeshReadResult:
     """Read a triangle mesh; the format is chosen by the file extension.
 
@@ -139,6 +142,9 @@ def read_mesh(
         Explicit factor from file units to mm (instead of ``units``).
     kind : {"head", "skull", "face"}
         What the mesh shows; sets the plausible size used by unit detection.
+    allow_nonfinite : bool
+        Keep vertices with NaN or infinite coordinates (for inspecting a
+        damaged file); by default such a file is refused with their count.
 
     Returns
     -------
@@ -148,7 +154,8 @@ def read_mesh(
     ------
     InputError
         Missing file, unsupported extension, or a file that cannot be parsed
-        (truncated, non-numeric, indices out of range, no triangles, ...).
+        (truncated, non-numeric, indices out of range, no triangles, NaN or
+        infinite coordinates, ...), or both ``units`` and ``scale``.
     """
     path = Path(path)
     module = _format_for(path, "read")
@@ -160,6 +167,8 @@ def read_mesh(
     with np.errstate(all="ignore"):  # damaged numbers (NaN, overflow) are reported, not warned
         parsed = module.read(path, data)
     raw = Mesh(parsed.vertices, parsed.faces)
+    if not allow_nonfinite:
+        _refuse_nonfinite(path, raw)
     report = detect_units(raw, kind)
     messages = list(parsed.messages)
     if factor is None:
@@ -177,6 +186,21 @@ def read_mesh(
             )
     mesh = raw if factor == 1.0 else raw.scaled(factor)
     return MeshReadResult(mesh, report, path, tuple(messages), factor, path.suffix.lower())
+
+
+def _refuse_nonfinite(path: Path, mesh: Mesh) -> None:
+    """An :class:`InputError` naming the file and the count of NaN / infinite vertices."""
+    bad = ~np.isfinite(mesh.vertices)
+    if not bad.any():
+        return
+    rows = bad.any(axis=1)
+    nan = int(np.isnan(mesh.vertices).any(axis=1).sum())
+    kinds = " and ".join(k for k, n in (("NaN", nan), ("infinite", int(rows.sum()) - nan)) if n)
+    first = ", ".join(str(i) for i in np.flatnonzero(rows)[:5])
+    raise InputError(path, f"{int(rows.sum())} vertices of {mesh.n_vertices} have {kinds} "
+                     f"coordinates (first: vertex {first})",
+                     "the file is damaged or was exported incorrectly; repair or export it "
+                     "again ('workbench mesh info' shows the damage)")
 
 
 def _atomic_write(path: Path, payload: bytes) -> None:

@@ -23,7 +23,10 @@ from __future__ import annotations
 from os import PathLike
 from pathlib import Path
 
+import numpy as np
+
 from workbench.core.errors import InputError
+from workbench.core.limits import check_voxel_size
 from workbench.core.volume import Volume
 from workbench.io.volume_formats.dicom import read_dicom_series
 from workbench.io.volume_formats.metaimage import read_metaimage
@@ -99,4 +102,59 @@ def read_volume(path: str | PathLike[str]) -> Volume:
         "metaimage": read_metaimage,
         "nifti": read_nifti,
     }[kind]
-    return reader(path)
+    try:
+        volume = reader(path)
+    except ValueError as exc:   # the Volume's own checks (spacing, direction) on header values
+        raise InputError(path, f"the header describes no valid volume: {exc}") from None
+    if kind == "nifti":
+        _check_nifti_pixdim(path)
+    check_voxel_size(volume.spacing_mm, path)
+    _check_finite_voxels(volume, path)
+    return volume
+
+
+def _check_nifti_pixdim(path: Path) -> None:
+    """Refuse a NIfTI-1 whose affine comes from ``pixdim`` with a zero or negative voxel size.
+
+    nibabel replaces such sizes with 1 (with a warning only), which would
+    make a scan of unknown voxel size look like 1 mm voxels; so the raw
+    header bytes are read here (``pixdim`` at byte 76, ``qform_code`` and
+    ``sform_code`` at 252 and 254).
+    """
+    import gzip
+    import struct
+
+    try:
+        opener = gzip.open if path.name.lower().endswith(".gz") else open
+        with opener(path, "rb") as handle:
+            raw = handle.read(348)
+    except OSError:
+        return   # the reader already read it; nothing more to learn here
+    if len(raw) < 348:
+        return
+    for order in "<>":
+        if struct.unpack(order + "i", raw[:4])[0] == 348:   # NIfTI-1 (NIfTI-2 has 540)
+            break
+    else:
+        return
+    pixdim = struct.unpack(order + "3f", raw[80:92])
+    codes = struct.unpack(order + "2h", raw[252:256])
+    if codes == (0, 0) and not all(v > 0 for v in pixdim):
+        shown = " x ".join(f"{v:g}" for v in pixdim)
+        raise InputError(path, f"the voxel size in the header is {shown} mm (pixdim, no "
+                         "qform or sform)", "the scan's voxel size is unset and cannot be "
+                         "guessed (1 mm would be a silent assumption); fix the header")
+
+
+def _check_finite_voxels(volume: Volume, path: Path) -> None:
+    """Refuse NaN or infinite voxel values (floating-point data only), with their count."""
+    data = volume.data
+    if data.dtype.kind != "f":
+        return
+    bad = 0
+    for k in range(data.shape[0]):   # slice by slice: no full-size temporary
+        bad += int((~np.isfinite(data[k])).sum())
+    if bad:
+        raise InputError(path, f"{bad} voxels of {data.size} are NaN or infinite",
+                         "the volume is damaged, or NaN marks 'no data'; fill them (e.g. with "
+                         "the air value) before extracting a surface")

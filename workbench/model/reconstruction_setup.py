@@ -39,6 +39,7 @@ from types import MappingProxyType
 from typing import Any
 
 from workbench.core.errors import InputError
+from workbench.core.limits import MAX_BUILD_SD, MAX_TISSUE_DEPTH_MM, REGION_FACTOR_RANGE
 from workbench.model.state import freeze_json, thaw_json
 
 DEFAULT_TABLE = "ttable_2023"
@@ -50,9 +51,9 @@ TISSUE_MODELS = ("table", "reference")
 #: face regions a thickness factor can be set for (``tissue_model.REGIONS``)
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 #: plausible region factors (``tissue_model.FACTOR_RANGE``)
-FACTOR_RANGE = (0.3, 3.0)
-#: largest depth override accepted (mm): a sanity bound, no face has thicker tissue
-MAX_DEPTH_MM = 100.0
+FACTOR_RANGE = REGION_FACTOR_RANGE
+#: largest depth override accepted (mm): the soft-tissue bound of :mod:`workbench.core.limits`
+MAX_DEPTH_MM = MAX_TISSUE_DEPTH_MM
 #: anterior and superior may not be closer to parallel than this (|cos|)
 MAX_AXIS_COS = 0.99
 
@@ -82,6 +83,10 @@ def parse_build(value: Any) -> str | float:
                              "use slender, normal, obese, or a number k for mean + k SD") from None
     if not math.isfinite(k):
         raise SetupError("build", f"k must be a finite number of SDs, got {value!r}")
+    if abs(k) > MAX_BUILD_SD:
+        raise SetupError("build", f"k = {k:g} SD is outside ±{MAX_BUILD_SD:g} SD",
+                         "a build is mean + k SD of the table group; beyond "
+                         f"±{MAX_BUILD_SD:g} SD the table is extrapolated, not read")
     return k
 
 

@@ -18,8 +18,9 @@ import numpy as np
 from workbench.commands.case_edits import AddEvidence, SetSpecimen
 from workbench.commands.landmarks import ReplaceLandmarkSet
 from workbench.commands.stack import CommandStack
+from workbench.core.errors import InputError
 from workbench.core.mesh import validate
-from workbench.core.units import resolve_units
+from workbench.core.units import check_units_choice, resolve_units
 from workbench.io.case_file import load_case
 from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import read_landmarks
@@ -27,6 +28,11 @@ from workbench.io.meshes import read_mesh
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
 from workbench.model.meta import CaseMeta
+from workbench.services.input_checks import (
+    check_landmark_geometry,
+    check_landmarks_on_skull,
+    check_skull_mesh,
+)
 from workbench.model.state import thaw_json
 
 
@@ -64,9 +70,11 @@ def start_case_from_skull(
         in the same frame and units as the skull file.
     """
     path = Path(skull_path)
+    check_units_choice(units, scale)
     read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="skull")
     if scale is None and units == "auto":
         resolve_units(read.units, "auto", source=str(path))
+    check_skull_mesh(read.mesh, path, units_note=read.units.confirmed)
     factor = read.scale_applied
     units_note = "millimetres" if factor == 1.0 else f"file units x {factor:g} = mm"
     case = Case(meta=CaseMeta.new(examiner=examiner))
@@ -80,9 +88,12 @@ def start_case_from_skull(
         stack.push(SetSpecimen(mesh=read.mesh, units="mm"))
         if landmarks_path is not None:
             result = read_landmarks(landmarks_path, "skull", catalogue=load_catalogue())
+            _refuse_unusable_points(result, landmarks_path)
             landmarks = result.landmarks
             if factor != 1.0:
                 landmarks = landmarks.transformed(_scale_matrix(factor))
+            check_landmark_geometry(landmarks, landmarks_path)
+            check_landmarks_on_skull(read.mesh, landmarks, landmarks_path)
             notes += list(result.messages)
             stack.push(AddEvidence(evidence=EvidenceFile.from_path(landmarks_path,
                                                                    "skull_landmarks")))
@@ -90,6 +101,23 @@ def start_case_from_skull(
                                           label=f"Import landmarks {Path(landmarks_path).name}"))
     stack.set_clean()
     return OpenedCase(case, stack, notes)
+
+
+def _refuse_unusable_points(result: Any, path: str | PathLike[str]) -> None:
+    """Unknown or repeated codes in a landmark file given for a case are refused.
+
+    The reader skips them with a note; for evidence imported into a case a
+    skipped point is a silent loss, so the user fixes the file first.
+    """
+    problems = []
+    if result.unknown:
+        problems.append(f"unknown skull landmark codes: {', '.join(result.unknown)}")
+    if result.duplicates:
+        problems.append(f"duplicate codes: {', '.join(result.duplicates)} (given twice)")
+    if problems:
+        raise InputError(path, "; ".join(problems),
+                         "use the codes of data_tables/landmarks/catalogue.csv, one point per "
+                         "code ('workbench landmarks check' lists them)")
 
 
 def _scale_matrix(factor: float) -> np.ndarray:

@@ -296,7 +296,8 @@ def summarise(signed_mm: np.ndarray, coverage: float = math.nan) -> dict[str, fl
 
 def compare_surfaces(recon: Mesh, truth: Mesh, *,
                      recon_regions: Mapping[str, np.ndarray] | None = None,
-                     region: str = "face", max_distance_mm: float = 25.0) -> Comparison:
+                     region: str = "face", max_distance_mm: float = 25.0,
+                     truth_name: str = "truth") -> Comparison:
     """Signed distances from the true skin ``truth`` to the reconstruction ``recon``.
 
     Parameters
@@ -312,11 +313,15 @@ def compare_surfaces(recon: Mesh, truth: Mesh, *,
         ``"all"`` (every truth vertex within ``max_distance_mm``; needs no labels).
     max_distance_mm : float
         Truth vertices farther from the reconstruction are not used.
+    truth_name : str
+        How messages name the true skin (e.g. its file).
 
     Raises
     ------
     InputError
-        An unknown region, or a region other than "all" without region labels.
+        An unknown region, a region other than "all" without region labels,
+        or surfaces that do not overlap (no true-skin vertex within
+        ``max_distance_mm`` of the region: every figure would be empty).
     """
     if not max_distance_mm > 0:
         raise InputError("max_distance_mm", f"must be positive, got {max_distance_mm}")
@@ -363,6 +368,13 @@ def compare_surfaces(recon: Mesh, truth: Mesh, *,
     use = referenced & allowed[vertex] & (cl.distances <= max_distance_mm)
     use &= ~_beyond_border(recon, index, tv, cl)
     ids = np.nonzero(use)[0]
+    if len(ids) == 0:
+        gap = cl.distances[referenced]
+        nearest_mm = float(gap.min()) if len(gap) else math.nan
+        raise InputError(truth_name, f"the surfaces do not overlap (nearest distance "
+                         f"{nearest_mm:.1f} mm; no true-skin vertex within "
+                         f"{max_distance_mm:g} mm of the reconstruction's {region} region)",
+                         "both meshes must be in the same frame and units")
     signed, region_of = signed[ids], label[vertex[ids]]
 
     # reconstruction -> truth: which part of the region has true skin nearby

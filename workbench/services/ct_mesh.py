@@ -23,6 +23,12 @@ from time import perf_counter
 from typing import Any
 
 from workbench.core.isosurface import TISSUES, IsoChoice, choose_iso, extract_isosurface
+from workbench.core.limits import (
+    MAX_SMOOTH_ITERATIONS,
+    TARGET_TRIANGLES_RANGE,
+    check_count,
+    finite_number,
+)
 from workbench.core.mesh import Mesh, ValidationReport, validate
 from workbench.core.volume import Volume
 from workbench.io.samples import credit_for
@@ -146,6 +152,7 @@ def mesh_from_ct(
     """
     if tissue not in TISSUES:
         raise ValueError(f"tissue must be one of {TISSUES}, got {tissue!r}")
+    check_extraction_settings(iso, target_triangles, smooth_iterations)
 
     def report(step: str, fraction: float) -> None:
         if progress is not None:
@@ -201,6 +208,25 @@ def mesh_from_ct(
         warnings=tuple(volume.metadata.get("warnings", ())),
         credit=_credit(path_or_volume),
     )
+
+
+def check_extraction_settings(iso: float | None, target_triangles: int | None,
+                              smooth_iterations: int = 0) -> None:
+    """Refuse a non-finite iso level, a decimation target or smoothing out of bounds.
+
+    The bounds are :data:`~workbench.core.limits.TARGET_TRIANGLES_RANGE` and
+    :data:`~workbench.core.limits.MAX_SMOOTH_ITERATIONS`; the names in the
+    messages are the command-line options.
+    """
+    if iso is not None:
+        finite_number(iso, "--iso")
+    if target_triangles is not None:
+        lo, hi = TARGET_TRIANGLES_RANGE
+        check_count(target_triangles, "--target-triangles", lo, hi,
+                    why=f"fewer than {lo:,} triangles lose the anatomy; more than {hi:,} is "
+                        "finer than any CT needs")
+    check_count(smooth_iterations, "--smooth", 0, MAX_SMOOTH_ITERATIONS,
+                why="a few tens of iterations smooth a CT surface; thousands melt it")
 
 
 def _credit(path_or_volume: str | PathLike[str] | Volume) -> str | None:

@@ -35,6 +35,7 @@ from workbench.core.units import UNIT_SCALES
 from workbench.io.case_file import save_case
 from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import write_mrk_json
+from workbench.io.mesh_formats import ply
 from workbench.io.meshes import write_mesh
 from workbench.io.outputs import relocate, staged_folder
 from workbench.io.template_pack import export_template
@@ -44,6 +45,7 @@ from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.fit_guides import MAX_GUIDE_SHIFT_MM, plausible_guides
 from workbench.services.guides import guides_from_json, guides_to_json
+from workbench.services.input_checks import check_face_fits_skull, check_fit_settings
 from workbench.services.landmark_transfer import TransferResult
 from workbench.services.reconstruct import FitSettings, Reconstruction
 from workbench.services.reconstruction_service import (
@@ -110,6 +112,14 @@ class JobResult:
         mm_per_unit = self.settings.scale or UNIT_SCALES.get(self.settings.units, 1.0)
         return 1.0 / mm_per_unit
 
+    @property
+    def file_units_label(self) -> str:
+        """The skull file's units as ``face.ply`` states them: "mm", "cm", or
+        "file units (1 unit = 15 mm)" for a ``--scale``."""
+        if self.settings.scale:
+            return f"file units (1 unit = {self.settings.scale:g} mm)"
+        return self.settings.units if self.settings.units in UNIT_SCALES else "mm"
+
 
 def record_settings(opened: OpenedCase, settings: JobSettings) -> None:
     """The job's settings as typed commands on the case (each one undo step, audited)."""
@@ -138,11 +148,13 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
                                    examiner=settings.examiner, landmarks_path=settings.landmarks)
     case, stack = opened.case, opened.stack
     record_settings(opened, settings)
+    check_fit_settings(case.dowels, ensemble=settings.ensemble, rules=settings.rules)
     inputs = FitInputs.from_case(case, template=settings.template, templates=settings.templates,
                                  rules=settings.rules, use_guides=str(settings.guides) != "none",
                                  ensemble=settings.ensemble, tissue=settings.tissue)
     times["open"] = time.perf_counter() - t
     fit = run_fit(inputs, progress=say)
+    check_face_fits_skull(fit.recon.face, case.specimen.mesh)
     times.update(fit.seconds)
     stack.push(ReplaceLandmarkSet(surface="skull", new_set=fit.recon.landmarks,
                                   label="Skull landmarks from the dense registration"))
@@ -362,7 +374,8 @@ def write_outputs(result: JobResult, out: str | PathLike[str], *, force: bool = 
     """Outputs in the skull file's frame (no report files).
 
     ``face.ply`` is also in the skull file's **units**, so it overlays the
-    evidence in any viewer; when those are not mm, ``face_mm.ply`` is the
+    evidence in any viewer, and its ``comment units:`` header line names
+    them (e.g. ``units: cm``); when those are not mm, ``face_mm.ply`` is the
     same surface in mm.  ``head/`` (a template pack: skin, skull parts,
     muscles, landmarks) and the landmark file are in mm, as the pack format
     and the case require.
@@ -387,7 +400,12 @@ def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     face = result.recon.face
     k = result.file_units_per_mm
-    files = {"face": write_mesh(out / "face.ply", face if k == 1.0 else face.scaled(k))}
+    if k == 1.0:
+        files = {"face": write_mesh(out / "face.ply", face)}
+    else:   # the skull file's units, and the header says so (not "mm")
+        files = {"face": ply.write(out / "face.ply", face.scaled(k),
+                                   units=result.file_units_label,
+                                   comments=["same surface in mm: face_mm.ply"])}
     if k != 1.0:
         files["face_mm"] = write_mesh(out / "face_mm.ply", face)
     head_in = head_in_input_frame(result.recon)

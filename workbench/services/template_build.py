@@ -359,8 +359,13 @@ def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLi
     from workbench.io.template_pack import export_template
     from workbench.services.template_cache import reference_head
 
+    from workbench.core.units import check_units_choice
+    from workbench.services.input_checks import check_output_location, check_skull_mesh
+
+    check_units_choice(units, scale)
     sources = [skin_path, skull_path, skin_landmarks, skull_landmarks]
     if not staged:
+        check_output_location(out)
         check_output_folder(out, sources, force)    # before the build, which takes a while
     meshes, factors, inputs = {}, {}, []
     for role, path, kind in (("skin", Path(skin_path), "head"),
@@ -368,6 +373,8 @@ def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLi
         read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind=kind)
         if scale is None and units == "auto":
             resolve_units(read.units, "auto", source=str(path))
+        if role == "skull":
+            check_skull_mesh(read.mesh, path, units_note=read.units.confirmed)
         meshes[role], factors[role] = read.mesh, read.scale_applied
         inputs.append({"role": role, "file": path.name, "sha256": _sha256(path)})
     seeds: dict[str, LandmarkSet | None] = {"skin": None, "skull": None}

@@ -326,17 +326,21 @@ def _comment_lines(comments: Iterable[str]) -> str:
 
 
 def encode(
-    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, comments: Iterable[str] = ()
+    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, comments: Iterable[str] = (),
+    units: str = "mm",
 ) -> bytes:
     """PLY bytes: binary little endian (default) or ascii, double vertices.
 
     ``comments`` are extra header lines (``comment TEXT``), written after
     the units and writer comments; each must be one line of ASCII text
-    (ValueError otherwise).
+    (ValueError otherwise).  ``units`` is what the ``comment units:`` line
+    states: "mm" unless the caller writes the numbers in other units.
     """
     fmt = "binary_little_endian" if binary else "ascii"
+    units_note = UNITS_NOTE if units == "mm" else f"units: {units}"
+    _comment_lines([units_note])   # one line of ASCII text, like the other comments
     header = (
-        f"ply\nformat {fmt} 1.0\ncomment {UNITS_NOTE}\ncomment written by {WRITER_NAME}\n"
+        f"ply\nformat {fmt} 1.0\ncomment {units_note}\ncomment written by {WRITER_NAME}\n"
         f"{_comment_lines(comments)}"
         f"element vertex {len(vertices)}\n"
         "property double x\nproperty double y\nproperty double z\n"
@@ -352,7 +356,8 @@ def encode(
 
 
 def write(
-    path: str | PathLike[str], mesh: Mesh, binary: bool = True, comments: Iterable[str] = ()
+    path: str | PathLike[str], mesh: Mesh, binary: bool = True, comments: Iterable[str] = (),
+    units: str = "mm",
 ) -> Path:
     """Write a PLY mesh (vertices in mm) atomically with extra header ``comments``.
 
@@ -371,7 +376,8 @@ def write(
         raise InputError(path, "the folder does not exist", "create it first")
     if path.is_dir():
         raise InputError(path, "is a folder, cannot write a mesh file there")
-    payload = encode(mesh.vertices, np.asarray(mesh.faces), binary=binary, comments=comments)
+    payload = encode(mesh.vertices, np.asarray(mesh.faces), binary=binary, comments=comments,
+                     units=units)
     try:
         _atomic_write(path, payload)
     except OSError as exc:

@@ -1,0 +1,156 @@
+"""Plausibility bounds for user inputs, in one place (lengths in mm).
+
+A value outside these bounds is not a forensic finding but a typing slip,
+a wrong unit or a broken file, so the workbench refuses it with a message
+naming the option or file and the bound instead of computing a garbage
+result.  The bounds are sanity limits, deliberately generous: each comment
+says why a real case cannot reach it.
+
+Pure Python and numpy; no file access.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from workbench.core.errors import InputError
+
+#: soft-tissue depth (mm), 0 < d <= MAX: the thickest facial tissue of obese adults
+#: (cheek, submental) stays well under 60 mm; more is a unit slip (cm read as mm x 10...)
+MAX_TISSUE_DEPTH_MM = 60.0
+#: SD of a table depth (mm): a spread larger than the largest plausible depth is garbage
+MAX_TISSUE_SD_MM = MAX_TISSUE_DEPTH_MM
+#: thickness factor of a face region (x the table's tissue): a third to three times
+#: spans emaciated to obese faces; beyond it the factor is a slip
+REGION_FACTOR_RANGE = (0.3, 3.0)
+#: build k (mean + k SD): 4 SD covers 99.99 % of a normal population; beyond it the
+#: table is being extrapolated, not read
+MAX_BUILD_SD = 4.0
+#: uncertainty-ensemble fits: the spread map settles by ~50 draws, one draw takes ~0.5 s,
+#: so 500 is minutes already (1e8 would run for years)
+MAX_ENSEMBLE = 500
+#: CT / MR voxel size (mm): clinical and micro CT lie within 0.05-20 mm; 0 is an unset
+#: header field, km-size voxels a unit slip
+VOXEL_MM_RANGE = (0.05, 20.0)
+#: decimation target (triangles): below 1,000 a skull or head loses its anatomy, above
+#: 5,000,000 the mesh is larger than any CT iso-surface needs
+TARGET_TRIANGLES_RANGE = (1_000, 5_000_000)
+#: Taubin smoothing iterations: a few tens smooth a CT surface; thousands melt it
+MAX_SMOOTH_ITERATIONS = 500
+#: every extent of a skull (mm): even a mandible alone is 30 mm or more in every direction,
+#: so a thinner "skull" is flat (a plane, a line) or in the wrong units
+MIN_SKULL_THICKNESS_MM = 20.0
+#: a skull mesh needs at least this many triangles to carry any anatomy at all
+MIN_SKULL_TRIANGLES = 100
+#: each bounding-box extent of the reconstructed face divided by the skull's: the head is
+#: the skull plus 3-30 mm of tissue a side (x 1.0-1.3 for a 190 mm skull); a face cut to
+#: the front of the head is shorter in depth, hence the low bound below 1
+FACE_TO_SKULL_EXTENT_RANGE = (0.8, 1.6)
+#: a skull landmark farther than this (mm) from the skull surface is not on the bone
+LANDMARK_OFF_SURFACE_MM = 10.0
+#: refuse the landmarks when at least this fraction of them is off the surface
+OFF_SURFACE_FRACTION = 0.5
+#: two landmarks closer than this (mm) coincide (e.g. both porions typed as one point)
+COINCIDENT_MM = 1.0
+#: landmarks whose second principal spread is below this (mm) lie on a line
+COLLINEAR_MM = 2.0
+
+
+def finite_number(value: Any, name: str) -> float:
+    """``value`` as a float, or an :class:`InputError` naming ``name``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InputError(name, f"{value!r} is not a number") from None
+    if isinstance(value, bool) or not math.isfinite(number):
+        raise InputError(name, f"must be a finite number, got {value!r}")
+    return number
+
+
+def check_range(value: Any, name: str, lo: float | None = None, hi: float | None = None, *,
+                unit: str = "", low_open: bool = False, why: str = "") -> float:
+    """``value`` as a finite float within ``[lo, hi]`` (``(lo, hi]`` with ``low_open``).
+
+    Raises an :class:`InputError` naming ``name``, the value and the bound.
+    """
+    number = finite_number(value, name)
+    below = lo is not None and (number <= lo if low_open else number < lo)
+    above = hi is not None and number > hi
+    if below or above:
+        u = f" {unit}" if unit else ""
+        if lo is not None and hi is not None:
+            bound = f"{'above' if low_open else 'at least'} {lo:g} and at most {hi:g}{u}"
+        elif lo is not None:
+            bound = f"{'above' if low_open else 'at least'} {lo:g}{u}"
+        else:
+            bound = f"at most {hi:g}{u}"
+        raise InputError(name, f"{value!r} is out of range: must be {bound}",
+                         why or None)
+    return number
+
+
+def check_count(value: Any, name: str, lo: int, hi: int, why: str = "") -> int:
+    """An integer within ``[lo, hi]`` (an :class:`InputError` naming ``name`` otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        number = finite_number(value, name)
+        if number != int(number):
+            raise InputError(name, f"must be a whole number, got {value!r}")
+        value = int(number)
+    if not lo <= int(value) <= hi:
+        raise InputError(name, f"{value!r} is out of range: must be {lo}-{hi}", why or None)
+    return int(value)
+
+
+def check_tissue_depth(value: Any, name: str) -> float:
+    """A soft-tissue depth in mm: ``0 < d <= MAX_TISSUE_DEPTH_MM``."""
+    return check_range(value, name, 0.0, MAX_TISSUE_DEPTH_MM, unit="mm", low_open=True,
+                       why=f"no face has soft tissue thicker than {MAX_TISSUE_DEPTH_MM:g} mm; "
+                           "check the units")
+
+
+def check_build_sd(k: float, name: str = "--build") -> float:
+    """A build k (mean + k SD) within ``±MAX_BUILD_SD``."""
+    return check_range(k, name, -MAX_BUILD_SD, MAX_BUILD_SD, unit="SD",
+                       why=f"a build is mean + k SD with k within ±{MAX_BUILD_SD:g} SD")
+
+
+def check_voxel_size(spacing_mm: Any, source: Any) -> np.ndarray:
+    """Voxel sizes (mm) within :data:`VOXEL_MM_RANGE`, else an error naming the file."""
+    spacing = np.asarray(spacing_mm, dtype=np.float64).reshape(-1)
+    lo, hi = VOXEL_MM_RANGE
+    shown = " x ".join(f"{s:.4g}" for s in spacing)
+    if not np.isfinite(spacing).all():
+        raise InputError(source, f"the voxel size is not a number ({shown} mm)",
+                         "the header's spacing or affine is damaged")
+    if (spacing < lo).any() or (spacing > hi).any():
+        raise InputError(source, f"voxel size {shown} mm is implausible for a CT or MR scan "
+                         f"(expected {lo:g}-{hi:g} mm)",
+                         "the header's voxel size is unset or in the wrong units")
+    return spacing
+
+
+def check_face_fits_skull(face_extent_mm: Any, skull_extent_mm: Any,
+                          source: str = "reconstruction") -> None:
+    """Refuse a face whose bounding box does not fit the skull's.
+
+    Both extents are ``(3,)`` sizes (mm) in the same frame.  Every side of
+    the face must be at least the low factor of
+    :data:`FACE_TO_SKULL_EXTENT_RANGE` times the skull's side (the face
+    covers the bone) and at most the high factor times the skull's
+    *largest* side (a skull with a cut vault still carries a whole head).
+    """
+    face = np.asarray(face_extent_mm, dtype=np.float64).reshape(3)
+    skull = np.asarray(skull_extent_mm, dtype=np.float64).reshape(3)
+    lo, hi = FACE_TO_SKULL_EXTENT_RANGE
+    ok = bool(np.isfinite(face).all() and np.isfinite(skull).all()
+              and (face >= lo * skull).all() and (face <= hi * skull.max()).all())
+    if not ok:
+        sizes = " x ".join(f"{v:.1f}" for v in face)
+        bone = " x ".join(f"{v:.1f}" for v in skull)
+        raise InputError(source, f"the face came out {sizes} mm against a skull of {bone} mm "
+                         f"(each side should be at least {lo:g} x the skull's and at most "
+                         f"{hi:g} x its largest side); the result is not a plausible face",
+                         "check the skull landmarks, the orientation and the depth settings")
