@@ -76,13 +76,14 @@ def run(options: LaunchOptions) -> int:
     app = ensure_app()
     from workbench.qt.main_window import MainWindow
 
-    shot = options.screenshot is not None
+    screenshot = options.screenshot
+    shot = screenshot is not None
     window = MainWindow(auto_update=not shot, interactive=not shot)
     window.resize(*options.size)
     window.show()
     app.processEvents()
     errors = prepare(window, options)
-    if not shot:
+    if screenshot is None:
         from PySide6.QtCore import QTimer
 
         from workbench.qt.autosave import offer_recovery
@@ -91,7 +92,7 @@ def run(options: LaunchOptions) -> int:
         return int(app.exec())
     window.reset_view()
     window.wait_idle()
-    path = window.save_screenshot(options.screenshot)
+    path = window.save_screenshot(screenshot)
     window.close()
     for text in errors:
         print(f"workbench gui: {text.splitlines()[0]} {' '.join(text.splitlines()[1:])}",

@@ -277,7 +277,8 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
     if doc.get("version") != SIDECAR_VERSION:
         raise ValueError(f"its description file has version {doc.get('version')!r}; "
                          f"this workbench reads version {SIDECAR_VERSION}")
-    types = {"pid": int, "hostname": str, "session": str, "session_started": (int, float)}
+    types: dict[str, type | tuple[type, ...]] = {
+        "pid": int, "hostname": str, "session": str, "session_started": (int, float)}
     bad = [key for key, kind in types.items() if not isinstance(doc.get(key), kind)]
     if bad:
         raise ValueError(f"its description file has no valid {', '.join(bad)}")

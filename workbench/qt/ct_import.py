@@ -186,8 +186,8 @@ class CtImportDialog(QDialog):
         self.resize(900, 600)
 
         self.plotter = QtInteractor(self, auto_update=False)
-        self.plotter.set_background("#2b2f36", top="#59606b")
-        self.plotter.clear_events_for_key("q")
+        self.plotter.set_background("#2b2f36", top="#59606b")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        self.plotter.clear_events_for_key("q")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         self.plotter.setMinimumSize(360, 300)
 
         self.title = QLabel(f"<b>{self.path.name}</b>")
@@ -280,8 +280,8 @@ class CtImportDialog(QDialog):
         path, max_voxels = self.path, self.max_voxels
 
         def work(progress: Any) -> tuple[CtPreview, Any]:
-            kw = {} if max_voxels is None else {"max_voxels": max_voxels}
-            ct = CtPreview.load(path, progress=progress, **kw)
+            ct = (CtPreview.load(path, progress=progress) if max_voxels is None
+                  else CtPreview.load(path, progress=progress, max_voxels=max_voxels))
             return ct, jobs.sample_orientation(path)
 
         self.runner.submit(LOAD, f"Reading the CT {path.name} …", work, self._loaded,
@@ -419,7 +419,7 @@ class CtImportDialog(QDialog):
                                  smooth_shading=True, name=name, pickable=False, render=False,
                                  reset_camera=False)
             else:
-                plotter.remove_actor(name, render=False)
+                plotter.remove_actor(name, render=False)  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         if surface.empty:
             self.figures["triangles"].setText(f"no surface ({surface.note})")
         else:
@@ -449,7 +449,7 @@ class CtImportDialog(QDialog):
         distance = 3.0 * float(np.linalg.norm(bounds[1] - bounds[0]))
         self.plotter.camera_position = [tuple(focus + distance * view), tuple(focus),
                                         tuple(superior)]
-        self.plotter.reset_camera()
+        self.plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
         self.plotter.camera.zoom(1.3)
         self._camera_set = True
 

@@ -19,7 +19,7 @@ frame (see :mod:`workbench.services.guides`).
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PySide6.QtCore import QTimer
@@ -43,6 +43,10 @@ class DragOpsMixin:
     picker: Any
     plotter: Any
     guide_view: Any = None
+
+    if TYPE_CHECKING:  # provided by LandmarkOpsMixin and MainWindow
+        def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None: ...
+        def draw_face(self) -> None: ...
 
     def _init_drag(self) -> None:
         self.drag_timings: list[float] = []   # seconds per computed preview (tests, benchmarks)

@@ -14,16 +14,24 @@ from __future__ import annotations
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from PySide6.QtWidgets import QFileDialog
 
+from workbench.commands.stack import CommandStack
 from workbench.core.errors import UnitsError, WorkbenchError
 from workbench.core.raycast import RayCaster
 from workbench.io.case_file import case_validator, load_case, save_case
 from workbench.qt import autosave, dialogs, jobs
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.landmark_snap import snap_index
+
+if TYPE_CHECKING:
+    from PySide6.QtWidgets import QLabel, QMainWindow
+
+    _Window = QMainWindow   # the mixin's host (dialogs take it as their parent)
+else:
+    _Window = object
 
 MESH_FILTER = "Meshes (*.ply *.stl *.obj *.vtk *.vtp);;All files (*)"
 CASE_FILTER = "Case files (*.fcase);;All files (*)"
@@ -96,11 +104,22 @@ def case_from_ct(path: Path, tissue: str, iso: float | None, *, volume: Any = No
     return opened
 
 
-class FileOpsMixin:
+class FileOpsMixin(_Window):
     """Open/save/export for the main window (see the module docstring)."""
 
     document: Any
     runner: Any
+    fit: Any
+    preview: Any
+    interactive: bool
+    messages: list[str]
+    status_label: QLabel
+
+    if TYPE_CHECKING:  # provided by MainWindow
+        def status(self, text: str) -> None: ...
+        def show_error(self, what: str, exc: BaseException) -> None: ...
+        def load_truth(self, path: str | Path, scale: float | None = None) -> None: ...
+        def save_screenshot(self, path: str | Path) -> Path: ...
 
     # ------------------------------------------------------------ open
     def open_skull(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
@@ -116,7 +135,7 @@ class FileOpsMixin:
 
     def _open_failed(self, path: Path, exc: BaseException) -> None:
         if isinstance(exc, UnitsError) and self.interactive:
-            factor = dialogs.ask_units(self, path.name, exc.problem)  # type: ignore[arg-type]
+            factor = dialogs.ask_units(self, path.name, exc.problem)
             if factor is not None:
                 self.open_skull(path, scale=factor)
             return
@@ -184,7 +203,7 @@ class FileOpsMixin:
         A case that fails its evidence, array or audit-chain check never gets
         here: loading refuses it and the error names the first problem.
         """
-        self._opened(OpenedCase(loaded.case, None), path)
+        self._opened(OpenedCase(loaded.case, CommandStack(loaded.case)), path)
         chain = loaded.audit_chain.summary()
         audit = chain if chain.startswith("audit log") else f"audit log {chain}"
         notes = [f"{path.name}: evidence and arrays match their hashes; {audit}"]

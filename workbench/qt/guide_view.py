@@ -22,7 +22,7 @@ wheel zooms (the view never rotates by accident).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PySide6.QtCore import QEvent, Qt, QTimer
@@ -33,6 +33,10 @@ from workbench.qt.lod import decimated, with_normals
 from workbench.qt.scene import SMOOTH
 from workbench.render.snapshots import to_polydata
 from workbench.services.guides import AXES, Guide, guides_from_prediction
+
+if TYPE_CHECKING:
+    from workbench.qt.jobs import FitResult
+    from workbench.qt.main_window import MainWindow
 
 GRAB_RADIUS_PX = 8.0
 PRIORITY = 10.0
@@ -46,11 +50,11 @@ HLINE_X = (-40.0, 40.0)
 class GuideView(QWidget):
     """See the module docstring.  ``window`` is the main window (fit, panel, preview)."""
 
-    def __init__(self, window: Any, parent: QWidget | None = None) -> None:
+    def __init__(self, window: MainWindow, parent: QWidget | None = None) -> None:
         from pyvistaqt import QtInteractor
 
         super().__init__(parent)
-        self.window = window
+        self.host = window   # not ``self.window``: that would hide QWidget.window()
         self.side = "frontal"
         self.closed_by_user = False
         self.stale = True   # needs drawing when next shown (changed while hidden)
@@ -84,12 +88,12 @@ class GuideView(QWidget):
         # no 4x multisampling (llvmpipe: 73 → 42 ms a frame for this view);
         # FXAA as in the 3D view, dropped with it on a software renderer
         # (SceneView.tune)
-        self.plotter.render_window.SetMultiSamples(0)
+        self._render_window().SetMultiSamples(0)
         self.plotter.enable_anti_aliasing("fxaa")
-        self.plotter.set_background("#1f2329")
-        self.plotter.enable_parallel_projection()
-        self.plotter.enable_2d_style()
-        self.plotter.clear_events_for_key("q")
+        self.plotter.set_background("#1f2329")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        self.plotter.enable_parallel_projection()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
+        self.plotter.enable_2d_style()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
+        self.plotter.clear_events_for_key("q")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         # until a fit is drawn a plain label stands in for the 3D view: an
         # empty OpenGL view would still cost a software-GL paint, in the same
         # pass as the main view's when the first fit opens this view
@@ -124,16 +128,16 @@ class GuideView(QWidget):
         The view keeps showing the previous fit for the ~0.2 s the light
         skull takes, rather than being drawn twice (face first, then skull).
         """
-        fit = self.window.fit
+        fit = self.host.fit
         self._skull_light = None
         if fit is None:
             self.refresh()
             return
-        self.window.runner.submit("guide_view", "Preparing the guide view …",
-                                  lambda: with_normals(decimated(fit.skull_h, 15_000)),
-                                  lambda light: self._skull_ready(to_polydata(light,
-                                                                              normals=True)),
-                                  lambda _exc: self.refresh(reset_camera=True))
+        self.host.runner.submit("guide_view", "Preparing the guide view …",
+                                lambda: with_normals(decimated(fit.skull_h, 15_000)),
+                                lambda light: self._skull_ready(to_polydata(light,
+                                                                            normals=True)),
+                                lambda _exc: self.refresh(reset_camera=True))
 
     def _skull_ready(self, light: Any) -> None:
         self._skull_light = light
@@ -150,7 +154,7 @@ class GuideView(QWidget):
         self.stale = False
         p.clear_actors()
         self._face_actor, self._guide_slots = None, {}
-        fit = self.window.fit
+        fit = self.host.fit
         if fit is None:
             self.drawn_fit = None
             self.info.setText("The guides appear here once the face is fitted.")
@@ -172,7 +176,7 @@ class GuideView(QWidget):
         # drawing above and the (software-GL) paint then block the event
         # loop one after the other, not as one long stretch; and after the
         # main view's pending paint (views of one window paint together)
-        scene = getattr(self.window, "scene", None)
+        scene = getattr(self.host, "scene", None)
         if scene is not None and scene.render_queued:
             scene.after_paint(self._paint, render=False)
         else:
@@ -185,8 +189,21 @@ class GuideView(QWidget):
             self.pages.setCurrentWidget(self.plotter)   # (a first show paints by itself)
         self.plotter.update()
 
+    def _fit(self) -> FitResult:
+        """The window's fit (drawing and dragging happen only while there is one)."""
+        fit = self.host.fit
+        if fit is None:
+            raise RuntimeError("the guide view has no fit to draw")
+        return fit
+
+    def _render_window(self) -> Any:
+        win = self.plotter.render_window
+        if win is None:
+            raise RuntimeError("the guide view's render window is closed")
+        return win
+
     def _front(self) -> float:
-        return float(self.window.fit.recon.head.skin.vertices[:, 2].max()) + 20.0
+        return float(self._fit().recon.head.skin.vertices[:, 2].max()) + 20.0
 
     def _segment(self, g: Guide) -> np.ndarray | None:
         """Drawn ends (2, 3) of a frontal guide, or one point (1, 3) of a lateral one."""
@@ -205,12 +222,12 @@ class GuideView(QWidget):
         ``self._guide_slots`` maps a guide's row to ``(actor, first point
         index, number of points)`` so a drag moves its points in place.
         """
-        guides = list(self.window.reconstruct_panel.guides)
+        guides = list(self.host.reconstruct_panel.guides)
         self._guide_slots = {}
         self._add_set(list(enumerate(guides)), GUIDE, 4, "gv_guide", track=True)
         if self.show_predictions.isChecked():
             predicted: list[Guide] = []
-            for pred in self.window.fit.predictions:
+            for pred in self._fit().predictions:
                 try:
                     predicted += [g for g in guides_from_prediction(pred, guides)
                                   if g.view == self.side]
@@ -262,8 +279,7 @@ class GuideView(QWidget):
                                    name=f"{prefix}_labels")
 
     def _reset_camera(self) -> None:
-        fit = self.window.fit
-        skin = fit.recon.head.skin.vertices
+        skin = self._fit().recon.head.skin.vertices
         face = skin[skin[:, 1] > -110.0]
         centre = np.array([0.0, float(np.median(face[:, 1])) - 20.0,
                            float(np.median(face[:, 2]))])
@@ -283,7 +299,7 @@ class GuideView(QWidget):
         # the page stack resized (after this widget's own resize event, with
         # its new size): keep 160 mm of the face across the narrower side
         if watched is self.pages and event.type() == QEvent.Type.Resize \
-                and self.window.fit is not None and not getattr(self.plotter, "_closed", False):
+                and self.host.fit is not None and not getattr(self.plotter, "_closed", False):
             self._fit_scale()
         return False
 
@@ -341,10 +357,10 @@ class GuideView(QWidget):
 
     def guide_at(self, x: float, y: float) -> int | None:
         """Row of the guide drawn within :data:`GRAB_RADIUS_PX` of display ``(x, y)``."""
-        if self.window.fit is None:
+        if self.host.fit is None:
             return None
         best, best_d = None, GRAB_RADIUS_PX
-        for row, g in enumerate(self.window.reconstruct_panel.guides):
+        for row, g in enumerate(self.host.reconstruct_panel.guides):
             seg = self._segment(g)
             if seg is None or not g.enabled:
                 continue
@@ -366,9 +382,9 @@ class GuideView(QWidget):
         if row is None:
             return
         self._swallow(obj, event)
-        self.dragging = (row, self.window.reconstruct_panel.guides[row])
-        self._samples = self.plotter.render_window.GetMultiSamples()
-        self.plotter.render_window.SetMultiSamples(0)   # a lighter frame while dragging
+        self.dragging = (row, self.host.reconstruct_panel.guides[row])
+        self._samples = self._render_window().GetMultiSamples()
+        self._render_window().SetMultiSamples(0)   # a lighter frame while dragging
 
     def _on_move(self, obj: Any, event: str) -> None:
         if self.dragging is None:
@@ -379,7 +395,7 @@ class GuideView(QWidget):
         value = tuple(float(world[a]) for a in AXES[start.kind])
         moved = start.moved(value)
         self.dragging = (row, moved)
-        self.window.preview_guide(moved)
+        self.host.preview_guide(moved)
 
     def _on_release(self, obj: Any, event: str) -> None:
         if self.dragging is None:
@@ -387,16 +403,16 @@ class GuideView(QWidget):
         self._swallow(obj, event)
         row, guide = self.dragging
         self.dragging = None
-        self.plotter.render_window.SetMultiSamples(self._samples)
-        original = self.window.reconstruct_panel.guides[row]
-        self.window.commit_guide(row, None if guide.value == original.value else guide.value)
+        self._render_window().SetMultiSamples(self._samples)
+        original = self.host.reconstruct_panel.guides[row]
+        self.host.commit_guide(row, None if guide.value == original.value else guide.value)
 
     def cancel_drag(self) -> None:
         if self.dragging is not None:
             row, _ = self.dragging
             self.dragging = None
-            self.plotter.render_window.SetMultiSamples(self._samples)
-            self.window.commit_guide(row, None)
+            self._render_window().SetMultiSamples(self._samples)
+            self.host.commit_guide(row, None)
 
     def close_view(self) -> None:
         """Remove the VTK observers (they hold this widget), then finalize the view."""

@@ -92,7 +92,7 @@ def sample_orientation(path: str | Path) -> dict[str, list[float]] | None:
 
 def anatomy_orientation(anatomy: dict[str, list[float]]) -> Orientation:
     """:func:`sample_orientation`'s directions as the case's orientation value."""
-    return Orientation(anatomy["anterior"], anatomy["superior"], anatomy.get("left"))
+    return Orientation.from_state(anatomy)
 
 
 def view_axes(case: Case) -> tuple[np.ndarray, np.ndarray] | None:

@@ -9,7 +9,7 @@ in the skull file's (input) frame.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,10 @@ class LandmarkOpsMixin:
     landmarks_panel: Any
     runner: Any
     messages: list[str]
+
+    if TYPE_CHECKING:  # provided by MainWindow
+        def status(self, text: str) -> None: ...
+        def show_error(self, what: str, exc: BaseException) -> None: ...
 
     def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None:
         """Landmarks of the case; ``override`` ({code: position}) draws a drag in progress."""

@@ -103,7 +103,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.detail = InteractiveDetail(self.plotter, self.runner.submit)
         self._init_drag()
         self._skull_poly: Any = None
-        QShortcut(QKeySequence(Qt.Key.Key_Escape), self, activated=self.cancel_drag)
+        QShortcut(QKeySequence(Qt.Key.Key_Escape), self).activated.connect(self.cancel_drag)
         self.picker = ClickPicker(self.plotter, self._skull_actor, self.on_pick,
                                   target_surface=self._skull_surface,
                                   grab_target=self.grab_target, on_drag=self.on_drag,
@@ -113,7 +113,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.dowels_panel = DowelsPanel(self.document)
         self.reconstruct_panel = ReconstructPanel(self.document)
         self.compare_panel = ComparePanel()
-        self.docks = {}
+        self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (("landmarks", "Skull landmarks", self.landmarks_panel),
                                   ("dowels", "Dowels", self.dowels_panel),
                                   ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
@@ -384,11 +384,12 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         see :class:`workbench.model.muscles.MuscleGrid`), so its rows are
         evaluated on the fitted head's skin and mapped to the input frame.
         """
-        head = self.fit.recon.head if self.fit is not None else None
-        if head is None or not head.muscles:
+        fit = self.fit
+        head = fit.recon.head if fit is not None else None
+        if fit is None or head is None or not head.muscles:
             self.scene.clear("muscles")
             return
-        to_input = self.fit.recon.to_input
+        to_input = fit.recon.to_input
         self.scene.show_muscles([[to_input(row) for row in grid.rows(head.skin)]
                                  for grid in head.muscles])
 
@@ -450,11 +451,10 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         import time
 
         end = time.monotonic() + timeout_s
-        app = QApplication.instance()
         while self.busy and time.monotonic() < end:
-            app.processEvents()
+            QApplication.processEvents()
             time.sleep(0.01)
-        app.processEvents()
+        QApplication.processEvents()
         return not self.busy
 
     def view_rect(self) -> QRect:
@@ -463,9 +463,9 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
 
     def save_screenshot(self, path: str | Path) -> Path:
         """Render and grab the whole window (3D view included under xcb) to a PNG."""
-        QApplication.instance().processEvents()
+        QApplication.processEvents()
         self.scene.render_now()
-        QApplication.instance().processEvents()
+        QApplication.processEvents()
         path = Path(path)
         if not self.grab().save(str(path)):
             raise OSError(f"could not write {path}")

@@ -60,9 +60,11 @@ def register(handler: Callable[[Any], None]) -> int:
     relay = _relay()
     key = next(_KEYS)
     if hasattr(handler, "__self__") and hasattr(handler, "__func__"):
-        relay.handlers[key] = weakref.WeakMethod(handler)  # type: ignore[arg-type]
+        relay.handlers[key] = weakref.WeakMethod(handler)
     else:
-        relay.handlers[key] = lambda h=handler: h
+        def strong() -> Callable[[Any], None]:
+            return handler
+        relay.handlers[key] = strong
     return key
 
 

@@ -534,7 +534,8 @@ def _vertex_normals(points: np.ndarray, data: Any) -> np.ndarray:
     cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])   # length = 2 × area
     n = len(points)
     flat = cells.ravel()
-    out = np.column_stack([np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n)
-                           for k in range(3)])
+    # float64 (bincount with weights), whatever numpy's stubs say
+    out: np.ndarray = np.column_stack([np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n)
+                                       for k in range(3)])
     out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
     return out

@@ -75,7 +75,7 @@ def render_heatmap(
     try:
         for col, view in enumerate(views):
             plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub: functools.wraps types it unbound
+            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
             bar: ScalarBarArgs | None = None
             if col == len(views) - 1:  # one bar, in the last panel
                 bar = {"title": bar_title, "color": "black", "n_labels": 5, "fmt": "%.1f",
@@ -90,7 +90,7 @@ def render_heatmap(
             plotter.camera.focal_point = centre
             plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
             plotter.camera.up = up
-            plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub: functools.wraps types it unbound
+            plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
             plotter.camera.zoom(1.1)
             label = view.replace("_", " ")
             plotter.add_text(f"{title}: {label}" if col == 0 and title else label,

@@ -95,7 +95,7 @@ def render_surfaces(
     try:
         for col, view in enumerate(views):
             plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub: functools.wraps types it unbound
+            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
             for mesh, colour, opacity in layers:
                 plotter.add_mesh(to_polydata(mesh), color=colour, opacity=opacity,
                                  smooth_shading=True, specular=0.2)
@@ -110,7 +110,7 @@ def render_surfaces(
             plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
             plotter.camera.up = up
             # keep the direction, fit the distance to the bounds
-            plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub: functools.wraps types it unbound
+            plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
             plotter.camera.zoom(1.15)
             plotter.add_text(view.replace("_", " "), font_size=10, color="black")
         plotter.screenshot(str(path))

@@ -12,6 +12,8 @@ direction.
 
 from __future__ import annotations
 
+from typing import Any
+
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QAbstractItemView, QComboBox, QFormLayout, QHeaderView, QLabel, QPushButton, QTableWidget,
@@ -80,10 +82,14 @@ class DowelsPanel(QWidget):
         layout.addWidget(self.clear_button)
         layout.addWidget(self.warnings)
         document.case_replaced.connect(self.refresh)
-        document.part_changed.connect(lambda part: part == "dowels" and self.refresh())
+        document.part_changed.connect(self._on_part)
         self.refresh()
 
     # ------------------------------------------------------------ state → widgets
+    def _on_part(self, part: str) -> None:
+        if part == "dowels":
+            self.refresh()
+
     def refresh(self) -> None:
         self._refreshing = True
         try:
@@ -137,7 +143,7 @@ class DowelsPanel(QWidget):
         if self._refreshing:
             return
         try:
-            value = parse_build(text) if name == "build" else text
+            value: Any = parse_build(text) if name == "build" else text
         except WorkbenchError as exc:
             self.warnings.setText(str(exc))
             return

@@ -136,14 +136,12 @@ class LandmarksPanel(QWidget):
                 status = lm.status if lm is not None else "missing"
                 counts[status] += 1
                 row = self._row[code]
-                item = self.table.item(row, 2)
-                item.setText(STATUS_TEXT[status])
+                self._cell(row, 2).setText(STATUS_TEXT[status])
                 conf = "" if lm is None or status != "suggested" else f"{lm.confidence:.2f}"
-                self.table.item(row, 3).setText(conf)
+                self._cell(row, 3).setText(conf)
                 colour = STATUS_BG[status]
                 for col in range(4):
-                    cell = self.table.item(row, col)
-                    cell.setBackground(QColor(colour) if colour else QColor(0, 0, 0, 0))
+                    self._cell(row, col).setBackground(QColor(colour) if colour else QColor(0, 0, 0, 0))
             self.summary.setText(", ".join(f"{n} {s}" for s, n in counts.items()))
             orient = self.document.case.orientation
             self.anterior.setCurrentText(_direction_name(orient, "anterior"))
@@ -151,6 +149,13 @@ class LandmarksPanel(QWidget):
             self._show_description()
         finally:
             self._refreshing = False
+
+    def _cell(self, row: int, col: int) -> QTableWidgetItem:
+        """The item the constructor put in every cell."""
+        item = self.table.item(row, col)
+        if item is None:
+            raise RuntimeError(f"landmark table cell ({row}, {col}) has no item")
+        return item
 
     def _show_description(self) -> None:
         code = self.selected_code()

@@ -12,6 +12,8 @@ features are shown beside them for comparison.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QAbstractItemView, QCheckBox, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel,
@@ -23,6 +25,9 @@ from workbench.core.errors import WorkbenchError
 from workbench.qt.document import Document
 from workbench.qt.jobs import FitResult, guides_state, user_guides
 from workbench.services.guides import Guide
+
+if TYPE_CHECKING:
+    import numpy as np
 
 GUIDE_COLUMNS = ("Guide", "Value mm", "On", "Rule")
 FIGURES = (("max_tip_error_mm", "largest dowel-tip error", "mm"),
@@ -219,7 +224,7 @@ def _num(value: object) -> str:
     return str(value)
 
 
-def _median(values: object) -> float:
+def _median(values: np.ndarray) -> float:
     import numpy as np
 
     return float(np.median(values))
