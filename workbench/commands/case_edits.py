@@ -206,7 +206,9 @@ class AddEvidence(ReplacePartCommand):
         super().__post_init__()
 
     def default_label(self) -> str:
-        return f"Add evidence {self.evidence.name}"  # type: ignore[union-attr]
+        if self.evidence is None:  # refused by __post_init__
+            raise CommandError("AddEvidence needs an EvidenceFile")
+        return f"Add evidence {self.evidence.name}"
 
     def apply(self, case: Case) -> Any:
         item = self.evidence

@@ -41,7 +41,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
-from typing import Any, BinaryIO, TypeVar
+from typing import IO, Any, TypeVar
 
 _HEADER = struct.Struct("<Q")
 _lock = threading.Lock()
@@ -87,14 +87,14 @@ def run(name: str, *args: Any) -> Any:
     return _resolve(name)(*args)
 
 
-def _send(stream: BinaryIO, obj: Any) -> None:
+def _send(stream: IO[bytes], obj: Any) -> None:
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
     stream.write(_HEADER.pack(len(data)))
     stream.write(data)
     stream.flush()
 
 
-def _receive(stream: BinaryIO) -> Any:
+def _receive(stream: IO[bytes]) -> Any:
     head = stream.read(_HEADER.size)
     if len(head) < _HEADER.size:
         raise EOFError("the helper process closed its pipe")
@@ -121,15 +121,17 @@ def _stop() -> None:
     if child is None:
         return
     try:
-        child.stdin.close()  # type: ignore[union-attr]  # the child's read ends, it exits
+        if child.stdin is not None:
+            child.stdin.close()  # the child's read ends, it exits
         child.wait(timeout=2.0)
     except (OSError, subprocess.TimeoutExpired):
         child.kill()
         child.wait()
     finally:
         for pipe in (child.stdin, child.stdout):
-            with contextlib.suppress(OSError):
-                pipe.close()  # type: ignore[union-attr]
+            if pipe is not None:
+                with contextlib.suppress(OSError):
+                    pipe.close()
 
 
 atexit.register(_stop)
@@ -154,8 +156,11 @@ def call(name: str, *args: Any) -> Any:
                 _problem = f"helper process could not start ({exc}); running in-process"
                 return fn(*args)
         try:
-            _send(_child.stdin, (name, args))  # type: ignore[arg-type]
-            ok, value = _receive(_child.stdout)  # type: ignore[arg-type]
+            stdin, stdout = _child.stdin, _child.stdout
+            if stdin is None or stdout is None:   # started with both pipes
+                raise OSError("helper process without its pipes")
+            _send(stdin, (name, args))
+            ok, value = _receive(stdout)
         except Exception as exc:  # noqa: BLE001 - broken pipe, crashed child, odd reply
             # not re-run in-process: an input that crashed the child would
             # crash this process too (fast_simplification does not check indices)

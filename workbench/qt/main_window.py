@@ -433,7 +433,9 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
 
     def _show_comparison(self, comparison: Any) -> None:
         self.comparison = comparison
-        name, truth = self.truth  # type: ignore[misc]
+        if self.truth is None:  # a comparison is only started with a true skin
+            raise RuntimeError("a comparison arrived without a true skin")
+        name, truth = self.truth
         self.scene.show_truth(truth, comparison.truth_vertex_values())
         self.compare_panel.show_comparison(name, comparison)
         self.status(f"Compared with {name}: mean |distance| "

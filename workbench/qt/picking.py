@@ -51,8 +51,8 @@ class ClickPicker:
                  on_drag_start: Callable[[str], None] | None = None,
                  on_drag_end: Callable[[str, np.ndarray | None], None] | None = None) -> None:
         self.plotter = plotter
-        self.target_actor = target_actor
-        self.target_surface = target_surface
+        self.target_actor: Callable[[], Any] | None = target_actor   # None once detached
+        self.target_surface: Callable[[], Any] | None = target_surface
         self.on_pick = on_pick
         self.grab_target = grab_target
         self.on_drag = on_drag
@@ -89,7 +89,7 @@ class ClickPicker:
         self._tags.clear()
         style, tag = self._style_observer
         style.RemoveObserver(tag)
-        self.target_actor = self.target_surface = None  # type: ignore[assignment]
+        self.target_actor = self.target_surface = None
         self._located = None
 
     # ------------------------------------------------------------ events

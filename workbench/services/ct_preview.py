@@ -84,7 +84,7 @@ def preview_strides(shape_ijk: tuple[int, int, int] | np.ndarray, spacing_mm: np
     counts = np.prod(-(-shape[None, :] // strides), axis=1)  # ceil division
     fits = np.flatnonzero(counts <= max_voxels)
     best = strides[fits[0]] if len(fits) else shape
-    return tuple(int(s) for s in best)  # type: ignore[return-value]
+    return int(best[0]), int(best[1]), int(best[2])
 
 
 def block_mean(volume: Volume, strides: tuple[int, int, int],

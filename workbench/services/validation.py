@@ -108,7 +108,7 @@ def _vector(text: str, where: str) -> tuple[float, float, float] | None:
         v = ()
     if len(v) != 3 or not np.isfinite(v).all() or not np.linalg.norm(v) > 0:
         raise InputError(where, f"{text!r} is not a direction x,y,z")
-    return v  # type: ignore[return-value]
+    return v
 
 
 def _resolve(text: str, base: Path, where: str) -> Path:
@@ -341,7 +341,7 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
         bone = _load(bone_path, units)
         truth = _load(truth_path, "mm" if is_volume(case.truth) else case.units)
         res.seconds["surfaces"] = time.perf_counter() - t0
-        packs = list(templates) or ([case.template] if case.template else [None])
+        packs: list[Path | None] = [*templates] or [case.template or None]
         settings = JobSettings(units=units, sex=case.sex, build=case.build,
                                orientation=case.orientation if case.orient == "hint" else None,
                                tissue=TissueSettings(model=tissue or case.tissue),
@@ -367,6 +367,8 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
                                                 "p90": float(np.percentile(spread, 90))}
         res.files[label] = out / label / "face.ply" if len(faces) == 1 else \
             out / f"{label}_consensus.ply"
+        if first is None:  # packs is never empty
+            raise RuntimeError(f"{case.case_id}: no reconstruction ran")
         recon = first.recon
         if case.orientation is not None:
             ant = unit(case.orientation[0])

@@ -8,10 +8,15 @@ a worker.  The true skin must be in the skull file's frame and mm.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
     QHeaderView, QLabel, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
 )
+
+if TYPE_CHECKING:
+    from workbench.services.compare import Comparison
 
 FIGURE_ROWS = (("mean_abs_mm", "mean |distance|", "mm"), ("rms_mm", "RMS", "mm"),
                ("signed_mean_mm", "mean signed", "mm"), ("pct_within_2_5mm", "within 2.5 mm", "%"),
@@ -47,7 +52,7 @@ class ComparePanel(QWidget):
         layout.addWidget(self.table, 1)
         layout.addWidget(self.notes)
 
-    def show_comparison(self, name: str, comparison: object | None) -> None:
+    def show_comparison(self, name: str, comparison: Comparison | None) -> None:
         """Figures of a :class:`~workbench.services.compare.Comparison` (None clears)."""
         if comparison is None:
             self.table.setRowCount(0)
@@ -56,9 +61,9 @@ class ComparePanel(QWidget):
             return
         self.source.setText(f"True skin: {name}<br>positive = reconstruction outside the "
                             "true skin (too much tissue)")
-        figs = comparison.figures  # type: ignore[attr-defined]
+        figs = comparison.figures
         rows = [(label, figs.get(key), unit) for key, label, unit in FIGURE_ROWS]
-        for region, f in comparison.regions.items():  # type: ignore[attr-defined]
+        for region, f in comparison.regions.items():
             rows.append((f"{region}: mean |d|", f.get("mean_abs_mm"), "mm"))
         self.table.setRowCount(len(rows))
         for i, (label, value, unit) in enumerate(rows):
@@ -66,4 +71,4 @@ class ComparePanel(QWidget):
                                              else str(value))
             for col, cell in enumerate((label, text, unit)):
                 self.table.setItem(i, col, QTableWidgetItem(cell))
-        self.notes.setText("\n".join(comparison.notes))  # type: ignore[attr-defined]
+        self.notes.setText("\n".join(comparison.notes))
