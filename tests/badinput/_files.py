@@ -206,6 +206,9 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
                                   [("g", [0, 31, 95]), ("zz_not_a_code", [1, 2, 3])])
     f["landmarks_duplicate"] = _mrk(folder / "duplicate.mrk.json",
                                     [("g", [0, 31, 95]), ("g", [0, 30, 95])])
+    f["landmarks_partial_nan"] = folder / "partial_nan.csv"
+    f["landmarks_partial_nan"].write_text("code,x_mm,y_mm,z_mm\ng,nan,91,95\nn,40,85,98\n",
+                                          encoding="utf-8")
     f["landmarks_empty"] = folder / "empty.mrk.json"
     f["landmarks_empty"].write_bytes(b"")
     f["landmarks_garbage"] = folder / "garbage.mrk.json"

@@ -187,6 +187,8 @@ ENTRIES: tuple[Entry, ...] = (
        "unknown.mrk.json"),
     _e("landmarks_duplicate_code", "O", R + " --landmarks {landmarks_duplicate}", "duplicate",
        "duplicate.mrk.json"),
+    _e("landmarks_partial_nan", "O", R + " --landmarks {landmarks_partial_nan}",
+       ("'g'", "partly missing"), "partial_nan.csv"),
     _e("landmarks_empty_file", "O", R + " --landmarks {landmarks_empty}", "empty",
        "empty.mrk.json"),
     _e("landmarks_not_json", "O", "landmarks check {landmarks_garbage} --surface skull", "json",

@@ -45,10 +45,13 @@ MAX_SMOOTH_ITERATIONS = 500
 MIN_SKULL_THICKNESS_MM = 20.0
 #: a skull mesh needs at least this many triangles to carry any anatomy at all
 MIN_SKULL_TRIANGLES = 100
-#: each bounding-box extent of the reconstructed face divided by the skull's: the head is
-#: the skull plus 3-30 mm of tissue a side (x 1.0-1.3 for a 190 mm skull); a face cut to
-#: the front of the head is shorter in depth, hence the low bound below 1
-FACE_TO_SKULL_EXTENT_RANGE = (0.8, 1.6)
+#: the reconstructed face's bounding box against the skull's: every side of the face at least
+#: the low factor x the skull's smallest side (the skin covers the bone: a face 29 mm deep
+#: over a 150 x 180 x 200 mm skull is a failed fit; the smallest side, as a bone surface from
+#: CT may carry vertebrae or shoulders), and none above the high factor x the skull's largest
+#: side (the reference head carries its neck: 310 mm of head and neck over the headsq bone,
+#: 168 mm at most with its vault cut, is 1.85 x; a runaway fit is several times larger)
+FACE_TO_SKULL_EXTENT_RANGE = (0.8, 2.0)
 #: a skull landmark farther than this (mm) from the skull surface is not on the bone
 LANDMARK_OFF_SURFACE_MM = 10.0
 #: refuse the landmarks when at least this fraction of them is off the surface
@@ -138,19 +141,19 @@ def check_face_fits_skull(face_extent_mm: Any, skull_extent_mm: Any,
 
     Both extents are ``(3,)`` sizes (mm) in the same frame.  Every side of
     the face must be at least the low factor of
-    :data:`FACE_TO_SKULL_EXTENT_RANGE` times the skull's side (the face
-    covers the bone) and at most the high factor times the skull's
-    *largest* side (a skull with a cut vault still carries a whole head).
+    :data:`FACE_TO_SKULL_EXTENT_RANGE` times the skull's smallest side and
+    at most the high factor times its largest side (see the constant).
     """
     face = np.asarray(face_extent_mm, dtype=np.float64).reshape(3)
     skull = np.asarray(skull_extent_mm, dtype=np.float64).reshape(3)
     lo, hi = FACE_TO_SKULL_EXTENT_RANGE
     ok = bool(np.isfinite(face).all() and np.isfinite(skull).all()
-              and (face >= lo * skull).all() and (face <= hi * skull.max()).all())
+              and (face >= lo * skull.min()).all() and (face <= hi * skull.max()).all())
     if not ok:
         sizes = " x ".join(f"{v:.1f}" for v in face)
         bone = " x ".join(f"{v:.1f}" for v in skull)
         raise InputError(source, f"the face came out {sizes} mm against a skull of {bone} mm "
-                         f"(each side should be at least {lo:g} x the skull's and at most "
-                         f"{hi:g} x its largest side); the result is not a plausible face",
+                         f"(each side should be at least {lo:g} x the skull's smallest side "
+                         f"and at most {hi:g} x its largest); the result is not a plausible "
+                         "face",
                          "check the skull landmarks, the orientation and the depth settings")

@@ -120,8 +120,12 @@ def _text_point(path: Path, label: str, values: list, status: object, confidence
                 description: str, active: bool = True, flip: np.ndarray = _FLIP["RAS"]) -> _Point:
     """A point from text fields; coordinates are parsed only when the point is defined."""
     status = _status(path, label, status)
-    defined = (active and status in (None, *DEFINED_STATUSES)
-               and all(str(v or "").strip().lower() not in ("", "nan") for v in values))
+    blank = [str(v or "").strip().lower() in ("", "nan") for v in values]
+    if any(blank) and not all(blank):   # some coordinates given, some not: a damaged row
+        shown = ", ".join(str(v) for v in values)
+        raise InputError(path, f"point {label!r}: coordinates ({shown}) are partly missing",
+                         "give all three numbers, or none for an undefined point")
+    defined = active and status in (None, *DEFINED_STATUSES) and not any(blank)
     xyz = (np.array([_number(path, f"point {label!r} coordinate", v) for v in values]) * flip
            if defined else None)
     return _Point(label, xyz, defined, status,

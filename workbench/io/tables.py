@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from workbench.core.errors import InputError
+from workbench.core.limits import MAX_TISSUE_DEPTH_MM, MAX_TISSUE_SD_MM
 from workbench.io.catalogue import LandmarkCatalogue, default_catalogue_path, load_catalogue
 
 COLUMNS = ("landmark_code", "skin_code", "group", "sex", "build", "mean_mm", "sd_mm", "n", "source")
@@ -121,8 +122,9 @@ def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | 
     InputError
         Naming the file and, for row problems, the line: missing file or
         columns, rows with too few or too many values, empty required
-        values, non-numeric or non-positive depths, negative SDs or counts,
-        unknown landmark codes (listed by name, with a "did you mean"), skin
+        values, non-numeric or non-positive depths, depths or SDs above the
+        soft-tissue bound (:data:`workbench.core.limits.MAX_TISSUE_DEPTH_MM`),
+        negative SDs or counts, unknown landmark codes (listed by name, with a "did you mean"), skin
         codes that are not skin landmarks, duplicate rows (same landmark and
         group), unknown sex/build labels, groups whose rows disagree on sex or
         build, and rows without a citation key (or citing one the metadata
@@ -291,6 +293,11 @@ def _number(path: Path, line: int, column: str, text: str | None, *, positive: b
                 else "a non-negative number of mm" if column.endswith("_mm")
                 else "a non-negative number")
         raise InputError(path, f"line {line}: {column} must be {what}, got {text}")
+    limit = {"mean_mm": MAX_TISSUE_DEPTH_MM, "sd_mm": MAX_TISSUE_SD_MM}.get(column)
+    if limit is not None and value > limit:
+        raise InputError(path, f"line {line}: {column} {text} mm is implausible (at most "
+                         f"{limit:g} mm)", "no face has soft tissue that thick; is the column "
+                         "in mm?")
     return value
 
 

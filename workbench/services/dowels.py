@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from workbench.core.errors import InputError
+from workbench.core.limits import check_tissue_depth
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
@@ -302,7 +303,7 @@ def _depth(code: str, value: float) -> float:
         raise InputError("overrides", f"{code}: depth is not a number ({value!r})") from None
     if not np.isfinite(v) or v <= 0:
         raise InputError("overrides", f"{code}: depth must be a positive number of mm, got {value}")
-    return v
+    return check_tissue_depth(v, f"overrides: {code}")
 
 
 def _unit(code: str, value: tuple[float, float, float]) -> np.ndarray:

@@ -35,8 +35,6 @@ from workbench.core.limits import (
     COLLINEAR_MM,
     LANDMARK_OFF_SURFACE_MM,
     MAX_ENSEMBLE,
-    MAX_TISSUE_DEPTH_MM,
-    MAX_TISSUE_SD_MM,
     MIN_SKULL_THICKNESS_MM,
     MIN_SKULL_TRIANGLES,
     OFF_SURFACE_FRACTION,
@@ -180,35 +178,15 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
                     "takes longer")
     if not isinstance(dowels.build, str):
         check_build_sd(dowels.build)
-    table = load_depth_table(dowels.table)
-    check_depth_table(table, dowels.table)
+    table = load_depth_table(dowels.table)   # refuses depths and SDs out of bounds
     choose_depth_group(table, None, dowels.sex, dowels.build)
-
-
-def check_depth_table(table: Any, source: Source) -> None:
-    """Refuse table depths and SDs outside the plausibility bounds (mm).
-
-    ``table`` is a :class:`~workbench.io.tables.DepthTable` (already checked
-    for positive, finite numbers by its reader).
-    """
-    for values, column, limit in ((table.mean_mm, "mean_mm", MAX_TISSUE_DEPTH_MM),
-                                  (table.sd_mm, "sd_mm", MAX_TISSUE_SD_MM)):
-        bad = np.flatnonzero(np.nan_to_num(values, nan=0.0) > limit)
-        if len(bad):
-            rows = ", ".join(f"{table.codes[i]} ({table.groups[i]}): {values[i]:g} mm"
-                             for i in bad[:5])
-            raise InputError(source, f"{column} is implausible for {len(bad)} row(s), above "
-                             f"{limit:g} mm: {rows}",
-                             "no face has soft tissue that thick; is the column in mm?")
 
 
 def check_face_fits_skull(face: Mesh, skull: Mesh, source: str = "reconstruction") -> None:
     """Refuse a fitted face whose bounding box does not fit the skull's (same frame, mm).
 
-    Every side of the face must span at least the low factor of
-    :data:`~workbench.core.limits.FACE_TO_SKULL_EXTENT_RANGE` times the
-    skull's side; no side may exceed the high factor times the skull's
-    *largest* side (a skull with a cut vault carries a full reference head).
+    The bounds are :data:`~workbench.core.limits.FACE_TO_SKULL_EXTENT_RANGE`
+    (see :func:`workbench.core.limits.check_face_fits_skull`).
     """
     _face_fits(face.extent, skull.extent, source)
 

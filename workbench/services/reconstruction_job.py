@@ -45,7 +45,6 @@ from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.fit_guides import MAX_GUIDE_SHIFT_MM, plausible_guides
 from workbench.services.guides import guides_from_json, guides_to_json
-from workbench.services.input_checks import check_face_fits_skull, check_fit_settings
 from workbench.services.landmark_transfer import TransferResult
 from workbench.services.reconstruct import FitSettings, Reconstruction
 from workbench.services.reconstruction_service import (
@@ -148,13 +147,11 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
                                    examiner=settings.examiner, landmarks_path=settings.landmarks)
     case, stack = opened.case, opened.stack
     record_settings(opened, settings)
-    check_fit_settings(case.dowels, ensemble=settings.ensemble, rules=settings.rules)
     inputs = FitInputs.from_case(case, template=settings.template, templates=settings.templates,
                                  rules=settings.rules, use_guides=str(settings.guides) != "none",
                                  ensemble=settings.ensemble, tissue=settings.tissue)
     times["open"] = time.perf_counter() - t
     fit = run_fit(inputs, progress=say)
-    check_face_fits_skull(fit.recon.face, case.specimen.mesh)
     times.update(fit.seconds)
     stack.push(ReplaceLandmarkSet(surface="skull", new_set=fit.recon.landmarks,
                                   label="Skull landmarks from the dense registration"))

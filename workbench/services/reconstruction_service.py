@@ -46,6 +46,7 @@ from workbench.services.dowels import DepthSettings, DowelPlan
 from workbench.services.fit_guides import FitGuides, stored_guides
 from workbench.services.guide_rules import Prediction, published_predictions
 from workbench.services.guides import Guide
+from workbench.services.input_checks import check_face_fits_skull, check_fit_settings
 from workbench.services.reconstruct import (
     FitSettings, Reconstruction, ensemble_spread, outward, reconstruct,
 )
@@ -256,11 +257,16 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     Raises
     ------
     WorkbenchError
-        Unknown tables, rules, landmark codes, a failed registration...
+        Unknown tables, rules, landmark codes, settings out of bounds
+        (:func:`~workbench.services.input_checks.check_fit_settings`), a failed
+        registration, a face whose size does not fit the skull
+        (:func:`~workbench.services.input_checks.check_face_fits_skull`)...
     """
     say = progress or (lambda _m: None)
     t = time.perf_counter()
     dowels = inputs.dowels
+    # cheap checks first: a bad table, build, ensemble or rule fails before the registration
+    check_fit_settings(dowels, ensemble=inputs.ensemble, rules=inputs.rules)
     head = reference_head(dowels.sex, inputs.template)
     work, notes = working_skull(inputs.skull, say)
     fit = inputs.fit_settings
@@ -271,6 +277,7 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     references = None
     if len(inputs.templates) > 1:
         recon, references = library_consensus(recon, work, inputs, say)
+    check_face_fits_skull(recon.face, inputs.skull)   # never a garbage face as a result
     skull_h = outward(work.transformed(recon.input_to_head))
     if recon.landmarks is None:  # reconstruct() always records the landmarks it used
         raise RuntimeError("the reconstruction carries no skull landmarks")
