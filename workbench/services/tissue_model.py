@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from workbench.core.errors import InputError
+from workbench.core.limits import REGION_FACTOR_RANGE
 from workbench.core.mesh import Mesh
 from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
@@ -61,8 +62,8 @@ REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 #: skin regions of the reference head that keep their shape
 FEATURE_REGIONS = ("nose", "upper_lip", "lower_lip", "eyelid_upper_l", "eyelid_upper_r",
                    "eyelid_lower_l", "eyelid_lower_r", "ear_l", "ear_r", "orbit_l", "orbit_r")
-#: plausible region factors
-FACTOR_RANGE = (0.3, 3.0)
+#: plausible region factors (the bound of :mod:`workbench.core.limits`)
+FACTOR_RANGE = REGION_FACTOR_RANGE
 
 
 @dataclass(frozen=True)
