@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -70,8 +71,9 @@ def manifest(out: Path, quick: bool) -> Path:
             'vhp_female_auto,sample:vhp_female,sample:vhp_female,mm,clip_patch:10,"0,1,0",'
             '"0,0,1","-1,0,0",auto,female,normal,300,-400,vhp_female',
         ]
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "manifest.csv"
+    # beside the results, not in them: validate refuses an output folder holding an input
+    out.parent.mkdir(parents=True, exist_ok=True)
+    path = out.parent / f"{out.name}_manifest.csv"
     path.write_text(HEADER + "\n".join(rows) + "\n", encoding="utf-8")
     return path
 
@@ -87,7 +89,12 @@ def main() -> int:
     from workbench.cli.main import main as workbench
 
     m = manifest(args.out, args.quick)
-    argv = ["validate", str(m), "--out", str(args.out)]
+    # --force keeps the previous run as OUT.1 (its surfaces and reference packs are reused);
+    # the run before that is dropped so the results folder does not grow without end
+    previous = args.out.with_name(args.out.name + ".1")
+    if previous.is_dir() and args.out.is_dir():
+        shutil.rmtree(previous)
+    argv = ["validate", str(m), "--out", str(args.out), "--force"]
     if args.library:
         argv += ["--leave-one-out", "--identity"]
     code = workbench(argv)
