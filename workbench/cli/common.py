@@ -136,7 +136,7 @@ def _finite_or_none(value: Any) -> Any:
 
 def progress_printer(enabled: bool = True):  # noqa: ANN201 - returns a callback
     """A ``progress(step, fraction)`` callback printing to stderr."""
-    last = {"step": None}
+    last: dict[str, str | None] = {"step": None}
 
     def report(step: str, fraction: float) -> None:
         if not enabled:

@@ -41,7 +41,7 @@ def _vector(text: str) -> tuple[float, float, float]:
         v = ()
     if len(v) != 3:
         raise argparse.ArgumentTypeError(f"expected three comma-separated numbers, got {text!r}")
-    return v  # type: ignore[return-value]
+    return v
 
 
 def add_orientation_options(p: argparse.ArgumentParser) -> None:

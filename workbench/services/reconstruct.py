@@ -42,6 +42,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -58,6 +59,9 @@ from workbench.model.template import TemplateHead
 from workbench.services.dowels import DepthSettings, DowelPlan, plan_dowels
 from workbench.services.frame import head_frame_from_landmarks
 from workbench.services.tissue_model import TissueField, TissueSettings, apply_field, tissue_field
+
+if TYPE_CHECKING:
+    from workbench.services.skull_registration import SkullRegistration
 
 #: warp regularisation λ (mm) of the final (guide) warp
 SMOOTHING = 1.0
@@ -144,7 +148,7 @@ class Reconstruction:
     dowel_depths: Mapping[str, float] = field(default_factory=dict)
     observed: np.ndarray | None = None
     landmarks: LandmarkSet | None = None
-    registration: object | None = None
+    registration: SkullRegistration | None = None
     tissue: TissueField | None = None
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
@@ -239,7 +243,7 @@ def _spread(points: np.ndarray, spacing: float) -> np.ndarray:
 GuideFn = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
 
 
-def _skin_observed(head_skin: Mesh, reg: object) -> np.ndarray:
+def _skin_observed(head_skin: Mesh, reg: SkullRegistration) -> np.ndarray:
     """0..1 per skin vertex from the observed weights of the registered bone under it.
 
     Cranium and mandible only: teeth rarely match a CT's (metal, roots,
@@ -353,7 +357,7 @@ def move_eyes(head: TemplateHead, moves: Mapping[int, np.ndarray]) -> TemplateHe
     return replace(head, meshes=meshes, eye_centres=head.eye_centres + shift)
 
 
-def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
+def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
              guide_targets: Mapping[str, np.ndarray] | None = None,
              guides: GuideFn | None = None, settings: FitSettings = FitSettings(),
              tissue: TissueField | None = None, depths: np.ndarray | None = None,
@@ -435,8 +439,7 @@ def fit_head(head: TemplateHead, reg: object, plan: DowelPlan, *,
     src_a, dst_a = np.array(src), np.array(dst)
 
     # no skin inside (or too close to) the target bone: clearance correspondences
-    target = reg.target_h
-    index = MeshIndex(target)
+    index = MeshIndex(reg.target_h)
     exempt = _mask(n, head, NO_CLEARANCE_REGIONS)
     for loop in head.openings.values():
         exempt[np.asarray(loop, dtype=np.int64)] = True
@@ -510,7 +513,7 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
                 settings: FitSettings = FitSettings(),
                 guide_targets: Mapping[str, np.ndarray] | None = None,
                 guides: Callable[[Mesh, LandmarkSet, DowelPlan], GuideFn | None] | None = None,
-                hint: tuple | None = None, registration: object | None = None,
+                hint: tuple | None = None, registration: SkullRegistration | None = None,
                 progress: Callable[[str], None] | None = None) -> Reconstruction:
     """Fit ``head`` over ``skull`` (input frame, mm); see the module docstring.
 

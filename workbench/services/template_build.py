@@ -378,14 +378,14 @@ def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLi
         meshes[role], factors[role] = read.mesh, read.scale_applied
         inputs.append({"role": role, "file": path.name, "sha256": _sha256(path)})
     seeds: dict[str, LandmarkSet | None] = {"skin": None, "skull": None}
-    for surface, path in (("skin", skin_landmarks), ("skull", skull_landmarks)):
-        if path is not None:
-            lms = read_landmarks(path, surface, catalogue=load_catalogue(),
+    for surface, lm_path in (("skin", skin_landmarks), ("skull", skull_landmarks)):
+        if lm_path is not None:
+            lms = read_landmarks(lm_path, surface, catalogue=load_catalogue(),
                                  allow_undefined=True).landmarks
             f = factors[surface]
             seeds[surface] = lms.transformed(np.diag([f, f, f, 1.0]))
-            inputs.append({"role": f"{surface}_landmarks", "file": Path(path).name,
-                           "sha256": _sha256(Path(path))})
+            inputs.append({"role": f"{surface}_landmarks", "file": Path(lm_path).name,
+                           "sha256": _sha256(Path(lm_path))})
     result = build_template(meshes["skin"], meshes["skull"], base or reference_head(sex),
                             skin_seeds=seeds["skin"], skull_seeds=seeds["skull"],
                             orientation=orientation, inputs=inputs, progress=progress)
