@@ -153,8 +153,9 @@ def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = 
     times["open"] = time.perf_counter() - t
     fit = run_fit(inputs, progress=say)
     times.update(fit.seconds)
-    stack.push(ReplaceLandmarkSet(surface="skull", new_set=fit.recon.landmarks,
-                                  label="Skull landmarks from the dense registration"))
+    if fit.recon.landmarks is not None:   # None only when the fit kept no landmark set
+        stack.push(ReplaceLandmarkSet(surface="skull", new_set=fit.recon.landmarks,
+                                      label="Skull landmarks from the dense registration"))
     for key, value in (("template_id", fit.head.template_id),
                        ("template_hash", fit.head.content_hash),
                        ("depth_group", fit.recon.plan.group_label)):
