@@ -208,7 +208,7 @@ def test_clean_close_save_discard_and_undo_remove_the_snapshot(
                         lambda *_a: QMessageBox.StandardButton.Discard)
     window.interactive = True
     try:
-        assert window._may_discard()
+        assert window.may_discard()
     finally:
         window.interactive = False
     assert not saver.has_snapshot

@@ -17,6 +17,7 @@ if os.environ.get("QT_QPA_PLATFORM") != "xcb":
                 allow_module_level=True)
 
 from PySide6.QtCore import Qt  # noqa: E402
+from workbench.qt.scene import is_closed
 
 pytestmark = pytest.mark.gui
 WAIT_MS = 30_000
@@ -28,7 +29,7 @@ def dialog(qtbot, window, headsq_nhdr):  # noqa: ANN001
     qtbot.waitExposed(d)
     yield d
     d.close()             # cancels its jobs and closes its plotter
-    assert d.plotter._closed
+    assert is_closed(d.plotter)
 
 
 def _wait_preview(qtbot, dialog, after: int = 0, iso: float | None = None) -> None:  # noqa: ANN001
@@ -109,7 +110,7 @@ def test_extract_starts_a_case_with_the_bone_surface(qtbot, window, dialog,
     qtbot.mouseClick(dialog.extract_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: dialog.state == "done" and not window.runner.busy, timeout=WAIT_MS)
     assert not window.errors, window.errors
-    assert not dialog.isVisible() and dialog.plotter._closed
+    assert not dialog.isVisible() and is_closed(dialog.plotter)
     mesh = window.document.case.specimen.mesh
     bone = headsq_surfaces["bone"]
     assert mesh.n_faces == bone.n_faces
@@ -124,7 +125,7 @@ def test_extract_starts_a_case_with_the_bone_surface(qtbot, window, dialog,
 def test_cancel_closes_the_dialog_while_previewing(qtbot, window, dialog):  # noqa: ANN001
     _wait_preview(qtbot, dialog)
     qtbot.mouseClick(dialog.cancel_button, Qt.MouseButton.LeftButton)
-    assert dialog.state == "closed" and not dialog.isVisible() and dialog.plotter._closed
+    assert dialog.state == "closed" and not dialog.isVisible() and is_closed(dialog.plotter)
     assert not window.runner.busy and not window.errors
 
 
@@ -132,7 +133,7 @@ def test_cancel_while_loading_drops_the_volume(qtbot, window, headsq_nhdr):  # n
     d = window.open_ct_dialog(headsq_nhdr)
     assert d.state == "loading" and window.runner.is_running("ct-load")
     d.cancel()
-    assert d.state == "closed" and not window.runner.busy and d.plotter._closed
+    assert d.state == "closed" and not window.runner.busy and is_closed(d.plotter)
     qtbot.wait(300)
     assert d.ct is None and d.previews_shown == 0 and not window.errors
 
@@ -144,7 +145,7 @@ def test_an_unreadable_file_is_reported_without_traceback(qtbot, window, tmp_pat
     qtbot.waitUntil(lambda: d.state == "closed", timeout=WAIT_MS)
     assert len(window.errors) == 1
     assert window.errors[0].startswith("Could not read the CT broken.nrrd")
-    assert "Traceback" not in window.errors[0] and d.plotter._closed
+    assert "Traceback" not in window.errors[0] and is_closed(d.plotter)
 
 
 def test_non_interactive_open_ct_uses_the_same_path(qtbot, window, headsq_nhdr,

@@ -11,11 +11,14 @@ agree with the Layers dock whichever one the user clicks.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from PySide6.QtGui import QAction, QKeySequence
 
 from workbench.qt.scene import LAYERS
+
+if TYPE_CHECKING:
+    from workbench.qt.hosts import MenuHost
 
 
 @dataclass(frozen=True)
@@ -59,7 +62,7 @@ ACTIONS: tuple[ActionSpec, ...] = (
 )
 
 
-def build_menus(window: Any) -> dict[str, QAction]:
+def build_menus(window: MenuHost) -> dict[str, QAction]:
     """Create the menus of ``window``; returns ``{action id: QAction}``."""
     menus: dict[str, Any] = {}
     out: dict[str, QAction] = {}
@@ -67,7 +70,7 @@ def build_menus(window: Any) -> dict[str, QAction]:
     for spec in ACTIONS:
         if spec.menu not in menus:
             menus[spec.menu] = bar.addMenu(spec.menu)
-        action = QAction(spec.title, window)
+        action = QAction(spec.title, window.window())
         if spec.shortcut is not None:
             action.setShortcut(QKeySequence(spec.shortcut))
         if spec.tip:
@@ -79,21 +82,21 @@ def build_menus(window: Any) -> dict[str, QAction]:
         if spec.id in ("export", "redo"):
             menus[spec.menu].addSeparator()
     view = menus["&View"]
-    second = QAction("Second &view: guides, frontal / lateral", window)
+    second = QAction("Second &view: guides, frontal / lateral", window.window())
     second.setCheckable(True)
     second.setShortcut(QKeySequence("F2"))
     second.setStatusTip("The orthographic guide view beside the 3D view (drag the guides there)")
     second.toggled.connect(window.user_toggled_guide_view)
     view.addAction(second)
     out["guide_view"] = second
-    for key, dock in getattr(window, "docks", {}).items():
+    for key, dock in window.docks.items():
         toggle = dock.toggleViewAction()
         view.addAction(toggle)
         out[f"dock_{key}"] = toggle
     view.addSeparator()
     scene = window.scene
     for layer, title in LAYERS.items():
-        action = QAction(title, window)
+        action = QAction(title, window.window())
         action.setCheckable(True)
         action.setChecked(scene.visible[layer])
         action.setStatusTip(f"Show or hide the {title.lower()} layer (opacity: Layers dock)")

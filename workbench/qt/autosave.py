@@ -54,7 +54,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal
 from PySide6.QtWidgets import QMessageBox, QWidget
@@ -70,6 +70,9 @@ from workbench.io.case_file import (
 from workbench.model.case import Case
 from workbench.qt import relay
 from workbench.services.case_setup import OpenedCase
+
+if TYPE_CHECKING:
+    from workbench.qt.hosts import AutosaveHost
 
 ENV_INTERVAL = "WORKBENCH_AUTOSAVE_S"
 ENV_FOLDER = "WORKBENCH_AUTOSAVE_DIR"
@@ -588,24 +591,24 @@ class RecoverSnapshot(Command):
         pass
 
 
-def install_autosave(window: Any, folder: str | Path | None = None,
+def install_autosave(window: AutosaveHost, folder: str | Path | None = None,
                      interval_s: float | None = None) -> Autosaver:
     """Give ``window`` (a MainWindow) an :class:`Autosaver` as ``window.autosaver``."""
-    saver = Autosaver(window.document, folder, interval_s, parent=window)
+    saver = Autosaver(window.document, folder, interval_s, parent=window.window())
     saver.snapshot_failed.connect(window.status)
     saver.snapshot_failed.connect(window.messages.append)
     window.autosaver = saver
     return saver
 
 
-def forget_snapshot(window: Any) -> None:
+def forget_snapshot(window: object) -> None:
     """Delete the window's snapshot, if it has an autosaver (after Save or Discard)."""
     saver = getattr(window, "autosaver", None)
     if saver is not None:
         saver.discard_snapshot()
 
 
-def recover(window: Any, entry: RecoveryEntry) -> bool:
+def recover(window: AutosaveHost, entry: RecoveryEntry) -> bool:
     """Open ``entry``'s snapshot in ``window`` as an unsaved case; True on success.
 
     The current case is replaced only if it may be (as for File > Open).
@@ -622,7 +625,7 @@ def recover(window: Any, entry: RecoveryEntry) -> bool:
     except (WorkbenchError, OSError) as error:
         window.show_error(f"Could not recover unsaved work from {entry.when}", error)
         return False
-    if not window._may_discard():
+    if not window.may_discard():
         return False
     saver: Autosaver = window.autosaver
     try:
@@ -638,7 +641,7 @@ def recover(window: Any, entry: RecoveryEntry) -> bool:
     note = (f"Recovered unsaved work from {entry.when} ({entry.title}); "
             + (f"Save writes to {entry.original_path}" if entry.original_path
                else "it was never saved: Save asks for a file name"))
-    window._opened(OpenedCase(loaded.case, stack, [note]), entry.original_path)
+    window.replace_case(OpenedCase(loaded.case, stack, [note]), entry.original_path)
     window.status(note)
     return True
 
@@ -665,7 +668,7 @@ def ask_recovery(parent: QWidget, entry: RecoveryEntry) -> str:
     return DISCARD if clicked is discard_button else LATER
 
 
-def offer_recovery(window: Any, folder: str | Path | None = None) -> bool:
+def offer_recovery(window: AutosaveHost, folder: str | Path | None = None) -> bool:
     """At startup: offer each left-over snapshot, newest first; True if one was recovered.
 
     Non-interactive windows never see a dialog (nothing happens; use
@@ -685,7 +688,7 @@ def offer_recovery(window: Any, folder: str | Path | None = None) -> bool:
     if not window.interactive:
         return False
     for entry in (e for e in entries if e.recoverable):
-        answer = ask_recovery(window, entry)
+        answer = ask_recovery(window.window(), entry)
         if answer == RECOVER:
             return recover(window, entry)
         if answer == LATER:

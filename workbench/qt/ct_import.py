@@ -12,7 +12,7 @@ A non-modal :class:`CtImportDialog` over the main window:
    in the worker (channel ``"ct-preview"``); a newer preview supersedes and
    cancels an older one, so the view follows the slider;
 3. "Extract surface" runs the full-resolution extraction through the
-   window's :meth:`~workbench.qt.file_ops.FileOpsMixin.open_ct` (channel
+   window's :meth:`~workbench.qt.file_ops.FileTool.open_ct` (channel
    ``"open"``, with progress); on success the window holds a new case whose
    specimen is the extracted surface and the dialog closes.  "Cancel"
    during the extraction cancels the job (the window's case is unchanged)
@@ -27,7 +27,7 @@ through ``window.show_error`` (never a traceback).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PySide6.QtCore import QEvent, QObject, QPointF, QRectF, Qt, QTimer, Signal
@@ -52,6 +52,9 @@ from workbench.qt import jobs
 from workbench.qt.workers import show_fraction
 from workbench.render.snapshots import to_polydata
 from workbench.services.ct_preview import CtPreview, PreviewSurface
+
+if TYPE_CHECKING:
+    from workbench.qt.hosts import CtImportHost
 
 BONE = (0.93, 0.89, 0.80)
 DEBRIS = (0.55, 0.57, 0.62)
@@ -145,8 +148,9 @@ class CtImportDialog(QDialog):
 
     Parameters
     ----------
-    window : MainWindow
-        Supplies ``runner``, ``open_ct``, ``show_error`` and ``interactive``.
+    window : CtImportHost
+        The main window: ``runner``, ``open_ct``, ``show_error``; its
+        ``window()`` parents the dialog, which closes with it.
     path : path
         DICOM folder or NRRD/NHDR, MetaImage, NIfTI file.
     max_voxels : int
@@ -164,8 +168,9 @@ class CtImportDialog(QDialog):
 
     preview_updated = Signal(object)  # PreviewSurface
 
-    def __init__(self, window: Any, path: str | Path, *, max_voxels: int | None = None) -> None:
-        super().__init__(window)
+    def __init__(self, window: CtImportHost, path: str | Path, *,
+                 max_voxels: int | None = None) -> None:
+        super().__init__(window.window())
         from pyvistaqt import QtInteractor
 
         self.window_ = window
@@ -271,7 +276,7 @@ class CtImportDialog(QDialog):
         self.cancel_button.clicked.connect(self.cancel)
         self.runner.progress_changed.connect(self._on_progress)
         self.runner.busy_changed.connect(self._check_extraction)
-        window.installEventFilter(self)
+        window.window().installEventFilter(self)
         self._set_controls(False)
         self._load()
 
@@ -539,7 +544,7 @@ class CtImportDialog(QDialog):
         super().closeEvent(event)
 
     def eventFilter(self, watched: QObject, event: QEvent) -> bool:  # noqa: N802 - Qt name
-        if watched is self.window_ and event.type() == QEvent.Type.Close:
+        if watched is self.window_.window() and event.type() == QEvent.Type.Close:
             self.close()  # the window is closing: release the 3D view first
         return False
 
@@ -561,6 +566,6 @@ class CtImportDialog(QDialog):
                 signal.disconnect(slot)
             except (RuntimeError, TypeError):
                 pass
-        self.window_.removeEventFilter(self)
+        self.window_.window().removeEventFilter(self)
         self.plotter.close()  # finalize VTK while the GL context exists (HEADLESS.md)
         self.ct = None  # release the volume

@@ -1,6 +1,6 @@
 """Live dragging in the main window: a skull landmark along the surface, a guide line.
 
-A mixin of :class:`workbench.qt.main_window.MainWindow`.  While the mouse
+A tool the main window composes (:class:`DragTool`).  While the mouse
 moves nothing is written to the case: the view being dragged in draws a
 *preview* — the landmark marker, its dowel, and the face re-solved by
 :class:`workbench.services.preview_fit.PreviewFit` from the last full fit
@@ -19,6 +19,7 @@ frame (see :mod:`workbench.services.guides`).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -29,31 +30,63 @@ from workbench.core.spatial import MeshIndex
 from workbench.services.guides import Guide
 from workbench.services.preview_fit import PreviewFit
 
+if TYPE_CHECKING:
+    from workbench.qt.document import Document
+    from workbench.qt.guide_view import GuideView
+    from workbench.qt.lod import InteractiveDetail
+    from workbench.qt.panels.landmarks_panel import LandmarksPanel
+    from workbench.qt.panels.reconstruct_panel import ReconstructPanel
+    from workbench.qt.picking import ClickPicker
+    from workbench.qt.scene import SceneView
+    from workbench.qt.session import Session
 
-class DragOpsMixin:
-    """Landmark and guide drags with a live preview (see the module docstring)."""
 
-    document: Any
-    scene: Any
-    fit: Any
-    preview: Any
-    detail: Any
-    landmarks_panel: Any
-    reconstruct_panel: Any
-    picker: Any
-    plotter: Any
-    guide_view: Any = None
+class DragTool:
+    """Landmark and guide drags with a live preview (see the module docstring).
 
-    if TYPE_CHECKING:  # provided by LandmarkOpsMixin and MainWindow
-        def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None: ...
-        def draw_face(self) -> None: ...
+    Parameters
+    ----------
+    document, scene, session
+        The case, the main 3D view's layers, the fit previews start from.
+    detail : InteractiveDetail
+        The lighter skull while dragging.
+    plotter
+        The main 3D view (one render per dragged frame).
+    landmarks_panel, reconstruct_panel
+        The selected landmark; the guide list a guide drag stores into.
+    draw_landmarks, draw_face
+        Redraw the landmarks (``override``: {code: position} of a drag) and the face.
 
-    def _init_drag(self) -> None:
+    The click picker and the guide view are attached once they exist
+    (:meth:`attach`): both call back into this tool.
+    """
+
+    def __init__(self, document: Document, scene: SceneView, session: Session,
+                 detail: InteractiveDetail, plotter: Any, landmarks_panel: LandmarksPanel,
+                 reconstruct_panel: ReconstructPanel,
+                 draw_landmarks: Callable[[dict[str, np.ndarray] | None], None],
+                 draw_face: Callable[[], None]) -> None:
+        self.document = document
+        self.scene = scene
+        self.session = session
+        self.detail = detail
+        self.plotter = plotter
+        self.landmarks_panel = landmarks_panel
+        self.reconstruct_panel = reconstruct_panel
+        self._draw_landmarks = draw_landmarks
+        self._draw_face = draw_face
+        self.picker: ClickPicker | None = None
+        self.guide_view: GuideView | None = None
         self.drag_timings: list[float] = []   # seconds per computed preview (tests, benchmarks)
         self._preview_fit: PreviewFit | None = None
         self._drag_pending: tuple[str, Any] | None = None
         self._drag_scheduled = False
         self._muscle_binding: tuple | None = None   # see _preview_muscles
+
+    def attach(self, picker: ClickPicker, guide_view: GuideView) -> None:
+        """The views whose drags this tool handles (they are built after it)."""
+        self.picker = picker
+        self.guide_view = guide_view
 
     # ------------------------------------------------------------ landmark drags
     def grab_target(self) -> tuple[str, np.ndarray] | None:
@@ -85,9 +118,10 @@ class DragOpsMixin:
 
     def cancel_drag(self) -> None:
         """Esc: end a landmark drag without moving anything."""
-        if self.picker.dragging is not None:
+        if self.picker is not None and self.picker.dragging is not None:
             self.picker.finish_drag(cancel=True)
-        self.guide_view.cancel_drag()
+        if self.guide_view is not None:
+            self.guide_view.cancel_drag()
 
     # ------------------------------------------------------------ guide drags
     def preview_guide(self, guide: Guide) -> None:
@@ -107,10 +141,11 @@ class DragOpsMixin:
 
     # ------------------------------------------------------------ preview
     def _new_preview_fit(self) -> PreviewFit | None:
-        if self.fit is None:
+        fit = self.session.fit
+        if fit is None:
             return None
         try:
-            return PreviewFit.from_fit(self.fit.recon, self.fit.head)
+            return PreviewFit.from_fit(fit.recon, fit.head)
         except ValueError:
             return None
 
@@ -137,7 +172,7 @@ class DragOpsMixin:
         preview = self._preview_fit
         if kind == "landmark":
             code, point = value
-            self.draw_landmarks(override={code: point})
+            self._draw_landmarks({code: point})
             self._preview_dowel(code, point)
             if preview is not None and preview.move_landmark(code, point):
                 skin = preview.skin()
@@ -162,7 +197,9 @@ class DragOpsMixin:
         drag draws them exactly.  ~0.1 ms a frame, against ~20 ms for
         re-evaluating the grids.
         """
-        fit = self.fit
+        fit = self.session.fit
+        if fit is None:
+            return
         binding = self._muscle_binding
         if binding is None or binding[0] is not fit:
             face = fit.recon.face
@@ -175,7 +212,7 @@ class DragOpsMixin:
         self.scene.move_layer_points("muscles", drawn + moved)
 
     def _preview_dowel(self, code: str, point: np.ndarray) -> None:
-        p = self.preview
+        p = self.session.preview
         if p is None or code not in p.codes:
             return
         i = p.codes.index(code)
@@ -185,10 +222,11 @@ class DragOpsMixin:
         self.scene.show_dowels(origins, tips)
 
     def _redraw_after_drag(self) -> None:
-        self.draw_landmarks()
-        if self.preview is not None:
-            self.scene.show_dowels(self.preview.origins, self.preview.tips)
-        self.draw_face()
+        self._draw_landmarks(None)
+        preview = self.session.preview
+        if preview is not None:
+            self.scene.show_dowels(preview.origins, preview.tips)
+        self._draw_face()
         if self.guide_view is not None:
             self.guide_view.refresh()
         self.plotter.update()

@@ -1,6 +1,8 @@
 """File actions of the main window: open a skull mesh, a CT or a case; save; export.
 
-A mixin of :class:`workbench.qt.main_window.MainWindow`.  Reading and
+A tool the main window composes (:class:`FileTool`, built from the
+document, the session and the worker; the window is its
+:class:`~workbench.qt.hosts.FileHost`: messages, dialogs' parent).  Reading and
 extraction run in the worker (the window stays responsive); the new case
 replaces the current one on the GUI thread.  Saving is synchronous and
 atomic (:func:`workbench.io.case_file.save_case`): a failed save shows why
@@ -27,11 +29,11 @@ from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.landmark_snap import snap_index
 
 if TYPE_CHECKING:
-    from PySide6.QtWidgets import QLabel, QMainWindow
-
-    _Window = QMainWindow   # the mixin's host (dialogs take it as their parent)
-else:
-    _Window = object
+    from workbench.qt.ct_import import CtImportDialog
+    from workbench.qt.document import Document
+    from workbench.qt.hosts import FileHost
+    from workbench.qt.session import Session
+    from workbench.qt.workers import TaskRunner
 
 MESH_FILTER = "Meshes (*.ply *.stl *.obj *.vtk *.vtp);;All files (*)"
 CASE_FILTER = "Case files (*.fcase);;All files (*)"
@@ -104,38 +106,47 @@ def case_from_ct(path: Path, tissue: str, iso: float | None, *, volume: Any = No
     return opened
 
 
-class FileOpsMixin(_Window):
-    """Open/save/export for the main window (see the module docstring)."""
+class FileTool:
+    """Open/save/export for the main window (see the module docstring).
 
-    document: Any
-    runner: Any
-    fit: Any
-    preview: Any
-    interactive: bool
-    messages: list[str]
-    status_label: QLabel
+    Attributes
+    ----------
+    exported : dict[str, Path]
+        The files of the last export.
+    ct_dialog : CtImportDialog or None
+        The last CT import dialog opened.
+    """
 
-    if TYPE_CHECKING:  # provided by MainWindow
-        def status(self, text: str) -> None: ...
-        def show_error(self, what: str, exc: BaseException) -> None: ...
-        def load_truth(self, path: str | Path, scale: float | None = None) -> None: ...
-        def save_screenshot(self, path: str | Path) -> Path: ...
+    def __init__(self, document: Document, session: Session, runner: TaskRunner,
+                 host: FileHost) -> None:
+        self.document = document
+        self.session = session
+        self.runner = runner
+        self.host = host
+        self.exported: dict[str, Path] = {}
+        self.ct_dialog: CtImportDialog | None = None
+
+    def status(self, text: str) -> None:
+        self.host.status(text)
+
+    def show_error(self, what: str, exc: BaseException) -> None:
+        self.host.show_error(what, exc)
 
     # ------------------------------------------------------------ open
     def open_skull(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
         """Start a new case from a skull mesh (in the worker)."""
-        if not self._may_discard():
+        if not self.may_discard():
             return
         path = Path(path)
         self.runner.submit("open", f"Opening {path.name} …",
                            lambda: _drawable(_with_orientation(
                                start_case_from_skull(path, units=units, scale=scale), path)),
-                           lambda opened: self._opened(opened, None),
+                           lambda opened: self.replace_case(opened, None),
                            lambda exc: self._open_failed(path, exc))
 
     def _open_failed(self, path: Path, exc: BaseException) -> None:
-        if isinstance(exc, UnitsError) and self.interactive:
-            factor = dialogs.ask_units(self, path.name, exc.problem)
+        if isinstance(exc, UnitsError) and self.host.interactive:
+            factor = dialogs.ask_units(self.host.window(), path.name, exc.problem)
             if factor is not None:
                 self.open_skull(path, scale=factor)
             return
@@ -155,12 +166,12 @@ class FileOpsMixin(_Window):
         new case is shown (True) or the error was shown (False); never after
         a cancel.  Returns False if the user kept the current case.
         """
-        if not self._may_discard():
+        if not self.may_discard():
             return False
         path = Path(path)
 
         def done(opened: OpenedCase) -> None:
-            self._opened(opened, None)
+            self.replace_case(opened, None)
             if finished is not None:
                 finished(True)
 
@@ -179,17 +190,17 @@ class FileOpsMixin(_Window):
         """Show the non-modal CT import dialog (threshold preview, then extraction)."""
         from workbench.qt.ct_import import CtImportDialog
 
-        previous = getattr(self, "ct_dialog", None)
+        previous = self.ct_dialog
         if previous is not None and previous.isVisible():
             previous.close()  # both would use the same worker channels
-        dialog = CtImportDialog(self, path)
+        dialog = CtImportDialog(self.host, path)
         self.ct_dialog = dialog
         dialog.show()
         return dialog
 
     def open_case(self, path: str | Path) -> None:
         """Open a saved ``.fcase`` (in the worker)."""
-        if not self._may_discard():
+        if not self.may_discard():
             return
         path = Path(path)
         self.runner.submit("open", f"Opening case {path.name} …",
@@ -203,7 +214,7 @@ class FileOpsMixin(_Window):
         A case that fails its evidence, array or audit-chain check never gets
         here: loading refuses it and the error names the first problem.
         """
-        self._opened(OpenedCase(loaded.case, CommandStack(loaded.case)), path)
+        self.replace_case(OpenedCase(loaded.case, CommandStack(loaded.case)), path)
         chain = loaded.audit_chain.summary()
         audit = chain if chain.startswith("audit log") else f"audit log {chain}"
         notes = [f"{path.name}: evidence and arrays match their hashes; {audit}"]
@@ -211,15 +222,15 @@ class FileOpsMixin(_Window):
             notes.append(f"{path.name} was reconstructed before, but a case file keeps the "
                          "settings, not the face: Reconstruct face (Ctrl+R) fits it again")
         for note in notes:
-            self.messages.append(note)
-        self.status(f"{self.status_label.text()}; {audit}")
+            self.host.messages.append(note)
+        self.status(f"{self.host.status_text()}; {audit}")
 
-    def _opened(self, opened: OpenedCase, path: Path | None) -> None:
-        self.fit = None
-        self.preview = None
+    def replace_case(self, opened: OpenedCase, path: Path | None) -> None:
+        """Show ``opened`` as the window's case (``path``: its file; None: untitled)."""
+        self.session.clear_fit()
         self.document.replace(opened.case, opened.stack, path, opened.notes)
         for note in opened.notes:
-            self.messages.append(note)
+            self.host.messages.append(note)
         self.status(f"Opened {path.name if path else 'a new case'}: "
                     f"{opened.case.specimen.mesh.n_faces if opened.case.specimen.mesh else 0} "
                     "triangles")
@@ -242,19 +253,20 @@ class FileOpsMixin(_Window):
             return False
         self.document.path = path
         self.document.stack_changed.emit()
-        autosave.forget_snapshot(self)  # the saved file now holds the work
+        autosave.forget_snapshot(self.host)  # the saved file now holds the work
         self.status(f"Saved {path}")
         return True
 
     def ask_save_as(self) -> bool:
         start = str(self.document.path or "case.fcase")
-        name, _ = QFileDialog.getSaveFileName(self, "Save case as", start, CASE_FILTER)
+        name, _ = QFileDialog.getSaveFileName(self.host.window(), "Save case as", start,
+                                              CASE_FILTER)
         return self.save_to(name) if name else False
 
     # ------------------------------------------------------------ export
     def export_to(self, folder: str | Path) -> None:
         """Face and head meshes, landmarks and the PDF report into ``folder`` (worker)."""
-        case, fit, notes = self.document.case, self.fit, list(self.document.notes)
+        case, fit, notes = self.document.case, self.session.fit, list(self.document.notes)
         self.runner.submit("export", f"Exporting to {folder} …",
                            lambda: jobs.export_results(folder, case, fit, notes=notes),
                            self._exported,
@@ -269,51 +281,53 @@ class FileOpsMixin(_Window):
 
     # ------------------------------------------------------------ dialogs
     def ask_open_skull(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self, "Open skull mesh", "", MESH_FILTER)
+        name, _ = QFileDialog.getOpenFileName(self.host.window(), "Open skull mesh", "",
+                                              MESH_FILTER)
         if name:
             self.open_skull(name)
 
     def ask_open_ct(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self, "Open CT volume (or cancel for a DICOM "
-                                              "folder)", "", CT_FILTER)
+        name, _ = QFileDialog.getOpenFileName(self.host.window(), "Open CT volume (or cancel "
+                                              "for a DICOM folder)", "", CT_FILTER)
         if not name:
-            name = QFileDialog.getExistingDirectory(self, "Open DICOM folder")
-        if name and self.interactive:
+            name = QFileDialog.getExistingDirectory(self.host.window(), "Open DICOM folder")
+        if name and self.host.interactive:
             self.open_ct_dialog(name)
         elif name:
             self.open_ct(name)
 
     def ask_open_case(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self, "Open case", "", CASE_FILTER)
+        name, _ = QFileDialog.getOpenFileName(self.host.window(), "Open case", "", CASE_FILTER)
         if name:
             self.open_case(name)
 
     def ask_export(self) -> None:
-        name = QFileDialog.getExistingDirectory(self, "Export into folder")
+        name = QFileDialog.getExistingDirectory(self.host.window(), "Export into folder")
         if name:
             self.export_to(name)
 
     def ask_load_truth(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self, "True skin surface (same frame, mm)", "",
+        name, _ = QFileDialog.getOpenFileName(self.host.window(),
+                                              "True skin surface (same frame, mm)", "",
                                               MESH_FILTER)
         if name:
-            self.load_truth(name)
+            self.host.load_truth(name)
 
     def ask_screenshot(self) -> None:
-        name, _ = QFileDialog.getSaveFileName(self, "Save window picture", "window.png",
-                                              "PNG (*.png)")
+        name, _ = QFileDialog.getSaveFileName(self.host.window(), "Save window picture",
+                                              "window.png", "PNG (*.png)")
         if name:
-            self.save_screenshot(name)
+            self.host.save_screenshot(name)
 
-    def _may_discard(self) -> bool:
+    def may_discard(self) -> bool:
         """True if the open case may be replaced (saved, discarded, or clean)."""
-        if not self.document.is_dirty or not self.interactive:
+        if not self.document.is_dirty or not self.host.interactive:
             return True
-        answer = dialogs.ask_save_changes(self, self.document.path.name if self.document.path
+        answer = dialogs.ask_save_changes(self.host.window(), self.document.path.name if self.document.path
                                           else "the untitled case")
         if answer == dialogs.QMessageBox.StandardButton.Save:
             return self.save()
         if answer == dialogs.QMessageBox.StandardButton.Discard:
-            autosave.forget_snapshot(self)  # a deliberate discard
+            autosave.forget_snapshot(self.host)  # a deliberate discard
             return True
         return False

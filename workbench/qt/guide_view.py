@@ -14,9 +14,11 @@ point *is* ``(y, z)``:
 
 A guide is dragged with the left button (press within
 :data:`GRAB_RADIUS_PX` of it): the window previews the re-solved face at
-every move (:meth:`MainWindow.preview_guide`) and stores the new value as
-one undoable step on release (:meth:`MainWindow.commit_guide`), which
-re-fits the face in the worker.  Elsewhere the left button pans and the
+every move (the drag host's ``preview_guide``, :class:`workbench.qt.hosts.GuideDragHost`)
+and stores the new value as one undoable step on release (its ``commit_guide``),
+which re-fits the face in the worker.  The fit drawn is the session's
+(:class:`workbench.qt.session.Session`); the guides are the reconstruct
+panel's list (:class:`workbench.qt.hosts.GuideList`).  Elsewhere the left button pans and the
 wheel zooms (the view never rotates by accident).
 """
 
@@ -30,13 +32,16 @@ from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QHBoxLayout, QLabel, QRa
                                QStackedWidget, QVBoxLayout, QWidget)
 
 from workbench.qt.lod import decimated, with_normals
-from workbench.qt.scene import SMOOTH
+from workbench.qt.scene import SMOOTH, is_closed
 from workbench.render.snapshots import to_polydata
 from workbench.services.guides import AXES, Guide, guides_from_prediction
 
 if TYPE_CHECKING:
+    from workbench.qt.hosts import GuideDragHost, GuideList
     from workbench.qt.jobs import FitResult
-    from workbench.qt.main_window import MainWindow
+    from workbench.qt.scene import SceneView
+    from workbench.qt.session import Session
+    from workbench.qt.workers import TaskRunner
 
 GRAB_RADIUS_PX = 8.0
 PRIORITY = 10.0
@@ -48,13 +53,33 @@ HLINE_X = (-40.0, 40.0)
 
 
 class GuideView(QWidget):
-    """See the module docstring.  ``window`` is the main window (fit, panel, preview)."""
+    """See the module docstring.
 
-    def __init__(self, window: MainWindow, parent: QWidget | None = None) -> None:
+    Parameters
+    ----------
+    session : Session
+        Holds the fit drawn here.
+    runner : TaskRunner
+        The window's worker (the light skull is prepared there).
+    scene : SceneView
+        The main 3D view (this view paints after its pending paint).
+    guide_list : GuideList
+        The guides, in table row order (the reconstruct panel).
+    drag_host : GuideDragHost
+        Previews and stores the guide drags.
+    """
+
+    def __init__(self, session: Session, runner: TaskRunner, scene: SceneView,
+                 guide_list: GuideList, drag_host: GuideDragHost,
+                 parent: QWidget | None = None) -> None:
         from pyvistaqt import QtInteractor
 
         super().__init__(parent)
-        self.host = window   # not ``self.window``: that would hide QWidget.window()
+        self.session = session
+        self.runner = runner
+        self.scene = scene
+        self.guide_list = guide_list
+        self.drag_host = drag_host
         self.side = "frontal"
         self.closed_by_user = False
         self.stale = True   # needs drawing when next shown (changed while hidden)
@@ -128,25 +153,24 @@ class GuideView(QWidget):
         The view keeps showing the previous fit for the ~0.2 s the light
         skull takes, rather than being drawn twice (face first, then skull).
         """
-        fit = self.host.fit
+        fit = self.session.fit
         self._skull_light = None
         if fit is None:
             self.refresh()
             return
-        self.host.runner.submit("guide_view", "Preparing the guide view …",
-                                lambda: with_normals(decimated(fit.skull_h, 15_000)),
-                                lambda light: self._skull_ready(to_polydata(light,
-                                                                            normals=True)),
-                                lambda _exc: self.refresh(reset_camera=True))
+        self.runner.submit("guide_view", "Preparing the guide view …",
+                           lambda: with_normals(decimated(fit.skull_h, 15_000)),
+                           lambda light: self._skull_ready(to_polydata(light, normals=True)),
+                           lambda _exc: self.refresh(reset_camera=True))
 
     def _skull_ready(self, light: Any) -> None:
         self._skull_light = light
         self.refresh(reset_camera=True)
 
     def refresh(self, reset_camera: bool = False) -> None:
-        """Redraw skull, face, guides and predictions from the window's fit."""
+        """Redraw skull, face, guides and predictions from the session's fit."""
         p = self.plotter
-        if getattr(p, "_closed", False):
+        if is_closed(p):
             return
         if not self.isVisible():
             self.stale = True   # drawn when shown (hidden views cost nothing)
@@ -154,7 +178,7 @@ class GuideView(QWidget):
         self.stale = False
         p.clear_actors()
         self._face_actor, self._guide_slots = None, {}
-        fit = self.host.fit
+        fit = self.session.fit
         if fit is None:
             self.drawn_fit = None
             self.info.setText("The guides appear here once the face is fitted.")
@@ -176,22 +200,21 @@ class GuideView(QWidget):
         # drawing above and the (software-GL) paint then block the event
         # loop one after the other, not as one long stretch; and after the
         # main view's pending paint (views of one window paint together)
-        scene = getattr(self.host, "scene", None)
-        if scene is not None and scene.render_queued:
-            scene.after_paint(self._paint, render=False)
+        if self.scene.render_queued:
+            self.scene.after_paint(self._paint, render=False)
         else:
             QTimer.singleShot(0, self._paint)
 
     def _paint(self) -> None:
-        if getattr(self.plotter, "_closed", False):
+        if is_closed(self.plotter):
             return
         if self.drawn_fit is not None:
             self.pages.setCurrentWidget(self.plotter)   # (a first show paints by itself)
         self.plotter.update()
 
     def _fit(self) -> FitResult:
-        """The window's fit (drawing and dragging happen only while there is one)."""
-        fit = self.host.fit
+        """The session's fit (drawing and dragging happen only while there is one)."""
+        fit = self.session.fit
         if fit is None:
             raise RuntimeError("the guide view has no fit to draw")
         return fit
@@ -222,7 +245,7 @@ class GuideView(QWidget):
         ``self._guide_slots`` maps a guide's row to ``(actor, first point
         index, number of points)`` so a drag moves its points in place.
         """
-        guides = list(self.host.reconstruct_panel.guides)
+        guides = list(self.guide_list.guides)
         self._guide_slots = {}
         self._add_set(list(enumerate(guides)), GUIDE, 4, "gv_guide", track=True)
         if self.show_predictions.isChecked():
@@ -299,7 +322,7 @@ class GuideView(QWidget):
         # the page stack resized (after this widget's own resize event, with
         # its new size): keep 160 mm of the face across the narrower side
         if watched is self.pages and event.type() == QEvent.Type.Resize \
-                and self.host.fit is not None and not getattr(self.plotter, "_closed", False):
+                and self.session.fit is not None and not is_closed(self.plotter):
             self._fit_scale()
         return False
 
@@ -357,10 +380,10 @@ class GuideView(QWidget):
 
     def guide_at(self, x: float, y: float) -> int | None:
         """Row of the guide drawn within :data:`GRAB_RADIUS_PX` of display ``(x, y)``."""
-        if self.host.fit is None:
+        if self.session.fit is None:
             return None
         best, best_d = None, GRAB_RADIUS_PX
-        for row, g in enumerate(self.host.reconstruct_panel.guides):
+        for row, g in enumerate(self.guide_list.guides):
             seg = self._segment(g)
             if seg is None or not g.enabled:
                 continue
@@ -382,7 +405,7 @@ class GuideView(QWidget):
         if row is None:
             return
         self._swallow(obj, event)
-        self.dragging = (row, self.host.reconstruct_panel.guides[row])
+        self.dragging = (row, self.guide_list.guides[row])
         self._samples = self._render_window().GetMultiSamples()
         self._render_window().SetMultiSamples(0)   # a lighter frame while dragging
 
@@ -395,7 +418,7 @@ class GuideView(QWidget):
         value = tuple(float(world[a]) for a in AXES[start.kind])
         moved = start.moved(value)
         self.dragging = (row, moved)
-        self.host.preview_guide(moved)
+        self.drag_host.preview_guide(moved)
 
     def _on_release(self, obj: Any, event: str) -> None:
         if self.dragging is None:
@@ -404,15 +427,15 @@ class GuideView(QWidget):
         row, guide = self.dragging
         self.dragging = None
         self._render_window().SetMultiSamples(self._samples)
-        original = self.host.reconstruct_panel.guides[row]
-        self.host.commit_guide(row, None if guide.value == original.value else guide.value)
+        original = self.guide_list.guides[row]
+        self.drag_host.commit_guide(row, None if guide.value == original.value else guide.value)
 
     def cancel_drag(self) -> None:
         if self.dragging is not None:
             row, _ = self.dragging
             self.dragging = None
             self._render_window().SetMultiSamples(self._samples)
-            self.host.commit_guide(row, None)
+            self.drag_host.commit_guide(row, None)
 
     def close_view(self) -> None:
         """Remove the VTK observers (they hold this widget), then finalize the view."""

@@ -1,7 +1,8 @@
 """Skull landmark operations of the main window: draw, place by click, suggest, snap.
 
-A mixin of :class:`workbench.qt.main_window.MainWindow`; every change is
-an undoable command pushed on the window's document.  Suggesting runs in
+A tool the main window composes (:class:`LandmarkTool`, built from the
+document, the scene, the landmarks panel and the worker); every change is
+an undoable command pushed on the document.  Suggesting runs in
 the worker; snapping is computed on the GUI thread (a few ms: the search
 structures are built in the worker when the skull opens).  Positions are mm
 in the skull file's (input) frame.
@@ -9,7 +10,7 @@ in the skull file's (input) frame.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,20 +19,37 @@ from workbench.core.errors import WorkbenchError
 from workbench.qt import jobs
 from workbench.services.landmark_snap import snap_landmark
 
+if TYPE_CHECKING:
+    from workbench.io.catalogue import LandmarkCatalogue
+    from workbench.qt.document import Document
+    from workbench.qt.hosts import Feedback
+    from workbench.qt.panels.landmarks_panel import LandmarksPanel
+    from workbench.qt.scene import SceneView
+    from workbench.qt.workers import TaskRunner
 
-class LandmarkOpsMixin:
-    """Landmark drawing and editing for the main window (see the module docstring)."""
 
-    document: Any
-    scene: Any
-    catalogue: Any
-    landmarks_panel: Any
-    runner: Any
-    messages: list[str]
+class LandmarkTool:
+    """Landmark drawing and editing (see the module docstring).
 
-    if TYPE_CHECKING:  # provided by MainWindow
-        def status(self, text: str) -> None: ...
-        def show_error(self, what: str, exc: BaseException) -> None: ...
+    ``feedback`` (the main window) takes the status line, the error
+    messages and the notes of a suggestion.
+    """
+
+    def __init__(self, document: Document, scene: SceneView, catalogue: LandmarkCatalogue,
+                 landmarks_panel: LandmarksPanel, runner: TaskRunner,
+                 feedback: Feedback) -> None:
+        self.document = document
+        self.scene = scene
+        self.catalogue = catalogue
+        self.landmarks_panel = landmarks_panel
+        self.runner = runner
+        self.feedback = feedback
+
+    def status(self, text: str) -> None:
+        self.feedback.status(text)
+
+    def show_error(self, what: str, exc: BaseException) -> None:
+        self.feedback.show_error(what, exc)
 
     def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None:
         """Landmarks of the case; ``override`` ({code: position}) draws a drag in progress."""
@@ -77,7 +95,7 @@ class LandmarkOpsMixin:
             d = reg.figures.get("median_observed_distance_mm")
             self.status(f"Suggested {n} landmarks by the dense registration (median bone "
                         f"distance {d:.2f} mm, {self.runner.timings.get('suggest', 0):.1f} s)")
-            self.messages.extend(reg.warnings)
+            self.feedback.messages.extend(reg.warnings)
 
     def snap_selected(self) -> None:
         """Snap the selected skull landmark to the feature its definition names ("Snap", S).

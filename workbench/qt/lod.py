@@ -29,7 +29,7 @@ LIGHT_TRIANGLES = 25_000
 #: surfaces smaller than this are always drawn in full
 MIN_TRIANGLES = 40_000
 
-Submit = Callable[..., None]
+Submit = Callable[..., object]   # TaskRunner.submit (its token is not used here)
 
 
 def decimated(mesh: Mesh, triangles: int = LIGHT_TRIANGLES) -> Mesh:

@@ -4,12 +4,16 @@ Wiring (created in this order in ``__init__``)::
 
     MainWindow
     ├── Document            case + CommandStack + file; Qt signals for changes
+    ├── Session             derived results (fit, dowel preview, true skin, comparison)
     ├── TaskRunner          worker threads; results come back on the GUI thread
     ├── QtInteractor        central 3D view (pyvistaqt)
     │   ├── SceneView       named layers: skull, landmarks, dowels, guides, muscles, face, truth
     │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
-    ├── docks               LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel;
-    │                       LayersPanel on the left (visibility + opacity per layer)
+    ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel (docks);
+    │                       LayersPanel below them (visibility + opacity per layer)
+    ├── tools               FileTool (open, save, export), LandmarkTool (draw, place,
+    │                       suggest, snap), DragTool (live drags)
+    ├── GuideView           second view: guides over the session's fit (drags → DragTool)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
 
 The window holds no geometry logic: edits are commands pushed on the
@@ -24,8 +28,9 @@ coordinates).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from PySide6.QtCore import QPoint, QRect, Qt
 from PySide6.QtGui import QKeySequence, QShortcut
@@ -37,10 +42,10 @@ from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, gc_guard, jobs
 from workbench.qt.actions import build_menus
 from workbench.qt.document import Document
-from workbench.qt.drag_ops import DragOpsMixin
-from workbench.qt.file_ops import FileOpsMixin
+from workbench.qt.drag_ops import DragTool
+from workbench.qt.file_ops import FileTool
 from workbench.qt.guide_view import GuideView
-from workbench.qt.landmark_ops import LandmarkOpsMixin
+from workbench.qt.landmark_ops import LandmarkTool
 from workbench.qt.lod import InteractiveDetail
 from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
@@ -48,8 +53,12 @@ from workbench.qt.panels.landmarks_panel import LandmarksPanel
 from workbench.qt.panels.layers_panel import LayersPanel
 from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.picking import ClickPicker
-from workbench.qt.scene import SceneView
+from workbench.qt.scene import SceneView, is_closed
+from workbench.qt.session import Session
 from workbench.qt.workers import TaskRunner, preload, show_fraction
+
+if TYPE_CHECKING:
+    from workbench.services.case_setup import OpenedCase
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
@@ -57,7 +66,7 @@ FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
 FIT_PARTS = ("specimen", "landmarks", "dowels", "orientation", "guides")
 
 
-class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
+class MainWindow(QMainWindow):
     """See the module docstring.
 
     Parameters
@@ -78,22 +87,23 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.interactive = interactive
         self.messages: list[str] = []
         self.errors: list[str] = []
-        self.fit: jobs.FitResult | None = None
-        self.preview: jobs.DowelPreview | None = None
-        self.truth: tuple[str, Any] | None = None
-        self.comparison: Any = None
-        self.exported: dict[str, Path] = {}
         self.catalogue = load_catalogue()
         self.document = Document(on_error=self.show_error, parent=self)
+        self.session = Session(self)
         self.runner = TaskRunner(self)
+        self.files = FileTool(self.document, self.session, self.runner, self)
         preload()   # what the workers will import, before the event loop runs
 
         self.plotter = QtInteractor(self, auto_update=auto_update)
-        self.plotter.clear_events_for_key("q")  # pyvista's "q" would close the 3D view
+        # pyvista's "q" would close the 3D view
+        self.plotter.clear_events_for_key("q")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         # FXAA instead of 4x multisampling: similar edges at a third of the cost
         # (llvmpipe: 180 → 70 ms a frame, 100k triangles); a software renderer
         # then goes without either (SceneView.tune)
-        self.plotter.render_window.SetMultiSamples(0)
+        render_window = self.plotter.render_window
+        if render_window is None:  # (a new view always has one)
+            raise RuntimeError("the 3D view has no render window")
+        render_window.SetMultiSamples(0)
         self.plotter.enable_anti_aliasing("fxaa")
         # the 3D view and the optional second view (guides, orthographic) side by side
         self.views = QSplitter(Qt.Orientation.Horizontal, self)
@@ -101,18 +111,23 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.setCentralWidget(self.views)
         self.scene = SceneView(self.plotter)
         self.detail = InteractiveDetail(self.plotter, self.runner.submit)
-        self._init_drag()
         self._skull_poly: Any = None
-        QShortcut(QKeySequence(Qt.Key.Key_Escape), self).activated.connect(self.cancel_drag)
-        self.picker = ClickPicker(self.plotter, self._skull_actor, self.on_pick,
-                                  target_surface=self._skull_surface,
-                                  grab_target=self.grab_target, on_drag=self.on_drag,
-                                  on_drag_start=self.on_drag_start, on_drag_end=self.on_drag_end)
 
         self.landmarks_panel = LandmarksPanel(self.document, self.catalogue)
         self.dowels_panel = DowelsPanel(self.document)
         self.reconstruct_panel = ReconstructPanel(self.document)
         self.compare_panel = ComparePanel()
+        self.landmarks = LandmarkTool(self.document, self.scene, self.catalogue,
+                                      self.landmarks_panel, self.runner, self)
+        self.drags = DragTool(self.document, self.scene, self.session, self.detail, self.plotter,
+                              self.landmarks_panel, self.reconstruct_panel,
+                              self.landmarks.draw_landmarks, self.draw_face)
+        QShortcut(QKeySequence(Qt.Key.Key_Escape), self).activated.connect(self.cancel_drag)
+        drags = self.drags
+        self.picker = ClickPicker(self.plotter, self._skull_actor, self.landmarks.on_pick,
+                                  target_surface=self._skull_surface,
+                                  grab_target=drags.grab_target, on_drag=drags.on_drag,
+                                  on_drag_start=drags.on_drag_start, on_drag_end=drags.on_drag_end)
         self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (("landmarks", "Skull landmarks", self.landmarks_panel),
                                   ("dowels", "Dowels", self.dowels_panel),
@@ -134,7 +149,9 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock, Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"], dock], [620, 230], Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"]], [420], Qt.Orientation.Horizontal)
-        self.guide_view = GuideView(self)
+        self.guide_view = GuideView(self.session, self.runner, self.scene,
+                                    self.reconstruct_panel, self.drags)
+        self.drags.attach(self.picker, self.guide_view)
         self.scene.also_tune(self.guide_view.plotter)
         self.views.addWidget(self.guide_view)
         self.views.setStretchFactor(0, 3)
@@ -159,15 +176,18 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
             lambda _channel, step, f: show_fraction(self.progress, f, step))
-        self.landmarks_panel.selection_changed.connect(lambda _c: self.draw_landmarks())
-        self.landmarks_panel.suggest_requested.connect(self.suggest_landmarks)
-        self.landmarks_panel.snap_requested.connect(lambda _code: self.snap_selected())
+        self.landmarks_panel.selection_changed.connect(
+            lambda _c: self.landmarks.draw_landmarks())
+        self.landmarks_panel.suggest_requested.connect(self.landmarks.suggest_landmarks)
+        self.landmarks_panel.snap_requested.connect(lambda _code: self.landmarks.snap_selected())
         self.reconstruct_panel.reconstruct_requested.connect(self.reconstruct)
         self.reconstruct_panel.opacity_changed.connect(lambda v: self.scene.set_opacity("face", v))
-        self.scene.layer_changed.connect(lambda layer: layer == "face" and self.reconstruct_panel
-                                         .show_opacity(self.scene.opacity["face"]))
+        self.scene.layer_changed.connect(self._on_layer_changed)
         self.reconstruct_panel.colouring_changed.connect(lambda _v: self.draw_face())
         self.compare_panel.load_requested.connect(self.ask_load_truth)
+        self.session.fit_changed.connect(self.reconstruct_panel.show_result)
+        self.session.truth_changed.connect(
+            lambda truth: self.compare_panel.show_comparison(truth[0], None))
         self.resize(1400, 900)
         self._update_title()
 
@@ -175,9 +195,94 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
 
         self.autosaver = install_autosave(self)  # snapshots of unsaved work (crash recovery)
 
+    # ------------------------------------------------------------ results (the session's)
+    @property
+    def fit(self) -> jobs.FitResult | None:
+        """The last fitted face (:attr:`Session.fit`)."""
+        return self.session.fit
+
+    @property
+    def preview(self) -> jobs.DowelPreview | None:
+        """The dowel plan drawn (:attr:`Session.preview`)."""
+        return self.session.preview
+
+    @property
+    def truth(self) -> tuple[str, Any] | None:
+        """The true skin ``(name, mesh)`` (:attr:`Session.truth`)."""
+        return self.session.truth
+
+    @property
+    def comparison(self) -> Any:
+        """The last comparison with the true skin (:attr:`Session.comparison`)."""
+        return self.session.comparison
+
+    # ------------------------------------------------------------ file actions (the tool's)
+    def open_skull(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
+        self.files.open_skull(path, units, scale)
+
+    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None, *,
+                volume: Any = None, finished: Callable[[bool], None] | None = None) -> bool:
+        return self.files.open_ct(path, tissue, iso, volume=volume, finished=finished)
+
+    def open_ct_dialog(self, path: str | Path) -> Any:
+        return self.files.open_ct_dialog(path)
+
+    def open_case(self, path: str | Path) -> None:
+        self.files.open_case(path)
+
+    def replace_case(self, opened: OpenedCase, path: Path | None) -> None:
+        self.files.replace_case(opened, path)
+
+    def may_discard(self) -> bool:
+        """True if the open case may be replaced (saved, discarded, or clean)."""
+        return self.files.may_discard()
+
+    def save(self) -> bool:
+        return self.files.save()
+
+    def save_to(self, path: str | Path) -> bool:
+        return self.files.save_to(path)
+
+    def ask_save_as(self) -> bool:
+        return self.files.ask_save_as()
+
+    def export_to(self, folder: str | Path) -> None:
+        self.files.export_to(folder)
+
+    @property
+    def exported(self) -> dict[str, Path]:
+        """The files of the last export (:attr:`FileTool.exported`)."""
+        return self.files.exported
+
+    @property
+    def ct_dialog(self) -> Any:
+        """The last CT import dialog opened, or None."""
+        return self.files.ct_dialog
+
+    def ask_open_skull(self) -> None:
+        self.files.ask_open_skull()
+
+    def ask_open_ct(self) -> None:
+        self.files.ask_open_ct()
+
+    def ask_open_case(self) -> None:
+        self.files.ask_open_case()
+
+    def ask_export(self) -> None:
+        self.files.ask_export()
+
+    def ask_load_truth(self) -> None:
+        self.files.ask_load_truth()
+
+    def ask_screenshot(self) -> None:
+        self.files.ask_screenshot()
+
     # ------------------------------------------------------------ messages
     def status(self, text: str) -> None:
         self.status_label.setText(text)
+
+    def status_text(self) -> str:
+        return self.status_label.text()
 
     def show_error(self, what: str, exc: BaseException) -> None:
         """A readable message (never a traceback); the case stays as it was."""
@@ -227,19 +332,37 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         axes = jobs.view_axes(self.document.case)
         self.scene.reset_camera(*(axes or (None, None)))
 
+    def cancel_drag(self) -> None:
+        """Esc: end a landmark or guide drag without moving anything."""
+        self.drags.cancel_drag()
+
+    # ------------------------------------------------------------ landmark actions (the tool's)
+    def on_pick(self, point: Any) -> None:
+        """A click on the skull at ``point`` (mm): place the selected landmark there."""
+        self.landmarks.on_pick(point)
+
+    def suggest_landmarks(self) -> None:
+        self.landmarks.suggest_landmarks()
+
+    def snap_selected(self) -> None:
+        self.landmarks.snap_selected()
+
+    @property
+    def drag_timings(self) -> list[float]:
+        """Seconds per computed drag preview (:attr:`DragTool.drag_timings`)."""
+        return self.drags.drag_timings
+
     # ------------------------------------------------------------ case → scene
     def _on_case_replaced(self) -> None:
-        self.fit = None
-        self.preview = None
+        self.session.clear_fit()   # the reconstruct panel follows (fit_changed)
         self.show_skull()
         self.scene.clear("face")
         self.scene.clear("muscles")
         self.scene.clear("guides")
         self.scene.clear("dowels")
-        self.reconstruct_panel.show_result(None)
         self.guide_view.fit_changed()
         self.dowels_panel.show_plan(None)
-        self.draw_landmarks()
+        self.landmarks.draw_landmarks()
         self.reset_view()
         self.schedule_dowels()
 
@@ -247,11 +370,15 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         if part == "specimen":
             self.show_skull()
         if part == "landmarks":
-            self.draw_landmarks()
+            self.landmarks.draw_landmarks()
         if part in FIT_PARTS:
             self.schedule_dowels()
-            if self.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
+            if self.session.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
                 self.reconstruct()
+
+    def _on_layer_changed(self, layer: str) -> None:
+        if layer == "face":   # the panel's opacity slider follows the Layers dock
+            self.reconstruct_panel.show_opacity(self.scene.opacity["face"])
 
     def user_toggled_guide_view(self, on: bool) -> None:
         """The View-menu toggle: remember a deliberate close (no reopening on the next fit)."""
@@ -296,7 +423,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         case = self.document.case
         lms = case.landmarks["skull"]
         if case.specimen.mesh is None or not all(c in lms.as_dict() for c in FRAME_CODES):
-            self.preview = None
+            self.session.set_preview(None)
             self.scene.clear("dowels")
             self.dowels_panel.show_plan(None, "Dowels appear once the porions and orbitales "
                                               "are placed (or suggested).")
@@ -307,12 +434,12 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
                            self._show_dowels, self._dowels_failed)
 
     def _show_dowels(self, preview: jobs.DowelPreview) -> None:
-        self.preview = preview
+        self.session.set_preview(preview)
         self.scene.show_dowels(preview.origins, preview.tips)
         self.dowels_panel.show_plan(preview)
 
     def _dowels_failed(self, exc: BaseException) -> None:
-        self.preview = None
+        self.session.set_preview(None)
         self.scene.clear("dowels")
         self.dowels_panel.show_plan(None, dialogs.error_text("No dowels", exc)[0])
 
@@ -336,8 +463,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
                            lambda exc: self.show_error("Could not reconstruct the face", exc))
 
     def _show_fit(self, fit: jobs.FitResult) -> None:
-        self.fit = fit
-        self.reconstruct_panel.show_result(fit)
+        self.session.set_fit(fit)   # the reconstruct panel follows (fit_changed)
         self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
             # the first fit opens the guide view.  Both views then repaint
@@ -350,32 +476,33 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
             self._draw_fit(fit)
 
     def _draw_fit(self, fit: jobs.FitResult) -> None:
-        if fit is not self.fit or getattr(self.plotter, "_closed", False):
+        if fit is not self.session.fit or self.scene.closed:
             return   # a newer fit (or none) is on its way, or the window closed
         self._show_dowels(fit.preview)
         self.draw_face()
         self.draw_muscles()
         self.draw_guides()
-        if self.truth is not None:
+        if self.session.truth is not None:
             self.compare()
         # the guide view after the main view's paint: its drawing and paint
         # would otherwise join that paint in one long block of the event loop
         self.scene.after_paint(lambda f=fit: self._show_fit_in_guide_view(f))
 
     def _show_fit_in_guide_view(self, fit: jobs.FitResult) -> None:
-        if fit is not self.fit or getattr(self.guide_view.plotter, "_closed", False):
+        if fit is not self.session.fit or is_closed(self.guide_view.plotter):
             return
         self.guide_view.fit_changed()
 
     def draw_face(self) -> None:
-        if self.fit is None:
+        fit = self.session.fit
+        if fit is None:
             self.scene.clear("face")
             return
         spread = self.reconstruct_panel.colouring.currentText() == "spread"
-        if spread and self.fit.spread is not None:
-            self.scene.show_face(self.fit.recon.face, self.fit.spread, "spread mm")
+        if spread and fit.spread is not None:
+            self.scene.show_face(fit.recon.face, fit.spread, "spread mm")
         else:
-            self.scene.show_face(self.fit.recon.face)
+            self.scene.show_face(fit.recon.face)
 
     def draw_muscles(self) -> None:
         """The fitted head's muscle grids (mm, input frame), 4 mm under the fitted skin.
@@ -384,7 +511,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         see :class:`workbench.model.muscles.MuscleGrid`), so its rows are
         evaluated on the fitted head's skin and mapped to the input frame.
         """
-        fit = self.fit
+        fit = self.session.fit
         head = fit.recon.head if fit is not None else None
         if fit is None or head is None or not head.muscles:
             self.scene.clear("muscles")
@@ -394,10 +521,11 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
                                  for grid in head.muscles])
 
     def draw_guides(self) -> None:
-        if self.fit is None:
+        fit = self.session.fit
+        if fit is None:
             self.scene.clear("guides")
             return
-        segments, points = jobs.guide_geometry(self.fit)
+        segments, points = jobs.guide_geometry(fit)
         self.scene.show_guides(segments, points)
 
     # ------------------------------------------------------------ compare
@@ -412,30 +540,31 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
                            lambda exc: self.show_error(f"Could not read {path.name}", exc))
 
     def _truth_loaded(self, name: str, mesh: Any) -> None:
-        self.truth = (name, mesh)
+        self.session.set_truth(name, mesh)   # the compare panel follows (truth_changed)
         self.scene.show_truth(mesh)
-        self.compare_panel.show_comparison(name, None)
         self.docks["compare"].raise_()
-        if self.fit is not None:
+        if self.session.fit is not None:
             self.compare()
 
     def compare(self) -> None:
         from workbench.services.compare import compare_surfaces, face_regions
 
-        if self.truth is None or self.fit is None:
+        fit, truth_loaded = self.session.fit, self.session.truth
+        if truth_loaded is None or fit is None:
             return
-        name, truth = self.truth
-        face, regions = self.fit.recon.face, face_regions(self.fit.head)
+        name, truth = truth_loaded
+        face, regions = fit.recon.face, face_regions(fit.head)
         self.runner.submit("compare", "Comparing with the true skin …",
                            lambda: compare_surfaces(face, truth, recon_regions=regions),
                            self._show_comparison,
                            lambda exc: self.show_error("Could not compare", exc))
 
     def _show_comparison(self, comparison: Any) -> None:
-        self.comparison = comparison
-        if self.truth is None:  # a comparison is only started with a true skin
+        truth_loaded = self.session.truth
+        if truth_loaded is None:  # a comparison is only started with a true skin
             raise RuntimeError("a comparison arrived without a true skin")
-        name, truth = self.truth
+        self.session.set_comparison(comparison)
+        name, truth = truth_loaded
         self.scene.show_truth(truth, comparison.truth_vertex_values())
         self.compare_panel.show_comparison(name, comparison)
         self.status(f"Compared with {name}: mean |distance| "
@@ -474,7 +603,7 @@ class MainWindow(FileOpsMixin, DragOpsMixin, LandmarkOpsMixin, QMainWindow):
         return path
 
     def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt name
-        if self.interactive and not self._may_discard():
+        if self.interactive and not self.may_discard():
             event.ignore()
             return
         self.autosaver.close()  # a clean close: the snapshot of unsaved work goes

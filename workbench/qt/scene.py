@@ -65,6 +65,18 @@ SCALAR_BAR: dict[str, Any] = {"vertical": True, "render": False, "position_x": 0
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
+def is_closed(plotter: Any) -> bool:
+    """True once a pyvistaqt view was closed (``plotter.close()``): draw nothing into it.
+
+    The one place that reads pyvistaqt's private ``_closed`` flag:
+    ``QtInteractor`` has no public "closed" state, and after ``close()`` its
+    render window is finalized, so rendering or adding actors would touch a
+    released GL context.  A plotter that never had the flag (not a
+    pyvistaqt view) counts as open.
+    """
+    return bool(getattr(plotter, "_closed", False))
+
+
 def gl_renderer(render_window: Any) -> str:
     """The OpenGL renderer string of an initialised VTK render window ('' if unknown)."""
     try:
@@ -137,7 +149,7 @@ class SceneView(QObject):
 
     def render_now(self) -> None:
         self._render_pending = False
-        if getattr(self.plotter, "_closed", False) or self.plotter.render_window is None:
+        if self.closed or self.plotter.render_window is None:
             return
         if isinstance(self.plotter, QWidget):
             # the widget renders in its paint; rendering here as well would
@@ -147,6 +159,11 @@ class SceneView(QObject):
         else:
             self.plotter.render()
         self.renders += 1
+
+    @property
+    def closed(self) -> bool:
+        """The 3D view was closed (see :func:`is_closed`)."""
+        return is_closed(self.plotter)
 
     @property
     def render_queued(self) -> bool:
@@ -189,7 +206,7 @@ class SceneView(QObject):
             return
         for plotter in self._tuned:
             renderer = getattr(plotter, "renderer", None)
-            if renderer is not None and not getattr(plotter, "_closed", False):
+            if renderer is not None and not is_closed(plotter):
                 renderer.SetUseFXAA(False)
 
     def _rendered(self, *_args: Any) -> None:
