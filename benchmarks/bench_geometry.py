@@ -69,8 +69,9 @@ def subdivide(mesh: Mesh) -> Mesh:
     v = np.vstack([mesh.vertices, 0.5 * (mesh.vertices[a_idx] + mesh.vertices[b_idx])])
     ab, bc, ca = mesh.n_vertices + inv.reshape(3, -1)
     a, b, c = f.T
-    faces = np.concatenate([np.stack(t, 1) for t in
-                            ([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca])])
+    faces = np.concatenate(
+        [np.stack(t, 1) for t in ([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca])]
+    )
     return Mesh(v, faces)
 
 
@@ -98,15 +99,17 @@ def head_mesh() -> Mesh:
     from workbench.io.meshes import read_mesh
     from workbench.services.ct_mesh import mesh_from_ct
 
-    skin = subdivide(mesh_from_ct(DATA / "vtk_headsq_quarter_ct" / "headsq" / "quarter.nhdr",
-                                  tissue="skin").mesh)
+    skin = subdivide(
+        mesh_from_ct(DATA / "vtk_headsq_quarter_ct" / "headsq" / "quarter.nhdr", tissue="skin").mesh
+    )
     skull = read_mesh(DATA / "skull_mesh_yahoojapan" / "skull.obj", units="cm").mesh
     s_lo, s_hi = skin.bounds
     k_lo, k_hi = skull.bounds
     scale = 0.8 * float(np.min((s_hi - s_lo) / (k_hi - k_lo)))
     placed = (skull.vertices - 0.5 * (k_lo + k_hi)) * scale + 0.5 * (s_lo + s_hi)
-    return Mesh(np.vstack([skin.vertices, placed]),
-                np.vstack([skin.faces, skull.faces + skin.n_vertices]))
+    return Mesh(
+        np.vstack([skin.vertices, placed]), np.vstack([skin.faces, skull.faces + skin.n_vertices])
+    )
 
 
 def surface_points(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -141,8 +144,10 @@ def main() -> None:
         print(f"  {name:<52s} {seconds:8.3f} s  {ratio}", flush=True)
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"geometry benchmark, {os.cpu_count()} cores, load average {load:.2f} "
-          f"(other processes competing for the cores inflate wall times), best of {rep}")
+    print(
+        f"geometry benchmark, {os.cpu_count()} cores, load average {load:.2f} "
+        f"(other processes competing for the cores inflate wall times), best of {rep}"
+    )
     # ------------------------------------------------------------ warp
     for n_lm in (60, 500):
         src = rng.uniform(-80, 80, (n_lm, 3))
@@ -151,14 +156,20 @@ def main() -> None:
         for n_pts in (100_000, 250_000, 1_000_000):
             pts = rng.uniform(-100, 100, (n_pts, 3))
             budget = 0.3 if (n_lm, n_pts) == (500, 250_000) else None
-            row(f"warp: fit {n_lm} + apply to {n_pts:,} points",
-                best_of(lambda: fit_warp(src, dst)(pts), rep), budget)
+            row(
+                f"warp: fit {n_lm} + apply to {n_pts:,} points",
+                best_of(lambda: fit_warp(src, dst)(pts), rep),
+                budget,
+            )
 
     # ------------------------------------------------------------ meshes
     t0 = time.perf_counter()
     meshes = {"head": head_mesh(), "sphere": uv_sphere(90.0, 250_000)}
-    print(f"  (meshes built in {time.perf_counter() - t0:.1f} s: "
-          + ", ".join(f"{k} {m.n_faces:,} triangles" for k, m in meshes.items()) + ")")
+    print(
+        f"  (meshes built in {time.perf_counter() - t0:.1f} s: "
+        + ", ".join(f"{k} {m.n_faces:,} triangles" for k, m in meshes.items())
+        + ")"
+    )
     for name, mesh in meshes.items():
         _ = mesh.triangles, mesh.face_cross
         # rays
@@ -166,11 +177,15 @@ def main() -> None:
         caster = RayCaster(mesh, "embree")
         o, d = rays(mesh, N_QUERIES, rng)
         row(f"rays: 10^5 first hits, {name}", best_of(lambda: caster.first_hits(o, d), rep), 0.5)
-        row(f"rays: 10^5 first hits, back faces culled, {name}",
-            best_of(lambda: caster.first_hits(o, d, cull_backfaces=True), rep))
+        row(
+            f"rays: 10^5 first hits, back faces culled, {name}",
+            best_of(lambda: caster.first_hits(o, d, cull_backfaces=True), rep),
+        )
         numpy_caster = RayCaster(mesh, "numpy")
-        row(f"rays: 10^4 first hits, numpy backend, {name}",
-            best_of(lambda: numpy_caster.first_hits(o[:10_000], d[:10_000]), 1))
+        row(
+            f"rays: 10^4 first hits, numpy backend, {name}",
+            best_of(lambda: numpy_caster.first_hits(o[:10_000], d[:10_000]), 1),
+        )
         # closest points
         row(f"closest: index build, {name}", best_of(lambda: MeshIndex(mesh), rep))
         index = MeshIndex(mesh)
@@ -184,8 +199,11 @@ def main() -> None:
             "uniform in bbox": (rng.uniform(lo, hi, (N_QUERIES, 3)), None),
         }
         for label, (q, budget) in queries.items():
-            row(f"closest: 10^5 {label}, {name}",
-                best_of(lambda q=q: index.closest_points(q), rep), budget)
+            row(
+                f"closest: 10^5 {label}, {name}",
+                best_of(lambda q=q: index.closest_points(q), rep),
+                budget,
+            )
 
     print()
     print(f"{'figure':<54s} {'wall s':>8s} {'cpu s':>7s} {'budget':>7s} {'ratio':>6s}")
@@ -193,8 +211,10 @@ def main() -> None:
         b = f"{budget:7.2f}" if budget else f"{'-':>7s}"
         r = f"{seconds / budget:6.2f}" if budget else f"{'-':>6s}"
         print(f"{name:<54s} {seconds:8.3f} {cpu:7.3f} {b} {r}")
-    print("(wall: best wall-clock time, the budgeted figure; cpu: best process CPU time, "
-          "summed over threads)")
+    print(
+        "(wall: best wall-clock time, the budgeted figure; cpu: best process CPU time, "
+        "summed over threads)"
+    )
     over = [name for name, s, _, b in rows if b and s > b]
     print("\nall budgets met" if not over else f"\nover budget: {', '.join(over)}")
 

@@ -67,7 +67,7 @@ class Heartbeat:
         return max(self.gaps, default=0.0)
 
 
-def _wait(app, window, timeout: float = 300.0) -> None:  # noqa: ANN001
+def _wait(app, window, timeout: float = 300.0) -> None:
     end = time.monotonic() + timeout
     while window.busy and time.monotonic() < end:
         app.processEvents()
@@ -76,7 +76,7 @@ def _wait(app, window, timeout: float = 300.0) -> None:  # noqa: ANN001
         app.processEvents()
 
 
-def _settle(app, beat: Heartbeat) -> None:  # noqa: ANN001
+def _settle(app, beat: Heartbeat) -> None:
     """Spin the event loop until the heartbeat has ticked once (at most 0.5 s).
 
     Synthetic input is sent from this script, outside the event loop; a
@@ -90,7 +90,7 @@ def _settle(app, beat: Heartbeat) -> None:  # noqa: ANN001
         time.sleep(0.001)
 
 
-def _drag(app, widget, start, offsets, beat: Heartbeat) -> np.ndarray:  # noqa: ANN001
+def _drag(app, widget, start, offsets, beat: Heartbeat) -> np.ndarray:
     """Press, move, release; returns the seconds from each move to its drawn frame."""
     from PySide6.QtCore import QPoint, Qt
     from PySide6.QtTest import QTest
@@ -101,17 +101,21 @@ def _drag(app, widget, start, offsets, beat: Heartbeat) -> np.ndarray:  # noqa: 
         _settle(app, beat)
         t0 = time.perf_counter()
         QTest.mouseMove(widget, start + QPoint(dx, dy))
-        app.processEvents()   # the coalesced preview, then the paint (one render per view)
+        app.processEvents()  # the coalesced preview, then the paint (one render per view)
         app.processEvents()
         frames.append(time.perf_counter() - t0)
     _settle(app, beat)
-    QTest.mouseRelease(widget, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                       start + QPoint(*offsets[-1]))
+    QTest.mouseRelease(
+        widget,
+        Qt.MouseButton.LeftButton,
+        Qt.KeyboardModifier.NoModifier,
+        start + QPoint(*offsets[-1]),
+    )
     app.processEvents()
     return np.array(frames)
 
 
-def _qt_pos(plotter, xy):  # noqa: ANN001, ANN202
+def _qt_pos(plotter, xy):
     from PySide6.QtCore import QPoint
 
     ratio = plotter.devicePixelRatioF()
@@ -123,9 +127,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("skull", nargs="?", default=str(DEFAULT_SKULL))
     parser.add_argument("--scale", type=float, default=15.0)
-    parser.add_argument("--cold", action="store_true",
-                        help="start from an empty cache folder, as on a first run "
-                             "(the reference head is built during 'suggest')")
+    parser.add_argument(
+        "--cold",
+        action="store_true",
+        help="start from an empty cache folder, as on a first run "
+        "(the reference head is built during 'suggest')",
+    )
     args = parser.parse_args(argv)
     if args.cold:
         import tempfile
@@ -144,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     beat = Heartbeat()
     blocks: dict[str, float] = {}
 
-    def step(name: str, fn) -> None:  # noqa: ANN001
+    def step(name: str, fn) -> None:
         beat.start()
         fn()
         _wait(app, window)
@@ -170,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     window.detail.end()
     app.processEvents()
 
-    def landmark_drag(name: str, offsets) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+    def landmark_drag(name: str, offsets) -> tuple[np.ndarray, np.ndarray]:
         """Drag the glabella; (move → frame seconds, preview seconds); the block in ``blocks``."""
         window.landmarks_panel.select("g")
         window.scene.render_now()
@@ -187,8 +194,9 @@ def main(argv: list[str] | None = None) -> int:
     step("re-fit after the drag", lambda: None)
     # the same with the muscles layer shown (they follow the preview too)
     window.scene.set_visible("muscles", True)
-    mu_frames, mu_times = landmark_drag("landmark drag, muscles shown",
-                                        [(0, k) for k in range(1, 16)])
+    mu_frames, mu_times = landmark_drag(
+        "landmark drag, muscles shown", [(0, k) for k in range(1, 16)]
+    )
     step("re-fit after it", lambda: None)
     window.scene.set_visible("muscles", False)
 
@@ -222,22 +230,32 @@ def main(argv: list[str] | None = None) -> int:
         print("failed:", window.errors, file=sys.stderr)
         return 1
 
-    print(f"skull: {n_tri} triangles; window 1400x900; "
-          f"renderer: {window.scene.gl_renderer}; FXAA "
-          f"{'on' if window.plotter.renderer.GetUseFXAA() else 'off (software renderer)'}")
-    print(f"one render of the main view: full quality {render_ms['full']:.0f} ms, "
-          f"interactive (light skull, no edge smoothing) {render_ms['light']:.0f} ms")
-    for name, times, frames in (("landmark drag", lm_times, lm_frames),
-                                ("landmark drag, muscles shown", mu_times, mu_frames),
-                                ("guide drag", guide_times, guide_frames)):
+    print(
+        f"skull: {n_tri} triangles; window 1400x900; "
+        f"renderer: {window.scene.gl_renderer}; FXAA "
+        f"{'on' if window.plotter.renderer.GetUseFXAA() else 'off (software renderer)'}"
+    )
+    print(
+        f"one render of the main view: full quality {render_ms['full']:.0f} ms, "
+        f"interactive (light skull, no edge smoothing) {render_ms['light']:.0f} ms"
+    )
+    for name, times, frames in (
+        ("landmark drag", lm_times, lm_frames),
+        ("landmark drag, muscles shown", mu_times, mu_frames),
+        ("guide drag", guide_times, guide_frames),
+    ):
         med = float(np.median(frames))
-        print(f"{name}: {len(frames)} moves, move → drawn frame median {med * 1e3:.0f} ms, "
-              f"max {frames.max() * 1e3:.0f} ms -> {1 / med:.1f} Hz "
-              f"(budget >= 10 Hz: ratio {(1 / med) / 10:.2f}); preview computation median "
-              f"{np.median(times) * 1e3:.1f} ms")
+        print(
+            f"{name}: {len(frames)} moves, move → drawn frame median {med * 1e3:.0f} ms, "
+            f"max {frames.max() * 1e3:.0f} ms -> {1 / med:.1f} Hz "
+            f"(budget >= 10 Hz: ratio {(1 / med) / 10:.2f}); preview computation median "
+            f"{np.median(times) * 1e3:.1f} ms"
+        )
     for name, gap in blocks.items():
-        print(f"longest event-loop block during {name}: {gap * 1e3:.0f} ms "
-              f"(budget 200 ms: ratio {gap / 0.2:.2f})")
+        print(
+            f"longest event-loop block during {name}: {gap * 1e3:.0f} ms "
+            f"(budget 200 ms: ratio {gap / 0.2:.2f})"
+        )
     print("worker times: " + ", ".join(f"{k} {v:.2f} s" for k, v in window.runner.timings.items()))
     window.runner.shutdown()
     window.guide_view.close_view()

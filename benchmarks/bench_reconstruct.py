@@ -39,7 +39,7 @@ RSS_BUDGET_MB = 2048.0
 STABLE_MM = 0.1
 
 
-def _bone(name: str):  # noqa: ANN202
+def _bone(name: str):
     from workbench.core.isosurface import decimate
     from workbench.core.mesh import Mesh
     from workbench.io.samples import fetch, registry
@@ -60,7 +60,7 @@ def _clear() -> None:
     sr._CACHE.clear()
 
 
-def _best(fn, repeat: int) -> tuple[float, object]:  # noqa: ANN001
+def _best(fn, repeat: int) -> tuple[float, object]:
     best, out = np.inf, None
     for _ in range(repeat):
         _clear()
@@ -84,34 +84,51 @@ def main() -> int:
     rows = []
     for name in args.cases.split(","):
         skull, hint = _bone(name)
-        t_reg, reg = _best(lambda: register_skull(skull, head, hint=hint), args.repeat)  # noqa: B023
-        t_fit, recon = _best(lambda: reconstruct(skull, None, head, hint=hint),  # noqa: B023
-                             args.repeat)
+        t_reg, reg = _best(lambda: register_skull(skull, head, hint=hint), args.repeat)
+        t_fit, recon = _best(
+            lambda: reconstruct(skull, None, head, hint=hint),
+            args.repeat,
+        )
         parts = reg.figures["seconds"]
         rng = np.random.default_rng(0)
-        noisy = Mesh(skull.vertices + 1e-9 * rng.standard_normal(skull.vertices.shape),
-                     skull.faces)
+        noisy = Mesh(skull.vertices + 1e-9 * rng.standard_normal(skull.vertices.shape), skull.faces)
         _clear()
-        d_noise = np.abs(reconstruct(noisy, None, head, hint=hint).face.vertices
-                         - recon.face.vertices).max()
-        in_cm = Mesh((skull.vertices / 10.0) * 10.0, skull.faces)   # read in cm, back to mm
+        d_noise = np.abs(
+            reconstruct(noisy, None, head, hint=hint).face.vertices - recon.face.vertices
+        ).max()
+        in_cm = Mesh((skull.vertices / 10.0) * 10.0, skull.faces)  # read in cm, back to mm
         _clear()
-        d_units = np.abs(reconstruct(in_cm, None, head, hint=hint).face.vertices
-                         - recon.face.vertices).max()
+        d_units = np.abs(
+            reconstruct(in_cm, None, head, hint=hint).face.vertices - recon.face.vertices
+        ).max()
         rows.append((name, skull.n_faces, t_reg, t_fit, parts, d_noise, d_units))
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    print("case        triangles  registration (budget 5 s)  whole fit (budget 8 s)  "
-          "noise 1e-9 / cm units: max face change (budget 0.1 mm)")
+    print(
+        "case        triangles  registration (budget 5 s)  whole fit (budget 8 s)  "
+        "noise 1e-9 / cm units: max face change (budget 0.1 mm)"
+    )
     for name, n, t_reg, t_fit, parts, dn, du in rows:
-        print(f"{name:11s} {n:9d}  {t_reg:6.2f} s (ratio {t_reg / BUDGETS['registration']:.2f})"
-              f"        {t_fit:6.2f} s (ratio {t_fit / BUDGETS['fit']:.2f})     "
-              f"{dn:.2e} mm / {du:.2e} mm")
-        print(f"{'':11s} registration steps: " + ", ".join(f"{k} {v:.2f} s"
-                                                          for k, v in parts.items()))
-    print(f"peak memory: {rss:.0f} MB (budget {RSS_BUDGET_MB:.0f} MB, ratio "
-          f"{rss / RSS_BUDGET_MB:.2f})")
-    ok = all(r[2] <= BUDGETS["registration"] and r[3] <= BUDGETS["fit"]
-             and max(r[5], r[6]) < STABLE_MM for r in rows) and rss <= RSS_BUDGET_MB
+        print(
+            f"{name:11s} {n:9d}  {t_reg:6.2f} s (ratio {t_reg / BUDGETS['registration']:.2f})"
+            f"        {t_fit:6.2f} s (ratio {t_fit / BUDGETS['fit']:.2f})     "
+            f"{dn:.2e} mm / {du:.2e} mm"
+        )
+        print(
+            f"{'':11s} registration steps: " + ", ".join(f"{k} {v:.2f} s" for k, v in parts.items())
+        )
+    print(
+        f"peak memory: {rss:.0f} MB (budget {RSS_BUDGET_MB:.0f} MB, ratio "
+        f"{rss / RSS_BUDGET_MB:.2f})"
+    )
+    ok = (
+        all(
+            r[2] <= BUDGETS["registration"]
+            and r[3] <= BUDGETS["fit"]
+            and max(r[5], r[6]) < STABLE_MM
+            for r in rows
+        )
+        and rss <= RSS_BUDGET_MB
+    )
     print("all budgets met" if ok else "some budgets NOT met")
     return 0
 

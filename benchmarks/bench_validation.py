@@ -43,8 +43,9 @@ sys.path.insert(0, str(ROOT))
 SHARED = ROOT.parent / "shared" / "data"
 os.environ.setdefault("WORKBENCH_SAMPLE_MIRRORS", str(SHARED))
 
-HEADER = ("id,skull,truth,units,mask,anterior,superior,left,orient,sex,build,bone_iso,"
-          "skin_iso,subject\n")
+HEADER = (
+    "id,skull,truth,units,mask,anterior,superior,left,orient,sex,build,bone_iso,skin_iso,subject\n"
+)
 
 
 def manifest(out: Path, quick: bool) -> Path:
@@ -54,7 +55,7 @@ def manifest(out: Path, quick: bool) -> Path:
     vhpf = fetch("vhp_female")
     rows = [
         'headsq,sample:headsq,sample:headsq,mm,none,"0,-1,0","0,0,-1","1,0,0",hint,male,'
-        'normal,1150,500,headsq',
+        "normal,1150,500,headsq",
         'vhp_female,sample:vhp_female,sample:vhp_female,mm,clip_patch:10,"0,1,0","0,0,1",'
         '"-1,0,0",hint,female,normal,300,-400,vhp_female',
     ]
@@ -64,10 +65,10 @@ def manifest(out: Path, quick: bool) -> Path:
         rows += [
             'vhp_male,sample:vhp_male,sample:vhp_male,mm,behind_clip:3,"0,1,0","0,0,1",'
             '"-1,0,0",hint,male,normal,300,-400,vhp_male',
-            f'vhp_female_cut,{cut_dir / "cut_skull.ply"},{cut_dir / "skin.ply"},mm,clip_patch:10,'
+            f"vhp_female_cut,{cut_dir / 'cut_skull.ply'},{cut_dir / 'skin.ply'},mm,clip_patch:10,"
             '"0,1,0","0,0,1","-1,0,0",hint,female,normal,,,vhp_female',
             'headsq_auto,sample:headsq,sample:headsq,mm,none,"0,-1,0","0,0,-1","1,0,0",auto,male,'
-            'normal,1150,500,headsq',
+            "normal,1150,500,headsq",
             'vhp_female_auto,sample:vhp_female,sample:vhp_female,mm,clip_patch:10,"0,1,0",'
             '"0,0,1","-1,0,0",auto,female,normal,300,-400,vhp_female',
         ]
@@ -81,9 +82,11 @@ def manifest(out: Path, quick: bool) -> Path:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="headsq and VHP female only")
-    parser.add_argument("--library", action="store_true",
-                        help="also leave-one-out over the other subjects' references, and the "
-                             "identity test")
+    parser.add_argument(
+        "--library",
+        action="store_true",
+        help="also leave-one-out over the other subjects' references, and the identity test",
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "validation")
     args = parser.parse_args()
     from workbench.cli.main import main as workbench

@@ -77,6 +77,7 @@ def _sample_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 # as a template pack in the session's temporary data folder, so each sex is
 # built once per test session.
 
+
 @pytest.fixture(scope="session")
 def head_male(_sample_cache: Path):
     from workbench.services.template_cache import reference_head
@@ -101,8 +102,12 @@ def skull_obj_suggested(skull_obj: Path, head_male):
     from workbench.services.reference_parts import skull_surface
 
     mesh = read_mesh(skull_obj, scale=15.0, kind="skull").mesh
-    result = transfer_landmarks(mesh, skull_surface(head_male), head_male.skull_landmarks,
-                                orientation=((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)))
+    result = transfer_landmarks(
+        mesh,
+        skull_surface(head_male),
+        head_male.skull_landmarks,
+        orientation=((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    )
     return mesh, result.landmarks
 
 

@@ -12,9 +12,16 @@ REPO = Path(__file__).resolve().parents[1]
 
 def test_import_linter_contracts_hold() -> None:
     done = subprocess.run(
-        [sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command; "
-         "sys.argv=['lint-imports','--no-cache']; lint_imports_command()"],
-        cwd=REPO, capture_output=True, text=True, check=False,
+        [
+            sys.executable,
+            "-c",
+            "import sys; from importlinter.cli import lint_imports_command; "
+            "sys.argv=['lint-imports','--no-cache']; lint_imports_command()",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=False,
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert "broken" in done.stdout and "0 broken" in done.stdout
@@ -35,6 +42,7 @@ def test_non_gui_layers_import_without_qt_or_vtk() -> None:
                 importlib.import_module(info.name)
         print('ok')
     """)
-    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True,
-                          text=True, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=False
+    )
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr

@@ -226,13 +226,16 @@ class _Canon:
         if volume.frame == "LPS":
             d = np.diag([-1.0, -1.0, 1.0]) @ d  # columns in RAS
         ras_of_index = np.argmax(np.abs(d), axis=0)
-        if sorted(ras_of_index.tolist()) != [0, 1, 2] or np.min(
-            np.abs(d[ras_of_index, [0, 1, 2]])
-        ) < 0.999:
+        if (
+            sorted(ras_of_index.tolist()) != [0, 1, 2]
+            or np.min(np.abs(d[ras_of_index, [0, 1, 2]])) < 0.999
+        ):
             raise ValueError(f"the volume must be axis aligned, direction = {d.tolist()}")
         # index axis (i=0, j=1, k=2) along S, A, R (= RAS axes 2, 1, 0)
         self.index_axis = [int(np.flatnonzero(ras_of_index == ras)[0]) for ras in (2, 1, 0)]
-        self.flip = [bool(d[ras, a] < 0) for ras, a in zip((2, 1, 0), self.index_axis)]
+        self.flip = [
+            bool(d[ras, a] < 0) for ras, a in zip((2, 1, 0), self.index_axis, strict=False)
+        ]
         self.data_axes = [2 - a for a in self.index_axis]
         self.shape_ijk = volume.shape_ijk
         self.spacing = np.asarray(volume.spacing_mm, np.float64)[self.index_axis]
@@ -309,9 +312,7 @@ def find_mandible(volume: Volume, params: CutParams) -> tuple[np.ndarray, dict[s
         big = int(np.argmax(sizes))
         objects = ndi.find_objects(labels)
         sl = objects[big - 1]
-        cranium = _component_geometry(
-            canon, labels[sl] == big, np.array([s.start for s in sl])
-        )
+        cranium = _component_geometry(canon, labels[sl] == big, np.array([s.start for s in sl]))
         entry: dict[str, Any] = {"threshold_hu": float(thr), "candidates": []}
         for label in np.argsort(sizes)[::-1][1:9]:
             if sizes[label] * vox_mm3 < params.mandible_min_volume_cm3 * 1000.0:
@@ -350,7 +351,7 @@ def find_mandible(volume: Volume, params: CutParams) -> tuple[np.ndarray, dict[s
     margin = np.ceil(params.watershed_margin_mm / canon.spacing).astype(int)
     box = tuple(
         slice(max(s.start - m, 0), min(s.stop + m, n))
-        for s, m, n in zip(sl, margin, data_sar.shape)
+        for s, m, n in zip(sl, margin, data_sar.shape, strict=False)
     )
     sub = data_sar[box]
     markers = np.zeros(sub.shape, np.int32)
@@ -474,7 +475,9 @@ def find_landmarks(volume: Volume, bone_kji: np.ndarray, params: CutParams) -> d
         if side not in best or area > best[side][0]:
             best[side] = (area, idx)
     if set(best) != {"right", "left"}:
-        raise RuntimeError(f"could not find both orbits in the front depth map (found {sorted(best)})")
+        raise RuntimeError(
+            f"could not find both orbits in the front depth map (found {sorted(best)})"
+        )
     for side, (area, idx) in best.items():
         ss, rr = np.nonzero(lab2 == idx)
         rc = rr.mean()
@@ -601,7 +604,9 @@ def plan_frontal_hole(
         "radius_mm": params.hole_radius_mm,
         "depth_in_mm": params.hole_depth_in_mm,
         "depth_out_mm": params.hole_depth_out_mm,
-        "axis_from_anterior_deg": float(np.degrees(np.arccos(np.clip(axis @ dirs["anterior"], -1, 1)))),
+        "axis_from_anterior_deg": float(
+            np.degrees(np.arccos(np.clip(axis @ dirs["anterior"], -1, 1)))
+        ),
     }
 
 
@@ -631,7 +636,8 @@ def hole_voxels(volume: Volume, hole: dict[str, Any]) -> np.ndarray:
     if np.any(hi <= lo):
         return mask
     grid = np.stack(
-        np.meshgrid(*(np.arange(a, b) for a, b in zip(lo, hi)), indexing="ij"), axis=-1
+        np.meshgrid(*(np.arange(a, b) for a, b in zip(lo, hi, strict=False)), indexing="ij"),
+        axis=-1,
     )  # (ni, nj, nk, 3) in (i, j, k)
     inside = in_hole(volume.index_to_physical(grid.reshape(-1, 3)), hole).reshape(grid.shape[:3])
     mask[lo[2] : hi[2], lo[1] : hi[1], lo[0] : hi[0]] = inside.transpose(2, 1, 0)
@@ -702,9 +708,7 @@ def keep_faces(mesh: Mesh, keep: np.ndarray) -> Mesh:
 
 
 # ---------------------------------------------------------------- checks recorded with the case
-def region_checks(
-    full: Mesh, cut: Mesh, landmarks: dict[str, Any], frame: str
-) -> dict[str, Any]:
+def region_checks(full: Mesh, cut: Mesh, landmarks: dict[str, Any], frame: str) -> dict[str, Any]:
     """Vertex counts / areas of the full and cut bone in two anterior boxes (mm, frame axes).
 
     ``chin_box``: within 30 mm of the midline, at most 40 mm behind the front of
@@ -768,9 +772,9 @@ def _jsonable(obj: Any) -> Any:
 
 
 # ---------------------------------------------------------------- the case
-def build_case(ct_path: str | os.PathLike[str], params: CutParams = CutParams()) -> tuple[
-    dict[str, Mesh], dict[str, Any]
-]:
+def build_case(
+    ct_path: str | os.PathLike[str], params: CutParams = CutParams()
+) -> tuple[dict[str, Mesh], dict[str, Any]]:
     """Build the meshes (name -> Mesh) and the record (JSON-ready dict) without writing."""
     timings: dict[str, float] = {}
     clock = perf_counter()
@@ -823,11 +827,15 @@ def build_case(ct_path: str | os.PathLike[str], params: CutParams = CutParams())
 
     edited = np.array(data, copy=True)
     edited[mandible] = params.removed_hu
-    no_mandible = mesh_from_ct(dataclasses.replace(volume, data=edited), "bone", iso=params.bone_iso_hu)
+    no_mandible = mesh_from_ct(
+        dataclasses.replace(volume, data=edited), "bone", iso=params.bone_iso_hu
+    )
     n_hole_bone = int(np.count_nonzero(hole_mask & (edited >= params.bone_iso_hu)))
     edited[hole_mask] = params.removed_hu
     holed = mesh_from_ct(
-        dataclasses.replace(volume, data=edited), "bone", iso=params.bone_iso_hu,
+        dataclasses.replace(volume, data=edited),
+        "bone",
+        iso=params.bone_iso_hu,
         largest_component=False,
     )
     del edited
@@ -848,7 +856,9 @@ def build_case(ct_path: str | os.PathLike[str], params: CutParams = CutParams())
     in_defect_full = in_hole(full.mesh.vertices, hole)
     loops = boundary_loops(cut)
     border = np.unique(np.concatenate(loops)) if loops else np.zeros(0, np.int64)
-    near_hole_border = in_hole(cut.vertices[border], {**hole, "radius_mm": hole["radius_mm"] + spacing})
+    near_hole_border = in_hole(
+        cut.vertices[border], {**hole, "radius_mm": hole["radius_mm"] + spacing}
+    )
     rim_height = (full.mesh.vertices[in_defect_full] - rim) @ normal
     checks = {
         "max_height_above_cut_plane_mm": float(height.max()),
@@ -943,7 +953,10 @@ def build_case(ct_path: str | os.PathLike[str], params: CutParams = CutParams())
         "checks": checks,
         "outputs": {
             CUT_SKULL: {"iso_hu": params.bone_iso_hu, "what": "incomplete bone surface"},
-            SKIN: {"iso_hu": params.skin_iso_hu, "what": "true skin (ground truth), largest component"},
+            SKIN: {
+                "iso_hu": params.skin_iso_hu,
+                "what": "true skin (ground truth), largest component",
+            },
             FULL_BONE: {"iso_hu": params.bone_iso_hu, "what": "complete bone, largest component"},
         },
         "timings_s": timings,
@@ -1036,10 +1049,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ct", required=True, help="head CT (NIfTI/NRRD/DICOM) in HU")
     parser.add_argument("--out", required=True, help="cache folder for the outputs")
     parser.add_argument("--force", action="store_true", help="rebuild even if up to date")
-    parser.add_argument("--cut-above-rim", type=float, default=CutParams.vault_cut_above_rim_mm,
-                        help="vault cut height above the upper orbital rims (mm)")
-    parser.add_argument("--hole-radius", type=float, default=CutParams.hole_radius_mm,
-                        help="frontal defect radius (mm)")
+    parser.add_argument(
+        "--cut-above-rim",
+        type=float,
+        default=CutParams.vault_cut_above_rim_mm,
+        help="vault cut height above the upper orbital rims (mm)",
+    )
+    parser.add_argument(
+        "--hole-radius",
+        type=float,
+        default=CutParams.hole_radius_mm,
+        help="frontal defect radius (mm)",
+    )
     parser.add_argument("--hole-side", choices=("right", "left"), default=CutParams.hole_side)
     args = parser.parse_args(argv)
     params = CutParams(
@@ -1054,27 +1075,37 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{record['out_dir']}: {state} in {wall:.1f} s; CT sha256 {record['ct']['sha256'][:16]}…")
     for name in OUTPUTS:
         o = record["outputs"][name]
-        print(f"  {name:14s} {o['n_vertices']:>8d} vertices {o['n_faces']:>8d} faces "
-              f"{o['area_mm2'] / 100:>9.1f} cm²  {o['bytes'] / 2**20:6.1f} MiB")
+        print(
+            f"  {name:14s} {o['n_vertices']:>8d} vertices {o['n_faces']:>8d} faces "
+            f"{o['area_mm2'] / 100:>9.1f} cm²  {o['bytes'] / 2**20:6.1f} MiB"
+        )
     m = record["removed"]["mandible"]
     h = record["removed"]["frontal_hole"]
     v = record["removed"]["vault_cut"]
     f = record["landmarks"]["frankfort"]
     c = record["checks"]
     mr = c["mandible_regions"]
-    print(f"  mandible: separates at {m['separation_threshold_hu']:g} HU, "
-          f"{m['volume_removed_cm3']} cm³ removed, {m['n_contacts_at_bone_level']} contact(s) at "
-          f"{record['params']['bone_iso_hu']:g} HU: "
-          + "; ".join(f"{k['n_voxels']} vox at {k['centre_mm']}" for k in m["contacts_at_bone_level"]))
-    print(f"  Frankfort: tilt {f['tilt_from_axial_deg']:.2f}° from axial (pitch "
-          f"{f['pitch_deg']:.2f}°, roll {f['roll_deg']:.2f}°); cut plane point "
-          f"{v['plane_point_mm']} normal {v['plane_normal']}")
-    print(f"  hole ({h['side']}): centre {h['centre_mm']} axis {h['axis']} radius "
-          f"{h['radius_mm']} mm; isolated from the cut rim: {c['hole_isolated_from_cut_rim']}")
-    print(f"  area kept {record['counts']['cut_skull_area_fraction_of_full_bone']:.1%} of the full "
-          f"bone; chin box vertices full/cut {mr['chin_box']['full_bone_vertices']}/"
-          f"{mr['chin_box']['cut_skull_vertices']}; maxilla box area full/cut "
-          f"{mr['maxilla_box']['full_bone_area_mm2']}/{mr['maxilla_box']['cut_skull_area_mm2']} mm²")
+    print(
+        f"  mandible: separates at {m['separation_threshold_hu']:g} HU, "
+        f"{m['volume_removed_cm3']} cm³ removed, {m['n_contacts_at_bone_level']} contact(s) at "
+        f"{record['params']['bone_iso_hu']:g} HU: "
+        + "; ".join(f"{k['n_voxels']} vox at {k['centre_mm']}" for k in m["contacts_at_bone_level"])
+    )
+    print(
+        f"  Frankfort: tilt {f['tilt_from_axial_deg']:.2f}° from axial (pitch "
+        f"{f['pitch_deg']:.2f}°, roll {f['roll_deg']:.2f}°); cut plane point "
+        f"{v['plane_point_mm']} normal {v['plane_normal']}"
+    )
+    print(
+        f"  hole ({h['side']}): centre {h['centre_mm']} axis {h['axis']} radius "
+        f"{h['radius_mm']} mm; isolated from the cut rim: {c['hole_isolated_from_cut_rim']}"
+    )
+    print(
+        f"  area kept {record['counts']['cut_skull_area_fraction_of_full_bone']:.1%} of the full "
+        f"bone; chin box vertices full/cut {mr['chin_box']['full_bone_vertices']}/"
+        f"{mr['chin_box']['cut_skull_vertices']}; maxilla box area full/cut "
+        f"{mr['maxilla_box']['full_bone_area_mm2']}/{mr['maxilla_box']['cut_skull_area_mm2']} mm²"
+    )
     if not record["cached"]:
         print("  timings (s): " + ", ".join(f"{k} {t}" for k, t in record["timings_s"].items()))
     print(f"  {CREDIT} (Visible Human Project®). {FROZEN_COPY_NOTE}")

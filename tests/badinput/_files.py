@@ -26,8 +26,7 @@ SKULL_CENTRE_MM = (40.0, 60.0, 0.0)
 def sphere(levels: int = 3) -> Mesh:
     """Unit icosphere-like sphere (subdivided octahedron), outward winding."""
     v = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
-    f = [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4],
-         [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
+    f = [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
     verts = [np.array(p, float) for p in v]
     faces = [tuple(t) for t in f]
     for _ in range(levels):
@@ -56,10 +55,17 @@ def skull_mesh() -> Mesh:
 
 def _ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> Path:
     """ASCII PLY written by hand, so non-finite numbers reach the file as they are."""
-    lines = ["ply", "format ascii 1.0", f"element vertex {len(vertices)}",
-             "property float x", "property float y", "property float z",
-             f"element face {len(faces)}", "property list uchar int vertex_indices",
-             "end_header"]
+    lines = [
+        "ply",
+        "format ascii 1.0",
+        f"element vertex {len(vertices)}",
+        "property float x",
+        "property float y",
+        "property float z",
+        f"element face {len(faces)}",
+        "property list uchar int vertex_indices",
+        "end_header",
+    ]
     lines += [" ".join(repr(float(c)) for c in p) for p in vertices]
     lines += ["3 " + " ".join(str(int(i)) for i in t) for t in faces]
     path.write_text("\n".join(lines) + "\n", encoding="ascii")
@@ -68,9 +74,14 @@ def _ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> Path:
 
 #: skull codes placed on the stand-in skull: (code, direction in the skull frame)
 _SKULL_POINTS = {
-    "g": (0.0, 0.35, 1.0), "n": (0.0, 0.25, 1.0), "po_l": (1.0, 0.05, 0.0),
-    "po_r": (-1.0, 0.05, 0.0), "or_l": (0.35, 0.1, 0.9), "or_r": (-0.35, 0.1, 0.9),
-    "pr": (0.0, -0.35, 1.0), "gn": (0.0, -0.8, 0.7),
+    "g": (0.0, 0.35, 1.0),
+    "n": (0.0, 0.25, 1.0),
+    "po_l": (1.0, 0.05, 0.0),
+    "po_r": (-1.0, 0.05, 0.0),
+    "or_l": (0.35, 0.1, 0.9),
+    "or_r": (-0.35, 0.1, 0.9),
+    "pr": (0.0, -0.35, 1.0),
+    "gn": (0.0, -0.8, 0.7),
 }
 
 
@@ -82,28 +93,40 @@ def surface_point(direction: tuple[float, float, float], offset_mm: float = 0.0)
     return d * (t + offset_mm) + SKULL_CENTRE_MM
 
 
-def _landmarks(offset_mm: float = 0.0, flip: bool = False,
-               points: dict | None = None) -> LandmarkSet:
+def _landmarks(
+    offset_mm: float = 0.0, flip: bool = False, points: dict | None = None
+) -> LandmarkSet:
     out = []
     for code, d in (points or _SKULL_POINTS).items():
         p = surface_point(d, offset_mm)
-        if flip:   # RAS numbers in a file that says LPS
+        if flip:  # RAS numbers in a file that says LPS
             p = p * np.array([-1.0, -1.0, 1.0])
         out.append(Landmark(code, p, status="placed"))
     return LandmarkSet("skull", out)
 
 
 def _mrk(path: Path, points: list[tuple[str, list[float]]], system: str = "LPS") -> Path:
-    doc = {"@schema": "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/"
-                      "Markups/Resources/Schema/markups-schema-v1.0.3.json#",
-           "markups": [{"type": "Fiducial", "coordinateSystem": system,
-                        "controlPoints": [{"label": c, "position": p} for c, p in points]}]}
+    doc = {
+        "@schema": "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/"
+        "Markups/Resources/Schema/markups-schema-v1.0.3.json#",
+        "markups": [
+            {
+                "type": "Fiducial",
+                "coordinateSystem": system,
+                "controlPoints": [{"label": c, "position": p} for c, p in points],
+            }
+        ],
+    }
     path.write_text(json.dumps(doc), encoding="utf-8")
     return path
 
 
-def _nifti(path: Path, data: np.ndarray, zooms: tuple[float, float, float],
-           sform_row_y: tuple[float, float, float, float] | None = None) -> Path:
+def _nifti(
+    path: Path,
+    data: np.ndarray,
+    zooms: tuple[float, float, float],
+    sform_row_y: tuple[float, float, float, float] | None = None,
+) -> Path:
     """NIfTI-1 with the voxel sizes patched into the header bytes as given (even 0 or NaN).
 
     qform and sform codes are 0, so readers take the affine from ``pixdim``;
@@ -130,8 +153,11 @@ def _nifti(path: Path, data: np.ndarray, zooms: tuple[float, float, float],
     return path
 
 
-def _table(path: Path, rows: list[str],
-           header: str = "landmark_code,skin_code,group,sex,build,mean_mm,sd_mm,n,source") -> Path:
+def _table(
+    path: Path,
+    rows: list[str],
+    header: str = "landmark_code,skin_code,group,sex,build,mean_mm,sd_mm,n,source",
+) -> Path:
     path.write_text("\n".join([header, *rows]) + "\n", encoding="utf-8")
     return path
 
@@ -157,10 +183,13 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     f["garbage_ply"] = folder / "garbage.ply"
     f["garbage_ply"].write_bytes(np.random.default_rng(1).bytes(4096))
     f["header_only_ply"] = folder / "header_only.ply"
-    f["header_only_ply"].write_text("ply\nformat ascii 1.0\nelement vertex 3\n"
-                                    "property float x\nproperty float y\nproperty float z\n"
-                                    "element face 1\nproperty list uchar int vertex_indices\n"
-                                    "end_header\n0 0 0\n", encoding="ascii")
+    f["header_only_ply"].write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\n"
+        "end_header\n0 0 0\n",
+        encoding="ascii",
+    )
     f["bad_index_ply"] = _ply(folder / "bad_index.ply", v[:3], np.array([[0, 1, 7]]))
     f["wrong_ext"] = folder / "skull.txt"
     f["wrong_ext"].write_bytes(f["skull"].read_bytes())
@@ -170,8 +199,9 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     f["missing_landmarks"] = folder / "does_not_exist.mrk.json"
     # two triangles the size of a skull
     tri = np.array([[-80.0, -90, 0], [80, -90, 0], [80, 90, 0], [-80, 90, 0]])
-    f["two_triangles"] = write_mesh(folder / "two_triangles.ply",
-                                    Mesh(tri, np.array([[0, 1, 2], [0, 2, 3]])))
+    f["two_triangles"] = write_mesh(
+        folder / "two_triangles.ply", Mesh(tri, np.array([[0, 1, 2], [0, 2, 3]]))
+    )
     # a flat (coplanar) skull: the ellipsoid squashed to 0.5 mm deep
     centre = np.array(SKULL_CENTRE_MM)
     flat = (v - centre) * np.array([1.0, 1.0, 0.005]) + centre
@@ -185,8 +215,9 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     skin = (v - centre) * 1.08 + centre
     f["skin"] = write_mesh(folder / "skin.ply", Mesh(skin, t))
     # far away: the other surface 1 m off (no overlap for compare)
-    f["far_skin"] = write_mesh(folder / "far_skin.ply",
-                               Mesh(skin + np.array([0.0, 0.0, 1000.0]), t))
+    f["far_skin"] = write_mesh(
+        folder / "far_skin.ply", Mesh(skin + np.array([0.0, 0.0, 1000.0]), t)
+    )
     bad = skin.copy()
     bad[7] = np.nan
     f["nan_skin"] = _ply(folder / "nan_skin.ply", bad, t)
@@ -195,20 +226,24 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     # landmarks
     write_landmarks(folder / "skull.mrk.json", _landmarks(), coordinate_system="LPS")
     f["landmarks"] = folder / "skull.mrk.json"
-    write_landmarks(folder / "off50.mrk.json", _landmarks(offset_mm=50.0),
-                    coordinate_system="LPS")
+    write_landmarks(folder / "off50.mrk.json", _landmarks(offset_mm=50.0), coordinate_system="LPS")
     f["landmarks_off50"] = folder / "off50.mrk.json"
     # RAS numbers in a file declared LPS: the reader negates x and y, the points leave the skull
-    f["landmarks_flipped"] = _mrk(folder / "flipped.mrk.json",
-                                  [(c, [float(x) for x in surface_point(d)])
-                                   for c, d in _SKULL_POINTS.items()], system="LPS")
-    f["landmarks_unknown"] = _mrk(folder / "unknown.mrk.json",
-                                  [("g", [0, 31, 95]), ("zz_not_a_code", [1, 2, 3])])
-    f["landmarks_duplicate"] = _mrk(folder / "duplicate.mrk.json",
-                                    [("g", [0, 31, 95]), ("g", [0, 30, 95])])
+    f["landmarks_flipped"] = _mrk(
+        folder / "flipped.mrk.json",
+        [(c, [float(x) for x in surface_point(d)]) for c, d in _SKULL_POINTS.items()],
+        system="LPS",
+    )
+    f["landmarks_unknown"] = _mrk(
+        folder / "unknown.mrk.json", [("g", [0, 31, 95]), ("zz_not_a_code", [1, 2, 3])]
+    )
+    f["landmarks_duplicate"] = _mrk(
+        folder / "duplicate.mrk.json", [("g", [0, 31, 95]), ("g", [0, 30, 95])]
+    )
     f["landmarks_partial_nan"] = folder / "partial_nan.csv"
-    f["landmarks_partial_nan"].write_text("code,x_mm,y_mm,z_mm\ng,nan,91,95\nn,40,85,98\n",
-                                          encoding="utf-8")
+    f["landmarks_partial_nan"].write_text(
+        "code,x_mm,y_mm,z_mm\ng,nan,91,95\nn,40,85,98\n", encoding="utf-8"
+    )
     f["landmarks_empty"] = folder / "empty.mrk.json"
     f["landmarks_empty"].write_bytes(b"")
     f["landmarks_garbage"] = folder / "garbage.mrk.json"
@@ -216,35 +251,48 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     f["landmarks_wrong_ext"] = folder / "points.docx"
     f["landmarks_wrong_ext"].write_text("g,0,0,0\n", encoding="utf-8")
     porion = surface_point(_SKULL_POINTS["po_l"])
-    f["porions_same"] = _mrk(folder / "porions_same.mrk.json",
-                             [(c, [float(x) for x in (porion if c.startswith("po") else
-                                                      surface_point(d))])
-                              for c, d in _SKULL_POINTS.items()], system="RAS")
+    f["porions_same"] = _mrk(
+        folder / "porions_same.mrk.json",
+        [
+            (c, [float(x) for x in (porion if c.startswith("po") else surface_point(d))])
+            for c, d in _SKULL_POINTS.items()
+        ],
+        system="RAS",
+    )
     f["landmarks_collinear"] = _mrk(
         folder / "collinear.mrk.json",
         [(c, [40.0, 60.0 + i * 5.0, 100.0]) for i, c in enumerate(_SKULL_POINTS)],
-        system="RAS")
+        system="RAS",
+    )
     # depth tables
     good_rows = ["g,g',adult,pooled,pooled,5.5,1.2,40,t", "n,n',adult,pooled,pooled,6.5,1.4,40,t"]
-    f["table_5500"] = _table(folder / "table_5500.csv",
-                             ["g,g',adult,pooled,pooled,5500,1.2,40,t", good_rows[1]])
-    f["table_zero"] = _table(folder / "table_zero.csv",
-                             ["g,g',adult,pooled,pooled,0,1.2,40,t", good_rows[1]])
-    f["table_negative_sd"] = _table(folder / "table_negative_sd.csv",
-                                    ["g,g',adult,pooled,pooled,5.5,-1.2,40,t", good_rows[1]])
-    f["table_huge_sd"] = _table(folder / "table_huge_sd.csv",
-                                ["g,g',adult,pooled,pooled,5.5,900,40,t", good_rows[1]])
-    f["table_missing_columns"] = _table(folder / "table_missing.csv", ["g,5.5", "n,6.5"],
-                                        header="landmark_code,mean_mm")
-    f["table_unknown_code"] = _table(folder / "table_unknown.csv",
-                                     ["zorg,,adult,pooled,pooled,5.5,1.2,40,t", good_rows[1]])
+    f["table_5500"] = _table(
+        folder / "table_5500.csv", ["g,g',adult,pooled,pooled,5500,1.2,40,t", good_rows[1]]
+    )
+    f["table_zero"] = _table(
+        folder / "table_zero.csv", ["g,g',adult,pooled,pooled,0,1.2,40,t", good_rows[1]]
+    )
+    f["table_negative_sd"] = _table(
+        folder / "table_negative_sd.csv", ["g,g',adult,pooled,pooled,5.5,-1.2,40,t", good_rows[1]]
+    )
+    f["table_huge_sd"] = _table(
+        folder / "table_huge_sd.csv", ["g,g',adult,pooled,pooled,5.5,900,40,t", good_rows[1]]
+    )
+    f["table_missing_columns"] = _table(
+        folder / "table_missing.csv", ["g,5.5", "n,6.5"], header="landmark_code,mean_mm"
+    )
+    f["table_unknown_code"] = _table(
+        folder / "table_unknown.csv", ["zorg,,adult,pooled,pooled,5.5,1.2,40,t", good_rows[1]]
+    )
     f["table_duplicate"] = _table(folder / "table_duplicate.csv", [good_rows[0]] * 2)
-    f["table_text_depth"] = _table(folder / "table_text.csv",
-                                   ["g,g',adult,pooled,pooled,five,1.2,40,t", good_rows[1]])
+    f["table_text_depth"] = _table(
+        folder / "table_text.csv", ["g,g',adult,pooled,pooled,five,1.2,40,t", good_rows[1]]
+    )
     f["table_empty"] = folder / "table_empty.csv"
     f["table_empty"].write_text("", encoding="utf-8")
-    f["table_nan"] = _table(folder / "table_nan.csv",
-                            ["g,g',adult,pooled,pooled,nan,1.2,40,t", good_rows[1]])
+    f["table_nan"] = _table(
+        folder / "table_nan.csv", ["g,g',adult,pooled,pooled,nan,1.2,40,t", good_rows[1]]
+    )
     # guides
     f["guides_garbage"] = folder / "guides.json"
     f["guides_garbage"].write_text("[1, 2, 3", encoding="utf-8")
@@ -254,13 +302,18 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     ball = (np.clip(1.0 - r / 10.0, 0.0, 1.0) * 1500.0 - 1000.0).astype(np.float32)
     f["ct_good"] = _nifti(folder / "ct_good.nii", ball.astype(np.int16), (8.0, 8.0, 8.0))
     f["ct_voxel0"] = _nifti(folder / "ct_voxel0.nii", ball.astype(np.int16), (0.0, 0.0, 0.0))
-    f["ct_km"] = _nifti(folder / "ct_km.nii", ball.astype(np.int16),
-                        (3200000.0, 3200000.0, 3200000.0))
+    f["ct_km"] = _nifti(
+        folder / "ct_km.nii", ball.astype(np.int16), (3200000.0, 3200000.0, 3200000.0)
+    )
     nan_ball = ball.copy()
     nan_ball[3:6, 3:6, 3:6] = np.nan
     f["ct_nan_voxels"] = _nifti(folder / "ct_nan_voxels.nii", nan_ball, (8.0, 8.0, 8.0))
-    f["ct_nan_spacing"] = _nifti(folder / "ct_nan_spacing.nii", ball.astype(np.int16),
-                                 (8.0, 8.0, 8.0), sform_row_y=(0.0, np.nan, 0.0, 0.0))
+    f["ct_nan_spacing"] = _nifti(
+        folder / "ct_nan_spacing.nii",
+        ball.astype(np.int16),
+        (8.0, 8.0, 8.0),
+        sform_row_y=(0.0, np.nan, 0.0, 0.0),
+    )
     f["ct_garbage"] = folder / "ct_garbage.nii.gz"
     f["ct_garbage"].write_bytes(gzip.compress(b"not a nifti" * 40))
     f["ct_empty"] = folder / "ct_empty.nrrd"

@@ -52,13 +52,13 @@ def test_range_and_count_checks_name_the_option() -> None:
 
 
 def test_face_must_fit_the_skull() -> None:
-    skull = skull_mesh()                                    # 150 x 180 x 200 mm
+    skull = skull_mesh()  # 150 x 180 x 200 mm
     head = Mesh(skull.vertices * 1.1, skull.faces)
-    input_checks.check_face_fits_skull(head, skull)          # plausible: no error
+    input_checks.check_face_fits_skull(head, skull)  # plausible: no error
     # a cut vault (half-height skull) still carries a whole reference head
     cut = Mesh(skull.vertices * np.array([1.0, 0.5, 1.0]), skull.faces)
     input_checks.check_face_fits_skull(head, cut)
-    flat_face = Mesh(skull.vertices * np.array([1.1, 1.1, 0.145]), skull.faces)   # 29 mm deep
+    flat_face = Mesh(skull.vertices * np.array([1.1, 1.1, 0.145]), skull.faces)  # 29 mm deep
     with pytest.raises(InputError, match=r"29\.0 mm against a skull of 150\.0 x 180\.0"):
         input_checks.check_face_fits_skull(flat_face, skull)
     huge = Mesh(skull.vertices * 3.0, skull.faces)
@@ -73,8 +73,7 @@ def test_fit_settings_are_checked_before_the_fit(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="--rule: unknown prediction rule"):
         input_checks.check_fit_settings(DowelSettings(), rules=("nope",))
     table = tmp_path / "deep.csv"
-    table.write_text("landmark_code,group,mean_mm,sd_mm,source\ng,adult,75,2,t\n",
-                     encoding="utf-8")
+    table.write_text("landmark_code,group,mean_mm,sd_mm,source\ng,adult,75,2,t\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"deep\.csv: line 2: mean_mm 75 mm is implausible"):
         input_checks.check_fit_settings(DowelSettings(table=str(table)))
 
@@ -85,10 +84,14 @@ def test_landmarks_off_the_skull_are_counted() -> None:
     on = {"g": skull.vertices[0], "n": skull.vertices[5], "pr": skull.vertices[9]}
     lms = LandmarkSet.from_points("skull", on)
     input_checks.check_landmarks_on_skull(skull, lms, "lm.csv")
-    off = LandmarkSet.from_points("skull", {c: p + 40.0 * (p - centre) / np.linalg.norm(p - centre)
-                                            for c, p in on.items()})
-    with pytest.raises(InputError, match=r"lm\.csv: 3 of 3 skull landmarks are more than 10 mm "
-                                         r"from the skull surface \(median 40\.0 mm"):
+    off = LandmarkSet.from_points(
+        "skull", {c: p + 40.0 * (p - centre) / np.linalg.norm(p - centre) for c, p in on.items()}
+    )
+    with pytest.raises(
+        InputError,
+        match=r"lm\.csv: 3 of 3 skull landmarks are more than 10 mm "
+        r"from the skull surface \(median 40\.0 mm",
+    ):
         input_checks.check_landmarks_on_skull(skull, off, "lm.csv")
 
 
@@ -102,10 +105,11 @@ def test_skull_checks_for_scripts() -> None:
 
 
 def test_mesh_info_prints_valid_json_for_a_damaged_mesh(
-        bad_files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    bad_files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["mesh", "info", str(bad_files["nan_skull"])]) == 0
     data = json.loads(capsys.readouterr().out)
-    json.dumps(data, allow_nan=False)        # no NaN anywhere: strict JSON
+    json.dumps(data, allow_nan=False)  # no NaN anywhere: strict JSON
     assert data["validation"]["nonfinite_vertices"] == 3
     assert data["area_mm2"] is None
     assert any("NaN" in p for p in data["validation"]["problems"])
@@ -132,6 +136,8 @@ def test_face_ply_header_names_the_file_units(tmp_path: Path) -> None:
     assert b"comment units: mm\n" in ply.encode(np.zeros((3, 3)), np.array([[0, 1, 2]]))
     job = JobResult(*([None] * 9))
     assert replace(job, settings=JobSettings(units="cm")).file_units_label == "cm"
-    assert replace(job, settings=JobSettings(scale=15.0)).file_units_label == \
-        "file units (1 unit = 15 mm)"
+    assert (
+        replace(job, settings=JobSettings(scale=15.0)).file_units_label
+        == "file units (1 unit = 15 mm)"
+    )
     assert replace(job, settings=JobSettings()).file_units_label == "mm"

@@ -17,8 +17,13 @@ from badinput.conftest import sha256_of
 from badinput.corpus import ENTRIES, Entry, by_family
 from workbench.cli.main import main
 
-FAMILIES = {"A": "absurd values reported as success", "B": "'unexpected error' paths",
-            "C": "misleading messages", "D": "units", "O": "other bad files"}
+FAMILIES = {
+    "A": "absurd values reported as success",
+    "B": "'unexpected error' paths",
+    "C": "misleading messages",
+    "D": "units",
+    "O": "other bad files",
+}
 
 
 def _argv(entry: Entry, files: dict[str, Path], out: Path) -> tuple[list[str], list[Path]]:
@@ -28,14 +33,14 @@ def _argv(entry: Entry, files: dict[str, Path], out: Path) -> tuple[list[str], l
 
 
 @pytest.mark.parametrize("entry", ENTRIES, ids=[f"{e.family}-{e.id}" for e in ENTRIES])
-def test_bad_input_gets_a_clear_message(entry: Entry, bad_files: dict[str, Path],
-                                        tmp_path: Path,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_input_gets_a_clear_message(
+    entry: Entry, bad_files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     argv, used = _argv(entry, bad_files, tmp_path / "out")
     before = {p: sha256_of(p) for p in used}
     try:
         status = main(argv)
-    except SystemExit as exc:   # argparse refusing a value (status 2)
+    except SystemExit as exc:  # argparse refusing a value (status 2)
         status = exc.code
     captured = capsys.readouterr()
     text = captured.err + captured.out
@@ -51,9 +56,11 @@ def test_bad_input_gets_a_clear_message(entry: Entry, bad_files: dict[str, Path]
 def test_corpus_size_per_family(capsys: pytest.CaptureFixture[str]) -> None:
     counts = by_family()
     with capsys.disabled():
-        print("\nbad-input corpus: " + ", ".join(
-            f"{f} ({FAMILIES[f]}) {n}" for f, n in sorted(counts.items()))
-            + f"; total {sum(counts.values())}")
+        print(
+            "\nbad-input corpus: "
+            + ", ".join(f"{f} ({FAMILIES[f]}) {n}" for f, n in sorted(counts.items()))
+            + f"; total {sum(counts.values())}"
+        )
     assert set(counts) <= set(FAMILIES)
     assert sum(counts.values()) >= 60
     assert all(counts.get(f, 0) >= 5 for f in "ABCD")

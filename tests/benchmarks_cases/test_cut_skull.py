@@ -153,6 +153,7 @@ def test_no_mandible_and_the_maxilla_is_intact(case: dict) -> None:
     assert np.count_nonzero(f_cols & (f_h < -45.0)) > 500  # fails if the mandible were kept
     assert np.count_nonzero(c_cols & (c_h < -45.0)) == 0
     assert f_h[f_cols].min() < -75.0  # the chin of the full bone is far lower
+
     # the maxilla and the upper teeth (10-45 mm below orbitale) are untouched
     def area(mesh: Mesh, vmask: np.ndarray) -> float:
         return float(mesh.face_areas[vmask[np.asarray(mesh.faces)].all(axis=1)].sum())
@@ -166,8 +167,9 @@ def test_no_mandible_and_the_maxilla_is_intact(case: dict) -> None:
     mandible = case["record"]["removed"]["mandible"]
     assert 25.0 < mandible["volume_removed_cm3"] < 80.0
     assert mandible["width_mm"] > 80.0
-    assert mandible["bounds_mm"][1][2] < min(landmarks["orbits"][s]["orbitale_mm"][2]
-                                             for s in ("right", "left"))
+    assert mandible["bounds_mm"][1][2] < min(
+        landmarks["orbits"][s]["orbitale_mm"][2] for s in ("right", "left")
+    )
 
 
 def test_second_call_is_a_no_op(case: dict, vhf_2mm: Path) -> None:
@@ -182,8 +184,22 @@ def test_second_call_is_a_no_op(case: dict, vhf_2mm: Path) -> None:
 def test_clip_by_plane_is_exact_and_open() -> None:
     # a closed unit-ish box surface (12 triangles), clipped by an oblique plane
     v = np.array([[x, y, z] for x in (0, 10) for y in (0, 10) for z in (0, 10)], float)
-    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    f = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ]
+    )
     box = Mesh(v, f)
     point, normal = np.array([5.0, 5.0, 6.0]), _unit([0.1, -0.2, 1.0])
     clipped = cut_skull.clip_by_plane(box, point, normal)

@@ -16,14 +16,32 @@ from workbench.io.case_file import load_case
 from workbench.io.markups import write_landmarks
 
 
-def test_case_new_info_evidence(tmp_path: Path, skull_obj: Path,
-                                capsys: pytest.CaptureFixture[str]) -> None:
+def test_case_new_info_evidence(
+    tmp_path: Path, skull_obj: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     landmarks = tmp_path / "skull.mrk.json"
-    write_landmarks(landmarks, LandmarkSet.from_points("skull", {"n": (0.1, 9.5, 5.9),
-                                                                 "pr": (0.0, 6.1, 6.2)}))
+    write_landmarks(
+        landmarks, LandmarkSet.from_points("skull", {"n": (0.1, 9.5, 5.9), "pr": (0.0, 6.1, 6.2)})
+    )
     case_file = tmp_path / "case.fcase"
-    assert main(["case", "new", str(skull_obj), "--units", "cm", "--examiner", "A. Artist",
-                 "--landmarks", str(landmarks), "--out", str(case_file)]) == 0
+    assert (
+        main(
+            [
+                "case",
+                "new",
+                str(skull_obj),
+                "--units",
+                "cm",
+                "--examiner",
+                "A. Artist",
+                "--landmarks",
+                str(landmarks),
+                "--out",
+                str(case_file),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
 
     loaded = load_case(case_file)
@@ -47,8 +65,9 @@ def test_case_new_info_evidence(tmp_path: Path, skull_obj: Path,
     assert out.read_bytes() == skull_obj.read_bytes()
 
 
-def test_tampered_case_is_refused_then_reported(tmp_path: Path, skull_obj: Path,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
+def test_tampered_case_is_refused_then_reported(
+    tmp_path: Path, skull_obj: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     case_file = tmp_path / "case.fcase"
     assert main(["case", "new", str(skull_obj), "--units", "cm", "--out", str(case_file)]) == 0
     tampered = tmp_path / "tampered.fcase"
@@ -67,8 +86,9 @@ def test_tampered_case_is_refused_then_reported(tmp_path: Path, skull_obj: Path,
     assert tampered.read_bytes() == before  # inspection never rewrites a case
 
 
-def test_case_new_refuses_unclear_units(tmp_path: Path, skull_obj: Path,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_case_new_refuses_unclear_units(
+    tmp_path: Path, skull_obj: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "case.fcase"
     assert main(["case", "new", str(skull_obj), "--out", str(out)]) == 2
     assert "--units cm" in capsys.readouterr().err

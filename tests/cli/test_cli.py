@@ -29,8 +29,12 @@ def test_version_and_help(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_python_dash_m_runs_the_cli() -> None:
-    done = subprocess.run([sys.executable, "-m", "workbench", "--version"],
-                          capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [sys.executable, "-m", "workbench", "--version"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert done.returncode == 0
     assert workbench.__version__ in done.stdout
 
@@ -38,12 +42,28 @@ def test_python_dash_m_runs_the_cli() -> None:
 def test_mesh_from_ct_on_headsq(tmp_path: Path, headsq_nhdr: Path) -> None:
     out = tmp_path / "bone.ply"
     report = tmp_path / "bone.json"
-    assert main(["mesh-from-ct", str(headsq_nhdr), "--tissue", "bone", "--out", str(out),
-                 "--report", str(report), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "mesh-from-ct",
+                str(headsq_nhdr),
+                "--tissue",
+                "bone",
+                "--out",
+                str(out),
+                "--report",
+                str(report),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     mesh = read_mesh(out).mesh
     extent = mesh.extent
     # bone of an adult head, cut by the field of view: ~15 cm wide, 13.8 cm of slices
-    assert 130 < extent[0] < 175 and 130 < extent[1] < 200 and extent[2] == pytest.approx(138, abs=2)
+    assert (
+        130 < extent[0] < 175 and 130 < extent[1] < 200 and extent[2] == pytest.approx(138, abs=2)
+    )
     data = json.loads(report.read_text())
     assert data["tissue"] == "bone" and data["iso"] == pytest.approx(1150, abs=1)
     assert data["n_faces"] == mesh.n_faces
@@ -51,27 +71,44 @@ def test_mesh_from_ct_on_headsq(tmp_path: Path, headsq_nhdr: Path) -> None:
 
 def test_mesh_from_ct_decimates_and_accepts_sample_names(tmp_path: Path) -> None:
     out = tmp_path / "skin.stl"
-    assert main(["mesh-from-ct", "sample:headsq", "--tissue", "skin",
-                 "--target-triangles", "20000", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "mesh-from-ct",
+                "sample:headsq",
+                "--tissue",
+                "skin",
+                "--target-triangles",
+                "20000",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     mesh = read_mesh(out).mesh
     assert abs(mesh.n_faces - 20000) < 0.05 * 20000
 
 
-def test_units_are_never_guessed_silently(tmp_path: Path, skull_obj: Path,
-                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_units_are_never_guessed_silently(
+    tmp_path: Path, skull_obj: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "skull.ply"
     assert main(["mesh", "convert", str(skull_obj), str(out), "--kind", "skull"]) == 2
     err = capsys.readouterr().err
     assert "skull.obj" in err and "--units" in err
     assert not out.exists()
-    assert main(["mesh", "convert", str(skull_obj), str(out), "--kind", "skull",
-                 "--units", "cm"]) == 0
+    assert (
+        main(["mesh", "convert", str(skull_obj), str(out), "--kind", "skull", "--units", "cm"]) == 0
+    )
     mesh = read_mesh(out).mesh
     assert mesh.extent.max() == pytest.approx(139.0, abs=0.5)
 
 
-def test_mesh_info_reports_problems(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                    headsq_nhdr: Path) -> None:
+def test_mesh_info_reports_problems(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], headsq_nhdr: Path
+) -> None:
     out = tmp_path / "skin.ply"
     main(["mesh-from-ct", str(headsq_nhdr), "--tissue", "skin", "--out", str(out), "--quiet"])
     capsys.readouterr()
@@ -89,8 +126,10 @@ def test_bad_input_gives_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["mesh", "info", str(broken)]) == 2
     err = capsys.readouterr().err
     assert "broken.ply" in err and "Traceback" not in err
-    assert main(["mesh-from-ct", str(tmp_path / "nothing.nrrd"), "--out",
-                 str(tmp_path / "x.ply")]) == 2
+    assert (
+        main(["mesh-from-ct", str(tmp_path / "nothing.nrrd"), "--out", str(tmp_path / "x.ply")])
+        == 2
+    )
     assert "nothing.nrrd" in capsys.readouterr().err
 
 
@@ -118,20 +157,36 @@ def test_samples_list_and_offline_fetch(capsys: pytest.CaptureFixture[str]) -> N
     assert main(["samples", "fetch", "no-such-sample"]) == 2
 
 
-def test_landmarks_frame_aligns_a_copy(tmp_path: Path, skull_obj: Path,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_landmarks_frame_aligns_a_copy(
+    tmp_path: Path, skull_obj: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     # FH landmarks on the unitless skull (+y up, face +z), with the head tilted 12 degrees
     # about x; the frame undoes the tilt and an aligned copy of the mesh is written
     tilt = np.deg2rad(12.0)
     rot = np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]])
-    fh = {"po_l": (6.2, 7.0, -0.5), "po_r": (-6.2, 7.0, -0.5), "or_l": (3.3, 7.0, 6.7),
-          "or_r": (-3.3, 7.0, 6.7), "n": (0.0, 9.2, 7.9), "me": (0.0, -0.5, 6.5)}
+    fh = {
+        "po_l": (6.2, 7.0, -0.5),
+        "po_r": (-6.2, 7.0, -0.5),
+        "or_l": (3.3, 7.0, 6.7),
+        "or_r": (-3.3, 7.0, 6.7),
+        "n": (0.0, 9.2, 7.9),
+        "me": (0.0, -0.5, 6.5),
+    }
     tilted = {c: rot @ np.asarray(p) for c, p in fh.items()}
     lm = tmp_path / "fh.csv"
     write_landmarks(lm, LandmarkSet.from_points("skull", tilted))
     out = tmp_path / "aligned.ply"
-    args = ["landmarks", "frame", str(lm), "--surface", "skull", "--apply", str(skull_obj),
-            "--out", str(out)]
+    args = [
+        "landmarks",
+        "frame",
+        str(lm),
+        "--surface",
+        "skull",
+        "--apply",
+        str(skull_obj),
+        "--out",
+        str(out),
+    ]
     assert main(args) == 2  # the mesh's units are unclear: refused, nothing written
     assert not out.exists()
     capsys.readouterr()

@@ -17,15 +17,19 @@ from workbench.io.meshes import write_mesh
 
 
 @pytest.fixture(scope="module")
-def meshes(tmp_path_factory: pytest.TempPathFactory, head_male) -> dict[str, Path]:  # noqa: ANN001
+def meshes(tmp_path_factory: pytest.TempPathFactory, head_male) -> dict[str, Path]:
     """The male template skin as reconstruction; truths 3 mm outside it; a remeshed copy."""
     folder = tmp_path_factory.mktemp("compare")
     skin = build_skin("male")
     thick = skin.mesh.with_vertices(skin.mesh.vertices + 3.0 * vertex_normals(skin.mesh))
     # a reconstruction that is not on the template's topology (a few triangles gone)
     other = Mesh(skin.mesh.vertices, skin.mesh.faces[10:])
-    paths = {"recon": folder / "face.ply", "truth": folder / "truth.ply",
-             "truth_cm": folder / "truth_cm.obj", "other": folder / "other.ply"}
+    paths = {
+        "recon": folder / "face.ply",
+        "truth": folder / "truth.ply",
+        "truth_cm": folder / "truth_cm.obj",
+        "other": folder / "other.ply",
+    }
     write_mesh(paths["recon"], skin.mesh)
     write_mesh(paths["truth"], thick)
     write_mesh(paths["truth_cm"], thick.scaled(0.1))
@@ -37,13 +41,26 @@ def meshes(tmp_path_factory: pytest.TempPathFactory, head_male) -> dict[str, Pat
 
 
 @pytest.mark.render
-def test_compare_prints_figures_and_writes_heatmap(meshes, tmp_path: Path,  # noqa: ANN001
-                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_compare_prints_figures_and_writes_heatmap(
+    meshes, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from PIL import Image
 
     out = tmp_path / "validation"
-    assert main(["compare", str(meshes["recon"]), str(meshes["truth"]), "--out", str(out),
-                 "--clim", "4"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                str(meshes["recon"]),
+                str(meshes["truth"]),
+                "--out",
+                str(out),
+                "--clim",
+                "4",
+            ]
+        )
+        == 0
+    )
     data = json.loads(capsys.readouterr().out)
     assert data == json.loads((out / "compare.json").read_text())
     fig = data["figures"]
@@ -58,7 +75,7 @@ def test_compare_prints_figures_and_writes_heatmap(meshes, tmp_path: Path,  # no
     assert (image[..., 2] > image[..., 0] + 60).mean() > 0.01  # blue: reconstruction inside
 
 
-def test_other_topology_needs_region_all(meshes, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
+def test_other_topology_needs_region_all(meshes, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["compare", str(meshes["other"]), str(meshes["truth"]), "--region", "face"]) == 2
     err = capsys.readouterr().err
     assert "other.ply" in err and "topology" in err and "--region all" in err
@@ -70,16 +87,40 @@ def test_other_topology_needs_region_all(meshes, capsys: pytest.CaptureFixture[s
     assert "unknown region 'ears'" in capsys.readouterr().err
 
 
-def test_truth_units_and_template_pack(meshes, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
+def test_truth_units_and_template_pack(meshes, capsys: pytest.CaptureFixture[str]) -> None:
     # a truth in cm is refused until its units are given
     assert main(["compare", str(meshes["recon"]), str(meshes["truth_cm"])]) == 2
     assert "truth_cm.obj" in capsys.readouterr().err
-    assert main(["compare", str(meshes["recon"]), str(meshes["truth_cm"]), "--truth-units", "cm",
-                 "--template", str(meshes["pack"]), "--region", "nose"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                str(meshes["recon"]),
+                str(meshes["truth_cm"]),
+                "--truth-units",
+                "cm",
+                "--template",
+                str(meshes["pack"]),
+                "--region",
+                "nose",
+            ]
+        )
+        == 0
+    )
     data = json.loads(capsys.readouterr().out)
     assert "template pack" in data["template"] and list(data["regions"]) == ["nose"]
     assert data["regions"]["nose"]["signed_mean_mm"] == pytest.approx(-2.8, abs=0.3)
     # a folder that is not a pack
-    assert main(["compare", str(meshes["recon"]), str(meshes["truth"]),
-                 "--template", str(meshes["recon"].parent)]) == 2
+    assert (
+        main(
+            [
+                "compare",
+                str(meshes["recon"]),
+                str(meshes["truth"]),
+                "--template",
+                str(meshes["recon"].parent),
+            ]
+        )
+        == 2
+    )
     assert "not a template pack" in capsys.readouterr().err

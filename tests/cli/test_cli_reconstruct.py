@@ -12,17 +12,21 @@ from workbench.cli.main import main
 from workbench.io.case_file import load_case
 from workbench.io.markups import read_landmarks, write_mrk_json
 from workbench.io.meshes import read_mesh, write_mesh
-from workbench.reporting.report import read_report_json, sha256_file, validate_report
+from workbench.model.evidence import file_sha256 as sha256_file
+from workbench.reporting.report import read_report_json, validate_report
 from workbench.services.reference_parts import skull_surface
 
 HEADSQ_FLAGS = ["--anterior", "0,-1,0", "--superior", "0,0,-1", "--left", "1,0,0"]
 
 
 @pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory, head_female) -> dict[str, Path]:  # noqa: ANN001
+def inputs(tmp_path_factory: pytest.TempPathFactory, head_female) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("recon-inputs")
-    paths = {"skull": folder / "skull.ply", "landmarks": folder / "skull.mrk.json",
-             "truth": folder / "truth_skin.ply"}
+    paths = {
+        "skull": folder / "skull.ply",
+        "landmarks": folder / "skull.mrk.json",
+        "truth": folder / "truth_skin.ply",
+    }
     write_mesh(paths["skull"], skull_surface(head_female))
     write_mrk_json(paths["landmarks"], head_female.skull_landmarks)
     write_mesh(paths["truth"], head_female.skin)
@@ -30,11 +34,28 @@ def inputs(tmp_path_factory: pytest.TempPathFactory, head_female) -> dict[str, P
 
 
 @pytest.mark.render
-def test_reconstruct_writes_face_head_case_and_report(inputs, tmp_path, head_male, capsys):  # noqa: ANN001
+def test_reconstruct_writes_face_head_case_and_report(inputs, tmp_path, head_male, capsys):
     out = tmp_path / "recon"
-    code = main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
-                 "--sex", "male", "--ensemble", "3", "--truth", str(inputs["truth"]),
-                 "--exclude", "ecm2s", "--override", "g=6.5", "--out", str(out)])
+    code = main(
+        [
+            "reconstruct",
+            str(inputs["skull"]),
+            "--landmarks",
+            str(inputs["landmarks"]),
+            "--sex",
+            "male",
+            "--ensemble",
+            "3",
+            "--truth",
+            str(inputs["truth"]),
+            "--exclude",
+            "ecm2s",
+            "--override",
+            "g=6.5",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     face = read_mesh(out / "face.ply", units="mm").mesh
     assert face.n_vertices == head_male.skin.n_vertices
@@ -61,13 +82,13 @@ def test_reconstruct_writes_face_head_case_and_report(inputs, tmp_path, head_mal
     assert loaded.case.parameters["template_hash"] == head_male.content_hash
     assert loaded.case.dowels.excluded == ("ecm2s",)
     assert dict(loaded.case.dowels.overrides) == {"g": 6.5} and loaded.case.dowels.sex == "male"
-    assert loaded.case.guides is None          # computed from the skull, not stored
+    assert loaded.case.guides is None  # computed from the skull, not stored
     assert report["parameters"]["dowels"]["excluded"] == ["ecm2s"]
     ops = [r["command"] for r in loaded.audit_records if r["action"] == "do"]
     assert "SetDowelSettings" in ops and "SetParameter" in ops
 
 
-def test_suggest_then_reconstruct_headsq_bone(headsq_surfaces, tmp_path, capsys):  # noqa: ANN001
+def test_suggest_then_reconstruct_headsq_bone(headsq_surfaces, tmp_path, capsys):
     bone = write_mesh(tmp_path / "bone.ply", headsq_surfaces["bone"])
     lm_file = tmp_path / "suggested.mrk.json"
     assert main(["landmarks", "suggest", str(bone), *HEADSQ_FLAGS, "--out", str(lm_file)]) == 0
@@ -77,9 +98,22 @@ def test_suggest_then_reconstruct_headsq_bone(headsq_surfaces, tmp_path, capsys)
     assert lms["v"].status == "absent"
     assert sum(lm.status == "suggested" for lm in lms) >= 35
     out = tmp_path / "recon"
-    assert main(["reconstruct", str(bone), "--landmarks", str(lm_file), "--no-pictures",
-                 "--truth", str(write_mesh(tmp_path / "skin.ply", headsq_surfaces["skin"])),
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(bone),
+                "--landmarks",
+                str(lm_file),
+                "--no-pictures",
+                "--truth",
+                str(write_mesh(tmp_path / "skin.ply", headsq_surfaces["skin"])),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     report = read_report_json(out / "report.json")
     # the suggested landmarks' left/right labels tell the mirrored file (the shape cannot)
     assert "mirrored" in report["frame"]
@@ -88,7 +122,7 @@ def test_suggest_then_reconstruct_headsq_bone(headsq_surfaces, tmp_path, capsys)
     assert report["registration"]["parts"][1]["present"]
 
 
-def test_reconstruct_refuses_a_skull_in_metres(inputs, tmp_path, capsys):  # noqa: ANN001
+def test_reconstruct_refuses_a_skull_in_metres(inputs, tmp_path, capsys):
     mesh = read_mesh(inputs["skull"], units="mm").mesh
     metres = write_mesh(tmp_path / "skull_m.ply", mesh.scaled(0.001))
     assert main(["reconstruct", str(metres), "--out", str(tmp_path / "o")]) == 2
@@ -96,13 +130,27 @@ def test_reconstruct_refuses_a_skull_in_metres(inputs, tmp_path, capsys):  # noq
     assert "skull_m.ply" in err and ("metre" in err or "units" in err)
 
 
-def test_face_is_written_in_the_skull_files_units(inputs, tmp_path):  # noqa: ANN001
+def test_face_is_written_in_the_skull_files_units(inputs, tmp_path):
     mesh = read_mesh(inputs["skull"], units="mm").mesh
     cm = write_mesh(tmp_path / "skull_cm.ply", mesh.scaled(0.1))
     out = tmp_path / "o"
-    assert main(["reconstruct", str(cm), "--units", "cm", "--no-pictures", "--guides", "none",
-                 "--out", str(out)]) == 0
-    face_cm = read_mesh(out / "face.ply", units="cm").mesh   # cm numbers, read back as mm
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(cm),
+                "--units",
+                "cm",
+                "--no-pictures",
+                "--guides",
+                "none",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    face_cm = read_mesh(out / "face.ply", units="cm").mesh  # cm numbers, read back as mm
     face_mm = read_mesh(out / "face_mm.ply", units="mm").mesh
     np.testing.assert_allclose(face_cm.vertices, face_mm.vertices, atol=1e-6)
     skull_in_file = mesh.scaled(0.1)
@@ -111,13 +159,41 @@ def test_face_is_written_in_the_skull_files_units(inputs, tmp_path):  # noqa: AN
     assert raw[1][1] - raw[0][1] < 2 * (hi[1] - lo[1]) + 5  # the same scale as the skull file
 
 
-def test_a_published_rule_replaces_the_classic_guide(inputs, tmp_path, capsys):  # noqa: ANN001
+def test_a_published_rule_replaces_the_classic_guide(inputs, tmp_path, capsys):
     out = tmp_path / "rynn"
-    assert main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
-                 "--rule", "no_such_rule", "--no-pictures", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(inputs["skull"]),
+                "--landmarks",
+                str(inputs["landmarks"]),
+                "--rule",
+                "no_such_rule",
+                "--no-pictures",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "no_such_rule" in capsys.readouterr().err
-    assert main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
-                 "--rule", "nose_rynn2010_prn", "--no-pictures", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(inputs["skull"]),
+                "--landmarks",
+                str(inputs["landmarks"]),
+                "--rule",
+                "nose_rynn2010_prn",
+                "--no-pictures",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     report = read_report_json(out / "report.json")
     guides = {g["id"]: g for g in report["guides"]}
     assert guides["nose_tip"]["rule_id"] == "nose_rynn2010_prn"
@@ -125,17 +201,34 @@ def test_a_published_rule_replaces_the_classic_guide(inputs, tmp_path, capsys): 
     assert guides["nose_width_l"]["rule_id"].startswith("kaehler")
 
 
-def test_a_library_of_reference_packs_gives_their_median_face(inputs, tmp_path,
-                                                             head_male):  # noqa: ANN001
+def test_a_library_of_reference_packs_gives_their_median_face(inputs, tmp_path, head_male):
     from workbench.io.template_pack import export_template
 
     a = export_template(head_male, tmp_path / "a")[0].parent
     b = export_template(head_male, tmp_path / "b")[0].parent
     out = tmp_path / "lib"
-    assert main(["reconstruct", str(inputs["skull"]), "--landmarks", str(inputs["landmarks"]),
-                 "--template", str(a), "--template", str(b),
-                 "--tissue", "reference", "--guides", "none", "--no-pictures",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(inputs["skull"]),
+                "--landmarks",
+                str(inputs["landmarks"]),
+                "--template",
+                str(a),
+                "--template",
+                str(b),
+                "--tissue",
+                "reference",
+                "--guides",
+                "none",
+                "--no-pictures",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     report = read_report_json(out / "report.json")
     assert [h["path"] for h in report["references"]["heads"]] == [str(a), str(b)]
     # two identical references: the median is either fit, and they agree

@@ -62,11 +62,14 @@ def tetra(scale: float = 1.0) -> Mesh:
 
 
 def base_case() -> Case:
-    skull = LandmarkSet("skull", (
-        Landmark("n", [0.0, 50.0, 80.0]),
-        Landmark("zy_l", [60.0, 20.0, 40.0], "suggested", 0.5),
-        Landmark("pg", [np.nan] * 3, "absent"),
-    ))
+    skull = LandmarkSet(
+        "skull",
+        (
+            Landmark("n", [0.0, 50.0, 80.0]),
+            Landmark("zy_l", [60.0, 20.0, 40.0], "suggested", 0.5),
+            Landmark("pg", [np.nan] * 3, "absent"),
+        ),
+    )
     return Case(
         meta=CaseMeta.new("E. Xaminer"),
         evidence=(EvidenceFile("skull.obj", SHA_A, 10, "skull_mesh"),),
@@ -96,7 +99,8 @@ FACTORIES: dict[str, Callable[[], Command]] = {
     "confirm suggested": lambda: SetLandmarkStatus("skull", "zy_l", "placed"),
     "delete": lambda: DeleteLandmark("skull", "pg"),
     "replace set": lambda: ReplaceLandmarkSet(
-        "skin", LandmarkSet.from_points("skin", {"sn": (1, 1, 1)}, "suggested"), "Suggest skin"),
+        "skin", LandmarkSet.from_points("skin", {"sn": (1, 1, 1)}, "suggested"), "Suggest skin"
+    ),
     "set parameter": lambda: SetParameter("build", "slim"),
     "set new parameter": lambda: SetParameter("guides", {"nose": [1.0, 2.0]}),
     "delete parameter": lambda: DeleteParameter("build"),
@@ -108,8 +112,9 @@ FACTORIES: dict[str, Callable[[], Command]] = {
     "add evidence": lambda: AddEvidence(EvidenceFile("ct.nrrd", SHA_B, 99, "ct_volume")),
     "set dowel table": lambda: SetDowelSettings(table="rhine_1983_sw_native_american"),
     "set dowel sex and build": lambda: SetDowelSettings(sex="female", build=-1.0),
-    "set tissue model": lambda: SetDowelSettings(tissue_model="reference",
-                                                 region_factors={"nose": 1.3}),
+    "set tissue model": lambda: SetDowelSettings(
+        tissue_model="reference", region_factors={"nose": 1.3}
+    ),
     "set depth override": lambda: SetDepthOverride("n", 6.5),
     "change depth override": lambda: SetDepthOverride("g", 7.0),
     "clear depth override": lambda: SetDepthOverride("g", None),
@@ -120,8 +125,13 @@ FACTORIES: dict[str, Callable[[], Command]] = {
     "set guides": lambda: SetGuides([{"id": "lip_parting", "kind": "hline", "value": [-70.0]}]),
     "recompute guides": lambda: SetGuides(None),
     "macro": lambda: MacroCommand(
-        commands=[PlaceLandmark("skull", "g", [1, 2, 3]), MoveLandmark("skull", "g", [4, 5, 6]),
-                  SetParameter("build", "obese")], label="Macro"),
+        commands=[
+            PlaceLandmark("skull", "g", [1, 2, 3]),
+            MoveLandmark("skull", "g", [4, 5, 6]),
+            SetParameter("build", "obese"),
+        ],
+        label="Macro",
+    ),
 }
 
 ABSTRACT = {Command, LandmarkCommand, ReplacePartCommand}
@@ -131,8 +141,13 @@ def concrete_command_types() -> set[type]:
     found = set()
     for module in (stack, landmarks, case_edits, reconstruction_setup):
         for obj in vars(module).values():
-            if (isinstance(obj, type) and issubclass(obj, Command) and obj not in ABSTRACT
-                    and obj.__module__ == module.__name__ and not obj.__name__.startswith("_")):
+            if (
+                isinstance(obj, type)
+                and issubclass(obj, Command)
+                and obj not in ABSTRACT
+                and obj.__module__ == module.__name__
+                and not obj.__name__.startswith("_")
+            ):
                 found.add(obj)
     return found
 
@@ -186,24 +201,35 @@ command_strategy = st.one_of(
     st.builds(MoveLandmark, SURFACES, CODES, POSITIONS),
     st.builds(SetLandmarkStatus, SURFACES, CODES, STATUSES),
     st.builds(DeleteLandmark, SURFACES, CODES),
-    st.builds(lambda pts: ReplaceLandmarkSet("skin", LandmarkSet.from_points("skin", pts)),
-              st.dictionaries(CODES, POSITIONS, max_size=3)),
-    st.builds(SetParameter, st.sampled_from(["build", "depth_table", "x"]),
-              st.one_of(st.integers(-5, 5), st.text(max_size=3), st.lists(st.booleans()))),
+    st.builds(
+        lambda pts: ReplaceLandmarkSet("skin", LandmarkSet.from_points("skin", pts)),
+        st.dictionaries(CODES, POSITIONS, max_size=3),
+    ),
+    st.builds(
+        SetParameter,
+        st.sampled_from(["build", "depth_table", "x"]),
+        st.one_of(st.integers(-5, 5), st.text(max_size=3), st.lists(st.booleans())),
+    ),
     st.builds(DeleteParameter, st.sampled_from(["build", "x"])),
     st.builds(lambda b: SetDowelSettings(build=b), st.sampled_from(["normal", "obese", 1.0, -2])),
     st.builds(lambda sex: SetDowelSettings(sex=sex), st.sampled_from(["female", "male"])),
     st.builds(SetDepthOverride, CODES, st.one_of(st.none(), st.floats(0.5, 30))),
     st.builds(SetDowelExclusion, CODES, st.booleans()),
-    st.builds(lambda o: SetOrientation(o), st.sampled_from(
-        [None, ((0, 0, 1), (0, 1, 0)), ((0, -1, 0), (0, 0, -1))])),
-    st.builds(lambda ids: SetGuides(None if ids is None else [{"id": i, "value": [1.0]}
-                                                             for i in ids]),
-              st.one_of(st.none(), st.lists(st.sampled_from(["a", "b"]), unique=True))),
+    st.builds(
+        lambda o: SetOrientation(o),
+        st.sampled_from([None, ((0, 0, 1), (0, 1, 0)), ((0, -1, 0), (0, 0, -1))]),
+    ),
+    st.builds(
+        lambda ids: SetGuides(None if ids is None else [{"id": i, "value": [1.0]} for i in ids]),
+        st.one_of(st.none(), st.lists(st.sampled_from(["a", "b"]), unique=True)),
+    ),
     st.builds(lambda s: SetSpecimen(tetra(s)), st.sampled_from([0.5, 1.0, 2.0])),
     st.builds(SetExaminer, st.text(max_size=5)),
-    st.builds(lambda n, sha: AddEvidence(EvidenceFile(n, sha, 10, "other")),
-              st.sampled_from(["a.bin", "b.bin"]), st.sampled_from([SHA_A, SHA_B])),
+    st.builds(
+        lambda n, sha: AddEvidence(EvidenceFile(n, sha, 10, "other")),
+        st.sampled_from(["a.bin", "b.bin"]),
+        st.sampled_from([SHA_A, SHA_B]),
+    ),
 )
 
 

@@ -20,11 +20,14 @@ from workbench.model.case import Case
 
 @pytest.fixture
 def case() -> Case:
-    skull = LandmarkSet("skull", (
-        Landmark("n", [0.0, 50.0, 80.0], description="nasion, checked twice"),
-        Landmark("zy_l", [60.0, 20.0, 40.0], "suggested", 0.25),
-        Landmark("pg", [np.nan] * 3, "absent"),
-    ))
+    skull = LandmarkSet(
+        "skull",
+        (
+            Landmark("n", [0.0, 50.0, 80.0], description="nasion, checked twice"),
+            Landmark("zy_l", [60.0, 20.0, 40.0], "suggested", 0.25),
+            Landmark("pg", [np.nan] * 3, "absent"),
+        ),
+    )
     return Case(landmarks={"skull": skull})
 
 
@@ -98,8 +101,9 @@ def test_delete(case: Case, stack: CommandStack) -> None:
 
 
 def test_replace_set_for_suggestions(case: Case, stack: CommandStack) -> None:
-    suggested = LandmarkSet.from_points("skin", {"prn": (0, 10, 100), "sn": (0, 0, 90)},
-                                        "suggested")
+    suggested = LandmarkSet.from_points(
+        "skin", {"prn": (0, 10, 100), "sn": (0, 0, 90)}, "suggested"
+    )
     stack.push(ReplaceLandmarkSet("skin", suggested, "Suggest skin landmarks"))
     assert case.landmarks["skin"] is suggested
     assert stack.undo_text == "Suggest skin landmarks"
@@ -142,10 +146,16 @@ def test_labels_and_audit_parameters(case: Case, stack: CommandStack) -> None:
     stack.push(MoveLandmark("skin", "prn", [0, 1.5, 3]))
     stack.push(DeleteLandmark("skin", "prn"))
     labels = [r["operation"] for r in case.audit.records]
-    assert labels == ["Place skin landmark prn", "Move skin landmark prn",
-                      "Delete skin landmark prn"]
+    assert labels == [
+        "Place skin landmark prn",
+        "Move skin landmark prn",
+        "Delete skin landmark prn",
+    ]
     assert case.audit.records[1]["parameters"] == {
-        "surface": "skin", "code": "prn", "position": [0.0, 1.5, 3.0]}
+        "surface": "skin",
+        "code": "prn",
+        "position": [0.0, 1.5, 3.0],
+    }
 
 
 def test_events_fire_once_per_change(case: Case, stack: CommandStack) -> None:

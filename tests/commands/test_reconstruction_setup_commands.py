@@ -31,7 +31,7 @@ def test_dowel_settings_change_only_the_fields_given(case: Case, stack: CommandS
 
 
 def test_consecutive_edits_of_one_field_merge(case: Case, stack: CommandStack) -> None:
-    for k in ("1", "1.5", "2"):          # a combo box run through: one step
+    for k in ("1", "1.5", "2"):  # a combo box run through: one step
         stack.push(SetDowelSettings(build=k))
     stack.push(SetDowelSettings(table="rhine_1983_sw_native_american"))
     assert len(stack) == 2 and stack.undo_text == "Choose depth table"
@@ -96,20 +96,27 @@ def test_audit_records_name_the_settings_and_tables(case: Case, stack: CommandSt
     assert records[1]["parameters"]["orientation"]["left"] == [1.0, 0.0, 0.0]
     assert records[2]["parameters"]["guides"][0]["id"] == "nose_tip"
     assert records[3]["parameters"] == {"code": "n", "depth_mm": 7.0}
-    assert [r["command"] for r in records] == ["SetDowelSettings", "SetOrientation",
-                                               "SetGuides", "SetDepthOverride"]
+    assert [r["command"] for r in records] == [
+        "SetDowelSettings",
+        "SetOrientation",
+        "SetGuides",
+        "SetDepthOverride",
+    ]
 
 
-@pytest.mark.parametrize("make", [
-    lambda: SetDowelSettings(),
-    lambda: SetDowelSettings(sex="unknown"),
-    lambda: SetDowelSettings(build="slim"),
-    lambda: SetDepthOverride("g", -1.0),
-    lambda: SetDepthOverride("", 5.0),
-    lambda: SetDowelExclusion("", True),
-    lambda: SetOrientation(((0, 0, 1), (0, 0, 2))),
-    lambda: SetGuides([{"id": "a", "value": [1.0]}, {"id": "a", "value": [2.0]}]),
-])
-def test_bad_values_fail_when_the_command_is_built(make) -> None:  # noqa: ANN001
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: SetDowelSettings(),
+        lambda: SetDowelSettings(sex="unknown"),
+        lambda: SetDowelSettings(build="slim"),
+        lambda: SetDepthOverride("g", -1.0),
+        lambda: SetDepthOverride("", 5.0),
+        lambda: SetDowelExclusion("", True),
+        lambda: SetOrientation(((0, 0, 1), (0, 0, 2))),
+        lambda: SetGuides([{"id": "a", "value": [1.0]}, {"id": "a", "value": [2.0]}]),
+    ],
+)
+def test_bad_values_fail_when_the_command_is_built(make) -> None:
     with pytest.raises(WorkbenchError):
         make()

@@ -227,7 +227,7 @@ def test_group_is_one_step(case: Case, stack: CommandStack) -> None:
 def test_group_rolls_back_on_exception(case: Case, stack: CommandStack) -> None:
     stack.push(SetParameter("keep", 1))
     before = case.to_state()
-    with pytest.raises(LandmarkError), stack.group("broken"):  # noqa: PT012
+    with pytest.raises(LandmarkError), stack.group("broken"):
         stack.push(PlaceLandmark("skull", "n", [1, 2, 3]))
         stack.push(SetParameter("keep", 2))
         stack.push(MoveLandmark("skull", "zz", [0, 0, 0]))  # no such landmark
@@ -238,7 +238,7 @@ def test_group_rolls_back_on_exception(case: Case, stack: CommandStack) -> None:
 
 def test_group_rolls_back_on_any_exception(case: Case, stack: CommandStack) -> None:
     before = case.to_state()
-    with pytest.raises(RuntimeError, match="boom"), stack.group("g"):  # noqa: PT012
+    with pytest.raises(RuntimeError, match="boom"), stack.group("g"):
         stack.push(SetParameter("a", 1))
         raise RuntimeError("boom")
     assert states_equal(case.to_state(), before)
@@ -247,7 +247,7 @@ def test_group_rolls_back_on_any_exception(case: Case, stack: CommandStack) -> N
 
 def test_gesture_left_open_in_group_is_an_error(case: Case, stack: CommandStack) -> None:
     before = case.to_state()
-    with pytest.raises(CommandError, match="left open"), stack.group("g"):  # noqa: PT012
+    with pytest.raises(CommandError, match="left open"), stack.group("g"):
         stack.push(SetParameter("a", 1))
         stack.begin_gesture("drag")
         stack.push(SetParameter("b", 1))

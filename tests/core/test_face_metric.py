@@ -11,7 +11,7 @@ from workbench.core.mesh import Mesh, concatenate
 from workbench.core.offset_surface import uniform_offset
 
 
-def _sphere(r: float, centre=(0.0, 0.0, 0.0), levels: int = 4) -> Mesh:  # noqa: ANN001
+def _sphere(r: float, centre=(0.0, 0.0, 0.0), levels: int = 4) -> Mesh:
     s = subdivided_octahedron(levels)
     return Mesh(s.vertices * r + np.asarray(centre, float), s.faces)
 
@@ -19,14 +19,14 @@ def _sphere(r: float, centre=(0.0, 0.0, 0.0), levels: int = 4) -> Mesh:  # noqa:
 def test_selection_keeps_the_front_outer_skin_near_the_bone():
     bone = _sphere(60.0)
     skin = _sphere(70.0)
-    inner = _sphere(40.0)   # an "airway": skin surface inside the head
+    inner = _sphere(40.0)  # an "airway": skin surface inside the head
     truth = concatenate([skin, Mesh(inner.vertices, inner.faces[:, ::-1])])
     ids = scored_vertices(truth, bone, (0, 0, 1))
     v = truth.vertices[ids]
     assert len(ids) > 50
-    assert (ids < skin.n_vertices).all()            # the inner surface is never scored
+    assert (ids < skin.n_vertices).all()  # the inner surface is never scored
     normals = v / np.linalg.norm(v, axis=1, keepdims=True)
-    assert (normals[:, 2] > 0.3).all()               # facing anterior
+    assert (normals[:, 2] > 0.3).all()  # facing anterior
     # the anterior cap of a 70 mm sphere with n·a > 0.3: every such vertex is kept
     cap = (skin.vertices[:, 2] / 70.0) > 0.3 + 1e-6
     assert set(np.flatnonzero(cap)) <= set(ids) | set(np.flatnonzero(~cap))
@@ -41,7 +41,7 @@ def test_signed_errors_and_figures():
     ids = scored_vertices(truth, bone, (0, 0, 1))
     too_thick = _sphere(73.0, levels=5)
     s = score(too_thick, truth, ids)["all"]
-    assert s["signed_mean_mm"] == pytest.approx(3.0, abs=0.1)     # outside: positive
+    assert s["signed_mean_mm"] == pytest.approx(3.0, abs=0.1)  # outside: positive
     assert s["pct_within_2_5mm"] == 0.0 and s["pct_within_5mm"] == 100.0
     thin = score(_sphere(69.3, levels=5), truth, ids)["all"]
     assert thin["signed_mean_mm"] == pytest.approx(-0.7, abs=0.1)

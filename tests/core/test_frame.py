@@ -27,15 +27,20 @@ MIDLINE = np.stack([NASION, PROSTHION, BASION, OPISTHOCRANION])
 
 def rotation(q: np.ndarray) -> np.ndarray:
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-quaternions = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 4).map(np.array).filter(
-    lambda q: np.linalg.norm(q) > 0.1)
+quaternions = (
+    st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 4)
+    .map(np.array)
+    .filter(lambda q: np.linalg.norm(q) > 0.1)
+)
 translations = st.tuples(*[st.floats(-500, 500, allow_nan=False)] * 3).map(np.array)
 
 
@@ -47,12 +52,20 @@ def rigid(q: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def frame_for(m: np.ndarray, midline: bool = True, mirrored: bool = False, **kw):
-    move = (lambda p: apply_transform(m, p * np.array([-1.0, 1.0, 1.0]))) if mirrored else (
-        lambda p: apply_transform(m, p))
+    move = (
+        (lambda p: apply_transform(m, p * np.array([-1.0, 1.0, 1.0])))
+        if mirrored
+        else (lambda p: apply_transform(m, p))
+    )
     return frankfort_frame(
-        move(PO_L), move(PO_R), move(OR_L), move(OR_R),
+        move(PO_L),
+        move(PO_R),
+        move(OR_L),
+        move(OR_R),
         midline=move(MIDLINE) if midline else None,
-        above=[move(NASION), move(OPISTHOCRANION)], below=[move(PROSTHION)], **kw,
+        above=[move(NASION), move(OPISTHOCRANION)],
+        below=[move(PROSTHION)],
+        **kw,
     ), move
 
 
@@ -65,16 +78,19 @@ def test_rigidly_moved_head_maps_back_to_canonical_coordinates(q, t, midline):
     np.testing.assert_allclose(frame.to_head(move(landmarks)), landmarks, atol=1e-9)
     # midline landmarks lie on x = 0, the FH landmarks on y = 0
     np.testing.assert_allclose(frame.to_head(move(MIDLINE))[:, 0], 0.0, atol=1e-9)
-    np.testing.assert_allclose(frame.to_head(move(np.stack([PO_L, PO_R, OR_L, OR_R])))[:, 1],
-                               0.0, atol=1e-9)
+    np.testing.assert_allclose(
+        frame.to_head(move(np.stack([PO_L, PO_R, OR_L, OR_R])))[:, 1], 0.0, atol=1e-9
+    )
     assert not frame.mirrored_input
     assert frame.fh_residual_mm < 1e-9
 
 
 @settings(max_examples=60, deadline=None)
-@given(q=quaternions, t=translations,
-       pts=st.lists(st.tuples(*[st.floats(-300, 300, allow_nan=False)] * 3), min_size=1,
-                    max_size=20))
+@given(
+    q=quaternions,
+    t=translations,
+    pts=st.lists(st.tuples(*[st.floats(-300, 300, allow_nan=False)] * 3), min_size=1, max_size=20),
+)
 def test_round_trip_and_right_handed_rotation(q, t, pts):
     frame, _ = frame_for(rigid(q, t))
     r = frame.input_to_head[:3, :3]
@@ -100,8 +116,10 @@ def test_axes_point_left_up_forward():
     frame, move = frame_for(np.eye(4))
     np.testing.assert_allclose(frame.input_to_head, np.eye(4), atol=1e-12)
     # the head frame is (Left, Superior, Anterior): RAS maps with x = -R
-    np.testing.assert_allclose(apply_transform(RAS_TO_HEAD, [[1, 0, 0], [0, 1, 0], [0, 0, 1]]),
-                               [[-1, 0, 0], [0, 0, 1], [0, 1, 0]])
+    np.testing.assert_allclose(
+        apply_transform(RAS_TO_HEAD, [[1, 0, 0], [0, 1, 0], [0, 0, 1]]),
+        [[-1, 0, 0], [0, 0, 1], [0, 1, 0]],
+    )
     assert np.linalg.det(RAS_TO_HEAD[:3, :3]) == pytest.approx(1.0)
 
 
@@ -117,8 +135,15 @@ def test_three_landmark_frankfort_and_residual():
 def test_midline_accepts_arrays_and_two_points():
     frame = frankfort_frame(PO_L, PO_R, OR_L, OR_R, midline=MIDLINE[:2])
     np.testing.assert_allclose(frame.to_head(MIDLINE)[:, 0], 0.0, atol=1e-12)
-    frame = frankfort_frame(PO_L, PO_R, OR_L, OR_R, midline=np.empty((0, 3)),
-                            above=np.array([NASION]), below=np.array([PROSTHION]))
+    frame = frankfort_frame(
+        PO_L,
+        PO_R,
+        OR_L,
+        OR_R,
+        midline=np.empty((0, 3)),
+        above=np.array([NASION]),
+        below=np.array([PROSTHION]),
+    )
     assert not frame.mirrored_input
 
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.headgen.skin import (
     build_skin,
-    data_tables_dir,
     load_control_mesh,
     load_parameters,
     measure,
@@ -133,7 +133,9 @@ def test_outward_normals_and_positive_enclosed_volume(skin):
 
 # ------------------------------------------------------------------ landmarks
 def _catalogue_skin_codes() -> set[str]:
-    with open(REPO / "data_tables" / "landmarks" / "catalogue.csv", newline="", encoding="utf-8") as fh:
+    with open(
+        REPO / "data_tables" / "landmarks" / "catalogue.csv", newline="", encoding="utf-8"
+    ) as fh:
         return {row["code"] for row in csv.DictReader(fh) if row["surface"] == "skin"}
 
 
@@ -188,7 +190,9 @@ def test_landmark_anatomy_is_ordered(skin):
     assert y["ps_l"] > y["en_l"] and y["pi_l"] < y["ex_l"]
     assert lm["ex_l"][0] > lm["en_l"][0] > 0
     assert lm["zy_l"][0] > lm["go_l"][0]
-    assert lm["op"][2] == pytest.approx(min(p[2] for k, p in lm.items() if abs(p[0]) < 1e-9), abs=1e-9)
+    assert lm["op"][2] == pytest.approx(
+        min(p[2] for k, p in lm.items() if abs(p[0]) < 1e-9), abs=1e-9
+    )
 
 
 # ------------------------------------------------------------------ anthropometry
@@ -204,7 +208,9 @@ def test_measurements_within_one_sd_of_adult_norms(both, sex):
     assert not bad, bad
     # the issue's list is all there
     names = {m["name"] for m in params["measurements"]}
-    assert set(ISSUE_NORMS) | {"subnasal_width", "philtral_width", "lower_face_height_sto_gn"} <= names
+    assert (
+        set(ISSUE_NORMS) | {"subnasal_width", "philtral_width", "lower_face_height_sto_gn"} <= names
+    )
 
 
 def test_parameter_file_matches_the_issue_table():
@@ -222,9 +228,15 @@ def test_parameter_file_matches_the_cliniface_rows(shared_data):
     rows: dict[tuple[int, str], list[tuple[float, float]]] = {}
     with open(path, newline="", encoding="utf-8") as fh:
         for r in csv.DictReader(fh):
-            if (r["category"] == "Distance" and r["ethnicity_code"] == "904" and r["sexes"] in ("M", "F")
-                    and 20 <= float(r["age_years"]) <= 30):
-                rows.setdefault((int(r["metric_id"]), r["sexes"]), []).append((float(r["mean"]), float(r["sd"])))
+            if (
+                r["category"] == "Distance"
+                and r["ethnicity_code"] == "904"
+                and r["sexes"] in ("M", "F")
+                and 20 <= float(r["age_years"]) <= 30
+            ):
+                rows.setdefault((int(r["metric_id"]), r["sexes"]), []).append(
+                    (float(r["mean"]), float(r["sd"]))
+                )
     for m in load_parameters()["measurements"]:
         if m["cliniface_metric_id"] is None:
             continue
@@ -253,8 +265,21 @@ def test_whole_head_is_plausible(both):
 # ------------------------------------------------------------------ structure
 def test_regions(skin):
     r = skin.regions
-    for name in ("face", "scalp", "neck", "nose", "upper_lip", "lower_lip", "perioral", "eyelid_upper_l",
-                 "eyelid_upper_r", "eyelid_lower_l", "eyelid_lower_r", "ear_l", "ear_r"):
+    for name in (
+        "face",
+        "scalp",
+        "neck",
+        "nose",
+        "upper_lip",
+        "lower_lip",
+        "perioral",
+        "eyelid_upper_l",
+        "eyelid_upper_r",
+        "eyelid_lower_l",
+        "eyelid_lower_r",
+        "ear_l",
+        "ear_r",
+    ):
         assert name in r and len(r[name]) > 20, name
     v = skin.mesh.vertices
     assert (v[r["ear_l"], 0] > 40).all() and (v[r["ear_r"], 0] < -40).all()
@@ -274,20 +299,32 @@ def test_control_mesh_rings_are_concentric_edge_loops():
     cm = load_control_mesh()
     cv, cf, mp, _ = cm.mirrored()
     edges = {tuple(sorted(e)) for f in cf for e in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0]))}
-    for name in ("eye_r0", "eye_r1", "eye_r2", "eye_r3", "eye_r4", "nostril_rim", "ear_att", "ear_rim"):
+    for name in (
+        "eye_r0",
+        "eye_r1",
+        "eye_r2",
+        "eye_r3",
+        "eye_r4",
+        "nostril_rim",
+        "ear_att",
+        "ear_rim",
+    ):
         ring = list(cm.rings[name])
-        for a, b in zip(ring, ring[1:] + ring[:1]):
+        for a, b in zip(ring, ring[1:] + ring[:1], strict=False):
             assert tuple(sorted((a, b))) in edges, name
     for k in range(7):
         ring = list(cm.rings[f"mouth_m{k}"])
         full = ring + [int(mp[i]) for i in ring[::-1][1:-1]]
-        for a, b in zip(full, full[1:] + full[:1]):
+        for a, b in zip(full, full[1:] + full[:1], strict=False):
             assert tuple(sorted((a, b))) in edges, f"mouth_m{k}"
         assert abs(cv[ring[0], 0]) < 1e-9 and abs(cv[ring[-1], 0]) < 1e-9
     # rings around the eye are nested: mean distance to the opening grows outward
     centre = cv[cm.rings["eye_r0"]].mean(0)
-    radii = [np.linalg.norm(cv[cm.rings[f"eye_r{k}"]][:, :2] - centre[:2], axis=1).mean() for k in range(5)]
-    assert all(a < b for a, b in zip(radii, radii[1:]))
+    radii = [
+        np.linalg.norm(cv[cm.rings[f"eye_r{k}"]][:, :2] - centre[:2], axis=1).mean()
+        for k in range(5)
+    ]
+    assert all(a < b for a, b in zip(radii, radii[1:], strict=False))
 
 
 def test_control_mesh_data_file_header():
@@ -312,7 +349,9 @@ def test_levels():
 # ------------------------------------------------------------------ subdivision
 def _octahedron():
     v = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
-    f = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    f = np.array(
+        [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
+    )
     return v, f
 
 
@@ -330,8 +369,20 @@ def test_loop_subdivision_matrix_is_affine_and_converges():
 
 def test_loop_boundary_rules_keep_the_boundary_a_curve_of_its_own():
     # a square fan: interior vertex lifted, boundary flat in z = 0
-    v = np.array([[0, 0, 3.0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [-1, 1, 0], [-1, 0, 0], [-1, -1, 0],
-                  [0, -1, 0], [1, -1, 0]], float)
+    v = np.array(
+        [
+            [0, 0, 3.0],
+            [1, 0, 0],
+            [1, 1, 0],
+            [0, 1, 0],
+            [-1, 1, 0],
+            [-1, 0, 0],
+            [-1, -1, 0],
+            [0, -1, 0],
+            [1, -1, 0],
+        ],
+        float,
+    )
     f = np.array([[0, i, i % 8 + 1] for i in range(1, 9)])
     sub = loop_subdivide(f, len(v), 2)
     w = sub.matrix @ v
@@ -348,8 +399,9 @@ def test_loop_crease_is_sharp():
     step = loop_step(f, len(v), creases=np.array(crease))
     w = step.matrix @ v
     # the equator refines as a curve in z = 0 and the child creases are its halves
-    eq_new = len(v) + np.searchsorted(step.edges[:, 0] * 6 + step.edges[:, 1],
-                                      [min(a, b) * 6 + max(a, b) for a, b in crease])
+    eq_new = len(v) + np.searchsorted(
+        step.edges[:, 0] * 6 + step.edges[:, 1], [min(a, b) * 6 + max(a, b) for a, b in crease]
+    )
     assert np.allclose(w[eq_new, 2], 0.0) and np.allclose(w[[0, 1, 2, 3], 2], 0.0)
     assert len(step.creases) == 8
 
@@ -361,8 +413,13 @@ def test_renders_are_not_blank(tmp_path, both):
 
     from workbench.render.snapshots import render_surfaces
 
-    path = render_surfaces([(both["female"].mesh, "#e8c4a8", 1.0)], tmp_path / "skin.png",
-                           views=("front", "side"), frame="HEAD", size=(200, 240))
+    path = render_surfaces(
+        [(both["female"].mesh, "#e8c4a8", 1.0)],
+        tmp_path / "skin.png",
+        views=("front", "side"),
+        frame="HEAD",
+        size=(200, 240),
+    )
     img = np.asarray(Image.open(path).convert("L"), float)
     assert img.std() > 10
     assert (img < 240).mean() > 0.1

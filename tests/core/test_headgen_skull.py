@@ -39,8 +39,14 @@ def skull(built):
 
 
 def _parts(t):
-    return {"cranium": t.cranium, "mandible": t.mandible, "upper_teeth": t.upper_teeth,
-            "lower_teeth": t.lower_teeth, "eyes": t.eyes, "tongue": t.tongue}
+    return {
+        "cranium": t.cranium,
+        "mandible": t.mandible,
+        "upper_teeth": t.upper_teeth,
+        "lower_teeth": t.lower_teeth,
+        "eyes": t.eyes,
+        "tongue": t.tongue,
+    }
 
 
 def _components(mesh: Mesh) -> list[Mesh]:
@@ -56,8 +62,17 @@ def _components(mesh: Mesh) -> list[Mesh]:
 
 
 # ------------------------------------------------------------------ meshes
-@pytest.mark.parametrize("part, pieces", [("cranium", 1), ("mandible", 1), ("tongue", 1),
-                                          ("upper_teeth", 16), ("lower_teeth", 16), ("eyes", 2)])
+@pytest.mark.parametrize(
+    "part, pieces",
+    [
+        ("cranium", 1),
+        ("mandible", 1),
+        ("tongue", 1),
+        ("upper_teeth", 16),
+        ("lower_teeth", 16),
+        ("eyes", 2),
+    ],
+)
 def test_meshes_are_closed_manifold_outward(skull, part, pieces):
     mesh = _parts(skull)[part]
     report = validate(mesh)
@@ -72,7 +87,9 @@ def test_triangle_budgets(skull):
     assert 4_000 <= skull.mandible.n_faces <= 10_000
 
 
-@pytest.mark.parametrize("part", ["cranium", "mandible", "upper_teeth", "lower_teeth", "eyes", "tongue"])
+@pytest.mark.parametrize(
+    "part", ["cranium", "mandible", "upper_teeth", "lower_teeth", "eyes", "tongue"]
+)
 def test_symmetric_about_midsagittal_plane(skull, part):
     mesh = _parts(skull)[part]
     d = MeshIndex(mesh).closest_points(mesh.vertices * MIRROR).distances
@@ -96,7 +113,10 @@ def test_mandible_clear_of_cranium_and_seated_in_the_fossae(skull):
     near_tmj = np.linalg.norm(skull.mandible.vertices[:, 1:] - point[1:], axis=1) < 12.0
     assert sd[near_tmj].min() < 3.0, "condyles are not seated in the glenoid fossae"
     condyles = skull.condyle_centres
-    assert np.allclose(condyles.mean(axis=0), point) and (MeshIndex(skull.mandible).signed_distance(condyles) < 0).all()
+    assert (
+        np.allclose(condyles.mean(axis=0), point)
+        and (MeshIndex(skull.mandible).signed_distance(condyles) < 0).all()
+    )
     po = skull.landmarks["po_l"].position
     assert 5.0 < condyles[0][2] - po[2] < 25.0, "condyles must sit just in front of the ear canals"
     assert abs(condyles[0][1] - po[1]) < 15.0
@@ -146,7 +166,9 @@ def test_tongue_rests_inside_the_lower_arch(skull):
 
 # ------------------------------------------------------------------ landmarks
 def _catalogue_skull_codes() -> list[str]:
-    with open(REPO / "data_tables" / "landmarks" / "catalogue.csv", encoding="utf-8", newline="") as fh:
+    with open(
+        REPO / "data_tables" / "landmarks" / "catalogue.csv", encoding="utf-8", newline=""
+    ) as fh:
         return [r["code"] for r in csv.DictReader(fh) if r["surface"] == "skull"]
 
 
@@ -197,10 +219,23 @@ def test_landmark_normals_point_outward(skull):
 def test_anatomical_order(skull):
     L = {lm.code: lm.position for lm in skull.landmarks}
     y = {c: p[1] for c, p in L.items()}
-    assert y["v"] > y["b"] > y["g"] > y["n"] > y["rhi"] > y["ans"] > y["pr"] > y["id"] > y["pg"] > y["me"]
+    assert (
+        y["v"]
+        > y["b"]
+        > y["g"]
+        > y["n"]
+        > y["rhi"]
+        > y["ans"]
+        > y["pr"]
+        > y["id"]
+        > y["pg"]
+        > y["me"]
+    )
     assert y["mso_l"] > y["or_l"] and L["ec_l"][0] > L["d_l"][0]
     assert L["zy_l"][0] > L["ec_l"][0] and L["zy_l"][0] > L["go_l"][0]
-    assert L["ms_l"][1] < y["po_l"] and L["ms_l"][2] < L["po_l"][2]  # mastoid behind and below the ear
+    assert (
+        L["ms_l"][1] < y["po_l"] and L["ms_l"][2] < L["po_l"][2]
+    )  # mastoid behind and below the ear
     assert L["g"][2] > L["n"][2] and L["ans"][2] > L["ss"][2] and L["pg"][2] > L["sm"][2]
 
 
@@ -208,7 +243,9 @@ def test_anatomical_order(skull):
 def test_dimensions_within_published_ranges(skull):
     measured = skull.parameters["measurements"]
     for name, (low, high) in measurement_targets(skull.sex).items():
-        assert low <= measured[name] <= high, f"{skull.sex} {name} = {measured[name]:.1f}, want {low}-{high}"
+        assert low <= measured[name] <= high, (
+            f"{skull.sex} {name} = {measured[name]:.1f}, want {low}-{high}"
+        )
 
 
 def test_female_smaller_and_gracile():
@@ -232,7 +269,11 @@ def test_renders_are_not_blank(skull, tmp_path):
 
     from workbench.render.snapshots import render_surfaces
 
-    path = render_surfaces([(skull.cranium, "#e8dcc0", 1.0), (skull.mandible, "#d8c8a8", 1.0)],
-                           tmp_path / "skull.png", views=("front",), size=(240, 280))
+    path = render_surfaces(
+        [(skull.cranium, "#e8dcc0", 1.0), (skull.mandible, "#d8c8a8", 1.0)],
+        tmp_path / "skull.png",
+        views=("front",),
+        size=(240, 280),
+    )
     pixels = np.asarray(Image.open(path).convert("L"), dtype=float)
     assert (pixels < 240).mean() > 0.15 and pixels.std() > 20

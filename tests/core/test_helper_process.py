@@ -13,11 +13,11 @@ DECIMATE = "workbench.core.isosurface:decimate"
 
 
 @pytest.fixture(scope="module")
-def skull(skull_obj):  # noqa: ANN001
+def skull(skull_obj):
     return read_mesh(skull_obj, units="auto", scale=15.0).mesh
 
 
-def test_same_result_as_in_process(skull, monkeypatch) -> None:  # noqa: ANN001
+def test_same_result_as_in_process(skull, monkeypatch) -> None:
     monkeypatch.delenv("WORKBENCH_NO_HELPER_PROCESS", raising=False)
     v, f = helper_process.call(DECIMATE, skull.vertices, skull.faces, 20_000)
     assert helper_process.status() == ""
@@ -28,17 +28,17 @@ def test_same_result_as_in_process(skull, monkeypatch) -> None:  # noqa: ANN001
     assert 18_000 <= len(f) <= 20_000 and len(v) < skull.n_vertices
 
 
-def test_errors_come_back_and_other_functions_are_refused(monkeypatch) -> None:  # noqa: ANN001
+def test_errors_come_back_and_other_functions_are_refused(monkeypatch) -> None:
     monkeypatch.delenv("WORKBENCH_NO_HELPER_PROCESS", raising=False)
     with pytest.raises(ValueError, match="may not run"):
         helper_process.call("os:system", "true")
-    not_faces = [["a", "b", "c"]]   # the library's own ValueError comes back
+    not_faces = [["a", "b", "c"]]  # the library's own ValueError comes back
     with pytest.raises(ValueError):
         helper_process.call(DECIMATE, np.zeros((3, 3)), not_faces, 0)
     assert helper_process._child is not None and helper_process._child.poll() is None
 
 
-def test_a_dead_child_is_replaced_and_a_missing_one_falls_back(skull, monkeypatch) -> None:  # noqa: ANN001
+def test_a_dead_child_is_replaced_and_a_missing_one_falls_back(skull, monkeypatch) -> None:
     monkeypatch.delenv("WORKBENCH_NO_HELPER_PROCESS", raising=False)
     helper_process.call(DECIMATE, skull.vertices, skull.faces, 30_000)
     first = helper_process._child
@@ -55,7 +55,7 @@ def test_a_dead_child_is_replaced_and_a_missing_one_falls_back(skull, monkeypatc
     assert "in-process" in helper_process.status()
 
 
-def test_run_stays_in_process_unless_the_thread_opted_in(skull, monkeypatch) -> None:  # noqa: ANN001
+def test_run_stays_in_process_unless_the_thread_opted_in(skull, monkeypatch) -> None:
     """Scripts and the command line never start a second process; the
     window's worker threads (which call offload_here) use the helper."""
     import threading
@@ -77,12 +77,17 @@ def test_run_stays_in_process_unless_the_thread_opted_in(skull, monkeypatch) -> 
     t.start()
     t.join()
     assert seen["offloading"] and seen["faces"] <= 30_000 and seen["child"] is not None
-    assert not helper_process.offloading()   # per thread: this one did not opt in
+    assert not helper_process.offloading()  # per thread: this one did not opt in
 
 
 def test_only_marked_workbench_functions_may_run() -> None:
-    for name in ("os:system", "workbench.core.mesh:Mesh", "workbench.core.isosurface:nothing",
-                 "workbench.core.isosurface", "builtins:eval"):
+    for name in (
+        "os:system",
+        "workbench.core.mesh:Mesh",
+        "workbench.core.isosurface:nothing",
+        "workbench.core.isosurface",
+        "builtins:eval",
+    ):
         with pytest.raises(ValueError, match="may not run"):
             helper_process._resolve(name)
     assert helper_process._resolve(DECIMATE) is decimate

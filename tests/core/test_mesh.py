@@ -14,9 +14,16 @@ TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) + 5.0
 TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
 
 CLEAN = {
-    "nonfinite_vertices": 0, "degenerate_faces": 0, "duplicate_faces": 0,
-    "nonmanifold_edges": 0, "boundary_edges": 0, "holes": 0, "hole_sizes": [],
-    "n_components": 1, "unreferenced_vertices": 0, "inconsistent_orientation_edges": 0,
+    "nonfinite_vertices": 0,
+    "degenerate_faces": 0,
+    "duplicate_faces": 0,
+    "nonmanifold_edges": 0,
+    "boundary_edges": 0,
+    "holes": 0,
+    "hole_sizes": [],
+    "n_components": 1,
+    "unreferenced_vertices": 0,
+    "inconsistent_orientation_edges": 0,
     "watertight": True,
 }
 
@@ -48,20 +55,33 @@ def test_clean_octahedron():
     assert "no problems found" in r.summary()
 
 
-@pytest.mark.parametrize(("build", "expected"), [
-    (lambda: Mesh(np.vstack([OCTA_V, [[np.nan, 0, 0]]]), OCTA_F),
-     expect(nonfinite_vertices=1, unreferenced_vertices=1)),
-    (t_junction_degenerate, expect(degenerate_faces=1)),
-    (lambda: Mesh(OCTA_V, np.vstack([OCTA_F, OCTA_F[3]])),
-     # the copy's three edges are now shared by three triangles
-     expect(duplicate_faces=1, nonmanifold_edges=3, watertight=False)),
-    (lambda: Mesh(np.vstack([OCTA_V, [[5.0, 5.0, 5.0]]]), OCTA_F),
-     expect(unreferenced_vertices=1)),
-    (lambda: Mesh(OCTA_V, np.vstack([OCTA_F[:5], OCTA_F[5, ::-1], OCTA_F[6:]])),
-     expect(inconsistent_orientation_edges=3)),
-    (lambda: Mesh(np.vstack([OCTA_V, TETRA_V]), np.vstack([OCTA_F, TETRA_F + 6])),
-     expect(n_components=2)),
-])
+@pytest.mark.parametrize(
+    ("build", "expected"),
+    [
+        (
+            lambda: Mesh(np.vstack([OCTA_V, [[np.nan, 0, 0]]]), OCTA_F),
+            expect(nonfinite_vertices=1, unreferenced_vertices=1),
+        ),
+        (t_junction_degenerate, expect(degenerate_faces=1)),
+        (
+            lambda: Mesh(OCTA_V, np.vstack([OCTA_F, OCTA_F[3]])),
+            # the copy's three edges are now shared by three triangles
+            expect(duplicate_faces=1, nonmanifold_edges=3, watertight=False),
+        ),
+        (
+            lambda: Mesh(np.vstack([OCTA_V, [[5.0, 5.0, 5.0]]]), OCTA_F),
+            expect(unreferenced_vertices=1),
+        ),
+        (
+            lambda: Mesh(OCTA_V, np.vstack([OCTA_F[:5], OCTA_F[5, ::-1], OCTA_F[6:]])),
+            expect(inconsistent_orientation_edges=3),
+        ),
+        (
+            lambda: Mesh(np.vstack([OCTA_V, TETRA_V]), np.vstack([OCTA_F, TETRA_F + 6])),
+            expect(n_components=2),
+        ),
+    ],
+)
 def test_single_defects_are_counted_exactly(build, expected):
     assert report(build()) == expected
 
@@ -91,8 +111,12 @@ def test_two_holes_of_known_sizes():
     first = 0
     share = lambda i, j: len(set(faces[i]) & set(faces[j]))  # noqa: E731
     far = [i for i in range(len(faces)) if share(first, i) == 0]
-    pair = next((i, j) for i in far for j in far if i < j and share(i, j) == 2
-                and all(share(first, k) == 0 for k in (i, j)))
+    pair = next(
+        (i, j)
+        for i in far
+        for j in far
+        if i < j and share(i, j) == 2 and all(share(first, k) == 0 for k in (i, j))
+    )
     keep = np.ones(len(faces), bool)
     keep[[first, *pair]] = False
     holed = Mesh(mesh.vertices, faces[keep])
@@ -107,8 +131,13 @@ def test_all_defects_together_add_up():
     f[5] = f[5, ::-1]  # flip a face away from the T-junction
     v = np.vstack([base.vertices, TETRA_V, [[np.nan, 1, 1]], [[9, 9, 9]]])
     mesh = Mesh(v, np.vstack([f, TETRA_F + 7]))
-    assert report(mesh) == expect(nonfinite_vertices=1, degenerate_faces=1, n_components=2,
-                                  unreferenced_vertices=2, inconsistent_orientation_edges=3)
+    assert report(mesh) == expect(
+        nonfinite_vertices=1,
+        degenerate_faces=1,
+        n_components=2,
+        unreferenced_vertices=2,
+        inconsistent_orientation_edges=3,
+    )
     r = validate(mesh)
     assert r.component_face_counts == (10, 4)
     assert len(r.problems()) == 5
@@ -129,8 +158,16 @@ def test_arrays_are_read_only_and_inputs_are_copied():
     v[0] = 99.0
     f[0] = [1, 1, 1]
     assert mesh.vertices[0, 0] == 1.0 and mesh.faces[0, 0] == 0
-    for a in (mesh.vertices, mesh.faces, mesh.triangles, mesh.face_normals, mesh.face_areas,
-              mesh.face_cross, mesh.bounds, mesh.edges_sorted):
+    for a in (
+        mesh.vertices,
+        mesh.faces,
+        mesh.triangles,
+        mesh.face_normals,
+        mesh.face_areas,
+        mesh.face_cross,
+        mesh.bounds,
+        mesh.edges_sorted,
+    ):
         with pytest.raises(ValueError):
             a.flat[0] = 0
 

@@ -12,7 +12,7 @@ from workbench.core.spatial import MeshIndex
 LEVELS = (Level(30.0, 1.0, 10.0, 6), Level(15.0, 0.5, 6.0, 6), Level(8.0, 0.4, 4.0, 6))
 
 
-def _ellipsoid(axes, centre=(0.0, 0.0, 0.0), levels: int = 4) -> Mesh:  # noqa: ANN001
+def _ellipsoid(axes, centre=(0.0, 0.0, 0.0), levels: int = 4) -> Mesh:
     s = subdivided_octahedron(levels)
     return Mesh(s.vertices * np.asarray(axes, float) + np.asarray(centre, float), s.faces)
 
@@ -29,7 +29,7 @@ def test_sphere_onto_an_ellipsoid():
 def test_a_hole_in_the_target_is_filled_by_the_template_shape():
     src = _ellipsoid((50, 50, 50))
     full = _ellipsoid((55, 55, 55), levels=5)
-    keep = full.triangles.mean(axis=1)[:, 2] < 30.0      # the top cap is missing
+    keep = full.triangles.mean(axis=1)[:, 2] < 30.0  # the top cap is missing
     tgt = Mesh(full.vertices, full.faces[keep])
     w = np.ones(tgt.n_vertices)
     reg = register(src, Target(tgt, w), levels=LEVELS)
@@ -56,12 +56,16 @@ def test_parts_move_independently():
     b = _ellipsoid((20, 20, 20), centre=(30, 0, 0), levels=3)
     src = concatenate([a, b])
     parts = np.r_[np.zeros(a.n_vertices, int), np.ones(b.n_vertices, int)]
-    tgt = concatenate([_ellipsoid((20, 20, 20), centre=(-30, 0, 0), levels=4),
-                       _ellipsoid((20, 20, 20), centre=(30, 0, 8), levels=4)])
+    tgt = concatenate(
+        [
+            _ellipsoid((20, 20, 20), centre=(-30, 0, 0), levels=4),
+            _ellipsoid((20, 20, 20), centre=(30, 0, 8), levels=4),
+        ]
+    )
     reg = register(src, Target(tgt, np.ones(tgt.n_vertices)), parts=parts, levels=LEVELS)
     shift = reg.vertices - src.vertices
-    assert np.abs(shift[: a.n_vertices]).max() < 0.8          # part a stays
-    assert np.median(shift[a.n_vertices:, 2]) > 7.0           # part b moves up by 8 mm
+    assert np.abs(shift[: a.n_vertices]).max() < 0.8  # part a stays
+    assert np.median(shift[a.n_vertices :, 2]) > 7.0  # part b moves up by 8 mm
 
 
 def test_hard_constraints_are_met():
@@ -69,8 +73,9 @@ def test_hard_constraints_are_met():
     tgt = _ellipsoid((50, 50, 50), levels=5)
     vid = int(np.argmax(src.vertices[:, 2]))
     goal = src.vertices[vid] + [6.0, 0.0, 0.0]
-    reg = register(src, Target(tgt, np.ones(tgt.n_vertices)), levels=LEVELS,
-                   hard=(np.array([vid]), goal[None]))
+    reg = register(
+        src, Target(tgt, np.ones(tgt.n_vertices)), levels=LEVELS, hard=(np.array([vid]), goal[None])
+    )
     assert np.linalg.norm(reg.vertices[vid] - goal) < 1.5
 
 
@@ -91,11 +96,13 @@ def test_soft_match_prefers_the_surface_that_faces_the_same_way():
     wall_out = np.array([[x, y, 2.0] for x in range(-3, 4) for y in range(-3, 4)], float)
     wall_in = wall_out - [0, 0, 3.0]
     cloud = np.vstack([wall_out, wall_in])
-    normals = np.vstack([np.tile([0, 0, 1.0], (len(wall_out), 1)),
-                         np.tile([0, 0, -1.0], (len(wall_in), 1))])
+    normals = np.vstack(
+        [np.tile([0, 0, 1.0], (len(wall_out), 1)), np.tile([0, 0, -1.0], (len(wall_in), 1))]
+    )
     from scipy.spatial import cKDTree
 
-    q = np.array([[0.0, 0.0, -0.5]])    # nearer the inner wall
-    p, quality, dist, _, _ = soft_match(q, np.array([[0, 0, 1.0]]), cKDTree(cloud), cloud,
-                                        normals, k=30)
+    q = np.array([[0.0, 0.0, -0.5]])  # nearer the inner wall
+    p, quality, dist, _, _ = soft_match(
+        q, np.array([[0, 0, 1.0]]), cKDTree(cloud), cloud, normals, k=30
+    )
     assert p[0, 2] > 1.5 and quality[0] > 0.9

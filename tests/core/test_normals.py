@@ -76,8 +76,10 @@ def test_averaging_radius_smooths_normals_on_real_skull(skull):
     raw_a = skull.face_normals[index.closest_points(start).face_ids]
     raw_b = skull.face_normals[index.closest_points(neighbour).face_ids]
     raw = angle_deg(raw_a, raw_b)
-    smooth = angle_deg(normals_within_radius(skull, start, 10.0, tree=index.centroid_tree),
-                       normals_within_radius(skull, neighbour, 10.0, tree=index.centroid_tree))
+    smooth = angle_deg(
+        normals_within_radius(skull, start, 10.0, tree=index.centroid_tree),
+        normals_within_radius(skull, neighbour, 10.0, tree=index.centroid_tree),
+    )
     assert np.median(smooth) < 0.5 * np.median(raw)
     assert smooth.mean() < raw.mean()
     # smoothing over 10 mm still points the same way as the local surface

@@ -110,8 +110,10 @@ def test_culling_skips_back_faces_to_reach_a_front_face(backend):
     # two nested spheres: from between them, outward rays see the outer
     # sphere's inside (a back face); inward rays see the inner sphere's front
     outer, inner = sphere_mesh(60.0), sphere_mesh(20.0)
-    both = Mesh(np.vstack([outer.vertices, inner.vertices]),
-                np.vstack([outer.faces, inner.faces + outer.n_vertices]))
+    both = Mesh(
+        np.vstack([outer.vertices, inner.vertices]),
+        np.vstack([outer.faces, inner.faces + outer.n_vertices]),
+    )
     caster = RayCaster(both, backend)
     o = np.array([[40.0, 0.0, 0.0]])
     hits = caster.first_hits(o, [[-1.0, 0.0, 0.0]], cull_backfaces=True)
@@ -173,14 +175,14 @@ def test_a_rigid_copy_casts_on_the_originals_scene_with_the_same_hits(skull, mir
     m[:3, :3] = _rotation([0.3, 1.0, -0.2], 0.7) @ (np.diag([-1.0, 1, 1]) if mirror else np.eye(3))
     m[:3, 3] = [12.0, -40.0, 7.5]
     copy = skull.transformed(m)
-    again = copy.transformed(np.linalg.inv(m))     # chains back to the first mesh
+    again = copy.transformed(np.linalg.inv(m))  # chains back to the first mesh
     assert copy.rigid_source[0] is skull and again.rigid_source[0] is skull
     np.testing.assert_allclose(again.rigid_source[1], np.eye(4), atol=1e-12)
     assert skull.scaled(2.0).rigid_source is None
     assert skull.transformed(np.diag([2.0, 2.0, 2.0, 1.0])).rigid_source is None
 
     borrowed = RayCaster.shared(copy)
-    assert borrowed._scene is RayCaster.shared(skull)._scene   # no scene of its own
+    assert borrowed._scene is RayCaster.shared(skull)._scene  # no scene of its own
     own = RayCaster(copy, "embree")
     o, d = skull_rays(copy, 2000, np.random.default_rng(3))
     for cull in (False, True):
@@ -188,7 +190,7 @@ def test_a_rigid_copy_casts_on_the_originals_scene_with_the_same_hits(skull, mir
         b = own.first_hits(o, d, cull_backfaces=cull)
         assert 0.3 < a.hit.mean() < 1.0
         same = a.hit == b.hit
-        assert same.mean() > 0.998          # single-precision ties at edges aside
+        assert same.mean() > 0.998  # single-precision ties at edges aside
         both = a.hit & b.hit
         np.testing.assert_allclose(a.distance[both], b.distance[both], atol=1e-4)
         np.testing.assert_allclose(a.points[both], b.points[both], atol=1e-4)
@@ -227,6 +229,6 @@ def test_embree_slabs_are_watertight_and_agree_with_one_scene(skull, casters, mo
         np.testing.assert_array_equal(a.hit, b.hit)
         np.testing.assert_allclose(a.distance[a.hit], b.distance[b.hit], atol=1e-5)
         differ = a.face_ids != b.face_ids
-        assert differ[:3000].mean() < 0.01   # random rays: rare ties
+        assert differ[:3000].mean() < 0.01  # random rays: rare ties
         # rays aimed at vertices and edges: either face of the tie, same point
         np.testing.assert_allclose(a.points[differ & a.hit], b.points[differ & a.hit], atol=1e-5)

@@ -161,10 +161,18 @@ def test_fill_small_holes_keeps_big_holes():
     assert validate(fill_small_holes(holed, max_edges=sizes[0]).mesh).is_watertight
 
 
-@pytest.mark.parametrize("repair", [
-    remove_nonfinite, remove_degenerate_faces, remove_duplicate_faces,
-    remove_unreferenced_vertices, merge_close_vertices, keep_largest_component, fill_small_holes,
-])
+@pytest.mark.parametrize(
+    "repair",
+    [
+        remove_nonfinite,
+        remove_degenerate_faces,
+        remove_duplicate_faces,
+        remove_unreferenced_vertices,
+        merge_close_vertices,
+        keep_largest_component,
+        fill_small_holes,
+    ],
+)
 def test_repairs_leave_clean_meshes_alone(repair):
     mesh = octahedron()
     result = repair(mesh)

@@ -22,24 +22,24 @@ def _error_mm(found: np.ndarray, truth: np.ndarray, pts: np.ndarray) -> float:
 
 
 @pytest.fixture(scope="module")
-def skulls(head_female, head_male):  # noqa: ANN001
+def skulls(head_female, head_male):
     return skull_surface(head_female), skull_surface(head_male)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_any_file_axes(skulls, seed):  # noqa: ANN001
+def test_any_file_axes(skulls, seed):
     target, reference = skulls
     r = _rot(seed)
     m = np.eye(4)
     m[:3, :3], m[:3, 3] = r, [40.0, -300.0, 900.0]
     moved = target.transformed(m)
     pose = search_pose(moved, reference)
-    truth = np.linalg.inv(m)   # the female skull is in the same head frame as the reference
+    truth = np.linalg.inv(m)  # the female skull is in the same head frame as the reference
     assert _error_mm(pose.matrix, truth, moved.vertices[::40]) < 8.0
     assert pose.handedness == "assumed" and not pose.mirrored
 
 
-def test_a_cranium_without_mandible_with_a_spine_below(skulls, head_female):  # noqa: ANN001
+def test_a_cranium_without_mandible_with_a_spine_below(skulls, head_female):
     from tests.core._shapes import subdivided_octahedron
 
     _, reference = skulls
@@ -54,7 +54,7 @@ def test_a_cranium_without_mandible_with_a_spine_below(skulls, head_female):  # 
     assert _error_mm(pose.matrix, truth, target.transformed(m).vertices[::40]) < 8.0
 
 
-def test_hint_and_its_left_decide_the_handedness(skulls):  # noqa: ANN001
+def test_hint_and_its_left_decide_the_handedness(skulls):
     target, reference = skulls
     mirrored = Mesh(target.vertices * [-1, 1, 1], target.faces[:, ::-1])
     pose = search_pose(mirrored, reference, hint=((0, 0, 1), (0, 1, 0), (-1, 0, 0)))
@@ -65,7 +65,7 @@ def test_hint_and_its_left_decide_the_handedness(skulls):  # noqa: ANN001
     assert not mirror and np.allclose(r, np.eye(3))
 
 
-def test_seeds_give_a_mirrored_file_away(skulls, head_female, head_male):  # noqa: ANN001
+def test_seeds_give_a_mirrored_file_away(skulls, head_female, head_male):
     target, reference = skulls
     mirrored = Mesh(target.vertices * [-1, 1, 1], target.faces[:, ::-1])
     ref = head_male.skull_landmarks.as_dict()

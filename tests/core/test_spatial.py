@@ -42,7 +42,7 @@ def brute_force(mesh: Mesh, points: np.ndarray, budget: int = 16_384):
     face = np.zeros(len(points), np.int64)
     for i, p in enumerate(points):
         for s in range(0, len(tri), budget):
-            t = tri[s:s + budget]
+            t = tri[s : s + budget]
             cp, _ = closest_on_triangles(np.broadcast_to(p, (len(t), 3)), t[:, 0], t[:, 1], t[:, 2])
             d = np.linalg.norm(cp - p, axis=1)
             j = int(d.argmin())
@@ -68,8 +68,9 @@ def check_against_brute_force(mesh: Mesh, index: MeshIndex, points: np.ndarray) 
     np.testing.assert_allclose(np.linalg.norm(cp - points, axis=1), dist, atol=1e-12 * scale)
     np.testing.assert_allclose(got.points, cp, atol=1e-12 * scale)
     # barycentric coordinates reproduce the point and lie in the triangle
-    np.testing.assert_allclose(np.einsum("ij,ijk->ik", got.barycentric, tri), got.points,
-                               atol=1e-9 * scale)
+    np.testing.assert_allclose(
+        np.einsum("ij,ijk->ik", got.barycentric, tri), got.points, atol=1e-9 * scale
+    )
     assert (got.barycentric >= -1e-12).all()
     np.testing.assert_allclose(got.barycentric.sum(axis=1), 1.0, atol=1e-12)
 
@@ -87,11 +88,13 @@ def test_closest_points_match_brute_force_on_sphere():
     mesh = sphere_mesh(resolution=40)
     index = MeshIndex(mesh)
     rng = np.random.default_rng(2)
-    pts = np.vstack([
-        rng.normal(size=(150, 3)) * 30,  # inside, near the centre (many near-ties)
-        surface_samples(mesh, 150, rng) * rng.uniform(0.8, 1.2, (150, 1)),
-        rng.uniform(-200, 200, (100, 3)),
-    ])
+    pts = np.vstack(
+        [
+            rng.normal(size=(150, 3)) * 30,  # inside, near the centre (many near-ties)
+            surface_samples(mesh, 150, rng) * rng.uniform(0.8, 1.2, (150, 1)),
+            rng.uniform(-200, 200, (100, 3)),
+        ]
+    )
     check_against_brute_force(mesh, index, pts)
 
 
@@ -125,7 +128,7 @@ def test_signed_distance_of_a_closed_sphere():
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     r = rng.uniform(0.0, 2.0 * radius, 4000)
     r = r[np.abs(r - radius) > 1.0]  # further than the faceting error from the surface
-    pts = u[:len(r)] * r[:, None]
+    pts = u[: len(r)] * r[:, None]
     sd = index.signed_distance(pts)
     np.testing.assert_array_equal(sd < 0, r < radius)
     # magnitude: distance to the polyhedron lies within the faceting error of |r - R|
@@ -133,8 +136,9 @@ def test_signed_distance_of_a_closed_sphere():
     np.testing.assert_array_equal(index.contains(pts), r < radius)
 
 
-def ray_parity_inside(caster: RayCaster, points: np.ndarray,
-                      rng: np.random.Generator) -> np.ndarray:
+def ray_parity_inside(
+    caster: RayCaster, points: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
     """Inside by counting surface crossings along three random rays (majority vote)."""
     votes = np.zeros(len(points), int)
     for _ in range(3):
@@ -158,8 +162,12 @@ def ray_parity_inside(caster: RayCaster, points: np.ndarray,
 def test_contains_agrees_with_ray_parity_on_real_skull(skull, skull_index):
     rng = np.random.default_rng(6)
     lo, hi = skull.bounds
-    pts = np.vstack([rng.uniform(lo, hi, (1500, 3)),
-                     surface_samples(skull, 1500, rng) + rng.normal(0, 1.0, (1500, 3))])
+    pts = np.vstack(
+        [
+            rng.uniform(lo, hi, (1500, 3)),
+            surface_samples(skull, 1500, rng) + rng.normal(0, 1.0, (1500, 3)),
+        ]
+    )
     sd = skull_index.signed_distance(pts)
     pts = pts[np.abs(sd) > 1e-3]
     inside = skull_index.contains(pts)
@@ -180,8 +188,10 @@ def test_real_skull_signed_distance_is_continuous_across_the_surface(skull, skul
 
 
 def test_single_triangle_and_degenerate_faces():
-    mesh = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 2], [3, 3, 3], [4, 4, 4]],
-                [[0, 1, 2], [3, 4, 5], [3, 3, 3]])
+    mesh = Mesh(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 2], [3, 3, 3], [4, 4, 4]],
+        [[0, 1, 2], [3, 4, 5], [3, 3, 3]],
+    )
     index = MeshIndex(mesh)
     pts = np.array([[0.2, 0.2, 1.0], [5.0, 5.0, 5.0], [3.0, 3.0, 3.5], [-1.0, -1.0, 0.0]])
     got = index.closest_points(pts)
@@ -227,8 +237,11 @@ def test_closest_on_triangle_is_optimal_and_matches_the_leaf_kernel(p, a, b, c, 
 
 
 @settings(max_examples=40, deadline=None)
-@given(n_faces=st.integers(1, 150), seed=st.integers(0, 2**32 - 1),
-       spread=st.sampled_from([1e-3, 1.0, 100.0]))
+@given(
+    n_faces=st.integers(1, 150),
+    seed=st.integers(0, 2**32 - 1),
+    spread=st.sampled_from([1e-3, 1.0, 100.0]),
+)
 def test_random_triangle_soups_match_brute_force(n_faces, seed, spread):
     """Small meshes exercise padding, empty leaves, slivers and repeated corners."""
     rng = np.random.default_rng(seed)

@@ -32,8 +32,9 @@ def smooth_displacement(p: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return 5.0 * np.sin(p @ k) + rng.normal(0, 1.0, p.shape)
 
 
-def reference_warp(src: np.ndarray, dst: np.ndarray, x: np.ndarray,
-                   smoothing: float = 0.0) -> np.ndarray:
+def reference_warp(
+    src: np.ndarray, dst: np.ndarray, x: np.ndarray, smoothing: float = 0.0
+) -> np.ndarray:
     """The block system solved densely with numpy.linalg.solve, evaluated directly."""
     n = len(src)
     # φ = r is conditionally negative definite: smoothing subtracts λ I
@@ -70,8 +71,11 @@ def test_landmarks_are_interpolated_exactly(case):
 
 
 @settings(max_examples=30, deadline=None)
-@given(case=landmark_sets, a=st.lists(st.floats(-1, 1), min_size=9, max_size=9),
-       t=st.lists(st.floats(-100, 100), min_size=3, max_size=3))
+@given(
+    case=landmark_sets,
+    a=st.lists(st.floats(-1, 1), min_size=9, max_size=9),
+    t=st.lists(st.floats(-100, 100), min_size=3, max_size=3),
+)
 def test_affine_maps_are_reproduced_everywhere(case, a, t):
     n, seed = case
     rng = np.random.default_rng(seed)
@@ -211,5 +215,8 @@ def test_a_million_points_in_bounded_memory():
     extra = peak - base - y.nbytes
     assert extra < 200 * 2**20, f"{extra / 2**20:.0f} MB beyond input and output"
     sample = rng.choice(len(x), 500, replace=False)
-    np.testing.assert_allclose(y[sample], reference_warp(
-        warp.centres + warp.offset, warp(warp.centres + warp.offset), x[sample]), atol=1e-7)
+    np.testing.assert_allclose(
+        y[sample],
+        reference_warp(warp.centres + warp.offset, warp(warp.centres + warp.offset), x[sample]),
+        atol=1e-7,
+    )

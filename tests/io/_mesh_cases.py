@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
-FORMATS = [(".ply", True), (".ply", False), (".stl", True), (".stl", False), (".obj", True),
-           (".vtk", True), (".vtk", False), (".vtp", True), (".vtp", False)]
+FORMATS = [
+    (".ply", True),
+    (".ply", False),
+    (".stl", True),
+    (".stl", False),
+    (".obj", True),
+    (".vtk", True),
+    (".vtk", False),
+    (".vtp", True),
+    (".vtp", False),
+]
 # binary STL stores float32; everything else is written as double
 FLOAT32_FORMATS = {(".stl", True)}
 

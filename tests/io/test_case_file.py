@@ -59,8 +59,11 @@ def session(skull_obj: Path, skull_mesh: Mesh) -> tuple[Case, CommandStack]:
     case = Case()
     stack = CommandStack(case)
     stack.push(SetExaminer("A. Examiner"))
-    stack.push(AddEvidence(EvidenceFile.from_path(skull_obj, "skull_mesh",
-                                                  units_note="unitless as distributed")))
+    stack.push(
+        AddEvidence(
+            EvidenceFile.from_path(skull_obj, "skull_mesh", units_note="unitless as distributed")
+        )
+    )
     transform = np.eye(4)
     transform[:3, :3] *= 10.0
     stack.push(SetSpecimen(skull_mesh, "unitless", transform))
@@ -68,8 +71,9 @@ def session(skull_obj: Path, skull_mesh: Mesh) -> tuple[Case, CommandStack]:
     stack.push(PlaceLandmark("skull", "g", skull_mesh.vertices[20]))
     stack.push(SetLandmarkStatus("skull", "pg", "absent"))
     stack.push(PlaceLandmark("skin", "prn", [0.1, 0.2, 0.3]))
-    stack.push(SetDowelSettings(table="stephan_2013", sex="female", build=-1.5,
-                                excluded=("ecm2s_l",)))
+    stack.push(
+        SetDowelSettings(table="stephan_2013", sex="female", build=-1.5, excluded=("ecm2s_l",))
+    )
     stack.push(SetDepthOverride("g", 6.5))
     stack.push(SetOrientation(((0, 0, 1), (0, 1, 0))))
     stack.push(SetGuides([{"id": "nose_tip", "value": [20.0, 95.5], "source": "user"}]))
@@ -102,7 +106,7 @@ def drop_member(path: Path, name: str) -> None:
 
 
 def flip_byte(data: bytes, at: int = 100) -> bytes:
-    return data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1:]
+    return data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1 :]
 
 
 def array_members(path: Path) -> list[str]:
@@ -144,9 +148,15 @@ def test_zip_layout(saved: Path, skull_obj: Path) -> None:
     assert "audit.jsonl" in names
     assert doc["@schema"] == "case-schema-v2"
     assert doc["format_version"] == 2
-    assert doc["dowels"] == {"table": "stephan_2013", "sex": "female", "build": -1.5,
-                             "overrides": {"g": 6.5}, "excluded": ["ecm2s_l"],
-                             "tissue_model": "table", "region_factors": {}}
+    assert doc["dowels"] == {
+        "table": "stephan_2013",
+        "sex": "female",
+        "build": -1.5,
+        "overrides": {"g": 6.5},
+        "excluded": ["ecm2s_l"],
+        "tissue_model": "table",
+        "region_factors": {},
+    }
     assert doc["orientation"] == {"anterior": [0, 0, 1], "superior": [0, 1, 0], "left": None}
     assert doc["guides"][0]["id"] == "nose_tip"
     assert doc["software"].endswith(workbench.__version__)
@@ -195,7 +205,7 @@ def test_byte_flipped_in_place_is_refused(saved: Path) -> None:
     with zipfile.ZipFile(saved) as archive:
         offset = archive.getinfo("evidence/skull.obj").header_offset
     raw = bytearray(saved.read_bytes())
-    name_len, extra_len = struct.unpack("<HH", raw[offset + 26:offset + 30])
+    name_len, extra_len = struct.unpack("<HH", raw[offset + 26 : offset + 30])
     raw[offset + 30 + name_len + extra_len + 1000] ^= 0x01
     saved.write_bytes(bytes(raw))
     with pytest.raises(CaseFileError, match=r"evidence/skull\.obj"):
@@ -233,29 +243,49 @@ def _pickled() -> bytes:
 CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
     "not a zip": (lambda p: p.write_text("hello"), "damaged or truncated"),
     "invalid json": (lambda p: rewrite_member(p, "case.json", lambda d: d[:-5]), "not valid JSON"),
-    "nan in json": (lambda p: rewrite_member(
-        p, "case.json", lambda d: d.replace(b'"confidence": 1.0', b'"confidence": NaN', 1)),
-        "not valid JSON"),
-    "schema violation": (lambda p: _set_doc(
-        p, lambda d: d["landmarks"]["skull"]["landmarks"][0].update(status="lost")),
-        r"landmarks.*skull"),
-    "class name in file": (lambda p: _set_doc(
-        p, lambda d: d["specimen"].update({"@class": "os.system"})), "case-schema-v2"),
-    "negative dowel depth": (lambda p: _set_doc(
-        p, lambda d: d["dowels"]["overrides"].update(g=-2.0)), r"dowels.*overrides"),
-    "unknown build": (lambda p: _set_doc(p, lambda d: d["dowels"].update(build="slim")),
-                      r"dowels.*build"),
-    "parallel orientation": (lambda p: _set_doc(
-        p, lambda d: d["orientation"].update(superior=[0, 0, 2])), "parallel"),
+    "nan in json": (
+        lambda p: rewrite_member(
+            p, "case.json", lambda d: d.replace(b'"confidence": 1.0', b'"confidence": NaN', 1)
+        ),
+        "not valid JSON",
+    ),
+    "schema violation": (
+        lambda p: _set_doc(
+            p, lambda d: d["landmarks"]["skull"]["landmarks"][0].update(status="lost")
+        ),
+        r"landmarks.*skull",
+    ),
+    "class name in file": (
+        lambda p: _set_doc(p, lambda d: d["specimen"].update({"@class": "os.system"})),
+        "case-schema-v2",
+    ),
+    "negative dowel depth": (
+        lambda p: _set_doc(p, lambda d: d["dowels"]["overrides"].update(g=-2.0)),
+        r"dowels.*overrides",
+    ),
+    "unknown build": (
+        lambda p: _set_doc(p, lambda d: d["dowels"].update(build="slim")),
+        r"dowels.*build",
+    ),
+    "parallel orientation": (
+        lambda p: _set_doc(p, lambda d: d["orientation"].update(superior=[0, 0, 2])),
+        "parallel",
+    ),
     "missing array": (lambda p: drop_member(p, array_members(p)[0]), "missing from the case file"),
     "missing case.json": (lambda p: drop_member(p, "case.json"), "case.json is missing"),
     "newer format": (lambda p: _set_doc(p, lambda d: d.update(format_version=7)), "newer version"),
-    "pickled array": (lambda p: rewrite_member(p, array_members(p)[0], lambda d: _pickled()),
-                      "not a readable array"),
-    "damaged audit": (lambda p: rewrite_member(p, "audit.jsonl", lambda d: d + b"{x\n"),
-                      "audit log is damaged"),
-    "array shape": (lambda p: _set_doc(
-        p, lambda d: d["specimen"]["mesh"]["faces"].update(shape=[1, 3])), "expects int64"),
+    "pickled array": (
+        lambda p: rewrite_member(p, array_members(p)[0], lambda d: _pickled()),
+        "not a readable array",
+    ),
+    "damaged audit": (
+        lambda p: rewrite_member(p, "audit.jsonl", lambda d: d + b"{x\n"),
+        "audit log is damaged",
+    ),
+    "array shape": (
+        lambda p: _set_doc(p, lambda d: d["specimen"]["mesh"]["faces"].update(shape=[1, 3])),
+        "expects int64",
+    ),
 }
 
 
@@ -328,7 +358,7 @@ def test_audit_log_is_append_only_across_saves(session, saved: Path, tmp_path: P
         second = archive.read("audit.jsonl")
     assert second.startswith(first)
     assert len(second) > len(first)
-    tail = [json.loads(line) for line in second[len(first):].splitlines()]
+    tail = [json.loads(line) for line in second[len(first) :].splitlines()]
     assert [r["action"] for r in tail] == ["do", "undo", "save"]
     # a reopened case saved under a new name keeps the whole log as a prefix
     reopened = load_case(saved).case
@@ -403,12 +433,23 @@ def v0_file(tmp_path: Path) -> Path:
         arrays[f"arrays/{sha}.npy"] = data
         refs[key] = {"sha256": sha, "dtype": array.dtype.name, "shape": list(array.shape)}
     doc = {
-        "format_version": 0, "software": "workbench 0.0.9", "case_id": V0_CASE_ID,
-        "examiner": "Old Examiner", "created": "2024-03-01T10:00:00+00:00",
-        "skull": {**refs, "units": "mm"}, "head_transform": np.eye(4).tolist(),
+        "format_version": 0,
+        "software": "workbench 0.0.9",
+        "case_id": V0_CASE_ID,
+        "examiner": "Old Examiner",
+        "created": "2024-03-01T10:00:00+00:00",
+        "skull": {**refs, "units": "mm"},
+        "head_transform": np.eye(4).tolist(),
         "landmarks": {"skull": {"n": [0.0, 5.0, 9.0]}, "skin": {"prn": [1.0, 2.0, 3.0]}},
-        "evidence": [{"file": "skull.stl", "sha256": hashlib.sha256(evidence).hexdigest(),
-                      "bytes": len(evidence), "kind": "skull_mesh", "source": "/cases/skull.stl"}],
+        "evidence": [
+            {
+                "file": "skull.stl",
+                "sha256": hashlib.sha256(evidence).hexdigest(),
+                "bytes": len(evidence),
+                "kind": "skull_mesh",
+                "source": "/cases/skull.stl",
+            }
+        ],
         "settings": {"depth_table": "old_table"},
     }
     path = tmp_path / "old.fcase"
@@ -452,8 +493,10 @@ def test_migrate_is_pure_and_ordered(v0_file: Path) -> None:
     assert new["format_version"] == 2
     assert json.dumps(doc, sort_keys=True) == snapshot
     assert migrate(new) == (new, [])
-    steps = {0: lambda d: {**d, "format_version": 1, "seen": [0]},
-             1: lambda d: {**d, "format_version": 2, "seen": [*d["seen"], 1]}}
+    steps = {
+        0: lambda d: {**d, "format_version": 1, "seen": [0]},
+        1: lambda d: {**d, "format_version": 2, "seen": [*d["seen"], 1]},
+    }
     assert migrate({"format_version": 0}, steps)[0]["seen"] == [0, 1]
     with pytest.raises(MigrationError, match="no migration from format_version -1"):
         migrate({"format_version": -1})
@@ -478,9 +521,19 @@ def test_schema_found_in_wheel_data_first(tmp_path: Path, monkeypatch) -> None:
 
 
 # ---------------------------------------------------------------- format 1 -> 2
-V1_GUIDE = {"id": "nose_tip", "label": "Nose tip", "kind": "point", "view": "lateral",
-            "value": [-20.0, 95.0], "affects": ["prn"], "rule_id": "kaehler_nose_tip",
-            "citation": "Kähler 2003", "source": "user", "enabled": True, "derivation": ""}
+V1_GUIDE = {
+    "id": "nose_tip",
+    "label": "Nose tip",
+    "kind": "point",
+    "view": "lateral",
+    "value": [-20.0, 95.0],
+    "affects": ["prn"],
+    "rule_id": "kaehler_nose_tip",
+    "citation": "Kähler 2003",
+    "source": "user",
+    "enabled": True,
+    "derivation": "",
+}
 
 
 def _v1_file(v0_file: Path, path: Path, parameters: dict) -> Path:
@@ -499,10 +552,17 @@ def _v1_file(v0_file: Path, path: Path, parameters: dict) -> Path:
 
 
 def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None:
-    old = {"depth_table": "ttable_2023", "sex": "female", "build": "1.5",
-           "depth_overrides": {"g": 6.5, "n": 7}, "excluded_landmarks": ["ecm2s_r", "ecm2s_l"],
-           "guides": [V1_GUIDE], "orientation": {"anterior": [0, -2, 0], "superior": [0, 0, -1]},
-           "template_hash": "abc123", "look_alike": {"@array": "x"}}
+    old = {
+        "depth_table": "ttable_2023",
+        "sex": "female",
+        "build": "1.5",
+        "depth_overrides": {"g": 6.5, "n": 7},
+        "excluded_landmarks": ["ecm2s_r", "ecm2s_l"],
+        "guides": [V1_GUIDE],
+        "orientation": {"anterior": [0, -2, 0], "superior": [0, 0, -1]},
+        "template_hash": "abc123",
+        "look_alike": {"@array": "x"},
+    }
     path = _v1_file(v0_file, tmp_path / "v1.fcase", old)
     with zipfile.ZipFile(path) as archive:
         doc = json.loads(archive.read("case.json"))
@@ -510,9 +570,13 @@ def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None
     assert migrate(doc)[1] == [1]
     loaded = load_case(path)
     case = loaded.case
-    assert case.dowels == DowelSettings(table="ttable_2023", sex="female", build=1.5,
-                                        overrides={"g": 6.5, "n": 7.0},
-                                        excluded=("ecm2s_l", "ecm2s_r"))
+    assert case.dowels == DowelSettings(
+        table="ttable_2023",
+        sex="female",
+        build=1.5,
+        overrides={"g": 6.5, "n": 7.0},
+        excluded=("ecm2s_l", "ecm2s_r"),
+    )
     assert case.orientation == Orientation((0, -1, 0), (0, 0, -1))
     assert case.guides == GuideList((V1_GUIDE,))
     from workbench.services.guides import guides_from_json
@@ -531,14 +595,21 @@ def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None
 
 
 def test_v1_values_that_are_not_settings_stay_parameters(v0_file: Path, tmp_path: Path) -> None:
-    old = {"build": "slim", "sex": "unknown", "guides": {"nose": {"projection_mm": 17.5}},
-           "orientation": {}, "depth_overrides": {"g": -1}, "excluded_landmarks": "g",
-           "depth_table": "stephan_2013"}
+    old = {
+        "build": "slim",
+        "sex": "unknown",
+        "guides": {"nose": {"projection_mm": 17.5}},
+        "orientation": {},
+        "depth_overrides": {"g": -1},
+        "excluded_landmarks": "g",
+        "depth_table": "stephan_2013",
+    }
     case = load_case(_v1_file(v0_file, tmp_path / "odd.fcase", old)).case
     assert case.dowels == DowelSettings(table="stephan_2013")
     assert case.orientation is None and case.guides is None
-    assert thaw(case.parameters) == {k: v for k, v in old.items()
-                                     if k not in ("orientation", "depth_table")}
+    assert thaw(case.parameters) == {
+        k: v for k, v in old.items() if k not in ("orientation", "depth_table")
+    }
 
 
 def thaw(value: object) -> object:

@@ -30,8 +30,10 @@ def saved(tmp_path: Path) -> Path:
     """A small case saved twice: 9 audit records (7 edits, 2 saves)."""
     skull = tmp_path / "skull.obj"
     skull.write_bytes(OBJ)
-    mesh = Mesh(np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], float),
-                np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    mesh = Mesh(
+        np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], float),
+        np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]),
+    )
     case = Case()
     stack = CommandStack(case)
     stack.push(SetExaminer("A. Examiner"))
@@ -51,8 +53,11 @@ def _members(path: Path) -> dict[str, bytes]:
         return {name: archive.read(name) for name in archive.namelist()}
 
 
-def _rewrite(path: Path, audit: Callable[[list[bytes]], list[bytes]] | None = None,
-             doc: Callable[[dict], None] | None = None) -> None:
+def _rewrite(
+    path: Path,
+    audit: Callable[[list[bytes]], list[bytes]] | None = None,
+    doc: Callable[[dict], None] | None = None,
+) -> None:
     """Rewrite the zip with its audit lines and/or case.json changed (CRCs valid)."""
     members = _members(path)
     if audit is not None:
@@ -74,6 +79,7 @@ def _edit_line(index: int) -> Callable[[list[bytes]], list[bytes]]:
     def change(lines: list[bytes]) -> list[bytes]:
         lines[index] = lines[index].replace(b"A. Examiner", b"B. Examiner")
         return lines
+
     return change
 
 
@@ -114,8 +120,11 @@ TAMPERS = {
     "edited": (dict(audit=_edit_line(3)), 3, "edited"),
     "deleted in the middle": (dict(audit=lambda lines: lines[:4] + lines[5:]), 4, "missing"),
     "last deleted": (dict(audit=lambda lines: lines[:-1]), 8, "missing"),
-    "swapped": (dict(audit=lambda lines: [*lines[:2], lines[3], lines[2], *lines[4:]]), 2,
-                "reordered"),
+    "swapped": (
+        dict(audit=lambda lines: [*lines[:2], lines[3], lines[2], *lines[4:]]),
+        2,
+        "reordered",
+    ),
     "forged append": (dict(audit=_forge), 9, "added after the last save"),
     "anchor edited": (dict(doc=lambda d: d["audit_chain"].update(head="0" * 64)), 8, "anchor"),
     "anchor removed": (dict(doc=lambda d: d.pop("audit_chain")), 0, "no audit chain anchor"),
@@ -123,8 +132,9 @@ TAMPERS = {
 
 
 @pytest.mark.parametrize("kind", TAMPERS)
-def test_each_tamper_is_refused_then_reported(saved: Path, kind: str,
-                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_each_tamper_is_refused_then_reported(
+    saved: Path, kind: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     change, index, words = TAMPERS[kind]
     _rewrite(saved, **change)
     before = saved.read_bytes()
@@ -163,17 +173,20 @@ def test_tamper_survives_a_save_of_the_tampered_case(saved: Path) -> None:
 
 def _as_old_file(path: Path) -> None:
     """What the software wrote before the chain: no seq/prev, no anchor."""
+
     def strip(lines: list[bytes]) -> list[bytes]:
         out = []
         for record in parse_records(b"".join(lines)):
             record.pop("prev"), record.pop("seq")
             out.append(encode_record(record))
         return out
+
     _rewrite(path, audit=strip, doc=lambda d: d.pop("audit_chain"))
 
 
 def test_old_case_loads_as_predating_the_chain_then_is_sealed(
-        saved: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    saved: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     _as_old_file(saved)
     old_log = _members(saved)["audit.jsonl"]
     loaded = load_case(saved)
@@ -202,8 +215,9 @@ def test_damaged_log_is_still_a_damaged_log(saved: Path) -> None:
         load_case(saved)
 
 
-def test_case_info_of_nested_parameters_is_json(saved: Path,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
+def test_case_info_of_nested_parameters_is_json(
+    saved: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Frozen nested values (mappingproxy) once made ``case info`` fail to print."""
     case = load_case(saved).case
     stack = CommandStack(case)

@@ -49,10 +49,15 @@ def edited(skull_copy: Path) -> tuple[Case, CommandStack]:
 
 def _observable(case: Case) -> dict:
     """Everything a snapshot must leave alone."""
-    return {"state": case.to_state(), "meta": case.meta.to_state(),
-            "records": case.audit.records, "pending": case.audit.pending,
-            "persisted": case.audit.persisted_bytes, "source": case.source_path,
-            "retained": dict(case.retained_evidence)}
+    return {
+        "state": case.to_state(),
+        "meta": case.meta.to_state(),
+        "records": case.audit.records,
+        "pending": case.audit.pending,
+        "persisted": case.audit.persisted_bytes,
+        "source": case.source_path,
+        "retained": dict(case.retained_evidence),
+    }
 
 
 def _same(before: dict, after: dict) -> None:
@@ -103,7 +108,8 @@ def test_snapshot_over_itself_and_after_a_save(edited, tmp_path: Path) -> None:
 
 
 def test_evidence_survives_in_the_snapshot_when_the_original_is_gone(
-        edited, skull_copy: Path, tmp_path: Path) -> None:
+    edited, skull_copy: Path, tmp_path: Path
+) -> None:
     case, _stack = edited
     original = skull_copy.read_bytes()
     snap = write_case_snapshot(case, tmp_path / "snap.fcase")
@@ -118,12 +124,15 @@ def test_evidence_survives_in_the_snapshot_when_the_original_is_gone(
     assert evidence_bytes(saved, "skull.obj") == original
     reopened = load_case(saved).case
     assert reopened.meta.case_id == case.meta.case_id  # meta.modified moved on: a save
-    assert states_equal({k: v for k, v in reopened.to_state().items() if k != "meta"},
-                        {k: v for k, v in case.to_state().items() if k != "meta"})
+    assert states_equal(
+        {k: v for k, v in reopened.to_state().items() if k != "meta"},
+        {k: v for k, v in case.to_state().items() if k != "meta"},
+    )
 
 
-def test_evidence_missing_everywhere_is_a_readable_error(edited, skull_copy: Path,
-                                                         tmp_path: Path) -> None:
+def test_evidence_missing_everywhere_is_a_readable_error(
+    edited, skull_copy: Path, tmp_path: Path
+) -> None:
     case, _stack = edited
     skull_copy.unlink()
     before = _observable(case)
@@ -151,8 +160,9 @@ def test_detached_copy_is_equal_and_unreachable_by_later_edits(edited, tmp_path:
 
     loaded = load_case(write_case_snapshot(copy, tmp_path / "snap.fcase")).case
     assert "n" not in loaded.landmarks["skull"]
-    np.testing.assert_array_equal(loaded.landmarks["skull"]["g"].position,
-                                  case.landmarks["skull"]["g"].position)
+    np.testing.assert_array_equal(
+        loaded.landmarks["skull"]["g"].position, case.landmarks["skull"]["g"].position
+    )
 
 
 def test_read_case_json_names_the_problem(tmp_path: Path) -> None:

@@ -14,26 +14,67 @@ import workbench
 from workbench.core.errors import InputError, LandmarkError
 from workbench.io.catalogue import COLUMNS, default_catalogue_path, load_catalogue, split_side
 
-TABLE = Path(workbench.__file__).resolve().parents[1] / "data_tables" / "landmarks" / "catalogue.csv"
+TABLE = (
+    Path(workbench.__file__).resolve().parents[1] / "data_tables" / "landmarks" / "catalogue.csv"
+)
 META = TABLE.with_name("catalogue.meta.json")
 
 # Kähler (2003) Table 8.3: (id, skull code, skin code); bilateral ids get a side.
-KAHLER_83_MIDLINE = [("tr", "sg", "tr"), ("g", "g", "g"), ("n", "n", "n"), ("na", "rhi", "rhi"),
-                     ("a", "mp", "mp"), ("sd", "pr", "ls"), ("id", "id", "li"), ("b", "b", "sl"),
-                     ("pog", "pg", "pg"), ("me", "me", "me")]
-KAHLER_83_BILATERAL = [("fe*", "fe", "fe"), ("sci", "mso", "sci"), ("or", "or", "or"),
-                       ("en", "d", "en"), ("ex", "ec", "ex"), ("im", "im", "im"), ("lo", "lo", "lo"),
-                       ("zy", "zy", "zy"), ("sg", "sgl", "sgl"), ("go", "go", "go"),
-                       ("spm2*", "ecm2s", "sM2"), ("ol", "ol", "ol"), ("sbm2*", "ecm2i", "iM2"),
-                       ("mp*", "ms", "ms")]
+KAHLER_83_MIDLINE = [
+    ("tr", "sg", "tr"),
+    ("g", "g", "g"),
+    ("n", "n", "n"),
+    ("na", "rhi", "rhi"),
+    ("a", "mp", "mp"),
+    ("sd", "pr", "ls"),
+    ("id", "id", "li"),
+    ("b", "b", "sl"),
+    ("pog", "pg", "pg"),
+    ("me", "me", "me"),
+]
+KAHLER_83_BILATERAL = [
+    ("fe*", "fe", "fe"),
+    ("sci", "mso", "sci"),
+    ("or", "or", "or"),
+    ("en", "d", "en"),
+    ("ex", "ec", "ex"),
+    ("im", "im", "im"),
+    ("lo", "lo", "lo"),
+    ("zy", "zy", "zy"),
+    ("sg", "sgl", "sgl"),
+    ("go", "go", "go"),
+    ("spm2*", "ecm2s", "sM2"),
+    ("ol", "ol", "ol"),
+    ("sbm2*", "ecm2i", "iM2"),
+    ("mp*", "ms", "ms"),
+]
 # Documented departures from Kähler's "same id on skull and skin" (README): skin tr/sci are
 # Farkas' trichion/superciliare, skull b is bregma, skull n pairs with skin se (T-Table).
 KAHLER_NOT_PARTNERS = {"tr", "n", "b", "sci"}
-KAHLER_82 = ("v n gn po t g op sto sn sl zy go or sci en ex se obs al prn ls li ch sa sba obi pra pa")
-RHINE_EXPECTED = {"sg": "sg", "g": "g", "n": "n", "rhi": "rhi", "mp": "mp", "pr": "pr", "id": "id",
-                  "sm": "sm", "pg": "pg", "me": "me", "fe": "fe", "mso": "mso", "or": "or", "im": "im",
-                  "lo": "lo", "zy": "zy", "sgl": "sgl", "go": "go", "ecm2_sup": "ecm2s", "mm": "ol",
-                  "ecm2_inf": "ecm2i"}
+KAHLER_82 = "v n gn po t g op sto sn sl zy go or sci en ex se obs al prn ls li ch sa sba obi pra pa"
+RHINE_EXPECTED = {
+    "sg": "sg",
+    "g": "g",
+    "n": "n",
+    "rhi": "rhi",
+    "mp": "mp",
+    "pr": "pr",
+    "id": "id",
+    "sm": "sm",
+    "pg": "pg",
+    "me": "me",
+    "fe": "fe",
+    "mso": "mso",
+    "or": "or",
+    "im": "im",
+    "lo": "lo",
+    "zy": "zy",
+    "sgl": "sgl",
+    "go": "go",
+    "ecm2_sup": "ecm2s",
+    "mm": "ol",
+    "ecm2_inf": "ecm2i",
+}
 
 
 @pytest.fixture(scope="module")
@@ -80,8 +121,11 @@ def test_ttable_pairs_are_partners(cat, shared_data):
 
 
 def test_rhine_codes_resolve(cat, shared_data):
-    rows = _rows(shared_data / "fstt_rhine1983_sw_native_american"
-                 / "fstt_rhine1983_sw_native_american_normal_female.csv")
+    rows = _rows(
+        shared_data
+        / "fstt_rhine1983_sw_native_american"
+        / "fstt_rhine1983_sw_native_american_normal_female.csv"
+    )
     assert {r["code"] for r in rows} == set(RHINE_EXPECTED)
     for row in rows:
         want = RHINE_EXPECTED[row["code"]]
@@ -90,8 +134,10 @@ def test_rhine_codes_resolve(cat, shared_data):
                 assert cat.normalise(spelled, "skull") == f"{want}_{side}", spelled
         else:
             assert cat.normalise(row["code"], "skull") == want
-        assert cat.partner(cat.normalise(row["code"] + ("_l" if row["bilateral"] == "yes" else ""),
-                                         "skull"), "skull"), row["code"]
+        assert cat.partner(
+            cat.normalise(row["code"] + ("_l" if row["bilateral"] == "yes" else ""), "skull"),
+            "skull",
+        ), row["code"]
 
 
 def test_cliniface_codes_resolve(cat, shared_data):
@@ -176,8 +222,22 @@ def test_every_alias_resolves_to_its_row(cat):
             assert cat.normalise(alias, e.surface) == e.code, (e.surface, alias)
 
 
-@pytest.mark.parametrize("label", ["exL", "ex_L", "Lex", "L ex", "ex-l", "ex (left)", "ex'L", "ex_l",
-                                   "Exocanthion (left)", "left exocanthion", "ex left"])
+@pytest.mark.parametrize(
+    "label",
+    [
+        "exL",
+        "ex_L",
+        "Lex",
+        "L ex",
+        "ex-l",
+        "ex (left)",
+        "ex'L",
+        "ex_l",
+        "Exocanthion (left)",
+        "left exocanthion",
+        "ex left",
+    ],
+)
 def test_side_spellings(cat, label):
     assert cat.normalise(label, "skin") == "ex_l"
 
@@ -201,14 +261,25 @@ def _broken_copy(tmp_path: Path, edit) -> Path:
     return target
 
 
-@pytest.mark.parametrize("edit,problem", [
-    (lambda t: t.replace("surface,code", "surf,code", 1), "columns"),
-    (lambda t: t.replace("skin,ex_r,Exocanthion,right,ex_l", "skin,ex_r,Exocanthion,right,en_l"),
-     "pair"),
-    (lambda t: t.replace("skull,ec_l,Ectoconchion,left,ec_r,ex_l",
-                         "skull,ec_l,Ectoconchion,left,ec_r,en_l"), "partner"),
-    (lambda t: t.replace("farkas1994", "farkas1994x", 1), "undefined source"),
-])
+@pytest.mark.parametrize(
+    "edit,problem",
+    [
+        (lambda t: t.replace("surface,code", "surf,code", 1), "columns"),
+        (
+            lambda t: t.replace(
+                "skin,ex_r,Exocanthion,right,ex_l", "skin,ex_r,Exocanthion,right,en_l"
+            ),
+            "pair",
+        ),
+        (
+            lambda t: t.replace(
+                "skull,ec_l,Ectoconchion,left,ec_r,ex_l", "skull,ec_l,Ectoconchion,left,ec_r,en_l"
+            ),
+            "partner",
+        ),
+        (lambda t: t.replace("farkas1994", "farkas1994x", 1), "undefined source"),
+    ],
+)
 def test_broken_tables_are_rejected(tmp_path, edit, problem):
     with pytest.raises(InputError, match=problem):
         load_catalogue(_broken_copy(tmp_path, edit))
@@ -219,5 +290,7 @@ def test_wheel_data_is_preferred(tmp_path, monkeypatch):
     (fake / "_data" / "data_tables" / "landmarks").mkdir(parents=True)
     shutil.copy(TABLE, fake / "_data" / "data_tables" / "landmarks" / "catalogue.csv")
     monkeypatch.setattr(workbench, "__file__", str(fake / "__init__.py"))
-    assert default_catalogue_path() == fake / "_data" / "data_tables" / "landmarks" / "catalogue.csv"
+    assert (
+        default_catalogue_path() == fake / "_data" / "data_tables" / "landmarks" / "catalogue.csv"
+    )
     assert load_catalogue().codes("skin") == load_catalogue(TABLE).codes("skin")

@@ -12,8 +12,18 @@ from hypothesis import strategies as st
 
 from workbench.core.errors import InputError, LandmarkError
 from workbench.core.landmarks import Landmark, LandmarkSet
-from workbench.io.markups import (read_csv, read_fcsv, read_landmarks, read_mrk_json, read_pp,
-                                  write_csv, write_fcsv, write_landmarks, write_mrk_json, write_pp)
+from workbench.io.markups import (
+    read_csv,
+    read_fcsv,
+    read_landmarks,
+    read_mrk_json,
+    read_pp,
+    write_csv,
+    write_fcsv,
+    write_landmarks,
+    write_mrk_json,
+    write_pp,
+)
 
 EXTENSIONS = [".mrk.json", ".json", ".fcsv", ".pp", ".csv"]
 NAN3 = [np.nan] * 3
@@ -22,15 +32,23 @@ NAN3 = [np.nan] * 3
 @pytest.fixture
 def sample() -> LandmarkSet:
     """Left/right points (subject's left = +x in RAS), a suggestion, undefined points."""
-    return LandmarkSet("skin", (
-        Landmark("ex_l", [45.25, 61.0, 12.125]),
-        Landmark("ex_r", [-44.75, 60.5, 12.0], description="right eye, outer corner"),
-        Landmark("prn", [0.1, 98.30000000000001, -20.7], "suggested", 0.35,
-                 'tip, "estimated"\nfrom Rynn; Ünïcode'),
-        Landmark("go_l", NAN3, "absent", description="mandible broken"),
-        Landmark("go_r", NAN3, "missing"),
-        Landmark("ch_r", [-25.0, 80.0, -45.0], description="a\r\nb,c"),
-    ))
+    return LandmarkSet(
+        "skin",
+        (
+            Landmark("ex_l", [45.25, 61.0, 12.125]),
+            Landmark("ex_r", [-44.75, 60.5, 12.0], description="right eye, outer corner"),
+            Landmark(
+                "prn",
+                [0.1, 98.30000000000001, -20.7],
+                "suggested",
+                0.35,
+                'tip, "estimated"\nfrom Rynn; Ünïcode',
+            ),
+            Landmark("go_l", NAN3, "absent", description="mandible broken"),
+            Landmark("go_r", NAN3, "missing"),
+            Landmark("ch_r", [-25.0, 80.0, -45.0], description="a\r\nb,c"),
+        ),
+    )
 
 
 @pytest.mark.parametrize("ext", EXTENSIONS)
@@ -56,7 +74,9 @@ def test_undefined_skipped_by_default_and_named(tmp_path, sample, ext):
     assert read_landmarks(path, "skin", strict=True, allow_undefined=True).landmarks.equals(sample)
 
 
-@pytest.mark.parametrize("writer,reader", [(write_mrk_json, read_mrk_json), (write_fcsv, read_fcsv)])
+@pytest.mark.parametrize(
+    "writer,reader", [(write_mrk_json, read_mrk_json), (write_fcsv, read_fcsv)]
+)
 @pytest.mark.parametrize("cs", ["LPS", "RAS"])
 def test_slicer_formats_in_both_frames(tmp_path, sample, writer, reader, cs):
     path = tmp_path / ("p.mrk.json" if writer is write_mrk_json else "p.fcsv")
@@ -86,15 +106,27 @@ def test_lps_file_stores_flipped_numbers(tmp_path, sample):
 
 
 def _mrk(cs: str, points: list[tuple[str, list[float], str]]) -> dict:
-    return {"@schema": "https://example/markups-schema-v1.0.3.json#", "markups": [{
-        "type": "Fiducial", "coordinateSystem": cs,
-        "controlPoints": [{"label": lab, "position": pos, "positionStatus": state}
-                          for lab, pos, state in points]}]}
+    return {
+        "@schema": "https://example/markups-schema-v1.0.3.json#",
+        "markups": [
+            {
+                "type": "Fiducial",
+                "coordinateSystem": cs,
+                "controlPoints": [
+                    {"label": lab, "position": pos, "positionStatus": state}
+                    for lab, pos, state in points
+                ],
+            }
+        ],
+    }
 
 
 def test_hand_written_ras_and_lps_files_agree(tmp_path):
-    ras = [("Lex", [31.5, 20.0, 5.0], "defined"), ("Rex", [-30.0, 19.5, 5.25], "defined"),
-           ("prn", [0.0, 55.0, -10.0], "defined")]
+    ras = [
+        ("Lex", [31.5, 20.0, 5.0], "defined"),
+        ("Rex", [-30.0, 19.5, 5.25], "defined"),
+        ("prn", [0.0, 55.0, -10.0], "defined"),
+    ]
     lps = [(lab, [-x, -y, z], state) for lab, (x, y, z), state in ras]
     (tmp_path / "ras.mrk.json").write_text(json.dumps(_mrk("RAS", ras)), encoding="utf-8")
     (tmp_path / "lps.mrk.json").write_text(json.dumps(_mrk("LPS", lps)), encoding="utf-8")
@@ -104,20 +136,33 @@ def test_hand_written_ras_and_lps_files_agree(tmp_path):
     assert a["ex_l"].position.tolist() == [31.5, 20.0, 5.0]
     header = "# Markups fiducial file version = 4.10\n# CoordinateSystem = {}\n"
     for flag, rows in (("0", ras), ("1", lps), ("RAS", ras), ("LPS", lps)):
-        body = "".join(f"vtkMRMLMarkupsFiducialNode_{i},{p[0]},{p[1]},{p[2]},0,0,0,1,1,1,0,{lab},,\n"
-                       for i, (lab, p, _) in enumerate(rows))
+        body = "".join(
+            f"vtkMRMLMarkupsFiducialNode_{i},{p[0]},{p[1]},{p[2]},0,0,0,1,1,1,0,{lab},,\n"
+            for i, (lab, p, _) in enumerate(rows)
+        )
         (tmp_path / "f.fcsv").write_text(header.format(flag) + body, encoding="utf-8")
         assert read_fcsv(tmp_path / "f.fcsv", "skin").landmarks.equals(a), flag
 
 
 def test_unknown_duplicate_undefined_reported_by_name(tmp_path):
-    doc = _mrk("RAS", [("exL", [1.0, 2.0, 3.0], "defined"), ("ex_l", [9.0, 9.0, 9.0], "defined"),
-                       ("foo", [0.0, 0.0, 0.0], "defined"), ("prn", [0.0, 0.0, 0.0], "undefined"),
-                       ("sn", [0.0, 50.0, -20.0], "preview")])
+    doc = _mrk(
+        "RAS",
+        [
+            ("exL", [1.0, 2.0, 3.0], "defined"),
+            ("ex_l", [9.0, 9.0, 9.0], "defined"),
+            ("foo", [0.0, 0.0, 0.0], "defined"),
+            ("prn", [0.0, 0.0, 0.0], "undefined"),
+            ("sn", [0.0, 50.0, -20.0], "preview"),
+        ],
+    )
     path = tmp_path / "mixed.mrk.json"
     path.write_text(json.dumps(doc), encoding="utf-8")
     r = read_mrk_json(path, "skin")
-    assert r.landmarks.codes == ("ex_l",) and r.landmarks["ex_l"].position.tolist() == [1.0, 2.0, 3.0]
+    assert r.landmarks.codes == ("ex_l",) and r.landmarks["ex_l"].position.tolist() == [
+        1.0,
+        2.0,
+        3.0,
+    ]
     assert (r.unknown, r.duplicates, r.undefined) == (("foo",), ("ex_l",), ("prn", "sn"))
     text = " ".join(r.messages)
     assert "foo" in text and "ex_l" in text and "prn" in text
@@ -130,16 +175,22 @@ def test_unknown_duplicate_undefined_reported_by_name(tmp_path):
 
 
 def test_meshlab_file(tmp_path):
-    text = ('<!DOCTYPE PickedPoints>\n<PickedPoints>\n <DocumentData>\n'
-            '  <DateTime time="10:00:00" date="2024-01-01"/>\n  <User name="x"/>\n'
-            '  <DataFileName name="skull.ply"/>\n  <templateName name=""/>\n </DocumentData>\n'
-            ' <point x="1.5" y="-2" z="3e1" active="1" name="zyL"/>\n'
-            ' <point x="0" y="0" z="0" active="0" name="zyR"/>\n'
-            ' <point x="4" y="5" z="6" active="1" name="3"/>\n</PickedPoints>\n')
+    text = (
+        "<!DOCTYPE PickedPoints>\n<PickedPoints>\n <DocumentData>\n"
+        '  <DateTime time="10:00:00" date="2024-01-01"/>\n  <User name="x"/>\n'
+        '  <DataFileName name="skull.ply"/>\n  <templateName name=""/>\n </DocumentData>\n'
+        ' <point x="1.5" y="-2" z="3e1" active="1" name="zyL"/>\n'
+        ' <point x="0" y="0" z="0" active="0" name="zyR"/>\n'
+        ' <point x="4" y="5" z="6" active="1" name="3"/>\n</PickedPoints>\n'
+    )
     path = tmp_path / "skull.pp"
     path.write_text(text, encoding="utf-8")
     r = read_pp(path, "skull")
-    assert r.landmarks.codes == ("zy_l",) and r.landmarks["zy_l"].position.tolist() == [1.5, -2.0, 30.0]
+    assert r.landmarks.codes == ("zy_l",) and r.landmarks["zy_l"].position.tolist() == [
+        1.5,
+        -2.0,
+        30.0,
+    ]
     assert r.undefined == ("zyR",) and r.unknown == ("3",)
 
 
@@ -171,25 +222,49 @@ def test_pp_keeps_mesh_coordinates(tmp_path, sample):
     assert 'x="45.25"' in text and 'name="head.ply"' in text
 
 
-@pytest.mark.parametrize("name,content,problem", [
-    ("cut.mrk.json", '{"@schema": "x", "markups": [{"type": "Fiducial", "controlPoints": [{"lab',
-     "not valid JSON"),
-    ("other.json", '{"hello": 1}', "no 'markups' list"),
-    ("lines.mrk.json", '{"markups": [{"type": "Line", "controlPoints": []}]}', "no point list"),
-    ("badpos.mrk.json", '{"markups": [{"type": "Fiducial", "controlPoints": [{"label": "n", '
-     '"position": [1, "x", 3]}]}]}', "expected a finite number"),
-    ("frame.mrk.json", '{"markups": [{"type": "Fiducial", "coordinateSystem": "IJK"}]}',
-     "coordinate system"),
-    ("broken.pp", "<PickedPoints><point x='1' y='2' z='3' name='n'></PickedPoints>", "broken XML"),
-    ("wrong.pp", "<Scene/>", "not a MeshLab"),
-    ("text.fcsv", "# CoordinateSystem = LPS\nid,one,two,three,0,0,0,1,1,1,0,n,,\n",
-     "expected a finite number"),
-    ("nan.fcsv", "# CoordinateSystem = RAS\nid,1,inf,3,0,0,0,1,1,1,0,n,,\n", "expected a finite number"),
-    ("cm.csv", "# units: cm; frame: x\ncode,x_mm,y_mm,z_mm\nn,1,2,3\n", "'cm'"),
-    ("cols.csv", "code,a,b,c\nn,1,2,3\n", "x_mm"),
-    ("status.csv", "code,x_mm,y_mm,z_mm,status\nn,1,2,3,maybe\n", "unknown status"),
-    ("points.xyz", "1 2 3\n", "unknown landmark file type"),
-])
+@pytest.mark.parametrize(
+    "name,content,problem",
+    [
+        (
+            "cut.mrk.json",
+            '{"@schema": "x", "markups": [{"type": "Fiducial", "controlPoints": [{"lab',
+            "not valid JSON",
+        ),
+        ("other.json", '{"hello": 1}', "no 'markups' list"),
+        ("lines.mrk.json", '{"markups": [{"type": "Line", "controlPoints": []}]}', "no point list"),
+        (
+            "badpos.mrk.json",
+            '{"markups": [{"type": "Fiducial", "controlPoints": [{"label": "n", '
+            '"position": [1, "x", 3]}]}]}',
+            "expected a finite number",
+        ),
+        (
+            "frame.mrk.json",
+            '{"markups": [{"type": "Fiducial", "coordinateSystem": "IJK"}]}',
+            "coordinate system",
+        ),
+        (
+            "broken.pp",
+            "<PickedPoints><point x='1' y='2' z='3' name='n'></PickedPoints>",
+            "broken XML",
+        ),
+        ("wrong.pp", "<Scene/>", "not a MeshLab"),
+        (
+            "text.fcsv",
+            "# CoordinateSystem = LPS\nid,one,two,three,0,0,0,1,1,1,0,n,,\n",
+            "expected a finite number",
+        ),
+        (
+            "nan.fcsv",
+            "# CoordinateSystem = RAS\nid,1,inf,3,0,0,0,1,1,1,0,n,,\n",
+            "expected a finite number",
+        ),
+        ("cm.csv", "# units: cm; frame: x\ncode,x_mm,y_mm,z_mm\nn,1,2,3\n", "'cm'"),
+        ("cols.csv", "code,a,b,c\nn,1,2,3\n", "x_mm"),
+        ("status.csv", "code,x_mm,y_mm,z_mm,status\nn,1,2,3,maybe\n", "unknown status"),
+        ("points.xyz", "1 2 3\n", "unknown landmark file type"),
+    ],
+)
 def test_corrupt_files_raise_input_error(tmp_path, name, content, problem):
     path = tmp_path / name
     path.write_text(content, encoding="utf-8")
@@ -216,12 +291,18 @@ def test_surface_mismatch_is_noted(tmp_path):
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(xyz=st.lists(st.tuples(finite, finite, finite), min_size=2, max_size=2),
-       conf=st.floats(0.0, 1.0), text=st.text(max_size=20))
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    xyz=st.lists(st.tuples(finite, finite, finite), min_size=2, max_size=2),
+    conf=st.floats(0.0, 1.0),
+    text=st.text(max_size=20),
+)
 def test_any_float_round_trips(tmp_path_factory, xyz, conf, text):
-    lms = LandmarkSet("skull", (Landmark("zy_l", xyz[0], "suggested", conf, text),
-                                Landmark("zy_r", xyz[1])))
+    lms = LandmarkSet(
+        "skull", (Landmark("zy_l", xyz[0], "suggested", conf, text), Landmark("zy_r", xyz[1]))
+    )
     folder = tmp_path_factory.mktemp("prop")
     for ext in EXTENSIONS:
         path = Path(folder) / f"p{ext}"

@@ -21,11 +21,17 @@ from _mesh_cases import ids as _ids
 # ------------------------------------------------------------------ errors
 # OBJ has no length information: a cut between face lines cannot be detected, so
 # OBJ is only cut inside the vertex block (which leaves no faces)
-CUTS = [(ext, binary, keep) for ext, binary in FORMATS for keep in (0.5, 0.95)
-        if not (ext == ".obj" and keep > 0.5)]
+CUTS = [
+    (ext, binary, keep)
+    for ext, binary in FORMATS
+    for keep in (0.5, 0.95)
+    if not (ext == ".obj" and keep > 0.5)
+]
 
 
-CUT_IDS = [f"{name}-{keep}" for name, (_, _, keep) in zip(_ids([c[:2] for c in CUTS]), CUTS)]
+CUT_IDS = [
+    f"{name}-{keep}" for name, (_, _, keep) in zip(_ids([c[:2] for c in CUTS]), CUTS, strict=False)
+]
 
 
 @pytest.mark.parametrize(("ext", "binary", "keep"), CUTS, ids=CUT_IDS)
@@ -38,25 +44,42 @@ def test_truncated_files_raise_input_error(tmp_path, head_mesh, ext, binary, kee
     assert str(path) in str(info.value)
 
 
-@pytest.mark.parametrize(("name", "content", "words"), [
-    ("junk.ply",
-     b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n",
-     "x, y and z"),
-    ("range.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-     b"property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-     b"0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "out of range"),
-    ("text.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
-     b"property float z\nend_header\n0 zero 0\n", "non-numeric"),
-    ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles"),
-    ("text.obj", b"v 0 0 0\nv 1 zero 0\nv 0 1 0\nf 1 2 3\n", "non-numeric"),
-    ("zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "index 0"),
-    ("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "out of range"),
-    ("grid.vtk", b"# vtk DataFile Version 3.0\nt\nASCII\nDATASET STRUCTURED_POINTS\n", "POLYDATA"),
-    ("notxml.vtp", b"<VTKFile type='PolyData'><PolyData>", "malformed"),
-    ("grid.vtp", b"<VTKFile type='ImageData'/>", "PolyData"),
-    ("short.stl", b"not an stl", "truncated"),
-    ("empty.ply", b"", "empty"),
-])
+@pytest.mark.parametrize(
+    ("name", "content", "words"),
+    [
+        (
+            "junk.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n",
+            "x, y and z",
+        ),
+        (
+            "range.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            b"property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+            b"0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+            "out of range",
+        ),
+        (
+            "text.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+            b"property float z\nend_header\n0 zero 0\n",
+            "non-numeric",
+        ),
+        ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles"),
+        ("text.obj", b"v 0 0 0\nv 1 zero 0\nv 0 1 0\nf 1 2 3\n", "non-numeric"),
+        ("zero.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "index 0"),
+        ("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "out of range"),
+        (
+            "grid.vtk",
+            b"# vtk DataFile Version 3.0\nt\nASCII\nDATASET STRUCTURED_POINTS\n",
+            "POLYDATA",
+        ),
+        ("notxml.vtp", b"<VTKFile type='PolyData'><PolyData>", "malformed"),
+        ("grid.vtp", b"<VTKFile type='ImageData'/>", "PolyData"),
+        ("short.stl", b"not an stl", "truncated"),
+        ("empty.ply", b"", "empty"),
+    ],
+)
 def test_bad_files_raise_plain_input_error(tmp_path, name, content, words):
     path = tmp_path / name
     path.write_bytes(content)

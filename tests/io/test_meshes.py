@@ -18,6 +18,7 @@ from workbench.io.meshes import read_mesh, write_mesh
 from _mesh_cases import FLOAT32_FORMATS, FORMATS
 from _mesh_cases import ids as _ids
 
+
 @pytest.fixture(scope="module")
 def skull(skull_obj: Path):
     return read_mesh(skull_obj, kind="skull")
@@ -132,8 +133,17 @@ def test_written_files_state_units_mm(tmp_path, head_mesh, ext, binary):
 
 
 # ------------------------------------------------------------------ files from pyvista / VTK
-PV_FORMATS = [(".ply", True), (".ply", False), (".stl", True), (".stl", False),
-              (".vtk", True), (".vtk", False), (".vtp", True), (".vtp", False), (".obj", True)]
+PV_FORMATS = [
+    (".ply", True),
+    (".ply", False),
+    (".stl", True),
+    (".stl", False),
+    (".vtk", True),
+    (".vtk", False),
+    (".vtp", True),
+    (".vtp", False),
+    (".obj", True),
+]
 
 
 @pytest.mark.parametrize(("ext", "binary"), PV_FORMATS, ids=_ids(PV_FORMATS))
@@ -177,8 +187,11 @@ def test_reads_every_vtp_layout(tmp_path, fsaverage_ply, variant):
     path = tmp_path / "variant.vtp"
     writer.SetFileName(str(path))
     writer.SetInputData(poly)
-    {"binary": writer.SetDataModeToBinary, "appended": writer.SetDataModeToAppended,
-     "ascii": writer.SetDataModeToAscii}[mode]()
+    {
+        "binary": writer.SetDataModeToBinary,
+        "appended": writer.SetDataModeToAppended,
+        "ascii": writer.SetDataModeToAscii,
+    }[mode]()
     writer.SetEncodeAppendedData(encode)
     if compressed:
         writer.SetCompressorTypeToZLib()
@@ -216,16 +229,25 @@ def test_reads_classic_legacy_vtk(tmp_path, fsaverage_ply, binary):
 
 
 # ------------------------------------------------------------------ format details
-def _ply_bytes(fmt: str, verts, polys, vtype="float", ctype="uchar", itype="int",
-               name="vertex_indices") -> bytes:
+def _ply_bytes(
+    fmt: str, verts, polys, vtype="float", ctype="uchar", itype="int", name="vertex_indices"
+) -> bytes:
     order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
-    head = (f"ply\nformat {fmt} 1.0\ncomment test\nelement vertex {len(verts)}\n"
-            f"property {vtype} x\nproperty {vtype} y\nproperty {vtype} z\nproperty uchar red\n"
-            f"element face {len(polys)}\nproperty list {ctype} {itype} {name}\n"
-            "property float quality\nelement edge 1\nproperty int vertex1\nproperty int vertex2\n"
-            "end_header\n").encode()
-    types = {"float": "f4", "double": "f8", "uchar": "u1", "ushort": "u2",
-             "int": "i4", "uint": "u4"}
+    head = (
+        f"ply\nformat {fmt} 1.0\ncomment test\nelement vertex {len(verts)}\n"
+        f"property {vtype} x\nproperty {vtype} y\nproperty {vtype} z\nproperty uchar red\n"
+        f"element face {len(polys)}\nproperty list {ctype} {itype} {name}\n"
+        "property float quality\nelement edge 1\nproperty int vertex1\nproperty int vertex2\n"
+        "end_header\n"
+    ).encode()
+    types = {
+        "float": "f4",
+        "double": "f8",
+        "uchar": "u1",
+        "ushort": "u2",
+        "int": "i4",
+        "uint": "u4",
+    }
     if order is None:
         body = "".join(f"{x!r} {y!r} {z!r} 7\n" for x, y, z in verts)
         body += "".join(f"{len(p)} {' '.join(map(str, p))} 0.5\n" for p in polys) + "0 1\n"
@@ -234,23 +256,30 @@ def _ply_bytes(fmt: str, verts, polys, vtype="float", ctype="uchar", itype="int"
     for v in verts:
         out += [np.array(v, order + types[vtype]).tobytes(), b"\x07"]
     for p in polys:
-        out += [np.array(len(p), order + types[ctype]).tobytes(),
-                np.array(p, order + types[itype]).tobytes(), np.array(0.5, order + "f4").tobytes()]
+        out += [
+            np.array(len(p), order + types[ctype]).tobytes(),
+            np.array(p, order + types[itype]).tobytes(),
+            np.array(0.5, order + "f4").tobytes(),
+        ]
     out.append(np.array([0, 1], order + "i4").tobytes())
     return b"".join(out)
 
 
-SQUARE_PYRAMID = ([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0),
-                   (0.5, 0.5, 1.0)],
-                  [[3, 2, 1, 0], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+SQUARE_PYRAMID = (
+    [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0), (0.5, 0.5, 1.0)],
+    [[3, 2, 1, 0], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]],
+)
 PYRAMID_TRIS = [[3, 2, 1], [3, 1, 0], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
 
 
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
-@pytest.mark.parametrize(("vtype", "ctype", "itype", "name"), [
-    ("float", "uchar", "int", "vertex_indices"),
-    ("double", "ushort", "uint", "vertex_index"),
-])
+@pytest.mark.parametrize(
+    ("vtype", "ctype", "itype", "name"),
+    [
+        ("float", "uchar", "int", "vertex_indices"),
+        ("double", "ushort", "uint", "vertex_index"),
+    ],
+)
 def test_ply_variants(tmp_path, fmt, vtype, ctype, itype, name):
     verts, polys = SQUARE_PYRAMID
     path = tmp_path / "pyramid.ply"
@@ -303,8 +332,14 @@ def test_binary_stl_starting_with_solid(tmp_path, head_mesh):
 
 
 def test_stl_merges_identical_corners_exactly(tmp_path):
-    tris = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[1, 0, 0], [1, 1, 0], [0, 1, 0]],
-                     [[-0.0, 0, 0], [0, 1, 0], [0, 0, 1]], [[1e-7, 0, 0], [0, 1, 0], [0, 0, 1]]])
+    tris = np.array(
+        [
+            [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+            [[1, 0, 0], [1, 1, 0], [0, 1, 0]],
+            [[-0.0, 0, 0], [0, 1, 0], [0, 0, 1]],
+            [[1e-7, 0, 0], [0, 1, 0], [0, 0, 1]],
+        ]
+    )
     facets = [
         " facet normal 0 0 1\n  outer loop\n"
         + "".join(f"   vertex {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in t)
@@ -323,7 +358,7 @@ def _canonical(faces: np.ndarray) -> np.ndarray:
     """Rows rotated so the smallest index comes first (winding kept), then sorted."""
     faces = np.asarray(faces)
     shift = faces.argmin(axis=1)
-    rolled = np.stack([np.roll(f, -s) for f, s in zip(faces, shift)])
+    rolled = np.stack([np.roll(f, -s) for f, s in zip(faces, shift, strict=False)])
     return rolled[np.lexsort(rolled.T[::-1])]
 
 
@@ -357,8 +392,9 @@ def test_vtp_joint_base64_header_and_several_pieces(tmp_path):
         "</Polys></Piece>"
     )
     path = tmp_path / "joint.vtp"
-    path.write_text(f'<VTKFile type="PolyData" version="0.1"><PolyData>{piece}{piece}'
-                    "</PolyData></VTKFile>")
+    path.write_text(
+        f'<VTKFile type="PolyData" version="0.1"><PolyData>{piece}{piece}</PolyData></VTKFile>'
+    )
     mesh = read_mesh(path).mesh
     assert np.array_equal(mesh.vertices, np.concatenate([pts, pts]))
     assert np.array_equal(mesh.faces, [[0, 1, 2], [3, 4, 5]])

@@ -10,8 +10,14 @@ import pytest
 
 from workbench.core.errors import InputError
 from workbench.io.outputs import (
-    backup_existing, backup_name, check_output_file, check_output_folder, output_file,
-    same_file, staged_folder, write_folder,
+    backup_existing,
+    backup_name,
+    check_output_file,
+    check_output_folder,
+    output_file,
+    same_file,
+    staged_folder,
+    write_folder,
 )
 
 
@@ -20,8 +26,9 @@ def _sha(path: Path) -> str:
 
 
 def _tree(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file()}
+    return {
+        str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()
+    }
 
 
 def test_same_file_sees_through_symlinks_and_hard_links(tmp_path: Path) -> None:
@@ -65,7 +72,7 @@ def test_existing_output_file_needs_force_and_is_kept_as_numbered_backup(tmp_pat
     with output_file(out, [], force=True, notify=notes.append) as path:
         tmp = path.with_name(".new")
         tmp.write_text("second")
-        os.replace(tmp, path)         # what the atomic writers do
+        os.replace(tmp, path)  # what the atomic writers do
     assert out.read_text() == "second"
     assert (tmp_path / "skull_landmarks.1.mrk.json").read_text() == "first"
     assert notes and "skull_landmarks.1.mrk.json" in notes[0]
@@ -134,7 +141,7 @@ def test_staged_folder_refuses_then_keeps_the_old_run(tmp_path: Path) -> None:
     assert "recon.1" in str(info.value)
     with staged_folder(out, True, []) as temp:
         assert temp.parent == out.parent and temp.name.startswith(".recon.partial-")
-        assert _tree(out) == old         # untouched while the job runs
+        assert _tree(out) == old  # untouched while the job runs
         (temp / "face.ply").write_text("run 2")
         (temp / "report.json").write_text("{}")
     assert _tree(out) == {"face.ply": b"run 2", "report.json": b"{}"}

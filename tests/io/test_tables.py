@@ -53,7 +53,9 @@ def test_every_table_code_is_in_the_catalogue() -> None:
 
 def test_user_table_errors_name_the_problem(tmp_path: Path) -> None:
     path = tmp_path / "mine.csv"
-    path.write_text("landmark_code,group,mean_mm,source\npg,adult,11,me\nxyz,adult,5,me\nfoo,adult,5,me\n")
+    path.write_text(
+        "landmark_code,group,mean_mm,source\npg,adult,11,me\nxyz,adult,5,me\nfoo,adult,5,me\n"
+    )
     with pytest.raises(InputError, match=r"mine.csv.*unknown skull landmark codes: xyz, foo"):
         load_depth_table(path)
     path.write_text("landmark_code,group,mean_mm,source\npg,adult,-3,me\n")

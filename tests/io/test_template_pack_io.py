@@ -45,7 +45,7 @@ def test_edited_or_incomplete_pack_is_refused(head_female, tmp_path):
 def test_cached_head_is_reused_and_keyed_by_sources(head_male):
     key = source_key()
     assert len(key) == 16
-    again = reference_head("male")          # from the session cache: same content
+    again = reference_head("male")  # from the session cache: same content
     assert again.content_hash == head_male.content_hash
     with pytest.raises(InputError, match="sex"):
         reference_head("other")

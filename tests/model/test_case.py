@@ -56,9 +56,15 @@ def full_case() -> Case:
         evidence=(EvidenceFile("skull.obj", SHA, 12, "skull_mesh", "/x/skull.obj", "unitless"),),
         specimen=Specimen(tetra(), "mm", transform),
         landmarks={"skull": skull, "skin": skin},
-        dowels=DowelSettings(table="stephan_2013", sex="female", build=-1.0,
-                             overrides={"g": 6.5}, excluded=("ecm2s_l",),
-                             tissue_model="reference", region_factors={"nose": 1.2}),
+        dowels=DowelSettings(
+            table="stephan_2013",
+            sex="female",
+            build=-1.0,
+            overrides={"g": 6.5},
+            excluded=("ecm2s_l",),
+            tissue_model="reference",
+            region_factors={"nose": 1.2},
+        ),
         orientation=Orientation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0)),
         guides=GuideList(({"id": "nose_tip", "value": [-20.0, 95.0], "source": "user"},)),
         parameters={"template_id": "male-v1", "notes": {"nose": [1, 2.5, None, True]}},
@@ -79,8 +85,12 @@ def json_round_trip(case: Case) -> Case:
         doc[name] = state
     doc = json.loads(json.dumps(doc, allow_nan=False))
     arrays = {sha: np.load(io.BytesIO(data), allow_pickle=False) for sha, data in blobs.items()}
-    state = {name: join_arrays(part, lambda ref: arrays[ref["@array"]])
-             if PARTS[name].has_arrays else part for name, part in doc.items()}
+    state = {
+        name: join_arrays(part, lambda ref: arrays[ref["@array"]])
+        if PARTS[name].has_arrays
+        else part
+        for name, part in doc.items()
+    }
     return Case.from_state(state)
 
 
@@ -312,17 +322,26 @@ def test_states_equal_is_exact() -> None:
 
 
 json_values = st.recursive(
-    st.none() | st.booleans() | st.integers() | st.text(max_size=5)
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.text(max_size=5)
     | st.floats(allow_nan=False, allow_infinity=False),
-    lambda children: st.lists(children, max_size=3)
-    | st.dictionaries(st.text(max_size=4), children, max_size=3),
+    lambda children: (
+        st.lists(children, max_size=3) | st.dictionaries(st.text(max_size=4), children, max_size=3)
+    ),
     max_leaves=10,
 )
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.dictionaries(st.sampled_from(["@array", "dtype", "k"]) | st.text(min_size=1, max_size=8),
-                       json_values, max_size=4))
+@given(
+    st.dictionaries(
+        st.sampled_from(["@array", "dtype", "k"]) | st.text(min_size=1, max_size=8),
+        json_values,
+        max_size=4,
+    )
+)
 def test_parameters_round_trip_any_json(values: dict) -> None:
     case = Case(parameters=values)
     assert thaw_json(case.parameters) == json.loads(json.dumps(values))
@@ -341,8 +360,10 @@ landmark_st = st.builds(
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(landmark_st, max_size=6, unique_by=lambda lm: lm.code),
-       st.sampled_from(["skin", "skull"]))
+@given(
+    st.lists(landmark_st, max_size=6, unique_by=lambda lm: lm.code),
+    st.sampled_from(["skin", "skull"]),
+)
 def test_landmark_sets_round_trip(landmarks: list, surface: str) -> None:
     lmset = LandmarkSet(surface, tuple(landmarks))
     state = json.loads(json.dumps(landmark_set_to_state(lmset), allow_nan=False))
@@ -358,6 +379,13 @@ def test_frozen_json_rejects_non_json() -> None:
 
 def test_module_docstring_fixes_units_and_frames() -> None:
     doc = case_module.__doc__ or ""
-    for phrase in ("Notes", "millimetres", "radians", "degrees", "input frame",
-                   "Frankfort", "input_to_head"):
+    for phrase in (
+        "Notes",
+        "millimetres",
+        "radians",
+        "degrees",
+        "input frame",
+        "Frankfort",
+        "input_to_head",
+    ):
         assert phrase in doc

@@ -11,24 +11,32 @@ from workbench.model.muscles import MuscleGrid, SurfacePoints
 
 
 @pytest.fixture(scope="module")
-def skin():  # noqa: ANN201
+def skin():
     return build_skin("female")
 
 
-def _grid(skin) -> MuscleGrid:  # noqa: ANN001
+def _grid(skin) -> MuscleGrid:
     rng = np.random.default_rng(3)
     faces = rng.integers(0, skin.mesh.n_faces, 6)
     bary = rng.dirichlet(np.ones(3), 6)
-    return MuscleGrid("zygomaticus_major_l", "zygomaticus major", "linear", "skull", "left",
-                      (2, 2, 2), SurfacePoints(faces, bary, np.full(6, 4.0)))
+    return MuscleGrid(
+        "zygomaticus_major_l",
+        "zygomaticus major",
+        "linear",
+        "skull",
+        "left",
+        (2, 2, 2),
+        SurfacePoints(faces, bary, np.full(6, 4.0)),
+    )
 
 
-def test_grid_points_follow_a_warp_of_the_skin(skin) -> None:  # noqa: ANN001
+def test_grid_points_follow_a_warp_of_the_skin(skin) -> None:
     grid = _grid(skin)
     on_surface = SurfacePoints(grid.points.faces, grid.points.barycentric)
     before = on_surface.evaluate(skin.mesh)
-    warp = fit_warp(skin.landmarks.positions[:12],
-                    skin.landmarks.positions[:12] * 1.1 + [0.0, 2.0, 0.0])
+    warp = fit_warp(
+        skin.landmarks.positions[:12], skin.landmarks.positions[:12] * 1.1 + [0.0, 2.0, 0.0]
+    )
     warped = skin.mesh.with_vertices(warp(skin.mesh.vertices))
     after = on_surface.evaluate(warped)
     # points on the surface are barycentric combinations, so they follow the
@@ -41,7 +49,7 @@ def test_grid_points_follow_a_warp_of_the_skin(skin) -> None:  # noqa: ANN001
     assert np.allclose(np.linalg.norm(below - before, axis=1), 4.0)
 
 
-def test_grid_state_round_trip_and_validation(skin) -> None:  # noqa: ANN001
+def test_grid_state_round_trip_and_validation(skin) -> None:
     grid = _grid(skin)
     again = MuscleGrid.from_state(grid.to_state())
     assert np.array_equal(again.points.faces, grid.points.faces)

@@ -33,16 +33,31 @@ def test_dowel_defaults() -> None:
     d = DowelSettings()
     assert (d.table, d.sex, d.build, d.tissue_model) == ("ttable_2023", "male", "normal", "table")
     assert dict(d.overrides) == {} and d.excluded == () and dict(d.region_factors) == {}
-    assert d.to_state() == {"table": "ttable_2023", "sex": "male", "build": "normal",
-                            "overrides": {}, "excluded": [], "tissue_model": "table",
-                            "region_factors": {}}
+    assert d.to_state() == {
+        "table": "ttable_2023",
+        "sex": "male",
+        "build": "normal",
+        "overrides": {},
+        "excluded": [],
+        "tissue_model": "table",
+        "region_factors": {},
+    }
 
 
 def test_dowels_normalise_and_compare_by_value() -> None:
-    a = DowelSettings(table=" ttable_2023 ", build="1.5", overrides={"n": 7, "g": 6.5},
-                      excluded=["zy_r", "zy_l", "zy_r"], region_factors={"nose": 1.2})
-    b = DowelSettings(build=1.5, overrides={"g": 6.5, "n": 7.0}, excluded=("zy_l", "zy_r"),
-                      region_factors={"nose": 1.2})
+    a = DowelSettings(
+        table=" ttable_2023 ",
+        build="1.5",
+        overrides={"n": 7, "g": 6.5},
+        excluded=["zy_r", "zy_l", "zy_r"],
+        region_factors={"nose": 1.2},
+    )
+    b = DowelSettings(
+        build=1.5,
+        overrides={"g": 6.5, "n": 7.0},
+        excluded=("zy_l", "zy_r"),
+        region_factors={"nose": 1.2},
+    )
     assert a == b and hash(a) == hash(b)
     assert a.table == "ttable_2023" and a.build == 1.5 and a.build_text == "1.5"
     assert list(a.overrides) == ["g", "n"] and a.excluded == ("zy_l", "zy_r")
@@ -55,42 +70,50 @@ def test_dowels_normalise_and_compare_by_value() -> None:
 @given(
     table=st.sampled_from(["ttable_2023", "rhine_1983_sw_native_american", "/x/my table.csv"]),
     sex=st.sampled_from(["female", "male"]),
-    build=st.one_of(st.sampled_from(["slender", "normal", "obese"]),
-                    st.floats(-4, 4, allow_nan=False)),
-    overrides=st.dictionaries(st.sampled_from(["g", "n", "pg", "i:vault_1"]),
-                              st.floats(0.1, MAX_DEPTH_MM, allow_nan=False), max_size=3),
+    build=st.one_of(
+        st.sampled_from(["slender", "normal", "obese"]), st.floats(-4, 4, allow_nan=False)
+    ),
+    overrides=st.dictionaries(
+        st.sampled_from(["g", "n", "pg", "i:vault_1"]),
+        st.floats(0.1, MAX_DEPTH_MM, allow_nan=False),
+        max_size=3,
+    ),
     excluded=st.lists(st.sampled_from(["g", "ecm2s_l", "zy_r"]), max_size=3),
     model=st.sampled_from(TISSUE_MODELS),
     factors=st.dictionaries(st.sampled_from(REGIONS), st.floats(*FACTOR_RANGE), max_size=3),
 )
-def test_dowels_round_trip_through_json(table, sex, build, overrides, excluded, model,
-                                        factors) -> None:  # noqa: ANN001
+def test_dowels_round_trip_through_json(
+    table, sex, build, overrides, excluded, model, factors
+) -> None:
     d = DowelSettings(table, sex, build, overrides, excluded, model, factors)
     again = DowelSettings.from_state(json_again(d.to_state()))
     assert again == d and again.to_state() == d.to_state()
 
 
-@pytest.mark.parametrize(("fields", "message"), [
-    ({"table": ""}, "depth table"),
-    ({"sex": "unknown"}, "sex"),
-    ({"sex": None}, "sex"),
-    ({"build": "slim"}, "unknown build"),
-    ({"build": True}, "unknown build"),
-    ({"build": math.inf}, "finite"),
-    ({"overrides": {"g": 0.0}}, "depth override g"),
-    ({"overrides": {"g": -1.0}}, "depth override g"),
-    ({"overrides": {"g": math.nan}}, "depth override g"),
-    ({"overrides": {"g": 250.0}}, "depth override g"),
-    ({"overrides": {"g": "six"}}, "depth override g"),
-    ({"overrides": {"": 5.0}}, "landmark code"),
-    ({"overrides": [("g", 5.0)]}, "mapping"),
-    ({"excluded": "g"}, "list of codes"),
-    ({"excluded": ["g", 3]}, "landmark code"),
-    ({"tissue_model": "rubber"}, "tissue model"),
-    ({"region_factors": {"ears": 1.0}}, "unknown region"),
-    ({"region_factors": {"nose": 5.0}}, "outside 0.3-3"),
-    ({"region_factors": {"nose": math.nan}}, "outside"),
-])
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"table": ""}, "depth table"),
+        ({"sex": "unknown"}, "sex"),
+        ({"sex": None}, "sex"),
+        ({"build": "slim"}, "unknown build"),
+        ({"build": True}, "unknown build"),
+        ({"build": math.inf}, "finite"),
+        ({"overrides": {"g": 0.0}}, "depth override g"),
+        ({"overrides": {"g": -1.0}}, "depth override g"),
+        ({"overrides": {"g": math.nan}}, "depth override g"),
+        ({"overrides": {"g": 250.0}}, "depth override g"),
+        ({"overrides": {"g": "six"}}, "depth override g"),
+        ({"overrides": {"": 5.0}}, "landmark code"),
+        ({"overrides": [("g", 5.0)]}, "mapping"),
+        ({"excluded": "g"}, "list of codes"),
+        ({"excluded": ["g", 3]}, "landmark code"),
+        ({"tissue_model": "rubber"}, "tissue model"),
+        ({"region_factors": {"ears": 1.0}}, "unknown region"),
+        ({"region_factors": {"nose": 5.0}}, "outside 0.3-3"),
+        ({"region_factors": {"nose": math.nan}}, "outside"),
+    ],
+)
 def test_invalid_dowel_settings_are_refused(fields: dict, message: str) -> None:
     with pytest.raises(SetupError, match=message) as info:
         DowelSettings(**fields)
@@ -139,8 +162,10 @@ def test_orientation_stores_unit_vectors_and_round_trips() -> None:
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.tuples(*[st.floats(-10, 10, allow_nan=False)] * 3),
-       st.tuples(*[st.floats(-10, 10, allow_nan=False)] * 3))
+@given(
+    st.tuples(*[st.floats(-10, 10, allow_nan=False)] * 3),
+    st.tuples(*[st.floats(-10, 10, allow_nan=False)] * 3),
+)
 def test_orientation_state_is_a_fixed_point(a: tuple, s: tuple) -> None:
     try:
         o = Orientation(a, s)
@@ -151,13 +176,16 @@ def test_orientation_state_is_a_fixed_point(a: tuple, s: tuple) -> None:
     assert math.isclose(sum(x * x for x in o.anterior), 1.0, rel_tol=1e-12)
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (((0, 0, 0), (0, 1, 0)), "zero length"),
-    (((0, 0, 1), (0, 0, -3)), "parallel"),
-    (((0, 0, 1), (0, 1)), "3 finite numbers"),
-    (((0, 0, math.nan), (0, 1, 0)), "3 finite numbers"),
-    (((0, 0, 1), (0, 1, 0), (1, 0, "x")), "3 finite numbers"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (((0, 0, 0), (0, 1, 0)), "zero length"),
+        (((0, 0, 1), (0, 0, -3)), "parallel"),
+        (((0, 0, 1), (0, 1)), "3 finite numbers"),
+        (((0, 0, math.nan), (0, 1, 0)), "3 finite numbers"),
+        (((0, 0, 1), (0, 1, 0), (1, 0, "x")), "3 finite numbers"),
+    ],
+)
 def test_invalid_orientations_are_refused(args: tuple, message: str) -> None:
     with pytest.raises(SetupError, match=message):
         Orientation(*args)
@@ -166,9 +194,19 @@ def test_invalid_orientations_are_refused(args: tuple, message: str) -> None:
 
 
 # ---------------------------------------------------------------- guides
-GUIDE = {"id": "nose_tip", "label": "Nose tip", "kind": "point", "view": "lateral",
-         "value": [-20.0, 95.0], "affects": ["prn"], "rule_id": "r", "citation": "c",
-         "source": "user", "enabled": True, "derivation": ""}
+GUIDE = {
+    "id": "nose_tip",
+    "label": "Nose tip",
+    "kind": "point",
+    "view": "lateral",
+    "value": [-20.0, 95.0],
+    "affects": ["prn"],
+    "rule_id": "r",
+    "citation": "c",
+    "source": "user",
+    "enabled": True,
+    "derivation": "",
+}
 
 
 def test_guide_list_is_frozen_json_and_round_trips() -> None:
@@ -190,15 +228,18 @@ def test_guide_list_matches_the_services_json() -> None:
     assert guides_from_json(stored.to_state()) == guides
 
 
-@pytest.mark.parametrize(("value", "message"), [
-    ({"guides": []}, "list of guides"),
-    ("nose", "list of guides"),
-    ([GUIDE, GUIDE], "duplicate guide ids: nose_tip"),
-    ([{**GUIDE, "id": ""}], "non-empty text id"),
-    ([{**GUIDE, "value": []}], "1 or 2 numbers"),
-    ([{**GUIDE, "value": [1.0, "x"]}], "1 or 2 numbers"),
-    ([["nose_tip", 1.0]], "expected an object"),
-])
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ({"guides": []}, "list of guides"),
+        ("nose", "list of guides"),
+        ([GUIDE, GUIDE], "duplicate guide ids: nose_tip"),
+        ([{**GUIDE, "id": ""}], "non-empty text id"),
+        ([{**GUIDE, "value": []}], "1 or 2 numbers"),
+        ([{**GUIDE, "value": [1.0, "x"]}], "1 or 2 numbers"),
+        ([["nose_tip", 1.0]], "expected an object"),
+    ],
+)
 def test_invalid_guide_lists_are_refused(value: object, message: str) -> None:
     with pytest.raises(SetupError, match=message):
         GuideList(value)  # type: ignore[arg-type]

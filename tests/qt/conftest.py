@@ -18,11 +18,12 @@ from pytestqt.qtbot import QtBot
 _KEPT: list = []
 
 
-def _keep(self, widget, *, before_close_func=None) -> None:  # noqa: ANN001
+def _keep(self, widget, *, before_close_func=None) -> None:
     """``qtbot.addWidget``: closed at the end of the test, kept alive until the session ends."""
     request = self._request
-    request.addfinalizer(lambda: (before_close_func(widget) if before_close_func else None,
-                                  widget.close()))
+    request.addfinalizer(
+        lambda: (before_close_func(widget) if before_close_func else None, widget.close())
+    )
     _KEPT.append(widget)
 
 
@@ -30,14 +31,14 @@ QtBot.addWidget = _keep  # type: ignore[method-assign]
 
 
 @pytest.fixture(autouse=True)
-def _private_autosave(monkeypatch, tmp_path_factory):  # noqa: ANN001
+def _private_autosave(monkeypatch, tmp_path_factory):
     monkeypatch.setenv("WORKBENCH_AUTOSAVE_DIR", str(tmp_path_factory.mktemp("autosave")))
     yield
     gc.collect()
 
 
 @pytest.fixture
-def new_window(qtbot):  # noqa: ANN001
+def new_window(qtbot):
     """A factory of shown, non-interactive main windows (``new_window(width, height)``).
 
     Each window's worker and 3D view are shut down in teardown (HEADLESS.md:
@@ -47,7 +48,7 @@ def new_window(qtbot):  # noqa: ANN001
 
     made = []
 
-    def make(width: int = 1200, height: int = 800):  # noqa: ANN202
+    def make(width: int = 1200, height: int = 800):
         w = MainWindow(auto_update=False, interactive=False)
         qtbot.addWidget(w)
         w.resize(width, height)
@@ -64,5 +65,5 @@ def new_window(qtbot):  # noqa: ANN001
 
 
 @pytest.fixture
-def window(new_window):  # noqa: ANN001
+def window(new_window):
     return new_window()

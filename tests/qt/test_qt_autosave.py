@@ -19,21 +19,23 @@ import pytest
 
 pytest.importorskip("pytestqt")
 if os.environ.get("QT_QPA_PLATFORM") != "xcb":
-    pytest.skip("the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
-                allow_module_level=True)
+    pytest.skip(
+        "the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
+        allow_module_level=True,
+    )
 
-from PySide6.QtWidgets import QMessageBox  # noqa: E402
+from PySide6.QtWidgets import QMessageBox
 
-from workbench.commands.reconstruction_setup import SetDowelSettings  # noqa: E402
-from workbench.io.case_file import evidence_bytes, load_case  # noqa: E402
-from workbench.qt import autosave, dialogs  # noqa: E402
-from workbench.qt.autosave import find_recoverable, recover  # noqa: E402
+from workbench.commands.reconstruction_setup import SetDowelSettings
+from workbench.io.case_file import evidence_bytes, load_case
+from workbench.qt import autosave, dialogs
+from workbench.qt.autosave import find_recoverable, recover
 
 pytestmark = pytest.mark.gui
 
 
 @pytest.fixture
-def folder(tmp_path, monkeypatch) -> Path:  # noqa: ANN001
+def folder(tmp_path, monkeypatch) -> Path:
     path = tmp_path / "autosave"
     monkeypatch.setenv("WORKBENCH_AUTOSAVE_DIR", str(path))
     monkeypatch.setenv("WORKBENCH_AUTOSAVE_S", "0")  # tests call autosave() themselves
@@ -41,31 +43,31 @@ def folder(tmp_path, monkeypatch) -> Path:  # noqa: ANN001
 
 
 @pytest.fixture
-def skull_copy(skull_obj, tmp_path) -> Path:  # noqa: ANN001
+def skull_copy(skull_obj, tmp_path) -> Path:
     """A private copy of the skull: deleting it shows the evidence lives on in the snapshot."""
     (tmp_path / "scan").mkdir()
     return Path(shutil.copy(skull_obj, tmp_path / "scan" / "skull.obj"))
 
 
 @pytest.fixture
-def make_window(new_window, folder):  # noqa: ANN001
+def make_window(new_window, folder):
     """Windows made after the autosave folder is set (see ``folder``)."""
     return lambda: new_window(1000, 700)
 
 
 @pytest.fixture
-def window(make_window):  # noqa: ANN001
+def window(make_window):
     return make_window()
 
 
-def _open(qtbot, window, path) -> None:  # noqa: ANN001
+def _open(qtbot, window, path) -> None:
     window.open_skull(path, scale=15.0)
     qtbot.waitUntil(lambda: not window.busy, timeout=30_000)
     assert not window.errors, window.errors
     assert window.document.has_specimen
 
 
-def _edit(qtbot, window) -> None:  # noqa: ANN001
+def _edit(qtbot, window) -> None:
     """Place glabella with a pick on the skull and set the sex of the dowels (two undo steps)."""
     window.landmarks_panel.select("g")
     window.on_pick(np.array(window.document.case.specimen.mesh.vertices[1234]))
@@ -80,7 +82,7 @@ def _dead_pid() -> int:
     return child.pid
 
 
-def _crash(window) -> tuple:  # noqa: ANN001
+def _crash(window) -> tuple:
     """Stop ``window`` as a crash would: files left, owner pid gone. Returns its case."""
     saver = window.autosaver
     saver.abandon()
@@ -93,8 +95,7 @@ def _crash(window) -> tuple:  # noqa: ANN001
     return case, saver
 
 
-def test_crash_then_recover_an_untitled_case(qtbot, make_window, folder, skull_copy,
-                                             tmp_path):  # noqa: ANN001
+def test_crash_then_recover_an_untitled_case(qtbot, make_window, folder, skull_copy, tmp_path):
     original_bytes = skull_copy.read_bytes()
     first = make_window()
     _open(qtbot, first, skull_copy)
@@ -157,7 +158,8 @@ def test_crash_then_recover_an_untitled_case(qtbot, make_window, folder, skull_c
 
 
 def test_recovered_case_saves_to_its_original_file_only_when_saved(
-        qtbot, make_window, folder, skull_copy, tmp_path):  # noqa: ANN001
+    qtbot, make_window, folder, skull_copy, tmp_path
+):
     first = make_window()
     _open(qtbot, first, skull_copy)
     case_path = tmp_path / "case.fcase"
@@ -188,7 +190,8 @@ def test_recovered_case_saves_to_its_original_file_only_when_saved(
 
 
 def test_clean_close_save_discard_and_undo_remove_the_snapshot(
-        qtbot, make_window, folder, skull_copy, tmp_path, monkeypatch):  # noqa: ANN001
+    qtbot, make_window, folder, skull_copy, tmp_path, monkeypatch
+):
     window = make_window()
     _open(qtbot, window, skull_copy)
     saver = window.autosaver
@@ -204,8 +207,7 @@ def test_clean_close_save_discard_and_undo_remove_the_snapshot(
     # a deliberate Discard
     window.redo()
     assert saver.autosave(wait=True) and saver.has_snapshot
-    monkeypatch.setattr(dialogs, "ask_save_changes",
-                        lambda *_a: QMessageBox.StandardButton.Discard)
+    monkeypatch.setattr(dialogs, "ask_save_changes", lambda *_a: QMessageBox.StandardButton.Discard)
     window.interactive = True
     try:
         assert window.may_discard()
@@ -227,8 +229,9 @@ def test_clean_close_save_discard_and_undo_remove_the_snapshot(
     assert list(folder.iterdir()) == []
 
 
-def test_timer_writes_in_the_worker_and_env_zero_disables(qtbot, make_window, folder,
-                                                          skull_copy, monkeypatch):  # noqa: ANN001
+def test_timer_writes_in_the_worker_and_env_zero_disables(
+    qtbot, make_window, folder, skull_copy, monkeypatch
+):
     monkeypatch.setenv("WORKBENCH_AUTOSAVE_S", "0.2")
     window = make_window()
     assert window.autosaver.timer.isActive() and window.autosaver.timer.interval() == 200
@@ -247,8 +250,9 @@ def test_timer_writes_in_the_worker_and_env_zero_disables(qtbot, make_window, fo
     assert not make_window().autosaver.timer.isActive()
 
 
-def test_damaged_snapshots_are_listed_with_a_reason(qtbot, make_window, folder, skull_copy,
-                                                    tmp_path):  # noqa: ANN001
+def test_damaged_snapshots_are_listed_with_a_reason(
+    qtbot, make_window, folder, skull_copy, tmp_path
+):
     window = make_window()
     _open(qtbot, window, skull_copy)
     _edit(qtbot, window)
@@ -276,8 +280,9 @@ def test_damaged_snapshots_are_listed_with_a_reason(qtbot, make_window, folder, 
     assert len(list(folder.iterdir())) == 4  # left on disk for a person to look at
 
 
-def test_reused_pid_counts_as_gone_and_the_offer_asks(qtbot, make_window, folder, skull_copy,
-                                                      monkeypatch):  # noqa: ANN001
+def test_reused_pid_counts_as_gone_and_the_offer_asks(
+    qtbot, make_window, folder, skull_copy, monkeypatch
+):
     window = make_window()
     _open(qtbot, window, skull_copy)
     _edit(qtbot, window)
@@ -294,7 +299,7 @@ def test_reused_pid_counts_as_gone_and_the_offer_asks(qtbot, make_window, folder
     other = make_window()
     shown = []
 
-    def click_later(box) -> int:  # noqa: ANN001 - the real dialog, answered without a user
+    def click_later(box) -> int:
         shown.append((box.text(), box.informativeText(), [b.text() for b in box.buttons()]))
         next(b for b in box.buttons() if b.text() == "Later").click()
         return 0
@@ -308,8 +313,9 @@ def test_reused_pid_counts_as_gone_and_the_offer_asks(qtbot, make_window, folder
     assert sorted(buttons) == ["Discard", "Later", "Recover"]
 
     asked = []
-    monkeypatch.setattr(autosave, "ask_recovery",
-                        lambda _parent, entry: asked.append(entry) or autosave.LATER)
+    monkeypatch.setattr(
+        autosave, "ask_recovery", lambda _parent, entry: asked.append(entry) or autosave.LATER
+    )
     other.interactive = True
     try:
         assert not autosave.offer_recovery(other)  # Later: kept for the next start
@@ -322,8 +328,7 @@ def test_reused_pid_counts_as_gone_and_the_offer_asks(qtbot, make_window, folder
     assert not saver.snapshot_path.exists()
 
 
-def test_a_failed_autosave_is_a_message_and_the_case_is_unaffected(make_window, folder,
-                                                                     tmp_path):  # noqa: ANN001
+def test_a_failed_autosave_is_a_message_and_the_case_is_unaffected(make_window, folder, tmp_path):
     folder.parent.mkdir(exist_ok=True)
     folder.write_text("a file where the autosave folder should be", encoding="utf-8")
     window = make_window()

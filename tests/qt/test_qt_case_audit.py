@@ -20,8 +20,10 @@ OBJ = b"v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 
 def _case_file(tmp_path: Path) -> Path:
     skull = tmp_path / "skull.obj"
     skull.write_bytes(OBJ)
-    mesh = Mesh(np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], float),
-                np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    mesh = Mesh(
+        np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], float),
+        np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]),
+    )
     case = Case()
     stack = CommandStack(case)
     stack.push(AddEvidence(EvidenceFile.from_path(skull, "skull_mesh")))
@@ -30,11 +32,11 @@ def _case_file(tmp_path: Path) -> Path:
     return save_case(case, tmp_path / "case.fcase", stack)
 
 
-def _wait(qtbot, window) -> None:  # noqa: ANN001
+def _wait(qtbot, window) -> None:
     qtbot.waitUntil(lambda: not window.busy, timeout=20_000)
 
 
-def test_open_reports_the_chain_and_the_missing_face(qtbot, window, tmp_path) -> None:  # noqa: ANN001
+def test_open_reports_the_chain_and_the_missing_face(qtbot, window, tmp_path) -> None:
     path = _case_file(tmp_path)
     window.open_case(path)
     _wait(qtbot, window)
@@ -44,7 +46,7 @@ def test_open_reports_the_chain_and_the_missing_face(qtbot, window, tmp_path) ->
     assert any("Reconstruct face" in m for m in window.messages)
 
 
-def test_open_refuses_an_edited_log(qtbot, window, tmp_path) -> None:  # noqa: ANN001
+def test_open_refuses_an_edited_log(qtbot, window, tmp_path) -> None:
     path = _case_file(tmp_path)
     with zipfile.ZipFile(path) as source:
         members = {n: source.read(n) for n in source.namelist()}

@@ -13,10 +13,12 @@ import pytest
 
 pytest.importorskip("pytestqt")
 if os.environ.get("QT_QPA_PLATFORM") != "xcb":
-    pytest.skip("the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
-                allow_module_level=True)
+    pytest.skip(
+        "the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
+        allow_module_level=True,
+    )
 
-from PySide6.QtCore import Qt  # noqa: E402
+from PySide6.QtCore import Qt
 from workbench.qt.scene import is_closed
 
 pytestmark = pytest.mark.gui
@@ -24,35 +26,41 @@ WAIT_MS = 30_000
 
 
 @pytest.fixture
-def dialog(qtbot, window, headsq_nhdr):  # noqa: ANN001
+def dialog(qtbot, window, headsq_nhdr):
     d = window.open_ct_dialog(headsq_nhdr)
     qtbot.waitExposed(d)
     yield d
-    d.close()             # cancels its jobs and closes its plotter
+    d.close()  # cancels its jobs and closes its plotter
     assert is_closed(d.plotter)
 
 
-def _wait_preview(qtbot, dialog, after: int = 0, iso: float | None = None) -> None:  # noqa: ANN001
-    qtbot.waitUntil(lambda: dialog.previews_shown > after and not dialog.runner.busy
-                    and (iso is None or dialog.shown.iso == iso), timeout=WAIT_MS)
+def _wait_preview(qtbot, dialog, after: int = 0, iso: float | None = None) -> None:
+    qtbot.waitUntil(
+        lambda: (
+            dialog.previews_shown > after
+            and not dialog.runner.busy
+            and (iso is None or dialog.shown.iso == iso)
+        ),
+        timeout=WAIT_MS,
+    )
     assert not dialog.window_.errors, dialog.window_.errors
 
 
-def _bone_pixels(dialog) -> int:  # noqa: ANN001
+def _bone_pixels(dialog) -> int:
     """Pixels of the 3D view that are bone-coloured (warm; the background is blue-grey)."""
     image = np.asarray(dialog.plotter.screenshot(return_img=True), dtype=int)
     r, b = image[..., 0], image[..., 2]
     return int(np.count_nonzero((r > 90) & (r > b + 15)))
 
 
-def test_the_dialog_shows_the_bone_preview_and_its_figures(qtbot, dialog):  # noqa: ANN001
+def test_the_dialog_shows_the_bone_preview_and_its_figures(qtbot, dialog):
     _wait_preview(qtbot, dialog)
     assert dialog.state == "preview"
     assert dialog.iso == 1150.0 and dialog.slider.value() == 1150
     assert "bone" in dialog.tissue_label.text() and "preset" in dialog.tissue_label.text()
     names = set(dialog.plotter.renderer.actors)
     assert {"ct_preview", "ct_debris"} <= names
-    assert dialog.shown.mesh.n_faces == 75_756      # full resolution: headsq is small
+    assert dialog.shown.mesh.n_faces == 75_756  # full resolution: headsq is small
     figures = {k: label.text() for k, label in dialog.figures.items()}
     assert figures["iso"] == "1150"
     assert figures["above"].startswith("34,295 (9.00 %")
@@ -64,11 +72,11 @@ def test_the_dialog_shows_the_bone_preview_and_its_figures(qtbot, dialog):  # no
     assert _bone_pixels(dialog) > 5000
 
 
-def test_moving_the_slider_recomputes_the_preview(qtbot, dialog):  # noqa: ANN001
+def test_moving_the_slider_recomputes_the_preview(qtbot, dialog):
     _wait_preview(qtbot, dialog)
     first = dialog.shown
     shown = dialog.previews_shown
-    for value in (1200, 1300, 1400, 1600):          # a drag: older previews are superseded
+    for value in (1200, 1300, 1400, 1600):  # a drag: older previews are superseded
         dialog.slider.setValue(value)
     assert dialog.spin.value() == 1600.0
     _wait_preview(qtbot, dialog, shown, iso=1600.0)
@@ -82,7 +90,7 @@ def test_moving_the_slider_recomputes_the_preview(qtbot, dialog):  # noqa: ANN00
     assert dialog.slider.value() == 500 and "skin" in dialog.tissue_label.text()
 
 
-def test_cancelling_the_extraction_leaves_the_case_unchanged(qtbot, window, dialog):  # noqa: ANN001
+def test_cancelling_the_extraction_leaves_the_case_unchanged(qtbot, window, dialog):
     _wait_preview(qtbot, dialog)
     case = window.document.case
     qtbot.mouseClick(dialog.extract_button, Qt.MouseButton.LeftButton)
@@ -94,19 +102,20 @@ def test_cancelling_the_extraction_leaves_the_case_unchanged(qtbot, window, dial
     assert dialog.state == "preview" and dialog.isVisible()
     assert not window.runner.is_running("open")
     assert "cancelled" in dialog.status_label.text()
-    qtbot.wait(1500)                                # longer than the whole extraction
+    qtbot.wait(1500)  # longer than the whole extraction
     assert window.document.case is case and not window.document.has_specimen
     assert not window.errors
     assert dialog.extract_button.isEnabled()
 
 
-def test_extract_starts_a_case_with_the_bone_surface(qtbot, window, dialog,
-                                                     headsq_surfaces):  # noqa: ANN001
+def test_extract_starts_a_case_with_the_bone_surface(qtbot, window, dialog, headsq_surfaces):
     _wait_preview(qtbot, dialog)
-    progress: list[tuple[str, float, int, int]] = []   # after the window's own slot:
-    window.runner.progress_changed.connect(               # what its status bar showed
+    progress: list[tuple[str, float, int, int]] = []  # after the window's own slot:
+    window.runner.progress_changed.connect(  # what its status bar showed
         lambda channel, _step, f: progress.append(
-            (channel, f, window.progress.maximum(), window.progress.value())))
+            (channel, f, window.progress.maximum(), window.progress.value())
+        )
+    )
     qtbot.mouseClick(dialog.extract_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: dialog.state == "done" and not window.runner.busy, timeout=WAIT_MS)
     assert not window.errors, window.errors
@@ -122,14 +131,14 @@ def test_extract_starts_a_case_with_the_bone_surface(qtbot, window, dialog,
     assert all(top == 1000 and value == round(1000 * f) for f, top, value in shown)
 
 
-def test_cancel_closes_the_dialog_while_previewing(qtbot, window, dialog):  # noqa: ANN001
+def test_cancel_closes_the_dialog_while_previewing(qtbot, window, dialog):
     _wait_preview(qtbot, dialog)
     qtbot.mouseClick(dialog.cancel_button, Qt.MouseButton.LeftButton)
     assert dialog.state == "closed" and not dialog.isVisible() and is_closed(dialog.plotter)
     assert not window.runner.busy and not window.errors
 
 
-def test_cancel_while_loading_drops_the_volume(qtbot, window, headsq_nhdr):  # noqa: ANN001
+def test_cancel_while_loading_drops_the_volume(qtbot, window, headsq_nhdr):
     d = window.open_ct_dialog(headsq_nhdr)
     assert d.state == "loading" and window.runner.is_running("ct-load")
     d.cancel()
@@ -138,7 +147,7 @@ def test_cancel_while_loading_drops_the_volume(qtbot, window, headsq_nhdr):  # n
     assert d.ct is None and d.previews_shown == 0 and not window.errors
 
 
-def test_an_unreadable_file_is_reported_without_traceback(qtbot, window, tmp_path):  # noqa: ANN001
+def test_an_unreadable_file_is_reported_without_traceback(qtbot, window, tmp_path):
     bad = tmp_path / "broken.nrrd"
     bad.write_bytes(b"NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4\n\n" + b"\0" * 10)
     d = window.open_ct_dialog(bad)
@@ -148,26 +157,23 @@ def test_an_unreadable_file_is_reported_without_traceback(qtbot, window, tmp_pat
     assert "Traceback" not in window.errors[0] and is_closed(d.plotter)
 
 
-def test_non_interactive_open_ct_uses_the_same_path(qtbot, window, headsq_nhdr,
-                                                    headsq_surfaces):  # noqa: ANN001
+def test_non_interactive_open_ct_uses_the_same_path(qtbot, window, headsq_nhdr, headsq_surfaces):
     assert window.open_ct(headsq_nhdr, iso=1150.0)
     qtbot.waitUntil(lambda: not window.runner.busy, timeout=WAIT_MS)
     assert not window.errors, window.errors
     assert window.document.case.specimen.mesh.n_faces == headsq_surfaces["bone"].n_faces
 
 
-def test_another_open_in_the_window_stops_the_extraction(qtbot, window, dialog,
-                                                         headsq_nhdr):  # noqa: ANN001
+def test_another_open_in_the_window_stops_the_extraction(qtbot, window, dialog, headsq_nhdr):
     _wait_preview(qtbot, dialog)
     dialog.set_iso(1300.0)
     _wait_preview(qtbot, dialog, dialog.previews_shown, iso=1300.0)
     dialog.extract()
     token = window.runner.token("open")
-    assert window.open_ct(headsq_nhdr)              # supersedes the dialog's extraction
-    assert token.cancelled and dialog.state == "preview" and "stopped" in \
-        dialog.status_label.text()
+    assert window.open_ct(headsq_nhdr)  # supersedes the dialog's extraction
+    assert token.cancelled and dialog.state == "preview" and "stopped" in dialog.status_label.text()
     qtbot.waitUntil(lambda: not window.runner.is_running("open"), timeout=WAIT_MS)
     assert not window.errors, window.errors
-    assert any("iso 1150" in note for note in window.document.notes)   # the window's own open
-    dialog.cancel()                                  # closes; the new case stays
+    assert any("iso 1150" in note for note in window.document.notes)  # the window's own open
+    dialog.cancel()  # closes; the new case stays
     assert window.document.has_specimen

@@ -16,16 +16,18 @@ import pytest
 
 pytest.importorskip("pytestqt")
 if os.environ.get("QT_QPA_PLATFORM") != "xcb":
-    pytest.skip("the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
-                allow_module_level=True)
+    pytest.skip(
+        "the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
+        allow_module_level=True,
+    )
 
-from PySide6.QtCore import QPoint, Qt  # noqa: E402
+from PySide6.QtCore import QPoint, Qt
 
 pytestmark = pytest.mark.gui
 
 
 @pytest.fixture
-def fitted(qtbot, new_window, skull_obj):  # noqa: ANN001
+def fitted(qtbot, new_window, skull_obj):
     w = new_window(1400, 900)
     w.open_skull(skull_obj, scale=15.0)
     qtbot.waitUntil(lambda: not w.busy, timeout=60_000)
@@ -37,14 +39,14 @@ def fitted(qtbot, new_window, skull_obj):  # noqa: ANN001
     return w
 
 
-def _widget_pos(plotter, display_xy) -> QPoint:  # noqa: ANN001
+def _widget_pos(plotter, display_xy) -> QPoint:
     """VTK display pixels (origin bottom left) → Qt widget position (top left)."""
     ratio = plotter.devicePixelRatioF()
     height = plotter.render_window.GetSize()[1]
     return QPoint(int(round(display_xy[0] / ratio)), int(round((height - display_xy[1]) / ratio)))
 
 
-def _drag(qtbot, plotter, start: QPoint, offsets) -> None:  # noqa: ANN001
+def _drag(qtbot, plotter, start: QPoint, offsets) -> None:
     qtbot.mousePress(plotter, Qt.MouseButton.LeftButton, pos=start)
     for dx, dy in offsets:
         qtbot.mouseMove(plotter, start + QPoint(dx, dy))
@@ -53,7 +55,7 @@ def _drag(qtbot, plotter, start: QPoint, offsets) -> None:  # noqa: ANN001
     qtbot.mouseRelease(plotter, Qt.MouseButton.LeftButton, pos=end)
 
 
-def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # noqa: ANN001
+def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):
     from workbench.core.spatial import MeshIndex
 
     w = fitted
@@ -64,7 +66,7 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     camera = w.plotter.camera_position
     face_actor = w.scene.actors("face")[0]
     face_before = np.array(face_actor.GetMapper().GetInput().GetPoints().GetData())
-    w.scene.set_visible("muscles", True)       # shown muscles follow the preview too
+    w.scene.set_visible("muscles", True)  # shown muscles follow the preview too
     muscle_actor = w.scene.actors("muscles")[0]
     muscles_before = np.array(muscle_actor.GetMapper().GetInput().GetPoints().GetData())
     start = _widget_pos(w.plotter, w.picker.display_position(before.position))
@@ -72,9 +74,14 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     seen: list[np.ndarray] = []
     seen_muscles: list[np.ndarray] = []
     w.scene.render_now()
-    w.document.part_changed.connect(lambda _p: (
-        seen.append(np.array(face_actor.GetMapper().GetInput().GetPoints().GetData())),
-        seen_muscles.append(np.array(muscle_actor.GetMapper().GetInput().GetPoints().GetData()))))
+    w.document.part_changed.connect(
+        lambda _p: (
+            seen.append(np.array(face_actor.GetMapper().GetInput().GetPoints().GetData())),
+            seen_muscles.append(
+                np.array(muscle_actor.GetMapper().GetInput().GetPoints().GetData())
+            ),
+        )
+    )
 
     _drag(qtbot, w.plotter, start, [(0, -3 * k) for k in range(1, 9)])
 
@@ -83,7 +90,7 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     assert np.linalg.norm(after.position - before.position) > 2.0
     skull = w.document.case.specimen.mesh
     assert MeshIndex(skull).closest_points(after.position[None]).distances[0] < 0.05
-    assert w.plotter.camera_position == camera                       # no rotation
+    assert w.plotter.camera_position == camera  # no rotation
     assert len(w.document.stack) == n_steps + 1
     assert w.document.stack.undo_text == "Move skull landmark g"
     assert w.drag_timings, "no preview was drawn during the drag"
@@ -95,11 +102,10 @@ def test_drag_a_landmark_along_the_skull_previews_the_face(qtbot, fitted):  # no
     assert not w.errors, w.errors
 
     w.undo()
-    np.testing.assert_allclose(w.document.case.landmarks["skull"]["g"].position,
-                               before.position)
+    np.testing.assert_allclose(w.document.case.landmarks["skull"]["g"].position, before.position)
 
 
-def test_escape_cancels_a_landmark_drag(qtbot, fitted):  # noqa: ANN001
+def test_escape_cancels_a_landmark_drag(qtbot, fitted):
     w = fitted
     w.landmarks_panel.select("n")
     w.scene.render_now()
@@ -115,7 +121,7 @@ def test_escape_cancels_a_landmark_drag(qtbot, fitted):  # noqa: ANN001
     assert w.picker.dragging is None and not w.detail.active
 
 
-def test_drag_a_guide_in_the_guide_view(qtbot, fitted):  # noqa: ANN001
+def test_drag_a_guide_in_the_guide_view(qtbot, fitted):
     w = fitted
     gv = w.guide_view
     qtbot.waitUntil(lambda: not w.busy, timeout=30_000)
@@ -130,10 +136,10 @@ def test_drag_a_guide_in_the_guide_view(qtbot, fitted):  # noqa: ANN001
     n_steps = len(w.document.stack)
     w.drag_timings.clear()
 
-    _drag(qtbot, gv.plotter, start, [(0, -2 * k) for k in range(1, 8)])   # up on screen
+    _drag(qtbot, gv.plotter, start, [(0, -2 * k) for k in range(1, 8)])  # up on screen
 
     stored = w.document.case.guides.to_state()[row]
-    assert stored["value"][0] > g.value[0] + 1.0          # moved up: y grows (head frame)
+    assert stored["value"][0] > g.value[0] + 1.0  # moved up: y grows (head frame)
     assert stored["source"] == "user"
     assert len(w.document.stack) == n_steps + 1
     assert w.drag_timings

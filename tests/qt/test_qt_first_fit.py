@@ -21,16 +21,19 @@ import pytest
 
 pytest.importorskip("pytestqt")
 if os.environ.get("QT_QPA_PLATFORM") != "xcb":
-    pytest.skip("the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
-                allow_module_level=True)
+    pytest.skip(
+        "the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
+        allow_module_level=True,
+    )
 
-from workbench.qt.scene import is_software_gl  # noqa: E402
+from workbench.qt.scene import is_software_gl
 
 pytestmark = pytest.mark.gui
 
 
 def test_first_fit_opens_the_guide_view_before_drawing_the_face(
-        qtbot, window, skull_obj, skull_obj_suggested):  # noqa: ANN001
+    qtbot, window, skull_obj, skull_obj_suggested
+):
     from workbench.commands.landmarks import ReplaceLandmarkSet
 
     gv = window.guide_view
@@ -44,9 +47,13 @@ def test_first_fit_opens_the_guide_view_before_drawing_the_face(
     events: list[tuple[str, bool, int]] = []
     scene, show_face, show_guide_view = window.scene, window.scene.show_face, window.show_guide_view
     scene.show_face = lambda *a, **k: (
-        events.append(("face", gv.isVisible(), scene.paints)), show_face(*a, **k))[1]
+        events.append(("face", gv.isVisible(), scene.paints)),
+        show_face(*a, **k),
+    )[1]
     window.show_guide_view = lambda on, draw=True: (
-        events.append(("guide view", bool(on), scene.paints)), show_guide_view(on, draw))[1]
+        events.append(("guide view", bool(on), scene.paints)),
+        show_guide_view(on, draw),
+    )[1]
     try:
         window.reconstruct()
         assert window.wait_idle(180)
@@ -56,8 +63,8 @@ def test_first_fit_opens_the_guide_view_before_drawing_the_face(
 
     kinds = [e[0] for e in events]
     opened, drawn = kinds.index("guide view"), kinds.index("face")
-    assert opened < drawn and events[drawn][1]            # opened first, visible when drawn
-    assert events[drawn][2] > events[opened][2]           # the main view painted in between
+    assert opened < drawn and events[drawn][1]  # opened first, visible when drawn
+    assert events[drawn][2] > events[opened][2]  # the main view painted in between
     assert gv.pages.currentWidget() is gv.plotter and gv.drawn_fit is window.fit
 
     # framing: 160 mm of the face across the narrower side of the guide view

@@ -30,11 +30,24 @@ def test_window_and_tools_provide_their_hosts() -> None:
     from workbench.qt.drag_ops import DragTool
     from workbench.qt.main_window import MainWindow
 
-    window_attrs = {"document", "messages", "interactive", "autosaver", "runner", "scene",
-                    "docks"}   # set in MainWindow.__init__
-    for protocol in (hosts.AutosaveHost, hosts.CtImportHost, hosts.MenuHost, hosts.Feedback,
-                     hosts.FileHost):
-        missing = {n for n in _members(protocol)
-                   if not hasattr(MainWindow, n) and n not in window_attrs}
+    window_attrs = {
+        "document",
+        "messages",
+        "interactive",
+        "autosaver",
+        "runner",
+        "scene",
+        "docks",
+    }  # set in MainWindow.__init__
+    for protocol in (
+        hosts.AutosaveHost,
+        hosts.CtImportHost,
+        hosts.MenuHost,
+        hosts.Feedback,
+        hosts.FileHost,
+    ):
+        missing = {
+            n for n in _members(protocol) if not hasattr(MainWindow, n) and n not in window_attrs
+        }
         assert not missing, (protocol.__name__, missing)
     assert _members(hosts.GuideDragHost) <= set(vars(DragTool))

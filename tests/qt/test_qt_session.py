@@ -19,20 +19,24 @@ def test_session_stores_and_signals(qtbot) -> None:
     assert (session.fit, session.preview, session.truth, session.comparison) == (None,) * 4
 
     fit, preview, mesh, comparison = object(), object(), object(), object()
-    session.set_fit(fit)   # any object stands in for a result
+    session.set_fit(fit)  # any object stands in for a result
     session.set_preview(preview)
     session.set_truth("skin.ply", mesh)
     session.set_comparison(comparison)
     assert session.fit is fit and session.preview is preview
     assert session.truth == ("skin.ply", mesh) and session.comparison is comparison
-    assert seen == [("fit", fit), ("preview", preview), ("truth", ("skin.ply", mesh)),
-                    ("comparison", comparison)]
+    assert seen == [
+        ("fit", fit),
+        ("preview", preview),
+        ("truth", ("skin.ply", mesh)),
+        ("comparison", comparison),
+    ]
 
     seen.clear()
-    session.clear_fit()   # a new case: fit and dowels go, the true skin stays
+    session.clear_fit()  # a new case: fit and dowels go, the true skin stays
     assert session.fit is None and session.preview is None and session.truth is not None
     assert seen == [("fit", None), ("preview", None)]
-    session.clear_fit()   # told again, also when nothing changed
+    session.clear_fit()  # told again, also when nothing changed
     assert seen[2:] == [("fit", None), ("preview", None)]
 
 

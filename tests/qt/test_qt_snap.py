@@ -15,23 +15,26 @@ import pytest
 
 pytest.importorskip("pytestqt")
 if os.environ.get("QT_QPA_PLATFORM") != "xcb":
-    pytest.skip("the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
-                allow_module_level=True)
+    pytest.skip(
+        "the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
+        allow_module_level=True,
+    )
 
-from PySide6.QtCore import Qt  # noqa: E402
+from PySide6.QtCore import Qt
 
 pytestmark = pytest.mark.gui
 
 
 def test_snap_button_moves_the_selected_landmark_as_one_undo_step(
-        qtbot, window, skull_obj, skull_obj_suggested):  # noqa: ANN001
+    qtbot, window, skull_obj, skull_obj_suggested
+):
     from workbench.commands.landmarks import ReplaceLandmarkSet
     from workbench.core.spatial import MeshIndex
 
     window.open_skull(skull_obj, scale=15.0)
     qtbot.waitUntil(lambda: not window.busy, timeout=30_000)
     assert window.document.has_specimen and not window.errors, window.errors
-    _, landmarks = skull_obj_suggested      # suggested on the same file × 15: same frame
+    _, landmarks = skull_obj_suggested  # suggested on the same file × 15: same frame
     assert window.document.push(ReplaceLandmarkSet("skull", landmarks, "Suggest skull landmarks"))
     qtbot.waitUntil(lambda: not window.busy, timeout=60_000)
 

@@ -28,7 +28,7 @@ def merge(*meshes: Mesh) -> Mesh:
 
 
 @pytest.fixture(scope="module")
-def scene(head_male):  # noqa: ANN001, ANN201
+def scene(head_male):
     head = head_male
     m = head.meshes
     skull = merge(m["cranium"], m["mandible"], m["upper_teeth"], m["lower_teeth"])
@@ -47,11 +47,12 @@ def bluish(image: np.ndarray) -> int:
     return int((image[..., 2] > image[..., 0] + 40).sum())
 
 
-def test_every_picture_is_written_and_not_blank(scene, tmp_path: Path) -> None:  # noqa: ANN001
+def test_every_picture_is_written_and_not_blank(scene, tmp_path: Path) -> None:
     skull, skin, eyes, dowels = scene
     spread = np.linalg.norm(skin.vertices - skin.vertices.mean(axis=0), axis=1) / 50.0
-    out = render_reconstruction(skull, skin, dowels, tmp_path, spread=spread, eyes=eyes,
-                                prefix="case7", size=SIZE)
+    out = render_reconstruction(
+        skull, skin, dowels, tmp_path, spread=spread, eyes=eyes, prefix="case7", size=SIZE
+    )
     expected = {f"{kind}_{v}" for kind in ("skull_dowels", "face_skull", "face") for v in VIEWS}
     assert set(out) == expected | {"spread"}
     for key, path in out.items():
@@ -69,15 +70,17 @@ def test_every_picture_is_written_and_not_blank(scene, tmp_path: Path) -> None: 
     assert ((spread_img[..., 0] > 150) & (spread_img[..., 1] < 90)).sum() > 500  # deep reds
 
 
-def test_no_face_gives_skull_pictures_only(scene, tmp_path: Path) -> None:  # noqa: ANN001
+def test_no_face_gives_skull_pictures_only(scene, tmp_path: Path) -> None:
     skull, _, _, dowels = scene
     out = render_reconstruction(skull, None, dowels, tmp_path, views=("front",), size=SIZE)
     assert set(out) == {"skull_dowels_front"}
     bare = render_reconstruction(skull, None, None, tmp_path / "bare", views=("front",), size=SIZE)
-    assert bluish(pixels(bare["skull_dowels_front"])) < 20 < bluish(pixels(out["skull_dowels_front"]))
+    assert (
+        bluish(pixels(bare["skull_dowels_front"])) < 20 < bluish(pixels(out["skull_dowels_front"]))
+    )
 
 
-def test_frame_orients_views_of_a_skull_in_scanner_coordinates(scene, tmp_path: Path) -> None:  # noqa: ANN001
+def test_frame_orients_views_of_a_skull_in_scanner_coordinates(scene, tmp_path: Path) -> None:
     """A skull in scanner coordinates, with its frame, looks the same as in the head frame."""
     skull = scene[0]
     to_scanner = np.eye(4)
@@ -86,8 +89,15 @@ def test_frame_orients_views_of_a_skull_in_scanner_coordinates(scene, tmp_path: 
     scanned = skull.transformed(to_scanner)
     views = ("front", "side")
     ref = render_reconstruction(skull, None, None, tmp_path / "ref", views=views, size=SIZE)
-    framed = render_reconstruction(scanned, None, None, tmp_path / "framed", views=views, size=SIZE,
-                                   frame=np.linalg.inv(to_scanner))
+    framed = render_reconstruction(
+        scanned,
+        None,
+        None,
+        tmp_path / "framed",
+        views=views,
+        size=SIZE,
+        frame=np.linalg.inv(to_scanner),
+    )
     unframed = render_reconstruction(scanned, None, None, tmp_path / "raw", views=views, size=SIZE)
     for key in ref:
         a, b, c = (pixels(p[key]) for p in (ref, framed, unframed))
@@ -96,7 +106,7 @@ def test_frame_orients_views_of_a_skull_in_scanner_coordinates(scene, tmp_path: 
         assert other > 4 * same + 5.0, (key, other)
 
 
-def test_bad_input_is_named(scene, tmp_path: Path) -> None:  # noqa: ANN001
+def test_bad_input_is_named(scene, tmp_path: Path) -> None:
     skull, skin, _, (origins, tips) = scene
     with pytest.raises(InputError, match="spread"):
         render_reconstruction(skull, skin, None, tmp_path, spread=np.ones(10))

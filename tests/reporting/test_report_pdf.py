@@ -25,10 +25,10 @@ from workbench.io.catalogue import load_catalogue
 from workbench.io.markups import write_mrk_json
 from workbench.io.meshes import write_mesh
 from workbench.io.tables import load_depth_table, tables_dir
+from workbench.model.evidence import file_sha256 as sha256_file
 from workbench.reporting import pdf as pdf_module
 from workbench.reporting.report import (
     read_report_json,
-    sha256_file,
     utc_now,
     validate_report,
     write_report_json,
@@ -45,7 +45,7 @@ def merge(*meshes: Mesh) -> Mesh:
     return concatenate(list(meshes))
 
 
-def build_report(head, folder: Path, *, render: bool = True, size=(200, 240)) -> dict:  # noqa: ANN001
+def build_report(head, folder: Path, *, render: bool = True, size=(200, 240)) -> dict:
     """A complete report of the reference head as if it were a reconstruction, files in ``folder``."""
     m = head.meshes
     skull = merge(m["cranium"], m["mandible"], m["upper_teeth"], m["lower_teeth"])
@@ -54,8 +54,9 @@ def build_report(head, folder: Path, *, render: bool = True, size=(200, 240)) ->
     skull_path = write_mesh(inputs / "skull.ply", skull)
     landmarks_path = inputs / "skull.mrk.json"
     write_mrk_json(landmarks_path, head.skull_landmarks)
-    settings = DepthSettings(overrides={"pg": 12.0}, excluded=frozenset({"ecm2s_l", "ecm2s_r"}),
-                             interpolate=True)
+    settings = DepthSettings(
+        overrides={"pg": 12.0}, excluded=frozenset({"ecm2s_l", "ecm2s_r"}), interpolate=True
+    )
     plan = plan_dowels(skull, head.skull_landmarks, settings)
     table = load_depth_table(settings.table)
     catalogue = load_catalogue()
@@ -63,80 +64,167 @@ def build_report(head, folder: Path, *, render: bool = True, size=(200, 240)) ->
     landmarks = []
     for d in plan.dowels:
         entry = catalogue.get(d.code, "skull")
-        landmarks.append({
-            "code": d.code, "name": entry.name if entry else "interpolated site",
-            "status": status.get(d.code, "suggested"), "position_mm": d.origin,
-            "skin_code": d.skin_code, "table_depth_mm": d.table_depth_mm, "sd_mm": d.sd_mm,
-            "depth_mm": None if d.excluded else d.depth_mm,
-            "source": "excluded" if d.excluded else d.source, "direction": d.direction,
-            "note": ("hollow cheeks with table depths (Kähler 2003, §8.6.8)" if d.excluded
-                     else "set by the examiner" if d.source == "override" else None)})
+        landmarks.append(
+            {
+                "code": d.code,
+                "name": entry.name if entry else "interpolated site",
+                "status": status.get(d.code, "suggested"),
+                "position_mm": d.origin,
+                "skin_code": d.skin_code,
+                "table_depth_mm": d.table_depth_mm,
+                "sd_mm": d.sd_mm,
+                "depth_mm": None if d.excluded else d.depth_mm,
+                "source": "excluded" if d.excluded else d.source,
+                "direction": d.direction,
+                "note": (
+                    "hollow cheeks with table depths (Kähler 2003, §8.6.8)"
+                    if d.excluded
+                    else "set by the examiner"
+                    if d.source == "override"
+                    else None
+                ),
+            }
+        )
     for lm in head.skull_landmarks:  # no table value, no override: no dowel
         if lm.code not in plan.codes:
-            landmarks.append({"code": lm.code, "name": catalogue.entry(lm.code, "skull").name,
-                              "status": lm.status, "position_mm": lm.position, "skin_code": None,
-                              "table_depth_mm": None, "sd_mm": None, "depth_mm": None,
-                              "source": "none", "direction": None})
+            landmarks.append(
+                {
+                    "code": lm.code,
+                    "name": catalogue.entry(lm.code, "skull").name,
+                    "status": lm.status,
+                    "position_mm": lm.position,
+                    "skin_code": None,
+                    "table_depth_mm": None,
+                    "sd_mm": None,
+                    "depth_mm": None,
+                    "source": "none",
+                    "direction": None,
+                }
+            )
     report = {
-        "@schema": "reconstruction-report-v1", "case_id": CASE_ID, "created": utc_now(),
-        "examiner": "J. Kähler-Öztürk", "software": {"name": "workbench", "version": "0.1.0"},
+        "@schema": "reconstruction-report-v1",
+        "case_id": CASE_ID,
+        "created": utc_now(),
+        "examiner": "J. Kähler-Öztürk",
+        "software": {"name": "workbench", "version": "0.1.0"},
         "template": {"id": head.template_id, "content_hash": head.content_hash},
         "frame": "input skull frame = head frame (x to the subject's left, y up, z forward; "
-                 "Frankfort Horizontal at y = 0)",
+        "Frankfort Horizontal at y = 0)",
         "units": "mm",
         "inputs": [
-            {"role": "skull", "path": str(skull_path), "sha256": sha256_file(skull_path), "units": "mm"},
-            {"role": "landmarks", "path": str(landmarks_path), "sha256": sha256_file(landmarks_path),
-             "units": "mm"},
-            {"role": "table", "path": str(tables_dir() / "ttable_2023.csv"),
-             "sha256": sha256_file(tables_dir() / "ttable_2023.csv"), "units": "mm"}],
-        "table": {"id": plan.table_id, "title": plan.table_title, "citation": plan.citation,
-                  "group": plan.group_label, "build": "normal",
-                  "caveats": list(table.meta.get("caveats", []))},
+            {
+                "role": "skull",
+                "path": str(skull_path),
+                "sha256": sha256_file(skull_path),
+                "units": "mm",
+            },
+            {
+                "role": "landmarks",
+                "path": str(landmarks_path),
+                "sha256": sha256_file(landmarks_path),
+                "units": "mm",
+            },
+            {
+                "role": "table",
+                "path": str(tables_dir() / "ttable_2023.csv"),
+                "sha256": sha256_file(tables_dir() / "ttable_2023.csv"),
+                "units": "mm",
+            },
+        ],
+        "table": {
+            "id": plan.table_id,
+            "title": plan.table_title,
+            "citation": plan.citation,
+            "group": plan.group_label,
+            "build": "normal",
+            "caveats": list(table.meta.get("caveats", [])),
+        },
         "landmarks": landmarks,
         "guides": [
-            {"id": "nose_width", "label": "nose width: aperture + 5 mm per side", "kind": "vertical lines",
-             "value": [-17.5, 17.5], "rule_id": "kaehler_nose_width", "citation": "Kähler 2003, §8.6.5",
-             "source": "default", "enabled": True},
-            {"id": "pronasale", "label": "nose tip (Krogman)", "kind": "point", "value": [0.0, -8.5, 98.0],
-             "rule_id": "krogman_3x_spine", "citation": "Taylor 2001, p. 443", "source": "user",
-             "enabled": False}],
-        "predictions": [{"rule_id": "rynn_2010_nose", "label": "pronasale projection",
-                         "value_mm": 21.4, "citation": "Rynn, Wilkinson & Peters 2010"}],
-        "fit": {"iterations": 3, "max_tip_error_mm": 0.04, "min_tissue_mm": 2.1,
-                "penetrating_vertices": 0, "seconds": 1.7, "extra_constraints": 12},
+            {
+                "id": "nose_width",
+                "label": "nose width: aperture + 5 mm per side",
+                "kind": "vertical lines",
+                "value": [-17.5, 17.5],
+                "rule_id": "kaehler_nose_width",
+                "citation": "Kähler 2003, §8.6.5",
+                "source": "default",
+                "enabled": True,
+            },
+            {
+                "id": "pronasale",
+                "label": "nose tip (Krogman)",
+                "kind": "point",
+                "value": [0.0, -8.5, 98.0],
+                "rule_id": "krogman_3x_spine",
+                "citation": "Taylor 2001, p. 443",
+                "source": "user",
+                "enabled": False,
+            },
+        ],
+        "predictions": [
+            {
+                "rule_id": "rynn_2010_nose",
+                "label": "pronasale projection",
+                "value_mm": 21.4,
+                "citation": "Rynn, Wilkinson & Peters 2010",
+            }
+        ],
+        "fit": {
+            "iterations": 3,
+            "max_tip_error_mm": 0.04,
+            "min_tissue_mm": 2.1,
+            "penetrating_vertices": 0,
+            "seconds": 1.7,
+            "extra_constraints": 12,
+        },
         "ensemble": {"n": 20, "spread_mm": {"median": 0.9, "p90": 2.1, "max": 3.6}},
-        "validation": None, "pictures": {}, "warnings": list(plan.warnings) + [
-            "the skull is the reference head's own skull (test case) – depths ± 1 SD"],
+        "validation": None,
+        "pictures": {},
+        "warnings": list(plan.warnings)
+        + ["the skull is the reference head's own skull (test case) – depths ± 1 SD"],
     }
     skin = head.skin
     truth = skin.with_vertices(skin.vertices + 2.0 * vertex_normals(skin))
     cmp = compare_surfaces(skin, truth, recon_regions=face_regions(head))
-    report["validation"] = {**cmp.figures, "truth": "skin + 2 mm (test)", "region": cmp.region,
-                            "regions": cmp.regions}
+    report["validation"] = {
+        **cmp.figures,
+        "truth": "skin + 2 mm (test)",
+        "region": cmp.region,
+        "regions": cmp.regions,
+    }
     if render:
         from workbench.render.reconstruction import render_reconstruction
 
         active = plan.active()
         spread = np.abs(skin.vertices[:, 2]) / 40.0
         pictures = render_reconstruction(
-            skull, skin, (np.array([d.origin for d in active]), np.array([d.tip for d in active])),
-            folder / "pictures", spread=spread, eyes=m["eyes"], size=size)
+            skull,
+            skin,
+            (np.array([d.origin for d in active]), np.array([d.tip for d in active])),
+            folder / "pictures",
+            spread=spread,
+            eyes=m["eyes"],
+            size=size,
+        )
         report["pictures"] = {k: str(p.relative_to(folder)) for k, p in pictures.items()}
     return report
 
 
 @pytest.fixture(scope="module")
-def head(head_male):  # noqa: ANN001, ANN201 - the session's cached reference head
+def head(head_male):
     return head_male
 
 
 @pytest.fixture(scope="module")
-def written(head, tmp_path_factory):  # noqa: ANN001, ANN201
+def written(head, tmp_path_factory):
     folder = tmp_path_factory.mktemp("case")
     report = build_report(head, folder)
-    return report, write_report_json(report, folder / "report.json"), \
-        write_report_pdf(report, folder / "report.pdf")
+    return (
+        report,
+        write_report_json(report, folder / "report.json"),
+        write_report_pdf(report, folder / "report.pdf"),
+    )
 
 
 def pdf_text(path: Path) -> tuple[str, object]:
@@ -154,7 +242,7 @@ def test_schema_file_is_a_valid_json_schema() -> None:
     assert schema["$id"] == "reconstruction-report-v1"
 
 
-def test_report_json_round_trips_and_validates(written) -> None:  # noqa: ANN001
+def test_report_json_round_trips_and_validates(written) -> None:
     report, json_path, _ = written
     doc = read_report_json(json_path)
     assert doc["case_id"] == CASE_ID
@@ -168,7 +256,7 @@ def test_report_json_round_trips_and_validates(written) -> None:  # noqa: ANN001
     assert "NaN" not in json_path.read_text(encoding="utf-8")
 
 
-def test_pdf_holds_the_case_file_facts(written) -> None:  # noqa: ANN001
+def test_pdf_holds_the_case_file_facts(written) -> None:
     report, _, pdf_path = written
     text, reader = pdf_text(pdf_path)
     flat = re.sub(r"\s+", "", text)
@@ -187,7 +275,7 @@ def test_pdf_holds_the_case_file_facts(written) -> None:  # noqa: ANN001
     assert images == len(report["pictures"]) == 10
 
 
-def test_pictures_are_not_blank(written) -> None:  # noqa: ANN001
+def test_pictures_are_not_blank(written) -> None:
     from PIL import Image
 
     report, json_path, _ = written
@@ -197,7 +285,7 @@ def test_pictures_are_not_blank(written) -> None:  # noqa: ANN001
         assert (np.abs(image - 255).sum(axis=2) > 30).mean() > 0.1, key
 
 
-def test_missing_key_fails_with_its_name(written) -> None:  # noqa: ANN001
+def test_missing_key_fails_with_its_name(written) -> None:
     report = copy.deepcopy(written[0])
     del report["table"]["citation"]
     with pytest.raises(InputError, match=r"citation") as info:
@@ -209,15 +297,18 @@ def test_missing_key_fails_with_its_name(written) -> None:  # noqa: ANN001
         write_report_json(report, Path("/nonexistent/never/written.json"))
 
 
-@pytest.mark.parametrize(("path", "value", "where"), [
-    (("landmarks", 0, "depth_mm"), -3.0, r"\$\.landmarks\[0\]\.depth_mm"),
-    (("landmarks", 1, "source"), "guessed", r"\$\.landmarks\[1\]\.source"),
-    (("inputs", 0, "sha256"), "abc", r"\$\.inputs\[0\]\.sha256"),
-    (("units",), "cm", r"\$\.units"),
-    (("created",), "yesterday", r"\$\.created"),
-    (("fit", "seconds"), float("inf"), r"\$\.fit\.seconds"),
-])
-def test_bad_values_are_named_by_json_path(written, path, value, where) -> None:  # noqa: ANN001
+@pytest.mark.parametrize(
+    ("path", "value", "where"),
+    [
+        (("landmarks", 0, "depth_mm"), -3.0, r"\$\.landmarks\[0\]\.depth_mm"),
+        (("landmarks", 1, "source"), "guessed", r"\$\.landmarks\[1\]\.source"),
+        (("inputs", 0, "sha256"), "abc", r"\$\.inputs\[0\]\.sha256"),
+        (("units",), "cm", r"\$\.units"),
+        (("created",), "yesterday", r"\$\.created"),
+        (("fit", "seconds"), float("inf"), r"\$\.fit\.seconds"),
+    ],
+)
+def test_bad_values_are_named_by_json_path(written, path, value, where) -> None:
     report = copy.deepcopy(written[0])
     target = report
     for key in path[:-1]:
@@ -227,7 +318,7 @@ def test_bad_values_are_named_by_json_path(written, path, value, where) -> None:
         validate_report(report)
 
 
-def test_excluded_landmark_has_no_used_depth_and_codes_are_unique(written) -> None:  # noqa: ANN001
+def test_excluded_landmark_has_no_used_depth_and_codes_are_unique(written) -> None:
     report = copy.deepcopy(written[0])
     excluded = next(i for i, lm in enumerate(report["landmarks"]) if lm["source"] == "excluded")
     report["landmarks"][excluded]["depth_mm"] = 9.0
@@ -239,11 +330,23 @@ def test_excluded_landmark_has_no_used_depth_and_codes_are_unique(written) -> No
         validate_report(report)
 
 
-def test_minimal_report_and_missing_picture(head, tmp_path: Path, written) -> None:  # noqa: ANN001
+def test_minimal_report_and_missing_picture(head, tmp_path: Path, written) -> None:
     """Optional sections absent: the PDF still builds; a listed picture that is gone is noted."""
     full = written[0]
-    report = {k: copy.deepcopy(full[k]) for k in ("@schema", "case_id", "created", "software",
-                                                  "template", "frame", "units", "inputs", "table")}
+    report = {
+        k: copy.deepcopy(full[k])
+        for k in (
+            "@schema",
+            "case_id",
+            "created",
+            "software",
+            "template",
+            "frame",
+            "units",
+            "inputs",
+            "table",
+        )
+    }
     report["landmarks"] = copy.deepcopy(full["landmarks"][:3])
     report["pictures"] = {"face_front": "pictures/gone.png"}
     report.update(ensemble=None, validation=None, guides=[], warnings=None)
@@ -255,7 +358,7 @@ def test_minimal_report_and_missing_picture(head, tmp_path: Path, written) -> No
     assert not list(path.parent.glob("*.tmp"))  # atomic: no temporary left
 
 
-def test_core_font_fallback_transliterates(written, tmp_path: Path, monkeypatch) -> None:  # noqa: ANN001
+def test_core_font_fallback_transliterates(written, tmp_path: Path, monkeypatch) -> None:
     assert pdf_module.transliterate("Kähler – ± ≤ 2.5 mm “x”") == 'Kähler - ± <= 2.5 mm "x"'
     monkeypatch.setattr(pdf_module, "find_fonts", lambda: None)
     report = copy.deepcopy(written[0])

@@ -25,17 +25,17 @@ from workbench.services.compare import (
 
 
 @pytest.fixture(scope="module")
-def head(head_male):  # noqa: ANN001, ANN201 - the session's cached reference head
+def head(head_male):
     return head_male
 
 
 @pytest.fixture(scope="module")
-def regions(head) -> dict[str, np.ndarray]:  # noqa: ANN001
+def regions(head) -> dict[str, np.ndarray]:
     return face_regions(head)
 
 
 @pytest.fixture(scope="module")
-def displaced(head) -> Mesh:  # noqa: ANN001
+def displaced(head) -> Mesh:
     """The template skin moved 3 mm outward along its vertex normals."""
     skin = head.skin
     normals = vertex_normals(skin)
@@ -45,7 +45,7 @@ def displaced(head) -> Mesh:  # noqa: ANN001
     return skin.with_vertices(skin.vertices + 3.0 * normals)
 
 
-def test_face_regions_partition_the_face(head, regions) -> None:  # noqa: ANN001
+def test_face_regions_partition_the_face(head, regions) -> None:
     assert tuple(regions) == REGION_NAMES
     ids = np.concatenate(list(regions.values()))
     assert len(ids) == len(np.unique(ids))  # disjoint
@@ -54,8 +54,10 @@ def test_face_regions_partition_the_face(head, regions) -> None:  # noqa: ANN001
     lm = head.skin_landmarks.as_dict()
     # each region holds its anatomy: pronasale in the nose, glabella on the
     # forehead, the mouth corners in the mouth, gnathion on the chin, zygion on the cheeks
-    nearest = {code: int(np.linalg.norm(v - lm[code], axis=1).argmin())
-               for code in ("prn", "g", "ch_l", "ch_r", "pg", "zy_l", "zy_r", "ex_l")}
+    nearest = {
+        code: int(np.linalg.norm(v - lm[code], axis=1).argmin())
+        for code in ("prn", "g", "ch_l", "ch_r", "pg", "zy_l", "zy_r", "ex_l")
+    }
     assert nearest["prn"] in regions["nose"]
     assert nearest["g"] in regions["forehead"]
     assert nearest["ch_l"] in regions["mouth"] and nearest["ch_r"] in regions["mouth"]
@@ -70,7 +72,7 @@ def test_face_regions_partition_the_face(head, regions) -> None:  # noqa: ANN001
     assert min(len(idx) for idx in regions.values()) > 100
 
 
-def test_identical_surfaces_agree_everywhere(head, regions) -> None:  # noqa: ANN001
+def test_identical_surfaces_agree_everywhere(head, regions) -> None:
     result = compare_surfaces(head.skin, head.skin, recon_regions=regions)
     fig = result.figures
     assert set(fig) == set(FIGURE_KEYS)
@@ -80,10 +82,12 @@ def test_identical_surfaces_agree_everywhere(head, regions) -> None:  # noqa: AN
     assert fig["coverage"] == pytest.approx(1.0)
     assert set(result.regions) == set(REGION_NAMES)
     for name, figures in result.regions.items():
-        assert figures["n_vertices"] == len(regions[name]) and figures["coverage"] == pytest.approx(1.0)
+        assert figures["n_vertices"] == len(regions[name]) and figures["coverage"] == pytest.approx(
+            1.0
+        )
 
 
-def test_a_thicker_true_skin_gives_negative_distances(head, regions, displaced) -> None:  # noqa: ANN001
+def test_a_thicker_true_skin_gives_negative_distances(head, regions, displaced) -> None:
     # the truth lies 3 mm outside the reconstruction: the reconstruction is inside (too thin)
     result = compare_surfaces(head.skin, displaced, recon_regions=regions)
     fig = result.figures
@@ -111,7 +115,7 @@ def test_a_thicker_true_skin_gives_negative_distances(head, regions, displaced) 
     assert np.isfinite(values[regions["nose"]]).all()
 
 
-def test_a_partial_truth_lowers_the_coverage(head, regions, displaced) -> None:  # noqa: ANN001
+def test_a_partial_truth_lowers_the_coverage(head, regions, displaced) -> None:
     # a scan of the left half of the face only
     keep = displaced.triangles.mean(axis=1)[:, 0] > 0
     half = Mesh(displaced.vertices, displaced.faces[keep])
@@ -127,7 +131,7 @@ def test_a_partial_truth_lowers_the_coverage(head, regions, displaced) -> None: 
     assert part.regions["forehead"]["signed_mean_mm"] == pytest.approx(-3.0, abs=0.05)
 
 
-def test_regions_all_and_single(head, regions, displaced) -> None:  # noqa: ANN001
+def test_regions_all_and_single(head, regions, displaced) -> None:
     whole = compare_surfaces(head.skin, displaced, region="all")  # needs no labels
     assert whole.figures["n_vertices"] > 0.95 * displaced.n_vertices
     assert whole.regions == {} and (whole.region_of == -1).all()
@@ -145,7 +149,7 @@ def test_regions_all_and_single(head, regions, displaced) -> None:  # noqa: ANN0
         compare_surfaces(head.skin, displaced, recon_regions=regions, region="ears")
 
 
-def test_max_distance_and_inward_winding(head, regions, displaced) -> None:  # noqa: ANN001
+def test_max_distance_and_inward_winding(head, regions, displaced) -> None:
     skin = head.skin
     # truth vertices farther than max_distance_mm are other anatomy, not compared
     near = compare_surfaces(skin, displaced, recon_regions=regions, max_distance_mm=2.0)
@@ -161,7 +165,7 @@ def test_max_distance_and_inward_winding(head, regions, displaced) -> None:  # n
     assert result.notes and "inward" in result.notes[0]
 
 
-def test_orientation_from_the_template(head) -> None:  # noqa: ANN001
+def test_orientation_from_the_template(head) -> None:
     # a reconstruction in a CT's LPS frame: head frame (x left, y up, z face) -> LPS
     to_lps = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # x->L, y up->S, z face->-P
     recon = head.skin.with_vertices(head.skin.vertices @ to_lps.T + [5.0, -80.0, 20.0])
@@ -171,7 +175,7 @@ def test_orientation_from_the_template(head) -> None:  # noqa: ANN001
 
 
 @pytest.mark.render
-def test_heatmap_is_not_blank(tmp_path: Path, head, regions, displaced) -> None:  # noqa: ANN001
+def test_heatmap_is_not_blank(tmp_path: Path, head, regions, displaced) -> None:
     from PIL import Image
 
     from workbench.render.heatmap import render_heatmap
@@ -181,8 +185,9 @@ def test_heatmap_is_not_blank(tmp_path: Path, head, regions, displaced) -> None:
     normals = vertex_normals(skin)
     truth = skin.with_vertices(skin.vertices + normals * (skin.vertices[:, [0]] / 10.0))
     result = compare_surfaces(skin, truth, recon_regions=regions)
-    path = render_heatmap(truth, result.truth_vertex_values(), tmp_path / "heat.png",
-                          views=("front", "side"))
+    path = render_heatmap(
+        truth, result.truth_vertex_values(), tmp_path / "heat.png", views=("front", "side")
+    )
     image = np.asarray(Image.open(path).convert("RGB")).astype(int)
     assert image.shape[1] > image.shape[0]  # panels side by side
     assert image.std() > 20

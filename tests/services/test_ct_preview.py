@@ -17,23 +17,26 @@ from workbench.services.ct_preview import CtPreview, block_mean, preview_strides
 
 
 @pytest.fixture(scope="module")
-def headsq(headsq_nhdr) -> Volume:  # noqa: ANN001
+def headsq(headsq_nhdr) -> Volume:
     return read_volume(headsq_nhdr)
 
 
 @pytest.fixture(scope="module")
-def full_bone(headsq):  # noqa: ANN001
+def full_bone(headsq):
     return mesh_from_ct(headsq, "bone")
 
 
 # ------------------------------------------------------------------ downsampling
-@pytest.mark.parametrize(("shape", "spacing", "limit"), [
-    ((512, 512, 300), (0.5, 0.5, 0.6), 3_000_000),
-    ((512, 512, 60), (0.45, 0.45, 3.0), 3_000_000),
-    ((64, 64, 93), (3.2, 3.2, 1.5), 1_000),
-    ((64, 64, 93), (3.2, 3.2, 1.5), 10**9),
-])
-def test_strides_keep_the_preview_under_the_limit(shape, spacing, limit) -> None:  # noqa: ANN001
+@pytest.mark.parametrize(
+    ("shape", "spacing", "limit"),
+    [
+        ((512, 512, 300), (0.5, 0.5, 0.6), 3_000_000),
+        ((512, 512, 60), (0.45, 0.45, 3.0), 3_000_000),
+        ((64, 64, 93), (3.2, 3.2, 1.5), 1_000),
+        ((64, 64, 93), (3.2, 3.2, 1.5), 10**9),
+    ],
+)
+def test_strides_keep_the_preview_under_the_limit(shape, spacing, limit) -> None:
     strides = preview_strides(shape, np.array(spacing), limit)
     n = np.prod([-(-a // s) for a, s in zip(shape, strides, strict=True)])
     assert n <= limit
@@ -53,8 +56,14 @@ def test_block_mean_keeps_the_physical_frame() -> None:
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     shape_kji = (13, 10, 17)
     k, j, i = np.indices(shape_kji)
-    vol = Volume(np.zeros(shape_kji), spacing_mm=(0.7, 0.9, 2.0), origin_mm=(5.0, -3.0, 40.0),
-                 direction=q, frame="RAS", units="HU")
+    vol = Volume(
+        np.zeros(shape_kji),
+        spacing_mm=(0.7, 0.9, 2.0),
+        origin_mm=(5.0, -3.0, 40.0),
+        direction=q,
+        frame="RAS",
+        units="HU",
+    )
     xyz = vol.index_to_physical(np.stack([i, j, k], axis=-1).reshape(-1, 3))
     field_ = (xyz @ np.array([0.3, -1.2, 2.5])).reshape(shape_kji)
     vol = Volume(field_, vol.spacing_mm, vol.origin_mm, vol.direction, "RAS", units="HU")
@@ -72,7 +81,7 @@ def test_block_mean_keeps_the_physical_frame() -> None:
 
 
 # ------------------------------------------------------------------ headsq previews
-def test_small_volume_preview_is_the_full_resolution_surface(headsq, full_bone) -> None:  # noqa: ANN001
+def test_small_volume_preview_is_the_full_resolution_surface(headsq, full_bone) -> None:
     ct = CtPreview.from_volume(headsq)
     assert ct.strides == (1, 1, 1)
     assert ct.presets["bone"].iso == 1150.0 and ct.presets["skin"].iso == 500.0
@@ -82,7 +91,7 @@ def test_small_volume_preview_is_the_full_resolution_surface(headsq, full_bone) 
     assert surface.n_components > 1 and surface.debris.n_faces > 0
 
 
-def test_preview_is_fast(headsq) -> None:  # noqa: ANN001
+def test_preview_is_fast(headsq) -> None:
     ct = CtPreview.from_volume(headsq)
     seconds = []
     for iso in (1150.0, 900.0, 1400.0):
@@ -92,7 +101,7 @@ def test_preview_is_fast(headsq) -> None:  # noqa: ANN001
     assert min(seconds) < 0.5, seconds
 
 
-def test_downsampled_preview_overlays_the_full_extraction(headsq, full_bone) -> None:  # noqa: ANN001
+def test_downsampled_preview_overlays_the_full_extraction(headsq, full_bone) -> None:
     ct = CtPreview.from_volume(headsq, max_voxels=100_000)
     assert ct.strides != (1, 1, 1)
     assert ct.preview_volume.data.size <= 100_000
@@ -106,7 +115,7 @@ def test_downsampled_preview_overlays_the_full_extraction(headsq, full_bone) -> 
     assert np.all(surface.mesh.bounds[0] >= lo - 1e-9) and np.all(surface.mesh.bounds[1] <= hi)
 
 
-def test_iso_changes_the_surface_and_the_counts(headsq) -> None:  # noqa: ANN001
+def test_iso_changes_the_surface_and_the_counts(headsq) -> None:
     ct = CtPreview.from_volume(headsq)
     low, high = ct.surface(900.0), ct.surface(2000.0)
     assert low.iso == 900.0 and high.iso == 2000.0
@@ -120,7 +129,7 @@ def test_iso_changes_the_surface_and_the_counts(headsq) -> None:  # noqa: ANN001
     assert "voxels ≥ 900" in low.summary.text()
 
 
-def test_percentiles_and_histogram_match_numpy(headsq) -> None:  # noqa: ANN001
+def test_percentiles_and_histogram_match_numpy(headsq) -> None:
     ct = CtPreview.from_volume(headsq)
     q = (1.0, 25.0, 50.0, 95.0, 99.9)
     got = ct.percentiles(q)
@@ -131,14 +140,14 @@ def test_percentiles_and_histogram_match_numpy(headsq) -> None:  # noqa: ANN001
     np.testing.assert_array_equal(counts[:-1], np.histogram(headsq.data, edges)[0][:-1])
 
 
-def test_a_level_without_surface_gives_an_empty_preview(headsq) -> None:  # noqa: ANN001
+def test_a_level_without_surface_gives_an_empty_preview(headsq) -> None:
     ct = CtPreview.from_volume(headsq)
     surface = ct.surface(10_000.0)
     assert surface.empty and surface.summary.voxels_above == 0
     assert "outside the data range" in surface.note
 
 
-def test_load_reports_progress_and_describes_the_volume(headsq_nhdr) -> None:  # noqa: ANN001
+def test_load_reports_progress_and_describes_the_volume(headsq_nhdr) -> None:
     steps: list[tuple[str, float]] = []
     ct = CtPreview.load(headsq_nhdr, progress=lambda s, f: steps.append((s, f)))
     fractions = [f for _, f in steps]
@@ -160,7 +169,7 @@ def test_cancel_token_basics() -> None:
     assert issubclass(Cancelled, WorkbenchError)
 
 
-def test_cancel_stops_mesh_from_ct_at_its_next_progress_check(headsq) -> None:  # noqa: ANN001
+def test_cancel_stops_mesh_from_ct_at_its_next_progress_check(headsq) -> None:
     token = CancelToken()
     steps: list[str] = []
 
@@ -175,7 +184,7 @@ def test_cancel_stops_mesh_from_ct_at_its_next_progress_check(headsq) -> None:  
     assert "validating" not in steps and "done" not in steps
 
 
-def test_cancel_from_another_thread_stops_the_worker(headsq) -> None:  # noqa: ANN001
+def test_cancel_from_another_thread_stops_the_worker(headsq) -> None:
     token, outcome = CancelToken(), {}
     started = threading.Event()
 
@@ -198,7 +207,7 @@ def test_cancel_from_another_thread_stops_the_worker(headsq) -> None:  # noqa: A
     assert outcome == {"result": "cancelled"}
 
 
-def test_a_cancelled_preview_raises(headsq) -> None:  # noqa: ANN001
+def test_a_cancelled_preview_raises(headsq) -> None:
     ct = CtPreview.from_volume(headsq)
     token = CancelToken()
     token.cancel()

@@ -22,8 +22,23 @@ from workbench.services.dowels import (
     plan_dowels,
 )
 
-MANDIBLE_CODES = {"id", "sm", "pg", "gn", "me", "iC_l", "iC_r", "ecm2i_l", "ecm2i_r",
-                  "mr_l", "mr_r", "go_l", "go_r", "mmb_l", "mmb_r"}
+MANDIBLE_CODES = {
+    "id",
+    "sm",
+    "pg",
+    "gn",
+    "me",
+    "iC_l",
+    "iC_r",
+    "ecm2i_l",
+    "ecm2i_r",
+    "mr_l",
+    "mr_r",
+    "go_l",
+    "go_r",
+    "mmb_l",
+    "mmb_r",
+}
 
 
 def _combine(*meshes: Mesh) -> Mesh:
@@ -31,17 +46,17 @@ def _combine(*meshes: Mesh) -> Mesh:
 
 
 @pytest.fixture(scope="module")
-def head(head_male):  # noqa: ANN001, ANN201 - the session's cached reference head
+def head(head_male):
     return head_male
 
 
 @pytest.fixture(scope="module")
-def skull(head) -> Mesh:  # noqa: ANN001
+def skull(head) -> Mesh:
     return _combine(head.meshes["cranium"], head.meshes["mandible"])
 
 
 @pytest.fixture(scope="module")
-def plan(head, skull):  # noqa: ANN001, ANN201
+def plan(head, skull):
     return plan_dowels(skull, head.skull_landmarks)
 
 
@@ -52,12 +67,14 @@ def _with_status(lms: LandmarkSet, **status: str) -> LandmarkSet:
     return lms
 
 
-def test_template_dowel_tips_reach_the_paired_skin_landmarks(head, plan) -> None:  # noqa: ANN001
+def test_template_dowel_tips_reach_the_paired_skin_landmarks(head, plan) -> None:
     table = load_depth_table("ttable_2023")
     rows = [d for d in plan.dowels if d.source == "table"]
     assert {d.code for d in rows} == set(table.codes)  # all 36 T-Table sites are on the template
-    errors = {d.code: float(np.linalg.norm(d.tip - head.skin_landmarks[d.skin_code].position))
-              for d in rows}
+    errors = {
+        d.code: float(np.linalg.norm(d.tip - head.skin_landmarks[d.skin_code].position))
+        for d in rows
+    }
     # the template skull was fitted so these agree; measured worst 0.21 mm (ecm2s)
     assert max(errors.values()) < 0.5, errors
     for d in rows:
@@ -76,7 +93,7 @@ def test_template_dowel_tips_reach_the_paired_skin_landmarks(head, plan) -> None
     assert "fe_l" in no_value and "sgl_r" in no_value
 
 
-def test_build_variant_adds_k_sd_exactly(head, skull, plan) -> None:  # noqa: ANN001
+def test_build_variant_adds_k_sd_exactly(head, skull, plan) -> None:
     plus = plan_dowels(skull, head.skull_landmarks, DepthSettings(build=1.5))
     minus = plan_dowels(skull, head.skull_landmarks, DepthSettings(build="-1 SD"))
     assert plus.group_label == "adult pooled, mean + 1.5 SD"
@@ -94,11 +111,13 @@ def test_build_variant_adds_k_sd_exactly(head, skull, plan) -> None:  # noqa: AN
     # mean - 3 SD would put gonion (12.5 +- 6 mm) inside the bone: floored, and said so
     thin = plan_dowels(skull, head.skull_landmarks, DepthSettings(build=-3))
     assert thin["go_l"].depth_mm == MIN_SAMPLE_DEPTH_MM
-    assert any(w.startswith("mean - 3 SD is below 0.5 mm for") and "go_l (-5.5 mm)" in w
-               for w in thin.warnings)
+    assert any(
+        w.startswith("mean - 3 SD is below 0.5 mm for") and "go_l (-5.5 mm)" in w
+        for w in thin.warnings
+    )
 
 
-def test_named_builds_and_impossible_requests(head, skull, tmp_path: Path) -> None:  # noqa: ANN001
+def test_named_builds_and_impossible_requests(head, skull, tmp_path: Path) -> None:
     lms = head.skull_landmarks
     with pytest.raises(InputError, match="ttable_2023: no obese build group"):
         plan_dowels(skull, lms, DepthSettings(build="obese"))
@@ -119,23 +138,31 @@ def test_named_builds_and_impossible_requests(head, skull, tmp_path: Path) -> No
     assert any("has no SDs" in w for w in female.warnings)
     # a user table with build groups (values invented for the test): the named build is used
     path = tmp_path / "builds.csv"
-    path.write_text("landmark_code,group,sex,build,mean_mm,sd_mm,source\n"
-                    + "".join(f"{c},m/{b},male,{b},{d},1,test\n{c},f/{b},female,{b},{d + 1},1,test\n"
-                              for c in ("g", "pg", "go_l") for b, d in
-                              (("slender", 3.0), ("normal", 5.0), ("obese", 8.0))))
+    path.write_text(
+        "landmark_code,group,sex,build,mean_mm,sd_mm,source\n"
+        + "".join(
+            f"{c},m/{b},male,{b},{d},1,test\n{c},f/{b},female,{b},{d + 1},1,test\n"
+            for c in ("g", "pg", "go_l")
+            for b, d in (("slender", 3.0), ("normal", 5.0), ("obese", 8.0))
+        )
+    )
     obese = plan_dowels(skull, lms, DepthSettings(table=str(path), sex="male", build="obese"))
     assert obese.group_label == "m/obese male, mean"
-    assert {d.code: d.depth_mm for d in obese.dowels if d.source == "table"} == \
-        {"g": 8.0, "pg": 8.0, "go_l": 8.0}
+    assert {d.code: d.depth_mm for d in obese.dowels if d.source == "table"} == {
+        "g": 8.0,
+        "pg": 8.0,
+        "go_l": 8.0,
+    }
     slim = plan_dowels(skull, lms, DepthSettings(table=str(path), sex="female", build="slender"))
     assert slim["g"].depth_mm == 4.0 and slim.citation == "test"
     k = plan_dowels(skull, lms, DepthSettings(table=str(path), sex="female", build=-1))
     assert k["g"].depth_mm == 5.0 and k.group_label == "f/normal female, mean - 1 SD"
 
 
-def test_overrides_and_exclusions(head, skull, plan) -> None:  # noqa: ANN001
-    settings = DepthSettings(overrides={"pg": 15.0, "sgl_l": 8.0},
-                             excluded=frozenset({"spm2", "sbm2", "go_r"}))
+def test_overrides_and_exclusions(head, skull, plan) -> None:
+    settings = DepthSettings(
+        overrides={"pg": 15.0, "sgl_l": 8.0}, excluded=frozenset({"spm2", "sbm2", "go_r"})
+    )
     p = plan_dowels(skull, head.skull_landmarks, settings)
     pg = p["pg"]
     assert (pg.source, pg.depth_mm, pg.table_depth_mm, pg.sd_mm) == ("override", 15.0, 11.0, None)
@@ -156,9 +183,12 @@ def test_overrides_and_exclusions(head, skull, plan) -> None:  # noqa: ANN001
         plan_dowels(skull, head.skull_landmarks, DepthSettings(overrides={"pg": -2.0}))
 
 
-def test_user_direction_overrides_the_normal(head, skull) -> None:  # noqa: ANN001
-    p = plan_dowels(skull, head.skull_landmarks,
-                    DepthSettings(directions={"g": (0.0, 0.0, 2.0), "i:v-g:0.50": (0, 1, 1)}))
+def test_user_direction_overrides_the_normal(head, skull) -> None:
+    p = plan_dowels(
+        skull,
+        head.skull_landmarks,
+        DepthSettings(directions={"g": (0.0, 0.0, 2.0), "i:v-g:0.50": (0, 1, 1)}),
+    )
     np.testing.assert_allclose(p["g"].direction, [0.0, 0.0, 1.0])
     np.testing.assert_allclose(p["g"].tip, p["g"].origin + [0.0, 0.0, 5.5])
     np.testing.assert_allclose(p["i:v-g:0.50"].direction, [0.0, 2**-0.5, 2**-0.5])
@@ -166,7 +196,7 @@ def test_user_direction_overrides_the_normal(head, skull) -> None:  # noqa: ANN0
         plan_dowels(skull, head.skull_landmarks, DepthSettings(directions={"g": (0, 0, 0)}))
 
 
-def test_absent_and_missing_landmarks_are_skipped_with_warnings(head, skull) -> None:  # noqa: ANN001
+def test_absent_and_missing_landmarks_are_skipped_with_warnings(head, skull) -> None:
     lms = _with_status(head.skull_landmarks, pg="absent", v="missing")
     p = plan_dowels(skull, lms)
     assert "pg" not in p.codes and "v" not in p.codes
@@ -179,7 +209,7 @@ def test_absent_and_missing_landmarks_are_skipped_with_warnings(head, skull) -> 
             assert r.code in skipped
 
 
-def test_missing_mandible_drops_its_dowels_and_sites(head, plan) -> None:  # noqa: ANN001
+def test_missing_mandible_drops_its_dowels_and_sites(head, plan) -> None:
     cranium = head.meshes["cranium"]
     p = plan_dowels(cranium, head.skull_landmarks)
     assert not MANDIBLE_CODES & set(p.codes)
@@ -194,7 +224,7 @@ def test_missing_mandible_drops_its_dowels_and_sites(head, plan) -> None:  # noq
         np.testing.assert_allclose(d.tip, plan[d.code].tip, atol=1e-9)
 
 
-def test_interpolated_sites_lie_on_the_bone_between_their_parents(head, skull, plan) -> None:  # noqa: ANN001
+def test_interpolated_sites_lie_on_the_bone_between_their_parents(head, skull, plan) -> None:
     sites = interpolated_sites(skull, head.skull_landmarks)
     assert [c for c, _, _ in sites] == [r.code for r in SITE_PATTERN]
     pos = np.stack([p for _, p, _ in sites])
@@ -214,9 +244,11 @@ def test_interpolated_sites_lie_on_the_bone_between_their_parents(head, skull, p
             np.testing.assert_allclose(right, p * [-1, 1, 1], atol=0.5)
 
 
-def test_sites_correspond_on_a_scaled_skull_and_vanish_in_a_hole(head, skull) -> None:  # noqa: ANN001
+def test_sites_correspond_on_a_scaled_skull_and_vanish_in_a_hole(head, skull) -> None:
     base = dict((c, p) for c, p, _ in interpolated_sites(skull, head.skull_landmarks))
-    big = interpolated_sites(skull.scaled(1.1), head.skull_landmarks.transformed(np.diag([1.1] * 3 + [1])))
+    big = interpolated_sites(
+        skull.scaled(1.1), head.skull_landmarks.transformed(np.diag([1.1] * 3 + [1]))
+    )
     assert [c for c, _, _ in big] == list(base)
     worst = max(np.linalg.norm(p - 1.1 * base[c]) for c, p, _ in big)
     assert worst < 1.0  # measured 0.26 mm (the normal radius does not scale)
@@ -224,13 +256,14 @@ def test_sites_correspond_on_a_scaled_skull_and_vanish_in_a_hole(head, skull) ->
     centre = base["i:v-op:0.50"]
     keep = np.linalg.norm(skull.triangles.mean(axis=1) - centre, axis=1) > 12.0
     skipped: list[str] = []
-    holed = interpolated_sites(Mesh(skull.vertices, skull.faces[keep]), head.skull_landmarks,
-                               skipped=skipped)
+    holed = interpolated_sites(
+        Mesh(skull.vertices, skull.faces[keep]), head.skull_landmarks, skipped=skipped
+    )
     assert [c for c, _, _ in holed] == [c for c in base if c != "i:v-op:0.50"]
     assert skipped == ["i:v-op:0.50: no bone on its dowel line (missing or damaged cranium?)"]
 
 
-def test_depth_samples_follow_mean_and_sd(head, skull) -> None:  # noqa: ANN001
+def test_depth_samples_follow_mean_and_sd(head, skull) -> None:
     p = plan_dowels(skull, head.skull_landmarks, DepthSettings(overrides={"g": 6.0}))
     rng = np.random.default_rng(7)
     draws = np.stack([depth_samples(p, rng) for _ in range(4000)])
@@ -252,7 +285,7 @@ def test_depth_samples_follow_mean_and_sd(head, skull) -> None:  # noqa: ANN001
     assert np.corrcoef(draws[:, index["v"]], draws[:, index["i:v-op:0.25"]])[0, 1] > 0.5
 
 
-def test_inward_wound_skull_is_flagged(head, skull) -> None:  # noqa: ANN001
+def test_inward_wound_skull_is_flagged(head, skull) -> None:
     flipped = Mesh(skull.vertices, skull.faces[:, ::-1])
     p = plan_dowels(flipped, head.skull_landmarks, DepthSettings(interpolate=False))
     assert any("point into the skull" in w for w in p.warnings)

@@ -12,10 +12,16 @@ from workbench.services.frame import head_frame_from_landmarks
 
 # an adult skull's landmarks in the head frame (mm), roughly after Howells' means
 CANONICAL = {
-    "po_l": (62.0, 0.0, 0.0), "po_r": (-62.0, 0.0, 0.0),
-    "or_l": (33.0, 0.0, 72.0), "or_r": (-33.0, 0.0, 72.0),
-    "n": (0.0, 22.0, 88.0), "g": (0.0, 35.0, 92.0), "pr": (0.0, -42.0, 88.0),
-    "me": (0.0, -85.0, 78.0), "op": (0.0, 40.0, -100.0), "b": (0.0, 110.0, 10.0),
+    "po_l": (62.0, 0.0, 0.0),
+    "po_r": (-62.0, 0.0, 0.0),
+    "or_l": (33.0, 0.0, 72.0),
+    "or_r": (-33.0, 0.0, 72.0),
+    "n": (0.0, 22.0, 88.0),
+    "g": (0.0, 35.0, 92.0),
+    "pr": (0.0, -42.0, 88.0),
+    "me": (0.0, -85.0, 78.0),
+    "op": (0.0, 40.0, -100.0),
+    "b": (0.0, 110.0, 10.0),
 }
 
 
@@ -36,8 +42,9 @@ def test_frame_recovers_the_canonical_coordinates(seed: int) -> None:
         assert np.allclose(got, p, atol=1e-9), code
     # and back into the user's frame
     p = np.asarray(CANONICAL["me"])
-    assert np.allclose(frame.to_input(frame.to_head(m[:3, :3] @ p + m[:3, 3])),
-                       m[:3, :3] @ p + m[:3, 3])
+    assert np.allclose(
+        frame.to_input(frame.to_head(m[:3, :3] @ p + m[:3, 3])), m[:3, :3] @ p + m[:3, 3]
+    )
 
 
 def test_mirrored_input_is_flagged() -> None:

@@ -10,7 +10,7 @@ from workbench.services.jaw import axis_rotation, open_jaw
 
 
 @pytest.fixture(scope="module")
-def head(head_female):  # noqa: ANN001, ANN201 - the session's reference head
+def head(head_female):
     return head_female
 
 
@@ -22,7 +22,7 @@ def test_axis_rotation_keeps_the_axis_and_is_rigid() -> None:
         assert np.allclose(m[:3, :3] @ p + m[:3, 3], p)
 
 
-def test_opening_moves_the_chin_down_and_back_and_closing_restores(head) -> None:  # noqa: ANN001
+def test_opening_moves_the_chin_down_and_back_and_closing_restores(head) -> None:
     me = head.skull_landmarks["me"].position
     opened = open_jaw(head, 20.0)
     me_open = opened.skull_landmarks["me"].position
@@ -31,10 +31,14 @@ def test_opening_moves_the_chin_down_and_back_and_closing_restores(head) -> None
     assert np.array_equal(opened.skull_landmarks["n"].position, head.skull_landmarks["n"].position)
     assert opened.meshes["cranium"] is head.meshes["cranium"]
     # the mouth opens: lower incisors move away from the upper ones
-    gap = MeshIndex(opened.meshes["upper_teeth"]).closest_points(
-        opened.meshes["lower_teeth"].vertices).distances.min()
+    gap = (
+        MeshIndex(opened.meshes["upper_teeth"])
+        .closest_points(opened.meshes["lower_teeth"].vertices)
+        .distances.min()
+    )
     assert gap > 5.0
     closed = open_jaw(opened, -20.0)
-    assert np.allclose(closed.meshes["mandible"].vertices, head.meshes["mandible"].vertices,
-                       atol=1e-9)
+    assert np.allclose(
+        closed.meshes["mandible"].vertices, head.meshes["mandible"].vertices, atol=1e-9
+    )
     assert closed.provenance["jaw_angle_deg"] == 0.0

@@ -12,7 +12,7 @@ from workbench.services.landmark_placement import SurfacePlacement
 
 
 @pytest.fixture()
-def editor(headsq_surfaces, tmp_path):  # noqa: ANN001
+def editor(headsq_surfaces, tmp_path):
     from workbench.io.meshes import write_mesh
 
     path = write_mesh(tmp_path / "bone.ply", headsq_surfaces["bone"])
@@ -38,7 +38,7 @@ def test_slide_stays_on_the_surface_and_is_one_step(editor):
     moved = editor.slide("g", [0.0, 0.0, -8.0])
     assert MeshIndex(editor.mesh).closest_points(moved.position[None]).distances[0] < 1e-9
     assert 2.0 < np.linalg.norm(moved.position - start) < 16.0
-    editor.move("g", moved.position + [0.5, 0, 0])   # a drag continues: merges
+    editor.move("g", moved.position + [0.5, 0, 0])  # a drag continues: merges
     editor.stack.undo()
     np.testing.assert_allclose(editor.landmark("g").position, start)
 

@@ -24,7 +24,7 @@ from workbench.services.landmark_snap import snap_frame, snap_index, snap_landma
 
 
 @pytest.fixture(scope="module")
-def skull(skull_obj_suggested):  # noqa: ANN001, ANN201
+def skull(skull_obj_suggested):
     mesh, landmarks = skull_obj_suggested
     to_head = snap_frame(landmarks)
     return mesh, landmarks, to_head, MeshIndex(mesh)
@@ -42,13 +42,14 @@ def _with(landmarks: LandmarkSet, code: str, position: np.ndarray) -> LandmarkSe
     return landmarks.with_landmark(landmarks[code].moved(position, "placed"))
 
 
-def _editor(mesh, landmarks: LandmarkSet) -> SurfacePlacement:  # noqa: ANN001
-    case = Case(specimen=Specimen(mesh, "mm"),
-                landmarks={"skull": landmarks, "skin": LandmarkSet("skin")})
+def _editor(mesh, landmarks: LandmarkSet) -> SurfacePlacement:
+    case = Case(
+        specimen=Specimen(mesh, "mm"), landmarks={"skull": landmarks, "skin": LandmarkSet("skin")}
+    )
     return SurfacePlacement(mesh, CommandStack(case))
 
 
-def test_perturbed_glabella_snaps_back_to_the_most_anterior_midline_point(skull):  # noqa: ANN001
+def test_perturbed_glabella_snaps_back_to_the_most_anterior_midline_point(skull):
     mesh, lms, to_head, index = skull
     feature = snap_landmark(mesh, lms, "g").position
     # 4 mm up the forehead and 1 mm back (head frame), onto the surface: behind the brow
@@ -56,27 +57,30 @@ def test_perturbed_glabella_snaps_back_to_the_most_anterior_midline_point(skull)
     perturbed = index.closest_points(off[None]).points[0]
     moved = _with(lms, "g", perturbed)
     result = snap_landmark(mesh, moved, "g")
-    frame = snap_frame(moved)           # g is a midline landmark: the frame moves with it
+    frame = snap_frame(moved)  # g is a midline landmark: the frame moves with it
     s, p = _head(frame, result.position), _head(frame, perturbed)
 
     assert result.rule is not None and result.feature == "most anterior midline point"
-    assert s[2] > p[2] + 0.5                       # more anterior than where it was put
-    assert abs(s[0]) <= 1.5                        # on the midsagittal plane (exactly, here)
-    assert index.closest_points(result.position[None]).distances[0] < 1e-6   # on the surface
+    assert s[2] > p[2] + 0.5  # more anterior than where it was put
+    assert abs(s[0]) <= 1.5  # on the midsagittal plane (exactly, here)
+    assert index.closest_points(result.position[None]).distances[0] < 1e-6  # on the surface
     # more anterior than the nearby outer surface near the midline (independent check on
     # raw vertices within the 8 mm radius, |x| <= 1.5 mm, facing forward; ties of 0.25 mm)
     heads = mesh.vertices @ frame[:3, :3].T + frame[:3, 3]
     facing = snap_index(mesh).normals @ frame[:3, :3].T
-    near = ((np.linalg.norm(heads - s, axis=1) < 8.0) & (np.abs(heads[:, 0]) <= 1.5)
-            & (facing[:, 2] > 0))
+    near = (
+        (np.linalg.norm(heads - s, axis=1) < 8.0)
+        & (np.abs(heads[:, 0]) <= 1.5)
+        & (facing[:, 2] > 0)
+    )
     assert near.sum() > 10
     assert heads[near, 2].max() <= s[2] + 0.5
-    assert np.linalg.norm(result.position - feature) < 2.5   # back to the same feature
+    assert np.linalg.norm(result.position - feature) < 2.5  # back to the same feature
     assert result.moved_mm == pytest.approx(np.linalg.norm(result.position - perturbed))
     assert result.explanation.startswith("g → most anterior midline point within 8 mm: moved")
 
 
-def test_glabella_on_the_flat_of_the_brow_stays_put(skull):  # noqa: ANN001
+def test_glabella_on_the_flat_of_the_brow_stays_put(skull):
     # this brow is within 0.5 mm of its most anterior point over ~10 mm of height: 4 mm
     # down is still on it, and the snap keeps the user's choice (near-ties of 0.25 mm)
     mesh, lms, to_head, index = skull
@@ -86,10 +90,10 @@ def test_glabella_on_the_flat_of_the_brow_stays_put(skull):  # noqa: ANN001
     moved = _with(lms, "g", perturbed)
     result = snap_landmark(mesh, moved, "g")
     assert result.moved_mm < 1.5
-    assert abs(_head(snap_frame(moved), result.position)[0]) < 1e-6   # on the midline
+    assert abs(_head(snap_frame(moved), result.position)[0]) < 1e-6  # on the midline
 
 
-def test_snapping_is_idempotent_for_every_rule(skull):  # noqa: ANN001
+def test_snapping_is_idempotent_for_every_rule(skull):
     mesh, lms, _, index = skull
     rules = load_snap_rules()
     codes = [c for c in rules if c in lms and lms[c].is_defined]
@@ -102,7 +106,7 @@ def test_snapping_is_idempotent_for_every_rule(skull):  # noqa: ANN001
         assert again.moved_mm < 0.5, (code, first.explanation, again.explanation)
 
 
-def test_snap_result_is_a_fixed_point_from_perturbed_starts(skull):  # noqa: ANN001
+def test_snap_result_is_a_fixed_point_from_perturbed_starts(skull):
     """Whatever the start near the feature, snapping the result again keeps it (< 0.5 mm)."""
     mesh, lms, _, index = skull
     rng = np.random.default_rng(7)
@@ -116,7 +120,7 @@ def test_snap_result_is_a_fixed_point_from_perturbed_starts(skull):  # noqa: ANN
             assert again.moved_mm < 0.5, (code, offset, first.explanation, again.explanation)
 
 
-def test_lateral_and_deepest_rules_follow_the_head_frame(skull):  # noqa: ANN001
+def test_lateral_and_deepest_rules_follow_the_head_frame(skull):
     mesh, lms, to_head, _ = skull
     for code, sign in (("zy_l", 1.0), ("zy_r", -1.0)):
         r = snap_landmark(mesh, lms, code)
@@ -126,11 +130,11 @@ def test_lateral_and_deepest_rules_follow_the_head_frame(skull):  # noqa: ANN001
     assert ss.feature == "deepest point of the midline concavity"
     s = _head(to_head, ss.position)
     ans, pr = (_head(to_head, lms[c].position) for c in ("ans", "pr"))
-    assert pr[1] < s[1] < ans[1]                   # between its bounds, as defined
-    assert s[2] < min(ans[2], pr[2]) - 0.3         # and behind both: a concavity
+    assert pr[1] < s[1] < ans[1]  # between its bounds, as defined
+    assert s[2] < min(ans[2], pr[2]) - 0.3  # and behind both: a concavity
 
 
-def test_snap_is_one_undo_step_that_does_not_merge_with_a_drag(skull):  # noqa: ANN001
+def test_snap_is_one_undo_step_that_does_not_merge_with_a_drag(skull):
     mesh, lms, to_head, index = skull
     editor = _editor(mesh, lms)
     before = editor.landmark("g").position.copy()
@@ -141,7 +145,7 @@ def test_snap_is_one_undo_step_that_does_not_merge_with_a_drag(skull):  # noqa: 
     np.testing.assert_allclose(editor.landmark("g").position, result.position)
     assert editor.landmark("g").status == "placed"
     editor.stack.undo()
-    np.testing.assert_allclose(editor.landmark("g").position, dragged)   # the drag stays
+    np.testing.assert_allclose(editor.landmark("g").position, dragged)  # the drag stays
     editor.stack.undo()
     np.testing.assert_allclose(editor.landmark("g").position, before)
     editor.stack.redo()
@@ -149,7 +153,7 @@ def test_snap_is_one_undo_step_that_does_not_merge_with_a_drag(skull):  # noqa: 
     np.testing.assert_allclose(editor.landmark("g").position, result.position)
 
 
-def test_snap_all_is_one_step(skull):  # noqa: ANN001
+def test_snap_all_is_one_step(skull):
     mesh, lms, _, _ = skull
     editor = _editor(mesh, lms)
     n_steps = len(editor.stack)
@@ -161,48 +165,50 @@ def test_snap_all_is_one_step(skull):  # noqa: ANN001
     assert editor.stack.case.landmarks["skull"].equals(lms)
 
 
-def test_landmarks_without_a_rule(skull):  # noqa: ANN001
+def test_landmarks_without_a_rule(skull):
     mesh, lms, to_head, index = skull
     assert "n" not in load_snap_rules()
     # nasion pushed 2 mm to the side (on the surface): it only comes back onto the midline
-    off = index.closest_points(_input(to_head, _head(to_head, lms["n"].position)
-                                      + [2.0, 0, 0])[None]).points[0]
+    off = index.closest_points(
+        _input(to_head, _head(to_head, lms["n"].position) + [2.0, 0, 0])[None]
+    ).points[0]
     moved = _with(lms, "n", off)
     r = snap_landmark(mesh, moved, "n")
     assert r.rule is None and r.feature == "the midsagittal plane"
     frame = snap_frame(moved)
     h, h0 = _head(frame, r.position), _head(frame, off)
     assert abs(h[0]) < 1e-6 and abs(h0[0]) > 1.0
-    assert np.hypot(*(h - h0)[1:]) < 1.5           # height and depth about kept
+    assert np.hypot(*(h - h0)[1:]) < 1.5  # height and depth about kept
     assert index.closest_points(r.position[None]).distances[0] < 1e-6
     # a bilateral landmark without a rule does not move, and needs no frame
     fe = snap_landmark(mesh, lms.without("po_l"), "fe_l")
     assert fe.moved_mm == 0.0 and not fe.moves and "no snap rule" in fe.explanation
 
 
-def test_missing_frame_landmarks_are_named(skull):  # noqa: ANN001
+def test_missing_frame_landmarks_are_named(skull):
     mesh, lms, _, _ = skull
     with pytest.raises(LandmarkError, match=r"porions.*po_l"):
         snap_landmark(mesh, lms.without("po_l"), "g")
     with pytest.raises(LandmarkError, match="or_l or or_r"):
-        snap_landmark(mesh, lms.without("or_l").without("or_r")
-                      if "or_r" in lms else lms.without("or_l"), "g")
+        snap_landmark(
+            mesh, lms.without("or_l").without("or_r") if "or_r" in lms else lms.without("or_l"), "g"
+        )
     with pytest.raises(LandmarkError, match="place it before snapping"):
         snap_landmark(mesh, lms.without("g"), "g")
 
 
-def test_a_warm_snap_is_fast(skull):  # noqa: ANN001
+def test_a_warm_snap_is_fast(skull):
     mesh, lms, _, _ = skull
-    snap_landmark(mesh, lms, "g")                  # index built and cached for this mesh
+    snap_landmark(mesh, lms, "g")  # index built and cached for this mesh
     costs = []
     for code in ("g", "v", "op", "zy_l", "sm"):
         t = time.perf_counter()
         snap_landmark(mesh, lms, code)
         costs.append(time.perf_counter() - t)
-    assert max(costs) < 0.1, costs                 # measured 2-20 ms on 100k triangles
+    assert max(costs) < 0.1, costs  # measured 2-20 ms on 100k triangles
 
 
-def test_the_index_cache_lets_a_mesh_go(skull):  # noqa: ANN001
+def test_the_index_cache_lets_a_mesh_go(skull):
     import gc
     import weakref
 
@@ -216,7 +222,7 @@ def test_the_index_cache_lets_a_mesh_go(skull):  # noqa: ANN001
     assert gone() is None
 
 
-def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):  # noqa: ANN001
+def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):
     from workbench.core.landmarks import LandmarkSet
     from workbench.services.landmark_snap import snap_suggested
     from workbench.services.reference_parts import skull_surface
@@ -225,10 +231,17 @@ def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):  # noqa:
     lms = head_female.skull_landmarks
     # glabella suggested 6 mm too low, nasion placed 4 mm off: only glabella moves
     g, n = lms["g"], lms["n"]
-    moved = LandmarkSet("skull", tuple(
-        g.moved(g.position + [0.0, -6.0, -1.0], "suggested") if lm.code == "g" else
-        n.moved(n.position + [0.0, 0.0, 4.0], "placed") if lm.code == "n" else lm
-        for lm in lms))
+    moved = LandmarkSet(
+        "skull",
+        tuple(
+            g.moved(g.position + [0.0, -6.0, -1.0], "suggested")
+            if lm.code == "g"
+            else n.moved(n.position + [0.0, 0.0, 4.0], "placed")
+            if lm.code == "n"
+            else lm
+            for lm in lms
+        ),
+    )
     out, notes = snap_suggested(skull, moved)
     assert any(note.startswith("g ") for note in notes)
     assert np.linalg.norm(out["g"].position - g.position) < 3.0

@@ -28,8 +28,9 @@ def test_recovers_landmarks_of_a_moved_scaled_skull(head_male, skull):
     rot = _rotation(70, [1, 2, 0.5])
     target = skull.with_vertices(skull.vertices @ rot.T * 1.08 + [40, -25, 300])
     truth = head_male.skull_landmarks.positions @ rot.T * 1.08 + [40, -25, 300]
-    res = transfer_landmarks(target, skull, head_male.skull_landmarks,
-                             orientation=(rot @ [0, 0, 1], rot @ [0, 1, 0]))
+    res = transfer_landmarks(
+        target, skull, head_male.skull_landmarks, orientation=(rot @ [0, 0, 1], rot @ [0, 1, 0])
+    )
     err = np.linalg.norm(res.landmarks.positions - truth, axis=1)
     assert all(lm.status == "suggested" for lm in res.landmarks)
     assert np.median(err) < 1.0 and err.max() < 4.0
@@ -41,8 +42,9 @@ def test_seeds_align_without_a_hint_and_are_kept(head_male, skull):
     target = skull.with_vertices(skull.vertices @ rot.T - [10, 200, 5])
     lms = head_male.skull_landmarks
     seed_codes = ("n", "po_l", "po_r", "pr")
-    seeds = LandmarkSet("skull", tuple(lms[c].moved(lms[c].position @ rot.T - [10, 200, 5])
-                                       for c in seed_codes))
+    seeds = LandmarkSet(
+        "skull", tuple(lms[c].moved(lms[c].position @ rot.T - [10, 200, 5]) for c in seed_codes)
+    )
     res = transfer_landmarks(target, skull, lms, seeds=seeds)
     assert res.alignment.method == "seeds"
     for c in seed_codes:
@@ -56,25 +58,29 @@ def test_cut_vault_gives_absent_landmarks_not_floating_points(head_male, skull):
     # a CT field of view ending 30 mm above the Frankfort plane: no vertex, no bregma
     keep = (skull.vertices[skull.faces][:, :, 1] < 30.0).all(axis=1)
     cut = Mesh(skull.vertices, skull.faces[keep])
-    res = transfer_landmarks(cut, skull, head_male.skull_landmarks,
-                             orientation=((0, 0, 1), (0, 1, 0)))
+    res = transfer_landmarks(
+        cut, skull, head_male.skull_landmarks, orientation=((0, 0, 1), (0, 1, 0))
+    )
     for code in ("v", "b"):
         assert res.landmarks[code].status == "absent", code
     for code in ("n", "pr", "gn", "zy_l", "go_r", "po_l"):
         assert res.landmarks[code].status == "suggested", code
     defined = res.landmarks.defined()
-    d = np.linalg.norm(defined.positions - head_male.skull_landmarks.positions_of(defined.codes),
-                       axis=1)
+    d = np.linalg.norm(
+        defined.positions - head_male.skull_landmarks.positions_of(defined.codes), axis=1
+    )
     assert np.median(d) < 1.5
     assert any("absent" in w for w in res.warnings)
 
 
-def test_headsq_bone_frame_from_suggested_landmarks(head_male, skull, headsq_surfaces,
-                                                    headsq_orientation):
+def test_headsq_bone_frame_from_suggested_landmarks(
+    head_male, skull, headsq_surfaces, headsq_orientation
+):
     """Real CT: the suggested porions/orbitales give a Frankfort frame that
     agrees with the scan's known anatomical axes, and the cut-off vault is absent."""
-    res = transfer_landmarks(headsq_surfaces["bone"], skull, head_male.skull_landmarks,
-                             orientation=headsq_orientation)
+    res = transfer_landmarks(
+        headsq_surfaces["bone"], skull, head_male.skull_landmarks, orientation=headsq_orientation
+    )
     lms = res.landmarks
     assert lms["v"].status == "absent" and lms["b"].status == "absent"
     assert sum(lm.status == "suggested" for lm in lms) >= 35
@@ -99,8 +105,13 @@ def test_seeds_on_a_mirrored_scan(head_male, skull):
     lms = head_male.skull_landmarks
     mirrored = Mesh(skull.vertices * [-1.0, 1.0, 1.0], skull.faces[:, ::-1])
     flip = np.diag([-1.0, 1.0, 1.0, 1.0])
-    seeds = LandmarkSet("skull", tuple(lms[c].moved(lms[c].position * [-1.0, 1.0, 1.0])
-                                       for c in ("n", "po_l", "po_r", "pr", "go_l")))
+    seeds = LandmarkSet(
+        "skull",
+        tuple(
+            lms[c].moved(lms[c].position * [-1.0, 1.0, 1.0])
+            for c in ("n", "po_l", "po_r", "pr", "go_l")
+        ),
+    )
     res = transfer_landmarks(mirrored, skull, lms, seeds=seeds)
     assert np.linalg.det(res.alignment.matrix[:3, :3]) < 0
     truth = lms.transformed(flip).positions

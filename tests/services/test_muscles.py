@@ -16,7 +16,7 @@ MIRROR = np.array([-1.0, 1.0, 1.0])
 
 
 @pytest.fixture(scope="module", params=["male", "female"])
-def layout(request: pytest.FixtureRequest):  # noqa: ANN201
+def layout(request: pytest.FixtureRequest):
     skin = build_skin(request.param)
     return skin, {m.code: m for m in layout_muscles(skin)}
 
@@ -25,18 +25,23 @@ def _on_skin(sp: SurfacePoints, mesh: Mesh) -> np.ndarray:
     return SurfacePoints(sp.faces, sp.barycentric).evaluate(mesh)
 
 
-def _lm(skin, code: str) -> np.ndarray:  # noqa: ANN001
+def _lm(skin, code: str) -> np.ndarray:
     return np.asarray(skin.landmarks[code].position, float)
 
 
-def test_table71_codes_kinds_attachments_sides(layout) -> None:  # noqa: ANN001
+def test_table71_codes_kinds_attachments_sides(layout) -> None:
     _, muscles = layout
     table = read_table71()
     assert len(table) == 24 and len(muscles) == 24
     for row in table:
         m = muscles[row["code"]]
         assert isinstance(m, MuscleGrid)
-        assert (m.name, m.kind, m.attachment, m.side) == (row["name"], row["kind"], row["attachment"], row["side"])
+        assert (m.name, m.kind, m.attachment, m.side) == (
+            row["name"],
+            row["kind"],
+            row["attachment"],
+            row["side"],
+        )
         # grid sizes close to Kähler's control-grid point counts
         n = len(m.points)
         assert abs(n - int(row["n_points"])) <= 1, (row["code"], n)
@@ -44,7 +49,7 @@ def test_table71_codes_kinds_attachments_sides(layout) -> None:  # noqa: ANN001
         assert (m.axis is not None) == (m.kind == "sphincter")
 
 
-def test_grid_points_lie_on_the_skin(layout) -> None:  # noqa: ANN001
+def test_grid_points_lie_on_the_skin(layout) -> None:
     skin, muscles = layout
     index = MeshIndex(skin.mesh)
     for m in muscles.values():
@@ -57,7 +62,7 @@ def test_grid_points_lie_on_the_skin(layout) -> None:  # noqa: ANN001
         assert np.allclose(np.linalg.norm(deep - _on_skin(sp, skin.mesh), axis=1), GRID_DEPTH_MM)
 
 
-def test_points_are_not_stray(layout) -> None:  # noqa: ANN001
+def test_points_are_not_stray(layout) -> None:
     """Neighbouring grid points stay close: no ray landed on another part of the head."""
     skin, muscles = layout
     for m in muscles.values():
@@ -66,20 +71,25 @@ def test_points_are_not_stray(layout) -> None:  # noqa: ANN001
                 assert np.linalg.norm(np.diff(row, axis=0), axis=1).max() < 30.0, m.code
 
 
-def test_left_right_mirror(layout) -> None:  # noqa: ANN001
+def test_left_right_mirror(layout) -> None:
     skin, muscles = layout
     for code, m in muscles.items():
         if not code.endswith("_l"):
             continue
         r = muscles[code[:-2] + "_r"]
         assert r.row_lengths == m.row_lengths
-        assert np.abs(_on_skin(m.points, skin.mesh) * MIRROR - _on_skin(r.points, skin.mesh)).max() < 0.5
+        assert (
+            np.abs(_on_skin(m.points, skin.mesh) * MIRROR - _on_skin(r.points, skin.mesh)).max()
+            < 0.5
+        )
         assert np.all(_on_skin(m.points, skin.mesh)[:, 0] > 0)
         if m.axis is not None:
-            assert np.abs(m.axis.evaluate(skin.mesh) * MIRROR - r.axis.evaluate(skin.mesh)).max() < 0.5
+            assert (
+                np.abs(m.axis.evaluate(skin.mesh) * MIRROR - r.axis.evaluate(skin.mesh)).max() < 0.5
+            )
 
 
-def test_midline_muscles_are_symmetric(layout) -> None:  # noqa: ANN001
+def test_midline_muscles_are_symmetric(layout) -> None:
     skin, muscles = layout
     for m in muscles.values():
         if m.side != "midline":
@@ -90,13 +100,22 @@ def test_midline_muscles_are_symmetric(layout) -> None:  # noqa: ANN001
             assert np.abs(m.axis.evaluate(skin.mesh)[:, 0]).max() < 1e-6
 
 
-@pytest.mark.parametrize("code, fixed, free", [
-    ("zygomaticus_major_l", "zy_l", "ch_l"), ("risorius_l", "go_l", "ch_l"),
-    ("triangularis_l", "mmb_l", "ch_l"), ("quadratus_labii_l", "gn", "li"),
-    ("levator_labii_l", "or_l", "ls"), ("mentalis", "pg", "sl"), ("frontalis_inner_l", "tr", "en_l"),
-    ("frontalis_outer_l", "tr", "ex_l"), ("corrugator_l", "g", "sci_l"), ("mylohyoideus", "me", "me"),
-])
-def test_linear_rows_run_from_bone_to_free_end(layout, code: str, fixed: str, free: str) -> None:  # noqa: ANN001
+@pytest.mark.parametrize(
+    "code, fixed, free",
+    [
+        ("zygomaticus_major_l", "zy_l", "ch_l"),
+        ("risorius_l", "go_l", "ch_l"),
+        ("triangularis_l", "mmb_l", "ch_l"),
+        ("quadratus_labii_l", "gn", "li"),
+        ("levator_labii_l", "or_l", "ls"),
+        ("mentalis", "pg", "sl"),
+        ("frontalis_inner_l", "tr", "en_l"),
+        ("frontalis_outer_l", "tr", "ex_l"),
+        ("corrugator_l", "g", "sci_l"),
+        ("mylohyoideus", "me", "me"),
+    ],
+)
+def test_linear_rows_run_from_bone_to_free_end(layout, code: str, fixed: str, free: str) -> None:
     skin, muscles = layout
     rows = muscles[code].rows(skin.mesh)
     first, last = rows[0].mean(0), rows[-1].mean(0)
@@ -107,7 +126,7 @@ def test_linear_rows_run_from_bone_to_free_end(layout, code: str, fixed: str, fr
         assert np.linalg.norm(last - b) < np.linalg.norm(first - b)
 
 
-def test_orbicularis_oris_above_and_below_the_mouth(layout) -> None:  # noqa: ANN001
+def test_orbicularis_oris_above_and_below_the_mouth(layout) -> None:
     skin, muscles = layout
     loop = skin.mesh.vertices[skin.openings["mouth"]]
     top, bottom = loop[:, 1].max(), loop[:, 1].min()
@@ -127,7 +146,7 @@ def test_orbicularis_oris_above_and_below_the_mouth(layout) -> None:  # noqa: AN
         assert a1[2] < a0[2] and np.linalg.norm(a1 - a0) == pytest.approx(10.0, abs=1e-6)
 
 
-def test_eye_rings_surround_the_eye(layout) -> None:  # noqa: ANN001
+def test_eye_rings_surround_the_eye(layout) -> None:
     skin, muscles = layout
     for side in ("l", "r"):
         c = skin.mesh.vertices[skin.openings[f"eye_{side}"]].mean(0)
@@ -139,7 +158,7 @@ def test_eye_rings_surround_the_eye(layout) -> None:  # noqa: ANN001
         assert orb[:, 1].max() > c[1] + 10 and orb[:, 1].min() < c[1] - 10
 
 
-def test_grids_follow_a_warp_of_the_skin(layout) -> None:  # noqa: ANN001
+def test_grids_follow_a_warp_of_the_skin(layout) -> None:
     skin, muscles = layout
     v = skin.mesh.vertices
     rng = np.random.default_rng(3)

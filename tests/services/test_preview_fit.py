@@ -13,7 +13,7 @@ from workbench.services.reference_parts import skull_surface
 
 
 @pytest.fixture(scope="module")
-def fitted(head_female, head_male):  # noqa: ANN001
+def fitted(head_female, head_male):
     """The female skull with the male head, shifted so input and head frames differ."""
     m = np.eye(4)
     m[:3, 3] = [40.0, -25.0, 300.0]
@@ -23,7 +23,7 @@ def fitted(head_female, head_male):  # noqa: ANN001
     return skull, lms, reconstruct(skull, lms, head_male, guide_targets=guide_targets)
 
 
-def test_labels_describe_every_correspondence(fitted):  # noqa: ANN001
+def test_labels_describe_every_correspondence(fitted):
     _, _, recon = fitted
     assert len(recon.labels) == len(recon.sources) == len(recon.targets)
     kinds = {label.split(":")[0] for label in recon.labels}
@@ -35,17 +35,17 @@ def test_labels_describe_every_correspondence(fitted):  # noqa: ANN001
     np.testing.assert_array_equal(recon.sources[rows], recon.targets[rows])
 
 
-def test_an_unchanged_preview_is_the_fit(fitted, head_male):  # noqa: ANN001
+def test_an_unchanged_preview_is_the_fit(fitted, head_male):
     _, _, recon = fitted
     preview = PreviewFit.from_fit(recon, head_male)
     np.testing.assert_allclose(preview.skin(), recon.face.vertices, atol=1e-8)
 
 
-def test_moving_a_landmark_moves_its_dowel_tip_and_the_face_near_it(fitted, head_male):  # noqa: ANN001
+def test_moving_a_landmark_moves_its_dowel_tip_and_the_face_near_it(fitted, head_male):
     _, lms, recon = fitted
     preview = PreviewFit.from_fit(recon, head_male)
     g = lms["g"].position
-    assert preview.move_landmark("g", g + [0.0, 4.0, 0.0])     # 4 mm up (input = head axes here)
+    assert preview.move_landmark("g", g + [0.0, 4.0, 0.0])  # 4 mm up (input = head axes here)
     moved = preview.skin()
     shift = np.linalg.norm(moved - recon.face.vertices, axis=1)
     row = recon.labels.index("dowel:g")
@@ -68,19 +68,35 @@ def test_moving_a_landmark_moves_its_dowel_tip_and_the_face_near_it(fitted, head
     assert not preview.move_landmark("no_such_code", g)
 
 
-def test_moving_a_guide_sets_the_coordinate_it_fixes(fitted, head_male):  # noqa: ANN001
+def test_moving_a_guide_sets_the_coordinate_it_fixes(fitted, head_male):
     _, _, recon = fitted
     preview = PreviewFit.from_fit(recon, head_male)
     row = recon.labels.index("guide:prn")
     y = float(recon.targets[row, 1]) + 5.0
-    guide = Guide(id="nose_tip_y", label="nose tip height", kind="hline", view="frontal",
-                  value=(y,), affects=("prn",), rule_id="test", citation="test")
+    guide = Guide(
+        id="nose_tip_y",
+        label="nose tip height",
+        kind="hline",
+        view="frontal",
+        value=(y,),
+        affects=("prn",),
+        rule_id="test",
+        citation="test",
+    )
     assert preview.move_guide(guide)
     assert preview.targets[row, 1] == pytest.approx(y)
     np.testing.assert_allclose(preview.targets[row, [0, 2]], recon.targets[row, [0, 2]])
     prn = recon.sources[row]
     i = int(np.argmin(np.linalg.norm(recon.base_skin - prn, axis=1)))
     assert preview.skin_head()[i, 1] - recon.head.skin.vertices[i, 1] > 3.0
-    off = Guide(id="x", label="x", kind="vline", view="frontal", value=(1.0,),
-                affects=("no_code",), rule_id="t", citation="t")
+    off = Guide(
+        id="x",
+        label="x",
+        kind="vline",
+        view="frontal",
+        value=(1.0,),
+        affects=("no_code",),
+        rule_id="t",
+        citation="t",
+    )
     assert not preview.move_guide(off)

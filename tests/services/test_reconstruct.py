@@ -14,7 +14,10 @@ from workbench.core.mesh import Mesh, concatenate
 from workbench.services.compare import compare_surfaces, face_regions
 from workbench.core.landmarks import LandmarkSet
 from workbench.services.reconstruct import (
-    FitSettings, ensemble_spread, eye_moves, reconstruct,
+    FitSettings,
+    ensemble_spread,
+    eye_moves,
+    reconstruct,
 )
 from workbench.services.reference_parts import skull_surface
 from workbench.services.tissue_model import TissueSettings
@@ -26,7 +29,7 @@ from workbench.services.tissue_model import TissueSettings
 SAME_EYES = FitSettings(tissue=TissueSettings(eyes="reference"))
 
 
-def _rigid(deg: float, t) -> np.ndarray:  # noqa: ANN001
+def _rigid(deg: float, t) -> np.ndarray:
     a = np.radians(deg)
     m = np.eye(4)
     m[:3, :3] = [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]
@@ -35,7 +38,7 @@ def _rigid(deg: float, t) -> np.ndarray:  # noqa: ANN001
 
 
 @pytest.fixture(scope="module")
-def female_case(head_female, head_male):  # noqa: ANN001
+def female_case(head_female, head_male):
     """The female skull reconstructed with the male reference head (truth: the female skin)."""
     skull = skull_surface(head_female)
     return skull, reconstruct(skull, head_female.skull_landmarks, head_male, settings=SAME_EYES)
@@ -59,8 +62,9 @@ def test_result_is_in_the_input_frame(female_case, head_female, head_male):
     skull, recon = female_case
     m = _rigid(35.0, [100.0, -40.0, 900.0])
     moved_skull = skull.transformed(m)
-    moved = reconstruct(moved_skull, head_female.skull_landmarks.transformed(m), head_male,
-                        settings=SAME_EYES)
+    moved = reconstruct(
+        moved_skull, head_female.skull_landmarks.transformed(m), head_male, settings=SAME_EYES
+    )
     expected = recon.face.vertices @ m[:3, :3].T + m[:3, 3]
     # the fit is equivariant up to rounding (Embree's single-precision exposure test of the
     # orientation samples is the only step that is not exact)
@@ -71,16 +75,17 @@ def test_result_is_in_the_input_frame(female_case, head_female, head_male):
 
 def test_mirrored_input_is_detected_and_mapped_back(female_case, head_female, head_male):
     skull, recon = female_case
-    flip = np.diag([-1.0, 1.0, 1.0, 1.0])   # a file with its x axis flipped, labels unchanged
+    flip = np.diag([-1.0, 1.0, 1.0, 1.0])  # a file with its x axis flipped, labels unchanged
     mirrored = Mesh(skull.vertices * [-1, 1, 1], skull.faces[:, ::-1])
-    result = reconstruct(mirrored, head_female.skull_landmarks.transformed(flip), head_male,
-                         settings=SAME_EYES)
+    result = reconstruct(
+        mirrored, head_female.skull_landmarks.transformed(flip), head_male, settings=SAME_EYES
+    )
     assert result.mirrored_input
     # reversed triangles draw other orientation samples, so the fit is the mirror image up to
     # that sampling (and the clearance points it picks): a few vertices move by a few mm
     diff = np.linalg.norm(result.face.vertices - recon.face.vertices * [-1, 1, 1], axis=1)
     assert np.median(diff) < 0.1 and np.percentile(diff, 99) < 1.0 and diff.max() < 3.0
-    assert result.face.volume * recon.face.volume > 0   # outward winding kept
+    assert result.face.volume * recon.face.volume > 0  # outward winding kept
 
 
 def test_missing_mandible_still_gives_a_face_and_says_so(head_female, head_male):
@@ -102,10 +107,13 @@ def test_no_landmarks_needed_the_registration_finds_them(head_female, head_male)
     recon = reconstruct(skull_surface(head_female), None, head_male, settings=SAME_EYES)
     found = recon.landmarks.as_dict()
     truth = head_female.skull_landmarks.as_dict()
-    common = [c for c in ("g", "n", "pr", "pg", "po_l", "po_r", "or_l", "or_r", "zy_l", "go_r")
-              if c in found]
+    common = [
+        c
+        for c in ("g", "n", "pr", "pg", "po_l", "po_r", "or_l", "or_r", "zy_l", "go_r")
+        if c in found
+    ]
     assert len(common) >= 8
-    err = [np.linalg.norm(found[c] - truth[c]) for c in common]   # both in the input frame
+    err = [np.linalg.norm(found[c] - truth[c]) for c in common]  # both in the input frame
     assert np.median(err) < 2.0
     c = compare_surfaces(recon.face, head_female.skin, recon_regions=face_regions(head_male))
     assert c.figures["pct_within_2_5mm"] > 90.0
@@ -125,29 +133,33 @@ def test_ensemble_spread_follows_the_table_sds(female_case, head_male):
     v = head_male.skin.vertices
     g = head_male.skin_landmarks["g"].position
     cheek = head_male.skin_landmarks["sM2_l"].position
-    assert (np.median(spread[np.linalg.norm(v - cheek, axis=1) < 8])
-            > np.median(spread[np.linalg.norm(v - g, axis=1) < 8]))
+    assert np.median(spread[np.linalg.norm(v - cheek, axis=1) < 8]) > np.median(
+        spread[np.linalg.norm(v - g, axis=1) < 8]
+    )
 
 
 def test_eyes_and_lids_go_to_the_published_projection(female_case, head_female, head_male):
     skull, same = female_case
-    recon = reconstruct(skull, head_female.skull_landmarks, head_male,
-                        registration=same.registration)
+    recon = reconstruct(
+        skull, head_female.skull_landmarks, head_male, registration=same.registration
+    )
     lms = recon.landmarks.transformed(recon.input_to_head).as_dict()
     eyes, centres = recon.head.meshes["eyes"].vertices, recon.head.eye_centres
     owner = np.linalg.norm(eyes[:, None] - centres[None], axis=2).argmin(axis=1)
     for i in (0, 1):
         side = "l" if centres[i, 0] > 0 else "r"
         apex = eyes[owner == i, 2].max()
-        assert apex - lms[f"ec_{side}"][2] == pytest.approx(16.0, abs=0.05)   # Stephan 2009
+        assert apex - lms[f"ec_{side}"][2] == pytest.approx(16.0, abs=0.05)  # Stephan 2009
         shift = recon.figures[f"eye_{side}_shift_mm"]
-        assert 4.0 < shift < 12.0   # the generated head's eyes sit 8.4 mm in front of ec
+        assert 4.0 < shift < 12.0  # the generated head's eyes sit 8.4 mm in front of ec
         # the lids go with their globe, the rest of the face stays
         lids = np.asarray(head_male.regions[f"eyelid_upper_{side}"])
         moved = recon.head.skin.vertices[lids] - same.head.skin.vertices[lids]
         assert np.median(moved[:, 2]) == pytest.approx(shift, abs=1.0)
-    far = np.linalg.norm(head_male.skin.vertices - head_male.skin_landmarks["pg"].position,
-                         axis=1) < 15
+    far = (
+        np.linalg.norm(head_male.skin.vertices - head_male.skin_landmarks["pg"].position, axis=1)
+        < 15
+    )
     d = np.linalg.norm(recon.head.skin.vertices[far] - same.head.skin.vertices[far], axis=1)
     assert np.median(d) < 0.2
     assert same.figures["eye_placement"] == "reference"
@@ -157,8 +169,14 @@ def test_eyes_and_lids_go_to_the_published_projection(female_case, head_female, 
 def test_an_implausible_orbit_leaves_the_eye_and_says_why(head_male):
     lms = head_male.skull_landmarks
     ec = lms["ec_l"]
-    bad = LandmarkSet("skull", tuple(lm.moved(lm.position + [0, 0, 30.0]) if lm.code == "ec_l"
-                                     else lm for lm in lms if lm.code != "ec_r"))
+    bad = LandmarkSet(
+        "skull",
+        tuple(
+            lm.moved(lm.position + [0, 0, 30.0]) if lm.code == "ec_l" else lm
+            for lm in lms
+            if lm.code != "ec_r"
+        ),
+    )
     moves, figures, notes = eye_moves(head_male, bad, "stephan2009", {})
     assert moves == {}
     assert any("ec_l" in n and "check" in n for n in notes)

@@ -25,7 +25,7 @@ from workbench.model.specimen import Specimen
 from workbench.services.reconstruction_service import FitInputs, depth_settings, tissue_settings
 from workbench.services.tissue_model import TissueSettings
 
-ORIENT = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))   # the generated skull: face +z, up +y
+ORIENT = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))  # the generated skull: face +z, up +y
 
 
 def tetra() -> Mesh:
@@ -36,8 +36,11 @@ def tetra() -> Mesh:
 def small_case() -> tuple[Case, CommandStack]:
     case = Case(specimen=Specimen(tetra()))
     stack = CommandStack(case)
-    stack.push(SetDowelSettings(sex="female", build=1.0, tissue_model="reference",
-                                region_factors={"nose": 1.2}))
+    stack.push(
+        SetDowelSettings(
+            sex="female", build=1.0, tissue_model="reference", region_factors={"nose": 1.2}
+        )
+    )
     stack.push(SetDepthOverride("g", 6.5))
     stack.push(SetDowelExclusion("ecm2s_l", True))
     stack.push(SetOrientation(ORIENT + ((1.0, 0.0, 0.0),)))
@@ -47,9 +50,10 @@ def small_case() -> tuple[Case, CommandStack]:
 # ---------------------------------------------------------------- snapshots
 def test_fit_inputs_are_a_snapshot_of_the_case() -> None:
     case, stack = small_case()
-    inputs = FitInputs.from_case(case, rules=["nose_rynn2010_prn"], ensemble=3,
-                                 tissue=TissueSettings(min_tissue_mm=1.5))
-    assert inputs.skull is case.specimen.mesh and inputs.landmarks is None   # no landmarks yet
+    inputs = FitInputs.from_case(
+        case, rules=["nose_rynn2010_prn"], ensemble=3, tissue=TissueSettings(min_tissue_mm=1.5)
+    )
+    assert inputs.skull is case.specimen.mesh and inputs.landmarks is None  # no landmarks yet
     assert inputs.dowels is case.dowels and inputs.orientation is case.orientation
     assert inputs.guides is None and inputs.use_guides and inputs.ensemble == 3
     assert inputs.rules == ("nose_rynn2010_prn",) and inputs.template is None
@@ -72,9 +76,17 @@ def test_fit_inputs_are_a_snapshot_of_the_case() -> None:
 def test_fit_inputs_keep_landmarks_packs_and_guides() -> None:
     case, stack = small_case()
     case.set_landmark_set(LandmarkSet.from_points("skull", {"n": (0.0, 5.0, 9.0)}))
-    guide = {"id": "nose_tip", "label": "Nose tip", "kind": "point", "view": "lateral",
-             "value": [-20.0, 95.0], "affects": ["prn"], "rule_id": "r", "citation": "c",
-             "source": "user"}
+    guide = {
+        "id": "nose_tip",
+        "label": "Nose tip",
+        "kind": "point",
+        "view": "lateral",
+        "value": [-20.0, 95.0],
+        "affects": ["prn"],
+        "rule_id": "r",
+        "citation": "c",
+        "source": "user",
+    }
     stack.push(SetGuides([guide]))
     inputs = FitInputs.from_case(case, templates=["a", "b"], use_guides=False)
     assert inputs.landmarks is case.landmarks["skull"] and inputs.guides is case.guides
@@ -94,12 +106,21 @@ def test_fit_inputs_refuse_what_cannot_be_fitted() -> None:
 
 
 def test_settings_conversions() -> None:
-    d = DowelSettings(table="rhine_1983_sw_native_american", sex="female", build="obese",
-                      overrides={"g": 4.0}, excluded=("n",), tissue_model="reference",
-                      region_factors={"chin": 0.8})
+    d = DowelSettings(
+        table="rhine_1983_sw_native_american",
+        sex="female",
+        build="obese",
+        overrides={"g": 4.0},
+        excluded=("n",),
+        tissue_model="reference",
+        region_factors={"chin": 0.8},
+    )
     depth = depth_settings(d)
-    assert (depth.table, depth.sex, depth.build) == ("rhine_1983_sw_native_american", "female",
-                                                     "obese")
+    assert (depth.table, depth.sex, depth.build) == (
+        "rhine_1983_sw_native_american",
+        "female",
+        "obese",
+    )
     assert depth.overrides == {"g": 4.0} and depth.excluded == frozenset({"n"})
     tissue = tissue_settings(d, TissueSettings(pin_dowels=True))
     assert tissue.model == "reference" and tissue.region_factors == {"chin": 0.8}
@@ -108,23 +129,29 @@ def test_settings_conversions() -> None:
 
 # ---------------------------------------------------------------- one pipeline
 @pytest.fixture(scope="module")
-def skull_file(tmp_path_factory: pytest.TempPathFactory, head_female) -> Path:  # noqa: ANN001
+def skull_file(tmp_path_factory: pytest.TempPathFactory, head_female) -> Path:
     from workbench.io.meshes import write_mesh
     from workbench.services.reference_parts import skull_surface
 
-    return write_mesh(tmp_path_factory.mktemp("one-pipeline") / "skull.ply",
-                      skull_surface(head_female))
+    return write_mesh(
+        tmp_path_factory.mktemp("one-pipeline") / "skull.ply", skull_surface(head_female)
+    )
 
 
 @pytest.mark.slow
-def test_the_cli_job_and_the_window_job_give_the_same_face(skull_file: Path, tmp_path: Path,
-                                                          head_male) -> None:  # noqa: ANN001
+def test_the_cli_job_and_the_window_job_give_the_same_face(
+    skull_file: Path, tmp_path: Path, head_male
+) -> None:
     from workbench.qt import jobs
     from workbench.services.case_setup import start_case_from_skull
     from workbench.services.reconstruction_job import JobSettings, run_reconstruction
 
-    settings = JobSettings(sex="male", orientation=ORIENT, overrides={"g": 6.5},
-                           excluded=frozenset({"ecm2s_l", "ecm2s_r"}))
+    settings = JobSettings(
+        sex="male",
+        orientation=ORIENT,
+        overrides={"g": 6.5},
+        excluded=frozenset({"ecm2s_l", "ecm2s_r"}),
+    )
     cli = run_reconstruction(skull_file, settings)
 
     # the window: open the skull, set the same things with the panels' commands, fit
@@ -152,7 +179,15 @@ def test_the_cli_job_and_the_window_job_give_the_same_face(skull_file: Path, tmp
     files = jobs.export_results(tmp_path / "export", case, window, formats=("ply",))
     report = json.loads(files["report_json"].read_text(encoding="utf-8"))
     mine = cli.report
-    for key in ("template", "table", "landmarks", "guides", "predictions", "parameters",
-                "frame", "ensemble"):
+    for key in (
+        "template",
+        "table",
+        "landmarks",
+        "guides",
+        "predictions",
+        "parameters",
+        "frame",
+        "ensemble",
+    ):
         assert report[key] == json.loads(json.dumps(mine[key])), key
     assert report["case_id"] == case.meta.case_id != mine["case_id"]

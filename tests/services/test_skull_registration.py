@@ -27,11 +27,11 @@ def _rot_x(deg: float, about: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def female_on_male(head_female, head_male):  # noqa: ANN001
+def female_on_male(head_female, head_male):
     return register_skull(skull_surface(head_female), head_male, hint=HINT)
 
 
-def test_registered_reference_lies_on_the_target(female_on_male, head_female):  # noqa: ANN001
+def test_registered_reference_lies_on_the_target(female_on_male, head_female):
     reg = female_on_male
     bone = MeshIndex(reg.target_h)
     d = bone.closest_points(reg.meshes["cranium"].vertices).distances
@@ -44,29 +44,33 @@ def test_registered_reference_lies_on_the_target(female_on_male, head_female):  
     assert np.median(err) < 2.0
 
 
-def test_an_open_jaw_gets_its_own_pose(head_female, head_male):  # noqa: ANN001
+def test_an_open_jaw_gets_its_own_pose(head_female, head_male):
     jaw = concatenate([head_female.meshes["mandible"], head_female.meshes["lower_teeth"]])
     axis = head_female.tmj_axis[0]
-    opened = Mesh(jaw.vertices @ _rot_x(18.0, axis)[:3, :3].T + _rot_x(18.0, axis)[:3, 3],
-                  jaw.faces)
+    opened = Mesh(
+        jaw.vertices @ _rot_x(18.0, axis)[:3, :3].T + _rot_x(18.0, axis)[:3, 3], jaw.faces
+    )
     skull = concatenate([head_female.meshes["cranium"], head_female.meshes["upper_teeth"], opened])
     reg = register_skull(skull, head_male, hint=HINT)
     assert reg.part("mandible").present
-    d = MeshIndex(opened.transformed(reg.input_to_head)).closest_points(
-        reg.meshes["mandible"].vertices).distances
+    d = (
+        MeshIndex(opened.transformed(reg.input_to_head))
+        .closest_points(reg.meshes["mandible"].vertices)
+        .distances
+    )
     assert np.median(d) < 1.0
 
 
-def test_missing_mandible_and_a_cut_vault(head_female, head_male):  # noqa: ANN001
+def test_missing_mandible_and_a_cut_vault(head_female, head_male):
     cranium = concatenate([head_female.meshes["cranium"], head_female.meshes["upper_teeth"]])
-    keep = cranium.triangles.mean(axis=1)[:, 1] < 60.0          # vault cut 60 mm above FH
+    keep = cranium.triangles.mean(axis=1)[:, 1] < 60.0  # vault cut 60 mm above FH
     cut = Mesh(cranium.vertices, cranium.faces[keep])
     reg = register_skull(cut, head_male, hint=HINT)
     assert not reg.part("mandible").present
     assert any("mandible" in w for w in reg.warnings)
     v = reg.meshes["cranium"].vertices
     top = v[:, 1] > 80.0
-    assert (reg.observed["cranium"][top] < 0.3).mean() > 0.9     # inferred, not observed
+    assert (reg.observed["cranium"][top] < 0.3).mean() > 0.9  # inferred, not observed
     # the missing vault keeps a skull shape: no collapse onto the cut rim
     assert v[top, 1].max() > 100.0
     absent = {lm.code for lm in reg.landmarks if not lm.is_defined}
@@ -74,7 +78,7 @@ def test_missing_mandible_and_a_cut_vault(head_female, head_male):  # noqa: ANN0
     assert "po_l" not in absent
 
 
-def test_extra_anatomy_is_reported_and_ignored(head_female, head_male):  # noqa: ANN001
+def test_extra_anatomy_is_reported_and_ignored(head_female, head_male):
     s = subdivided_octahedron(3)
     spine = Mesh(s.vertices * [12.0, 40.0, 12.0] + [0.0, -115.0, -40.0], s.faces)
     reg = register_skull(concatenate([skull_surface(head_female), spine]), head_male, hint=HINT)
@@ -83,7 +87,7 @@ def test_extra_anatomy_is_reported_and_ignored(head_female, head_male):  # noqa:
     assert np.median(d) < 1.0
 
 
-def test_units_and_tiny_noise_do_not_change_the_face(head_female, head_male):  # noqa: ANN001
+def test_units_and_tiny_noise_do_not_change_the_face(head_female, head_male):
     skull = skull_surface(head_female)
     a = carry_head(head_male, register_skull(skull, head_male, hint=HINT)).skin.vertices
     rng = np.random.default_rng(5)
@@ -96,7 +100,7 @@ def test_units_and_tiny_noise_do_not_change_the_face(head_female, head_male):  #
     assert np.abs(a - c).max() < 0.1
 
 
-def test_handedness_from_labelled_landmarks(head_female):  # noqa: ANN001
+def test_handedness_from_labelled_landmarks(head_female):
     lms = head_female.skull_landmarks
     assert mirror_from_landmarks(lms) == "no"
     flip = np.diag([-1.0, 1.0, 1.0, 1.0])

@@ -11,13 +11,13 @@ from workbench.services.template import build_reference_head
 
 
 @pytest.fixture(scope="module", params=["female", "male"])
-def head(request: pytest.FixtureRequest):  # noqa: ANN201
+def head(request: pytest.FixtureRequest):
     # the session's head: built by build_reference_head in this session's
     # empty cache (tests/conftest.py), so these tests check a fresh build
     return request.getfixturevalue(f"head_{request.param}")
 
 
-def test_every_ttable_pair_is_fitted(head) -> None:  # noqa: ANN001
+def test_every_ttable_pair_is_fitted(head) -> None:
     table = load_depth_table("ttable_2023")
     errors = head.provenance["depth_error_mm"]
     assert set(errors) == set(table.codes)  # all 36 T-Table landmark pairs take part
@@ -29,7 +29,7 @@ def test_every_ttable_pair_is_fitted(head) -> None:  # noqa: ANN001
     assert values.max() < 1.0
 
 
-def test_parts_are_present_and_the_bone_is_under_the_skin(head) -> None:  # noqa: ANN001
+def test_parts_are_present_and_the_bone_is_under_the_skin(head) -> None:
     assert set(PARTS) <= set(head.meshes)
     # Away from the openings bone stays under the skin (issue 3: > 0 mm).
     # Achieved: 0.75 mm (male), 1.7 mm (female) at worst.
@@ -48,7 +48,7 @@ def test_parts_are_present_and_the_bone_is_under_the_skin(head) -> None:  # noqa
         assert (lo > skin.bounds[0] - 1).all() and (hi < skin.bounds[1] + 1).all()
 
 
-def test_template_identity(head) -> None:  # noqa: ANN001
+def test_template_identity(head) -> None:
     assert head.template_id.endswith(head.sex)
     assert len(head.content_hash) == 64
     again = build_reference_head(head.sex)

@@ -25,21 +25,28 @@ from workbench.services.template_build import MIN_TISSUE_MM, build_template_pack
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory: pytest.TempPathFactory, headsq_surfaces, headsq_orientation,
-          head_male) -> dict:  # noqa: ANN001
+def built(
+    tmp_path_factory: pytest.TempPathFactory, headsq_surfaces, headsq_orientation, head_male
+) -> dict:
     folder = tmp_path_factory.mktemp("template-build")
     skin = write_mesh(folder / "headsq_skin.ply", headsq_surfaces["skin"])
     bone = write_mesh(folder / "headsq_bone.ply", headsq_surfaces["bone"])
-    result, files = build_template_pack(skin, bone, folder / "pack",
-                                        orientation=headsq_orientation, base=head_male)
+    result, files = build_template_pack(
+        skin, bone, folder / "pack", orientation=headsq_orientation, base=head_male
+    )
     m = result.input_to_head
 
     def to_head(mesh: Mesh) -> Mesh:
         return outward(Mesh(mesh.vertices @ m[:3, :3].T + m[:3, 3], mesh.faces))
 
-    return {"result": result, "files": files, "pack": load_template_pack(folder / "pack"),
-            "inputs": (skin, bone), "ct_skin": to_head(headsq_surfaces["skin"]),
-            "ct_bone": to_head(headsq_surfaces["bone"])}
+    return {
+        "result": result,
+        "files": files,
+        "pack": load_template_pack(folder / "pack"),
+        "inputs": (skin, bone),
+        "ct_skin": to_head(headsq_surfaces["skin"]),
+        "ct_bone": to_head(headsq_surfaces["bone"]),
+    }
 
 
 def test_pack_loads_with_the_template_topology_and_muscles(built, head_male):
@@ -69,7 +76,7 @@ def test_pack_is_in_the_persons_own_frankfort_frame(built, headsq_orientation, h
     # orbitales (they are not coplanar in a real person: ~0.4 mm here)
     fh = pack.skull_landmarks.positions_of(["po_l", "po_r", "or_l", "or_r"])
     assert abs(fh[:, 1].mean()) < 1e-6 and np.abs(fh[:, 1]).max() < 1.0
-    assert fh[0, 0] > 40 and fh[1, 0] < -40            # porions on their own sides
+    assert fh[0, 0] > 40 and fh[1, 0] < -40  # porions on their own sides
     # the person's size, not the template's: the skin is not rescaled to it
     np.testing.assert_allclose(np.linalg.svd(result.input_to_head[:3, :3])[1], 1.0, atol=1e-9)
 
@@ -80,9 +87,9 @@ def test_face_lies_on_the_ct_skin(built, head_male):
     face = np.asarray(pack.regions["face"])
     cp = MeshIndex(ct).closest_points(pack.skin.vertices[face])
     near = (cp.distances < 10.0) & ~rim_faces(ct)[cp.face_ids]
-    assert near.sum() > 0.6 * len(face)                  # the CT shows most of the face
+    assert near.sum() > 0.6 * len(face)  # the CT shows most of the face
     within = (cp.distances[near] <= 1.5).mean()
-    assert within >= 0.6                                  # measured 0.93
+    assert within >= 0.6  # measured 0.93
     figures = built["result"].figures
     assert figures["face_within_1_5mm_fraction"] == pytest.approx(within, abs=0.02)
     assert 0.3 < figures["skin_on_scan_fraction"] < 1.0
@@ -110,13 +117,15 @@ def test_skin_stays_outside_the_bone(built):
 def test_landmarks_sit_on_the_ct_surfaces_or_are_marked_absent(built):
     pack = built["pack"]
     absent = pack.provenance["absent_landmarks"]
-    assert {"v", "op"} <= set(absent["skull"])            # the vault is outside the CT
-    for lmset, ct, limit in ((pack.skin_landmarks, built["ct_skin"], 0.6),
-                             (pack.skull_landmarks, built["ct_bone"], 1.5)):
+    assert {"v", "op"} <= set(absent["skull"])  # the vault is outside the CT
+    for lmset, ct, limit in (
+        (pack.skin_landmarks, built["ct_skin"], 0.6),
+        (pack.skull_landmarks, built["ct_bone"], 1.5),
+    ):
         gone = absent[lmset.surface]
         codes = [c for c in lmset.codes if c not in gone]
         d = MeshIndex(ct).closest_points(lmset.positions_of(codes)).distances
-        assert np.median(d) < limit, lmset.surface       # measured 0.29 mm / 0.7 mm
+        assert np.median(d) < limit, lmset.surface  # measured 0.29 mm / 0.7 mm
         assert all("absent on the target" in lmset[c].description for c in gone)
     # every landmark keeps a position, on the pack's own surfaces
     d_skin = MeshIndex(pack.skin).closest_points(pack.skin_landmarks.positions).distances
@@ -129,8 +138,10 @@ def test_eyeballs_sit_behind_the_scanned_lids(built, head_male):
     eyes, centres = pack.meshes["eyes"].vertices, pack.eye_centres
     ref_eyes = head_male.meshes["eyes"].vertices
     ref_own = np.linalg.norm(ref_eyes - head_male.eye_centres[0], axis=1) < 20
-    ref_gap = (ref_eyes[ref_own, 2].max()
-               - head_male.skin.vertices[np.asarray(head_male.openings["eye_l"]), 2].mean())
+    ref_gap = (
+        ref_eyes[ref_own, 2].max()
+        - head_male.skin.vertices[np.asarray(head_male.openings["eye_l"]), 2].mean()
+    )
     for i in (0, 1):
         side = "l" if centres[i, 0] > 0 else "r"
         loop = np.asarray(pack.openings[f"eye_{side}"])

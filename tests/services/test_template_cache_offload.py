@@ -17,12 +17,13 @@ from workbench.services import template as template_module
 from workbench.services.template_cache import cached_folder, reference_head
 
 
-def test_a_worker_thread_gets_the_head_built_by_the_helper_process(tmp_path, monkeypatch,
-                                                                    head_female) -> None:
+def test_a_worker_thread_gets_the_head_built_by_the_helper_process(
+    tmp_path, monkeypatch, head_female
+) -> None:
     monkeypatch.setenv("WORKBENCH_DATA_DIR", str(tmp_path))
     monkeypatch.delenv("WORKBENCH_NO_HELPER_PROCESS", raising=False)
 
-    def not_here(*_a, **_k):  # noqa: ANN002, ANN003, ANN202
+    def not_here(*_a, **_k):
         raise AssertionError("the head was built in the window's process")
 
     monkeypatch.setattr(template_module, "build_reference_head", not_here)

@@ -22,13 +22,13 @@ def _manifest(tmp_path: Path, rows: str) -> Path:
     return p
 
 
-def test_manifest_errors_name_the_row_and_column(tmp_path, headsq_nhdr):  # noqa: ANN001
+def test_manifest_errors_name_the_row_and_column(tmp_path, headsq_nhdr):
     ct = str(headsq_nhdr)
     bad = {
         "x,missing.ply,missing.ply,,,,,,,,,\n": "row 2 column skull",
         f"a,{ct},{ct},,ring:3,,,,,,,\n": "column mask",
         f"a,{ct},{ct},,,1,0,,,,,,\n": "column anterior",
-        f"a,{ct},{ct},,,\"0,1,0\",,,,,,\n": "both anterior and superior",
+        f'a,{ct},{ct},,,"0,1,0",,,,,,\n': "both anterior and superior",
         f"a,{ct},{ct},,,,,,,fat,,\n": "column build",
         f"a,{ct},{ct},,,,,,,,x,\n": "column bone_iso",
         f"a,{ct},{ct},,,,,,,,,\na,{ct},{ct},,,,,,,,,\n": "used twice",
@@ -40,8 +40,12 @@ def test_manifest_errors_name_the_row_and_column(tmp_path, headsq_nhdr):  # noqa
     p.write_text("id,skull,truth,colour\n", encoding="utf-8")
     with pytest.raises(InputError, match="unknown columns colour"):
         read_manifest(p)
-    cases = read_manifest(_manifest(tmp_path, f"h,{ct},{ct},mm,behind_clip:3,\"0,-1,0\","
-                                              f"\"0,0,-1\",\"1,0,0\",female,1.5,1150,500\n"))
+    cases = read_manifest(
+        _manifest(
+            tmp_path,
+            f'h,{ct},{ct},mm,behind_clip:3,"0,-1,0","0,0,-1","1,0,0",female,1.5,1150,500\n',
+        )
+    )
     c = cases[0]
     assert c.orientation == ((0, -1, 0), (0, 0, -1), (1, 0, 0)) and c.build == 1.5
     assert str(c.mask) == "behind_clip:3" and c.bone_iso == 1150 and c.sex == "female"
@@ -57,16 +61,17 @@ def test_consensus_is_the_per_vertex_median():
 
 
 @pytest.mark.slow
-def test_headsq_beats_the_uniform_offset(tmp_path, headsq_nhdr):  # noqa: ANN001
+def test_headsq_beats_the_uniform_offset(tmp_path, headsq_nhdr):
     ct = str(headsq_nhdr)
-    m = _manifest(tmp_path, f"headsq,{ct},{ct},mm,none,\"0,-1,0\",\"0,0,-1\",\"1,0,0\",male,"
-                            "normal,1150,500\n")
+    m = _manifest(
+        tmp_path, f'headsq,{ct},{ct},mm,none,"0,-1,0","0,0,-1","1,0,0",male,normal,1150,500\n'
+    )
     out = tmp_path / "out"
     assert main(["validate", str(m), "--out", str(out), "--no-pictures"]) == 0
     rows = list(csv.DictReader((out / "results.csv").open(encoding="utf-8")))
     by = {r["method"]: r for r in rows}
     mine, base = by["reconstruction"], by["uniform_6mm_offset"]
-    assert mine["n"] == base["n"] and int(mine["n"]) > 5000       # the same truth points
+    assert mine["n"] == base["n"] and int(mine["n"]) > 5000  # the same truth points
     # VALIDATION.md: the offset scores 51.4 % within 2.5 mm on headsq
     assert abs(float(base["pct_within_2_5mm"]) - 51.4) < 1.0
     assert float(mine["pct_within_2_5mm"]) > float(base["pct_within_2_5mm"]) + 10.0

@@ -12,29 +12,42 @@ from workbench.services.case_setup import describe_case, start_case_from_skull
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("case", help="create and inspect case files (.fcase)",
-                       description="Case files keep the original evidence byte for byte with "
-                                   "its SHA-256, the working data, and an append-only audit log.")
+    p = sub.add_parser(
+        "case",
+        help="create and inspect case files (.fcase)",
+        description="Case files keep the original evidence byte for byte with "
+        "its SHA-256, the working data, and an append-only audit log.",
+    )
     csub = p.add_subparsers(dest="case_command", metavar="ACTION", required=True)
 
     new = csub.add_parser("new", help="start a case from a skull mesh")
     new.add_argument("skull", help="skull mesh file or sample:NAME")
     add_units_options(new)
-    new.add_argument("--landmarks", type=Path, default=None,
-                     help="skull landmarks to import (.mrk.json .fcsv .pp .csv)")
+    new.add_argument(
+        "--landmarks",
+        type=Path,
+        default=None,
+        help="skull landmarks to import (.mrk.json .fcsv .pp .csv)",
+    )
     new.add_argument("--examiner", default="")
     new.add_argument("--out", type=Path, required=True, help="case file to write (.fcase)")
     add_force_option(new)
     new.set_defaults(handler=run_new)
 
-    info = csub.add_parser("info", help="summary, evidence check and audit log (JSON)",
-                           description="audit_chain.status is 'verified (N records)', "
-                                       "'NOT VERIFIED: ...' naming the first bad record, or "
-                                       "'audit log predates the hash chain (not verifiable)'")
+    info = csub.add_parser(
+        "info",
+        help="summary, evidence check and audit log (JSON)",
+        description="audit_chain.status is 'verified (N records)', "
+        "'NOT VERIFIED: ...' naming the first bad record, or "
+        "'audit log predates the hash chain (not verifiable)'",
+    )
     info.add_argument("case", type=Path)
-    info.add_argument("--allow-tampered", action="store_true",
-                      help="report a case whose evidence no longer matches its hashes, or "
-                           "whose audit log was edited, instead of refusing it")
+    info.add_argument(
+        "--allow-tampered",
+        action="store_true",
+        help="report a case whose evidence no longer matches its hashes, or "
+        "whose audit log was edited, instead of refusing it",
+    )
     info.set_defaults(handler=run_info)
 
     ev = csub.add_parser("evidence", help="extract an original evidence file")
@@ -50,8 +63,13 @@ def run_new(args: argparse.Namespace) -> int:
 
     skull = resolve_input(args.skull)
     check_output_file(args.out, [skull, args.landmarks], args.force)  # before the work
-    opened = start_case_from_skull(skull, units=args.units, scale=args.scale,
-                                   examiner=args.examiner, landmarks_path=args.landmarks)
+    opened = start_case_from_skull(
+        skull,
+        units=args.units,
+        scale=args.scale,
+        examiner=args.examiner,
+        landmarks_path=args.landmarks,
+    )
     with output_path(args.out, args, skull, args.landmarks) as out:
         save_case(opened.case, out, opened.stack)
     for note in opened.notes:

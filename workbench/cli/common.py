@@ -19,25 +19,34 @@ from workbench.io.samples import resolve_input
 def add_units_options(parser: argparse.ArgumentParser) -> None:
     """``--units`` and ``--scale`` for every command that reads a mesh."""
     parser.add_argument(
-        "--units", choices=["auto", *UNIT_SCALES], default="auto",
+        "--units",
+        choices=["auto", *UNIT_SCALES],
+        default="auto",
         help="units of the numbers in the mesh file (mesh files carry none). 'auto' accepts "
-             "the file only if its size looks like millimetres and otherwise stops with an "
-             "explanation; nothing is ever rescaled silently (default: auto)",
+        "the file only if its size looks like millimetres and otherwise stops with an "
+        "explanation; nothing is ever rescaled silently (default: auto)",
     )
-    parser.add_argument("--scale", type=float, default=None, metavar="FACTOR",
-                        help="explicit factor from file units to mm (instead of --units)")
+    parser.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        metavar="FACTOR",
+        help="explicit factor from file units to mm (instead of --units)",
+    )
 
 
 def add_force_option(parser: argparse.ArgumentParser, folder: bool = False) -> None:
     """``--force``: replace an existing output, keeping the old one as a numbered backup."""
     kept = "DIR.1, DIR.2 ..." if folder else "NAME.1.EXT, NAME.2.EXT ..."
     parser.add_argument(
-        "--force", action="store_true",
+        "--force",
+        action="store_true",
         help=f"replace an existing output; the old one is kept as {kept}. Inputs are never "
-             "replaced, not even with --force")
+        "replaced, not even with --force",
+    )
 
 
-def output_path(path: Path, args: argparse.Namespace, *inputs: Any):  # noqa: ANN201
+def output_path(path: Path, args: argparse.Namespace, *inputs: Any):
     """Context manager yielding ``path`` to write atomically (see ``workbench.io.outputs``).
 
     Refuses an output that is one of ``inputs`` (paths or ``sample:NAME``), or
@@ -69,9 +78,13 @@ def input_paths(*inputs: Any) -> list[Path]:
     return _input_paths(inputs)
 
 
-def load_mesh(argument: str, args: argparse.Namespace, kind: str = "head",
-              options: tuple[str, str] = ("--units", "--scale"),
-              check_skull: bool = False) -> MeshReadResult:
+def load_mesh(
+    argument: str,
+    args: argparse.Namespace,
+    kind: str = "head",
+    options: tuple[str, str] = ("--units", "--scale"),
+    check_skull: bool = False,
+) -> MeshReadResult:
     """Read a mesh (path or ``sample:NAME``) applying the user's units policy.
 
     Raises ``UnitsError`` when ``--units auto`` and the size does not look like mm,
@@ -134,7 +147,7 @@ def _finite_or_none(value: Any) -> Any:
     return value
 
 
-def progress_printer(enabled: bool = True):  # noqa: ANN201 - returns a callback
+def progress_printer(enabled: bool = True):
     """A ``progress(step, fraction)`` callback printing to stderr."""
     last: dict[str, str | None] = {"step": None}
 

@@ -30,17 +30,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("volume", help="volume file or DICOM folder, or sample:NAME")
     p.add_argument("--tissue", choices=["bone", "skin"], default="bone")
-    p.add_argument("--iso", type=float, default=None,
-                   help="iso level in the volume's units (HU for CT); default: the tissue preset")
-    p.add_argument("--target-triangles", type=int, default=None, metavar="N",
-                   help="decimate to about N triangles (quadric error)")
-    p.add_argument("--smooth", type=int, default=0, metavar="ITER",
-                   help="Taubin smoothing iterations (default 0: unsmoothed, best for measuring)")
-    p.add_argument("--all-components", action="store_true",
-                   help="keep every piece instead of the largest connected one")
+    p.add_argument(
+        "--iso",
+        type=float,
+        default=None,
+        help="iso level in the volume's units (HU for CT); default: the tissue preset",
+    )
+    p.add_argument(
+        "--target-triangles",
+        type=int,
+        default=None,
+        metavar="N",
+        help="decimate to about N triangles (quadric error)",
+    )
+    p.add_argument(
+        "--smooth",
+        type=int,
+        default=0,
+        metavar="ITER",
+        help="Taubin smoothing iterations (default 0: unsmoothed, best for measuring)",
+    )
+    p.add_argument(
+        "--all-components",
+        action="store_true",
+        help="keep every piece instead of the largest connected one",
+    )
     p.add_argument("--out", required=True, type=Path, help="output mesh (.ply .stl .obj .vtk .vtp)")
-    p.add_argument("--report", type=Path, default=None,
-                   help="also write a JSON report (iso rule, timings, validation)")
+    p.add_argument(
+        "--report",
+        type=Path,
+        default=None,
+        help="also write a JSON report (iso rule, timings, validation)",
+    )
     p.add_argument("--quiet", action="store_true")
     add_force_option(p)
     p.set_defaults(handler=run)
@@ -56,14 +77,18 @@ def run(args: argparse.Namespace) -> int:
     check_extraction_settings(args.iso, args.target_triangles, args.smooth)
     source = resolve_input(args.volume)
     check_output_location(args.out)
-    check_output_file(args.out, [source], args.force)        # before the extraction
+    check_output_file(args.out, [source], args.force)  # before the extraction
     if args.report is not None:
         if same_file(args.report, args.out):
             raise InputError(args.report, "is also the --out mesh", "give the report its own name")
         check_output_file(args.report, [source], args.force)
     result = mesh_from_ct(
-        source, tissue=args.tissue, iso=args.iso, target_triangles=args.target_triangles,
-        smooth_iterations=args.smooth, largest_component=not args.all_components,
+        source,
+        tissue=args.tissue,
+        iso=args.iso,
+        target_triangles=args.target_triangles,
+        smooth_iterations=args.smooth,
+        largest_component=not args.all_components,
         progress=progress_printer(not args.quiet),
     )
     with output_path(args.out, args, source) as out:
@@ -77,8 +102,10 @@ def run(args: argparse.Namespace) -> int:
     if result.credit:
         print(f"credit: {result.credit}")
         if args.out.suffix.lower() != ".ply":
-            print(f"  note: {args.out.suffix} files have no header comments to carry this credit; "
-                  "keep it with the mesh (a .ply output or the --report JSON records it)")
+            print(
+                f"  note: {args.out.suffix} files have no header comments to carry this credit; "
+                "keep it with the mesh (a .ply output or the --report JSON records it)"
+            )
     if not args.quiet:
         print(f"{args.tissue} surface at iso {result.iso:g} ({result.rule})")
         print(f"  {result.summary}")

@@ -33,11 +33,17 @@ from workbench.services.ct_mesh import mesh_from_ct
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="run the main pipeline on the built-in default case",
-                       description=__doc__)
+    p = sub.add_parser(
+        "demo", help="run the main pipeline on the built-in default case", description=__doc__
+    )
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder")
-    p.add_argument("--no-picture", "--no-pictures", dest="no_picture", action="store_true",
-                   help="skip the rendered pictures")
+    p.add_argument(
+        "--no-picture",
+        "--no-pictures",
+        dest="no_picture",
+        action="store_true",
+        help="skip the rendered pictures",
+    )
     p.add_argument("--ensemble", type=int, default=20, help="ensemble size (0 = none)")
     p.add_argument("--skip-headsq", action="store_true", help="only the built-in case")
     add_force_option(p, folder=True)
@@ -61,7 +67,7 @@ def _is_demo_output(folder: Path) -> bool:
     return isinstance(summary, dict) and "builtin" in summary and "seconds_total" in summary
 
 
-def _shown(value, temp: Path, final: Path):  # noqa: ANN001, ANN202
+def _shown(value, temp: Path, final: Path):
     """``value`` with the staged folder's name in strings replaced by the final one."""
     if isinstance(value, str):
         return value.replace(str(temp), str(final))
@@ -82,10 +88,12 @@ def run(args: argparse.Namespace) -> int:
     # A previous demo is replaced (no backup) without --force; see the module docstring.
     previous_demo = _is_demo_output(final)
     replace_demo = previous_demo and not args.force
-    with staged_folder(final, args.force or previous_demo, discard_existing=replace_demo,
-                       notify=print) as out:
-        (out / DEMO_MARK).write_text("written by workbench demo; the next demo replaces this "
-                                     "folder\n", encoding="utf-8")
+    with staged_folder(
+        final, args.force or previous_demo, discard_existing=replace_demo, notify=print
+    ) as out:
+        (out / DEMO_MARK).write_text(
+            "written by workbench demo; the next demo replaces this folder\n", encoding="utf-8"
+        )
         summary: dict = {"builtin": _builtin(out / "builtin", args)}
         if not args.skip_headsq:
             summary["headsq"] = _headsq(out / "headsq", args)
@@ -101,15 +109,34 @@ def _figures(report: dict, folder: Path) -> dict:
     return {
         "folder": str(folder),
         "report": "report.pdf",
-        "fit": {k: report["fit"].get(k) for k in ("max_tip_error_mm", "min_tissue_mm",
-                                                  "penetrating_vertices", "suggested_landmarks",
-                                                  "absent_landmarks")},
+        "fit": {
+            k: report["fit"].get(k)
+            for k in (
+                "max_tip_error_mm",
+                "min_tissue_mm",
+                "penetrating_vertices",
+                "suggested_landmarks",
+                "absent_landmarks",
+            )
+        },
         "ensemble_spread_mm": (report.get("ensemble") or {}).get("spread_mm"),
-        "validation": {**{k: v.get(k) for k in ("mean_abs_mm", "rms_mm", "signed_mean_mm",
-                                                "pct_within_2_5mm", "pct_within_5mm")},
-                       "uniform_6mm_offset": {k: (v.get("baseline") or {}).get(k)
-                                              for k in ("mean_abs_mm", "pct_within_2_5mm")}}
-        if v else None,
+        "validation": {
+            **{
+                k: v.get(k)
+                for k in (
+                    "mean_abs_mm",
+                    "rms_mm",
+                    "signed_mean_mm",
+                    "pct_within_2_5mm",
+                    "pct_within_5mm",
+                )
+            },
+            "uniform_6mm_offset": {
+                k: (v.get("baseline") or {}).get(k) for k in ("mean_abs_mm", "pct_within_2_5mm")
+            },
+        }
+        if v
+        else None,
         "seconds": report.get("_seconds"),
         "picture": (report.get("pictures") or {}).get("face_skull_three_quarter"),
     }
@@ -126,11 +153,11 @@ def _builtin(folder: Path, args: argparse.Namespace) -> dict:
     female = reference_head("female")
     skull = write_mesh(folder / "skull.ply", skull_surface(female))
     truth = write_mesh(folder / "truth_skin.ply", female.skin)
-    settings = JobSettings(sex="male", ensemble=args.ensemble,
-                           orientation=((0, 0, 1), (0, 1, 0)))
+    settings = JobSettings(sex="male", ensemble=args.ensemble, orientation=((0, 0, 1), (0, 1, 0)))
     # the demo's own folder (staged by run()): the skull written above stays beside the face
-    report = execute(skull, settings, folder, truth=truth, pictures=not args.no_picture,
-                     quiet=True, staged=True)
+    report = execute(
+        skull, settings, folder, truth=truth, pictures=not args.no_picture, quiet=True, staged=True
+    )
     return _figures(report, folder)
 
 
@@ -149,14 +176,23 @@ def _headsq(folder: Path, args: argparse.Namespace) -> dict | None:
     surfaces = {}
     for tissue in ("bone", "skin"):
         result = mesh_from_ct(ct, tissue=tissue, progress=progress_printer())
-        surfaces[tissue] = {"file": write_mesh(folder / f"{tissue}.ply", result.mesh).name,
-                            **mesh_summary(result.mesh), "iso": result.iso}
+        surfaces[tissue] = {
+            "file": write_mesh(folder / f"{tissue}.ply", result.mesh).name,
+            **mesh_summary(result.mesh),
+            "iso": result.iso,
+        }
     anatomy = registry()["headsq"].anatomy or {}
     orientation = (anatomy["anterior"], anatomy["superior"], anatomy["left"])
     settings = JobSettings(sex="male", ensemble=args.ensemble, orientation=orientation)
-    report = execute(folder / "bone.ply", settings, folder / "reconstruction",
-                     truth=folder / "skin.ply", pictures=not args.no_picture, quiet=True,
-                     staged=True)
+    report = execute(
+        folder / "bone.ply",
+        settings,
+        folder / "reconstruction",
+        truth=folder / "skin.ply",
+        pictures=not args.no_picture,
+        quiet=True,
+        staged=True,
+    )
     return {"surfaces": surfaces, **_figures(report, folder / "reconstruction")}
 
 
@@ -170,7 +206,8 @@ def _picture(meshes: dict, path: Path) -> str | None:
         anatomy = registry()["headsq"].anatomy or {}
         render_surfaces(
             [(meshes["bone"], "ivory", 1.0), (meshes["skin"], "peachpuff", 0.35)],
-            path, views=("front", "three_quarter", "side"),
+            path,
+            views=("front", "three_quarter", "side"),
             orientation=(anatomy["anterior"], anatomy["superior"]),
         )
     except (RuntimeError, OSError, ValueError) as exc:  # a missing GL stack must not fail the job

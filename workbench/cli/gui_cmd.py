@@ -16,34 +16,60 @@ TOOLS = ("landmarks", "dowels", "reconstruct", "compare")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("gui", help="open the desktop window",
-                       description="The workbench window: skull landmarks, dowels, guides, "
-                                   "reconstruction, comparison and export.")
+    p = sub.add_parser(
+        "gui",
+        help="open the desktop window",
+        description="The workbench window: skull landmarks, dowels, guides, "
+        "reconstruction, comparison and export.",
+    )
     add_arguments(p)
     p.set_defaults(handler=run)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("case", nargs="?", default=None,
-                   help="case file (.fcase) or skull mesh (.ply .stl .obj .vtk .vtp) to open, "
-                        "or sample:NAME")
-    p.add_argument("--ct", default=None,
-                   help="CT volume or DICOM folder to open, or sample:NAME (e.g. sample:headsq)")
-    p.add_argument("--units", choices=["auto", "mm", "cm", "m", "in"], default="auto",
-                   help="units of a skull mesh (default: judged from its size)")
-    p.add_argument("--scale", type=float, default=None, metavar="MM_PER_UNIT",
-                   help="millimetres per file unit of a skull mesh")
+    p.add_argument(
+        "case",
+        nargs="?",
+        default=None,
+        help="case file (.fcase) or skull mesh (.ply .stl .obj .vtk .vtp) to open, or sample:NAME",
+    )
+    p.add_argument(
+        "--ct",
+        default=None,
+        help="CT volume or DICOM folder to open, or sample:NAME (e.g. sample:headsq)",
+    )
+    p.add_argument(
+        "--units",
+        choices=["auto", "mm", "cm", "m", "in"],
+        default="auto",
+        help="units of a skull mesh (default: judged from its size)",
+    )
+    p.add_argument(
+        "--scale",
+        type=float,
+        default=None,
+        metavar="MM_PER_UNIT",
+        help="millimetres per file unit of a skull mesh",
+    )
     p.add_argument("--suggest", action="store_true", help="suggest the skull landmarks")
     p.add_argument("--reconstruct", action="store_true", help="reconstruct the face")
-    p.add_argument("--truth", default=None,
-                   help="true skin surface to compare with (same frame, mm), or sample:NAME")
+    p.add_argument(
+        "--truth",
+        default=None,
+        help="true skin surface to compare with (same frame, mm), or sample:NAME",
+    )
     p.add_argument("--tool", choices=TOOLS, default="landmarks", help="dock shown in front")
-    p.add_argument("--screenshot", type=Path, default=None, metavar="FILE.png",
-                   help="save a picture of the window after loading, then exit")
+    p.add_argument(
+        "--screenshot",
+        type=Path,
+        default=None,
+        metavar="FILE.png",
+        help="save a picture of the window after loading, then exit",
+    )
     p.add_argument("--size", default="1400x900", help="window size WxH (default 1400x900)")
 
 
-def options_from(args: argparse.Namespace):  # noqa: ANN201 - LaunchOptions
+def options_from(args: argparse.Namespace):
     from workbench.qt.app import LaunchOptions
 
     try:
@@ -63,9 +89,19 @@ def options_from(args: argparse.Namespace):  # noqa: ANN201 - LaunchOptions
     truth = None if args.truth is None else resolve_input(str(args.truth))
     if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
         raise InputError(args.screenshot, "the screenshot must be a .png file")
-    return LaunchOptions(case=case, skull=skull, ct=ct, units=args.units, scale=args.scale,
-                         suggest=args.suggest, reconstruct=args.reconstruct, truth=truth,
-                         tool=args.tool, screenshot=args.screenshot, size=(w, h))
+    return LaunchOptions(
+        case=case,
+        skull=skull,
+        ct=ct,
+        units=args.units,
+        scale=args.scale,
+        suggest=args.suggest,
+        reconstruct=args.reconstruct,
+        truth=truth,
+        tool=args.tool,
+        screenshot=args.screenshot,
+        size=(w, h),
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -29,8 +29,19 @@ from workbench.cli import (
 )
 from workbench.core.errors import WorkbenchError
 
-_MODULES = (demo_cmd, ct_cmd, mesh_cmd, landmarks_cmd, case_cmd, template_cmd, samples_cmd,
-            compare_cmd, reconstruct_cmd, validate_cmd, gui_cmd)
+_MODULES = (
+    demo_cmd,
+    ct_cmd,
+    mesh_cmd,
+    landmarks_cmd,
+    case_cmd,
+    template_cmd,
+    samples_cmd,
+    compare_cmd,
+    reconstruct_cmd,
+    validate_cmd,
+    gui_cmd,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,10 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
             "is in millimetres."
         ),
     )
-    parser.add_argument("--version", action="version",
-                        version=f"workbench {workbench.__version__}")
-    parser.add_argument("--debug", action="store_true",
-                        help="show full tracebacks for unexpected errors")
+    parser.add_argument("--version", action="version", version=f"workbench {workbench.__version__}")
+    parser.add_argument(
+        "--debug", action="store_true", help="show full tracebacks for unexpected errors"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in _MODULES:
         module.register(sub)
@@ -69,13 +80,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         if exc.filename is None or args.debug:
             return _unexpected(args, exc)
         where = f"{exc.filename}" + (f" -> {exc.filename2}" if exc.filename2 else "")
-        print(f"workbench {args.command}: error: {where}: cannot be read or written "
-              f"({exc.strerror or exc})", file=sys.stderr)
+        print(
+            f"workbench {args.command}: error: {where}: cannot be read or written "
+            f"({exc.strerror or exc})",
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except Exception as exc:  # last resort: never a bare traceback for users
+    except Exception as exc:  # noqa: BLE001 - last resort: never a bare traceback for users
         return _unexpected(args, exc)
 
 

@@ -6,7 +6,12 @@ import argparse
 from pathlib import Path
 
 from workbench.cli.common import (
-    add_force_option, add_units_options, load_mesh, mesh_summary, output_path, write_json,
+    add_force_option,
+    add_units_options,
+    load_mesh,
+    mesh_summary,
+    output_path,
+    write_json,
 )
 from workbench.core.mesh import validate
 from workbench.core.repair import clean, fill_small_holes, keep_largest_component
@@ -14,19 +19,26 @@ from workbench.io.meshes import write_mesh
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("mesh", help="inspect, check and convert mesh files",
-                       description="Inspect, check and convert mesh files "
-                                   "(PLY, STL, OBJ, VTK, VTP).")
+    p = sub.add_parser(
+        "mesh",
+        help="inspect, check and convert mesh files",
+        description="Inspect, check and convert mesh files (PLY, STL, OBJ, VTK, VTP).",
+    )
     msub = p.add_subparsers(dest="mesh_command", metavar="ACTION", required=True)
 
     info = msub.add_parser("info", help="size, units judgement and validation report (JSON)")
     info.add_argument("mesh", help="mesh file or sample:NAME")
-    info.add_argument("--kind", choices=["head", "skull", "face"], default="head",
-                      help="what the mesh shows (sets the plausible size range for units)")
+    info.add_argument(
+        "--kind",
+        choices=["head", "skull", "face"],
+        default="head",
+        help="what the mesh shows (sets the plausible size range for units)",
+    )
     info.add_argument("--units", choices=["auto", "mm", "cm", "m", "in"], default="auto")
     info.add_argument("--scale", type=float, default=None, metavar="FACTOR")
-    info.add_argument("--out", type=Path, default=None,
-                      help="write the JSON here instead of stdout")
+    info.add_argument(
+        "--out", type=Path, default=None, help="write the JSON here instead of stdout"
+    )
     add_force_option(info)
     info.set_defaults(handler=run_info)
 
@@ -35,12 +47,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     conv.add_argument("out", type=Path, help="output file; the extension picks the format")
     add_units_options(conv)
     conv.add_argument("--kind", choices=["head", "skull", "face"], default="head")
-    conv.add_argument("--clean", action="store_true",
-                      help="remove NaN vertices, degenerate/duplicate triangles, unused vertices")
-    conv.add_argument("--largest-component", action="store_true",
-                      help="keep only the largest piece")
-    conv.add_argument("--fill-holes", type=int, default=0, metavar="MAX_EDGES",
-                      help="close holes bounded by at most this many edges")
+    conv.add_argument(
+        "--clean",
+        action="store_true",
+        help="remove NaN vertices, degenerate/duplicate triangles, unused vertices",
+    )
+    conv.add_argument(
+        "--largest-component", action="store_true", help="keep only the largest piece"
+    )
+    conv.add_argument(
+        "--fill-holes",
+        type=int,
+        default=0,
+        metavar="MAX_EDGES",
+        help="close holes bounded by at most this many edges",
+    )
     conv.add_argument("--ascii", action="store_true", help="text encoding where the format has one")
     add_force_option(conv)
     conv.set_defaults(handler=run_convert)
@@ -53,8 +74,9 @@ def run_info(args: argparse.Namespace) -> int:
     path = resolve_input(args.mesh)
     # units and scale go in as given (both at once are refused); a damaged file is
     # inspected, not refused: its NaN vertices are counted in the validation report
-    result = read_mesh(path, units=args.units, scale=args.scale, kind=args.kind,
-                       allow_nonfinite=True)
+    result = read_mesh(
+        path, units=args.units, scale=args.scale, kind=args.kind, allow_nonfinite=True
+    )
     report = validate(result.mesh)
     data = {
         "file": str(path),

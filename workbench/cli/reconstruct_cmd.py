@@ -13,6 +13,7 @@ import math
 import os
 from pathlib import Path
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.cli.common import add_force_option, add_units_options, write_json
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check_tissue_depth
@@ -26,11 +27,13 @@ def _build(value: str) -> str | float:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--build must be slender, normal, obese or a number of SDs (e.g. 1 or -1.5), "
-            f"not {value!r}") from None
+            f"not {value!r}"
+        ) from None
     if not math.isfinite(k) or abs(k) > MAX_BUILD_SD:
         raise argparse.ArgumentTypeError(
             f"--build {value}: k must be a finite number of SDs within ±{MAX_BUILD_SD:g} SD "
-            "(mean + k SD of the table group)")
+            "(mean + k SD of the table group)"
+        )
     return k
 
 
@@ -45,13 +48,28 @@ def _vector(text: str) -> tuple[float, float, float]:
 
 
 def add_orientation_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--anterior", type=_vector, default=None, metavar="X,Y,Z",
-                   help="direction the face looks in the file's coordinates (helps the "
-                        "automatic landmark suggestion; sample files know theirs)")
-    p.add_argument("--superior", type=_vector, default=None, metavar="X,Y,Z",
-                   help="the head's up direction in the file's coordinates")
-    p.add_argument("--left", type=_vector, default=None, metavar="X,Y,Z",
-                   help="the subject's left in the file's coordinates (only for mirrored files)")
+    p.add_argument(
+        "--anterior",
+        type=_vector,
+        default=None,
+        metavar="X,Y,Z",
+        help="direction the face looks in the file's coordinates (helps the "
+        "automatic landmark suggestion; sample files know theirs)",
+    )
+    p.add_argument(
+        "--superior",
+        type=_vector,
+        default=None,
+        metavar="X,Y,Z",
+        help="the head's up direction in the file's coordinates",
+    )
+    p.add_argument(
+        "--left",
+        type=_vector,
+        default=None,
+        metavar="X,Y,Z",
+        help="the subject's left in the file's coordinates (only for mirrored files)",
+    )
 
 
 def _check_directions(args: argparse.Namespace) -> None:
@@ -61,15 +79,21 @@ def _check_directions(args: argparse.Namespace) -> None:
     given = {f"--{k}": getattr(args, k, None) for k in ("anterior", "superior", "left")}
     for option, v in given.items():
         if v is not None and not (all(math.isfinite(c) for c in v) and any(v)):
-            raise InputError(option, f"{','.join(f'{c:g}' for c in v)} is not a direction "
-                             "(zero or non-finite vector)", "give three numbers, e.g. 0,0,1")
+            raise InputError(
+                option,
+                f"{','.join(f'{c:g}' for c in v)} is not a direction (zero or non-finite vector)",
+                "give three numbers, e.g. 0,0,1",
+            )
     a, s = given["--anterior"], given["--superior"]
     if a is not None and s is not None:
         cos = sum(x * y for x, y in zip(a, s, strict=True)) / (math.hypot(*a) * math.hypot(*s))
         if abs(cos) > MAX_AXIS_COS:
-            raise InputError("--anterior/--superior", "the two directions are (nearly) parallel "
-                             f"(angle {math.degrees(math.acos(min(1.0, abs(cos)))):.1f} degrees)",
-                             "anterior (face) and superior (up) must be about 90 degrees apart")
+            raise InputError(
+                "--anterior/--superior",
+                "the two directions are (nearly) parallel "
+                f"(angle {math.degrees(math.acos(min(1.0, abs(cos)))):.1f} degrees)",
+                "anterior (face) and superior (up) must be about 90 degrees apart",
+            )
 
 
 def orientation_of(args: argparse.Namespace, argument: str) -> tuple | None:
@@ -90,46 +114,88 @@ def orientation_of(args: argparse.Namespace, argument: str) -> tuple | None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "reconstruct", help="reconstruct a face over a skull (dowels, guides, report)",
+        "reconstruct",
+        help="reconstruct a face over a skull (dowels, guides, report)",
         description="Fit the reference head over a skull: tissue-depth dowels from a published "
-                    "table, Kähler's nose and mouth guides, non-penetration refits; optional "
-                    "uncertainty ensemble. Without --landmarks the skull landmarks are suggested "
-                    "automatically. Outputs are in the skull file's frame and mm.")
+        "table, Kähler's nose and mouth guides, non-penetration refits; optional "
+        "uncertainty ensemble. Without --landmarks the skull landmarks are suggested "
+        "automatically. Outputs are in the skull file's frame and mm.",
+    )
     p.add_argument("skull", help="skull mesh (PLY/STL/OBJ/VTK/VTP) or sample:NAME")
     add_units_options(p)
     p.add_argument("--landmarks", type=Path, default=None, help="skull landmarks (.mrk.json …)")
-    p.add_argument("--table", default="ttable_2023", help="depth table id or CSV file")
+    p.add_argument("--table", default=DEFAULT_DEPTH_TABLE, help="depth table id or CSV file")
     p.add_argument("--sex", choices=["female", "male"], default="male")
-    p.add_argument("--build", type=_build, default="normal",
-                   help="slender|normal|obese where the table has them, else k for mean + k SD")
+    p.add_argument(
+        "--build",
+        type=_build,
+        default="normal",
+        help="slender|normal|obese where the table has them, else k for mean + k SD",
+    )
     p.add_argument("--guides", default="default", help="default | none | guides JSON file")
-    p.add_argument("--rule", action="append", default=[], metavar="RULE_ID",
-                   help="use a published prediction rule instead of the classic guide for its "
-                        "feature (repeatable), e.g. nose_rynn2010_prn, mouth_75pct_rule, "
-                        "eye_guyomarch2012_globe; ids in data_tables/guides/guide_rules.csv")
-    p.add_argument("--exclude", action="append", default=[], metavar="CODE",
-                   help="switch a landmark's dowel off (repeatable; e.g. ecm2s for Kähler's "
-                        "cheeks)")
-    p.add_argument("--override", action="append", default=[], metavar="CODE=MM",
-                   help="set a landmark's depth by hand (repeatable)")
-    p.add_argument("--ensemble", type=int, default=0, metavar="N",
-                   help="N fits drawing depths from mean ± SD: a per-vertex spread map")
-    p.add_argument("--template", type=Path, action="append", default=None, metavar="PACK",
-                   help="template pack (workbench template build/export) instead of the built-in "
-                        "head; repeat it for a library: one fit per pack, the face their "
-                        "per-vertex median, the spread between them in the report")
-    p.add_argument("--tissue", choices=["table", "reference"], default="table",
-                   help="table: the reference's thickness calibrated to the depth table "
-                        "(default); reference: the reference head's own thickness (a pack "
-                        "built from a real CT)")
-    p.add_argument("--truth", default=None, metavar="SKIN_MESH",
-                   help="true skin surface (same frame and units as the skull): adds "
-                        "validation figures")
+    p.add_argument(
+        "--rule",
+        action="append",
+        default=[],
+        metavar="RULE_ID",
+        help="use a published prediction rule instead of the classic guide for its "
+        "feature (repeatable), e.g. nose_rynn2010_prn, mouth_75pct_rule, "
+        "eye_guyomarch2012_globe; ids in data_tables/guides/guide_rules.csv",
+    )
+    p.add_argument(
+        "--exclude",
+        action="append",
+        default=[],
+        metavar="CODE",
+        help="switch a landmark's dowel off (repeatable; e.g. ecm2s for Kähler's cheeks)",
+    )
+    p.add_argument(
+        "--override",
+        action="append",
+        default=[],
+        metavar="CODE=MM",
+        help="set a landmark's depth by hand (repeatable)",
+    )
+    p.add_argument(
+        "--ensemble",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N fits drawing depths from mean ± SD: a per-vertex spread map",
+    )
+    p.add_argument(
+        "--template",
+        type=Path,
+        action="append",
+        default=None,
+        metavar="PACK",
+        help="template pack (workbench template build/export) instead of the built-in "
+        "head; repeat it for a library: one fit per pack, the face their "
+        "per-vertex median, the spread between them in the report",
+    )
+    p.add_argument(
+        "--tissue",
+        choices=["table", "reference"],
+        default="table",
+        help="table: the reference's thickness calibrated to the depth table "
+        "(default); reference: the reference head's own thickness (a pack "
+        "built from a real CT)",
+    )
+    p.add_argument(
+        "--truth",
+        default=None,
+        metavar="SKIN_MESH",
+        help="true skin surface (same frame and units as the skull): adds validation figures",
+    )
     p.add_argument("--examiner", default="")
     p.add_argument("--no-pictures", action="store_true", help="skip the rendered pictures")
     add_orientation_options(p)
-    p.add_argument("--out", type=Path, required=True,
-                   help="output folder; it must not hold any input (it is replaced as a whole)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="output folder; it must not hold any input (it is replaced as a whole)",
+    )
     add_force_option(p, folder=True)
     p.set_defaults(handler=run)
 
@@ -152,29 +218,55 @@ def run(args: argparse.Namespace) -> int:
     from workbench.services.input_checks import check_output_location
     from workbench.services.tissue_model import TissueSettings
 
-    check_count(args.ensemble, "--ensemble", 0, MAX_ENSEMBLE,
-                why=f"the spread map settles by ~50 fits; more than {MAX_ENSEMBLE} only takes "
-                    "longer")
+    check_count(
+        args.ensemble,
+        "--ensemble",
+        0,
+        MAX_ENSEMBLE,
+        why=f"the spread map settles by ~50 fits; more than {MAX_ENSEMBLE} only takes longer",
+    )
     check_output_location(args.out)
     settings = JobSettings(
-        units=args.units, scale=args.scale, landmarks=args.landmarks, table=args.table,
-        sex=args.sex, build=args.build, guides=args.guides, rules=tuple(args.rule),
+        units=args.units,
+        scale=args.scale,
+        landmarks=args.landmarks,
+        table=args.table,
+        sex=args.sex,
+        build=args.build,
+        guides=args.guides,
+        rules=tuple(args.rule),
         ensemble=args.ensemble,
         template=args.template[0] if args.template else None,
         templates=tuple(args.template or ()),
         tissue=TissueSettings(model=args.tissue),
         orientation=orientation_of(args, args.skull),
-        excluded=frozenset(args.exclude), overrides=_overrides(args.override),
-        examiner=args.examiner)
+        excluded=frozenset(args.exclude),
+        overrides=_overrides(args.override),
+        examiner=args.examiner,
+    )
     truth = None if args.truth is None else resolve_input(args.truth)
-    execute(resolve_input(args.skull), settings, args.out, truth=truth,
-            pictures=not args.no_pictures, force=args.force)
+    execute(
+        resolve_input(args.skull),
+        settings,
+        args.out,
+        truth=truth,
+        pictures=not args.no_pictures,
+        force=args.force,
+    )
     return 0
 
 
-def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,  # noqa: ANN001
-            pictures: bool = True, quiet: bool = False, force: bool = False,
-            staged: bool = False) -> dict:
+def execute(
+    skull_path: Path,
+    settings,
+    out: Path,
+    *,
+    truth: Path | None = None,
+    pictures: bool = True,
+    quiet: bool = False,
+    force: bool = False,
+    staged: bool = False,
+) -> dict:
     """Run the job, write every output into ``out``; returns the report dict.
 
     ``out`` is checked before the fit and written as a whole
@@ -189,7 +281,7 @@ def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,
     say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}"))
     inputs = job_inputs(skull_path, settings, truth)
     if not staged:
-        check_output_folder(out, inputs, force)   # before the fit, which takes a while
+        check_output_folder(out, inputs, force)  # before the fit, which takes a while
     result = run_reconstruction(skull_path, settings, progress=say)
     if staged:
         files = _write_all(result, out, truth, settings, pictures)
@@ -205,22 +297,32 @@ def execute(skull_path: Path, settings, out: Path, *, truth: Path | None = None,
     for name, path in files.items():
         print(f"wrote {name}: {path}")
     fit = report["fit"]
-    summary = {k: fit.get(k) for k in ("max_tip_error_mm", "min_tissue_mm", "penetrating_vertices",
-                                       "refits", "suggested_landmarks", "absent_landmarks")}
+    summary = {
+        k: fit.get(k)
+        for k in (
+            "max_tip_error_mm",
+            "min_tissue_mm",
+            "penetrating_vertices",
+            "refits",
+            "suggested_landmarks",
+            "absent_landmarks",
+        )
+    }
     summary["seconds"] = report["_seconds"]
     if report["ensemble"]:
         summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
     if report["validation"]:
-        summary["validation"] = {k: report["validation"][k] for k in
-                                 ("mean_abs_mm", "pct_within_2_5mm", "pct_within_5mm")}
+        summary["validation"] = {
+            k: report["validation"][k]
+            for k in ("mean_abs_mm", "pct_within_2_5mm", "pct_within_5mm")
+        }
     for w in report["warnings"]:
         print(f"  note: {w}")
     write_json(summary, None)
     return report
 
 
-def _write_all(result, out: Path, truth: Path | None, settings,  # noqa: ANN001
-               pictures: bool) -> dict[str, Path]:
+def _write_all(result, out: Path, truth: Path | None, settings, pictures: bool) -> dict[str, Path]:
     """The job's files, validation figures, pictures and report, all into ``out``."""
     from workbench.reporting.report import write_report_json, write_report_pdf
     from workbench.services.reconstruction_job import write_outputs
@@ -236,7 +338,7 @@ def _write_all(result, out: Path, truth: Path | None, settings,  # noqa: ANN001
     return files
 
 
-def _validate(truth_path: Path, scale: float | None, result) -> dict:  # noqa: ANN001
+def _validate(truth_path: Path, scale: float | None, result) -> dict:
     """The project's metric (VALIDATION.md) on the true skin, beside a uniform 6 mm offset.
 
     The anterior direction is the fitted head frame's (no other is known
@@ -255,18 +357,28 @@ def _validate(truth_path: Path, scale: float | None, result) -> dict:  # noqa: A
     bone = result.opened.case.specimen.mesh
     anterior = unit(np.linalg.inv(recon.input_to_head)[:3, :3] @ [0.0, 0.0, 1.0])
     _, (mine, base) = score_surfaces(
-        truth, bone, [("reconstruction", recon.face), ("uniform_6mm_offset", uniform_offset(bone))],
-        anterior, ScoreMask(), labels_from=recon.face, vertex_regions=face_regions(result.template),
-        region_names=REGION_NAMES)
-    return {**mine.figures, "regions": mine.regions, "truth": str(truth_path),
-            "region": "face (VALIDATION.md metric)",
-            "metric": "VALIDATION.md: outermost, anterior-facing true-skin vertices in front of "
-                      "the bone centre and within 35 mm of the bone; distance to the "
-                      "reconstruction (positive: outside)",
-            "baseline": {"method": "uniform 6 mm offset of the bone", **base.figures}}
+        truth,
+        bone,
+        [("reconstruction", recon.face), ("uniform_6mm_offset", uniform_offset(bone))],
+        anterior,
+        ScoreMask(),
+        labels_from=recon.face,
+        vertex_regions=face_regions(result.template),
+        region_names=REGION_NAMES,
+    )
+    return {
+        **mine.figures,
+        "regions": mine.regions,
+        "truth": str(truth_path),
+        "region": "face (VALIDATION.md metric)",
+        "metric": "VALIDATION.md: outermost, anterior-facing true-skin vertices in front of "
+        "the bone centre and within 35 mm of the bone; distance to the "
+        "reconstruction (positive: outside)",
+        "baseline": {"method": "uniform 6 mm offset of the bone", **base.figures},
+    }
 
 
-def _pictures(out: Path, result) -> dict[str, str]:  # noqa: ANN001
+def _pictures(out: Path, result) -> dict[str, str]:
     import numpy as np
 
     from workbench.render.reconstruction import render_reconstruction
@@ -277,10 +389,16 @@ def _pictures(out: Path, result) -> dict[str, str]:  # noqa: ANN001
     tips = recon.to_input(np.array([d.tip for d in active]))
     skull = result.opened.case.specimen.mesh
     try:
-        paths = render_reconstruction(skull, recon.face, (origins, tips), out / "pictures",
-                                      frame=recon.input_to_head,
-                                      eyes=recon.mesh_to_input(recon.head.meshes["eyes"]),
-                                      spread=result.spread, inferred=recon.inferred)
+        paths = render_reconstruction(
+            skull,
+            recon.face,
+            (origins, tips),
+            out / "pictures",
+            frame=recon.input_to_head,
+            eyes=recon.mesh_to_input(recon.head.meshes["eyes"]),
+            spread=result.spread,
+            inferred=recon.inferred,
+        )
     except (RuntimeError, OSError, ValueError) as exc:
         print(f"  note: no pictures (off-screen rendering failed: {exc})")
         return {}

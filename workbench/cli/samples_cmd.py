@@ -13,9 +13,12 @@ from workbench.io.samples import cache_dir, fetch, registry
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("samples", help="list or download public sample data",
-                       description="Public sample data (downloaded on demand, verified by SHA-256). "
-                                   "Any command that reads a file also accepts sample:NAME.")
+    p = sub.add_parser(
+        "samples",
+        help="list or download public sample data",
+        description="Public sample data (downloaded on demand, verified by SHA-256). "
+        "Any command that reads a file also accepts sample:NAME.",
+    )
     ssub = p.add_subparsers(dest="samples_command", metavar="ACTION", required=True)
     ls = ssub.add_parser("list", help="registered samples")
     ls.set_defaults(handler=run_list)
@@ -42,8 +45,10 @@ def run_list(args: argparse.Namespace) -> int:
             names = ", ".join(f.path for f in mirror_only[:_SHOWN_FILES])
             if len(mirror_only) > _SHOWN_FILES:
                 names += f" (+{len(mirror_only) - _SHOWN_FILES} more)"
-            line = (f"{indent}mirror only (no public URL; from WORKBENCH_SAMPLE_MIRRORS or the "
-                    f"cache): {names}")
+            line = (
+                f"{indent}mirror only (no public URL; from WORKBENCH_SAMPLE_MIRRORS or the "
+                f"cache): {names}"
+            )
             if sample.derived_from:
                 line += f"; download {sample.derived_from} for the original data"
             print(line)

@@ -18,24 +18,35 @@ import numpy as np
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "validate", help="reconstruct real skulls and score them against their true skin",
+        "validate",
+        help="reconstruct real skulls and score them against their true skin",
         description="Run the reconstruction on every case of a manifest (CSV columns: id, skull, "
-                    "truth, units, mask, anterior, superior, left, sex, build, tissue, template, "
-                    "bone_iso, skin_iso; skull and truth may be meshes or CT volumes) and score "
-                    "it with the project's metric beside a uniform 6 mm offset of the bone.")
+        "truth, units, mask, anterior, superior, left, sex, build, tissue, template, "
+        "bone_iso, skin_iso; skull and truth may be meshes or CT volumes) and score "
+        "it with the project's metric beside a uniform 6 mm offset of the bone.",
+    )
     p.add_argument("manifest", type=Path)
-    p.add_argument("--out", type=Path, required=True,
-                   help="output folder; it must not hold the manifest or any case's files (it is "
-                        "replaced as a whole; with --force a previous run's extracted surfaces "
-                        "and reference packs are reused)")
-    p.add_argument("--leave-one-out", action="store_true",
-                   help="also reconstruct each case with reference heads built from all other "
-                        "cases (their per-vertex median), never its own")
-    p.add_argument("--identity", action="store_true",
-                   help="also the identity test: a reference built from the case's own skin and "
-                        "bone, tissue model 'reference'")
-    p.add_argument("--cases", default=None, metavar="ID,ID",
-                   help="only these case ids")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="output folder; it must not hold the manifest or any case's files (it is "
+        "replaced as a whole; with --force a previous run's extracted surfaces "
+        "and reference packs are reused)",
+    )
+    p.add_argument(
+        "--leave-one-out",
+        action="store_true",
+        help="also reconstruct each case with reference heads built from all other "
+        "cases (their per-vertex median), never its own",
+    )
+    p.add_argument(
+        "--identity",
+        action="store_true",
+        help="also the identity test: a reference built from the case's own skin and "
+        "bone, tissue model 'reference'",
+    )
+    p.add_argument("--cases", default=None, metavar="ID,ID", help="only these case ids")
     p.add_argument("--no-pictures", action="store_true")
     from workbench.cli.common import add_force_option
 
@@ -56,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(args.manifest, f"no cases {', '.join(unknown)}")
         cases = [c for c in cases if c.case_id in wanted]
     inputs = [args.manifest, *validation_inputs(cases)]
-    check_output_folder(args.out, inputs, args.force)   # the cases take minutes each
+    check_output_folder(args.out, inputs, args.force)  # the cases take minutes each
     with staged_folder(args.out, args.force, inputs, notify=print) as out:
         reuse_caches(args.out, out)
         ok = _run(args, cases, out)
@@ -80,24 +91,37 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
             return
         for s in res.scores:
             f = s.figures
-            print(f"  {res.case_id} [{s.name}]: {f['pct_within_2_5mm']:.1f} % within 2.5 mm, "
-                  f"mean |d| {f['mean_abs_mm']:.2f} mm, signed {f['signed_mean_mm']:+.2f} mm "
-                  f"(n = {f['n']})")
+            print(
+                f"  {res.case_id} [{s.name}]: {f['pct_within_2_5mm']:.1f} % within 2.5 mm, "
+                f"mean |d| {f['mean_abs_mm']:.2f} mm, signed {f['signed_mean_mm']:+.2f} mm "
+                f"(n = {f['n']})"
+            )
         if not args.no_pictures:
             pictures[(res.case_id, label)] = _pictures(res, out / res.case_id, label)
 
-    results = run_validation(cases, out, leave_one_out=args.leave_one_out,
-                             identity=args.identity, progress=lambda m: print(f"  {m}"),
-                             on_case=on_case, staged=True)
-    credits = sorted({c for case in cases for p in (case.skull, case.truth)
-                      if (c := _credit(p))})
+    results = run_validation(
+        cases,
+        out,
+        leave_one_out=args.leave_one_out,
+        identity=args.identity,
+        progress=lambda m: print(f"  {m}"),
+        on_case=on_case,
+        staged=True,
+    )
+    credits = sorted({c for case in cases for p in (case.skull, case.truth) if (c := _credit(p))})
     table = rows(results, REGION_NAMES)
     write_csv(table, out / "results.csv")
     tmp = out / "results.md.part"
     tmp.write_text(markdown(results, REGION_NAMES, credits), encoding="utf-8")
     tmp.replace(out / "results.md")
-    write_pdf(results, REGION_NAMES, out / "results.pdf", pictures, credits,
-              software=f"workbench {__version__}")
+    write_pdf(
+        results,
+        REGION_NAMES,
+        out / "results.pdf",
+        pictures,
+        credits,
+        software=f"workbench {__version__}",
+    )
     return all(r.status == "ok" for r, _ in results)
 
 
@@ -124,7 +148,7 @@ def _pictures(res: Any, folder: Path, label: str) -> list[tuple[str, Path]]:
 
     try:
         from workbench.render.heatmap import render_heatmap
-    except ImportError:   # pragma: no cover - pyvista is a dependency
+    except ImportError:  # pragma: no cover - pyvista is a dependency
         return []
     truth = read_mesh(res.files["truth"], units="mm").mesh
     items = []
@@ -134,9 +158,15 @@ def _pictures(res: Any, folder: Path, label: str) -> list[tuple[str, Path]]:
         path = folder / "pictures" / f"{label}_{s.name}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            render_heatmap(truth, values, path, views=("front", "side"), clim=(-8.0, 8.0),
-                           title=f"{res.case_id}: {s.name}",
-                           frame=(tuple(res.anterior), tuple(res.superior)))
+            render_heatmap(
+                truth,
+                values,
+                path,
+                views=("front", "side"),
+                clim=(-8.0, 8.0),
+                title=f"{res.case_id}: {s.name}",
+                frame=(tuple(res.anterior), tuple(res.superior)),
+            )
         except (RuntimeError, OSError, ValueError, WorkbenchError) as exc:
             print(f"  note: no picture for {res.case_id} {s.name} ({exc})")
             continue

@@ -24,9 +24,15 @@ from workbench.model.reconstruction_setup import (
     build_text,
 )
 
-_FIELD_LABELS = {"table": "depth table", "sex": "sex", "build": "build",
-                 "overrides": "depth overrides", "excluded": "excluded dowels",
-                 "tissue_model": "tissue model", "region_factors": "region factors"}
+_FIELD_LABELS = {
+    "table": "depth table",
+    "sex": "sex",
+    "build": "build",
+    "overrides": "depth overrides",
+    "excluded": "excluded dowels",
+    "tissue_model": "tissue model",
+    "region_factors": "region factors",
+}
 
 
 @dataclass(eq=False)
@@ -51,14 +57,17 @@ class SetDowelSettings(ReplacePartCommand):
         if not self.changes():
             raise CommandError("SetDowelSettings needs at least one field to change")
         checked = DowelSettings().replaced(**self.changes())  # raises for bad values
-        for name in self.changes():   # keep the normalised, read-only values
+        for name in self.changes():  # keep the normalised, read-only values
             setattr(self, name, getattr(checked, name))
         super().__post_init__()
 
     def changes(self) -> dict[str, Any]:
         """``{field: new value}`` of the fields this command sets."""
-        return {f.name: getattr(self, f.name) for f in fields(DowelSettings)
-                if getattr(self, f.name) is not None}
+        return {
+            f.name: getattr(self, f.name)
+            for f in fields(DowelSettings)
+            if getattr(self, f.name) is not None
+        }
 
     def default_label(self) -> str:
         changes = self.changes()
@@ -72,8 +81,7 @@ class SetDowelSettings(ReplacePartCommand):
         return case.dowels.replaced(**self.changes())
 
     def merge_with(self, other: Command) -> bool:
-        if isinstance(other, SetDowelSettings) and other.changes().keys() == \
-                self.changes().keys():
+        if isinstance(other, SetDowelSettings) and other.changes().keys() == self.changes().keys():
             for name, value in other.changes().items():
                 setattr(self, name, value)
             self.label = other.label
@@ -115,8 +123,12 @@ class SetDepthOverride(ReplacePartCommand):
         return case.dowels.with_override(self.code, self.depth_mm)
 
     def merge_with(self, other: Command) -> bool:
-        if (isinstance(other, SetDepthOverride) and other.code == self.code
-                and other.depth_mm is not None and self.depth_mm is not None):
+        if (
+            isinstance(other, SetDepthOverride)
+            and other.code == self.code
+            and other.depth_mm is not None
+            and self.depth_mm is not None
+        ):
             self.depth_mm = other.depth_mm
             self.label = other.label
             return True
@@ -132,7 +144,7 @@ class SetDowelExclusion(ReplacePartCommand):
     excluded: bool = True
 
     def __post_init__(self) -> None:
-        DowelSettings().with_exclusion(self.code, True)   # raises for a bad code
+        DowelSettings().with_exclusion(self.code, True)  # raises for a bad code
         self.code = self.code.strip()
         self.excluded = bool(self.excluded)
         super().__post_init__()

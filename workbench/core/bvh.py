@@ -72,8 +72,9 @@ def split_leaves(points: np.ndarray, target_leaf: int = 8) -> np.ndarray:
 def _face_frames(tri: np.ndarray) -> np.ndarray:
     """``(_COLUMNS, m)`` per-face local frame used by :meth:`LeafTree.leaf_distances`."""
     m = len(tri)
-    edge_len = np.stack([np.linalg.norm(tri[:, (i + 1) % 3] - tri[:, i], axis=1)
-                         for i in range(3)], axis=1)
+    edge_len = np.stack(
+        [np.linalg.norm(tri[:, (i + 1) % 3] - tri[:, i], axis=1) for i in range(3)], axis=1
+    )
     first = edge_len.argmax(axis=1)  # cyclic relabel: longest edge is a -> b
     idx = (first[:, None] + np.arange(3)[None, :]) % 3
     t = np.take_along_axis(tri, idx[..., None], axis=1)
@@ -142,7 +143,7 @@ def box_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
         np.maximum(x, 0.0, out=x)
         x *= x
         total = x if total is None else np.add(total, x, out=total)
-    assert total is not None   # three axes summed
+    assert total is not None  # three axes summed
     return total
 
 
@@ -159,12 +160,13 @@ def aabb_bound(p: np.ndarray, box: np.ndarray) -> np.ndarray:
         np.maximum(x, 0.0, out=x)
         x *= x
         total = x if total is None else np.add(total, x, out=total)
-    assert total is not None   # three axes summed
+    assert total is not None  # three axes summed
     return total
 
 
-def _segment_dist2(x: np.ndarray, y: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-                   inv_len2: np.ndarray) -> np.ndarray:
+def _segment_dist2(
+    x: np.ndarray, y: np.ndarray, ux: np.ndarray, uy: np.ndarray, inv_len2: np.ndarray
+) -> np.ndarray:
     """Squared distance in the triangle plane from ``(x, y)`` to the segment 0 → ``(ux, uy)``."""
     s = x * ux
     s += y * uy
@@ -217,8 +219,8 @@ class LeafTree:
         box_lo[n:], box_hi[n:] = corners.min(axis=1), corners.max(axis=1)
         for level in range(self.depth - 1, -1, -1):
             a, b = 1 << level, 2 << level
-            box_lo[a:b] = np.minimum(box_lo[2 * a:2 * b:2], box_lo[2 * a + 1:2 * b:2])
-            box_hi[a:b] = np.maximum(box_hi[2 * a:2 * b:2], box_hi[2 * a + 1:2 * b:2])
+            box_lo[a:b] = np.minimum(box_lo[2 * a : 2 * b : 2], box_lo[2 * a + 1 : 2 * b : 2])
+            box_hi[a:b] = np.maximum(box_hi[2 * a : 2 * b : 2], box_hi[2 * a + 1 : 2 * b : 2])
         aabb = np.hstack([0.5 * (box_lo + box_hi), 0.5 * (box_hi - box_lo)])
         self.aabb32 = aabb.astype(np.float32)
         margin = 1e-9 * self.size
@@ -265,14 +267,16 @@ class LeafTree:
         """``(k, leaf_size)`` squared distances from ``points[i]`` to the faces of ``leaf[i]``."""
         if len(leaf) <= _CHUNK_LEAVES:
             return self._leaf_distances(points, leaf)
-        return np.concatenate([
-            self._leaf_distances(points[s:s + _CHUNK_LEAVES], leaf[s:s + _CHUNK_LEAVES])
-            for s in range(0, len(leaf), _CHUNK_LEAVES)
-        ])
+        return np.concatenate(
+            [
+                self._leaf_distances(points[s : s + _CHUNK_LEAVES], leaf[s : s + _CHUNK_LEAVES])
+                for s in range(0, len(leaf), _CHUNK_LEAVES)
+            ]
+        )
 
     def _leaf_distances(self, points: np.ndarray, leaf: np.ndarray) -> np.ndarray:
         t = np.take(self.table, leaf, axis=1)
-        px, py, pz = (points[:, i:i + 1] for i in range(3))
+        px, py, pz = (points[:, i : i + 1] for i in range(3))
         wx, wy, wz = px - t[0], py - t[1], pz - t[2]
         x = wx * t[3]
         x += wy * t[4]

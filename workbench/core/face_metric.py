@@ -116,8 +116,9 @@ def unit(v: Sequence[float] | np.ndarray) -> np.ndarray:
     return a / n
 
 
-def scored_vertices(truth: Mesh, bone: Mesh, anterior: Sequence[float] | np.ndarray,
-                    mask: ScoreMask = ScoreMask()) -> np.ndarray:
+def scored_vertices(
+    truth: Mesh, bone: Mesh, anterior: Sequence[float] | np.ndarray, mask: ScoreMask = ScoreMask()
+) -> np.ndarray:
     """Ids of the truth-skin vertices the metric scores (see the module docstring)."""
     a = unit(anterior)
     v = truth.vertices
@@ -149,14 +150,20 @@ def summarize(signed: np.ndarray) -> dict[str, float | int | None]:
     """Figures of one set of signed errors (mm; percentages 0-100)."""
     s = np.asarray(signed, dtype=float)
     if len(s) == 0:
-        return {"n": 0, "mean_abs_mm": None, "rms_mm": None, "signed_mean_mm": None,
-                "signed_sd_mm": None, "p95_mm": None,
-                **{_pct_key(t): None for t in TOLERANCES_MM}}
+        return {
+            "n": 0,
+            "mean_abs_mm": None,
+            "rms_mm": None,
+            "signed_mean_mm": None,
+            "signed_sd_mm": None,
+            "p95_mm": None,
+            **{_pct_key(t): None for t in TOLERANCES_MM},
+        }
     a = np.abs(s)
     out: dict[str, float | int | None] = {
         "n": int(len(s)),
         "mean_abs_mm": round(float(a.mean()), 3),
-        "rms_mm": round(float(np.sqrt((s ** 2).mean())), 3),
+        "rms_mm": round(float(np.sqrt((s**2).mean())), 3),
         "signed_mean_mm": round(float(s.mean()), 3),
         "signed_sd_mm": round(float(s.std(ddof=1)) if len(s) > 1 else 0.0, 3),
         "p95_mm": round(float(np.percentile(a, 95)), 3),
@@ -170,9 +177,14 @@ def _pct_key(t: float) -> str:
     return f"pct_within_{t:g}mm".replace(".", "_")
 
 
-def score(recon: Mesh, truth: Mesh, ids: np.ndarray, *,
-          labels: np.ndarray | None = None,
-          region_names: Sequence[str] = ()) -> dict:
+def score(
+    recon: Mesh,
+    truth: Mesh,
+    ids: np.ndarray,
+    *,
+    labels: np.ndarray | None = None,
+    region_names: Sequence[str] = (),
+) -> dict:
     """Figures of ``recon`` on the truth vertices ``ids``, overall and per region.
 
     ``labels`` (one per id, an index into ``region_names``, −1 for none)
@@ -188,8 +200,12 @@ def score(recon: Mesh, truth: Mesh, ids: np.ndarray, *,
     return out
 
 
-def region_labels(truth_points: np.ndarray, recon: Mesh, vertex_regions: Mapping[str, np.ndarray],
-                  names: Sequence[str]) -> np.ndarray:
+def region_labels(
+    truth_points: np.ndarray,
+    recon: Mesh,
+    vertex_regions: Mapping[str, np.ndarray],
+    names: Sequence[str],
+) -> np.ndarray:
     """Region index per truth point: the region of the reconstruction vertex nearest it."""
     lab = np.full(recon.n_vertices, -1, dtype=np.int64)
     for k, name in enumerate(names):

@@ -156,8 +156,9 @@ def frankfort_frame(
     # (y = z x x).  If the input is mirrored but labelled anatomically, that
     # makes the frame upside down, which the above/below checks reveal.
     mirrored = _looks_upside_down(fh.mean(axis=0), y_axis, above, below)
-    midline_pts = (np.asarray(list(midline), dtype=np.float64).reshape(-1, 3)
-                   if midline is not None else None)
+    midline_pts = (
+        np.asarray(list(midline), dtype=np.float64).reshape(-1, 3) if midline is not None else None
+    )
     if midline_pts is not None and len(midline_pts) >= 2:
         x_axis = _midsagittal_normal(midline_pts, y_axis, x_axis)
         z_axis = _unit(np.cross(x_axis, y_axis))
@@ -194,12 +195,15 @@ def _midsagittal_normal(midline: np.ndarray, up: np.ndarray, x_hint: np.ndarray)
     return normal if np.dot(normal, x_hint) > 0 else -normal
 
 
-def _looks_upside_down(fh_centre: np.ndarray, y_axis: np.ndarray,
-                       above: Iterable[np.ndarray] | None,
-                       below: Iterable[np.ndarray] | None) -> bool:
+def _looks_upside_down(
+    fh_centre: np.ndarray,
+    y_axis: np.ndarray,
+    above: Iterable[np.ndarray] | None,
+    below: Iterable[np.ndarray] | None,
+) -> bool:
     votes = 0
     for pts, sign in ((above, 1.0), (below, -1.0)):
-        for p in (() if pts is None else pts):
+        for p in () if pts is None else pts:
             h = float(np.dot(np.asarray(p, dtype=np.float64) - fh_centre, y_axis))
             votes += 1 if sign * h < 0 else -1
     return votes > 0

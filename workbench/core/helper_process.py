@@ -102,7 +102,7 @@ def _receive(stream: IO[bytes]) -> Any:
     data = stream.read(size)
     if len(data) < size:
         raise EOFError("the helper process closed its pipe mid-message")
-    return pickle.loads(data)  # noqa: S301 - our own child, over our own pipe
+    return pickle.loads(data)
 
 
 def _start() -> subprocess.Popen:
@@ -110,9 +110,13 @@ def _start() -> subprocess.Popen:
     # the child must import this package from wherever the parent did
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
     env.setdefault("OMP_NUM_THREADS", "1")
-    return subprocess.Popen([sys.executable, "-m", "workbench.core.helper_process"],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
-                            close_fds=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "workbench.core.helper_process"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        env=env,
+        close_fds=True,
+    )
 
 
 def _stop() -> None:
@@ -148,7 +152,7 @@ def call(name: str, *args: Any) -> Any:
     if os.environ.get("WORKBENCH_NO_HELPER_PROCESS"):
         return fn(*args)
     with _lock:
-        if _child is None or _child.poll() is not None:   # first call, or the child died
+        if _child is None or _child.poll() is not None:  # first call, or the child died
             _stop()
             try:
                 _child = _start()
@@ -157,17 +161,18 @@ def call(name: str, *args: Any) -> Any:
                 return fn(*args)
         try:
             stdin, stdout = _child.stdin, _child.stdout
-            if stdin is None or stdout is None:   # started with both pipes
+            if stdin is None or stdout is None:  # started with both pipes
                 raise OSError("helper process without its pipes")
             _send(stdin, (name, args))
             ok, value = _receive(stdout)
-        except Exception as exc:  # noqa: BLE001 - broken pipe, crashed child, odd reply
+        except Exception as exc:
             # not re-run in-process: an input that crashed the child would
             # crash this process too (fast_simplification does not check indices)
             _stop()
             _problem = f"helper process failed during {name} ({exc})"
-            raise RuntimeError(f"{name.split(':')[1]} failed in the helper process; the "
-                               "input mesh may be corrupt") from exc
+            raise RuntimeError(
+                f"{name.split(':')[1]} failed in the helper process; the input mesh may be corrupt"
+            ) from exc
         _problem = ""
     if ok:
         return value
@@ -184,7 +189,7 @@ def _serve() -> None:
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # stray prints must not corrupt the reply stream
     with contextlib.suppress(AttributeError, OSError):
-        os.nice(10)   # background work: the window's renderer comes first
+        os.nice(10)  # background work: the window's renderer comes first
     while True:
         try:
             name, args = _receive(stdin)
@@ -196,7 +201,7 @@ def _serve() -> None:
             reply = (False, exc)
         try:
             if not reply[0]:  # exceptions with odd constructors may not unpickle
-                pickle.loads(pickle.dumps(reply))  # noqa: S301
+                pickle.loads(pickle.dumps(reply))
         except Exception:  # noqa: BLE001
             reply = (False, RuntimeError(f"{name}: {type(reply[1]).__name__}: {reply[1]}"))
         _send(stdout, reply)

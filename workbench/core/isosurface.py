@@ -211,7 +211,9 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target_triangles: int):
     f_in = np.array(faces, np.int64, order="C")
     with _SIMPLIFY_LOCK:
         v, f = fast_simplification.simplify(
-            v_in, f_in, target_count=int(target_triangles),
+            v_in,
+            f_in,
+            target_count=int(target_triangles),
             preserve_border=True,  # no-op on closed meshes
         )
     return _compact(np.asarray(v, np.float64), np.asarray(f, np.int64))
@@ -404,8 +406,9 @@ def extract_isosurface(
     report("smoothing", 1.0)
     lap("smoothing")
     if target_triangles is not None and target_triangles < len(faces):
-        verts, faces = helper_process.run("workbench.core.isosurface:decimate",
-                                          verts, faces, int(target_triangles))
+        verts, faces = helper_process.run(
+            "workbench.core.isosurface:decimate", verts, faces, int(target_triangles)
+        )
         if largest_component:
             verts, faces, _ = keep_largest_component(verts, faces)
     report("decimation", 1.0)

@@ -74,8 +74,13 @@ class Landmark:
         return self.status in DEFINED_STATUSES
 
     def moved(self, position: np.ndarray, status: str = "placed") -> Landmark:
-        return Landmark(self.code, position, status, 1.0 if status == "placed" else self.confidence,
-                        self.description)
+        return Landmark(
+            self.code,
+            position,
+            status,
+            1.0 if status == "placed" else self.confidence,
+            self.description,
+        )
 
     def equals(self, other: Landmark) -> bool:
         return (
@@ -195,4 +200,6 @@ class LandmarkSet:
         cls, surface: str, points: Mapping[str, Iterable[float]], status: str = "placed"
     ) -> LandmarkSet:
         """Build from ``{code: (x, y, z)}`` in mm."""
-        return cls(surface, tuple(Landmark(c, np.asarray(p, float), status) for c, p in points.items()))
+        return cls(
+            surface, tuple(Landmark(c, np.asarray(p, float), status) for c, p in points.items())
+        )

@@ -73,8 +73,16 @@ def finite_number(value: Any, name: str) -> float:
     return number
 
 
-def check_range(value: Any, name: str, lo: float | None = None, hi: float | None = None, *,
-                unit: str = "", low_open: bool = False, why: str = "") -> float:
+def check_range(
+    value: Any,
+    name: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    unit: str = "",
+    low_open: bool = False,
+    why: str = "",
+) -> float:
     """``value`` as a finite float within ``[lo, hi]`` (``(lo, hi]`` with ``low_open``).
 
     Raises an :class:`InputError` naming ``name``, the value and the bound.
@@ -90,8 +98,7 @@ def check_range(value: Any, name: str, lo: float | None = None, hi: float | None
             bound = f"{'above' if low_open else 'at least'} {lo:g}{u}"
         else:
             bound = f"at most {hi:g}{u}"
-        raise InputError(name, f"{value!r} is out of range: must be {bound}",
-                         why or None)
+        raise InputError(name, f"{value!r} is out of range: must be {bound}", why or None)
     return number
 
 
@@ -109,15 +116,27 @@ def check_count(value: Any, name: str, lo: int, hi: int, why: str = "") -> int:
 
 def check_tissue_depth(value: Any, name: str) -> float:
     """A soft-tissue depth in mm: ``0 < d <= MAX_TISSUE_DEPTH_MM``."""
-    return check_range(value, name, 0.0, MAX_TISSUE_DEPTH_MM, unit="mm", low_open=True,
-                       why=f"no face has soft tissue thicker than {MAX_TISSUE_DEPTH_MM:g} mm; "
-                           "check the units")
+    return check_range(
+        value,
+        name,
+        0.0,
+        MAX_TISSUE_DEPTH_MM,
+        unit="mm",
+        low_open=True,
+        why=f"no face has soft tissue thicker than {MAX_TISSUE_DEPTH_MM:g} mm; check the units",
+    )
 
 
 def check_build_sd(k: float, name: str = "--build") -> float:
     """A build k (mean + k SD) within ``±MAX_BUILD_SD``."""
-    return check_range(k, name, -MAX_BUILD_SD, MAX_BUILD_SD, unit="SD",
-                       why=f"a build is mean + k SD with k within ±{MAX_BUILD_SD:g} SD")
+    return check_range(
+        k,
+        name,
+        -MAX_BUILD_SD,
+        MAX_BUILD_SD,
+        unit="SD",
+        why=f"a build is mean + k SD with k within ±{MAX_BUILD_SD:g} SD",
+    )
 
 
 def check_voxel_size(spacing_mm: Any, source: Any) -> np.ndarray:
@@ -126,17 +145,23 @@ def check_voxel_size(spacing_mm: Any, source: Any) -> np.ndarray:
     lo, hi = VOXEL_MM_RANGE
     shown = " x ".join(f"{s:.4g}" for s in spacing)
     if not np.isfinite(spacing).all():
-        raise InputError(source, f"the voxel size is not a number ({shown} mm)",
-                         "the header's spacing or affine is damaged")
+        raise InputError(
+            source,
+            f"the voxel size is not a number ({shown} mm)",
+            "the header's spacing or affine is damaged",
+        )
     if (spacing < lo).any() or (spacing > hi).any():
-        raise InputError(source, f"voxel size {shown} mm is implausible for a CT or MR scan "
-                         f"(expected {lo:g}-{hi:g} mm)",
-                         "the header's voxel size is unset or in the wrong units")
+        raise InputError(
+            source,
+            f"voxel size {shown} mm is implausible for a CT or MR scan (expected {lo:g}-{hi:g} mm)",
+            "the header's voxel size is unset or in the wrong units",
+        )
     return spacing
 
 
-def check_face_fits_skull(face_extent_mm: Any, skull_extent_mm: Any,
-                          source: str = "reconstruction") -> None:
+def check_face_fits_skull(
+    face_extent_mm: Any, skull_extent_mm: Any, source: str = "reconstruction"
+) -> None:
     """Refuse a face whose bounding box does not fit the skull's.
 
     Both extents are ``(3,)`` sizes (mm) in the same frame.  Every side of
@@ -147,13 +172,20 @@ def check_face_fits_skull(face_extent_mm: Any, skull_extent_mm: Any,
     face = np.asarray(face_extent_mm, dtype=np.float64).reshape(3)
     skull = np.asarray(skull_extent_mm, dtype=np.float64).reshape(3)
     lo, hi = FACE_TO_SKULL_EXTENT_RANGE
-    ok = bool(np.isfinite(face).all() and np.isfinite(skull).all()
-              and (face >= lo * skull.min()).all() and (face <= hi * skull.max()).all())
+    ok = bool(
+        np.isfinite(face).all()
+        and np.isfinite(skull).all()
+        and (face >= lo * skull.min()).all()
+        and (face <= hi * skull.max()).all()
+    )
     if not ok:
         sizes = " x ".join(f"{v:.1f}" for v in face)
         bone = " x ".join(f"{v:.1f}" for v in skull)
-        raise InputError(source, f"the face came out {sizes} mm against a skull of {bone} mm "
-                         f"(each side should be at least {lo:g} x the skull's smallest side "
-                         f"and at most {hi:g} x its largest); the result is not a plausible "
-                         "face",
-                         "check the skull landmarks, the orientation and the depth settings")
+        raise InputError(
+            source,
+            f"the face came out {sizes} mm against a skull of {bone} mm "
+            f"(each side should be at least {lo:g} x the skull's smallest side "
+            f"and at most {hi:g} x its largest); the result is not a plausible "
+            "face",
+            "check the skull landmarks, the orientation and the depth settings",
+        )

@@ -51,8 +51,7 @@ class Mesh:
         f = np.array(self.faces, dtype=np.int64, copy=True).reshape(-1, 3)
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(
-                f"face indices must lie in [0, {len(v) - 1}], got range "
-                f"[{f.min()}, {f.max()}]"
+                f"face indices must lie in [0, {len(v) - 1}], got range [{f.min()}, {f.max()}]"
             )
         object.__setattr__(self, "vertices", _frozen(v))
         object.__setattr__(self, "faces", _frozen(f))
@@ -97,12 +96,13 @@ class Mesh:
         v = self.vertices @ rot.T + matrix[:3, 3]
         faces = self.faces if np.linalg.det(rot) > 0 else self.faces[:, ::-1]
         out = Mesh(v, faces)
-        if np.allclose(rot.T @ rot, np.eye(3), rtol=0.0, atol=1e-9) \
-                and np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        if np.allclose(rot.T @ rot, np.eye(3), rtol=0.0, atol=1e-9) and np.allclose(
+            matrix[3], [0.0, 0.0, 0.0, 1.0]
+        ):
             back = np.eye(4)
             back[:3, :3], back[:3, 3] = rot.T, -rot.T @ matrix[:3, 3]
             source = self.rigid_source
-            if source is not None:   # chain back to the first mesh
+            if source is not None:  # chain back to the first mesh
                 back = source[1] @ back
             out.__dict__["_rigid_source"] = (self if source is None else source[0], back)
         return out
@@ -232,9 +232,7 @@ class Mesh:
         m = self.n_faces
         rows = self.faces.ravel()
         cols = np.repeat(np.arange(m), 3)
-        return sparse.csr_matrix(
-            (np.ones(3 * m), (rows, cols)), shape=(self.n_vertices, m)
-        )
+        return sparse.csr_matrix((np.ones(3 * m), (rows, cols)), shape=(self.n_vertices, m))
 
 
 # ---------------------------------------------------------------- validation
@@ -289,9 +287,7 @@ class ValidationReport:
             sizes = sorted((len(loop) for loop in self.boundary_loops), reverse=True)
             shown = ", ".join(str(s) for s in sizes[:5])
             more = "" if len(sizes) <= 5 else ", ..."
-            out.append(
-                f"{len(self.boundary_loops)} holes (boundary loops of {shown}{more} edges)"
-            )
+            out.append(f"{len(self.boundary_loops)} holes (boundary loops of {shown}{more} edges)")
         if self.n_components > 1:
             out.append(
                 f"{self.n_components} separate pieces (largest has "
@@ -312,8 +308,15 @@ class ValidationReport:
         return head + (": " + "; ".join(problems) if problems else ": no problems found")
 
     def to_dict(self) -> dict[str, object]:
-        counts = ("n_vertices", "n_faces", "nonfinite_vertices", "degenerate_faces",
-                  "duplicate_faces", "nonmanifold_edges", "boundary_edges")
+        counts = (
+            "n_vertices",
+            "n_faces",
+            "nonfinite_vertices",
+            "degenerate_faces",
+            "duplicate_faces",
+            "nonmanifold_edges",
+            "boundary_edges",
+        )
         return {name: getattr(self, name) for name in counts} | {
             "holes": len(self.boundary_loops),
             "hole_sizes": [len(loop) for loop in self.boundary_loops],
@@ -328,8 +331,10 @@ class ValidationReport:
 def concatenate(meshes: list[Mesh]) -> Mesh:
     """One mesh holding ``meshes`` in order (vertex ids offset, nothing merged)."""
     offsets = np.cumsum([0] + [m.n_vertices for m in meshes[:-1]])
-    return Mesh(np.vstack([m.vertices for m in meshes]),
-                np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]))
+    return Mesh(
+        np.vstack([m.vertices for m in meshes]),
+        np.vstack([m.faces + o for m, o in zip(meshes, offsets, strict=True)]),
+    )
 
 
 def degenerate_face_mask(mesh: Mesh, area_tol_mm2: float = 1e-12) -> np.ndarray:

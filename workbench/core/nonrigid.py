@@ -182,7 +182,7 @@ def grid_nodes(points: np.ndarray, spacing: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _LevelField:
-    phi: sparse.csr_matrix       # (n_source, n_nodes)
+    phi: sparse.csr_matrix  # (n_source, n_nodes)
     laplacian: sparse.csr_matrix  # (n_nodes, n_nodes)
 
 
@@ -206,15 +206,17 @@ def _level_field(points: np.ndarray, part: np.ndarray, spacing: float) -> _Level
         d, j = tree.query(points[ids], k=k)
         d, j = d.reshape(len(ids), k), j.reshape(len(ids), k)
         w = np.exp(-0.5 * (d / sigma) ** 2) * (d <= 2.5 * sigma)
-        w[:, 0] = np.maximum(w[:, 0], 1e-12)   # every vertex has its nearest node
+        w[:, 0] = np.maximum(w[:, 0], 1e-12)  # every vertex has its nearest node
         w /= w.sum(axis=1, keepdims=True)
         keep = w > 1e-6
         rows.append(np.repeat(ids, k).reshape(len(ids), k)[keep])
         cols.append((j + offset)[keep])
         vals.append(w[keep])
         offset += len(nid)
-    phi = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                            shape=(len(points), len(nodes)))
+    phi = sparse.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(len(points), len(nodes)),
+    )
     # node graph: within 2.2 spacings, and each node's 6 nearest, same part only (so no
     # node is left without neighbours: a node the data barely reach must follow them)
     tree = cKDTree(points[nodes])
@@ -225,8 +227,9 @@ def _level_field(points: np.ndarray, part: np.ndarray, spacing: float) -> _Level
         knn = np.column_stack([np.repeat(np.arange(len(nodes)), k - 1), nn[:, 1:].ravel()])
         pairs = np.vstack([pairs.reshape(-1, 2), knn])
     pairs = pairs[npart[pairs[:, 0]] == npart[pairs[:, 1]]]
-    a = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                          shape=(len(nodes), len(nodes)))
+    a = sparse.coo_matrix(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(nodes), len(nodes))
+    )
     a = ((a + a.T) > 0).astype(float).tocsr()
     lap = sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a
     return _LevelField(phi, lap.tocsr())
@@ -249,9 +252,14 @@ def _solve_spd(a: sparse.csr_matrix, b: np.ndarray, x0: np.ndarray) -> np.ndarra
     return out
 
 
-def soft_match(points: np.ndarray, normals: np.ndarray, tree: cKDTree, cloud: np.ndarray,
-               cloud_normals: np.ndarray, k: int = MATCH_K
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def soft_match(
+    points: np.ndarray,
+    normals: np.ndarray,
+    tree: cKDTree,
+    cloud: np.ndarray,
+    cloud_normals: np.ndarray,
+    k: int = MATCH_K,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Normal-compatible soft closest points of ``points`` on a point ``cloud``.
 
     Among the ``k`` nearest cloud points, those whose normal agrees with the
@@ -297,18 +305,29 @@ def soft_match(points: np.ndarray, normals: np.ndarray, tree: cKDTree, cloud: np
     return matched, quality, dist, blend, j
 
 
-def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.ndarray,
-                  t_tree: cKDTree, t_pts: np.ndarray, t_nrm: np.ndarray, t_w: np.ndarray,
-                  q: np.ndarray, q_n: np.ndarray, q_w: np.ndarray, rounds: int,
-                  hard: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+def _affine_stage(
+    source: Mesh,
+    x: np.ndarray,
+    parts: np.ndarray,
+    active: np.ndarray,
+    t_tree: cKDTree,
+    t_pts: np.ndarray,
+    t_nrm: np.ndarray,
+    t_w: np.ndarray,
+    q: np.ndarray,
+    q_n: np.ndarray,
+    q_w: np.ndarray,
+    rounds: int,
+    hard: tuple[np.ndarray, np.ndarray] | None,
+) -> np.ndarray:
     """Displacement ``(n, 3)`` of one robust affine map per part (push + pull matches)."""
     n = len(x)
     u = np.zeros_like(x)
     ones = np.ones((n, 1))
-    xh = np.hstack([x, ones])                      # rows [x, 1]
+    xh = np.hstack([x, ones])  # rows [x, 1]
     labels = np.unique(parts)
     sel = np.flatnonzero(active)
-    sel = sel[grid_nodes(x[sel], AFFINE_SAMPLE_MM)]   # a template-side subsample
+    sel = sel[grid_nodes(x[sel], AFFINE_SAMPLE_MM)]  # a template-side subsample
     for tau in np.geomspace(*AFFINE_SCALE_MM, max(rounds, 1))[:rounds]:
         y = x + u
         normals = vertex_normals(Mesh(y, source.faces))
@@ -317,10 +336,11 @@ def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.nda
         p[sel], agree, dist, blend, j = soft_match(y[sel], normals[sel], t_tree, t_pts, t_nrm)
         w[sel] = (blend * t_w[j]).sum(axis=1) * agree * np.exp(-0.5 * (dist / tau) ** 2)
         yact = sel
-        pm, agree_b, dist_b, blend_b, jb = soft_match(q, q_n, cKDTree(y[yact]), y[yact],
-                                                      normals[yact])
+        pm, agree_b, dist_b, blend_b, jb = soft_match(
+            q, q_n, cKDTree(y[yact]), y[yact], normals[yact]
+        )
         wb = PULL_WEIGHT * q_w * agree_b * np.exp(-0.5 * (dist_b / tau) ** 2)
-        src_of_q = yact[jb]                        # (k_samples, MATCH_K) source vertex ids
+        src_of_q = yact[jb]  # (k_samples, MATCH_K) source vertex ids
         new_u = u.copy()
         for lab in labels:
             mine = parts == lab
@@ -343,8 +363,9 @@ def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.nda
                 if held.any():
                     a_rows.append(xh[ids[held]])
                     b_rows.append(np.asarray(hard[1], float)[held])
-                    weights.append(np.full(int(held.sum()), HARD_WEIGHT * max(w[mine].mean(),
-                                                                              1e-6)))
+                    weights.append(
+                        np.full(int(held.sum()), HARD_WEIGHT * max(w[mine].mean(), 1e-6))
+                    )
             a = np.vstack(a_rows)
             b = np.vstack(b_rows)
             ww = np.concatenate(weights)
@@ -362,11 +383,16 @@ def _affine_stage(source: Mesh, x: np.ndarray, parts: np.ndarray, active: np.nda
     return u
 
 
-def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
-             levels: Sequence[Level] = DEFAULT_LEVELS,
-             active: np.ndarray | None = None,
-             hard: tuple[np.ndarray, np.ndarray] | None = None,
-             affine_rounds: int = AFFINE_ROUNDS) -> Registration:
+def register(
+    source: Mesh,
+    target: Target,
+    *,
+    parts: np.ndarray | None = None,
+    levels: Sequence[Level] = DEFAULT_LEVELS,
+    active: np.ndarray | None = None,
+    hard: tuple[np.ndarray, np.ndarray] | None = None,
+    affine_rounds: int = AFFINE_ROUNDS,
+) -> Registration:
     """Register ``source`` onto ``target`` (both mm, one frame).
 
     Parameters
@@ -398,8 +424,9 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
     u = np.zeros_like(x)
     total_iter = 0
     if affine_rounds:
-        u = _affine_stage(source, x, parts, active, t_tree, t_pts, t_nrm, t_w, q, q_n, q_w,
-                          affine_rounds, hard)
+        u = _affine_stage(
+            source, x, parts, active, t_tree, t_pts, t_nrm, t_w, q, q_n, q_w, affine_rounds, hard
+        )
         total_iter += affine_rounds
     for level in levels:
         fld = _level_field(x, parts, level.spacing_mm)
@@ -424,12 +451,10 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
             # pull: target sample → nearest agreeing moved source vertices (blend of them)
             yact = sel
             src_tree = cKDTree(y[yact])
-            pm, agree_b, dist_b, blend_b, jb = soft_match(q, q_n, src_tree, y[yact],
-                                                          moved_n[yact])
+            pm, agree_b, dist_b, blend_b, jb = soft_match(q, q_n, src_tree, y[yact], moved_n[yact])
             w_b = PULL_WEIGHT * q_w * agree_b * np.exp(-0.5 * (dist_b / level.scale_mm) ** 2)
             rows = np.repeat(np.arange(len(q)), jb.shape[1])
-            bmat = sparse.csr_matrix((blend_b.ravel(), (rows, yact[jb].ravel())),
-                                     shape=(len(q), n))
+            bmat = sparse.csr_matrix((blend_b.ravel(), (rows, yact[jb].ravel())), shape=(len(q), n))
             pull_rows = (bmat @ phi).tocsr()
             a_pull = pull_rows.T @ sparse.diags(w_b) @ pull_rows
             rhs += pull_rows.T @ (w_b[:, None] * (q - bmat @ (x + u)))
@@ -441,8 +466,9 @@ def register(source: Mesh, target: Target, *, parts: np.ndarray | None = None,
                 wh = np.full(len(ids), HARD_WEIGHT * scale)
                 a = a + h.T @ sparse.diags(wh) @ h
                 rhs += h.T @ (wh[:, None] * (pts - x[ids] - u[ids]))
-            system = (a + level.stiffness * scale * lap
-                      + EPSILON * scale * sparse.identity(m)).tocsr()
+            system = (
+                a + level.stiffness * scale * lap + EPSILON * scale * sparse.identity(m)
+            ).tocsr()
             new = _solve_spd(system, rhs, c)
             step = float(np.abs(new - c).max())
             c = new

@@ -26,7 +26,7 @@ def _surface_points(mesh: Mesh, spacing: float) -> np.ndarray:
     """Vertices plus area-proportional samples (about one per ``spacing``² of area)."""
     rng = np.random.default_rng(0)
     areas = mesh.face_areas
-    n = int(min(4e6, areas.sum() / spacing ** 2))
+    n = int(min(4e6, areas.sum() / spacing**2))
     pts = [mesh.vertices]
     if n > 0:
         faces = rng.choice(len(areas), size=n, p=areas / areas.sum())
@@ -63,8 +63,9 @@ def uniform_offset(bone: Mesh, depth_mm: float = 6.0, spacing_mm: float = 1.5) -
     solid = ndimage.binary_fill_holes(labels == sizes.argmax())
     field = np.where(solid & (field >= depth_mm), 0.0, field)
     field = np.where(~solid & (field < depth_mm), cap, field)
-    verts, faces, _, _ = marching_cubes(field.astype(np.float32), level=depth_mm,
-                                        spacing=(spacing_mm,) * 3, allow_degenerate=False)
+    verts, faces, _, _ = marching_cubes(
+        field.astype(np.float32), level=depth_mm, spacing=(spacing_mm,) * 3, allow_degenerate=False
+    )
     verts = verts + lo
     # marching cubes winds toward the high values (outside here): already outward
     v, f, _ = keep_largest_component(verts.astype(np.float64), faces.astype(np.int64))

@@ -63,8 +63,9 @@ def _unit(directions: np.ndarray) -> np.ndarray:
     return d / n
 
 
-def moller_trumbore(origins: np.ndarray, directions: np.ndarray, a: np.ndarray, b: np.ndarray,
-                    c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def moller_trumbore(
+    origins: np.ndarray, directions: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ray/triangle intersection, element-wise over ``(k, 3)`` arrays.
 
     Returns ``t`` (inf where the ray misses the triangle's interior or hits
@@ -102,8 +103,8 @@ class RayCaster:
         self.backend = backend
         self._scene = _build_embree(mesh) if backend == "embree" else None
         self._tree = LeafTree(mesh) if backend == "numpy" else None
-        self._lock = threading.Lock()   # one embree query at a time on a shared caster
-        self._to_base: np.ndarray | None = None   # set on casters borrowing another's scene
+        self._lock = threading.Lock()  # one embree query at a time on a shared caster
+        self._to_base: np.ndarray | None = None  # set on casters borrowing another's scene
 
     @staticmethod
     def shared(mesh: Mesh) -> RayCaster:
@@ -121,9 +122,12 @@ class RayCaster:
     def _shared_locked(mesh: Mesh) -> RayCaster:
         caster = mesh.__dict__.get("_shared_ray_caster")
         if caster is None:
-            source = mesh.rigid_source   # a rigid copy borrows the original's scenes
-            caster = RayCaster(mesh) if source is None else \
-                RayCaster._borrowed(mesh, RayCaster._shared_locked(source[0]), source[1])
+            source = mesh.rigid_source  # a rigid copy borrows the original's scenes
+            caster = (
+                RayCaster(mesh)
+                if source is None
+                else RayCaster._borrowed(mesh, RayCaster._shared_locked(source[0]), source[1])
+            )
             mesh.__dict__["_shared_ray_caster"] = caster
         return caster
 
@@ -145,9 +149,15 @@ class RayCaster:
         caster._to_base = np.asarray(to_base, dtype=np.float64)
         return caster
 
-    def first_hits(self, origins: np.ndarray, directions: np.ndarray, *,
-                   max_distance: float = np.inf, cull_backfaces: bool = False,
-                   max_skips: int = 8) -> RayHits:
+    def first_hits(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        *,
+        max_distance: float = np.inf,
+        cull_backfaces: bool = False,
+        max_skips: int = 8,
+    ) -> RayHits:
         """Nearest intersection of each ray ``origin + t·direction``, ``0 ≤ t ≤ max_distance``."""
         o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
         d = _unit(directions)
@@ -244,15 +254,16 @@ def _barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return np.stack([1 - v - w, v, w], axis=1)
 
 
-def _tree_cast(tree: LeafTree, o: np.ndarray, d: np.ndarray,
-               chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
+def _tree_cast(
+    tree: LeafTree, o: np.ndarray, d: np.ndarray, chunk: int = 8192
+) -> tuple[np.ndarray, np.ndarray]:
     """First hits (face id or -1, distance) through the leaves of ``tree``."""
     face = np.full(len(o), -1, np.int64)
     best = np.full(len(o), np.inf)
     lo, hi = tree.aabb_lo, tree.aabb_hi
     mask = np.int64(0xFFFFFFFF)
     for s in range(0, len(o), chunk):
-        oo, dd = o[s:s + chunk], d[s:s + chunk]
+        oo, dd = o[s : s + chunk], d[s : s + chunk]
         with np.errstate(divide="ignore"):
             inv = 1.0 / dd
         pairs = (np.arange(len(oo), dtype=np.int64) << 32) | 1
@@ -277,13 +288,16 @@ def _tree_cast(tree: LeafTree, o: np.ndarray, d: np.ndarray,
         tri = tree.triangles[faces]
         k, n_l = faces.shape
         t, _, _ = moller_trumbore(
-            np.repeat(oo[q], n_l, axis=0), np.repeat(dd[q], n_l, axis=0),
-            tri[..., 0, :].reshape(-1, 3), tri[..., 1, :].reshape(-1, 3),
-            tri[..., 2, :].reshape(-1, 3))
+            np.repeat(oo[q], n_l, axis=0),
+            np.repeat(dd[q], n_l, axis=0),
+            tri[..., 0, :].reshape(-1, 3),
+            tri[..., 1, :].reshape(-1, 3),
+            tri[..., 2, :].reshape(-1, 3),
+        )
         t = t.reshape(k, n_l)
         j = t.argmin(axis=1)
         tj = t[np.arange(k), j]
-        sub_best = best[s:s + chunk]
+        sub_best = best[s : s + chunk]
         np.minimum.at(sub_best, q, tj)
         win = np.isfinite(tj) & (tj <= sub_best[q])
         face[s + q[win]] = faces[np.arange(k), j][win]
@@ -297,8 +311,9 @@ def _brute_force(mesh: Mesh, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, 
     face = np.full(len(o), -1, np.int64)
     best = np.full(len(o), np.inf)
     for i in range(len(o)):
-        t, _, _ = moller_trumbore(np.broadcast_to(o[i], a.shape), np.broadcast_to(d[i], a.shape),
-                                  a, b, c)
+        t, _, _ = moller_trumbore(
+            np.broadcast_to(o[i], a.shape), np.broadcast_to(d[i], a.shape), a, b, c
+        )
         j = int(t.argmin())
         if np.isfinite(t[j]):
             face[i], best[i] = j, t[j]
@@ -341,6 +356,6 @@ def _build_embree(mesh: Mesh) -> list[tuple[Any, np.ndarray]]:
     for ids in chunks:
         scene = rtcore_scene.EmbreeScene(robust=True)  # watertight at shared edges
         TriangleMesh(scene=scene, vertices=tri[ids])
-        scene.run(*probe, output=1)   # commit (build the BVH) now, not in a query
+        scene.run(*probe, output=1)  # commit (build the BVH) now, not in a query
         scenes.append((scene, ids.astype(np.int64)))
     return scenes

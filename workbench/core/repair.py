@@ -47,12 +47,16 @@ def _keep_faces(mesh: Mesh, keep: np.ndarray, what: str) -> Repaired:
     removed = int((~keep).sum())
     if removed == 0:
         return _unchanged(mesh)
-    return Repaired(Mesh(mesh.vertices, mesh.faces[keep]), np.arange(mesh.n_vertices),
-                    f"removed {removed} {what}")
+    return Repaired(
+        Mesh(mesh.vertices, mesh.faces[keep]),
+        np.arange(mesh.n_vertices),
+        f"removed {removed} {what}",
+    )
 
 
-def _drop_vertices(vertices: np.ndarray, faces: np.ndarray,
-                   drop: np.ndarray) -> tuple[Mesh, np.ndarray]:
+def _drop_vertices(
+    vertices: np.ndarray, faces: np.ndarray, drop: np.ndarray
+) -> tuple[Mesh, np.ndarray]:
     """Remove the vertices flagged in ``drop`` (no face may use them) and renumber."""
     keep = ~drop
     new_index = np.cumsum(keep) - 1
@@ -81,9 +85,11 @@ def remove_nonfinite(mesh: Mesh) -> Repaired:
         return _unchanged(mesh)
     keep = ~bad[mesh.faces].any(axis=1)
     new_mesh, source = _drop_vertices(mesh.vertices, mesh.faces[keep], bad)
-    return Repaired(new_mesh, source,
-                    f"removed {int(bad.sum())} non-finite vertices and "
-                    f"{int((~keep).sum())} triangles")
+    return Repaired(
+        new_mesh,
+        source,
+        f"removed {int(bad.sum())} non-finite vertices and {int((~keep).sum())} triangles",
+    )
 
 
 def remove_degenerate_faces(mesh: Mesh, area_tol_mm2: float = 1e-12) -> Repaired:
@@ -114,8 +120,9 @@ def merge_close_vertices(mesh: Mesh, tol_mm: float = 1e-6) -> Repaired:
     remap = first[label]
     merged = remap != np.arange(n)  # welded into a lower index
     new_mesh, source = _drop_vertices(mesh.vertices, remap[mesh.faces], merged)
-    return Repaired(new_mesh, source,
-                    f"merged {int(merged.sum())} vertices closer than {tol_mm:g} mm")
+    return Repaired(
+        new_mesh, source, f"merged {int(merged.sum())} vertices closer than {tol_mm:g} mm"
+    )
 
 
 def keep_largest_component(mesh: Mesh) -> Repaired:
@@ -128,9 +135,11 @@ def keep_largest_component(mesh: Mesh) -> Repaired:
     # drop the vertices of the removed pieces, not other unreferenced ones
     orphaned = _used(mesh.n_vertices, mesh.faces[~keep]) & ~_used(mesh.n_vertices, mesh.faces[keep])
     new_mesh, source = _drop_vertices(mesh.vertices, mesh.faces[keep], orphaned)
-    return Repaired(new_mesh, source,
-                    f"kept the largest of {len(sizes)} pieces ({int(keep.sum())} of "
-                    f"{mesh.n_faces} triangles)")
+    return Repaired(
+        new_mesh,
+        source,
+        f"kept the largest of {len(sizes)} pieces ({int(keep.sum())} of {mesh.n_faces} triangles)",
+    )
 
 
 def fill_small_holes(mesh: Mesh, max_edges: int = 30) -> Repaired:
@@ -160,8 +169,12 @@ def fill_small_holes(mesh: Mesh, max_edges: int = 30) -> Repaired:
 def clean(mesh: Mesh) -> tuple[Mesh, list[str]]:
     """The usual sequence of safe repairs; returns the mesh and what was done."""
     messages: list[str] = []
-    for step in (remove_nonfinite, remove_degenerate_faces, remove_duplicate_faces,
-                 remove_unreferenced_vertices):
+    for step in (
+        remove_nonfinite,
+        remove_degenerate_faces,
+        remove_duplicate_faces,
+        remove_unreferenced_vertices,
+    ):
         result = step(mesh)
         if result.changed:
             messages.append(result.message)

@@ -171,8 +171,9 @@ def _principal_axes(points: np.ndarray) -> np.ndarray:
     return vt
 
 
-def hint_rotation(anterior: np.ndarray, superior: np.ndarray,
-                  left: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+def hint_rotation(
+    anterior: np.ndarray, superior: np.ndarray, left: np.ndarray | None = None
+) -> tuple[np.ndarray, bool]:
     """Rotation of input directions onto the head axes, and whether ``left`` says mirrored.
 
     Rows of the returned matrix: left, up, forward (in input coordinates).
@@ -226,13 +227,14 @@ def _fibonacci_hemisphere(n: int) -> np.ndarray:
     """``n`` unit vectors spread evenly over the half-sphere z ≥ 0 (fixed)."""
     i = np.arange(n) + 0.5
     z = i / n
-    phi = np.pi * (1 + 5 ** 0.5) * i
-    r = np.sqrt(1 - z ** 2)
+    phi = np.pi * (1 + 5**0.5) * i
+    r = np.sqrt(1 - z**2)
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
-def _reflect(points: np.ndarray, normals: np.ndarray, u: np.ndarray, d: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
+def _reflect(
+    points: np.ndarray, normals: np.ndarray, u: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Points and normals reflected across the planes ``u · x = d`` (broadcast over d)."""
     s = points @ u
     p = points[None] - 2.0 * (s[None] - np.asarray(d)[:, None])[..., None] * u
@@ -240,8 +242,9 @@ def _reflect(points: np.ndarray, normals: np.ndarray, u: np.ndarray, d: np.ndarr
     return p, np.broadcast_to(n, p.shape)
 
 
-def symmetry_planes(cloud: _Cloud, own: _Grid, keep: int = 3
-                    ) -> list[tuple[float, np.ndarray, float]]:
+def symmetry_planes(
+    cloud: _Cloud, own: _Grid, keep: int = 3
+) -> list[tuple[float, np.ndarray, float]]:
     """Best bilateral-symmetry planes ``(loss, unit normal, offset)`` of a target sample cloud.
 
     Every direction of a fine half-sphere (and the principal axes) is
@@ -297,8 +300,9 @@ def _width_scale(ref: _Cloud, cloud: _Cloud, left: np.ndarray) -> float:
     return float(np.clip((rhi - rlo) / max(hi - lo, 1e-6), *SCALE_RANGE))
 
 
-def _plane_poses(grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray,
-                 scale: float = 1.0) -> list[tuple[float, np.ndarray, np.ndarray]]:
+def _plane_poses(
+    grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray, scale: float = 1.0
+) -> list[tuple[float, np.ndarray, np.ndarray]]:
     """Poses putting the plane ``u · x = d`` on x = 0: both sides, every turn about it.
 
     Scored by the reference fit over a grid of in-plane translations;
@@ -316,8 +320,9 @@ def _plane_poses(grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np
             r = scale * np.vstack([a, b, np.cross(a, b)])
             p = small.points @ r.T
             t0 = centre - p.mean(axis=0)
-            ts = np.column_stack([np.full(len(offs), -side * d * scale),
-                                  t0[1] + offs[:, 0], t0[2] + offs[:, 1]])
+            ts = np.column_stack(
+                [np.full(len(offs), -side * d * scale), t0[1] + offs[:, 0], t0[2] + offs[:, 1]]
+            )
             n = small.normals @ r.T / scale
             loss = grid.loss(p[None] + ts[:, None], np.broadcast_to(n, (len(ts),) + n.shape))
             k = int(np.argmin(loss))
@@ -326,12 +331,14 @@ def _plane_poses(grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np
     return out
 
 
-def _distinct(cands: list[tuple[float, np.ndarray, np.ndarray]], n: int
-              ) -> list[tuple[float, np.ndarray, np.ndarray]]:
+def _distinct(
+    cands: list[tuple[float, np.ndarray, np.ndarray]], n: int
+) -> list[tuple[float, np.ndarray, np.ndarray]]:
     kept: list[tuple[float, np.ndarray, np.ndarray]] = []
     for c, r, t in cands:
-        if all(_angle_deg(r, r2) > DISTINCT_DEG or np.linalg.norm(t - t2) > 20.0
-               for _, r2, t2 in kept):
+        if all(
+            _angle_deg(r, r2) > DISTINCT_DEG or np.linalg.norm(t - t2) > 20.0 for _, r2, t2 in kept
+        ):
             kept.append((c, r, t))
         if len(kept) == n:
             break
@@ -365,8 +372,9 @@ class _Scorer:
         self.ref = reference
         self.tree = cKDTree(reference.points)
 
-    def match(self, pts: np.ndarray, nrm: np.ndarray, k: int = 4
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def match(
+        self, pts: np.ndarray, nrm: np.ndarray, k: int = 4
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per point: distance to the nearest reference sample with an agreeing normal.
 
         Returns ``(distance, index, ok)``; ``ok`` is False where none of the
@@ -419,9 +427,15 @@ def _rigid_update(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.n
     return r, cd - r @ cs
 
 
-def _icp(scorer: _Scorer, cloud: _Cloud, lin: np.ndarray, t: np.ndarray, rounds: int,
-         seeds: tuple[np.ndarray, np.ndarray] | None = None,
-         sigma_mm: tuple[float, float] = REFINE_SIGMA_MM) -> tuple[np.ndarray, np.ndarray, float]:
+def _icp(
+    scorer: _Scorer,
+    cloud: _Cloud,
+    lin: np.ndarray,
+    t: np.ndarray,
+    rounds: int,
+    seeds: tuple[np.ndarray, np.ndarray] | None = None,
+    sigma_mm: tuple[float, float] = REFINE_SIGMA_MM,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Robust (Welsch-weighted), normal-checked rigid ICP keeping ``lin``'s scale and handedness.
 
     The weight σ shrinks geometrically over the rounds from ``sigma_mm[0]`` to ``[1]``.
@@ -454,8 +468,9 @@ def _rotate_normals(lin: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
 
 
-def _fit_scale(scorer: _Scorer, cloud: _Cloud, lin: np.ndarray, t: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+def _fit_scale(
+    scorer: _Scorer, cloud: _Cloud, lin: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Uniform scale from matched pairs in both directions, on the overlap only."""
     for _ in range(4):
         pts = cloud.points @ lin.T + t
@@ -477,9 +492,17 @@ def _fit_scale(scorer: _Scorer, cloud: _Cloud, lin: np.ndarray, t: np.ndarray
     return lin, t
 
 
-def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
-                seeds: tuple[np.ndarray, np.ndarray] | None = None, mirror: str = "auto",
-                fit_scale: bool = True, n_samples: int = 1500, seed: int = 0) -> PoseResult:
+def search_pose(
+    target: Mesh,
+    reference: Mesh,
+    *,
+    hint: tuple | None = None,
+    seeds: tuple[np.ndarray, np.ndarray] | None = None,
+    mirror: str = "auto",
+    fit_scale: bool = True,
+    n_samples: int = 1500,
+    seed: int = 0,
+) -> PoseResult:
     """Similarity mapping ``target`` (input frame, mm) onto ``reference``.
 
     Parameters
@@ -524,7 +547,7 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
         # the shape cannot tell a mirrored skull (it is bilaterally symmetric): keep the
         # file's handedness unless told otherwise
         handedness = [mirror == "yes"]
-        if grid is None or own is None:   # built above whenever the search runs
+        if grid is None or own is None:  # built above whenever the search runs
             raise RuntimeError("search_pose: the pose search needs the distance grids")
         planes = symmetry_planes(cloud, own)
     best: dict[bool, tuple[float, np.ndarray, np.ndarray]] = {}
@@ -535,8 +558,11 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
             for r0 in rot_sets[flipped]:
                 r = _width_scale(ref, cloud, r0[0]) * r0
                 for shift in itertools.product((-36.0, -12.0, 12.0, 36.0), (-15.0, 15.0)):
-                    t = (ref.points.mean(axis=0) - (small.points @ r.T).mean(axis=0)
-                         + np.array([0.0, *shift]))
+                    t = (
+                        ref.points.mean(axis=0)
+                        - (small.points @ r.T).mean(axis=0)
+                        + np.array([0.0, *shift])
+                    )
                     lin, tt, c = _icp(scorer, small, r, t, rounds=5, sigma_mm=SEARCH_SIGMA_MM)
                     trials.append((c, lin, tt))
             trials.sort(key=lambda x: x[0])
@@ -563,8 +589,7 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
     if len(best) == 2:
         proper_cost, flipped_cost = best[False][0], best[True][0]
         choose = flipped_cost < MIRROR_MARGIN * proper_cost
-        handed_by = ("shape" if (choose or proper_cost < MIRROR_MARGIN * flipped_cost)
-                     else "assumed")
+        handed_by = "shape" if (choose or proper_cost < MIRROR_MARGIN * flipped_cost) else "assumed"
         ratio = float(max(proper_cost, flipped_cost) / max(min(proper_cost, flipped_cost), 1e-9))
     else:
         choose = handedness[0]
@@ -576,19 +601,24 @@ def search_pose(target: Mesh, reference: Mesh, *, hint: tuple | None = None,
     return _result(scorer, cloud, lin, t, choose, handed_by, ratio, method)
 
 
-def _from_seeds(scorer: _Scorer, cloud: _Cloud, seeds: tuple[np.ndarray, np.ndarray],
-                mirror: str, fit_scale: bool) -> PoseResult:
+def _from_seeds(
+    scorer: _Scorer,
+    cloud: _Cloud,
+    seeds: tuple[np.ndarray, np.ndarray],
+    mirror: str,
+    fit_scale: bool,
+) -> PoseResult:
     """Start from the seeds' similarity (both readings when allowed), refine with them held."""
     from workbench.core.tps import similarity_transform
 
     pts, ref_pts = np.asarray(seeds[0], float), np.asarray(seeds[1], float)
     options = []
-    for flipped in ((False, True) if mirror == "auto" else (mirror == "yes",)):
+    for flipped in (False, True) if mirror == "auto" else (mirror == "yes",):
         f = FLIP if flipped else np.eye(3)
         m = similarity_transform(pts @ f.T, ref_pts)
         lin = m[:3, :3] @ f
         resid = np.linalg.norm(pts @ lin.T + m[:3, 3] - ref_pts, axis=1)
-        options.append((float(np.sqrt((resid ** 2).mean())), flipped, lin, m[:3, 3]))
+        options.append((float(np.sqrt((resid**2).mean())), flipped, lin, m[:3, 3]))
     options.sort(key=lambda o: o[0])
     rms, flipped, lin, t = options[0]
     s = abs(np.linalg.det(lin)) ** (1 / 3)
@@ -605,13 +635,28 @@ def _from_seeds(scorer: _Scorer, cloud: _Cloud, seeds: tuple[np.ndarray, np.ndar
     return _result(scorer, cloud, lin, t, flipped, handed_by, float(ratio), "seeds")
 
 
-def _result(scorer: _Scorer, cloud: _Cloud, lin: np.ndarray, t: np.ndarray, mirrored: bool,
-            handed_by: str, ratio: float, method: str) -> PoseResult:
+def _result(
+    scorer: _Scorer,
+    cloud: _Cloud,
+    lin: np.ndarray,
+    t: np.ndarray,
+    mirrored: bool,
+    handed_by: str,
+    ratio: float,
+    method: str,
+) -> PoseResult:
     pts = cloud.points @ lin.T + t
     nrm = _rotate_normals(lin, cloud.normals)
     d, _, ok = scorer.match(pts, nrm)
     m = np.eye(4)
     m[:3, :3], m[:3, 3] = lin, t
-    return PoseResult(m, float(abs(np.linalg.det(lin)) ** (1 / 3)), bool(mirrored),
-                      scorer.cost(pts, nrm), float(np.mean(ok & (d < 2.0))), handed_by, ratio,
-                      method)
+    return PoseResult(
+        m,
+        float(abs(np.linalg.det(lin)) ** (1 / 3)),
+        bool(mirrored),
+        scorer.cost(pts, nrm),
+        float(np.mean(ok & (d < 2.0))),
+        handed_by,
+        ratio,
+        method,
+    )

@@ -61,8 +61,9 @@ class ClosestPoints:
     barycentric: np.ndarray
 
 
-def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray,
-                         c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def closest_on_triangles(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Closest points on triangles ``(a, b, c)`` to points ``p`` (all ``(k, 3)``).
 
     Returns the closest points ``(k, 3)`` and their barycentric coordinates
@@ -215,8 +216,9 @@ class MeshIndex:
         """Squared distance bound widened to cover rounding (never misses a face)."""
         return d2 * (1.0 + 1e-7) + self._abs_tol2
 
-    def _update(self, p: np.ndarray, q: np.ndarray, leaf: np.ndarray,
-                best: np.ndarray, face: np.ndarray) -> None:
+    def _update(
+        self, p: np.ndarray, q: np.ndarray, leaf: np.ndarray, best: np.ndarray, face: np.ndarray
+    ) -> None:
         """Evaluate leaves ``leaf`` for queries ``q`` and keep improvements (in place)."""
         if len(q) == 0:
             return
@@ -246,8 +248,9 @@ class MeshIndex:
     def _vertex_normals(self) -> np.ndarray:
         return angle_weighted_vertex_normals(self.mesh)
 
-    def pseudo_normals(self, face_ids: np.ndarray, barycentric: np.ndarray,
-                       tol: float = 1e-9) -> np.ndarray:
+    def pseudo_normals(
+        self, face_ids: np.ndarray, barycentric: np.ndarray, tol: float = 1e-9
+    ) -> np.ndarray:
         """Pseudo-normal of the closest feature (face, edge or vertex) ``(k, 3)``."""
         face_ids = np.asarray(face_ids)
         zero = barycentric <= tol

@@ -86,8 +86,9 @@ class PatchIndex:
         Edges are pairs of positions in the returned ids.
         """
         _, nearest = self.tree.query(point)
-        ball = np.union1d(np.asarray(self.tree.query_ball_point(point, radius_mm), np.int64),
-                          [nearest])
+        ball = np.union1d(
+            np.asarray(self.tree.query_ball_point(point, radius_mm), np.int64), [nearest]
+        )
         sub = self.adjacency[ball][:, ball]
         _, labels = connected_components(sub, directed=False)
         keep = labels == labels[np.searchsorted(ball, nearest)]
@@ -95,8 +96,9 @@ class PatchIndex:
         return ball[keep], np.column_stack([edges.row, edges.col])
 
 
-def plane_section(points: np.ndarray, normals: np.ndarray, edges: np.ndarray,
-                  signed_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def plane_section(
+    points: np.ndarray, normals: np.ndarray, edges: np.ndarray, signed_mm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Where ``edges`` cross a plane: ``(points (c, 3), interpolated normals (c, 3))``.
 
     ``signed_mm`` is each point's signed distance from the plane; edges whose
@@ -109,8 +111,10 @@ def plane_section(points: np.ndarray, normals: np.ndarray, edges: np.ndarray,
     a, b = a[cross], b[cross]
     t = (signed_mm[a] / (signed_mm[a] - signed_mm[b]))[:, None]
     on = signed_mm == 0.0
-    return (np.concatenate([points[a] + t * (points[b] - points[a]), points[on]]),
-            np.concatenate([normals[a] + t * (normals[b] - normals[a]), normals[on]]))
+    return (
+        np.concatenate([points[a] + t * (points[b] - points[a]), points[on]]),
+        np.concatenate([normals[a] + t * (normals[b] - normals[a]), normals[on]]),
+    )
 
 
 def depth_below_upper_hull(along: np.ndarray, height: np.ndarray) -> np.ndarray | None:
@@ -132,8 +136,8 @@ def depth_below_upper_hull(along: np.ndarray, height: np.ndarray) -> np.ndarray 
         hull = ConvexHull(np.column_stack([along, height]))
     except (QhullError, ValueError):
         return None
-    eq = hull.equations                 # n_along * a + n_height * h + offset <= 0 inside
-    upper = eq[eq[:, 1] > 1e-9]         # hull edges facing up in 'height'
+    eq = hull.equations  # n_along * a + n_height * h + offset <= 0 inside
+    upper = eq[eq[:, 1] > 1e-9]  # hull edges facing up in 'height'
     if not len(upper):
         return None
     # height of each upper edge's line at every point's 'along'; the hull is their minimum

@@ -46,8 +46,9 @@ def smooth_field(adj: sparse.csr_matrix, values: np.ndarray, passes: int) -> np.
     return v
 
 
-def harmonic_fill(adj: sparse.csr_matrix, known: np.ndarray, values: np.ndarray,
-                  pull: float = 1e-6) -> np.ndarray:
+def harmonic_fill(
+    adj: sparse.csr_matrix, known: np.ndarray, values: np.ndarray, pull: float = 1e-6
+) -> np.ndarray:
     """Values on ``known`` vertices kept, the rest a membrane (harmonic) fill of them.
 
     A weak ``pull`` toward zero decides vertices in pieces with no known value.
@@ -67,9 +68,17 @@ def thickness(points: np.ndarray, bone: MeshIndex) -> np.ndarray:
     return bone.signed_distance(points)
 
 
-def set_thickness(skin: Mesh, bone: MeshIndex, target_mm: np.ndarray, *,
-                  adjust: np.ndarray, features: np.ndarray | None = None,
-                  rounds: int = 3, passes: int = 6, max_step_mm: float = 25.0) -> np.ndarray:
+def set_thickness(
+    skin: Mesh,
+    bone: MeshIndex,
+    target_mm: np.ndarray,
+    *,
+    adjust: np.ndarray,
+    features: np.ndarray | None = None,
+    rounds: int = 3,
+    passes: int = 6,
+    max_step_mm: float = 25.0,
+) -> np.ndarray:
     """Skin vertices moved along their normals toward thickness ``target_mm`` (mm).
 
     Parameters

@@ -137,8 +137,9 @@ def _single_threaded_blas() -> Iterator[None]:
 _BLAS_CONTROLLER = None
 
 
-def _kernel_block(x: np.ndarray, centres: np.ndarray, gram: np.ndarray,
-                  centre_norm2: float) -> np.ndarray:
+def _kernel_block(
+    x: np.ndarray, centres: np.ndarray, gram: np.ndarray, centre_norm2: float
+) -> np.ndarray:
     """``(k, N)`` distances ‖x_j − p_i‖ for one chunk of points ``x`` ``(k, 3)``.
 
     Squared distances come from one small GEMM,
@@ -195,12 +196,22 @@ class LandmarkWarp:
     def n_landmarks(self) -> int:
         return int(len(self.centres))
 
-    def __call__(self, points: np.ndarray, *, chunk_elements: int = _DEFAULT_CHUNK,
-                 workers: int | None = None) -> np.ndarray:
+    def __call__(
+        self,
+        points: np.ndarray,
+        *,
+        chunk_elements: int = _DEFAULT_CHUNK,
+        workers: int | None = None,
+    ) -> np.ndarray:
         return self.apply(points, chunk_elements=chunk_elements, workers=workers)
 
-    def apply(self, points: np.ndarray, *, chunk_elements: int = _DEFAULT_CHUNK,
-              workers: int | None = None) -> np.ndarray:
+    def apply(
+        self,
+        points: np.ndarray,
+        *,
+        chunk_elements: int = _DEFAULT_CHUNK,
+        workers: int | None = None,
+    ) -> np.ndarray:
         """Warp ``points`` ``(n, 3)`` mm; returns a new ``(n, 3)`` array.
 
         Memory beyond input and output is ``O(chunk_elements)`` per worker.
@@ -281,7 +292,8 @@ def fit_warp(source: np.ndarray, target: np.ndarray, *, smoothing: float = 0.0) 
         uniq = np.unique(src, axis=0)
         if len(uniq) != n:
             raise ValueError(
-                f"{n - len(uniq)} source landmarks coincide; a warp needs distinct points")
+                f"{n - len(uniq)} source landmarks coincide; a warp needs distinct points"
+            )
     offset = src.mean(axis=0) if n else np.zeros(3)
     p = src - offset
     q = dst - offset
@@ -301,7 +313,7 @@ def _fit_tps(p: np.ndarray, q: np.ndarray, offset: np.ndarray, smoothing: float)
     n = len(p)
     a = np.zeros((n + 4, n + 4))
     a[:n, :n] = _kernel_matrix(p, smoothing)
-    a[:n, n:n + 3] = p
+    a[:n, n : n + 3] = p
     a[:n, n + 3] = 1.0
     a[n:, :n] = a[:n, n:].T
     b = np.zeros((n + 4, 3))
@@ -309,13 +321,18 @@ def _fit_tps(p: np.ndarray, q: np.ndarray, offset: np.ndarray, smoothing: float)
     with _single_threaded_blas():  # BLAS threads only slow an (N+4)² LU down
         x = lu_solve(lu_factor(a, check_finite=False), b, check_finite=False)
     return LandmarkWarp(
-        centres=_ro(p), weights=_ro(x[:n]), affine=_ro(x[n:]), offset=_ro(offset),
-        method="tps", smoothing=float(smoothing),
+        centres=_ro(p),
+        weights=_ro(x[:n]),
+        affine=_ro(x[n:]),
+        offset=_ro(offset),
+        method="tps",
+        smoothing=float(smoothing),
     )
 
 
-def _fit_similarity_rbf(p: np.ndarray, q: np.ndarray, offset: np.ndarray,
-                        smoothing: float) -> LandmarkWarp:
+def _fit_similarity_rbf(
+    p: np.ndarray, q: np.ndarray, offset: np.ndarray, smoothing: float
+) -> LandmarkWarp:
     m = similarity_transform(p, q)
     affine = np.vstack([m[:3, :3].T, m[:3, 3]])
     n = len(p)
@@ -326,8 +343,12 @@ def _fit_similarity_rbf(p: np.ndarray, q: np.ndarray, offset: np.ndarray,
             with _single_threaded_blas():
                 weights = np.linalg.solve(_kernel_matrix(p, smoothing), residual)
     return LandmarkWarp(
-        centres=_ro(p), weights=_ro(weights), affine=_ro(affine), offset=_ro(offset),
-        method="similarity+rbf", smoothing=float(smoothing),
+        centres=_ro(p),
+        weights=_ro(weights),
+        affine=_ro(affine),
+        offset=_ro(offset),
+        method="similarity+rbf",
+        smoothing=float(smoothing),
     )
 
 

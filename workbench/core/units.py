@@ -25,7 +25,10 @@ from workbench.core.mesh import Mesh
 #: millimetres per unit
 UNIT_SCALES: dict[str, float] = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 UNIT_NAMES: dict[str, str] = {
-    "mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches",
+    "mm": "millimetres",
+    "cm": "centimetres",
+    "m": "metres",
+    "in": "inches",
 }
 #: plausible largest extent in mm, and a typical value used to rank ambiguous guesses
 PLAUSIBLE_EXTENT_MM: dict[str, tuple[float, float, float]] = {
@@ -94,15 +97,22 @@ def detect_units_from_extent(largest_extent: float, kind: str = "head") -> Units
     lo, hi, typical = _check_kind(kind)
     ext = float(largest_extent)
     if not math.isfinite(ext) or ext <= 0:
-        return UnitsReport(kind, ext, "unknown", None, False,
-                           "the mesh has no finite size, so its units cannot be judged")
+        return UnitsReport(
+            kind,
+            ext,
+            "unknown",
+            None,
+            False,
+            "the mesh has no finite size, so its units cannot be judged",
+        )
     candidates = tuple((u, ext * s) for u, s in UNIT_SCALES.items())
     plausible = [(u, mm) for u, mm in candidates if lo <= mm <= hi]
     size = f"largest extent {ext:.4g}"
     expected = f"(a {kind} is roughly {lo:.0f}-{hi:.0f} mm)"
     if any(u == "mm" for u, _ in plausible):
-        return UnitsReport(kind, ext, "mm", 1.0, True,
-                           f"{size}: plausible as millimetres {expected}", candidates)
+        return UnitsReport(
+            kind, ext, "mm", 1.0, True, f"{size}: plausible as millimetres {expected}", candidates
+        )
     too = "far too small" if ext < lo else "far too large"
     parts = [f"{size}: as millimetres that is {too} for a {kind} {expected}"]
     if plausible:
@@ -180,18 +190,25 @@ def resolve_units(
     return unit_scale(requested)
 
 
-def check_units_choice(units: str | None, scale: float | None, *, units_option: str = "--units",
-                       scale_option: str = "--scale") -> None:
+def check_units_choice(
+    units: str | None,
+    scale: float | None,
+    *,
+    units_option: str = "--units",
+    scale_option: str = "--scale",
+) -> None:
     """Refuse a unit name together with a scale factor: one of them would be ignored.
 
     ``units`` None or "auto" with any ``scale`` is fine, as is a unit without a scale.
     """
     if scale is not None and units not in (None, "auto"):
         shown = f"{scale:g}" if isinstance(scale, (int, float)) else repr(scale)
-        raise InputError(f"{units_option} {units} with {scale_option} {shown}",
-                         "give either units or a scale factor, not both",
-                         f"{units_option} {units} means {UNIT_SCALES.get(units, '?')} mm per "
-                         f"unit; {scale_option} sets the mm per unit itself")
+        raise InputError(
+            f"{units_option} {units} with {scale_option} {shown}",
+            "give either units or a scale factor, not both",
+            f"{units_option} {units} means {UNIT_SCALES.get(units, '?')} mm per "
+            f"unit; {scale_option} sets the mm per unit itself",
+        )
 
 
 def unit_scale(unit: str) -> float:

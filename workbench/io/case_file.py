@@ -59,6 +59,7 @@ import jsonschema
 import numpy as np
 
 import workbench
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
 from workbench.io.migrations import CURRENT_VERSION, SCHEMA_ID, MigrationError, migrate
 from workbench.model.audit import (
@@ -122,12 +123,10 @@ class LoadedCase:
 # ---------------------------------------------------------------- schema
 def schema_dir() -> Path:
     """Folder of the JSON schemas: the wheel's ``_data`` copy first, else the source tree."""
-    package = Path(workbench.__file__).parent
-    for folder in (package / "_data" / "data_tables" / "schemas",
-                   package.parent / "data_tables" / "schemas"):
-        if (folder / "case.schema.json").is_file():
-            return folder
-    raise FileNotFoundError(f"case.schema.json not found beside the package {package}")
+    folder = data_tables_dir() / "schemas"
+    if not (folder / "case.schema.json").is_file():
+        raise FileNotFoundError(f"case.schema.json not found in {folder}")
+    return folder
 
 
 @lru_cache(maxsize=1)
@@ -143,8 +142,9 @@ def validate_case_json(doc: Any, source: PathArg) -> None:
     error = jsonschema.exceptions.best_match(case_validator().iter_errors(doc))
     if error is not None:
         message = error.message if len(error.message) < 300 else error.message[:300] + "..."
-        raise CaseFileError(source, f"case.json does not match {SCHEMA_ID} at "
-                                    f"{error.json_path}: {message}")
+        raise CaseFileError(
+            source, f"case.json does not match {SCHEMA_ID} at {error.json_path}: {message}"
+        )
 
 
 # ---------------------------------------------------------------- reading
@@ -156,8 +156,9 @@ def _open_zip(path: Path) -> Iterator[zipfile.ZipFile]:
         with zipfile.ZipFile(path, "r") as archive:
             yield archive
     except _ZIP_ERRORS as error:
-        raise CaseFileError(path, f"the file is damaged or truncated ({error})",
-                            "restore it from a backup") from None
+        raise CaseFileError(
+            path, f"the file is damaged or truncated ({error})", "restore it from a backup"
+        ) from None
     except OSError as error:
         raise CaseFileError(path, f"cannot read the file ({error})") from None
 
@@ -190,8 +191,9 @@ def _reject_constant(name: str) -> None:
     raise ValueError(f"{name} is not allowed")
 
 
-def _load_array(archive: zipfile.ZipFile, path: Path, status: dict[str, str],
-                ref: Mapping[str, Any]) -> np.ndarray:
+def _load_array(
+    archive: zipfile.ZipFile, path: Path, status: dict[str, str], ref: Mapping[str, Any]
+) -> np.ndarray:
     member = f"arrays/{ref[ARRAY_KEY]}.npy"
     data = _read_member(archive, member, path)
     found = hashlib.sha256(data).hexdigest()
@@ -225,10 +227,13 @@ def _evidence_store(doc: Mapping[str, Any], path: Path) -> tuple[EvidenceFile, .
     return tuple(store.values())
 
 
-def _build_case(doc: Mapping[str, Any], load: Callable[[Mapping[str, Any]], np.ndarray],
-                path: Path) -> Case:
-    state = {name: join_arrays(doc[name], load) if codec.has_arrays else doc[name]
-             for name, codec in PARTS.items()}
+def _build_case(
+    doc: Mapping[str, Any], load: Callable[[Mapping[str, Any]], np.ndarray], path: Path
+) -> Case:
+    state = {
+        name: join_arrays(doc[name], load) if codec.has_arrays else doc[name]
+        for name, codec in PARTS.items()
+    }
     try:
         return Case.from_state(state)
     except (ValueError, TypeError, KeyError) as error:
@@ -261,9 +266,12 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
     bad = {member: s for member, s in status.items() if s != OK}
     if bad and not allow_tampered:
         listing = "; ".join(f"{member}: {s}" for member, s in bad.items())
-        raise CaseFileError(path, f"integrity check failed, refusing to open: {listing}",
-                            "it was modified or damaged outside the workbench; "
-                            "load with allow_tampered=True to inspect it")
+        raise CaseFileError(
+            path,
+            f"integrity check failed, refusing to open: {listing}",
+            "it was modified or damaged outside the workbench; "
+            "load with allow_tampered=True to inspect it",
+        )
     if damaged is not None:
         raise CaseFileError(path, f"the audit log is damaged ({damaged})")
     case.audit = AuditLog(audit_bytes, case.meta.case_id)
@@ -273,8 +281,9 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
     return LoadedCase(case, case.audit.records, MappingProxyType(status), chain)
 
 
-def _check_chain(audit_bytes: bytes, case: Case,
-                 anchor: Mapping[str, Any] | None) -> tuple[ChainStatus, ValueError | None]:
+def _check_chain(
+    audit_bytes: bytes, case: Case, anchor: Mapping[str, Any] | None
+) -> tuple[ChainStatus, ValueError | None]:
     """The audit log's chain status, or the parse error of a log that is not JSON lines."""
     try:
         records = parse_records(audit_bytes)
@@ -298,11 +307,15 @@ def evidence_bytes(path: PathArg, name: str, *, allow_tampered: bool = False) ->
 
 
 # ---------------------------------------------------------------- writing
-def _encode(case: Case, meta_state: dict[str, Any],
-            audit: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
+def _encode(
+    case: Case, meta_state: dict[str, Any], audit: bytes
+) -> tuple[dict[str, Any], dict[str, bytes]]:
     """``case.json`` document and ``{sha256: npy bytes}`` for ``case`` with log ``audit``."""
-    doc: dict[str, Any] = {"@schema": SCHEMA_ID, "format_version": CURRENT_VERSION,
-                           "software": f"forensic-workbench {workbench.__version__}"}
+    doc: dict[str, Any] = {
+        "@schema": SCHEMA_ID,
+        "format_version": CURRENT_VERSION,
+        "software": f"forensic-workbench {workbench.__version__}",
+    }
     blobs: dict[str, bytes] = {}
     for name, state in case.to_state().items():
         if name == "meta":
@@ -332,8 +345,9 @@ def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[zipfil
     return found
 
 
-def _check_audit_prefix(path: Path, case: Case, sources: list[zipfile.ZipFile],
-                        new_audit: bytes) -> None:
+def _check_audit_prefix(
+    path: Path, case: Case, sources: list[zipfile.ZipFile], new_audit: bytes
+) -> None:
     """Refuse to overwrite this case's file if its log is not a prefix of ``new_audit``."""
     if not sources or Path(sources[0].filename or "") != path:
         return  # nothing to overwrite
@@ -344,8 +358,12 @@ def _check_audit_prefix(path: Path, case: Case, sources: list[zipfile.ZipFile],
     except (KeyError, ValueError, TypeError, *_ZIP_ERRORS):
         return  # not a case file, or no log yet
     if same_case and not new_audit.startswith(old_audit):
-        raise CaseFileError(path, "the audit log in this file has records this session does "
-                                  "not know (another session saved it)", "save under a new name")
+        raise CaseFileError(
+            path,
+            "the audit log in this file has records this session does "
+            "not know (another session saved it)",
+            "save under a new name",
+        )
 
 
 def _evidence_source(item: EvidenceFile, sources: list[zipfile.ZipFile]) -> Opener:
@@ -356,9 +374,11 @@ def _evidence_source(item: EvidenceFile, sources: list[zipfile.ZipFile]) -> Open
         openers.append(partial(open, item.original_path, "rb"))
     found = find_verified_copy(item, openers, (OSError, *_ZIP_ERRORS))
     if found is None:
-        raise CaseFileError(item.original_path or item.name,
-                            f"no copy of evidence {item.name!r} with sha256 {item.sha256} was "
-                            "found in the previous case file or at its original path")
+        raise CaseFileError(
+            item.original_path or item.name,
+            f"no copy of evidence {item.name!r} with sha256 {item.sha256} was "
+            "found in the previous case file or at its original path",
+        )
     return found
 
 
@@ -369,16 +389,22 @@ def _zip_info(name: str, compress: int, size: int = 0) -> zipfile.ZipInfo:
     return info
 
 
-def _write_members(archive: zipfile.ZipFile, doc: dict[str, Any], blobs: dict[str, bytes],
-                   audit: bytes, openers: dict[EvidenceFile, Opener]) -> None:
+def _write_members(
+    archive: zipfile.ZipFile,
+    doc: dict[str, Any],
+    blobs: dict[str, bytes],
+    audit: bytes,
+    openers: dict[EvidenceFile, Opener],
+) -> None:
     text = json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False)
     archive.writestr(_zip_info(CASE_JSON, zipfile.ZIP_DEFLATED), text.encode("utf-8"))
     for sha, data in blobs.items():
         # fastest deflate level: a 100k-triangle mesh's arrays compress in
         # ~55 ms instead of ~210 ms (the default, 6), 4% larger; the window
         # saves on its GUI thread
-        archive.writestr(_zip_info(f"arrays/{sha}.npy", zipfile.ZIP_DEFLATED), data,
-                         compresslevel=1)
+        archive.writestr(
+            _zip_info(f"arrays/{sha}.npy", zipfile.ZIP_DEFLATED), data, compresslevel=1
+        )
     for item, opener in openers.items():
         info = _zip_info(f"evidence/{item.name}", zipfile.ZIP_STORED, item.size)
         with opener() as source, archive.open(info, "w") as target:
@@ -426,8 +452,15 @@ def _replace(temp: Path, path: Path) -> None:
             os.close(dir_fd)
 
 
-def _write_case(path: Path, case: Case, doc: dict[str, Any], blobs: dict[str, bytes],
-                audit: bytes, *, guard_audit: bool) -> None:
+def _write_case(
+    path: Path,
+    case: Case,
+    doc: dict[str, Any],
+    blobs: dict[str, bytes],
+    audit: bytes,
+    *,
+    guard_audit: bool,
+) -> None:
     """Write a complete case file to ``path`` atomically; evidence copied from a verified copy.
 
     ``guard_audit``: refuse to overwrite a file of the same case whose audit log is not a
@@ -437,8 +470,9 @@ def _write_case(path: Path, case: Case, doc: dict[str, Any], blobs: dict[str, by
         sources = _sources(path, case, stack_of_files)
         if guard_audit:
             _check_audit_prefix(path, case, sources, audit)
-        openers = {item: _evidence_source(item, sources)
-                   for item in case.retained_evidence.values()}
+        openers = {
+            item: _evidence_source(item, sources) for item in case.retained_evidence.values()
+        }
         temp = _write_temp(path, lambda zf: _write_members(zf, doc, blobs, audit, openers))
     _replace(temp, path)  # after the previous file is closed (needed on Windows)
 
@@ -467,8 +501,9 @@ def save_case(case: Case, path: PathArg, stack: _Cleanable | None = None) -> Pat
     """
     path = Path(path).resolve()
     meta = case.meta.touched()
-    record = make_record("save", "Save case", meta.examiner,
-                         {"file": path.name, "format_version": CURRENT_VERSION})
+    record = make_record(
+        "save", "Save case", meta.examiner, {"file": path.name, "format_version": CURRENT_VERSION}
+    )
     audit = _bound_log(case).encode([record])
     doc, blobs = _encode(case, meta.to_state(), audit)
     validate_case_json(doc, path)

@@ -20,12 +20,21 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import workbench
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError, LandmarkError
 from workbench.core.landmarks import SURFACES
 
-COLUMNS = ("surface", "code", "name", "side", "bilateral_pair", "partner", "definition",
-           "aliases", "source")
+COLUMNS = (
+    "surface",
+    "code",
+    "name",
+    "side",
+    "bilateral_pair",
+    "partner",
+    "definition",
+    "aliases",
+    "source",
+)
 SIDES = ("midline", "left", "right")
 _SIDE_SUFFIX = {"left": "_l", "right": "_r"}
 _SIDE_WORD = {"l": "left", "left": "left", "r": "right", "right": "right"}
@@ -33,10 +42,12 @@ _SIDE_WORD = {"l": "left", "left": "left", "r": "right", "right": "right"}
 # Side spellings, tried in order; each yields (base, side word).
 _SIDE_PATTERNS = (
     re.compile(r"^(?P<base>.+?)\s*\(\s*(?P<side>left|right|l|r)\s*\)$", re.IGNORECASE),  # ex (left)
-    re.compile(r"^(?P<base>.+?)[_\-\s.']+(?P<side>left|right|l|r)$", re.IGNORECASE),   # ex_l ex-L ex'L
-    re.compile(r"^(?P<base>.*[^\s_\-.])(?P<side>[LR])$"),                            # exL ecm2(s)R
-    re.compile(r"^(?P<side>left|right|l|r)[_\-\s.]+(?P<base>.+)$", re.IGNORECASE),    # L ex, left-ex
-    re.compile(r"^(?P<side>[LR])(?P<base>[a-z].*)$"),                                # Lex (Cliniface)
+    re.compile(
+        r"^(?P<base>.+?)[_\-\s.']+(?P<side>left|right|l|r)$", re.IGNORECASE
+    ),  # ex_l ex-L ex'L
+    re.compile(r"^(?P<base>.*[^\s_\-.])(?P<side>[LR])$"),  # exL ecm2(s)R
+    re.compile(r"^(?P<side>left|right|l|r)[_\-\s.]+(?P<base>.+)$", re.IGNORECASE),  # L ex, left-ex
+    re.compile(r"^(?P<side>[LR])(?P<base>[a-z].*)$"),  # Lex (Cliniface)
 )
 _PRIMES = ("'", "\u2019", "\u2032")
 
@@ -120,8 +131,10 @@ class LandmarkCatalogue:
             names = [e.name, *([short] if short != e.name else []), *e.aliases]
             side = e.side if e.is_bilateral else None
             keys: list[tuple[str, str, str | None]] = (
-                [(e.surface, e.code, None)] if side is None
-                else [(e.surface, e.code, "*"), (e.surface, e.base, side)])
+                [(e.surface, e.code, None)]
+                if side is None
+                else [(e.surface, e.code, "*"), (e.surface, e.base, side)]
+            )
             for alias in names:
                 if side is None:
                     keys.append((e.surface, alias, None))
@@ -202,20 +215,17 @@ class LandmarkCatalogue:
                     found.append(code)
                     break
         if len(set(found)) > 1:
-            raise LandmarkError(f"ambiguous {surface} landmark label {text!r}: "
-                                f"could be {', '.join(sorted(set(found)))}")
+            raise LandmarkError(
+                f"ambiguous {surface} landmark label {text!r}: "
+                f"could be {', '.join(sorted(set(found)))}"
+            )
         return found[0] if found else None
 
 
 # ---------------------------------------------------------------- loading
 def default_catalogue_path() -> Path:
     """``data_tables/landmarks/catalogue.csv`` of the installed wheel or the checkout."""
-    package = Path(workbench.__file__).resolve().parent
-    for root in (package / "_data" / "data_tables", package.parent / "data_tables"):
-        candidate = root / "landmarks" / "catalogue.csv"
-        if candidate.exists():
-            return candidate
-    return package.parent / "data_tables" / "landmarks" / "catalogue.csv"
+    return data_tables_dir() / "landmarks" / "catalogue.csv"
 
 
 _CACHE: dict[tuple[str, int, int], LandmarkCatalogue] = {}
@@ -256,8 +266,11 @@ def read_table_rows(path: Path, columns: tuple[str, ...]) -> list[dict[str, str]
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.DictReader(fh)
             if tuple(reader.fieldnames or ()) != columns:
-                raise InputError(path, f"columns must be {', '.join(columns)}; "
-                                       f"found {', '.join(reader.fieldnames or ())}")
+                raise InputError(
+                    path,
+                    f"columns must be {', '.join(columns)}; "
+                    f"found {', '.join(reader.fieldnames or ())}",
+                )
             return list(reader)
     except (UnicodeDecodeError, csv.Error) as exc:
         raise InputError(path, f"not a readable CSV table ({exc})") from None
@@ -283,10 +296,16 @@ def _split(text: str | None) -> tuple[str, ...]:
 
 def _entry(path: Path, line: int, row: dict, sources: dict | None) -> CatalogueEntry:
     e = CatalogueEntry(
-        surface=row["surface"].strip(), code=row["code"].strip(), name=row["name"].strip(),
-        side=row["side"].strip(), bilateral_pair=row["bilateral_pair"].strip(),
-        partner=row["partner"].strip(), definition=row["definition"].strip(),
-        aliases=_split(row["aliases"]), sources=_split(row["source"]))
+        surface=row["surface"].strip(),
+        code=row["code"].strip(),
+        name=row["name"].strip(),
+        side=row["side"].strip(),
+        bilateral_pair=row["bilateral_pair"].strip(),
+        partner=row["partner"].strip(),
+        definition=row["definition"].strip(),
+        aliases=_split(row["aliases"]),
+        sources=_split(row["source"]),
+    )
     problem = None
     if e.surface not in SURFACES:
         problem = f"surface must be skin or skull, got {e.surface!r}"
@@ -316,15 +335,20 @@ def _check(path: Path, entries: Iterable[CatalogueEntry]) -> None:
     other = {"skin": "skull", "skull": "skin"}
     for e in entries:
         pair = keys.get((e.surface, e.bilateral_pair))
-        if e.is_bilateral and (pair is None or pair.bilateral_pair != e.code or pair.side == e.side):
-            problems.append(f"{e.surface} {e.code!r}: bilateral pair {e.bilateral_pair!r} "
-                            "is not its mirror")
+        if e.is_bilateral and (
+            pair is None or pair.bilateral_pair != e.code or pair.side == e.side
+        ):
+            problems.append(
+                f"{e.surface} {e.code!r}: bilateral pair {e.bilateral_pair!r} is not its mirror"
+            )
         if not e.is_bilateral and e.bilateral_pair:
             problems.append(f"{e.surface} {e.code!r}: midline point with a bilateral pair")
         if e.partner:
             p = keys.get((other[e.surface], e.partner))
             if p is None or p.partner != e.code:
-                problems.append(f"{e.surface} {e.code!r}: partner {e.partner!r} does not point back")
+                problems.append(
+                    f"{e.surface} {e.code!r}: partner {e.partner!r} does not point back"
+                )
         for alias in e.aliases:
             if e.is_bilateral and all(s != e.side for _, s in split_side(alias)):
                 clash = keys.get((e.surface, alias + _SIDE_SUFFIX[e.side]))

@@ -37,13 +37,33 @@ from workbench.core.errors import InputError, LandmarkError
 from workbench.core.landmarks import DEFINED_STATUSES, STATUSES, Landmark, LandmarkSet
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 
-MRK_SCHEMA = ("https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/"
-              "Resources/Schema/markups-schema-v1.0.3.json#")
+MRK_SCHEMA = (
+    "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/"
+    "Resources/Schema/markups-schema-v1.0.3.json#"
+)
 FCSV_VERSION = "4.11"
-FCSV_COLUMNS = ("id", "x", "y", "z", "ow", "ox", "oy", "oz", "vis", "sel", "lock", "label", "desc",
-                "associatedNodeID", "status", "confidence")
+FCSV_COLUMNS = (
+    "id",
+    "x",
+    "y",
+    "z",
+    "ow",
+    "ox",
+    "oy",
+    "oz",
+    "vis",
+    "sel",
+    "lock",
+    "label",
+    "desc",
+    "associatedNodeID",
+    "status",
+    "confidence",
+)
 CSV_COLUMNS = ("code", "x_mm", "y_mm", "z_mm", "status", "confidence", "description")
-KEY = "workbench"  #: extra .mrk.json key for status/confidence (Slicer ignores it, drops it on save)
+KEY = (
+    "workbench"  #: extra .mrk.json key for status/confidence (Slicer ignores it, drops it on save)
+)
 _FLIP = {"RAS": np.array([1.0, 1.0, 1.0]), "LPS": np.array([-1.0, -1.0, 1.0])}
 PathLike = str | os.PathLike[str]
 
@@ -91,7 +111,9 @@ def _read_text(path: Path) -> str:
         raise InputError(path, "not a text file (cannot decode as UTF-8)") from None
     except OSError as exc:
         missing = isinstance(exc, FileNotFoundError)
-        raise InputError(path, "file not found" if missing else f"cannot read ({exc.strerror})") from None
+        raise InputError(
+            path, "file not found" if missing else f"cannot read ({exc.strerror})"
+        ) from None
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -116,34 +138,64 @@ def _number(path: Path, what: str, value: object, optional: bool = False) -> flo
     return number
 
 
-def _text_point(path: Path, label: str, values: list, status: object, confidence: object,
-                description: str, active: bool = True, flip: np.ndarray = _FLIP["RAS"]) -> _Point:
+def _text_point(
+    path: Path,
+    label: str,
+    values: list,
+    status: object,
+    confidence: object,
+    description: str,
+    active: bool = True,
+    flip: np.ndarray = _FLIP["RAS"],
+) -> _Point:
     """A point from text fields; coordinates are parsed only when the point is defined."""
     status = _status(path, label, status)
     blank = [str(v or "").strip().lower() in ("", "nan") for v in values]
-    if any(blank) and not all(blank):   # some coordinates given, some not: a damaged row
+    if any(blank) and not all(blank):  # some coordinates given, some not: a damaged row
         shown = ", ".join(str(v) for v in values)
-        raise InputError(path, f"point {label!r}: coordinates ({shown}) are partly missing",
-                         "give all three numbers, or none for an undefined point")
+        raise InputError(
+            path,
+            f"point {label!r}: coordinates ({shown}) are partly missing",
+            "give all three numbers, or none for an undefined point",
+        )
     defined = active and status in (None, *DEFINED_STATUSES) and not any(blank)
-    xyz = (np.array([_number(path, f"point {label!r} coordinate", v) for v in values]) * flip
-           if defined else None)
-    return _Point(label, xyz, defined, status,
-                  _number(path, f"point {label!r} confidence", confidence, optional=True), description)
+    xyz = (
+        np.array([_number(path, f"point {label!r} coordinate", v) for v in values]) * flip
+        if defined
+        else None
+    )
+    return _Point(
+        label,
+        xyz,
+        defined,
+        status,
+        _number(path, f"point {label!r} confidence", confidence, optional=True),
+        description,
+    )
 
 
 def _status(path: Path, label: str, value: object) -> str | None:
     if value in (None, ""):
         return None
     if value not in STATUSES:
-        raise InputError(path, f"point {label!r}: unknown status {value!r}",
-                         hint=f"use one of {', '.join(STATUSES)}")
+        raise InputError(
+            path,
+            f"point {label!r}: unknown status {value!r}",
+            hint=f"use one of {', '.join(STATUSES)}",
+        )
     return str(value)
 
 
-def _build(path: Path, surface: str, points: Iterable[_Point], catalogue: LandmarkCatalogue | None,
-           allow_undefined: bool, strict: bool, messages: list[str],
-           coordinate_system: str = "RAS") -> LandmarkReadResult:
+def _build(
+    path: Path,
+    surface: str,
+    points: Iterable[_Point],
+    catalogue: LandmarkCatalogue | None,
+    allow_undefined: bool,
+    strict: bool,
+    messages: list[str],
+    coordinate_system: str = "RAS",
+) -> LandmarkReadResult:
     cat = catalogue if catalogue is not None else load_catalogue()
     kept: list[Landmark] = []
     unknown, duplicates, undefined, seen = [], [], [], set()
@@ -169,15 +221,23 @@ def _build(path: Path, surface: str, points: Iterable[_Point], catalogue: Landma
             status = pt.status if pt.status in ("absent", "missing") else "missing"
             kept.append(Landmark(code, np.full(3, np.nan), status, conf, pt.description))
     how = "kept without position" if allow_undefined else "skipped"
-    for names, text in ((unknown, f"not in the {surface} landmark catalogue, skipped"),
-                        (duplicates, "repeated landmark(s), first one kept"),
-                        (undefined, f"undefined point(s) {how}")):
+    for names, text in (
+        (unknown, f"not in the {surface} landmark catalogue, skipped"),
+        (duplicates, "repeated landmark(s), first one kept"),
+        (undefined, f"undefined point(s) {how}"),
+    ):
         if names:
             messages.append(f"{text}: {', '.join(names)}")
     if strict and (unknown or duplicates or (undefined and not allow_undefined)):
         raise LandmarkError(f"{path}: " + "; ".join(messages))
-    return LandmarkReadResult(LandmarkSet(surface, tuple(kept)), tuple(unknown), tuple(duplicates),
-                              tuple(undefined), tuple(messages), coordinate_system)
+    return LandmarkReadResult(
+        LandmarkSet(surface, tuple(kept)),
+        tuple(unknown),
+        tuple(duplicates),
+        tuple(undefined),
+        tuple(messages),
+        coordinate_system,
+    )
 
 
 def _split_header(text: str) -> tuple[list[str], str]:
@@ -190,8 +250,12 @@ def _split_header(text: str) -> tuple[list[str], str]:
 def _csv_line(values: Iterable[object]) -> str:
     """One CSV record; quotes fields with ``, " CR LF`` (csv.writer leaves a lone CR bare)."""
     fields = [str(v) for v in values]
-    return ",".join('"' + v.replace('"', '""') + '"' if any(c in v for c in ',"\r\n') else v
-                    for v in fields) + "\n"
+    return (
+        ",".join(
+            '"' + v.replace('"', '""') + '"' if any(c in v for c in ',"\r\n') else v for v in fields
+        )
+        + "\n"
+    )
 
 
 def _csv_rows(path: Path, body: str) -> list[list[str]]:
@@ -207,31 +271,43 @@ def _coordinate_system(value: object, path: Path | None = None) -> str:
     if mapped is None:
         if path is None:
             raise ValueError(f"coordinate_system must be 'LPS' or 'RAS', got {value!r}")
-        raise InputError(path, f"unsupported coordinate system {value!r}", hint="expected LPS or RAS")
+        raise InputError(
+            path, f"unsupported coordinate system {value!r}", hint="expected LPS or RAS"
+        )
     return mapped
 
 
 # ------------------------------------------------------------- .mrk.json
-def read_mrk_json(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None = None,
-                  allow_undefined: bool = False, strict: bool = False) -> LandmarkReadResult:
+def read_mrk_json(
+    path: PathLike,
+    surface: str,
+    catalogue: LandmarkCatalogue | None = None,
+    allow_undefined: bool = False,
+    strict: bool = False,
+) -> LandmarkReadResult:
     """Read a 3D Slicer markups point list (``.mrk.json``) into mesh/RAS mm."""
     path = Path(path)
     try:
         doc = json.loads(_read_text(path))
     except json.JSONDecodeError as exc:
-        raise InputError(path, f"not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})",
-                         hint="the file may be truncated or not a Slicer markups file") from None
+        raise InputError(
+            path,
+            f"not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})",
+            hint="the file may be truncated or not a Slicer markups file",
+        ) from None
     if not isinstance(doc, dict) or not isinstance(doc.get("markups"), list):
         raise InputError(path, "not a 3D Slicer markups file (no 'markups' list)")
     lists = [m for m in doc["markups"] if isinstance(m, dict) and m.get("type") == "Fiducial"]
     if not lists:
         raise InputError(path, "no point list (markups type 'Fiducial') in the file")
-    messages = [f"{len(lists)} point lists in the file; only the first was read"][:len(lists) - 1]
+    messages = [f"{len(lists)} point lists in the file; only the first was read"][: len(lists) - 1]
     mk = lists[0]
     cs = _coordinate_system(mk.get("coordinateSystem", "LPS"), path)
     units = mk.get("coordinateUnits", "mm")
     if (units[0] if isinstance(units, list) and units else units) != "mm":
-        raise InputError(path, f"coordinates are in {units!r}", hint="convert the points to mm first")
+        raise InputError(
+            path, f"coordinates are in {units!r}", hint="convert the points to mm first"
+        )
     info = mk.get(KEY)
     if not isinstance(info, dict):
         info = {}
@@ -244,20 +320,28 @@ def read_mrk_json(path: PathLike, surface: str, catalogue: LandmarkCatalogue | N
         label, pos = str(cp.get("label") or f"<unnamed point {i}>"), cp.get("position")
         if pos is not None and (not isinstance(pos, list) or len(pos) != 3):
             raise InputError(path, f"point {label!r}: position must be 3 numbers")
-        position = (None if pos is None else _FLIP[cs]
-                    * np.array([_number(path, f"point {label!r} position", v) for v in pos]))
+        position = (
+            None
+            if pos is None
+            else _FLIP[cs] * np.array([_number(path, f"point {label!r} position", v) for v in pos])
+        )
         extra = cp.get(KEY) if isinstance(cp.get(KEY), dict) else {}
         state = cp.get("positionStatus", "defined")
         status = _status(path, label, extra.get("status"))
         if state == "preview" and status is None:
             status = "suggested"
         conf = _number(path, f"point {label!r} confidence", extra.get("confidence"), optional=True)
-        points.append(_Point(label, position, state == "defined", status, conf,
-                             str(cp.get("description") or "")))
+        points.append(
+            _Point(
+                label, position, state == "defined", status, conf, str(cp.get("description") or "")
+            )
+        )
     return _build(path, surface, points, catalogue, allow_undefined, strict, messages, cs)
 
 
-def write_mrk_json(path: PathLike, landmark_set: LandmarkSet, coordinate_system: str = "LPS") -> None:
+def write_mrk_json(
+    path: PathLike, landmark_set: LandmarkSet, coordinate_system: str = "LPS"
+) -> None:
     """Write a Slicer 5 markups point list; undefined points get positionStatus ``"undefined"``."""
     cs = _coordinate_system(coordinate_system)
     flip = _FLIP[cs]
@@ -265,30 +349,58 @@ def write_mrk_json(path: PathLike, landmark_set: LandmarkSet, coordinate_system:
     points = []
     for i, lm in enumerate(landmark_set, start=1):
         pos = [float(v) for v in lm.position * flip] if lm.is_defined else [0.0, 0.0, 0.0]
-        points.append({
-            "id": str(i), "label": lm.code, "description": lm.description, "associatedNodeID": "",
-            "position": pos, "orientation": orientation, "selected": True, "locked": False,
-            "visibility": lm.is_defined, "positionStatus": "defined" if lm.is_defined else "undefined",
-            KEY: {"status": lm.status, "confidence": lm.confidence}})
-    markup = {"type": "Fiducial", "name": f"{landmark_set.surface} landmarks", "coordinateSystem": cs,
-              "coordinateUnits": "mm", "locked": False, "fixedNumberOfControlPoints": False,
-              "labelFormat": "%N-%d", "lastUsedControlPointNumber": len(points),
-              "controlPoints": points, "measurements": [],
-              KEY: {"surface": landmark_set.surface, "frame": "mesh coordinates = Slicer RAS world"}}
+        points.append(
+            {
+                "id": str(i),
+                "label": lm.code,
+                "description": lm.description,
+                "associatedNodeID": "",
+                "position": pos,
+                "orientation": orientation,
+                "selected": True,
+                "locked": False,
+                "visibility": lm.is_defined,
+                "positionStatus": "defined" if lm.is_defined else "undefined",
+                KEY: {"status": lm.status, "confidence": lm.confidence},
+            }
+        )
+    markup = {
+        "type": "Fiducial",
+        "name": f"{landmark_set.surface} landmarks",
+        "coordinateSystem": cs,
+        "coordinateUnits": "mm",
+        "locked": False,
+        "fixedNumberOfControlPoints": False,
+        "labelFormat": "%N-%d",
+        "lastUsedControlPointNumber": len(points),
+        "controlPoints": points,
+        "measurements": [],
+        KEY: {"surface": landmark_set.surface, "frame": "mesh coordinates = Slicer RAS world"},
+    }
     doc = {"@schema": MRK_SCHEMA, "markups": [markup]}
     _write_text(Path(path), json.dumps(doc, indent=4, ensure_ascii=False, allow_nan=False) + "\n")
 
 
 # ------------------------------------------------------------------ .fcsv
-def read_fcsv(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None = None,
-              allow_undefined: bool = False, strict: bool = False) -> LandmarkReadResult:
+def read_fcsv(
+    path: PathLike,
+    surface: str,
+    catalogue: LandmarkCatalogue | None = None,
+    allow_undefined: bool = False,
+    strict: bool = False,
+) -> LandmarkReadResult:
     """Read a legacy Slicer fiducial list (``.fcsv``); ``CoordinateSystem`` 0/RAS or 1/LPS."""
     path = Path(path)
     header, body = _split_header(_read_text(path))
-    settings = {k.strip(): v.strip() for k, sep, v in (ln[1:].partition("=") for ln in header) if sep}
+    settings = {
+        k.strip(): v.strip() for k, sep, v in (ln[1:].partition("=") for ln in header) if sep
+    }
     cs = _coordinate_system(settings.get("CoordinateSystem", "RAS"), path)
-    messages = ([] if "CoordinateSystem" in settings
-                else ["no CoordinateSystem line; assumed RAS as old Slicer versions do"])
+    messages = (
+        []
+        if "CoordinateSystem" in settings
+        else ["no CoordinateSystem line; assumed RAS as old Slicer versions do"]
+    )
     columns = [c.strip() for c in settings.get("columns", ",".join(FCSV_COLUMNS[:14])).split(",")]
     missing = [c for c in ("x", "y", "z", "label") if c not in columns]
     if missing:
@@ -297,21 +409,49 @@ def read_fcsv(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None 
     for n, row in enumerate(_csv_rows(path, body), start=1):
         rec = dict(zip(columns, row, strict=False))
         label = rec.get("label") or f"<unnamed point {n}>"
-        points.append(_text_point(path, label, [rec.get(c) for c in "xyz"], rec.get("status"),
-                                  rec.get("confidence"), rec.get("desc", ""), flip=_FLIP[cs]))
+        points.append(
+            _text_point(
+                path,
+                label,
+                [rec.get(c) for c in "xyz"],
+                rec.get("status"),
+                rec.get("confidence"),
+                rec.get("desc", ""),
+                flip=_FLIP[cs],
+            )
+        )
     return _build(path, surface, points, catalogue, allow_undefined, strict, messages, cs)
 
 
 def write_fcsv(path: PathLike, landmark_set: LandmarkSet, coordinate_system: str = "LPS") -> None:
     """Write a Slicer 4.11-style ``.fcsv`` with two extra columns, ``status`` and ``confidence``."""
     cs = _coordinate_system(coordinate_system)
-    lines = [f"# Markups fiducial file version = {FCSV_VERSION}\n# CoordinateSystem = {cs}\n"
-             f"# columns = {','.join(FCSV_COLUMNS)}\n"]
+    lines = [
+        f"# Markups fiducial file version = {FCSV_VERSION}\n# CoordinateSystem = {cs}\n"
+        f"# columns = {','.join(FCSV_COLUMNS)}\n"
+    ]
     for i, lm in enumerate(landmark_set):
         xyz = lm.position * _FLIP[cs] if lm.is_defined else np.zeros(3)
-        lines.append(_csv_line([f"vtkMRMLMarkupsFiducialNode_{i}", *(repr(float(v)) for v in xyz),
-                                0, 0, 0, 1, int(lm.is_defined), 1, 0, lm.code, lm.description, "",
-                                lm.status, repr(lm.confidence)]))
+        lines.append(
+            _csv_line(
+                [
+                    f"vtkMRMLMarkupsFiducialNode_{i}",
+                    *(repr(float(v)) for v in xyz),
+                    0,
+                    0,
+                    0,
+                    1,
+                    int(lm.is_defined),
+                    1,
+                    0,
+                    lm.code,
+                    lm.description,
+                    "",
+                    lm.status,
+                    repr(lm.confidence),
+                ]
+            )
+        )
     _write_text(Path(path), "".join(lines))
 
 
@@ -324,8 +464,13 @@ def _unescape(text: str, own: bool) -> str:
         return text
 
 
-def read_pp(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None = None,
-            allow_undefined: bool = False, strict: bool = False) -> LandmarkReadResult:
+def read_pp(
+    path: PathLike,
+    surface: str,
+    catalogue: LandmarkCatalogue | None = None,
+    allow_undefined: bool = False,
+    strict: bool = False,
+) -> LandmarkReadResult:
     """Read MeshLab PickedPoints (``.pp``); mesh coordinates, ``active="0"`` = undefined."""
     path = Path(path)
     try:
@@ -339,9 +484,17 @@ def read_pp(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None = 
         label = el.get("name") or f"<unnamed point {n}>"
         active = el.get("active", "1").strip() not in ("0", "false")
         own = el.get("status") is not None
-        points.append(_text_point(path, label, [el.get(c) for c in "xyz"], el.get("status"),
-                                  el.get("confidence"), _unescape(el.get("description", ""), own),
-                                  active=active))
+        points.append(
+            _text_point(
+                path,
+                label,
+                [el.get(c) for c in "xyz"],
+                el.get("status"),
+                el.get("confidence"),
+                _unescape(el.get("description", ""), own),
+                active=active,
+            )
+        )
     return _build(path, surface, points, catalogue, allow_undefined, strict, [])
 
 
@@ -350,28 +503,50 @@ def write_pp(path: PathLike, landmark_set: LandmarkSet, mesh_file: str = "") -> 
     root = ET.Element("PickedPoints")
     doc, now = ET.SubElement(root, "DocumentData"), datetime.now()
     ET.SubElement(doc, "DateTime", date=now.strftime("%Y-%m-%d"), time=now.strftime("%H:%M:%S"))
-    for tag, name in (("User", "forensic-workbench"), ("DataFileName", mesh_file), ("templateName", "")):
+    for tag, name in (
+        ("User", "forensic-workbench"),
+        ("DataFileName", mesh_file),
+        ("templateName", ""),
+    ):
         ET.SubElement(doc, tag, name=name)
     for lm in landmark_set:
         xyz = lm.position if lm.is_defined else np.zeros(3)
-        ET.SubElement(root, "point", x=repr(float(xyz[0])), y=repr(float(xyz[1])), z=repr(float(xyz[2])),
-                      active="1" if lm.is_defined else "0", name=lm.code, status=lm.status,
-                      confidence=repr(lm.confidence),
-                      description=json.dumps(lm.description, ensure_ascii=False)[1:-1])
+        ET.SubElement(
+            root,
+            "point",
+            x=repr(float(xyz[0])),
+            y=repr(float(xyz[1])),
+            z=repr(float(xyz[2])),
+            active="1" if lm.is_defined else "0",
+            name=lm.code,
+            status=lm.status,
+            confidence=repr(lm.confidence),
+            description=json.dumps(lm.description, ensure_ascii=False)[1:-1],
+        )
     ET.indent(root, space=" ")
-    _write_text(Path(path), "<!DOCTYPE PickedPoints>\n" + ET.tostring(root, encoding="unicode") + "\n")
+    _write_text(
+        Path(path), "<!DOCTYPE PickedPoints>\n" + ET.tostring(root, encoding="unicode") + "\n"
+    )
 
 
 # -------------------------------------------------------------------- .csv
-def read_csv(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None = None,
-             allow_undefined: bool = False, strict: bool = False) -> LandmarkReadResult:
+def read_csv(
+    path: PathLike,
+    surface: str,
+    catalogue: LandmarkCatalogue | None = None,
+    allow_undefined: bool = False,
+    strict: bool = False,
+) -> LandmarkReadResult:
     """Read ``code,x_mm,y_mm,z_mm[,status,confidence,description]`` (also ``name``/``label``, ``x``)."""
     path = Path(path)
     header, body = _split_header(_read_text(path))
     units = [ln.split("units:", 1)[1].split(";")[0].strip() for ln in header if "units:" in ln]
     if any(u != "mm" for u in units):
-        raise InputError(path, f"coordinates are in {next(u for u in units if u != 'mm')!r}",
-                         hint="convert the points to mm first")
+        raise InputError(
+            path,
+            f"coordinates are in {next(u for u in units if u != 'mm')!r}",
+            hint="convert the points to mm first",
+        )
     table = _csv_rows(path, body)
     names = [c.strip() for c in table[0]] if table else []
     rows = [dict(zip(names, r, strict=False)) for r in table[1:]]
@@ -387,15 +562,27 @@ def read_csv(path: PathLike, surface: str, catalogue: LandmarkCatalogue | None =
     for n, row in enumerate(rows, start=1):
         label = (row.get(label_col) or "").strip() or f"<unnamed point {n}>"
         status, conf = ((row.get(c) or "").strip() for c in ("status", "confidence"))
-        points.append(_text_point(path, label, [row.get(c) for c in xyz_cols], status, conf,
-                                  row.get("description") or ""))
+        points.append(
+            _text_point(
+                path,
+                label,
+                [row.get(c) for c in xyz_cols],
+                status,
+                conf,
+                row.get("description") or "",
+            )
+        )
     return _build(path, surface, points, catalogue, allow_undefined, strict, [])
 
 
-def write_csv(path: PathLike, landmark_set: LandmarkSet,
-              frame: str = "mesh coordinates (Slicer RAS world)") -> None:
+def write_csv(
+    path: PathLike, landmark_set: LandmarkSet, frame: str = "mesh coordinates (Slicer RAS world)"
+) -> None:
     """Write the plain CSV with a ``# units: mm; frame: ...`` comment line."""
-    lines = [f"# units: mm; frame: {frame}; surface: {landmark_set.surface}\n", _csv_line(CSV_COLUMNS)]
+    lines = [
+        f"# units: mm; frame: {frame}; surface: {landmark_set.surface}\n",
+        _csv_line(CSV_COLUMNS),
+    ]
     for lm in landmark_set:
         xyz = [repr(float(v)) for v in lm.position] if lm.is_defined else ["", "", ""]
         lines.append(_csv_line([lm.code, *xyz, lm.status, repr(lm.confidence), lm.description]))
@@ -404,8 +591,12 @@ def write_csv(path: PathLike, landmark_set: LandmarkSet,
 
 # --------------------------------------------------------------- dispatch
 FORMATS: dict[str, tuple[Callable[..., LandmarkReadResult], Callable[..., None]]] = {
-    ".mrk.json": (read_mrk_json, write_mrk_json), ".json": (read_mrk_json, write_mrk_json),
-    ".fcsv": (read_fcsv, write_fcsv), ".pp": (read_pp, write_pp), ".csv": (read_csv, write_csv)}
+    ".mrk.json": (read_mrk_json, write_mrk_json),
+    ".json": (read_mrk_json, write_mrk_json),
+    ".fcsv": (read_fcsv, write_fcsv),
+    ".pp": (read_pp, write_pp),
+    ".csv": (read_csv, write_csv),
+}
 
 
 def _format(path: Path) -> tuple[Callable[..., LandmarkReadResult], Callable[..., None]]:

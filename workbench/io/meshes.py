@@ -112,11 +112,15 @@ def _check_scale(path: Path, units: str, scale: float | None) -> float | None:
     try:
         value = float(scale)
     except (TypeError, ValueError):
-        raise InputError(path, f"the scale factor (--scale) must be a number, "
-                         f"got {scale!r}") from None
+        raise InputError(
+            path, f"the scale factor (--scale) must be a number, got {scale!r}"
+        ) from None
     if not math.isfinite(value) or value <= 0:
-        raise InputError(path, f"the scale factor (--scale) must be a positive number of mm "
-                         f"per file unit, got {scale!r}")
+        raise InputError(
+            path,
+            f"the scale factor (--scale) must be a positive number of mm "
+            f"per file unit, got {scale!r}",
+        )
     return value
 
 
@@ -197,10 +201,13 @@ def _refuse_nonfinite(path: Path, mesh: Mesh) -> None:
     nan = int(np.isnan(mesh.vertices).any(axis=1).sum())
     kinds = " and ".join(k for k, n in (("NaN", nan), ("infinite", int(rows.sum()) - nan)) if n)
     first = ", ".join(str(i) for i in np.flatnonzero(rows)[:5])
-    raise InputError(path, f"{int(rows.sum())} vertices of {mesh.n_vertices} have {kinds} "
-                     f"coordinates (first: vertex {first})",
-                     "the file is damaged or was exported incorrectly; repair or export it "
-                     "again ('workbench mesh info' shows the damage)")
+    raise InputError(
+        path,
+        f"{int(rows.sum())} vertices of {mesh.n_vertices} have {kinds} "
+        f"coordinates (first: vertex {first})",
+        "the file is damaged or was exported incorrectly; repair or export it "
+        "again ('workbench mesh info' shows the damage)",
+    )
 
 
 def _atomic_write(path: Path, payload: bytes) -> None:

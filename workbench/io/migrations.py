@@ -148,8 +148,11 @@ def _overrides_v1(value: Any) -> dict[str, float] | None:
     out = {}
     for code, depth in value.items():
         mm = _number(depth)
-        if not (isinstance(code, str) and code.strip()) or mm is None \
-                or not 0.0 < mm <= _MAX_DEPTH_MM:
+        if (
+            not (isinstance(code, str) and code.strip())
+            or mm is None
+            or not 0.0 < mm <= _MAX_DEPTH_MM
+        ):
             return None
         out[code.strip()] = mm
     return dict(sorted(out.items()))
@@ -188,8 +191,7 @@ def _guides_v1(value: Any) -> list[Any] | None:
         return None
     ids = []
     for item in value:
-        if not isinstance(item, Mapping) or not isinstance(item.get("id"), str) \
-                or not item["id"]:
+        if not isinstance(item, Mapping) or not isinstance(item.get("id"), str) or not item["id"]:
             return None
         v = item.get("value")
         if not isinstance(v, list) or len(v) not in (1, 2) or any(_number(x) is None for x in v):
@@ -199,24 +201,37 @@ def _guides_v1(value: Any) -> list[Any] | None:
 
 
 #: old parameter key -> (part, field or None for the whole part, converter)
-_MOVED_V1: Mapping[str, tuple[str, str | None, Callable[[Any], Any]]] = MappingProxyType({
-    "depth_table": ("dowels", "table",
-                    lambda v: v.strip() if isinstance(v, str) and v.strip() else None),
-    "sex": ("dowels", "sex", lambda v: v if v in _SEXES else None),
-    "build": ("dowels", "build", _build_v1),
-    "depth_overrides": ("dowels", "overrides", _overrides_v1),
-    "excluded_landmarks": ("dowels", "excluded", _codes_v1),
-    "orientation": ("orientation", None, _orientation_v1),
-    "guides": ("guides", None, _guides_v1),
-})
+_MOVED_V1: Mapping[str, tuple[str, str | None, Callable[[Any], Any]]] = MappingProxyType(
+    {
+        "depth_table": (
+            "dowels",
+            "table",
+            lambda v: v.strip() if isinstance(v, str) and v.strip() else None,
+        ),
+        "sex": ("dowels", "sex", lambda v: v if v in _SEXES else None),
+        "build": ("dowels", "build", _build_v1),
+        "depth_overrides": ("dowels", "overrides", _overrides_v1),
+        "excluded_landmarks": ("dowels", "excluded", _codes_v1),
+        "orientation": ("orientation", None, _orientation_v1),
+        "guides": ("guides", None, _guides_v1),
+    }
+)
 
 
 def v1_to_v2(doc: dict[str, Any]) -> dict[str, Any]:
     """Format 1 → 2: the reconstruction parameters become the typed parts (see above)."""
     parameters = dict(doc["parameters"])
     parts: dict[str, Any] = {
-        "dowels": {"table": "ttable_2023", "sex": "male", "build": "normal", "overrides": {},
-                   "excluded": [], "tissue_model": "table", "region_factors": {}},
+        "dowels": {
+            # the default of format-1 files, fixed by their history (not today's default)
+            "table": "ttable_2023",
+            "sex": "male",
+            "build": "normal",
+            "overrides": {},
+            "excluded": [],
+            "tissue_model": "table",
+            "region_factors": {},
+        },
         "orientation": None,
         "guides": None,
     }
@@ -224,19 +239,20 @@ def v1_to_v2(doc: dict[str, Any]) -> dict[str, Any]:
         if key not in parameters:
             continue
         if name is None and parameters[key] in (None, {}):
-            del parameters[key]   # the old spelling of "automatic" / "computed"
+            del parameters[key]  # the old spelling of "automatic" / "computed"
             continue
         value = convert(parameters[key])
         if value is None:
-            continue   # not usable as a setting: stays a loose parameter
+            continue  # not usable as a setting: stays a loose parameter
         if name is None:
             parts[part] = value
         else:
             parts[part][name] = value
         del parameters[key]
     out = {k: v for k, v in doc.items() if k != "parameters"}
-    out.update({"@schema": "case-schema-v2", "format_version": 2, **parts,
-                "parameters": parameters})
+    out.update(
+        {"@schema": "case-schema-v2", "format_version": 2, **parts, "parameters": parameters}
+    )
     return out
 
 

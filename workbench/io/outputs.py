@@ -45,8 +45,17 @@ COMPOUND_SUFFIXES = (".mrk.json", ".nii.gz", ".tar.gz")
 PARTIAL_TAG = ".partial-"
 _MAX_BACKUPS = 100_000
 
-__all__ = ["backup_existing", "backup_name", "check_output_file", "check_output_folder",
-           "output_file", "relocate", "same_file", "staged_folder", "write_folder"]
+__all__ = [
+    "backup_existing",
+    "backup_name",
+    "check_output_file",
+    "check_output_folder",
+    "output_file",
+    "relocate",
+    "same_file",
+    "staged_folder",
+    "write_folder",
+]
 
 
 # ------------------------------------------------------------------ comparisons
@@ -79,9 +88,9 @@ def _split_name(name: str) -> tuple[str, str]:
     lower = name.lower()
     for suffix in COMPOUND_SUFFIXES:
         if lower.endswith(suffix) and len(name) > len(suffix):
-            return name[:-len(suffix)], name[-len(suffix):]
+            return name[: -len(suffix)], name[-len(suffix) :]
     stem, dot, ext = name.rpartition(".")
-    if not dot or not stem:      # no extension, or a hidden name such as ".env"
+    if not dot or not stem:  # no extension, or a hidden name such as ".env"
         return name, ""
     return stem, "." + ext
 
@@ -100,8 +109,7 @@ def backup_name(path: PathArg) -> Path:
         candidate = _numbered(path, n)
         if not os.path.lexists(candidate):
             return candidate
-    raise InputError(path, f"has {_MAX_BACKUPS} numbered backups already",
-                     "move some of them away")
+    raise InputError(path, f"has {_MAX_BACKUPS} numbered backups already", "move some of them away")
 
 
 def _copy_claimed(path: Path, candidate: Path) -> None:
@@ -132,7 +140,7 @@ def backup_existing(path: PathArg, *, keep: bool = False) -> Path:
             continue
         try:
             if is_dir:
-                os.rename(path, candidate)   # fails on a (non-empty) folder that appeared
+                os.rename(path, candidate)  # fails on a (non-empty) folder that appeared
             else:
                 _claim_file(path, candidate, keep)
         except FileExistsError:
@@ -140,11 +148,13 @@ def backup_existing(path: PathArg, *, keep: bool = False) -> Path:
         except OSError as exc:
             if exc.errno in (errno.EEXIST, errno.ENOTEMPTY):
                 continue
-            raise InputError(path, f"cannot be kept as {candidate.name} ({exc.strerror or exc})",
-                             "check the folder's permissions") from None
+            raise InputError(
+                path,
+                f"cannot be kept as {candidate.name} ({exc.strerror or exc})",
+                "check the folder's permissions",
+            ) from None
         return candidate
-    raise InputError(path, f"has {_MAX_BACKUPS} numbered backups already",
-                     "move some of them away")
+    raise InputError(path, f"has {_MAX_BACKUPS} numbered backups already", "move some of them away")
 
 
 def _claim_file(path: Path, candidate: Path, keep: bool) -> None:
@@ -174,8 +184,9 @@ def _force_hint(path: Path) -> str:
 
 
 # ------------------------------------------------------------------ single files
-def check_output_file(path: PathArg, inputs: Iterable[PathArg | None] = (),
-                      force: bool = False) -> Path:
+def check_output_file(
+    path: PathArg, inputs: Iterable[PathArg | None] = (), force: bool = False
+) -> Path:
     """Refuse an output file that is an input, lies in an input folder, or exists.
 
     ``inputs`` are every file or folder the command reads (None entries are
@@ -186,11 +197,15 @@ def check_output_file(path: PathArg, inputs: Iterable[PathArg | None] = (),
     path = Path(path)
     for source in _real_inputs(inputs):
         if same_file(path, source):
-            raise InputError(path, "is an input of this command; an input is never replaced, "
-                                   "not even with --force", "choose another output name")
+            raise InputError(
+                path,
+                "is an input of this command; an input is never replaced, not even with --force",
+                "choose another output name",
+            )
         if os.path.isdir(source) and _inside(path, source):
-            raise InputError(path, f"lies inside the input folder {source}",
-                             "write the output somewhere else")
+            raise InputError(
+                path, f"lies inside the input folder {source}", "write the output somewhere else"
+            )
     if path.is_dir():
         raise InputError(path, "is a folder", "give the name of a file to write")
     if os.path.lexists(path) and not force:
@@ -199,8 +214,12 @@ def check_output_file(path: PathArg, inputs: Iterable[PathArg | None] = (),
 
 
 @contextlib.contextmanager
-def output_file(path: PathArg, inputs: Iterable[PathArg | None] = (),
-                force: bool = False, notify: Notify | None = None) -> Iterator[Path]:
+def output_file(
+    path: PathArg,
+    inputs: Iterable[PathArg | None] = (),
+    force: bool = False,
+    notify: Notify | None = None,
+) -> Iterator[Path]:
     """Check ``path`` (:func:`check_output_file`) and keep an existing file as its backup.
 
     Yields the path to write with an atomic writer (``write_mesh``,
@@ -230,8 +249,9 @@ def _is_empty_dir(path: Path) -> bool:
         return False
 
 
-def check_output_folder(path: PathArg, inputs: Iterable[PathArg | None] = (),
-                        force: bool = False) -> Path:
+def check_output_folder(
+    path: PathArg, inputs: Iterable[PathArg | None] = (), force: bool = False
+) -> Path:
     """Refuse an output folder that holds an input, is in an input folder, or is in use.
 
     The folder is replaced as a whole (see :func:`staged_folder`), so an
@@ -241,15 +261,24 @@ def check_output_folder(path: PathArg, inputs: Iterable[PathArg | None] = (),
     path = Path(path)
     for source in _real_inputs(inputs):
         if same_file(path, source) or _inside(source, path):
-            raise InputError(path, f"holds {source}, an input of this command; the output "
-                                   "folder is replaced as a whole, so the input would be lost",
-                             "pick another --out, outside the folder that holds the inputs")
+            raise InputError(
+                path,
+                f"holds {source}, an input of this command; the output "
+                "folder is replaced as a whole, so the input would be lost",
+                "pick another --out, outside the folder that holds the inputs",
+            )
         if os.path.isdir(source) and _inside(path, source):
-            raise InputError(path, f"lies inside the input folder {source}",
-                             "pick another --out, outside the input folder")
+            raise InputError(
+                path,
+                f"lies inside the input folder {source}",
+                "pick another --out, outside the input folder",
+            )
     if os.path.lexists(path) and not _is_empty_dir(path) and not force:
-        what = "folder already exists and is not empty" if path.is_dir() else \
-            "already exists (a file, not a folder)"
+        what = (
+            "folder already exists and is not empty"
+            if path.is_dir()
+            else "already exists (a file, not a folder)"
+        )
         raise InputError(path, f"{what}; refusing to replace it", _force_hint(path))
     return path
 
@@ -271,16 +300,20 @@ def _remove_stale_partials(final: Path) -> None:
         for entry in final.parent.iterdir():
             if not entry.name.startswith(prefix):
                 continue
-            tail = entry.name[len(prefix):]
+            tail = entry.name[len(prefix) :]
             if tail.isdigit() and (int(tail) == os.getpid() or not _pid_alive(int(tail))):
                 shutil.rmtree(entry, ignore_errors=True)
 
 
 @contextlib.contextmanager
-def staged_folder(final_dir: PathArg, force: bool = False,
-                  inputs: Iterable[PathArg | None] = (), *,
-                  discard_existing: bool = False,
-                  notify: Notify | None = None) -> Iterator[Path]:
+def staged_folder(
+    final_dir: PathArg,
+    force: bool = False,
+    inputs: Iterable[PathArg | None] = (),
+    *,
+    discard_existing: bool = False,
+    notify: Notify | None = None,
+) -> Iterator[Path]:
     """Yield a temporary sibling of ``final_dir`` to write a whole job into.
 
     On success an existing ``final_dir`` is kept as ``DIR.1`` (``DIR.2`` ...;
@@ -322,8 +355,14 @@ def staged_folder(final_dir: PathArg, force: bool = False,
         raise
 
 
-def write_folder(final_dir: PathArg, write: Callable[[Path], T], *, force: bool = False,
-                 inputs: Iterable[PathArg | None] = (), notify: Notify | None = None) -> T:
+def write_folder(
+    final_dir: PathArg,
+    write: Callable[[Path], T],
+    *,
+    force: bool = False,
+    inputs: Iterable[PathArg | None] = (),
+    notify: Notify | None = None,
+) -> T:
     """``write(temp_folder)`` inside :func:`staged_folder`; returns what ``write`` returned.
 
     Paths in the result that point into the temporary folder (a Path, or a

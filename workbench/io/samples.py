@@ -45,7 +45,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from workbench.core.errors import InputError, WorkbenchError
-from workbench.model.evidence import sha256_file
+from workbench.model.evidence import file_sha256
 
 _REGISTRY_PATH = Path(__file__).with_name("sample_registry.json")
 SAMPLE_PREFIX = "sample:"
@@ -107,10 +107,18 @@ def registry() -> dict[str, Sample]:
     """All registered samples by name."""
     raw = json.loads(_REGISTRY_PATH.read_text(encoding="utf-8"))
     return {
-        name: Sample(name, s["main"], s["kind"], s["description"], s["licence"],
-                     tuple(SampleFile(**f) for f in s["files"]), s.get("anatomy"),
-                     s.get("credit"), tuple(SampleFile(**f) for f in s.get("extra_files", ())),
-                     s.get("derived_from"))
+        name: Sample(
+            name,
+            s["main"],
+            s["kind"],
+            s["description"],
+            s["licence"],
+            tuple(SampleFile(**f) for f in s["files"]),
+            s.get("anatomy"),
+            s.get("credit"),
+            tuple(SampleFile(**f) for f in s.get("extra_files", ())),
+            s.get("derived_from"),
+        )
         for name, s in raw["samples"].items()
     }
 
@@ -122,10 +130,6 @@ def cache_dir() -> Path:
     import platformdirs
 
     return Path(platformdirs.user_cache_dir("forensic-workbench")) / "samples"
-
-
-def _sha256(path: Path) -> str:
-    return sha256_file(path)[0]
 
 
 def _mirrors() -> list[Path]:
@@ -150,13 +154,13 @@ def seed_from_mirror(mirror: Path, names: list[str] | None = None) -> int:
 
 def _from_mirror(entry: SampleFile, mirrors: list[Path]) -> Path | None:
     target = cache_dir() / entry.path
-    if target.exists() and _sha256(target) == entry.sha256:
+    if target.exists() and file_sha256(target) == entry.sha256:
         return target
     if entry.mirror is None:
         return None
     for mirror in mirrors:
         candidate = mirror / entry.mirror
-        if candidate.is_file() and _sha256(candidate) == entry.sha256:
+        if candidate.is_file() and file_sha256(candidate) == entry.sha256:
             target.parent.mkdir(parents=True, exist_ok=True)
             tmp = target.with_name(target.name + ".part")
             shutil.copyfile(candidate, tmp)
@@ -262,7 +266,7 @@ def credit_for(path: str | os.PathLike[str]) -> str | None:
     if not samples:
         return None
     if path.is_file():
-        return _credited_files().get(_sha256(path))
+        return _credited_files().get(file_sha256(path))
     if not path.is_dir():
         return None
     root = cache_dir()
@@ -277,7 +281,7 @@ def credit_for(path: str | os.PathLike[str]) -> str | None:
     for candidate in sorted(path.rglob("*")):
         table = by_name.get(candidate.name)
         if table and candidate.is_file():
-            credit = table.get(_sha256(candidate))
+            credit = table.get(file_sha256(candidate))
             if credit:
                 return credit
     return None
@@ -299,8 +303,9 @@ def credit_for_mesh_file(path: str | os.PathLike[str]) -> str | None:
         comments = ply.header_comments(path)
     except (OSError, WorkbenchError):
         return None
-    credits = [c[len(CREDIT_COMMENT_KEY):].strip() for c in comments
-               if c.startswith(CREDIT_COMMENT_KEY)]
+    credits = [
+        c[len(CREDIT_COMMENT_KEY) :].strip() for c in comments if c.startswith(CREDIT_COMMENT_KEY)
+    ]
     credits = [c for c in credits if c]
     return " ".join(credits) if credits else None
 
@@ -316,9 +321,12 @@ def resolve_input(argument: str) -> Path:
     Raises :class:`InputError` if a plain path does not exist.
     """
     if argument.startswith(SAMPLE_PREFIX):
-        return fetch(argument[len(SAMPLE_PREFIX):])
+        return fetch(argument[len(SAMPLE_PREFIX) :])
     path = Path(argument).expanduser()
     if not path.exists():
-        raise InputError(path, "no such file or folder",
-                         f"samples can be named as {SAMPLE_PREFIX}NAME, e.g. {SAMPLE_PREFIX}headsq")
+        raise InputError(
+            path,
+            "no such file or folder",
+            f"samples can be named as {SAMPLE_PREFIX}NAME, e.g. {SAMPLE_PREFIX}headsq",
+        )
     return path

@@ -23,17 +23,32 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.io.catalogue import (
-    LandmarkCatalogue, default_catalogue_path, load_catalogue, read_table_rows,
+    LandmarkCatalogue,
+    default_catalogue_path,
+    load_catalogue,
+    read_table_rows,
 )
 
 COLUMNS = ("code", "rule", "direction", "radius_mm", "midline", "between", "source", "note")
 RULES = ("extremum", "deepest")
-AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0),
-        "-y": (0.0, -1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
+AXES = {
+    "+x": (1.0, 0.0, 0.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0),
+    "-z": (0.0, 0.0, -1.0),
+}
 #: words for the explanation shown to the user, per head-frame direction
-FEATURE_WORDS = {"+x": "most leftward", "-x": "most rightward", "+y": "highest",
-                 "-y": "lowest", "+z": "most anterior", "-z": "most posterior",
-                 "lateral": "most lateral"}
+FEATURE_WORDS = {
+    "+x": "most leftward",
+    "-x": "most rightward",
+    "+y": "highest",
+    "-y": "lowest",
+    "+z": "most anterior",
+    "-z": "most posterior",
+    "lateral": "most lateral",
+}
 
 
 @dataclass(frozen=True)
@@ -99,8 +114,9 @@ def default_snap_rules_path() -> Path:
 _CACHE: dict[tuple[str, int, int], dict[str, SnapRule]] = {}
 
 
-def load_snap_rules(path: str | os.PathLike[str] | None = None,
-                    catalogue: LandmarkCatalogue | None = None) -> dict[str, SnapRule]:
+def load_snap_rules(
+    path: str | os.PathLike[str] | None = None, catalogue: LandmarkCatalogue | None = None
+) -> dict[str, SnapRule]:
     """``{skull code: SnapRule}`` from the table, checked against the catalogue.
 
     Raises
@@ -150,8 +166,10 @@ def _row(path: Path, line: int, row: dict, catalogue: LandmarkCatalogue) -> Snap
     if direction not in (*AXES, "lateral"):
         raise fail(f"direction must be +x, -x, +y, -y, +z, -z or lateral, got {direction!r}")
     if midline not in ("yes", "no") or (midline == "yes") != (entry.side == "midline"):
-        raise fail(f"midline must be 'yes' exactly for midline landmarks ({code} is "
-                   f"{entry.side}), got {midline!r}")
+        raise fail(
+            f"midline must be 'yes' exactly for midline landmarks ({code} is "
+            f"{entry.side}), got {midline!r}"
+        )
     if entry.side == "midline" and direction in ("+x", "-x", "lateral"):
         raise fail(f"{code} is a midline landmark: a sideways direction makes no sense")
     if rule == "deepest" and (entry.side != "midline" or direction in ("+x", "-x")):
@@ -163,16 +181,30 @@ def _row(path: Path, line: int, row: dict, catalogue: LandmarkCatalogue) -> Snap
     if not (np.isfinite(radius) and 0.0 < radius <= 40.0):
         raise fail(f"radius_mm must be in (0, 40] mm, got {radius:g}")
     between = tuple(s.strip() for s in (row["between"] or "").split(";") if s.strip())
-    if between and (rule != "deepest" or len(between) != 2
-                    or any(catalogue.get(c, "skull") is None for c in between)):
-        raise fail(f"between must name two skull landmarks, for deepest rules only; "
-                   f"got {row['between']!r}")
+    if between and (
+        rule != "deepest"
+        or len(between) != 2
+        or any(catalogue.get(c, "skull") is None for c in between)
+    ):
+        raise fail(
+            f"between must name two skull landmarks, for deepest rules only; got {row['between']!r}"
+        )
     sources = tuple(s.strip() for s in (row["source"] or "").split(";") if s.strip())
     if not sources:
         raise fail(f"{code!r} cites no source")
     undefined = [s for s in sources if s not in catalogue.sources]
     if undefined:
-        raise fail(f"{code!r} cites source key(s) not in catalogue.meta.json: "
-                   f"{', '.join(undefined)}")
-    return SnapRule(code, rule, direction, radius, midline == "yes", between, entry.side, sources,
-                    (row["note"] or "").strip())
+        raise fail(
+            f"{code!r} cites source key(s) not in catalogue.meta.json: {', '.join(undefined)}"
+        )
+    return SnapRule(
+        code,
+        rule,
+        direction,
+        radius,
+        midline == "yes",
+        between,
+        entry.side,
+        sources,
+        (row["note"] or "").strip(),
+    )

@@ -11,8 +11,6 @@ missing citations are reported by name.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 from dataclasses import dataclass, field
@@ -22,9 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_TISSUE_DEPTH_MM, MAX_TISSUE_SD_MM
-from workbench.io.catalogue import LandmarkCatalogue, default_catalogue_path, load_catalogue
+from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
+from workbench.io.csv_rows import read_csv_rows
 
 COLUMNS = ("landmark_code", "skin_code", "group", "sex", "build", "mean_mm", "sd_mm", "n", "source")
 REQUIRED = ("landmark_code", "group", "mean_mm", "source")
@@ -32,7 +32,7 @@ REQUIRED = ("landmark_code", "group", "mean_mm", "source")
 
 def tables_dir() -> Path:
     """Folder of the shipped tissue-depth tables."""
-    return default_catalogue_path().parents[1] / "tissue_depth"
+    return data_tables_dir() / "tissue_depth"
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,10 +74,14 @@ class DepthTable:
         """``{skull code: (mean_mm, sd_mm)}`` for one group (default: the first)."""
         group = group or self.group_names()[0]
         if group not in self.groups:
-            raise InputError(self.table_id, f"no group {group!r}",
-                             f"groups: {', '.join(self.group_names())}")
-        return {c: (float(m), float(s)) for c, g, m, s in
-                zip(self.codes, self.groups, self.mean_mm, self.sd_mm, strict=True) if g == group}
+            raise InputError(
+                self.table_id, f"no group {group!r}", f"groups: {', '.join(self.group_names())}"
+            )
+        return {
+            c: (float(m), float(s))
+            for c, g, m, s in zip(self.codes, self.groups, self.mean_mm, self.sd_mm, strict=True)
+            if g == group
+        }
 
     def group_sex(self, group: str) -> str:
         """The ``sex`` label of a group ('' if the table gives none)."""
@@ -89,8 +93,9 @@ class DepthTable:
 
     def _group_attr(self, values: tuple[str, ...], group: str) -> str:
         if group not in self.groups:
-            raise InputError(self.table_id, f"no group {group!r}",
-                             f"groups: {', '.join(self.group_names())}")
+            raise InputError(
+                self.table_id, f"no group {group!r}", f"groups: {', '.join(self.group_names())}"
+            )
         return values[self.groups.index(group)] if values else ""
 
     def citation(self, key: str) -> str:
@@ -113,8 +118,9 @@ def _read_meta(path: Path) -> dict[str, Any]:
         raise InputError(path, f"table metadata is not valid JSON ({exc})") from None
 
 
-def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | None = None
-                     ) -> DepthTable:
+def load_depth_table(
+    table: str | PathLike[str], catalogue: LandmarkCatalogue | None = None
+) -> DepthTable:
     """Load a shipped table by id, or a user CSV by path.
 
     Raises
@@ -134,8 +140,11 @@ def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | 
     if path.suffix.lower() != ".csv":
         path = tables_dir() / f"{table}.csv"
         if not path.exists():
-            raise InputError(table, "unknown tissue-depth table",
-                             f"shipped tables: {', '.join(list_tables())}; or give a CSV file")
+            raise InputError(
+                table,
+                "unknown tissue-depth table",
+                f"shipped tables: {', '.join(list_tables())}; or give a CSV file",
+            )
     if not path.exists():
         raise InputError(path, "tissue-depth table not found")
     meta = _read_meta(path.with_suffix(".meta.json"))
@@ -154,17 +163,23 @@ def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | 
             continue
         group = (row.get("group") or "").strip() or "all"
         if (code, group) in first_line:
-            raise InputError(path, f"line {line}: duplicate row for {code} in group {group!r} "
-                             f"(first given on line {first_line[code, group]})",
-                             "keep one row per landmark and group")
+            raise InputError(
+                path,
+                f"line {line}: duplicate row for {code} in group {group!r} "
+                f"(first given on line {first_line[code, group]})",
+                "keep one row per landmark and group",
+            )
         first_line[code, group] = line
         sex = _label(path, line, row, "sex", SEX_LABELS)
         build = _label(path, line, row, "build", BUILD_LABELS)
         kind = group_kind.setdefault(group, (sex, build, line))
         if kind[:2] != (sex, build):
-            raise InputError(path, f"line {line}: group {group!r} is {sex or '-'}/{build or '-'} "
-                             f"here but {kind[0] or '-'}/{kind[1] or '-'} on line {kind[2]}",
-                             "one group is one sex and build; use separate group labels")
+            raise InputError(
+                path,
+                f"line {line}: group {group!r} is {sex or '-'}/{build or '-'} "
+                f"here but {kind[0] or '-'}/{kind[1] or '-'} on line {kind[2]}",
+                "one group is one sex and build; use separate group labels",
+            )
         codes.append(code)
         skin.append(_skin_code(path, line, row, code, catalogue))
         groups.append(group)
@@ -175,16 +190,32 @@ def load_depth_table(table: str | PathLike[str], catalogue: LandmarkCatalogue | 
         n.append(_number(path, line, "n", row.get("n", ""), optional=True))
         src.append(_text(path, line, row, "source"))
     if unknown:
-        raise InputError(path, f"unknown skull landmark codes: {', '.join(u for _, u in unknown)} "
-                         f"({'; '.join(_unknown_note(line, u, catalogue) for line, u in unknown)})",
-                         "use the skull codes of data_tables/landmarks/catalogue.csv")
+        raise InputError(
+            path,
+            f"unknown skull landmark codes: {', '.join(u for _, u in unknown)} "
+            f"({'; '.join(_unknown_note(line, u, catalogue) for line, u in unknown)})",
+            "use the skull codes of data_tables/landmarks/catalogue.csv",
+        )
     known_sources = set(meta.get("sources", {}))
     if known_sources:
         missing = sorted({s for s in src if s not in known_sources})
         if missing:
-            raise InputError(path, f"rows cite sources not defined in the metadata: {', '.join(missing)}")
-    return DepthTable(meta.get("id", path.stem), tuple(codes), tuple(skin), tuple(groups),
-                      _ro(mean), _ro(sd), _ro(n), tuple(src), meta, tuple(sexes), tuple(builds))
+            raise InputError(
+                path, f"rows cite sources not defined in the metadata: {', '.join(missing)}"
+            )
+    return DepthTable(
+        meta.get("id", path.stem),
+        tuple(codes),
+        tuple(skin),
+        tuple(groups),
+        _ro(mean),
+        _ro(sd),
+        _ro(n),
+        tuple(src),
+        meta,
+        tuple(sexes),
+        tuple(builds),
+    )
 
 
 #: Accepted ``sex`` and ``build`` labels ('' = not given); "pooled" covers both sexes or all builds.
@@ -195,27 +226,7 @@ _POOLED_WORDS = ("all", "both", "any", "mixed", "combined")
 
 def _read_rows(path: Path) -> list[tuple[int, dict[str, str | None]]]:
     """Data rows with their line numbers in the file (comment lines ``#`` are skipped)."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot be read as UTF-8 text ({exc})") from None
-    kept = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
-            if not ln.lstrip().startswith("#")]
-    reader = csv.DictReader(io.StringIO("\n".join(ln for _, ln in kept)), skipinitialspace=True)
-    if reader.fieldnames:
-        reader.fieldnames = [f.strip() for f in reader.fieldnames]
-    missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
-    if missing:
-        header = kept[0][0] if kept else 1
-        raise InputError(path, f"line {header}: missing columns: {', '.join(missing)}",
-                         f"expected columns: {', '.join(COLUMNS)}")
-    rows: list[tuple[int, dict[str, str | None]]] = []
-    for row in reader:
-        line = kept[reader.line_num - 1][0]  # the row's last physical line
-        if None in row:
-            raise InputError(path, f"line {line}: more values than columns "
-                             f"({len(reader.fieldnames or [])})")
-        rows.append((line, row))
+    rows = read_csv_rows(path, REQUIRED, expected=COLUMNS, what="depth table")
     if not rows:
         raise InputError(path, "the table has no rows")
     return rows
@@ -228,30 +239,38 @@ def _text(path: Path, line: int, row: dict[str, str | None], column: str) -> str
     return value
 
 
-def _label(path: Path, line: int, row: dict[str, str | None], column: str,
-           allowed: tuple[str, ...]) -> str:
+def _label(
+    path: Path, line: int, row: dict[str, str | None], column: str, allowed: tuple[str, ...]
+) -> str:
     value = (row.get(column) or "").strip().lower()
     if value in _POOLED_WORDS:
         return "pooled"
     if column == "sex" and value in ("f", "m"):
         return {"f": "female", "m": "male"}[value]
     if value and value not in allowed:
-        raise InputError(path, f"line {line}: unknown {column} {value!r}",
-                         f"use one of: {', '.join(allowed)} (or leave it empty)")
+        raise InputError(
+            path,
+            f"line {line}: unknown {column} {value!r}",
+            f"use one of: {', '.join(allowed)} (or leave it empty)",
+        )
     return value
 
 
-def _skin_code(path: Path, line: int, row: dict[str, str | None], code: str,
-               catalogue: LandmarkCatalogue) -> str:
+def _skin_code(
+    path: Path, line: int, row: dict[str, str | None], code: str, catalogue: LandmarkCatalogue
+) -> str:
     label = (row.get("skin_code") or "").strip()
     if not label:
         return catalogue.partner(code, "skull") or ""
     try:
         return catalogue.normalise(label, "skin")
     except Exception:  # noqa: BLE001 - LandmarkError: reported with the line
-        raise InputError(path, f"line {line}: unknown skin landmark code {label!r}",
-                         "use the skin codes of data_tables/landmarks/catalogue.csv, or leave "
-                         "skin_code empty for the catalogue's partner") from None
+        raise InputError(
+            path,
+            f"line {line}: unknown skin landmark code {label!r}",
+            "use the skin codes of data_tables/landmarks/catalogue.csv, or leave "
+            "skin_code empty for the catalogue's partner",
+        ) from None
 
 
 def _unknown_note(line: int, label: str, catalogue: LandmarkCatalogue) -> str:
@@ -265,8 +284,11 @@ def _unknown_note(line: int, label: str, catalogue: LandmarkCatalogue) -> str:
         skin = None
     if skin is not None:
         partner = catalogue.partner(skin, "skin")
-        return note + (f" is a skin landmark; its skull partner is {partner}" if partner
-                       else " is a skin landmark")
+        return note + (
+            f" is a skin landmark; its skull partner is {partner}"
+            if partner
+            else " is a skin landmark"
+        )
     names: dict[str, str] = {}
     for e in catalogue.entries:
         if e.surface == "skull":
@@ -277,8 +299,15 @@ def _unknown_note(line: int, label: str, catalogue: LandmarkCatalogue) -> str:
     return note + (f", did you mean {' or '.join(guesses)}?" if guesses else "")
 
 
-def _number(path: Path, line: int, column: str, text: str | None, *, positive: bool = False,
-            optional: bool = False) -> float:
+def _number(
+    path: Path,
+    line: int,
+    column: str,
+    text: str | None,
+    *,
+    positive: bool = False,
+    optional: bool = False,
+) -> float:
     text = (text or "").strip()
     if not text:
         if optional:
@@ -289,15 +318,21 @@ def _number(path: Path, line: int, column: str, text: str | None, *, positive: b
     except ValueError:
         raise InputError(path, f"line {line}: {column} is not a number ({text!r})") from None
     if not math.isfinite(value) or (positive and value <= 0) or value < 0:
-        what = ("a positive number of mm" if positive
-                else "a non-negative number of mm" if column.endswith("_mm")
-                else "a non-negative number")
+        what = (
+            "a positive number of mm"
+            if positive
+            else "a non-negative number of mm"
+            if column.endswith("_mm")
+            else "a non-negative number"
+        )
         raise InputError(path, f"line {line}: {column} must be {what}, got {text}")
     limit = {"mean_mm": MAX_TISSUE_DEPTH_MM, "sd_mm": MAX_TISSUE_SD_MM}.get(column)
     if limit is not None and value > limit:
-        raise InputError(path, f"line {line}: {column} {text} mm is implausible (at most "
-                         f"{limit:g} mm)", "no face has soft tissue that thick; is the column "
-                         "in mm?")
+        raise InputError(
+            path,
+            f"line {line}: {column} {text} mm is implausible (at most {limit:g} mm)",
+            "no face has soft tissue that thick; is the column in mm?",
+        )
     return value
 
 

@@ -62,12 +62,15 @@ def _pairs(head: TemplateHead) -> dict[str, Any]:
 
 
 #: how ``template.json`` names the frame of a pack written in the head frame
-HEAD_FRAME_TEXT = ("head frame: x to the subject's left (x = 0 midsagittal), y up, z toward "
-                   "the face; Frankfort Horizontal at y = 0; origin between the porions")
+HEAD_FRAME_TEXT = (
+    "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward "
+    "the face; Frankfort Horizontal at y = 0; origin between the porions"
+)
 
 
-def export_template(head: TemplateHead, folder: str | PathLike[str], *,
-                    frame: str = HEAD_FRAME_TEXT) -> list[Path]:
+def export_template(
+    head: TemplateHead, folder: str | PathLike[str], *, frame: str = HEAD_FRAME_TEXT
+) -> list[Path]:
     """Write ``head`` into ``folder`` (created if needed); returns the files written.
 
     ``frame`` is recorded in ``template.json``: pass another description when
@@ -79,19 +82,25 @@ def export_template(head: TemplateHead, folder: str | PathLike[str], *,
     written = []
     for name, parts in FILES.items():
         written.append(write_mesh(out / name, concatenate([head.meshes[p] for p in parts])))
-    for name, lmset in (("skin.mrk.json", head.skin_landmarks),
-                        ("skull.mrk.json", head.skull_landmarks)):
+    for name, lmset in (
+        ("skin.mrk.json", head.skin_landmarks),
+        ("skull.mrk.json", head.skull_landmarks),
+    ):
         write_mrk_json(out / name, lmset, coordinate_system="RAS")
         written.append(out / name)
     muscles = {
         "@schema": "muscle-grids-v1",
         "units": "mm",
         "note": "points are stored on skin.ply as (triangle, barycentric weights, depth below the "
-                "skin along the interpolated vertex normal); 'positions_mm' evaluates them on this skin",
-        "muscles": [m.to_state() | {"positions_mm": m.points.evaluate(head.skin),
-                                    "axis_positions_mm": None if m.axis is None
-                                    else m.axis.evaluate(head.skin)}
-                    for m in head.muscles],
+        "skin along the interpolated vertex normal); 'positions_mm' evaluates them on this skin",
+        "muscles": [
+            m.to_state()
+            | {
+                "positions_mm": m.points.evaluate(head.skin),
+                "axis_positions_mm": None if m.axis is None else m.axis.evaluate(head.skin),
+            }
+            for m in head.muscles
+        ],
     }
     path = out / "muscles.json"
     path.write_text(json.dumps(_jsonable(muscles), indent=1) + "\n", encoding="utf-8")
@@ -125,19 +134,27 @@ def export_template(head: TemplateHead, folder: str | PathLike[str], *,
     return written
 
 
-def _split(mesh: Mesh, parts: list[str], sizes: dict[str, list[int]], path: Path) -> dict[str, Mesh]:
+def _split(
+    mesh: Mesh, parts: list[str], sizes: dict[str, list[int]], path: Path
+) -> dict[str, Mesh]:
     out, v0, f0 = {}, 0, 0
     for part in parts:
         nv, nf = sizes[part]
-        faces = mesh.faces[f0:f0 + nf] - v0
+        faces = mesh.faces[f0 : f0 + nf] - v0
         if len(faces) != nf or (nf and (faces.min() < 0 or faces.max() >= nv)):
-            raise InputError(path, f"part {part!r} does not match the sizes in template.json",
-                             hint="the pack was edited or is incomplete; export it again")
-        out[part] = Mesh(mesh.vertices[v0:v0 + nv], faces)
+            raise InputError(
+                path,
+                f"part {part!r} does not match the sizes in template.json",
+                hint="the pack was edited or is incomplete; export it again",
+            )
+        out[part] = Mesh(mesh.vertices[v0 : v0 + nv], faces)
         v0, f0 = v0 + nv, f0 + nf
     if v0 != mesh.n_vertices or f0 != mesh.n_faces:
-        raise InputError(path, "holds more geometry than template.json lists",
-                         hint="the pack was edited; export it again")
+        raise InputError(
+            path,
+            "holds more geometry than template.json lists",
+            hint="the pack was edited; export it again",
+        )
     return out
 
 
@@ -151,23 +168,33 @@ def load_template_pack(folder: str | PathLike[str]) -> TemplateHead:
     root = Path(folder)
     info_path = root / "template.json"
     if not info_path.is_file():
-        raise InputError(root, "is not a template pack (no template.json)",
-                         hint="write one with 'workbench template export' or 'workbench template build'")
+        raise InputError(
+            root,
+            "is not a template pack (no template.json)",
+            hint="write one with 'workbench template export' or 'workbench template build'",
+        )
     try:
         info = json.loads(info_path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(info_path, f"is not valid JSON ({exc})") from None
     if info.get("@schema") != "template-pack-v1" or "part_sizes" not in info:
-        raise InputError(info_path, "is not a template-pack-v1 description (or predates part sizes)",
-                         hint="export the pack again with this version of the workbench")
+        raise InputError(
+            info_path,
+            "is not a template-pack-v1 description (or predates part sizes)",
+            hint="export the pack again with this version of the workbench",
+        )
     meshes: dict[str, Mesh] = {}
     for name, parts in info["files"].items():
         path = root / name
         if not path.is_file():
             raise InputError(path, "is missing from the template pack")
-        meshes.update(_split(read_mesh(path, units="mm").mesh, list(parts), info["part_sizes"], path))
-    marks = {s: read_mrk_json(root / f"{s}.mrk.json", s, allow_undefined=True).landmarks
-             for s in ("skin", "skull")}
+        meshes.update(
+            _split(read_mesh(path, units="mm").mesh, list(parts), info["part_sizes"], path)
+        )
+    marks = {
+        s: read_mrk_json(root / f"{s}.mrk.json", s, allow_undefined=True).landmarks
+        for s in ("skin", "skull")
+    }
     muscles_doc = json.loads((root / "muscles.json").read_text(encoding="utf-8"))
     head = TemplateHead(
         template_id=str(info["template_id"]),
@@ -185,7 +212,9 @@ def load_template_pack(folder: str | PathLike[str]) -> TemplateHead:
         provenance=dict(info.get("provenance", {})),
     )
     if head.content_hash != info["content_hash"]:
-        raise InputError(root, "content does not match the hash recorded in template.json",
-                         hint="a file in the pack was changed; export or build the pack again")
+        raise InputError(
+            root,
+            "content does not match the hash recorded in template.json",
+            hint="a file in the pack was changed; export or build the pack again",
+        )
     return head
-

@@ -104,7 +104,7 @@ def read_volume(path: str | PathLike[str]) -> Volume:
     }[kind]
     try:
         volume = reader(path)
-    except ValueError as exc:   # the Volume's own checks (spacing, direction) on header values
+    except ValueError as exc:  # the Volume's own checks (spacing, direction) on header values
         raise InputError(path, f"the header describes no valid volume: {exc}") from None
     if kind == "nifti":
         _check_nifti_pixdim(path)
@@ -129,11 +129,11 @@ def _check_nifti_pixdim(path: Path) -> None:
         with opener(path, "rb") as handle:
             raw = handle.read(348)
     except OSError:
-        return   # the reader already read it; nothing more to learn here
+        return  # the reader already read it; nothing more to learn here
     if len(raw) < 348:
         return
     for order in "<>":
-        if struct.unpack(order + "i", raw[:4])[0] == 348:   # NIfTI-1 (NIfTI-2 has 540)
+        if struct.unpack(order + "i", raw[:4])[0] == 348:  # NIfTI-1 (NIfTI-2 has 540)
             break
     else:
         return
@@ -141,9 +141,12 @@ def _check_nifti_pixdim(path: Path) -> None:
     codes = struct.unpack(order + "2h", raw[252:256])
     if codes == (0, 0) and not all(v > 0 for v in pixdim):
         shown = " x ".join(f"{v:g}" for v in pixdim)
-        raise InputError(path, f"the voxel size in the header is {shown} mm (pixdim, no "
-                         "qform or sform)", "the scan's voxel size is unset and cannot be "
-                         "guessed (1 mm would be a silent assumption); fix the header")
+        raise InputError(
+            path,
+            f"the voxel size in the header is {shown} mm (pixdim, no qform or sform)",
+            "the scan's voxel size is unset and cannot be "
+            "guessed (1 mm would be a silent assumption); fix the header",
+        )
 
 
 def _check_finite_voxels(volume: Volume, path: Path) -> None:
@@ -152,9 +155,12 @@ def _check_finite_voxels(volume: Volume, path: Path) -> None:
     if data.dtype.kind != "f":
         return
     bad = 0
-    for k in range(data.shape[0]):   # slice by slice: no full-size temporary
+    for k in range(data.shape[0]):  # slice by slice: no full-size temporary
         bad += int((~np.isfinite(data[k])).sum())
     if bad:
-        raise InputError(path, f"{bad} voxels of {data.size} are NaN or infinite",
-                         "the volume is damaged, or NaN marks 'no data'; fill them (e.g. with "
-                         "the air value) before extracting a surface")
+        raise InputError(
+            path,
+            f"{bad} voxels of {data.size} are NaN or infinite",
+            "the volume is damaged, or NaN marks 'no data'; fill them (e.g. with "
+            "the air value) before extracting a surface",
+        )

@@ -9,5 +9,15 @@ from workbench.model.meta import CaseMeta
 from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.specimen import Specimen
 
-__all__ = ["PARTS", "AuditLog", "Case", "CaseMeta", "DowelSettings", "EvidenceConflictError",
-           "EvidenceFile", "GuideList", "Orientation", "Specimen"]
+__all__ = [
+    "PARTS",
+    "AuditLog",
+    "Case",
+    "CaseMeta",
+    "DowelSettings",
+    "EvidenceConflictError",
+    "EvidenceFile",
+    "GuideList",
+    "Orientation",
+    "Specimen",
+]

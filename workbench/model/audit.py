@@ -175,13 +175,21 @@ class ChainStatus:
             return "audit log predates the hash chain (not verifiable)"
         if self.state == "broken":
             return f"NOT VERIFIED: {self.problem}"
-        older = (f"; the first {self.unchained} predate the hash chain and are sealed as "
-                 "one block" if self.unchained else "")
+        older = (
+            f"; the first {self.unchained} predate the hash chain and are sealed as one block"
+            if self.unchained
+            else ""
+        )
         return f"verified ({self.records} records{older})"
 
     def to_json(self) -> dict[str, Any]:
-        return {"status": self.summary(), "state": self.state, "records": self.records,
-                "unchained": self.unchained, "first_bad_record": self.index}
+        return {
+            "status": self.summary(),
+            "state": self.state,
+            "records": self.records,
+            "unchained": self.unchained,
+            "first_bad_record": self.index,
+        }
 
 
 def _name(records: Sequence[Mapping[str, Any]], index: int) -> str:
@@ -194,17 +202,20 @@ def _name(records: Sequence[Mapping[str, Any]], index: int) -> str:
 
 def _has_chain_fields(record: Mapping[str, Any]) -> bool:
     seq = record.get("seq")
-    return (isinstance(record.get("prev"), str) and isinstance(seq, int)
-            and not isinstance(seq, bool))
+    return (
+        isinstance(record.get("prev"), str) and isinstance(seq, int) and not isinstance(seq, bool)
+    )
 
 
-def _broken(records: Sequence[Mapping[str, Any]], older: int, index: int,
-            problem: str) -> ChainStatus:
+def _broken(
+    records: Sequence[Mapping[str, Any]], older: int, index: int, problem: str
+) -> ChainStatus:
     return ChainStatus("broken", len(records), older, index, problem)
 
 
-def verify_chain(records: Sequence[Mapping[str, Any]], case_id: str,
-                 anchor: Mapping[str, Any] | None) -> ChainStatus:
+def verify_chain(
+    records: Sequence[Mapping[str, Any]], case_id: str, anchor: Mapping[str, Any] | None
+) -> ChainStatus:
     """Check ``records`` (parsed ``audit.jsonl``) against the chain and its ``anchor``.
 
     ``anchor`` is the ``case.json`` entry written by :func:`chain_anchor`, or
@@ -215,20 +226,34 @@ def verify_chain(records: Sequence[Mapping[str, Any]], case_id: str,
         chained = next((i for i, r in enumerate(records) if "prev" in r), None)
         if chained is None:
             return ChainStatus("unchained", n, n)
-        return _broken(records, chained, chained, f"{_name(records, chained)} carries a chain "
-                       "hash but case.json has no audit chain anchor (it was removed)")
+        return _broken(
+            records,
+            chained,
+            chained,
+            f"{_name(records, chained)} carries a chain "
+            "hash but case.json has no audit chain anchor (it was removed)",
+        )
     older = int(anchor["unchained"])
     for i in range(min(older, n)):
         if "prev" in records[i]:
-            return _broken(records, older, i, f"{_name(records, i)} carries a chain hash but "
-                           f"the anchor says the first {older} records predate the chain")
+            return _broken(
+                records,
+                older,
+                i,
+                f"{_name(records, i)} carries a chain hash but "
+                f"the anchor says the first {older} records predate the chain",
+            )
     links = [genesis(case_id, records[:older]) if n >= older else ""]
     links += [record_hash(r) for r in records[older:]]
     for i in range(older, n):
         record = records[i]
         if not _has_chain_fields(record):
-            return _broken(records, older, i, f"{_name(records, i)} has no valid chain fields "
-                           "(edited or inserted)")
+            return _broken(
+                records,
+                older,
+                i,
+                f"{_name(records, i)} has no valid chain fields (edited or inserted)",
+            )
         seq = record["seq"]
         if seq != i:
             return _broken(records, older, i, _order_problem(records, i, seq))
@@ -237,32 +262,58 @@ def verify_chain(records: Sequence[Mapping[str, Any]], case_id: str,
     expected = int(anchor["records"])
     if n < expected:
         last = f"; the log ends with {_name(records, n - 1)}" if n else ""
-        return _broken(records, older, n, f"record {n} is missing: the anchor counts {expected} "
-                       f"records, the log has {n} (deleted at the end){last}")
+        return _broken(
+            records,
+            older,
+            n,
+            f"record {n} is missing: the anchor counts {expected} "
+            f"records, the log has {n} (deleted at the end){last}",
+        )
     if n > expected:
-        return _broken(records, older, expected, f"{_name(records, expected)} was added after "
-                       f"the last save: the anchor counts {expected} records, the log has {n}")
+        return _broken(
+            records,
+            older,
+            expected,
+            f"{_name(records, expected)} was added after "
+            f"the last save: the anchor counts {expected} records, the log has {n}",
+        )
     if n and links[-1] != anchor["head"]:
-        return _broken(records, older, n - 1, f"{_name(records, n - 1)} was edited, or the "
-                       "anchor in case.json was: the last record's hash does not match it")
+        return _broken(
+            records,
+            older,
+            n - 1,
+            f"{_name(records, n - 1)} was edited, or the "
+            "anchor in case.json was: the last record's hash does not match it",
+        )
     return ChainStatus("verified", n, older)
 
 
 def _order_problem(records: Sequence[Mapping[str, Any]], i: int, seq: int) -> str:
     """Why the record at position ``i`` carries sequence number ``seq``."""
     if seq < i:
-        return (f"{_name(records, i)} was inserted or duplicated: it claims the position of "
-                f"record {seq}")
+        return (
+            f"{_name(records, i)} was inserted or duplicated: it claims the position of "
+            f"record {seq}"
+        )
     later = next((j for j in range(i + 1, len(records)) if records[j].get("seq") == i), None)
     if later is not None:
-        return (f"records reordered: {_name(records, i)} was written as record {seq}, and "
-                f"the one written as record {i} is now at position {later}")
-    return (f"record {i} is missing (deleted): position {i} holds "
-            f"{_name(records, i)}, written as record {seq}")
+        return (
+            f"records reordered: {_name(records, i)} was written as record {seq}, and "
+            f"the one written as record {i} is now at position {later}"
+        )
+    return (
+        f"record {i} is missing (deleted): position {i} holds "
+        f"{_name(records, i)}, written as record {seq}"
+    )
 
 
-def _edit_problem(records: Sequence[Mapping[str, Any]], older: int, i: int,
-                  links: Sequence[str], anchor: Mapping[str, Any]) -> tuple[int, str]:
+def _edit_problem(
+    records: Sequence[Mapping[str, Any]],
+    older: int,
+    i: int,
+    links: Sequence[str],
+    anchor: Mapping[str, Any],
+) -> tuple[int, str]:
     """The record at ``i`` does not follow its predecessor: which one changed."""
     if i + 1 < len(records):
         next_ok = records[i + 1].get("prev") == links[i + 1 - older]
@@ -271,13 +322,18 @@ def _edit_problem(records: Sequence[Mapping[str, Any]], older: int, i: int,
     if not next_ok:
         return i, f"{_name(records, i)} was edited (its chain hash does not match)"
     if i == 0:
-        return i, (f"{_name(records, i)} does not start this case's chain (the log was "
-                   "copied from another case, or the case id was changed)")
+        return i, (
+            f"{_name(records, i)} does not start this case's chain (the log was "
+            "copied from another case, or the case id was changed)"
+        )
     if i == older:
-        return i - 1, (f"the first {older} records, which predate the chain, were edited, "
-                       f"reordered or deleted (up to {_name(records, i - 1)})")
-    return i - 1, (f"{_name(records, i - 1)} was edited: its hash does not match the "
-                   f"next record's prev")
+        return i - 1, (
+            f"the first {older} records, which predate the chain, were edited, "
+            f"reordered or deleted (up to {_name(records, i - 1)})"
+        )
+    return i - 1, (
+        f"{_name(records, i - 1)} was edited: its hash does not match the next record's prev"
+    )
 
 
 class AuditLog:
@@ -305,8 +361,10 @@ class AuditLog:
     @property
     def records(self) -> tuple[dict[str, Any], ...]:
         """Every record, oldest first (copies, without the chain fields)."""
-        return tuple(json.loads(json.dumps({k: v for k, v in r.items() if k not in CHAIN_FIELDS}))
-                     for r in self._records)
+        return tuple(
+            json.loads(json.dumps({k: v for k, v in r.items() if k not in CHAIN_FIELDS}))
+            for r in self._records
+        )
 
     @property
     def pending(self) -> tuple[dict[str, Any], ...]:

@@ -132,7 +132,9 @@ PARTS: Mapping[str, PartCodec] = MappingProxyType(
             coerce_landmarks, landmarks_to_state, landmarks_from_state, empty_landmarks
         ),
         "dowels": PartCodec(
-            _check_type(DowelSettings), DowelSettings.to_state, DowelSettings.from_state,
+            _check_type(DowelSettings),
+            DowelSettings.to_state,
+            DowelSettings.from_state,
             DowelSettings,
         ),
         "orientation": PartCodec(

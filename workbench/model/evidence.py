@@ -17,6 +17,8 @@ from os import PathLike
 from pathlib import Path
 from typing import IO, Any
 
+from workbench.core.errors import InputError
+
 CHUNK_BYTES = 1 << 20
 
 #: Something that opens a fresh binary stream (a file, a zip member).
@@ -63,6 +65,14 @@ def sha256_file(path: str | PathLike[str]) -> tuple[str, int]:
     """``(sha256 hex, size in bytes)`` of a file, read in 1 MiB chunks."""
     with open(path, "rb") as stream:
         return hash_chunks(read_chunks(stream))
+
+
+def file_sha256(path: str | PathLike[str]) -> str:
+    """SHA-256 (lower-case hex) of a file; an unreadable file is an InputError naming it."""
+    try:
+        return sha256_file(path)[0]
+    except OSError as exc:
+        raise InputError(path, f"cannot read the file to hash it ({exc.strerror or exc})") from None
 
 
 def copy_hashed(source: IO[bytes], target: IO[bytes]) -> tuple[str, int]:

@@ -71,13 +71,19 @@ class SurfacePoints:
         return p
 
     def to_state(self) -> dict[str, Any]:
-        return {"faces": self.faces.tolist(), "barycentric": self.barycentric.tolist(),
-                "depth_mm": self.depth_mm.tolist()}
+        return {
+            "faces": self.faces.tolist(),
+            "barycentric": self.barycentric.tolist(),
+            "depth_mm": self.depth_mm.tolist(),
+        }
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> SurfacePoints:
-        return cls(np.asarray(state["faces"]), np.asarray(state["barycentric"]),
-                   np.asarray(state.get("depth_mm", [])))
+        return cls(
+            np.asarray(state["faces"]),
+            np.asarray(state["barycentric"]),
+            np.asarray(state.get("depth_mm", [])),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,16 +134,26 @@ class MuscleGrid:
 
     def to_state(self) -> dict[str, Any]:
         return {
-            "code": self.code, "name": self.name, "kind": self.kind,
-            "attachment": self.attachment, "side": self.side,
-            "row_lengths": list(self.row_lengths), "points": self.points.to_state(),
+            "code": self.code,
+            "name": self.name,
+            "kind": self.kind,
+            "attachment": self.attachment,
+            "side": self.side,
+            "row_lengths": list(self.row_lengths),
+            "points": self.points.to_state(),
             "axis": None if self.axis is None else self.axis.to_state(),
         }
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> MuscleGrid:
         axis = state.get("axis")
-        return cls(state["code"], state["name"], state["kind"], state["attachment"],
-                   state["side"], tuple(int(n) for n in state["row_lengths"]),
-                   SurfacePoints.from_state(state["points"]),
-                   None if axis is None else SurfacePoints.from_state(axis))
+        return cls(
+            state["code"],
+            state["name"],
+            state["kind"],
+            state["attachment"],
+            state["side"],
+            tuple(int(n) for n in state["row_lengths"]),
+            SurfacePoints.from_state(state["points"]),
+            None if axis is None else SurfacePoints.from_state(axis),
+        )

@@ -38,11 +38,12 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_BUILD_SD, MAX_TISSUE_DEPTH_MM, REGION_FACTOR_RANGE
 from workbench.model.state import freeze_json, thaw_json
 
-DEFAULT_TABLE = "ttable_2023"
+DEFAULT_TABLE = DEFAULT_DEPTH_TABLE
 SEXES = ("female", "male")
 #: named builds; a number k means mean + k SD of the table group
 BUILDS = ("slender", "normal", "obese")
@@ -79,14 +80,20 @@ def parse_build(value: Any) -> str | float:
         try:
             k = float(text.removesuffix("sd").strip())
         except ValueError:
-            raise SetupError("build", f"unknown build {value!r}",
-                             "use slender, normal, obese, or a number k for mean + k SD") from None
+            raise SetupError(
+                "build",
+                f"unknown build {value!r}",
+                "use slender, normal, obese, or a number k for mean + k SD",
+            ) from None
     if not math.isfinite(k):
         raise SetupError("build", f"k must be a finite number of SDs, got {value!r}")
     if abs(k) > MAX_BUILD_SD:
-        raise SetupError("build", f"k = {k:g} SD is outside ±{MAX_BUILD_SD:g} SD",
-                         "a build is mean + k SD of the table group; beyond "
-                         f"±{MAX_BUILD_SD:g} SD the table is extrapolated, not read")
+        raise SetupError(
+            "build",
+            f"k = {k:g} SD is outside ±{MAX_BUILD_SD:g} SD",
+            "a build is mean + k SD of the table group; beyond "
+            f"±{MAX_BUILD_SD:g} SD the table is extrapolated, not read",
+        )
     return k
 
 
@@ -107,15 +114,17 @@ def _depth(code: str, value: Any) -> float:
     except (TypeError, ValueError):
         depth = math.nan
     if isinstance(value, bool) or not (math.isfinite(depth) and 0.0 < depth <= MAX_DEPTH_MM):
-        raise SetupError(f"depth override {code}",
-                         f"{value!r} is not a depth in mm (0-{MAX_DEPTH_MM:g})")
+        raise SetupError(
+            f"depth override {code}", f"{value!r} is not a depth in mm (0-{MAX_DEPTH_MM:g})"
+        )
     return depth
 
 
 def _factor(region: Any, value: Any) -> float:
     if region not in REGIONS:
-        raise SetupError("region factor", f"unknown region {region!r}",
-                         f"regions: {', '.join(REGIONS)}")
+        raise SetupError(
+            "region factor", f"unknown region {region!r}", f"regions: {', '.join(REGIONS)}"
+        )
     try:
         f = float(value)
     except (TypeError, ValueError):
@@ -168,24 +177,32 @@ class DowelSettings:
         if self.sex not in SEXES:
             raise SetupError("sex", f"{self.sex!r} is not one of {', '.join(SEXES)}")
         if self.tissue_model not in TISSUE_MODELS:
-            raise SetupError("tissue model", f"unknown tissue model {self.tissue_model!r}",
-                             f"use {' or '.join(TISSUE_MODELS)}")
+            raise SetupError(
+                "tissue model",
+                f"unknown tissue model {self.tissue_model!r}",
+                f"use {' or '.join(TISSUE_MODELS)}",
+            )
         overrides = _mapping(self.overrides, "depth overrides")
         depths = {_code(c, "depth override"): _depth(str(c), v) for c, v in overrides.items()}
         excluded = self.excluded
-        if isinstance(excluded, (str, bytes)) or not isinstance(excluded,
-                                                                (Sequence, set, frozenset)):
+        if isinstance(excluded, (str, bytes)) or not isinstance(
+            excluded, (Sequence, set, frozenset)
+        ):
             raise SetupError("excluded dowels", f"expected a list of codes, got {excluded!r}")
         codes = {_code(c, "excluded dowel") for c in excluded}
-        factors = {r: _factor(r, f) for r, f in
-                   _mapping(self.region_factors, "region factors").items()}
+        factors = {
+            r: _factor(r, f) for r, f in _mapping(self.region_factors, "region factors").items()
+        }
         set_ = object.__setattr__
         set_(self, "table", self.table.strip())
         set_(self, "build", parse_build(self.build))
         set_(self, "overrides", MappingProxyType(dict(sorted(depths.items()))))
         set_(self, "excluded", tuple(sorted(codes)))
-        set_(self, "region_factors", MappingProxyType(
-            {r: factors[r] for r in REGIONS if r in factors}))
+        set_(
+            self,
+            "region_factors",
+            MappingProxyType({r: factors[r] for r in REGIONS if r in factors}),
+        )
 
     def __hash__(self) -> int:
         return hash(json.dumps(self.to_state(), sort_keys=True))
@@ -213,9 +230,15 @@ class DowelSettings:
         return replace(self, excluded=tuple(codes))
 
     def to_state(self) -> dict[str, Any]:
-        return {"table": self.table, "sex": self.sex, "build": self.build,
-                "overrides": dict(self.overrides), "excluded": list(self.excluded),
-                "tissue_model": self.tissue_model, "region_factors": dict(self.region_factors)}
+        return {
+            "table": self.table,
+            "sex": self.sex,
+            "build": self.build,
+            "overrides": dict(self.overrides),
+            "excluded": list(self.excluded),
+            "tissue_model": self.tissue_model,
+            "region_factors": dict(self.region_factors),
+        }
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any]) -> DowelSettings:
@@ -239,7 +262,7 @@ def _unit(value: Any, what: str) -> Vector:
     norm = math.sqrt(sum(x * x for x in v))
     if norm < 1e-9:
         raise SetupError(f"orientation {what}", "the direction has zero length")
-    if abs(norm - 1.0) > 1e-12:   # idempotent: a stored unit vector is kept bit for bit
+    if abs(norm - 1.0) > 1e-12:  # idempotent: a stored unit vector is kept bit for bit
         v = tuple(x / norm for x in v)
     return v  # type: ignore[return-value]
 
@@ -282,8 +305,11 @@ class Orientation:
         return cls(*hint)
 
     def to_state(self) -> dict[str, Any]:
-        return {"anterior": list(self.anterior), "superior": list(self.superior),
-                "left": None if self.left is None else list(self.left)}
+        return {
+            "anterior": list(self.anterior),
+            "superior": list(self.superior),
+            "left": None if self.left is None else list(self.left),
+        }
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any]) -> Orientation:
@@ -299,8 +325,11 @@ def _check_guide(item: Any, index: int) -> str:
     if not isinstance(gid, str) or not gid:
         raise SetupError(where, "needs a non-empty text id")
     value = item.get("value")
-    ok = isinstance(value, (list, tuple)) and len(value) in (1, 2) and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ok = (
+        isinstance(value, (list, tuple))
+        and len(value) in (1, 2)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    )
     if not ok:
         raise SetupError(f"guide {gid!r}", f"value must be 1 or 2 numbers (mm), got {value!r}")
     return gid
@@ -320,8 +349,7 @@ class GuideList:
     guides: tuple[Mapping[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.guides, (str, bytes, Mapping)) or not isinstance(self.guides,
-                                                                            Sequence):
+        if isinstance(self.guides, (str, bytes, Mapping)) or not isinstance(self.guides, Sequence):
             raise SetupError("guides", "expected a list of guides")
         frozen = freeze_json(list(self.guides), "guides")
         ids = [_check_guide(item, i) for i, item in enumerate(frozen)]

@@ -149,8 +149,10 @@ def array_from_npy(data: bytes, ref: Mapping[str, Any]) -> np.ndarray:
     except (ValueError, OSError, EOFError) as error:
         raise ValueError(f"not a readable array ({error})") from None
     if array.dtype.name != ref["dtype"] or list(array.shape) != list(ref["shape"]):
-        raise ValueError(f"holds {array.dtype}{list(array.shape)}, "
-                         f"case.json expects {ref['dtype']}{list(ref['shape'])}")
+        raise ValueError(
+            f"holds {array.dtype}{list(array.shape)}, "
+            f"case.json expects {ref['dtype']}{list(ref['shape'])}"
+        )
     return array
 
 

@@ -32,29 +32,66 @@ class ActionSpec:
 
 
 ACTIONS: tuple[ActionSpec, ...] = (
-    ActionSpec("open_skull", "&File", "Open skull &mesh…", "Ctrl+O", "ask_open_skull",
-               "Start a case from a skull surface (PLY, STL, OBJ, VTK, VTP)"),
-    ActionSpec("open_ct", "&File", "Open &CT…", "Ctrl+Shift+O", "ask_open_ct",
-               "Extract the bone surface of a CT volume and start a case from it"),
-    ActionSpec("open_case", "&File", "Open c&ase…", "Ctrl+Alt+O", "ask_open_case",
-               "Open a saved .fcase file"),
-    ActionSpec("save", "&File", "&Save", QKeySequence.StandardKey.Save, "save",
-               "Save the case (atomic: a failed save leaves the old file)"),
+    ActionSpec(
+        "open_skull",
+        "&File",
+        "Open skull &mesh…",
+        "Ctrl+O",
+        "ask_open_skull",
+        "Start a case from a skull surface (PLY, STL, OBJ, VTK, VTP)",
+    ),
+    ActionSpec(
+        "open_ct",
+        "&File",
+        "Open &CT…",
+        "Ctrl+Shift+O",
+        "ask_open_ct",
+        "Extract the bone surface of a CT volume and start a case from it",
+    ),
+    ActionSpec(
+        "open_case",
+        "&File",
+        "Open c&ase…",
+        "Ctrl+Alt+O",
+        "ask_open_case",
+        "Open a saved .fcase file",
+    ),
+    ActionSpec(
+        "save",
+        "&File",
+        "&Save",
+        QKeySequence.StandardKey.Save,
+        "save",
+        "Save the case (atomic: a failed save leaves the old file)",
+    ),
     ActionSpec("save_as", "&File", "Save &As…", QKeySequence.StandardKey.SaveAs, "ask_save_as"),
-    ActionSpec("export", "&File", "&Export…", "Ctrl+E", "ask_export",
-               "Face and head meshes (PLY/OBJ/STL), landmarks (.mrk.json, .fcsv) and the PDF "
-               "report"),
+    ActionSpec(
+        "export",
+        "&File",
+        "&Export…",
+        "Ctrl+E",
+        "ask_export",
+        "Face and head meshes (PLY/OBJ/STL), landmarks (.mrk.json, .fcsv) and the PDF report",
+    ),
     ActionSpec("quit", "&File", "&Quit", QKeySequence.StandardKey.Quit, "close"),
     ActionSpec("undo", "&Edit", "&Undo", QKeySequence.StandardKey.Undo, "undo"),
     ActionSpec("redo", "&Edit", "&Redo", QKeySequence.StandardKey.Redo, "redo"),
     ActionSpec("mark_absent", "&Edit", "Mark selected landmark &absent", "A", "mark_absent"),
-    ActionSpec("snap", "&Edit", "Sna&p selected landmark to its feature", "S", "snap_selected",
-               "Move the selected skull landmark to the feature its definition names "
-               "(e.g. the most anterior midline point for glabella), near where it is"),
-    ActionSpec("next_missing", "&Edit", "Select &next missing landmark", "N",
-               "select_next_missing"),
-    ActionSpec("suggest", "&Tools", "&Suggest the rest of the landmarks", "Ctrl+L",
-               "suggest_landmarks"),
+    ActionSpec(
+        "snap",
+        "&Edit",
+        "Sna&p selected landmark to its feature",
+        "S",
+        "snap_selected",
+        "Move the selected skull landmark to the feature its definition names "
+        "(e.g. the most anterior midline point for glabella), near where it is",
+    ),
+    ActionSpec(
+        "next_missing", "&Edit", "Select &next missing landmark", "N", "select_next_missing"
+    ),
+    ActionSpec(
+        "suggest", "&Tools", "&Suggest the rest of the landmarks", "Ctrl+L", "suggest_landmarks"
+    ),
     ActionSpec("reconstruct", "&Tools", "&Reconstruct face", "Ctrl+R", "reconstruct"),
     ActionSpec("load_truth", "&Tools", "Compare with a &true skin…", "Ctrl+T", "ask_load_truth"),
     ActionSpec("reset_view", "&View", "Reset &camera", "R", "reset_view"),
@@ -103,8 +140,9 @@ def build_menus(window: MenuHost) -> dict[str, QAction]:
         action.toggled.connect(lambda on, name=layer: scene.set_visible(name, on))
         view.addAction(action)
         out[f"layer_{layer}"] = action
-    scene.layer_changed.connect(lambda name: _follow_layer(out.get(f"layer_{name}"),
-                                                           scene.visible.get(name, True)))
+    scene.layer_changed.connect(
+        lambda name: _follow_layer(out.get(f"layer_{name}"), scene.visible.get(name, True))
+    )
     return out
 
 

@@ -36,7 +36,7 @@ class LaunchOptions:
     steps: list[str] = field(default_factory=list)
 
 
-def ensure_app(argv: Sequence[str] | None = None):  # noqa: ANN201 - QApplication
+def ensure_app(argv: Sequence[str] | None = None):
     from PySide6.QtWidgets import QApplication
 
     app = QApplication.instance()
@@ -47,7 +47,7 @@ def ensure_app(argv: Sequence[str] | None = None):  # noqa: ANN201 - QApplicatio
     return app
 
 
-def prepare(window, options: LaunchOptions) -> list[str]:  # noqa: ANN001
+def prepare(window, options: LaunchOptions) -> list[str]:
     """Load and run what ``options`` ask for, waiting for each step; returns errors."""
     if options.case is not None:
         window.open_case(options.case)
@@ -95,7 +95,9 @@ def run(options: LaunchOptions) -> int:
     path = window.save_screenshot(screenshot)
     window.close()
     for text in errors:
-        print(f"workbench gui: {text.splitlines()[0]} {' '.join(text.splitlines()[1:])}",
-              file=sys.stderr)
+        print(
+            f"workbench gui: {text.splitlines()[0]} {' '.join(text.splitlines()[1:])}",
+            file=sys.stderr,
+        )
     print(f"wrote {path}")
     return 2 if errors else 0

@@ -251,11 +251,15 @@ class RecoveryEntry:
         return f"Recover unsaved work from {self.when} ({self.title})?"
 
     def details(self) -> str:
-        lines = [f"Specimen: {self.specimen or 'none'}",
-                 f"Changes in the lost session: {self.undo_steps} undo step(s)",
-                 "Saved file: " + (str(self.original_path) if self.original_path
-                                   else "none (the case was never saved)"),
-                 f"Snapshot: {self.snapshot}"]
+        lines = [
+            f"Specimen: {self.specimen or 'none'}",
+            f"Changes in the lost session: {self.undo_steps} undo step(s)",
+            "Saved file: "
+            + (
+                str(self.original_path) if self.original_path else "none (the case was never saved)"
+            ),
+            f"Snapshot: {self.snapshot}",
+        ]
         return "\n".join(lines)
 
 
@@ -278,10 +282,16 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
     if not isinstance(doc, dict) or doc.get("format") != SIDECAR_FORMAT:
         raise ValueError("its description file is not a workbench autosave description")
     if doc.get("version") != SIDECAR_VERSION:
-        raise ValueError(f"its description file has version {doc.get('version')!r}; "
-                         f"this workbench reads version {SIDECAR_VERSION}")
+        raise ValueError(
+            f"its description file has version {doc.get('version')!r}; "
+            f"this workbench reads version {SIDECAR_VERSION}"
+        )
     types: dict[str, type | tuple[type, ...]] = {
-        "pid": int, "hostname": str, "session": str, "session_started": (int, float)}
+        "pid": int,
+        "hostname": str,
+        "session": str,
+        "session_started": (int, float),
+    }
     bad = [key for key, kind in types.items() if not isinstance(doc.get(key), kind)]
     if bad:
         raise ValueError(f"its description file has no valid {', '.join(bad)}")
@@ -297,17 +307,28 @@ def _entry(sidecar: Path, exclude: set[str]) -> RecoveryEntry | None:
         return RecoveryEntry(snapshot, sidecar, str(error), _mtime(snapshot, sidecar))
     written = doc.get("written")
     written = float(written) if isinstance(written, (int, float)) else None
-    if doc["session"] in exclude or owner_alive(doc["pid"], doc["hostname"],
-                                                float(doc["session_started"]),
-                                                written or _mtime(sidecar) or 0.0):
+    if doc["session"] in exclude or owner_alive(
+        doc["pid"],
+        doc["hostname"],
+        float(doc["session_started"]),
+        written or _mtime(sidecar) or 0.0,
+    ):
         return None
     original = doc.get("original_path")
     undo = doc.get("undo_steps")
     entry = RecoveryEntry(
-        snapshot, sidecar, None, written,
+        snapshot,
+        sidecar,
+        None,
+        written,
         Path(original) if isinstance(original, str) and original else None,
-        str(doc.get("title") or "untitled case"), str(doc.get("specimen") or ""),
-        undo if isinstance(undo, int) else 0, doc["pid"], doc["hostname"], doc["session"])
+        str(doc.get("title") or "untitled case"),
+        str(doc.get("specimen") or ""),
+        undo if isinstance(undo, int) else 0,
+        doc["pid"],
+        doc["hostname"],
+        doc["session"],
+    )
     problem = None
     if written is None or not snapshot.is_file():
         problem = "the session stopped before its first snapshot was complete"
@@ -326,8 +347,9 @@ def _mtime(*paths: Path) -> float | None:
     return None
 
 
-def find_recoverable(folder: str | Path | None = None,
-                     exclude: Iterable[str] = ()) -> list[RecoveryEntry]:
+def find_recoverable(
+    folder: str | Path | None = None, exclude: Iterable[str] = ()
+) -> list[RecoveryEntry]:
     """Snapshots in ``folder`` whose owning session is gone, newest first.
 
     Snapshots of running sessions (any window of this process, another
@@ -347,10 +369,15 @@ def find_recoverable(folder: str | Path | None = None,
             entries.append(entry)
     for snapshot in sorted(folder.glob(f"{PREFIX}*.fcase")):
         if not snapshot.with_suffix(".json").exists():
-            entries.append(RecoveryEntry(
-                snapshot, snapshot.with_suffix(".json"),
-                "its description file is missing (open it with File > Open case to look at it)",
-                _mtime(snapshot), title=snapshot.name))
+            entries.append(
+                RecoveryEntry(
+                    snapshot,
+                    snapshot.with_suffix(".json"),
+                    "its description file is missing (open it with File > Open case to look at it)",
+                    _mtime(snapshot),
+                    title=snapshot.name,
+                )
+            )
     entries.sort(key=lambda e: e.written or 0.0, reverse=True)
     return entries
 
@@ -401,8 +428,13 @@ class Autosaver(QObject):
     snapshot_written = Signal(str)
     snapshot_failed = Signal(str)
 
-    def __init__(self, document: Any, folder: str | Path | None = None,
-                 interval_s: float | None = None, parent: QObject | None = None) -> None:
+    def __init__(
+        self,
+        document: Any,
+        folder: str | Path | None = None,
+        interval_s: float | None = None,
+        parent: QObject | None = None,
+    ) -> None:
         super().__init__(parent)
         self.document = document
         self.folder = Path(folder) if folder is not None else autosave_folder()
@@ -466,9 +498,18 @@ class Autosaver(QObject):
         info = self._describe(frozen)
         self.timings = {"gui": 1e3 * (time.perf_counter() - started)}
         claim = not self._claimed
-        self._claimed = True   # the worker writes the sidecar first when claiming
-        future = self._pool.submit(_write_snapshot, frozen, info, self._generation, started,
-                                   self.folder, self.snapshot_path, self.sidecar_path, claim)
+        self._claimed = True  # the worker writes the sidecar first when claiming
+        future = self._pool.submit(
+            _write_snapshot,
+            frozen,
+            info,
+            self._generation,
+            started,
+            self.folder,
+            self.snapshot_path,
+            self.sidecar_path,
+            claim,
+        )
         self._future = future
         # the worker holds no reference to this QObject (see workbench.qt.relay)
         future.add_done_callback(functools.partial(relay.post, self._relay_key))
@@ -480,14 +521,21 @@ class Autosaver(QObject):
 
     def _describe(self, case: Case) -> dict[str, Any]:
         path = self.document.path
-        return {"format": SIDECAR_FORMAT, "version": SIDECAR_VERSION,
-                "session": self.session, "snapshot": self.snapshot_path.name,
-                "pid": os.getpid(), "hostname": socket.gethostname(),
-                "session_started": self.session_started,
-                "original_path": str(Path(path).resolve()) if path is not None else None,
-                "title": path.name if path is not None else "untitled case",
-                "specimen": _specimen_name(case), "undo_steps": len(self.document.stack),
-                "case_id": case.meta.case_id, "examiner": case.meta.examiner}
+        return {
+            "format": SIDECAR_FORMAT,
+            "version": SIDECAR_VERSION,
+            "session": self.session,
+            "snapshot": self.snapshot_path.name,
+            "pid": os.getpid(),
+            "hostname": socket.gethostname(),
+            "session_started": self.session_started,
+            "original_path": str(Path(path).resolve()) if path is not None else None,
+            "title": path.name if path is not None else "untitled case",
+            "specimen": _specimen_name(case),
+            "undo_steps": len(self.document.stack),
+            "case_id": case.meta.case_id,
+            "examiner": case.meta.examiner,
+        }
 
     def _on_finished(self, future: Future) -> None:
         if future is not self._future:
@@ -495,8 +543,9 @@ class Autosaver(QObject):
         self._future = None
         error = future.exception()
         if error is not None:
-            self.last_error = (f"Autosave failed: {_problem_text(error)}; "
-                               "the case itself is unaffected")
+            self.last_error = (
+                f"Autosave failed: {_problem_text(error)}; the case itself is unaffected"
+            )
             self.snapshot_failed.emit(self.last_error)
         else:
             self.last_error = None
@@ -556,11 +605,20 @@ class Autosaver(QObject):
         except ValueError:
             old = {}
         self.folder.mkdir(parents=True, exist_ok=True)
-        _write_json_atomic(self.sidecar_path, {
-            **old, "session": self.session, "snapshot": self.snapshot_path.name,
-            "pid": os.getpid(), "hostname": socket.gethostname(),
-            "session_started": self.session_started, "recovered_from": entry.session,
-            "format": SIDECAR_FORMAT, "version": SIDECAR_VERSION})
+        _write_json_atomic(
+            self.sidecar_path,
+            {
+                **old,
+                "session": self.session,
+                "snapshot": self.snapshot_path.name,
+                "pid": os.getpid(),
+                "hostname": socket.gethostname(),
+                "session_started": self.session_started,
+                "recovered_from": entry.session,
+                "format": SIDECAR_FORMAT,
+                "version": SIDECAR_VERSION,
+            },
+        )
         try:
             os.replace(entry.snapshot, self.snapshot_path)
         except OSError:
@@ -591,8 +649,9 @@ class RecoverSnapshot(Command):
         pass
 
 
-def install_autosave(window: AutosaveHost, folder: str | Path | None = None,
-                     interval_s: float | None = None) -> Autosaver:
+def install_autosave(
+    window: AutosaveHost, folder: str | Path | None = None, interval_s: float | None = None
+) -> Autosaver:
     """Give ``window`` (a MainWindow) an :class:`Autosaver` as ``window.autosaver``."""
     saver = Autosaver(window.document, folder, interval_s, parent=window.window())
     saver.snapshot_failed.connect(window.status)
@@ -617,8 +676,7 @@ def recover(window: AutosaveHost, entry: RecoveryEntry) -> bool:
     snapshot that fails its integrity checks is reported and left alone.
     """
     if not entry.recoverable:
-        window.show_error(f"Could not recover {entry.snapshot.name}",
-                          WorkbenchError(entry.problem))
+        window.show_error(f"Could not recover {entry.snapshot.name}", WorkbenchError(entry.problem))
         return False
     try:
         loaded = load_case(entry.snapshot)  # every hash checked before anything is replaced
@@ -634,13 +692,19 @@ def recover(window: AutosaveHost, entry: RecoveryEntry) -> bool:
         window.show_error(f"Could not recover unsaved work from {entry.when}", error)
         return False
     stack = CommandStack(loaded.case)
-    stack.push(RecoverSnapshot(snapshot=entry.snapshot.name,
-                               written=_iso(entry.written) if entry.written else "",
-                               original_path=str(entry.original_path or "")))
+    stack.push(
+        RecoverSnapshot(
+            snapshot=entry.snapshot.name,
+            written=_iso(entry.written) if entry.written else "",
+            original_path=str(entry.original_path or ""),
+        )
+    )
     stack.clear()  # no history to undo, and the case stays unsaved
-    note = (f"Recovered unsaved work from {entry.when} ({entry.title}); "
-            + (f"Save writes to {entry.original_path}" if entry.original_path
-               else "it was never saved: Save asks for a file name"))
+    note = f"Recovered unsaved work from {entry.when} ({entry.title}); " + (
+        f"Save writes to {entry.original_path}"
+        if entry.original_path
+        else "it was never saved: Save asks for a file name"
+    )
     window.replace_case(OpenedCase(loaded.case, stack, [note]), entry.original_path)
     window.status(note)
     return True
@@ -652,10 +716,16 @@ RECOVER, DISCARD, LATER = "recover", "discard", "later"
 
 def ask_recovery(parent: QWidget, entry: RecoveryEntry) -> str:
     """The modal question: :data:`RECOVER`, :data:`DISCARD` or :data:`LATER`."""
-    box = QMessageBox(QMessageBox.Icon.Question, "Unsaved work found", entry.question(),
-                      QMessageBox.StandardButton.NoButton, parent)
-    box.setInformativeText("The workbench stopped before these changes were saved.\n\n"
-                           + entry.details())
+    box = QMessageBox(
+        QMessageBox.Icon.Question,
+        "Unsaved work found",
+        entry.question(),
+        QMessageBox.StandardButton.NoButton,
+        parent,
+    )
+    box.setInformativeText(
+        "The workbench stopped before these changes were saved.\n\n" + entry.details()
+    )
     recover_button = box.addButton("Recover", QMessageBox.ButtonRole.AcceptRole)
     discard_button = box.addButton("Discard", QMessageBox.ButtonRole.DestructiveRole)
     later_button = box.addButton("Later", QMessageBox.ButtonRole.RejectRole)
@@ -679,12 +749,14 @@ def offer_recovery(window: AutosaveHost, folder: str | Path | None = None) -> bo
     """
     saver = getattr(window, "autosaver", None)
     exclude = {saver.session} if saver is not None else set()
-    entries = find_recoverable(folder if folder is not None else
-                               (saver.folder if saver is not None else None), exclude)
+    entries = find_recoverable(
+        folder if folder is not None else (saver.folder if saver is not None else None), exclude
+    )
     for entry in entries:
         if not entry.recoverable:
-            window.messages.append(f"Autosave {entry.snapshot.name} cannot be recovered: "
-                                   f"{entry.problem}")
+            window.messages.append(
+                f"Autosave {entry.snapshot.name} cannot be recovered: {entry.problem}"
+            )
     if not window.interactive:
         return False
     for entry in (e for e in entries if e.recoverable):
@@ -697,9 +769,16 @@ def offer_recovery(window: AutosaveHost, folder: str | Path | None = None) -> bo
     return False
 
 
-def _write_snapshot(frozen: Case, info: dict[str, Any], generation: int, started: float,
-                    folder: Path, snapshot: Path, sidecar: Path,
-                    claim: bool) -> tuple[int, float]:
+def _write_snapshot(
+    frozen: Case,
+    info: dict[str, Any],
+    generation: int,
+    started: float,
+    folder: Path,
+    snapshot: Path,
+    sidecar: Path,
+    claim: bool,
+) -> tuple[int, float]:
     """Worker thread: the snapshot, then its sidecar (with ``claim``, a sidecar first).
 
     Plain data in and out: the worker never holds the Autosaver (a QObject).

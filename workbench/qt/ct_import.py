@@ -1,4 +1,4 @@
-""""Open CT" dialog: choose the bone threshold on a live preview, then extract the surface.
+""" "Open CT" dialog: choose the bone threshold on a live preview, then extract the surface.
 
 A non-modal :class:`CtImportDialog` over the main window:
 
@@ -105,9 +105,10 @@ class HistogramStrip(QWidget):
             values = self._bin_values()
             for i, (height, value) in enumerate(zip(self._heights, values, strict=True)):
                 above = self._iso is not None and value >= self._iso
-                painter.fillRect(QRectF(i * bar, h - height * (h - 4), max(bar, 1.0),
-                                        height * (h - 4)),
-                                 QColor(225, 215, 190) if above else QColor(120, 128, 140))
+                painter.fillRect(
+                    QRectF(i * bar, h - height * (h - 4), max(bar, 1.0), height * (h - 4)),
+                    QColor(225, 215, 190) if above else QColor(120, 128, 140),
+                )
         for tissue, level in self._presets.items():
             colour = PRESET_COLOURS.get(tissue, QColor("white"))
             painter.setPen(QPen(colour, 1, Qt.PenStyle.DotLine))
@@ -168,8 +169,9 @@ class CtImportDialog(QDialog):
 
     preview_updated = Signal(object)  # PreviewSurface
 
-    def __init__(self, window: CtImportHost, path: str | Path, *,
-                 max_voxels: int | None = None) -> None:
+    def __init__(
+        self, window: CtImportHost, path: str | Path, *, max_voxels: int | None = None
+    ) -> None:
         super().__init__(window.window())
         from pyvistaqt import QtInteractor
 
@@ -224,10 +226,15 @@ class CtImportDialog(QDialog):
         self.figures: dict[str, QLabel] = {}
         figures_box = QGroupBox("Figures")
         form = QFormLayout(figures_box)
-        for key, title in (("iso", "Iso level"), ("above", "Voxels ≥ iso"),
-                           ("triangles", "Preview"), ("volume", "Volume"),
-                           ("spacing", "Spacing"), ("values", "Values"),
-                           ("grid", "Preview grid")):
+        for key, title in (
+            ("iso", "Iso level"),
+            ("above", "Voxels ≥ iso"),
+            ("triangles", "Preview"),
+            ("volume", "Volume"),
+            ("spacing", "Spacing"),
+            ("values", "Values"),
+            ("grid", "Preview grid"),
+        ):
             label = QLabel("–")
             label.setWordWrap(True)
             label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
@@ -285,12 +292,21 @@ class CtImportDialog(QDialog):
         path, max_voxels = self.path, self.max_voxels
 
         def work(progress: Any) -> tuple[CtPreview, Any]:
-            ct = (CtPreview.load(path, progress=progress) if max_voxels is None
-                  else CtPreview.load(path, progress=progress, max_voxels=max_voxels))
+            ct = (
+                CtPreview.load(path, progress=progress)
+                if max_voxels is None
+                else CtPreview.load(path, progress=progress, max_voxels=max_voxels)
+            )
             return ct, jobs.sample_orientation(path)
 
-        self.runner.submit(LOAD, f"Reading the CT {path.name} …", work, self._loaded,
-                           self._load_failed, progress=True)
+        self.runner.submit(
+            LOAD,
+            f"Reading the CT {path.name} …",
+            work,
+            self._loaded,
+            self._load_failed,
+            progress=True,
+        )
 
     def _loaded(self, loaded: tuple[CtPreview, Any]) -> None:
         if self.state == "closed":
@@ -316,8 +332,9 @@ class CtImportDialog(QDialog):
         ni, nj, nk = info["shape_ijk"]
         ei, ej, ek = info["extent_mm"]
         si, sj, sk = info["spacing_mm"]
-        self.figures["volume"].setText(f"{ni} × {nj} × {nk} voxels\n"
-                                       f"{ei:.0f} × {ej:.0f} × {ek:.0f} mm ({info['frame']})")
+        self.figures["volume"].setText(
+            f"{ni} × {nj} × {nk} voxels\n{ei:.0f} × {ej:.0f} × {ek:.0f} mm ({info['frame']})"
+        )
         self.figures["spacing"].setText(f"{si:.3g} × {sj:.3g} × {sk:.3g} mm")
         kind = "HU" if ct.units == "HU" else "raw values, not HU"
         self.figures["values"].setText(f"{_fmt(lo)} … {_fmt(hi)} ({kind})")
@@ -326,15 +343,18 @@ class CtImportDialog(QDialog):
             self.figures["grid"].setText("full resolution")
         else:
             pi, pj, pk = info["preview_shape_ijk"]
-            self.figures["grid"].setText(f"{pi} × {pj} × {pk} (block means of "
-                                         f"{strides[0]} × {strides[1]} × {strides[2]} voxels)")
+            self.figures["grid"].setText(
+                f"{pi} × {pj} × {pk} (block means of "
+                f"{strides[0]} × {strides[1]} × {strides[2]} voxels)"
+            )
         for tissue, button in (("bone", self.bone_button), ("skin", self.skin_button)):
             button.setToolTip(ct.presets[tissue].rule)
         self.state = "preview"
         self.progress.hide()
         self._set_controls(True)
-        self.status_label.setText("Move the level; the preview follows. "
-                                  "Grey pieces are dropped by the extraction.")
+        self.status_label.setText(
+            "Move the level; the preview follows. Grey pieces are dropped by the extraction."
+        )
         self.apply_preset("bone")
 
     def _load_failed(self, exc: BaseException) -> None:
@@ -393,15 +413,17 @@ class CtImportDialog(QDialog):
         tissue, exact = self._tissue()
         preset = self.ct.presets[tissue]
         self.tissue_label.setText(
-            f"Tissue: <b>{tissue}</b> — " + ("preset level" if exact else
-                                             f"custom level (preset {preset.iso:g}{units})"))
+            f"Tissue: <b>{tissue}</b> — "
+            + ("preset level" if exact else f"custom level (preset {preset.iso:g}{units})")
+        )
         self.tissue_label.setToolTip(preset.rule)
         self.histogram.set_iso(iso)
         summary = self.ct.summary(iso)
         self.figures["iso"].setText(f"{iso:g}{units}")
         self.figures["above"].setText(
             f"{summary.voxels_above:,} ({100 * summary.fraction_above:.2f} %, "
-            f"{summary.volume_above_ml:,.0f} ml); percentile {summary.percentile:.1f}")
+            f"{summary.volume_above_ml:,.0f} ml); percentile {summary.percentile:.1f}"
+        )
         self._debounce.start()
 
     # ------------------------------------------------------------ preview
@@ -409,20 +431,34 @@ class CtImportDialog(QDialog):
         if self.ct is None or self.state != "preview":
             return
         ct, iso, token = self.ct, self.iso, CancelToken()
-        self.runner.submit(PREVIEW, f"Preview at iso {iso:g} …",
-                           lambda: ct.surface(iso, cancel=token), self._show_preview,
-                           self._preview_failed, token=token)
+        self.runner.submit(
+            PREVIEW,
+            f"Preview at iso {iso:g} …",
+            lambda: ct.surface(iso, cancel=token),
+            self._show_preview,
+            self._preview_failed,
+            token=token,
+        )
 
     def _show_preview(self, surface: PreviewSurface) -> None:
         if self.state == "closed":
             return
         plotter = self.plotter
-        for name, mesh, colour, opacity in (("ct_preview", surface.mesh, BONE, 1.0),
-                                            ("ct_debris", surface.debris, DEBRIS, 0.45)):
+        for name, mesh, colour, opacity in (
+            ("ct_preview", surface.mesh, BONE, 1.0),
+            ("ct_debris", surface.debris, DEBRIS, 0.45),
+        ):
             if mesh.n_faces:
-                plotter.add_mesh(to_polydata(mesh), color=colour, opacity=opacity,
-                                 smooth_shading=True, name=name, pickable=False, render=False,
-                                 reset_camera=False)
+                plotter.add_mesh(
+                    to_polydata(mesh),
+                    color=colour,
+                    opacity=opacity,
+                    smooth_shading=True,
+                    name=name,
+                    pickable=False,
+                    render=False,
+                    reset_camera=False,
+                )
             else:
                 plotter.remove_actor(name, render=False)  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         if surface.empty:
@@ -432,7 +468,8 @@ class CtImportDialog(QDialog):
                 f"{surface.mesh.n_faces:,} triangles, {surface.n_components} piece"
                 f"{'s' if surface.n_components != 1 else ''} "
                 f"({surface.debris.n_faces:,} triangles of debris); "
-                f"{1000 * surface.seconds:.0f} ms")
+                f"{1000 * surface.seconds:.0f} ms"
+            )
             if not self._camera_set:
                 self._reset_camera(surface)
         self.shown = surface
@@ -452,8 +489,11 @@ class CtImportDialog(QDialog):
         bounds = surface.mesh.bounds
         focus = bounds.mean(axis=0)
         distance = 3.0 * float(np.linalg.norm(bounds[1] - bounds[0]))
-        self.plotter.camera_position = [tuple(focus + distance * view), tuple(focus),
-                                        tuple(superior)]
+        self.plotter.camera_position = [
+            tuple(focus + distance * view),
+            tuple(focus),
+            tuple(superior),
+        ]
         self.plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
         self.plotter.camera.zoom(1.3)
         self._camera_set = True
@@ -476,10 +516,12 @@ class CtImportDialog(QDialog):
         self.cancel_button.setEnabled(True)
         self.progress.setRange(0, 0)
         self.progress.show()
-        self.status_label.setText(f"Extracting the {tissue} surface at {self.iso:g}"
-                                  f"{_units_suffix(self.ct.units)} …")
-        started = self.window_.open_ct(self.path, tissue, iso, volume=self.ct.volume,
-                                       finished=self._extract_finished)
+        self.status_label.setText(
+            f"Extracting the {tissue} surface at {self.iso:g}{_units_suffix(self.ct.units)} …"
+        )
+        started = self.window_.open_ct(
+            self.path, tissue, iso, volume=self.ct.volume, finished=self._extract_finished
+        )
         if not started:  # the user kept the open case
             self._back_to_preview("The open case was kept.")
             return
@@ -494,8 +536,9 @@ class CtImportDialog(QDialog):
         """Back to the preview if another "open" job of the window superseded the extraction."""
         token = self._extract_token
         if self.state == "extracting" and token is not None and token.cancelled:
-            self._back_to_preview("Another file is being opened in the window; "
-                                  "the extraction stopped.")
+            self._back_to_preview(
+                "Another file is being opened in the window; the extraction stopped."
+            )
 
     def _extract_finished(self, ok: bool) -> None:
         if self.state != "extracting":
@@ -524,18 +567,25 @@ class CtImportDialog(QDialog):
         self.reject()
 
     def _on_progress(self, channel: str, step: str, fraction: float) -> None:
-        if (channel == EXTRACT and self.state == "extracting") or \
-                (channel == LOAD and self.state == "loading"):
+        if (channel == EXTRACT and self.state == "extracting") or (
+            channel == LOAD and self.state == "loading"
+        ):
             show_fraction(self.progress, fraction, step)
             self.progress.setFormat(f"{step} %p%")
 
     def _set_controls(self, enabled: bool) -> None:
-        for widget in (self.slider, self.spin, self.bone_button, self.skin_button,
-                       self.histogram, self.extract_button):
+        for widget in (
+            self.slider,
+            self.spin,
+            self.bone_button,
+            self.skin_button,
+            self.histogram,
+            self.extract_button,
+        ):
             widget.setEnabled(enabled)
 
     # ------------------------------------------------------------ closing
-    def done(self, result: int) -> None:  # noqa: D401 - Qt override (accept/reject)
+    def done(self, result: int) -> None:
         self.teardown()
         super().done(result)
 
@@ -560,8 +610,10 @@ class CtImportDialog(QDialog):
         self._debounce.stop()
         self.runner.cancel(LOAD)
         self.runner.cancel(PREVIEW)
-        for signal, slot in ((self.runner.progress_changed, self._on_progress),
-                             (self.runner.busy_changed, self._check_extraction)):
+        for signal, slot in (
+            (self.runner.progress_changed, self._on_progress),
+            (self.runner.busy_changed, self._check_extraction),
+        ):
             try:
                 signal.disconnect(slot)
             except (RuntimeError, TypeError):

@@ -25,16 +25,20 @@ def error_text(what: str, exc: BaseException) -> tuple[str, str]:
     if isinstance(exc, (OSError, ValueError, KeyError)):
         return f"{what}.\n\n{type(exc).__name__}: {exc}", ""
     details = getattr(exc, "worker_traceback", "") or "".join(
-        traceback.format_exception(type(exc), exc, exc.__traceback__))
-    return (f"{what}.\n\nUnexpected error ({type(exc).__name__}: {exc}). The case is "
-            "unchanged; please report this with the details below."), details
+        traceback.format_exception(type(exc), exc, exc.__traceback__)
+    )
+    return (
+        f"{what}.\n\nUnexpected error ({type(exc).__name__}: {exc}). The case is "
+        "unchanged; please report this with the details below."
+    ), details
 
 
 def show_error(parent: QWidget, what: str, exc: BaseException) -> QMessageBox:
     """A modal-less warning box with the readable message (returned for tests)."""
     text, details = error_text(what, exc)
-    box = QMessageBox(QMessageBox.Icon.Warning, "Forensic workbench", text,
-                      QMessageBox.StandardButton.Ok, parent)
+    box = QMessageBox(
+        QMessageBox.Icon.Warning, "Forensic workbench", text, QMessageBox.StandardButton.Ok, parent
+    )
     if details:
         box.setDetailedText(details)
     box.open()
@@ -44,20 +48,31 @@ def show_error(parent: QWidget, what: str, exc: BaseException) -> QMessageBox:
 def ask_units(parent: QWidget, file_name: str, problem: str) -> float | None:
     """Ask for the units of a mesh whose size does not look like mm; returns the mm factor."""
     choice, ok = QInputDialog.getItem(
-        parent, "Units of the mesh file",
-        f"{file_name}: {problem}\n\nWhich unit are the file's numbers in?", list(UNITS), 0, False)
+        parent,
+        "Units of the mesh file",
+        f"{file_name}: {problem}\n\nWhich unit are the file's numbers in?",
+        list(UNITS),
+        0,
+        False,
+    )
     if not ok:
         return None
     factors = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
     if choice in factors:
         return factors[choice]
-    value, ok = QInputDialog.getDouble(parent, "Scale factor", "Millimetres per file unit:",
-                                       1.0, 1e-6, 1e6, 4)
+    value, ok = QInputDialog.getDouble(
+        parent, "Scale factor", "Millimetres per file unit:", 1.0, 1e-6, 1e6, 4
+    )
     return value if ok else None
 
 
 def ask_save_changes(parent: QWidget, name: str) -> QMessageBox.StandardButton:
     return QMessageBox.question(
-        parent, "Unsaved changes", f"Save the changes to {name}?",
-        QMessageBox.StandardButton.Save | QMessageBox.StandardButton.Discard
-        | QMessageBox.StandardButton.Cancel, QMessageBox.StandardButton.Save)
+        parent,
+        "Unsaved changes",
+        f"Save the changes to {name}?",
+        QMessageBox.StandardButton.Save
+        | QMessageBox.StandardButton.Discard
+        | QMessageBox.StandardButton.Cancel,
+        QMessageBox.StandardButton.Save,
+    )

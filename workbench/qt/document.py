@@ -63,8 +63,13 @@ class Document(QObject):
         self.stack_changed.emit()
 
     # ------------------------------------------------------------ lifecycle
-    def replace(self, case: Case, stack: CommandStack | None = None,
-                path: str | Path | None = None, notes: list[str] | None = None) -> None:
+    def replace(
+        self,
+        case: Case,
+        stack: CommandStack | None = None,
+        path: str | Path | None = None,
+        notes: list[str] | None = None,
+    ) -> None:
         """Make ``case`` the current case (a fresh history unless ``stack`` is given)."""
         self._disconnect()
         self.case = case

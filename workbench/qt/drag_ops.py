@@ -61,11 +61,18 @@ class DragTool:
     (:meth:`attach`): both call back into this tool.
     """
 
-    def __init__(self, document: Document, scene: SceneView, session: Session,
-                 detail: InteractiveDetail, plotter: Any, landmarks_panel: LandmarksPanel,
-                 reconstruct_panel: ReconstructPanel,
-                 draw_landmarks: Callable[[dict[str, np.ndarray] | None], None],
-                 draw_face: Callable[[], None]) -> None:
+    def __init__(
+        self,
+        document: Document,
+        scene: SceneView,
+        session: Session,
+        detail: InteractiveDetail,
+        plotter: Any,
+        landmarks_panel: LandmarksPanel,
+        reconstruct_panel: ReconstructPanel,
+        draw_landmarks: Callable[[dict[str, np.ndarray] | None], None],
+        draw_face: Callable[[], None],
+    ) -> None:
         self.document = document
         self.scene = scene
         self.session = session
@@ -77,11 +84,11 @@ class DragTool:
         self._draw_face = draw_face
         self.picker: ClickPicker | None = None
         self.guide_view: GuideView | None = None
-        self.drag_timings: list[float] = []   # seconds per computed preview (tests, benchmarks)
+        self.drag_timings: list[float] = []  # seconds per computed preview (tests, benchmarks)
         self._preview_fit: PreviewFit | None = None
         self._drag_pending: tuple[str, Any] | None = None
         self._drag_scheduled = False
-        self._muscle_binding: tuple | None = None   # see _preview_muscles
+        self._muscle_binding: tuple | None = None  # see _preview_muscles
 
     def attach(self, picker: ClickPicker, guide_view: GuideView) -> None:
         """The views whose drags this tool handles (they are built after it)."""
@@ -112,8 +119,9 @@ class DragTool:
         if point is None:
             self._redraw_after_drag()
             return
-        if not self.document.push(MoveLandmark(surface="skull", code=code, position=point),
-                                  merge=False):
+        if not self.document.push(
+            MoveLandmark(surface="skull", code=code, position=point), merge=False
+        ):
             self._redraw_after_drag()
 
     def cancel_drag(self) -> None:
@@ -180,7 +188,7 @@ class DragTool:
                     self.scene.update_points("face", skin)
                 if self.scene.has("muscles") and self.scene.visible.get("muscles"):
                     self._preview_muscles(skin)
-            self.plotter.update()   # one render, in the view's next paint (never two)
+            self.plotter.update()  # one render, in the view's next paint (never two)
         elif self.guide_view is not None:
             self.guide_view.show_dragged(value)
             if preview is not None and preview.move_guide(value):

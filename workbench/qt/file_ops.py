@@ -46,12 +46,17 @@ def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
 
     anatomy = jobs.sample_orientation(source)
     if anatomy is not None and opened.case.orientation is None:
-        opened.stack.push(SetOrientation(jobs.anatomy_orientation(anatomy),
-                                         label="Orientation of the sample file"))
+        opened.stack.push(
+            SetOrientation(
+                jobs.anatomy_orientation(anatomy), label="Orientation of the sample file"
+            )
+        )
         opened.stack.clear()
         opened.stack.set_clean()
-        opened.notes.append(f"{source.name}: a known sample; face toward "
-                            f"{anatomy['anterior']}, up {anatomy['superior']} (file axes)")
+        opened.notes.append(
+            f"{source.name}: a known sample; face toward "
+            f"{anatomy['anterior']}, up {anatomy['superior']} (file axes)"
+        )
     return opened
 
 
@@ -69,14 +74,20 @@ def _drawable(opened: Any) -> Any:
     mesh = opened.case.specimen.mesh
     if mesh is not None and mesh.n_faces:
         _ = mesh.vertex_normals
-        snap_index(mesh).warm()   # the first Snap then takes ms, not ~0.1 s
+        snap_index(mesh).warm()  # the first Snap then takes ms, not ~0.1 s
         RayCaster.shared(mesh)
-    case_validator()              # (~75 ms, else paid by the first Save on the GUI thread)
+    case_validator()  # (~75 ms, else paid by the first Save on the GUI thread)
     return opened
 
 
-def case_from_ct(path: Path, tissue: str, iso: float | None, *, volume: Any = None,
-                 progress: Callable[[str, float], None] | None = None) -> OpenedCase:
+def case_from_ct(
+    path: Path,
+    tissue: str,
+    iso: float | None,
+    *,
+    volume: Any = None,
+    progress: Callable[[str, float], None] | None = None,
+) -> OpenedCase:
     """Worker side of "Open CT": surface (mm, CT frame) → PLY in a temporary folder → new case.
 
     ``iso`` in the volume's units (None: the ``tissue`` preset); ``volume``
@@ -90,16 +101,23 @@ def case_from_ct(path: Path, tissue: str, iso: float | None, *, volume: Any = No
         if progress is not None:
             progress(step, fraction)
 
-    result = mesh_from_ct(path if volume is None else volume, tissue, iso=iso,
-                          progress=lambda step, f: report(step, 0.7 * f))
+    result = mesh_from_ct(
+        path if volume is None else volume,
+        tissue,
+        iso=iso,
+        progress=lambda step, f: report(step, 0.7 * f),
+    )
     report("writing the surface", 0.71)
     folder = Path(tempfile.mkdtemp(prefix="workbench-ct-"))
     stem = path.name.split(".")[0]
     surface = write_mesh(folder / f"{stem}_{tissue}.ply", result.mesh)
     report("starting the case", 0.74)
     opened = start_case_from_skull(surface, units="mm")
-    opened.notes.insert(0, f"{tissue} surface of {path} at iso {result.iso:g} "
-                           f"{result.units} ({result.rule}), frame {result.frame}")
+    opened.notes.insert(
+        0,
+        f"{tissue} surface of {path} at iso {result.iso:g} "
+        f"{result.units} ({result.rule}), frame {result.frame}",
+    )
     report("orientation", 0.97)
     opened = _with_orientation(opened, path)
     report("done", 1.0)
@@ -117,8 +135,9 @@ class FileTool:
         The last CT import dialog opened.
     """
 
-    def __init__(self, document: Document, session: Session, runner: TaskRunner,
-                 host: FileHost) -> None:
+    def __init__(
+        self, document: Document, session: Session, runner: TaskRunner, host: FileHost
+    ) -> None:
         self.document = document
         self.session = session
         self.runner = runner
@@ -138,11 +157,15 @@ class FileTool:
         if not self.may_discard():
             return
         path = Path(path)
-        self.runner.submit("open", f"Opening {path.name} …",
-                           lambda: _drawable(_with_orientation(
-                               start_case_from_skull(path, units=units, scale=scale), path)),
-                           lambda opened: self.replace_case(opened, None),
-                           lambda exc: self._open_failed(path, exc))
+        self.runner.submit(
+            "open",
+            f"Opening {path.name} …",
+            lambda: _drawable(
+                _with_orientation(start_case_from_skull(path, units=units, scale=scale), path)
+            ),
+            lambda opened: self.replace_case(opened, None),
+            lambda exc: self._open_failed(path, exc),
+        )
 
     def _open_failed(self, path: Path, exc: BaseException) -> None:
         if isinstance(exc, UnitsError) and self.host.interactive:
@@ -152,8 +175,15 @@ class FileTool:
             return
         self.show_error(f"Could not open {path.name}", exc)
 
-    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None, *,
-                volume: Any = None, finished: Callable[[bool], None] | None = None) -> bool:
+    def open_ct(
+        self,
+        path: str | Path,
+        tissue: str = "bone",
+        iso: float | None = None,
+        *,
+        volume: Any = None,
+        finished: Callable[[bool], None] | None = None,
+    ) -> bool:
         """Extract the bone surface of a CT (worker, channel "open") and start a case from it.
 
         The extracted surface (mm, the CT's physical frame) is the case's
@@ -180,10 +210,16 @@ class FileTool:
             if finished is not None:
                 finished(False)
 
-        self.runner.submit("open", f"Extracting the {tissue} surface of {path.name} …",
-                           lambda progress: _drawable(case_from_ct(
-                               path, tissue, iso, volume=volume, progress=progress)),
-                           done, failed, progress=True)
+        self.runner.submit(
+            "open",
+            f"Extracting the {tissue} surface of {path.name} …",
+            lambda progress: _drawable(
+                case_from_ct(path, tissue, iso, volume=volume, progress=progress)
+            ),
+            done,
+            failed,
+            progress=True,
+        )
         return True
 
     def open_ct_dialog(self, path: str | Path) -> Any:
@@ -203,10 +239,13 @@ class FileTool:
         if not self.may_discard():
             return
         path = Path(path)
-        self.runner.submit("open", f"Opening case {path.name} …",
-                           lambda: _drawable(load_case(path)),
-                           lambda loaded: self._opened_case(loaded, path),
-                           lambda exc: self.show_error(f"Could not open {path.name}", exc))
+        self.runner.submit(
+            "open",
+            f"Opening case {path.name} …",
+            lambda: _drawable(load_case(path)),
+            lambda loaded: self._opened_case(loaded, path),
+            lambda exc: self.show_error(f"Could not open {path.name}", exc),
+        )
 
     def _opened_case(self, loaded: Any, path: Path) -> None:
         """A loaded case file in the window, with its integrity and face notes.
@@ -219,8 +258,10 @@ class FileTool:
         audit = chain if chain.startswith("audit log") else f"audit log {chain}"
         notes = [f"{path.name}: evidence and arrays match their hashes; {audit}"]
         if "template_hash" in loaded.case.parameters:
-            notes.append(f"{path.name} was reconstructed before, but a case file keeps the "
-                         "settings, not the face: Reconstruct face (Ctrl+R) fits it again")
+            notes.append(
+                f"{path.name} was reconstructed before, but a case file keeps the "
+                "settings, not the face: Reconstruct face (Ctrl+R) fits it again"
+            )
         for note in notes:
             self.host.messages.append(note)
         self.status(f"{self.host.status_text()}; {audit}")
@@ -231,9 +272,11 @@ class FileTool:
         self.document.replace(opened.case, opened.stack, path, opened.notes)
         for note in opened.notes:
             self.host.messages.append(note)
-        self.status(f"Opened {path.name if path else 'a new case'}: "
-                    f"{opened.case.specimen.mesh.n_faces if opened.case.specimen.mesh else 0} "
-                    "triangles")
+        self.status(
+            f"Opened {path.name if path else 'a new case'}: "
+            f"{opened.case.specimen.mesh.n_faces if opened.case.specimen.mesh else 0} "
+            "triangles"
+        )
 
     # ------------------------------------------------------------ save
     def save(self) -> bool:
@@ -259,18 +302,22 @@ class FileTool:
 
     def ask_save_as(self) -> bool:
         start = str(self.document.path or "case.fcase")
-        name, _ = QFileDialog.getSaveFileName(self.host.window(), "Save case as", start,
-                                              CASE_FILTER)
+        name, _ = QFileDialog.getSaveFileName(
+            self.host.window(), "Save case as", start, CASE_FILTER
+        )
         return self.save_to(name) if name else False
 
     # ------------------------------------------------------------ export
     def export_to(self, folder: str | Path) -> None:
         """Face and head meshes, landmarks and the PDF report into ``folder`` (worker)."""
         case, fit, notes = self.document.case, self.session.fit, list(self.document.notes)
-        self.runner.submit("export", f"Exporting to {folder} …",
-                           lambda: jobs.export_results(folder, case, fit, notes=notes),
-                           self._exported,
-                           lambda exc: self.show_error(f"Could not export to {folder}", exc))
+        self.runner.submit(
+            "export",
+            f"Exporting to {folder} …",
+            lambda: jobs.export_results(folder, case, fit, notes=notes),
+            self._exported,
+            lambda exc: self.show_error(f"Could not export to {folder}", exc),
+        )
 
     def _exported(self, files: dict[str, Path]) -> None:
         self.exported = files
@@ -281,14 +328,16 @@ class FileTool:
 
     # ------------------------------------------------------------ dialogs
     def ask_open_skull(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self.host.window(), "Open skull mesh", "",
-                                              MESH_FILTER)
+        name, _ = QFileDialog.getOpenFileName(
+            self.host.window(), "Open skull mesh", "", MESH_FILTER
+        )
         if name:
             self.open_skull(name)
 
     def ask_open_ct(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self.host.window(), "Open CT volume (or cancel "
-                                              "for a DICOM folder)", "", CT_FILTER)
+        name, _ = QFileDialog.getOpenFileName(
+            self.host.window(), "Open CT volume (or cancel for a DICOM folder)", "", CT_FILTER
+        )
         if not name:
             name = QFileDialog.getExistingDirectory(self.host.window(), "Open DICOM folder")
         if name and self.host.interactive:
@@ -307,15 +356,16 @@ class FileTool:
             self.export_to(name)
 
     def ask_load_truth(self) -> None:
-        name, _ = QFileDialog.getOpenFileName(self.host.window(),
-                                              "True skin surface (same frame, mm)", "",
-                                              MESH_FILTER)
+        name, _ = QFileDialog.getOpenFileName(
+            self.host.window(), "True skin surface (same frame, mm)", "", MESH_FILTER
+        )
         if name:
             self.host.load_truth(name)
 
     def ask_screenshot(self) -> None:
-        name, _ = QFileDialog.getSaveFileName(self.host.window(), "Save window picture",
-                                              "window.png", "PNG (*.png)")
+        name, _ = QFileDialog.getSaveFileName(
+            self.host.window(), "Save window picture", "window.png", "PNG (*.png)"
+        )
         if name:
             self.host.save_screenshot(name)
 
@@ -323,8 +373,10 @@ class FileTool:
         """True if the open case may be replaced (saved, discarded, or clean)."""
         if not self.document.is_dirty or not self.host.interactive:
             return True
-        answer = dialogs.ask_save_changes(self.host.window(), self.document.path.name if self.document.path
-                                          else "the untitled case")
+        answer = dialogs.ask_save_changes(
+            self.host.window(),
+            self.document.path.name if self.document.path else "the untitled case",
+        )
         if answer == dialogs.QMessageBox.StandardButton.Save:
             return self.save()
         if answer == dialogs.QMessageBox.StandardButton.Discard:

@@ -28,8 +28,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PySide6.QtCore import QEvent, Qt, QTimer
-from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QHBoxLayout, QLabel, QRadioButton,
-                               QStackedWidget, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QButtonGroup,
+    QCheckBox,
+    QHBoxLayout,
+    QLabel,
+    QRadioButton,
+    QStackedWidget,
+    QVBoxLayout,
+    QWidget,
+)
 
 from workbench.qt.lod import decimated, with_normals
 from workbench.qt.scene import SMOOTH, is_closed
@@ -69,9 +77,15 @@ class GuideView(QWidget):
         Previews and stores the guide drags.
     """
 
-    def __init__(self, session: Session, runner: TaskRunner, scene: SceneView,
-                 guide_list: GuideList, drag_host: GuideDragHost,
-                 parent: QWidget | None = None) -> None:
+    def __init__(
+        self,
+        session: Session,
+        runner: TaskRunner,
+        scene: SceneView,
+        guide_list: GuideList,
+        drag_host: GuideDragHost,
+        parent: QWidget | None = None,
+    ) -> None:
         from pyvistaqt import QtInteractor
 
         super().__init__(parent)
@@ -82,11 +96,11 @@ class GuideView(QWidget):
         self.drag_host = drag_host
         self.side = "frontal"
         self.closed_by_user = False
-        self.stale = True   # needs drawing when next shown (changed while hidden)
+        self.stale = True  # needs drawing when next shown (changed while hidden)
         self._samples = 0
         self.dragging: tuple[int, Guide] | None = None
         self._skull_light: Any = None
-        self.drawn_fit: Any = None   # the fit the view shows (None: none yet)
+        self.drawn_fit: Any = None  # the fit the view shows (None: none yet)
         self._face_actor: Any = None
         self._guide_slots: dict[int, tuple[Any, int, int]] = {}
 
@@ -99,8 +113,10 @@ class GuideView(QWidget):
         self.frontal.toggled.connect(lambda on: self.set_side("frontal" if on else "lateral"))
         self.show_predictions = QCheckBox("Published predictions")
         self.show_predictions.setChecked(True)
-        self.show_predictions.setToolTip("Cyan: the published prediction rules for the same "
-                                         "features, beside the classic guides (magenta)")
+        self.show_predictions.setToolTip(
+            "Cyan: the published prediction rules for the same "
+            "features, beside the classic guides (magenta)"
+        )
         self.show_predictions.toggled.connect(lambda _on: self.refresh())
         self.info = QLabel("Drag a magenta guide; the face follows.")
         self.info.setWordWrap(True)
@@ -122,8 +138,9 @@ class GuideView(QWidget):
         # until a fit is drawn a plain label stands in for the 3D view: an
         # empty OpenGL view would still cost a software-GL paint, in the same
         # pass as the main view's when the first fit opens this view
-        self.placeholder = QLabel("The nose and mouth guides appear here once the face "
-                                  "is fitted (Reconstruct).")
+        self.placeholder = QLabel(
+            "The nose and mouth guides appear here once the face is fitted (Reconstruct)."
+        )
         self.placeholder.setWordWrap(True)
         self.placeholder.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.placeholder.setStyleSheet("background: #1f2329; color: #c8ccd2; padding: 24px;")
@@ -137,10 +154,14 @@ class GuideView(QWidget):
         layout.addWidget(self.pages, 1)
         layout.addWidget(self.info)
         iren = self._iren = self.plotter.iren.interactor
-        self._tags = {event: iren.AddObserver(event, handler, PRIORITY)
-                      for event, handler in (("LeftButtonPressEvent", self._on_press),
-                                             ("MouseMoveEvent", self._on_move),
-                                             ("LeftButtonReleaseEvent", self._on_release))}
+        self._tags = {
+            event: iren.AddObserver(event, handler, PRIORITY)
+            for event, handler in (
+                ("LeftButtonPressEvent", self._on_press),
+                ("MouseMoveEvent", self._on_move),
+                ("LeftButtonReleaseEvent", self._on_release),
+            )
+        }
 
     # ------------------------------------------------------------ content
     def set_side(self, side: str) -> None:
@@ -158,10 +179,13 @@ class GuideView(QWidget):
         if fit is None:
             self.refresh()
             return
-        self.runner.submit("guide_view", "Preparing the guide view …",
-                           lambda: with_normals(decimated(fit.skull_h, 15_000)),
-                           lambda light: self._skull_ready(to_polydata(light, normals=True)),
-                           lambda _exc: self.refresh(reset_camera=True))
+        self.runner.submit(
+            "guide_view",
+            "Preparing the guide view …",
+            lambda: with_normals(decimated(fit.skull_h, 15_000)),
+            lambda light: self._skull_ready(to_polydata(light, normals=True)),
+            lambda _exc: self.refresh(reset_camera=True),
+        )
 
     def _skull_ready(self, light: Any) -> None:
         self._skull_light = light
@@ -173,7 +197,7 @@ class GuideView(QWidget):
         if is_closed(p):
             return
         if not self.isVisible():
-            self.stale = True   # drawn when shown (hidden views cost nothing)
+            self.stale = True  # drawn when shown (hidden views cost nothing)
             return
         self.stale = False
         p.clear_actors()
@@ -185,13 +209,25 @@ class GuideView(QWidget):
             self.pages.setCurrentWidget(self.placeholder)
             return
         if self._skull_light is not None:
-            p.add_mesh(self._skull_light, color=(0.93, 0.89, 0.80), **SMOOTH, pickable=False,
-                       render=False, name="gv_skull")
+            p.add_mesh(
+                self._skull_light,
+                color=(0.93, 0.89, 0.80),
+                **SMOOTH,
+                pickable=False,
+                render=False,
+                name="gv_skull",
+            )
         face = to_polydata(fit.recon.head.skin, normals=True)
-        self._face_actor = p.add_mesh(face, color=(0.91, 0.72, 0.60), opacity=0.45,
-                                      **SMOOTH, pickable=False, render=False,
-                                      name="gv_face")
-        self._face_actor.GetProperty().BackfaceCullingOn()   # blended unsorted (no OIT)
+        self._face_actor = p.add_mesh(
+            face,
+            color=(0.91, 0.72, 0.60),
+            opacity=0.45,
+            **SMOOTH,
+            pickable=False,
+            render=False,
+            name="gv_face",
+        )
+        self._face_actor.GetProperty().BackfaceCullingOn()  # blended unsorted (no OIT)
         self._draw_guides()
         self.drawn_fit = fit
         if reset_camera:
@@ -209,7 +245,7 @@ class GuideView(QWidget):
         if is_closed(self.plotter):
             return
         if self.drawn_fit is not None:
-            self.pages.setCurrentWidget(self.plotter)   # (a first show paints by itself)
+            self.pages.setCurrentWidget(self.plotter)  # (a first show paints by itself)
         self.plotter.update()
 
     def _fit(self) -> FitResult:
@@ -237,7 +273,7 @@ class GuideView(QWidget):
             return np.array([[g.value[0], VLINE_Y[0], z], [g.value[0], VLINE_Y[1], z]])
         if g.kind == "hline":
             return np.array([[HLINE_X[0], g.value[0], z], [HLINE_X[1], g.value[0], z]])
-        return np.array([[150.0, g.value[0], g.value[1]]])   # lateral: in front of the head
+        return np.array([[150.0, g.value[0], g.value[1]]])  # lateral: in front of the head
 
     def _draw_guides(self) -> None:
         """Guides (magenta) and predictions (cyan): one lines and one points actor each.
@@ -252,17 +288,27 @@ class GuideView(QWidget):
             predicted: list[Guide] = []
             for pred in self._fit().predictions:
                 try:
-                    predicted += [g for g in guides_from_prediction(pred, guides)
-                                  if g.view == self.side]
+                    predicted += [
+                        g for g in guides_from_prediction(pred, guides) if g.view == self.side
+                    ]
                 except Exception:  # noqa: BLE001 - a prediction that maps to no guide
                     continue
             self._add_set(list(enumerate(predicted)), PREDICTION, 2, "gv_pred", track=False)
-        self.info.setText("Magenta: guides (drag to move). Cyan: published predictions."
-                          if self.show_predictions.isChecked() else
-                          "Magenta: guides (drag to move).")
+        self.info.setText(
+            "Magenta: guides (drag to move). Cyan: published predictions."
+            if self.show_predictions.isChecked()
+            else "Magenta: guides (drag to move)."
+        )
 
-    def _add_set(self, items: list[tuple[int, Guide]], colour: tuple, width: float,
-                 prefix: str, *, track: bool) -> None:
+    def _add_set(
+        self,
+        items: list[tuple[int, Guide]],
+        colour: tuple,
+        width: float,
+        prefix: str,
+        *,
+        track: bool,
+    ) -> None:
         import pyvista as pv
 
         p = self.plotter
@@ -285,27 +331,44 @@ class GuideView(QWidget):
             pts = np.vstack(lines)
             n = len(lines)
             cells = np.column_stack([np.full(n, 2), 2 * np.arange(n), 2 * np.arange(n) + 1])
-            actors["lines"] = p.add_mesh(pv.PolyData(pts, lines=cells.ravel()), color=colour,
-                                         line_width=width, pickable=False, render=False,
-                                         name=f"{prefix}_lines")
+            actors["lines"] = p.add_mesh(
+                pv.PolyData(pts, lines=cells.ravel()),
+                color=colour,
+                line_width=width,
+                pickable=False,
+                render=False,
+                name=f"{prefix}_lines",
+            )
         if points:
-            actors["points"] = p.add_points(np.vstack(points), color=colour, point_size=14,
-                                            render_points_as_spheres=True, pickable=False,
-                                            render=False, name=f"{prefix}_points")
+            actors["points"] = p.add_points(
+                np.vstack(points),
+                color=colour,
+                point_size=14,
+                render_points_as_spheres=True,
+                pickable=False,
+                render=False,
+                name=f"{prefix}_points",
+            )
         if track:
-            self._guide_slots = {row: (actors[kind], first, n)
-                                 for row, kind, first, n in slots}
+            self._guide_slots = {row: (actors[kind], first, n) for row, kind, first, n in slots}
             if label_points:
-                p.add_point_labels(np.array(label_points), label_text, font_size=10,
-                                   text_color=colour, shape_opacity=0.0, show_points=False,
-                                   always_visible=True, pickable=False, render=False,
-                                   name=f"{prefix}_labels")
+                p.add_point_labels(
+                    np.array(label_points),
+                    label_text,
+                    font_size=10,
+                    text_color=colour,
+                    shape_opacity=0.0,
+                    show_points=False,
+                    always_visible=True,
+                    pickable=False,
+                    render=False,
+                    name=f"{prefix}_labels",
+                )
 
     def _reset_camera(self) -> None:
         skin = self._fit().recon.head.skin.vertices
         face = skin[skin[:, 1] > -110.0]
-        centre = np.array([0.0, float(np.median(face[:, 1])) - 20.0,
-                           float(np.median(face[:, 2]))])
+        centre = np.array([0.0, float(np.median(face[:, 1])) - 20.0, float(np.median(face[:, 2]))])
         eye = centre + ([0.0, 0.0, 500.0] if self.side == "frontal" else [500.0, 0.0, 0.0])
         self.plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 1.0, 0.0)]
         # Plotter.reset_camera always renders (pyvista 0.49 ignores render=False);
@@ -321,8 +384,12 @@ class GuideView(QWidget):
     def eventFilter(self, watched: Any, event: Any) -> bool:  # noqa: N802 - Qt name
         # the page stack resized (after this widget's own resize event, with
         # its new size): keep 160 mm of the face across the narrower side
-        if watched is self.pages and event.type() == QEvent.Type.Resize \
-                and self.session.fit is not None and not is_closed(self.plotter):
+        if (
+            watched is self.pages
+            and event.type() == QEvent.Type.Resize
+            and self.session.fit is not None
+            and not is_closed(self.plotter)
+        ):
             self._fit_scale()
         return False
 
@@ -360,7 +427,7 @@ class GuideView(QWidget):
         actor, first, n = slot
         data = actor.GetMapper().GetInput()
         pts = vtk_to_numpy(data.GetPoints().GetData())
-        pts[first:first + n] = seg
+        pts[first : first + n] = seg
         data.GetPoints().Modified()
         self.plotter.update()
 
@@ -407,7 +474,7 @@ class GuideView(QWidget):
         self._swallow(obj, event)
         self.dragging = (row, self.guide_list.guides[row])
         self._samples = self._render_window().GetMultiSamples()
-        self._render_window().SetMultiSamples(0)   # a lighter frame while dragging
+        self._render_window().SetMultiSamples(0)  # a lighter frame while dragging
 
     def _on_move(self, obj: Any, event: str) -> None:
         if self.dragging is None:

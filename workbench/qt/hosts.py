@@ -73,8 +73,15 @@ class CtImportHost(Protocol):
 
     def show_error(self, what: str, exc: BaseException) -> None: ...
 
-    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None, *,
-                volume: Any = None, finished: Callable[[bool], None] | None = None) -> bool: ...
+    def open_ct(
+        self,
+        path: str | Path,
+        tissue: str = "bone",
+        iso: float | None = None,
+        *,
+        volume: Any = None,
+        finished: Callable[[bool], None] | None = None,
+    ) -> bool: ...
 
 
 class MenuHost(Protocol):

@@ -45,18 +45,36 @@ from workbench.services.fit_guides import stored_guides
 from workbench.services.guides import Guide, guides_to_json
 from workbench.services.reconstruct import input_frame, outward
 from workbench.services.reconstruction_service import (
-    DowelPreview, FitInputs, FitResult, run_fit,
+    DowelPreview,
+    FitInputs,
+    FitResult,
+    run_fit,
 )
 from workbench.services.reconstruction_service import depth_settings as _depth_settings
 from workbench.services.skull_registration import (
-    SkullRegistration, mirror_from_landmarks, register_skull,
+    SkullRegistration,
+    mirror_from_landmarks,
+    register_skull,
 )
 from workbench.services.template_cache import reference_head
 
-__all__ = ["DowelPreview", "FitInputs", "FitResult", "depth_settings", "export_results",
-           "fit_face", "fit_inputs", "guide_geometry", "guides_state", "orientation",
-           "preview_dowels", "sample_orientation", "suggest_landmarks", "user_guides",
-           "view_axes"]
+__all__ = [
+    "DowelPreview",
+    "FitInputs",
+    "FitResult",
+    "depth_settings",
+    "export_results",
+    "fit_face",
+    "fit_inputs",
+    "guide_geometry",
+    "guides_state",
+    "orientation",
+    "preview_dowels",
+    "sample_orientation",
+    "suggest_landmarks",
+    "user_guides",
+    "view_axes",
+]
 
 
 def depth_settings(case: Case) -> DepthSettings:
@@ -85,8 +103,11 @@ def sample_orientation(path: str | Path) -> dict[str, list[float]] | None:
     for sample in registry().values():
         main = [f for f in sample.files if f.path == sample.main]
         if sample.anatomy and main and main[0].sha256 == digest:
-            return {k: [float(v) for v in sample.anatomy[k]]
-                    for k in ("anterior", "superior", "left") if k in sample.anatomy}
+            return {
+                k: [float(v) for v in sample.anatomy[k]]
+                for k in ("anterior", "superior", "left")
+                if k in sample.anatomy
+            }
     return None
 
 
@@ -105,8 +126,11 @@ def view_axes(case: Case) -> tuple[np.ndarray, np.ndarray] | None:
         to_head, _ = input_frame(case.landmarks["skull"])
     except (WorkbenchError, ValueError, KeyError, np.linalg.LinAlgError):
         orient = case.orientation
-        return None if orient is None else (np.array(orient.anterior, float),
-                                            np.array(orient.superior, float))
+        return (
+            None
+            if orient is None
+            else (np.array(orient.anterior, float), np.array(orient.superior, float))
+        )
     back = np.linalg.inv(to_head)[:3, :3]
     a, s = back @ [0.0, 0.0, 1.0], back @ [0.0, 1.0, 0.0]
     return a / np.linalg.norm(a), s / np.linalg.norm(s)
@@ -118,8 +142,9 @@ def user_guides(case: Case) -> list[Guide] | None:
 
 
 # ------------------------------------------------------------------ suggest
-def suggest_landmarks(skull: Mesh, current: LandmarkSet, sex: str,
-                      orient: tuple | None) -> tuple[LandmarkSet, SkullRegistration]:
+def suggest_landmarks(
+    skull: Mesh, current: LandmarkSet, sex: str, orient: tuple | None
+) -> tuple[LandmarkSet, SkullRegistration]:
     """Suggest the skull landmarks not placed yet (input frame, mm), by the dense registration.
 
     Landmarks the user placed are seeds (and hard constraints) and stay as
@@ -128,8 +153,13 @@ def suggest_landmarks(skull: Mesh, current: LandmarkSet, sex: str,
     """
     head = reference_head(sex)
     placed = LandmarkSet("skull", tuple(lm for lm in current if lm.status == "placed"))
-    reg = register_skull(skull, head, hint=orient, seeds=placed if len(placed) else None,
-                         mirror=mirror_from_landmarks(current))
+    reg = register_skull(
+        skull,
+        head,
+        hint=orient,
+        seeds=placed if len(placed) else None,
+        mirror=mirror_from_landmarks(current),
+    )
     # marked absent by a person (SetLandmarkStatus gives confidence 1; the registration 0)
     user_absent = {lm.code: lm for lm in current if lm.status == "absent" and lm.confidence > 0.5}
     merged = [user_absent.get(lm.code, lm) for lm in reg.landmarks]
@@ -142,8 +172,9 @@ def _to(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.asarray(p, float).reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
 
-def preview_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
-                   orient: tuple | None = None) -> DowelPreview:
+def preview_dowels(
+    skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings, orient: tuple | None = None
+) -> DowelPreview:
     """Plan the dowels (head frame) and map them back for display.
 
     The head frame comes from the landmarks' porions and orbitales, or —
@@ -154,9 +185,13 @@ def preview_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings,
     except (WorkbenchError, ValueError):
         head = reference_head(str(settings.sex or "male"))
         placed = LandmarkSet("skull", tuple(lm for lm in landmarks if lm.status == "placed"))
-        to_head = register_skull(skull, head, hint=orient,
-                                 seeds=placed if len(placed) else None,
-                                 mirror=mirror_from_landmarks(landmarks)).input_to_head
+        to_head = register_skull(
+            skull,
+            head,
+            hint=orient,
+            seeds=placed if len(placed) else None,
+            mirror=mirror_from_landmarks(landmarks),
+        ).input_to_head
     skull_h = outward(skull.transformed(to_head))
     plan = plan_dowels(skull_h, landmarks.transformed(to_head), settings)
     active = plan.active()
@@ -215,9 +250,15 @@ def guides_state(guides: list[Guide] | tuple[Guide, ...]) -> GuideList:
 
 
 # ------------------------------------------------------------------ export
-def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
-                   formats: tuple[str, ...] = ("ply", "obj", "stl"),
-                   report: bool = True, notes: list[str] | None = None) -> dict[str, Path]:
+def export_results(
+    folder: str | Path,
+    case: Case,
+    fit: FitResult | None,
+    *,
+    formats: tuple[str, ...] = ("ply", "obj", "stl"),
+    report: bool = True,
+    notes: list[str] | None = None,
+) -> dict[str, Path]:
     """Face and head meshes, landmarks (.mrk.json, .fcsv) and the PDF report into ``folder``.
 
     All in the skull file's frame, mm.  ``face.<ext>`` is the fitted skin's
@@ -233,7 +274,8 @@ def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
     from workbench.io.meshes import write_mesh
     from workbench.io.template_pack import FILES, export_template
     from workbench.services.reconstruction_job import (
-        FITTED_HEAD_FRAME_TEXT, head_in_input_frame,
+        FITTED_HEAD_FRAME_TEXT,
+        head_in_input_frame,
     )
 
     out = Path(folder)
@@ -252,7 +294,7 @@ def export_results(folder: str | Path, case: Case, fit: FitResult | None, *,
     head = head_in_input_frame(fit.recon)
     for path in export_template(head, out / "head", frame=FITTED_HEAD_FRAME_TEXT):
         files[f"head/{path.name}"] = path
-    others = [e for e in formats if e != "ply"]   # the pack already wrote the PLY files
+    others = [e for e in formats if e != "ply"]  # the pack already wrote the PLY files
     for name, parts in FILES.items():
         stem, mesh = Path(name).stem, concatenate([head.meshes[p] for p in parts])
         for ext in others:
@@ -267,5 +309,7 @@ def _report(out: Path, case: Case, fit: FitResult, notes: list[str]) -> dict[str
     from workbench.services.reconstruction_job import build_report
 
     report = build_report(case, fit, notes=notes)
-    return {"report_json": write_report_json(report, out / "report.json"),
-            "report_pdf": write_report_pdf(report, out / "report.pdf", base_dir=out)}
+    return {
+        "report_json": write_report_json(report, out / "report.json"),
+        "report_pdf": write_report_pdf(report, out / "report.pdf", base_dir=out),
+    }

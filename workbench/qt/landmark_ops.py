@@ -35,9 +35,15 @@ class LandmarkTool:
     messages and the notes of a suggestion.
     """
 
-    def __init__(self, document: Document, scene: SceneView, catalogue: LandmarkCatalogue,
-                 landmarks_panel: LandmarksPanel, runner: TaskRunner,
-                 feedback: Feedback) -> None:
+    def __init__(
+        self,
+        document: Document,
+        scene: SceneView,
+        catalogue: LandmarkCatalogue,
+        landmarks_panel: LandmarksPanel,
+        runner: TaskRunner,
+        feedback: Feedback,
+    ) -> None:
         self.document = document
         self.scene = scene
         self.catalogue = catalogue
@@ -63,8 +69,9 @@ class LandmarkTool:
             entry = self.catalogue.entry(code, "skull")
             # no label while dragging: VTK re-places labels every frame (slow)
             label = "" if override else f"{code}: {entry.name}"
-        self.scene.show_landmarks(positions.reshape(-1, 3), [lm.status for lm in lms],
-                                  selected, label)
+        self.scene.show_landmarks(
+            positions.reshape(-1, 3), [lm.status for lm in lms], selected, label
+        )
 
     # ------------------------------------------------------------ landmarks
     def on_pick(self, point: np.ndarray) -> None:
@@ -83,18 +90,23 @@ class LandmarkTool:
             return
         skull, current = case.specimen.mesh, case.landmarks["skull"]
         sex, orient = case.dowels.sex, jobs.orientation(case)
-        self.runner.submit("suggest", "Suggesting skull landmarks …",
-                           lambda: jobs.suggest_landmarks(skull, current, sex, orient),
-                           self._apply_suggestion,
-                           lambda exc: self.show_error("Could not suggest landmarks", exc))
+        self.runner.submit(
+            "suggest",
+            "Suggesting skull landmarks …",
+            lambda: jobs.suggest_landmarks(skull, current, sex, orient),
+            self._apply_suggestion,
+            lambda exc: self.show_error("Could not suggest landmarks", exc),
+        )
 
     def _apply_suggestion(self, result: tuple) -> None:
         new_set, reg = result
         if self.document.push(ReplaceLandmarkSet("skull", new_set, "Suggest skull landmarks")):
             n = sum(lm.status == "suggested" for lm in new_set)
             d = reg.figures.get("median_observed_distance_mm")
-            self.status(f"Suggested {n} landmarks by the dense registration (median bone "
-                        f"distance {d:.2f} mm, {self.runner.timings.get('suggest', 0):.1f} s)")
+            self.status(
+                f"Suggested {n} landmarks by the dense registration (median bone "
+                f"distance {d:.2f} mm, {self.runner.timings.get('suggest', 0):.1f} s)"
+            )
             self.feedback.messages.extend(reg.warnings)
 
     def snap_selected(self) -> None:
@@ -112,13 +124,16 @@ class LandmarkTool:
             self.status("Open a skull first.")
             return
         try:
-            result = snap_landmark(case.specimen.mesh, case.landmarks["skull"], code,
-                                   catalogue=self.catalogue)
+            result = snap_landmark(
+                case.specimen.mesh, case.landmarks["skull"], code, catalogue=self.catalogue
+            )
         except (WorkbenchError, ValueError) as exc:
             self.show_error(f"Could not snap {code}", exc)
             return
-        if result.moves and not self.document.push(MoveLandmark(
-                surface="skull", code=result.code, position=result.position,
-                label=result.label)):
+        if result.moves and not self.document.push(
+            MoveLandmark(
+                surface="skull", code=result.code, position=result.position, label=result.label
+            )
+        ):
             return
         self.status(result.explanation)

@@ -29,7 +29,7 @@ LIGHT_TRIANGLES = 25_000
 #: surfaces smaller than this are always drawn in full
 MIN_TRIANGLES = 40_000
 
-Submit = Callable[..., object]   # TaskRunner.submit (its token is not used here)
+Submit = Callable[..., object]  # TaskRunner.submit (its token is not used here)
 
 
 def decimated(mesh: Mesh, triangles: int = LIGHT_TRIANGLES) -> Mesh:
@@ -44,8 +44,9 @@ def decimated(mesh: Mesh, triangles: int = LIGHT_TRIANGLES) -> Mesh:
         return mesh
     # fast_simplification keeps the GIL for its whole run (~230 ms at 100k
     # triangles), which would freeze the GUI thread: run it in the helper process
-    v, f = helper_process.call("workbench.core.isosurface:decimate", mesh.vertices, mesh.faces,
-                               triangles)
+    v, f = helper_process.call(
+        "workbench.core.isosurface:decimate", mesh.vertices, mesh.faces, triangles
+    )
     return Mesh(v, f)
 
 
@@ -82,8 +83,10 @@ class InteractiveDetail:
         self._fxaa = False
         # the interactor style announces every rotation, pan and zoom
         iren = self._iren = plotter.iren.interactor
-        self._tags = [iren.AddObserver("StartInteractionEvent", lambda *_a: self.begin()),
-                      iren.AddObserver("EndInteractionEvent", lambda *_a: self.end())]
+        self._tags = [
+            iren.AddObserver("StartInteractionEvent", lambda *_a: self.begin()),
+            iren.AddObserver("EndInteractionEvent", lambda *_a: self.end()),
+        ]
 
     def detach(self) -> None:
         """Remove the VTK observers and forget the actors (before the view closes)."""
@@ -103,10 +106,13 @@ class InteractiveDetail:
         self._actor, self._full, self._light = actor, full, None
         if actor is None or full is None or mesh is None or mesh.n_faces < MIN_TRIANGLES:
             return
-        self.submit("lod", "Preparing the interactive view …",
-                    lambda: with_normals(decimated(mesh)),
-                    lambda light, a=actor: self._ready(a, to_polydata(light, normals=True)),
-                    lambda _exc: None)
+        self.submit(
+            "lod",
+            "Preparing the interactive view …",
+            lambda: with_normals(decimated(mesh)),
+            lambda light, a=actor: self._ready(a, to_polydata(light, normals=True)),
+            lambda _exc: None,
+        )
 
     def _ready(self, actor: Any, light: Any) -> None:
         if actor is self._actor:
@@ -138,4 +144,4 @@ class InteractiveDetail:
         self.plotter.render_window.SetMultiSamples(self._samples)
         self.plotter.renderer.SetUseFXAA(self._fxaa)
         if render and self.plotter.render_window is not None:
-            self.plotter.update()   # one full-quality render in the next paint
+            self.plotter.update()  # one full-quality render in the next paint

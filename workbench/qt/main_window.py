@@ -35,7 +35,14 @@ from typing import TYPE_CHECKING, Any
 from PySide6.QtCore import QPoint, QRect, Qt
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar, QScrollArea, QSplitter, QWidget,
+    QApplication,
+    QDockWidget,
+    QLabel,
+    QMainWindow,
+    QProgressBar,
+    QScrollArea,
+    QSplitter,
+    QWidget,
 )
 
 from workbench.io.catalogue import load_catalogue
@@ -82,7 +89,7 @@ class MainWindow(QMainWindow):
         super().__init__()
         from pyvistaqt import QtInteractor
 
-        gc_guard.install()   # cyclic garbage (Qt wrappers) collected on this thread only
+        gc_guard.install()  # cyclic garbage (Qt wrappers) collected on this thread only
 
         self.interactive = interactive
         self.messages: list[str] = []
@@ -92,7 +99,7 @@ class MainWindow(QMainWindow):
         self.session = Session(self)
         self.runner = TaskRunner(self)
         self.files = FileTool(self.document, self.session, self.runner, self)
-        preload()   # what the workers will import, before the event loop runs
+        preload()  # what the workers will import, before the event loop runs
 
         self.plotter = QtInteractor(self, auto_update=auto_update)
         # pyvista's "q" would close the 3D view
@@ -117,22 +124,39 @@ class MainWindow(QMainWindow):
         self.dowels_panel = DowelsPanel(self.document)
         self.reconstruct_panel = ReconstructPanel(self.document)
         self.compare_panel = ComparePanel()
-        self.landmarks = LandmarkTool(self.document, self.scene, self.catalogue,
-                                      self.landmarks_panel, self.runner, self)
-        self.drags = DragTool(self.document, self.scene, self.session, self.detail, self.plotter,
-                              self.landmarks_panel, self.reconstruct_panel,
-                              self.landmarks.draw_landmarks, self.draw_face)
+        self.landmarks = LandmarkTool(
+            self.document, self.scene, self.catalogue, self.landmarks_panel, self.runner, self
+        )
+        self.drags = DragTool(
+            self.document,
+            self.scene,
+            self.session,
+            self.detail,
+            self.plotter,
+            self.landmarks_panel,
+            self.reconstruct_panel,
+            self.landmarks.draw_landmarks,
+            self.draw_face,
+        )
         QShortcut(QKeySequence(Qt.Key.Key_Escape), self).activated.connect(self.cancel_drag)
         drags = self.drags
-        self.picker = ClickPicker(self.plotter, self._skull_actor, self.landmarks.on_pick,
-                                  target_surface=self._skull_surface,
-                                  grab_target=drags.grab_target, on_drag=drags.on_drag,
-                                  on_drag_start=drags.on_drag_start, on_drag_end=drags.on_drag_end)
+        self.picker = ClickPicker(
+            self.plotter,
+            self._skull_actor,
+            self.landmarks.on_pick,
+            target_surface=self._skull_surface,
+            grab_target=drags.grab_target,
+            on_drag=drags.on_drag,
+            on_drag_start=drags.on_drag_start,
+            on_drag_end=drags.on_drag_end,
+        )
         self.docks: dict[str, QDockWidget] = {}
-        for key, title, panel in (("landmarks", "Skull landmarks", self.landmarks_panel),
-                                  ("dowels", "Dowels", self.dowels_panel),
-                                  ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
-                                  ("compare", "Compare", self.compare_panel)):
+        for key, title, panel in (
+            ("landmarks", "Skull landmarks", self.landmarks_panel),
+            ("dowels", "Dowels", self.dowels_panel),
+            ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
+            ("compare", "Compare", self.compare_panel),
+        ):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
             dock.setWidget(_scrolling(panel))
@@ -149,14 +173,15 @@ class MainWindow(QMainWindow):
         self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock, Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"], dock], [620, 230], Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"]], [420], Qt.Orientation.Horizontal)
-        self.guide_view = GuideView(self.session, self.runner, self.scene,
-                                    self.reconstruct_panel, self.drags)
+        self.guide_view = GuideView(
+            self.session, self.runner, self.scene, self.reconstruct_panel, self.drags
+        )
         self.drags.attach(self.picker, self.guide_view)
         self.scene.also_tune(self.guide_view.plotter)
         self.views.addWidget(self.guide_view)
         self.views.setStretchFactor(0, 3)
         self.views.setStretchFactor(1, 2)
-        self.guide_view.hide()   # shown with the first fit, or from the View menu
+        self.guide_view.hide()  # shown with the first fit, or from the View menu
         self.actions_by_id = build_menus(self)
 
         self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
@@ -171,13 +196,14 @@ class MainWindow(QMainWindow):
         self.document.case_replaced.connect(self._on_case_replaced)
         self.document.part_changed.connect(self._on_part)
         self.document.part_changed.connect(
-            lambda part: self.guide_view.refresh() if part == "guides" else None)
+            lambda part: self.guide_view.refresh() if part == "guides" else None
+        )
         self.document.stack_changed.connect(self._update_title)
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
-            lambda _channel, step, f: show_fraction(self.progress, f, step))
-        self.landmarks_panel.selection_changed.connect(
-            lambda _c: self.landmarks.draw_landmarks())
+            lambda _channel, step, f: show_fraction(self.progress, f, step)
+        )
+        self.landmarks_panel.selection_changed.connect(lambda _c: self.landmarks.draw_landmarks())
         self.landmarks_panel.suggest_requested.connect(self.landmarks.suggest_landmarks)
         self.landmarks_panel.snap_requested.connect(lambda _code: self.landmarks.snap_selected())
         self.reconstruct_panel.reconstruct_requested.connect(self.reconstruct)
@@ -187,7 +213,8 @@ class MainWindow(QMainWindow):
         self.compare_panel.load_requested.connect(self.ask_load_truth)
         self.session.fit_changed.connect(self.reconstruct_panel.show_result)
         self.session.truth_changed.connect(
-            lambda truth: self.compare_panel.show_comparison(truth[0], None))
+            lambda truth: self.compare_panel.show_comparison(truth[0], None)
+        )
         self.resize(1400, 900)
         self._update_title()
 
@@ -220,8 +247,15 @@ class MainWindow(QMainWindow):
     def open_skull(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
         self.files.open_skull(path, units, scale)
 
-    def open_ct(self, path: str | Path, tissue: str = "bone", iso: float | None = None, *,
-                volume: Any = None, finished: Callable[[bool], None] | None = None) -> bool:
+    def open_ct(
+        self,
+        path: str | Path,
+        tissue: str = "bone",
+        iso: float | None = None,
+        *,
+        volume: Any = None,
+        finished: Callable[[bool], None] | None = None,
+    ) -> bool:
         return self.files.open_ct(path, tissue, iso, volume=volume, finished=finished)
 
     def open_ct_dialog(self, path: str | Path) -> Any:
@@ -303,7 +337,7 @@ class MainWindow(QMainWindow):
             self.status(text)
             return
         if self._busy_text and self.status_label.text() == self._busy_text:
-            self.status(self._status_before)   # nothing newer was said meanwhile
+            self.status(self._status_before)  # nothing newer was said meanwhile
         self._busy_text = ""
 
     def _update_title(self) -> None:
@@ -354,7 +388,7 @@ class MainWindow(QMainWindow):
 
     # ------------------------------------------------------------ case → scene
     def _on_case_replaced(self) -> None:
-        self.session.clear_fit()   # the reconstruct panel follows (fit_changed)
+        self.session.clear_fit()  # the reconstruct panel follows (fit_changed)
         self.show_skull()
         self.scene.clear("face")
         self.scene.clear("muscles")
@@ -377,7 +411,7 @@ class MainWindow(QMainWindow):
                 self.reconstruct()
 
     def _on_layer_changed(self, layer: str) -> None:
-        if layer == "face":   # the panel's opacity slider follows the Layers dock
+        if layer == "face":  # the panel's opacity slider follows the Layers dock
             self.reconstruct_panel.show_opacity(self.scene.opacity["face"])
 
     def user_toggled_guide_view(self, on: bool) -> None:
@@ -391,7 +425,7 @@ class MainWindow(QMainWindow):
         ``draw=False`` shows it without drawing (the caller fills it later).
         """
         if on and not draw:
-            self.guide_view.stale = False   # not even what it missed while hidden
+            self.guide_view.stale = False  # not even what it missed while hidden
         self.guide_view.setVisible(bool(on))
         action = self.actions_by_id.get("guide_view")
         if action is not None and action.isChecked() != bool(on):
@@ -425,13 +459,18 @@ class MainWindow(QMainWindow):
         if case.specimen.mesh is None or not all(c in lms.as_dict() for c in FRAME_CODES):
             self.session.set_preview(None)
             self.scene.clear("dowels")
-            self.dowels_panel.show_plan(None, "Dowels appear once the porions and orbitales "
-                                              "are placed (or suggested).")
+            self.dowels_panel.show_plan(
+                None, "Dowels appear once the porions and orbitales are placed (or suggested)."
+            )
             return
         skull, settings = case.specimen.mesh, jobs.depth_settings(case)
-        self.runner.submit("dowels", "Planning dowels …",
-                           lambda: jobs.preview_dowels(skull, lms, settings),
-                           self._show_dowels, self._dowels_failed)
+        self.runner.submit(
+            "dowels",
+            "Planning dowels …",
+            lambda: jobs.preview_dowels(skull, lms, settings),
+            self._show_dowels,
+            self._dowels_failed,
+        )
 
     def _show_dowels(self, preview: jobs.DowelPreview) -> None:
         self.session.set_preview(preview)
@@ -451,19 +490,23 @@ class MainWindow(QMainWindow):
             self.status("Open a skull first.")
             return
         panel = self.reconstruct_panel
-        try:   # the snapshot the worker fits; the user may go on editing the case
-            inputs = jobs.fit_inputs(case, use_guides=panel.use_guides.isChecked(),
-                                     ensemble=panel.ensemble.value())
+        try:  # the snapshot the worker fits; the user may go on editing the case
+            inputs = jobs.fit_inputs(
+                case, use_guides=panel.use_guides.isChecked(), ensemble=panel.ensemble.value()
+            )
         except Exception as exc:  # noqa: BLE001 - shown as a readable message
             self.show_error("The stored guides are not usable", exc)
             return
-        self.runner.submit("fit", "Reconstructing the face …",
-                           lambda: jobs.fit_face(inputs),
-                           self._show_fit,
-                           lambda exc: self.show_error("Could not reconstruct the face", exc))
+        self.runner.submit(
+            "fit",
+            "Reconstructing the face …",
+            lambda: jobs.fit_face(inputs),
+            self._show_fit,
+            lambda exc: self.show_error("Could not reconstruct the face", exc),
+        )
 
     def _show_fit(self, fit: jobs.FitResult) -> None:
-        self.session.set_fit(fit)   # the reconstruct panel follows (fit_changed)
+        self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
         self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
             # the first fit opens the guide view.  Both views then repaint
@@ -477,7 +520,7 @@ class MainWindow(QMainWindow):
 
     def _draw_fit(self, fit: jobs.FitResult) -> None:
         if fit is not self.session.fit or self.scene.closed:
-            return   # a newer fit (or none) is on its way, or the window closed
+            return  # a newer fit (or none) is on its way, or the window closed
         self._show_dowels(fit.preview)
         self.draw_face()
         self.draw_muscles()
@@ -517,8 +560,9 @@ class MainWindow(QMainWindow):
             self.scene.clear("muscles")
             return
         to_input = fit.recon.to_input
-        self.scene.show_muscles([[to_input(row) for row in grid.rows(head.skin)]
-                                 for grid in head.muscles])
+        self.scene.show_muscles(
+            [[to_input(row) for row in grid.rows(head.skin)] for grid in head.muscles]
+        )
 
     def draw_guides(self) -> None:
         fit = self.session.fit
@@ -533,14 +577,16 @@ class MainWindow(QMainWindow):
         from workbench.io.meshes import read_mesh
 
         path = Path(path)
-        self.runner.submit("truth", f"Reading {path.name} …",
-                           lambda: read_mesh(path, units="mm" if scale is None else "auto",
-                                             scale=scale).mesh,
-                           lambda mesh: self._truth_loaded(path.name, mesh),
-                           lambda exc: self.show_error(f"Could not read {path.name}", exc))
+        self.runner.submit(
+            "truth",
+            f"Reading {path.name} …",
+            lambda: read_mesh(path, units="mm" if scale is None else "auto", scale=scale).mesh,
+            lambda mesh: self._truth_loaded(path.name, mesh),
+            lambda exc: self.show_error(f"Could not read {path.name}", exc),
+        )
 
     def _truth_loaded(self, name: str, mesh: Any) -> None:
-        self.session.set_truth(name, mesh)   # the compare panel follows (truth_changed)
+        self.session.set_truth(name, mesh)  # the compare panel follows (truth_changed)
         self.scene.show_truth(mesh)
         self.docks["compare"].raise_()
         if self.session.fit is not None:
@@ -554,10 +600,13 @@ class MainWindow(QMainWindow):
             return
         name, truth = truth_loaded
         face, regions = fit.recon.face, face_regions(fit.head)
-        self.runner.submit("compare", "Comparing with the true skin …",
-                           lambda: compare_surfaces(face, truth, recon_regions=regions),
-                           self._show_comparison,
-                           lambda exc: self.show_error("Could not compare", exc))
+        self.runner.submit(
+            "compare",
+            "Comparing with the true skin …",
+            lambda: compare_surfaces(face, truth, recon_regions=regions),
+            self._show_comparison,
+            lambda exc: self.show_error("Could not compare", exc),
+        )
 
     def _show_comparison(self, comparison: Any) -> None:
         truth_loaded = self.session.truth
@@ -567,9 +616,11 @@ class MainWindow(QMainWindow):
         name, truth = truth_loaded
         self.scene.show_truth(truth, comparison.truth_vertex_values())
         self.compare_panel.show_comparison(name, comparison)
-        self.status(f"Compared with {name}: mean |distance| "
-                    f"{comparison.figures['mean_abs_mm']:.2f} mm "
-                    f"({self.runner.timings.get('compare', 0):.1f} s)")
+        self.status(
+            f"Compared with {name}: mean |distance| "
+            f"{comparison.figures['mean_abs_mm']:.2f} mm "
+            f"({self.runner.timings.get('compare', 0):.1f} s)"
+        )
 
     # ------------------------------------------------------------ pictures and closing
     @property

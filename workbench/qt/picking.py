@@ -43,15 +43,20 @@ GrabTarget = Callable[[], "tuple[str, np.ndarray] | None"]
 class ClickPicker:
     """Clicks on ``target_actor()`` → ``on_pick(point)``; landmark drags → ``on_drag*``."""
 
-    def __init__(self, plotter: Any, target_actor: Callable[[], Any],
-                 on_pick: Callable[[np.ndarray], None], *,
-                 target_surface: Callable[[], Any] | None = None,
-                 grab_target: GrabTarget | None = None,
-                 on_drag: Callable[[str, np.ndarray], None] | None = None,
-                 on_drag_start: Callable[[str], None] | None = None,
-                 on_drag_end: Callable[[str, np.ndarray | None], None] | None = None) -> None:
+    def __init__(
+        self,
+        plotter: Any,
+        target_actor: Callable[[], Any],
+        on_pick: Callable[[np.ndarray], None],
+        *,
+        target_surface: Callable[[], Any] | None = None,
+        grab_target: GrabTarget | None = None,
+        on_drag: Callable[[str, np.ndarray], None] | None = None,
+        on_drag_start: Callable[[str], None] | None = None,
+        on_drag_end: Callable[[str, np.ndarray | None], None] | None = None,
+    ) -> None:
         self.plotter = plotter
-        self.target_actor: Callable[[], Any] | None = target_actor   # None once detached
+        self.target_actor: Callable[[], Any] | None = target_actor  # None once detached
         self.target_surface: Callable[[], Any] | None = target_surface
         self.on_pick = on_pick
         self.grab_target = grab_target
@@ -65,17 +70,20 @@ class ClickPicker:
         self._located: tuple[Any, Any] | None = None
         self._tags: dict[str, int] = {}
         iren = self._iren = plotter.iren.interactor
-        for event, handler in (("LeftButtonPressEvent", self._on_press),
-                               ("MouseMoveEvent", self._on_move),
-                               ("LeftButtonReleaseEvent", self._on_release)):
+        for event, handler in (
+            ("LeftButtonPressEvent", self._on_press),
+            ("MouseMoveEvent", self._on_move),
+            ("LeftButtonReleaseEvent", self._on_release),
+        ):
             self._tags[event] = iren.AddObserver(event, handler, PRIORITY)
         # A press the style handled (a rotation, or a click) makes the style grab
         # the mouse focus: its release then reaches only the style, so the
         # click is also watched there (pyvista registers release events on
         # the style for this reason).
-        self._style_observer = (plotter.iren.style,
-                                plotter.iren.style.AddObserver("LeftButtonReleaseEvent",
-                                                               self._on_style_release))
+        self._style_observer = (
+            plotter.iren.style,
+            plotter.iren.style.AddObserver("LeftButtonReleaseEvent", self._on_style_release),
+        )
 
     def detach(self) -> None:
         """Remove the VTK observers (before the view closes).

@@ -48,7 +48,7 @@ _KEYS = itertools.count(1)
 def _relay() -> _Relay:
     global _RELAY
     if _RELAY is None:
-        _RELAY = _Relay()   # first use is on the GUI thread (a window or runner being built)
+        _RELAY = _Relay()  # first use is on the GUI thread (a window or runner being built)
     return _RELAY
 
 
@@ -62,8 +62,10 @@ def register(handler: Callable[[Any], None]) -> int:
     if hasattr(handler, "__self__") and hasattr(handler, "__func__"):
         relay.handlers[key] = weakref.WeakMethod(handler)
     else:
+
         def strong() -> Callable[[Any], None]:
             return handler
+
         relay.handlers[key] = strong
     return key
 

@@ -33,8 +33,13 @@ from workbench.render.snapshots import to_polydata
 
 #: layer name → menu title (also the row order of the Layers dock)
 LAYERS = {
-    "skull": "Skull", "landmarks": "Landmarks", "dowels": "Dowels", "guides": "Guides",
-    "muscles": "Muscles", "face": "Face (skin)", "truth": "True skin (compare)",
+    "skull": "Skull",
+    "landmarks": "Landmarks",
+    "dowels": "Dowels",
+    "guides": "Guides",
+    "muscles": "Muscles",
+    "face": "Face (skin)",
+    "truth": "True skin (compare)",
 }
 #: layers hidden until the user switches them on (everything else starts visible)
 HIDDEN_BY_DEFAULT = frozenset({"muscles"})
@@ -57,9 +62,16 @@ MUSCLE_FIBRE = (0.45, 0.04, 0.05)
 #: colour bars: vertical, inside the view's right edge (titles included), and
 #: added without pyvista's immediate render (the next paint draws them; that
 #: render cost ~85 ms of the GUI thread on top of the paint)
-SCALAR_BAR: dict[str, Any] = {"vertical": True, "render": False, "position_x": 0.82,
-                              "position_y": 0.25, "width": 0.07, "height": 0.5,
-                              "title_font_size": 14, "label_font_size": 12}
+SCALAR_BAR: dict[str, Any] = {
+    "vertical": True,
+    "render": False,
+    "position_x": 0.82,
+    "position_y": 0.25,
+    "width": 0.07,
+    "height": 0.5,
+    "title_font_size": 14,
+    "label_font_size": 12,
+}
 
 #: OpenGL renderer strings of software rasterisers (no graphics card in use)
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
@@ -111,7 +123,7 @@ class SceneView(QObject):
         self._actors: dict[str, list[Any]] = {}
         self._render_pending = False
         self.renders = 0
-        self.paints = 0   # renders VTK finished (the widget's paints included)
+        self.paints = 0  # renders VTK finished (the widget's paints included)
         self._awaiting_paint = False
         self._after_paint: list[Any] = []
         self._paint_fallback = QTimer(self)
@@ -137,8 +149,9 @@ class SceneView(QObject):
             renderer.SetUseOIT(False)
         plotter.set_background("#2b2f36", top="#59606b")
         window = getattr(plotter, "render_window", None)
-        self._end_observer = (None if window is None else
-                              window.AddObserver("EndEvent", self._rendered))
+        self._end_observer = (
+            None if window is None else window.AddObserver("EndEvent", self._rendered)
+        )
 
     # ------------------------------------------------------------ rendering
     def request_render(self) -> None:
@@ -217,7 +230,7 @@ class SceneView(QObject):
             self.tune()
         self._awaiting_paint = False
         if self._after_paint:
-            self._paint_fallback.start(1)   # not now: we are inside the paint
+            self._paint_fallback.start(1)  # not now: we are inside the paint
 
     def _run_after_paint(self) -> None:
         callbacks, self._after_paint = self._after_paint, []
@@ -304,19 +317,23 @@ class SceneView(QObject):
         vtk_to_numpy(vtk_points.GetData())[:] = new
         vtk_points.Modified()
         normals = data.GetPointData().GetNormals()
-        if normals is not None and data.GetPolys().IsHomogeneous() == 3:   # triangles only
+        if normals is not None and data.GetPolys().IsHomogeneous() == 3:  # triangles only
             vtk_to_numpy(normals)[:] = _vertex_normals(new, data)
             normals.Modified()
         data.Modified()
 
-    def reset_camera(self, anterior: Sequence[float] | None = None,
-                     superior: Sequence[float] | None = None) -> None:
+    def reset_camera(
+        self, anterior: Sequence[float] | None = None, superior: Sequence[float] | None = None
+    ) -> None:
         """Look at the face (``anterior`` toward the camera) when the orientation is known."""
         if anterior is not None and superior is not None:
             a = np.asarray(anterior, float)
             focus = np.asarray(self.plotter.center, float)
-            self.plotter.camera_position = [tuple(focus + 600.0 * a), tuple(focus),
-                                            tuple(np.asarray(superior, float))]
+            self.plotter.camera_position = [
+                tuple(focus + 600.0 * a),
+                tuple(focus),
+                tuple(np.asarray(superior, float)),
+            ]
         # Plotter.reset_camera always renders (pyvista 0.49 ignores render=False);
         # the renderer's own reset does not, so the next paint draws it
         self.plotter.renderer.reset_camera(render=False)
@@ -327,14 +344,25 @@ class SceneView(QObject):
         self.clear("skull")
         if mesh is None:
             return None
-        actor = self.plotter.add_mesh(to_polydata(mesh, normals=True), color=BONE, **SMOOTH,
-                                      pickable=True, name="layer_skull", render=False)
+        actor = self.plotter.add_mesh(
+            to_polydata(mesh, normals=True),
+            color=BONE,
+            **SMOOTH,
+            pickable=True,
+            name="layer_skull",
+            render=False,
+        )
         self._add("skull", actor)
         self.request_render()
         return actor
 
-    def show_landmarks(self, points: np.ndarray, statuses: Sequence[str],
-                       selected: np.ndarray | None = None, label: str = "") -> None:
+    def show_landmarks(
+        self,
+        points: np.ndarray,
+        statuses: Sequence[str],
+        selected: np.ndarray | None = None,
+        label: str = "",
+    ) -> None:
         """Placed (green) and suggested (orange) points; the selected one in yellow."""
         self.clear("landmarks")
         radius = self._marker_size()
@@ -342,21 +370,38 @@ class SceneView(QObject):
             mask = np.array([s == status for s in statuses], dtype=bool)
             if mask.any():
                 actor = self.plotter.add_points(
-                    np.asarray(points)[mask], color=colour, point_size=radius,
-                    render_points_as_spheres=True, pickable=False, render=False,
-                    name=f"layer_landmarks_{status}")
+                    np.asarray(points)[mask],
+                    color=colour,
+                    point_size=radius,
+                    render_points_as_spheres=True,
+                    pickable=False,
+                    render=False,
+                    name=f"layer_landmarks_{status}",
+                )
                 self._add("landmarks", actor)
         if selected is not None and np.isfinite(selected).all():
-            actor = self.plotter.add_points(np.asarray(selected, float)[None], color=SELECTED,
-                                            point_size=radius * 1.8, pickable=False,
-                                            render_points_as_spheres=True, render=False,
-                                            name="layer_landmarks_selected")
+            actor = self.plotter.add_points(
+                np.asarray(selected, float)[None],
+                color=SELECTED,
+                point_size=radius * 1.8,
+                pickable=False,
+                render_points_as_spheres=True,
+                render=False,
+                name="layer_landmarks_selected",
+            )
             self._add("landmarks", actor)
             if label:
                 labels = self.plotter.add_point_labels(
-                    np.asarray(selected, float)[None], [label], font_size=14, point_size=1,
-                    shape_opacity=0.6, always_visible=True, pickable=False, render=False,
-                    name="layer_landmarks_label")
+                    np.asarray(selected, float)[None],
+                    [label],
+                    font_size=14,
+                    point_size=1,
+                    shape_opacity=0.6,
+                    always_visible=True,
+                    pickable=False,
+                    render=False,
+                    name="layer_landmarks_label",
+                )
                 self._add("landmarks", labels)
         self.request_render()
 
@@ -370,17 +415,34 @@ class SceneView(QObject):
             pts = np.vstack([origins, tips])
             lines = np.column_stack([np.full(n, 2), np.arange(n), np.arange(n) + n]).ravel()
             poly = pv.PolyData(pts, lines=lines)
-            self._add("dowels", self.plotter.add_mesh(poly, color=DOWEL, line_width=4,
-                                                      pickable=False, render=False,
-                                                      name="layer_dowels_pegs"))
-            self._add("dowels", self.plotter.add_points(
-                np.asarray(tips), color=DOWEL, point_size=self._marker_size() * 0.8,
-                render_points_as_spheres=True, pickable=False, render=False,
-                name="layer_dowels_tips"))
+            self._add(
+                "dowels",
+                self.plotter.add_mesh(
+                    poly,
+                    color=DOWEL,
+                    line_width=4,
+                    pickable=False,
+                    render=False,
+                    name="layer_dowels_pegs",
+                ),
+            )
+            self._add(
+                "dowels",
+                self.plotter.add_points(
+                    np.asarray(tips),
+                    color=DOWEL,
+                    point_size=self._marker_size() * 0.8,
+                    render_points_as_spheres=True,
+                    pickable=False,
+                    render=False,
+                    name="layer_dowels_tips",
+                ),
+            )
         self.request_render()
 
-    def show_face(self, mesh: Mesh | None, scalars: np.ndarray | None = None,
-                  title: str = "") -> None:
+    def show_face(
+        self, mesh: Mesh | None, scalars: np.ndarray | None = None, title: str = ""
+    ) -> None:
         """The fitted skin; with ``scalars`` (per vertex, mm) as a colour map."""
         self.clear("face")
         if mesh is None:
@@ -389,16 +451,21 @@ class SceneView(QObject):
         kw: dict[str, Any] = {"color": SKIN}
         if scalars is not None:
             poly.point_data[title or "mm"] = np.asarray(scalars, float)
-            kw = {"scalars": title or "mm", "cmap": "viridis",
-                  "scalar_bar_args": dict(SCALAR_BAR, title=title or "mm")}
-        actor = self.plotter.add_mesh(poly, **SMOOTH,
-                                      pickable=False, render=False, name="layer_face", **kw)
-        actor.GetProperty().BackfaceCullingOn()   # translucent: see SetUseOIT above
+            kw = {
+                "scalars": title or "mm",
+                "cmap": "viridis",
+                "scalar_bar_args": dict(SCALAR_BAR, title=title or "mm"),
+            }
+        actor = self.plotter.add_mesh(
+            poly, **SMOOTH, pickable=False, render=False, name="layer_face", **kw
+        )
+        actor.GetProperty().BackfaceCullingOn()  # translucent: see SetUseOIT above
         self._add("face", actor)
         self.request_render()
 
-    def show_truth(self, mesh: Mesh | None, signed_mm: np.ndarray | None = None,
-                   limit_mm: float = 5.0) -> None:
+    def show_truth(
+        self, mesh: Mesh | None, signed_mm: np.ndarray | None = None, limit_mm: float = 5.0
+    ) -> None:
         """The true skin, coloured by signed distance (NaN grey) when given."""
         self.clear("truth")
         if mesh is None:
@@ -407,17 +474,23 @@ class SceneView(QObject):
         kw: dict[str, Any] = {"color": (0.7, 0.7, 0.75)}
         if signed_mm is not None:
             poly.point_data["signed mm"] = np.asarray(signed_mm, float)
-            kw = {"scalars": "signed mm", "cmap": "RdBu_r", "clim": (-limit_mm, limit_mm),
-                  "nan_color": (0.6, 0.6, 0.6),
-                  "scalar_bar_args": dict(SCALAR_BAR, title="signed mm")}
-        actor = self.plotter.add_mesh(poly, **SMOOTH,
-                                      pickable=False, render=False, name="layer_truth", **kw)
-        actor.GetProperty().BackfaceCullingOn()   # translucent: see SetUseOIT above
+            kw = {
+                "scalars": "signed mm",
+                "cmap": "RdBu_r",
+                "clim": (-limit_mm, limit_mm),
+                "nan_color": (0.6, 0.6, 0.6),
+                "scalar_bar_args": dict(SCALAR_BAR, title="signed mm"),
+            }
+        actor = self.plotter.add_mesh(
+            poly, **SMOOTH, pickable=False, render=False, name="layer_truth", **kw
+        )
+        actor.GetProperty().BackfaceCullingOn()  # translucent: see SetUseOIT above
         self._add("truth", actor)
         self.request_render()
 
-    def show_guides(self, segments: list[tuple[np.ndarray, np.ndarray]],
-                    points: np.ndarray) -> None:
+    def show_guides(
+        self, segments: list[tuple[np.ndarray, np.ndarray]], points: np.ndarray
+    ) -> None:
         """Guide lines (pairs of end points) and guide points, input frame."""
         import pyvista as pv
 
@@ -426,14 +499,30 @@ class SceneView(QObject):
             pts = np.array([p for seg in segments for p in seg], float)
             n = len(segments)
             lines = np.column_stack([np.full(n, 2), 2 * np.arange(n), 2 * np.arange(n) + 1]).ravel()
-            self._add("guides", self.plotter.add_mesh(pv.PolyData(pts, lines=lines), color=GUIDE,
-                                                      line_width=3, pickable=False, render=False,
-                                                      name="layer_guides_lines"))
+            self._add(
+                "guides",
+                self.plotter.add_mesh(
+                    pv.PolyData(pts, lines=lines),
+                    color=GUIDE,
+                    line_width=3,
+                    pickable=False,
+                    render=False,
+                    name="layer_guides_lines",
+                ),
+            )
         if len(points):
-            self._add("guides", self.plotter.add_points(
-                np.asarray(points, float), color=GUIDE, point_size=self._marker_size(),
-                render_points_as_spheres=True, pickable=False, render=False,
-                name="layer_guides_points"))
+            self._add(
+                "guides",
+                self.plotter.add_points(
+                    np.asarray(points, float),
+                    color=GUIDE,
+                    point_size=self._marker_size(),
+                    render_points_as_spheres=True,
+                    pickable=False,
+                    render=False,
+                    name="layer_guides_points",
+                ),
+            )
         self.request_render()
 
     def show_muscles(self, muscles: Sequence[Sequence[np.ndarray]]) -> tuple[int, int]:
@@ -456,15 +545,31 @@ class SceneView(QObject):
             # normals from numpy (Mesh.vertex_normals), not VTK's normals
             # filter: that took ~50 ms of the GUI thread per fit
             sheet = to_polydata(Mesh(points, faces), normals=True)
-            self._add("muscles", self.plotter.add_mesh(
-                sheet, color=MUSCLE, **SMOOTH, pickable=False, render=False,
-                name="layer_muscles_sheets"))
+            self._add(
+                "muscles",
+                self.plotter.add_mesh(
+                    sheet,
+                    color=MUSCLE,
+                    **SMOOTH,
+                    pickable=False,
+                    render=False,
+                    name="layer_muscles_sheets",
+                ),
+            )
         if lines:
             cells = np.concatenate([np.r_[len(line), line] for line in lines])
             fibres = pv.PolyData(points, lines=cells)
-            self._add("muscles", self.plotter.add_mesh(
-                fibres, color=MUSCLE_FIBRE, line_width=2.5, pickable=False, render=False,
-                name="layer_muscles_fibres"))
+            self._add(
+                "muscles",
+                self.plotter.add_mesh(
+                    fibres,
+                    color=MUSCLE_FIBRE,
+                    line_width=2.5,
+                    pickable=False,
+                    render=False,
+                    name="layer_muscles_fibres",
+                ),
+            )
         self.request_render()
         return len(faces), len(lines)
 
@@ -475,8 +580,9 @@ class SceneView(QObject):
             raise KeyError(f"layer {layer!r} has nothing drawn")
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
-        return np.array(vtk_to_numpy(actors[0].GetMapper().GetInput().GetPoints().GetData()),
-                        dtype=float)
+        return np.array(
+            vtk_to_numpy(actors[0].GetMapper().GetInput().GetPoints().GetData()), dtype=float
+        )
 
     def move_layer_points(self, layer: str, points: np.ndarray) -> None:
         """Move the points of every actor of ``layer`` in place (they share one layout,
@@ -492,8 +598,9 @@ class SceneView(QObject):
         return 12.0
 
 
-def _muscle_geometry(muscles: Sequence[Sequence[np.ndarray]]
-                     ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+def _muscle_geometry(
+    muscles: Sequence[Sequence[np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Points, sheet triangles and fibre polylines (point ids) of muscle grids."""
     pts: list[np.ndarray] = []
     tris: list[np.ndarray] = []
@@ -548,11 +655,12 @@ def _vertex_normals(points: np.ndarray, data: Any) -> np.ndarray:
 
     cells = vtk_to_numpy(data.GetPolys().GetConnectivityArray()).reshape(-1, 3)
     t = points[cells]
-    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])   # length = 2 × area
+    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])  # length = 2 × area
     n = len(points)
     flat = cells.ravel()
     # float64 (bincount with weights), whatever numpy's stubs say
-    out: np.ndarray = np.column_stack([np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n)
-                                       for k in range(3)])
+    out: np.ndarray = np.column_stack(
+        [np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n) for k in range(3)]
+    )
     out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
     return out

@@ -31,10 +31,10 @@ if TYPE_CHECKING:
 class Session(QObject):
     """See the module docstring.  Signals carry the new value (None: cleared)."""
 
-    fit_changed = Signal(object)          # FitResult | None
-    preview_changed = Signal(object)      # DowelPreview | None
-    truth_changed = Signal(object)        # (name, mesh) | None
-    comparison_changed = Signal(object)   # Comparison | None
+    fit_changed = Signal(object)  # FitResult | None
+    preview_changed = Signal(object)  # DowelPreview | None
+    truth_changed = Signal(object)  # (name, mesh) | None
+    comparison_changed = Signal(object)  # Comparison | None
 
     def __init__(self, parent: QObject | None = None) -> None:
         super().__init__(parent)

@@ -71,7 +71,7 @@ class _Job:
 class _Work:
     """Worker-thread side of a job: plain data only (see :mod:`workbench.qt.relay`)."""
 
-    key: int                     # the runner's relay key
+    key: int  # the runner's relay key
     job_id: int
     fn: Callable[..., Any]
     progress: bool
@@ -101,8 +101,9 @@ class TaskRunner(QObject):
 
     def __init__(self, parent: QObject | None = None, max_workers: int = 2) -> None:
         super().__init__(parent)
-        self._pool = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="workbench",
-                                        initializer=background_priority)
+        self._pool = ThreadPoolExecutor(
+            max_workers=max_workers, thread_name_prefix="workbench", initializer=background_priority
+        )
         self._generation: dict[str, int] = {}
         self._pending: dict[str, Future] = {}
         self._tokens: dict[str, CancelToken] = {}
@@ -122,10 +123,17 @@ class TaskRunner(QObject):
         """The cancel token of the channel's pending job (None when idle)."""
         return self._tokens.get(channel) if channel in self._pending else None
 
-    def submit(self, channel: str, description: str, fn: Callable[..., Any],
-               on_done: Callable[[Any], None],
-               on_error: Callable[[BaseException], None] | None = None, *,
-               progress: bool = False, token: CancelToken | None = None) -> CancelToken:
+    def submit(
+        self,
+        channel: str,
+        description: str,
+        fn: Callable[..., Any],
+        on_done: Callable[[Any], None],
+        on_error: Callable[[BaseException], None] | None = None,
+        *,
+        progress: bool = False,
+        token: CancelToken | None = None,
+    ) -> CancelToken:
         """Run ``fn`` in a worker; ``on_done(result)`` / ``on_error(exc)`` on the GUI thread.
 
         Parameters
@@ -150,8 +158,9 @@ class TaskRunner(QObject):
         generation = self._generation.get(channel, 0) + 1
         self._generation[channel] = generation
         token = token if token is not None else CancelToken()
-        job = _Job(channel, generation, on_done, on_error, token,
-                   cooperative=progress or token is not None)
+        job = _Job(
+            channel, generation, on_done, on_error, token, cooperative=progress or token is not None
+        )
         job_id = next(self._ids)
         self._jobs[job_id] = job
         self._tokens[channel] = token
@@ -226,8 +235,13 @@ class TaskRunner(QObject):
 # ------------------------------------------------------------------ worker thread
 #: modules the jobs import on first use; importing (compiling, loading a
 #: shared library) holds the GIL, so the window imports them before it shows
-PRELOAD = ("embreex.rtcore_scene", "embreex.mesh_construction", "threadpoolctl",
-           "workbench.core.isosurface", "workbench.io.samples")
+PRELOAD = (
+    "embreex.rtcore_scene",
+    "embreex.mesh_construction",
+    "threadpoolctl",
+    "workbench.core.isosurface",
+    "workbench.io.samples",
+)
 
 
 def preload() -> None:
@@ -259,7 +273,7 @@ def background_priority() -> None:
     """
     try:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)
-    except (AttributeError, OSError):   # no setpriority (Windows), or not per thread
+    except (AttributeError, OSError):  # no setpriority (Windows), or not per thread
         pass
     # and calls that hold the GIL for long go to the helper process
     helper_process.offload_here()
@@ -270,12 +284,15 @@ def _run(work: _Work) -> None:
     try:
         if work.cooperative:
             work.token.check()  # superseded or cancelled while queued
-        result = work.fn(lambda step, fraction: _report(work, step, fraction)) \
-            if work.progress else work.fn()
+        result = (
+            work.fn(lambda step, fraction: _report(work, step, fraction))
+            if work.progress
+            else work.fn()
+        )
     except Cancelled as exc:
         relay.post(work.key, ("done", work.job_id, None, exc))
         return
-    except BaseException as exc:  # delivered to the GUI thread, shown as a dialog
+    except BaseException as exc:  # noqa: BLE001 - delivered to the GUI thread, shown as a dialog
         exc.__dict__.setdefault("worker_traceback", traceback.format_exc())
         relay.post(work.key, ("done", work.job_id, None, exc))
         return

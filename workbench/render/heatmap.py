@@ -70,22 +70,43 @@ def render_heatmap(
     poly.point_data["distance_mm"] = values
     centre = mesh.bounds.mean(axis=0)
     radius = float(np.linalg.norm(mesh.extent))
-    plotter = pv.Plotter(off_screen=True, shape=(1, len(views)),
-                         window_size=[size[0] * len(views), size[1]], border=False)
+    plotter = pv.Plotter(
+        off_screen=True,
+        shape=(1, len(views)),
+        window_size=[size[0] * len(views), size[1]],
+        border=False,
+    )
     try:
         for col, view in enumerate(views):
             plotter.subplot(0, col)
             plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
             bar: ScalarBarArgs | None = None
             if col == len(views) - 1:  # one bar, in the last panel
-                bar = {"title": bar_title, "color": "black", "n_labels": 5, "fmt": "%.1f",
-                       "vertical": True, "position_x": 0.8, "position_y": 0.12,
-                       "height": 0.72, "width": 0.08, "title_font_size": 12,
-                       "label_font_size": 11}
-            plotter.add_mesh(poly, scalars="distance_mm", cmap=CMAP, clim=list(clim),
-                             nan_color=NAN_COLOUR, smooth_shading=True, specular=0.1,
-                             show_scalar_bar=bar is not None, scalar_bar_args=bar or {},
-                             copy_mesh=True)
+                bar = {
+                    "title": bar_title,
+                    "color": "black",
+                    "n_labels": 5,
+                    "fmt": "%.1f",
+                    "vertical": True,
+                    "position_x": 0.8,
+                    "position_y": 0.12,
+                    "height": 0.72,
+                    "width": 0.08,
+                    "title_font_size": 12,
+                    "label_font_size": 11,
+                }
+            plotter.add_mesh(
+                poly,
+                scalars="distance_mm",
+                cmap=CMAP,
+                clim=list(clim),
+                nan_color=NAN_COLOUR,
+                smooth_shading=True,
+                specular=0.1,
+                show_scalar_bar=bar is not None,
+                scalar_bar_args=bar or {},
+                copy_mesh=True,
+            )
             direction, up = view_directions(view, anterior, superior)
             plotter.camera.focal_point = centre
             plotter.camera.position = centre + np.asarray(direction, float) * radius * 1.5
@@ -93,8 +114,9 @@ def render_heatmap(
             plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
             plotter.camera.zoom(1.1)
             label = view.replace("_", " ")
-            plotter.add_text(f"{title}: {label}" if col == 0 and title else label,
-                             font_size=10, color="black")
+            plotter.add_text(
+                f"{title}: {label}" if col == 0 and title else label, font_size=10, color="black"
+            )
             if col == 0 and legend:
                 plotter.add_text(legend, position="lower_left", font_size=8, color="black")
         plotter.screenshot(str(path))

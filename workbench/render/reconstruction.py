@@ -107,65 +107,104 @@ def render_reconstruction(
     skull_pd = to_polydata(skull)
     eyes_pd = to_polydata(eyes) if eyes is not None and eyes.n_faces else None
 
-    def draw_skull(p, bar: bool) -> None:  # noqa: ANN001
+    def draw_skull(p, bar: bool) -> None:
         p.add_mesh(skull_pd, color=BONE, smooth_shading=True, specular=0.15, diffuse=0.85)
         if peg is not None:
-            actors = [p.add_mesh(part, scalars="depth_mm", cmap=DOWEL_CMAP, clim=depth_range[:2],
-                                 smooth_shading=True, show_scalar_bar=False) for part in peg]
+            actors = [
+                p.add_mesh(
+                    part,
+                    scalars="depth_mm",
+                    cmap=DOWEL_CMAP,
+                    clim=depth_range[:2],
+                    smooth_shading=True,
+                    show_scalar_bar=False,
+                )
+                for part in peg
+            ]
             if bar:
                 _scalar_bar(p, actors[0], "tissue depth (mm)", depth_range, size)
 
-    def over(p, _v) -> None:  # noqa: ANN001
+    def over(p, _v) -> None:
         draw_skull(p, False)
         p.add_mesh(face_pd, color=SKIN, opacity=FACE_OPACITY, smooth_shading=True, specular=0.1)
 
-    def alone(p, _v) -> None:  # noqa: ANN001
+    def alone(p, _v) -> None:
         p.add_mesh(face_pd, color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9)
         if eyes_pd is not None:
             p.add_mesh(eyes_pd, color=EYE, smooth_shading=True, specular=0.4)
 
     written: dict[str, Path] = {}
     for view in views:
-        written[f"skull_dowels_{view}"] = _shoot(pv, out / f"{prefix}_skull_dowels_{view}.png", size,
-                                                 [(cameras[view], view)],
-                                                 lambda p, _v: draw_skull(p, True))
+        written[f"skull_dowels_{view}"] = _shoot(
+            pv,
+            out / f"{prefix}_skull_dowels_{view}.png",
+            size,
+            [(cameras[view], view)],
+            lambda p, _v: draw_skull(p, True),
+        )
         if face_pd is None:
             continue
-        written[f"face_skull_{view}"] = _shoot(pv, out / f"{prefix}_face_skull_{view}.png", size,
-                                               [(cameras[view], view)], over, peel=True)
-        written[f"face_{view}"] = _shoot(pv, out / f"{prefix}_face_{view}.png", size,
-                                         [(cameras[view], view)], alone)
+        written[f"face_skull_{view}"] = _shoot(
+            pv,
+            out / f"{prefix}_face_skull_{view}.png",
+            size,
+            [(cameras[view], view)],
+            over,
+            peel=True,
+        )
+        written[f"face_{view}"] = _shoot(
+            pv, out / f"{prefix}_face_{view}.png", size, [(cameras[view], view)], alone
+        )
     if spread is not None and face_pd is not None:
         spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
 
-        def coloured(p, v) -> None:  # noqa: ANN001
-            actor = p.add_mesh(face_pd, scalars="spread_mm", cmap=SPREAD_CMAP,
-                               clim=spread_range[:2], smooth_shading=True, show_scalar_bar=False)
+        def coloured(p, v) -> None:
+            actor = p.add_mesh(
+                face_pd,
+                scalars="spread_mm",
+                cmap=SPREAD_CMAP,
+                clim=spread_range[:2],
+                smooth_shading=True,
+                show_scalar_bar=False,
+            )
             if eyes_pd is not None:
                 p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
             if v == views[len(views) // 2]:
                 _scalar_bar(p, actor, "spread (mm)", spread_range, size)
 
-        written["spread"] = _shoot(pv, out / f"{prefix}_spread.png", size,
-                                   [(cameras[v], v) for v in views], coloured)
+        written["spread"] = _shoot(
+            pv, out / f"{prefix}_spread.png", size, [(cameras[v], v) for v in views], coloured
+        )
     if inferred is not None and face_pd is not None and np.any(inferred):
 
-        def marked(p, v) -> None:  # noqa: ANN001
-            p.add_mesh(face_pd, scalars="inferred", cmap=[SKIN, INFERRED], clim=(0.0, 1.0),
-                       smooth_shading=True, show_scalar_bar=False, specular=0.1)
+        def marked(p, v) -> None:
+            p.add_mesh(
+                face_pd,
+                scalars="inferred",
+                cmap=[SKIN, INFERRED],
+                clim=(0.0, 1.0),
+                smooth_shading=True,
+                show_scalar_bar=False,
+                specular=0.1,
+            )
             if eyes_pd is not None:
                 p.add_mesh(eyes_pd, color=EYE, smooth_shading=True)
             if v == views[0]:
-                p.add_text("blue-grey: no bone under the skin (inferred from the reference)",
-                           position="lower_left", font_size=9, color="#333333")
+                p.add_text(
+                    "blue-grey: no bone under the skin (inferred from the reference)",
+                    position="lower_left",
+                    font_size=9,
+                    color="#333333",
+                )
 
-        written["inferred"] = _shoot(pv, out / f"{prefix}_inferred.png", size,
-                                     [(cameras[v], v) for v in views], marked)
+        written["inferred"] = _shoot(
+            pv, out / f"{prefix}_inferred.png", size, [(cameras[v], v) for v in views], marked
+        )
     return written
 
 
 # ---------------------------------------------------------------- helpers
-def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
+def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, np.ndarray]:
     if skull.n_faces == 0:
         raise InputError("skull", "the skull mesh has no triangles")
     origins = tips = np.zeros((0, 3))
@@ -174,12 +213,16 @@ def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, 
         if origins.shape != tips.shape:
             raise InputError("dowels", f"{len(origins)} origins but {len(tips)} tips")
         if not (np.isfinite(origins).all() and np.isfinite(tips).all()):
-            raise InputError("dowels", "dowel origins and tips must be finite (leave absent landmarks out)")
+            raise InputError(
+                "dowels", "dowel origins and tips must be finite (leave absent landmarks out)"
+            )
     if spread is not None:
         if face is None:
             raise InputError("spread", "a spread map needs the face it belongs to")
         if np.shape(spread) != (face.n_vertices,):
-            raise InputError("spread", f"{np.size(spread)} values for a face of {face.n_vertices} vertices")
+            raise InputError(
+                "spread", f"{np.size(spread)} values for a face of {face.n_vertices} vertices"
+            )
         if not np.isfinite(spread).all():
             raise InputError("spread", "the spread map has NaN or infinite values")
     return origins, tips
@@ -195,12 +238,16 @@ def _orientation(frame: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     rot = m[:3, :3]
     if abs(np.linalg.det(rot)) < 1e-9:
         raise InputError("frame", "the input-to-head frame is singular")
-    anterior, superior = np.linalg.solve(rot, [0.0, 0.0, 1.0]), np.linalg.solve(rot, [0.0, 1.0, 0.0])
+    anterior, superior = (
+        np.linalg.solve(rot, [0.0, 0.0, 1.0]),
+        np.linalg.solve(rot, [0.0, 1.0, 0.0]),
+    )
     return anterior / np.linalg.norm(anterior), superior / np.linalg.norm(superior)
 
 
-def _camera(points: np.ndarray, view: str, anterior: np.ndarray, superior: np.ndarray,
-            size: tuple[int, int]) -> dict:
+def _camera(
+    points: np.ndarray, view: str, anterior: np.ndarray, superior: np.ndarray, size: tuple[int, int]
+) -> dict:
     """One orthographic camera that frames ``points`` for ``view`` with a margin."""
     direction, up = view_directions(view, anterior, superior)
     up = up - direction * (up @ direction)
@@ -214,22 +261,34 @@ def _camera(points: np.ndarray, view: str, anterior: np.ndarray, superior: np.nd
     centre = right * mid[0] + up * mid[1] + direction * (depth.min() + depth.max()) / 2
     half_h = max((hi[1] - lo[1]) / 2, (hi[0] - lo[0]) / 2 * size[1] / size[0]) * 1.06
     reach = float(depth.max() - depth.min()) + 100.0
-    return {"centre": centre, "direction": direction, "up": up, "right": right,
-            "scale": half_h, "reach": reach, "aspect": size[0] / size[1]}
+    return {
+        "centre": centre,
+        "direction": direction,
+        "up": up,
+        "right": right,
+        "scale": half_h,
+        "reach": reach,
+        "aspect": size[0] / size[1],
+    }
 
 
-def _pegs(pv, origins: np.ndarray, tips: np.ndarray) -> list:  # noqa: ANN001
+def _pegs(pv, origins: np.ndarray, tips: np.ndarray) -> list:
     """Tubes from origin to tip and balls at the tips, with point data ``depth_mm``."""
     n = len(origins)
     depth = np.linalg.norm(tips - origins, axis=1)
-    lines = pv.PolyData(np.vstack([origins, tips]),
-                        lines=np.column_stack([np.full(n, 2), np.arange(n), np.arange(n) + n]).ravel())
+    lines = pv.PolyData(
+        np.vstack([origins, tips]),
+        lines=np.column_stack([np.full(n, 2), np.arange(n), np.arange(n) + n]).ravel(),
+    )
     lines["depth_mm"] = np.concatenate([depth, depth])
     tubes = lines.tube(radius=TUBE_RADIUS_MM, n_sides=14, capping=True)
     balls = pv.PolyData(tips)
     balls["depth_mm"] = depth
-    balls = balls.glyph(geom=pv.Sphere(radius=BALL_RADIUS_MM, theta_resolution=16,
-                                       phi_resolution=12), scale=False, orient=False)
+    balls = balls.glyph(
+        geom=pv.Sphere(radius=BALL_RADIUS_MM, theta_resolution=16, phi_resolution=12),
+        scale=False,
+        orient=False,
+    )
     return [tubes, balls]
 
 
@@ -252,23 +311,46 @@ def _font(size: tuple[int, int], points: float) -> int:
     return max(8, round(points * size[0] / 600 * 3.3))
 
 
-def _scalar_bar(p, actor, title: str, scale: tuple[float, float, float],  # noqa: ANN001
-                size: tuple[int, int]) -> None:
+def _scalar_bar(
+    p, actor, title: str, scale: tuple[float, float, float], size: tuple[int, int]
+) -> None:
     """A horizontal colour bar for ``actor`` in the lower left corner."""
     lo, hi, step = scale
-    bar = p.add_scalar_bar(title=title, mapper=actor.mapper, vertical=False, position_x=0.06,
-                           position_y=0.015, width=0.58, height=0.155, n_labels=round((hi - lo) / step) + 1,
-                           fmt="%.0f" if step >= 1 else "%.1f", color="black",
-                           title_font_size=_font(size, 6.5), label_font_size=_font(size, 6),
-                           bold=False, unconstrained_font_size=True)
+    bar = p.add_scalar_bar(
+        title=title,
+        mapper=actor.mapper,
+        vertical=False,
+        position_x=0.06,
+        position_y=0.015,
+        width=0.58,
+        height=0.155,
+        n_labels=round((hi - lo) / step) + 1,
+        fmt="%.0f" if step >= 1 else "%.1f",
+        color="black",
+        title_font_size=_font(size, 6.5),
+        label_font_size=_font(size, 6),
+        bold=False,
+        unconstrained_font_size=True,
+    )
     bar.SetTextPositionToPrecedeScalarBar()  # labels under the bar, title above
 
 
-def _shoot(pv, path: Path, size: tuple[int, int], panels: Sequence[tuple[dict, str]],  # noqa: ANN001
-           draw, *, peel: bool = False) -> Path:  # noqa: ANN001
+def _shoot(
+    pv,
+    path: Path,
+    size: tuple[int, int],
+    panels: Sequence[tuple[dict, str]],
+    draw,
+    *,
+    peel: bool = False,
+) -> Path:
     """One picture with one panel per ``(camera, view)``; ``draw(plotter, view)`` adds the actors."""
-    plotter = pv.Plotter(off_screen=True, shape=(1, len(panels)), border=False,
-                         window_size=(size[0] * len(panels), size[1]))
+    plotter = pv.Plotter(
+        off_screen=True,
+        shape=(1, len(panels)),
+        border=False,
+        window_size=(size[0] * len(panels), size[1]),
+    )
     try:
         for col, (cam, view) in enumerate(panels):
             plotter.subplot(0, col)
@@ -291,15 +373,21 @@ def _shoot(pv, path: Path, size: tuple[int, int], panels: Sequence[tuple[dict, s
     return path
 
 
-def _scale_bar(pv, plotter, cam: dict, size: tuple[int, int]) -> None:  # noqa: ANN001
+def _scale_bar(pv, plotter, cam: dict, size: tuple[int, int]) -> None:
     """A 50 mm bar in the lower right corner, drawn in front of everything."""
     half_w = cam["scale"] * cam["aspect"]
     front = cam["centre"] + cam["direction"] * (cam["reach"] / 2)
     end = front + cam["right"] * (half_w * 0.9) - cam["up"] * (cam["scale"] * 0.9)
     start = end - cam["right"] * SCALE_BAR_MM
     plotter.add_mesh(pv.Line(start, end), color="black", line_width=3)
-    plotter.add_point_labels(pv.PolyData([(start + end) / 2 + cam["up"] * cam["scale"] * 0.05]),
-                             [f"{SCALE_BAR_MM:.0f} mm"], show_points=False, shape=None,
-                             font_size=_font(size, 6.5), text_color="black", always_visible=True,
-                             bold=False,
-                             justification_horizontal="center")
+    plotter.add_point_labels(
+        pv.PolyData([(start + end) / 2 + cam["up"] * cam["scale"] * 0.05]),
+        [f"{SCALE_BAR_MM:.0f} mm"],
+        show_points=False,
+        shape=None,
+        font_size=_font(size, 6.5),
+        text_color="black",
+        always_visible=True,
+        bold=False,
+        justification_horizontal="center",
+    )

@@ -23,8 +23,9 @@ _AXES = {
 }
 
 
-def view_directions(view: str, anterior: Sequence[float] | np.ndarray,
-                    superior: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def view_directions(
+    view: str, anterior: Sequence[float] | np.ndarray, superior: Sequence[float] | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Camera direction (from the focus toward the camera) and view-up for a named view.
 
     "front" looks at the face, "side" at the subject's right profile,
@@ -48,7 +49,7 @@ def _prefer_headless_gl() -> None:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 
-def to_polydata(mesh: Mesh, *, normals: bool = False):  # noqa: ANN201 - pyvista type
+def to_polydata(mesh: Mesh, *, normals: bool = False):
     """``mesh`` as ``pyvista.PolyData`` (mm, same frame).
 
     With ``normals`` the mesh's cached :attr:`Mesh.vertex_normals` become the
@@ -57,9 +58,11 @@ def to_polydata(mesh: Mesh, *, normals: bool = False):  # noqa: ANN201 - pyvista
     """
     import pyvista as pv
 
+    faces = np.asarray(mesh.faces, np.int64)
     poly = pv.PolyData.from_regular_faces(
         np.asarray(mesh.vertices, float),
-        np.asarray(mesh.faces, np.int64))  # type: ignore[arg-type]  # pyvista stub: NDArray[int]
+        faces,  # type: ignore[arg-type]  # pyvista stub: NDArray[int]
+    )
     if normals:
         poly.point_data["Normals"] = np.asarray(mesh.vertex_normals, float)
         poly.point_data.active_normals_name = "Normals"
@@ -90,19 +93,32 @@ def render_surfaces(
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    plotter = pv.Plotter(off_screen=True, shape=(1, len(views)),
-                         window_size=[size[0] * len(views), size[1]], border=False)
+    plotter = pv.Plotter(
+        off_screen=True,
+        shape=(1, len(views)),
+        window_size=[size[0] * len(views), size[1]],
+        border=False,
+    )
     try:
         for col, view in enumerate(views):
             plotter.subplot(0, col)
             plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
             for mesh, colour, opacity in layers:
-                plotter.add_mesh(to_polydata(mesh), color=colour, opacity=opacity,
-                                 smooth_shading=True, specular=0.2)
+                plotter.add_mesh(
+                    to_polydata(mesh),
+                    color=colour,
+                    opacity=opacity,
+                    smooth_shading=True,
+                    specular=0.2,
+                )
             for positions, colour in points:
                 if len(positions):
-                    plotter.add_mesh(pv.PolyData(np.asarray(positions, float)), color=colour,
-                                     point_size=9, render_points_as_spheres=True)
+                    plotter.add_mesh(
+                        pv.PolyData(np.asarray(positions, float)),
+                        color=colour,
+                        point_size=9,
+                        render_points_as_spheres=True,
+                    )
             direction, up = view_directions(view, anterior, superior)
             centre = np.mean([m.bounds.mean(axis=0) for m, _, _ in layers], axis=0)
             radius = max(float(np.linalg.norm(m.extent)) for m, _, _ in layers)

@@ -18,23 +18,39 @@ def render_template(head: TemplateHead, folder: str | Path) -> list[Path]:
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     m = head.meshes
-    bone = [(m["cranium"], "ivory", 1.0), (m["mandible"], "ivory", 1.0),
-            (m["upper_teeth"], "white", 1.0), (m["lower_teeth"], "white", 1.0),
-            (m["eyes"], "lightsteelblue", 1.0)]
+    bone = [
+        (m["cranium"], "ivory", 1.0),
+        (m["mandible"], "ivory", 1.0),
+        (m["upper_teeth"], "white", 1.0),
+        (m["lower_teeth"], "white", 1.0),
+        (m["eyes"], "lightsteelblue", 1.0),
+    ]
     landmarks = head.skull_landmarks.defined().positions
     written = []
     for view in VIEWS:
         path = out / f"skin_{view}.png"
-        written.append(render_surfaces([(m["skin"], "peachpuff", 1.0), (m["eyes"], "lightsteelblue", 1.0)],
-                                       path, views=(view,)))
+        written.append(
+            render_surfaces(
+                [(m["skin"], "peachpuff", 1.0), (m["eyes"], "lightsteelblue", 1.0)],
+                path,
+                views=(view,),
+            )
+        )
         path = out / f"skull_{view}.png"
         written.append(render_surfaces(bone, path, views=(view,), points=[(landmarks, "red")]))
         path = out / f"head_{view}.png"
-        written.append(render_surfaces([*bone, (m["skin"], "peachpuff", 0.35)], path,
-                                       views=(view,)))
+        written.append(
+            render_surfaces([*bone, (m["skin"], "peachpuff", 0.35)], path, views=(view,))
+        )
     lines = [grid.points.evaluate(head.skin) for grid in head.muscles]
     for view in ("front", "three_quarter"):
         path = out / f"muscles_{view}.png"
-        written.append(render_surfaces([(m["skin"], "peachpuff", 0.6)], path, views=(view,),
-                                       points=[(np.vstack(lines), "darkred")] if lines else ()))
+        written.append(
+            render_surfaces(
+                [(m["skin"], "peachpuff", 0.6)],
+                path,
+                views=(view,),
+                points=[(np.vstack(lines), "darkred")] if lines else (),
+            )
+        )
     return written

@@ -24,18 +24,41 @@ from fpdf import FPDF, FontFace
 from fpdf.util import Padding
 from PIL import Image
 
-FONT_DIRS = ("/usr/share/fonts/truetype/dejavu", "/usr/share/fonts/TTF", "/usr/share/fonts/dejavu",
-             "/usr/share/fonts/dejavu-sans-fonts", "/usr/local/share/fonts",
-             "/Library/Fonts", "C:/Windows/Fonts")
+FONT_DIRS = (
+    "/usr/share/fonts/truetype/dejavu",
+    "/usr/share/fonts/TTF",
+    "/usr/share/fonts/dejavu",
+    "/usr/share/fonts/dejavu-sans-fonts",
+    "/usr/local/share/fonts",
+    "/Library/Fonts",
+    "C:/Windows/Fonts",
+)
 _FACES = {"": "DejaVuSans.ttf", "B": "DejaVuSans-Bold.ttf", "I": "DejaVuSans-Oblique.ttf"}
 _MONO = "DejaVuSansMono.ttf"
-_ASCII = {"–": "-", "—": "-", "−": "-", "‘": "'", "’": "'", "“": '"', "”": '"', "…": "...",
-          "≤": "<=", "≥": ">=", "→": "->", "·": "-", "≈": "~", "×": "x", "•": "-"}
+_ASCII = {
+    "–": "-",
+    "—": "-",
+    "−": "-",
+    "‘": "'",
+    "’": "'",
+    "“": '"',
+    "”": '"',
+    "…": "...",
+    "≤": "<=",
+    "≥": ">=",
+    "→": "->",
+    "·": "-",
+    "≈": "~",
+    "×": "x",
+    "•": "-",
+}
 VIEWS = ("front", "side", "three_quarter")
 #: picture groups: (key prefix, heading)
-GROUPS = (("skull_dowels_", "Skull with tissue-depth dowels"),
-          ("face_skull_", "Reconstructed face over the skull"),
-          ("face_", "Reconstructed face"))
+GROUPS = (
+    ("skull_dowels_", "Skull with tissue-depth dowels"),
+    ("face_skull_", "Reconstructed face over the skull"),
+    ("face_", "Reconstructed face"),
+)
 GREY, DARK, ACCENT = (110, 110, 110), (30, 30, 30), (35, 70, 120)
 
 
@@ -109,7 +132,11 @@ class ReportPDF(FPDF):
                 if style != "mono":
                     self.add_font("DejaVu", style, str(path))
             self.add_font("DejaVuMono", "", str(fonts["mono"]))
-            self.sans, self.mono, self.styles = "DejaVu", "DejaVuMono", {s for s in fonts if s != "mono"}
+            self.sans, self.mono, self.styles = (
+                "DejaVu",
+                "DejaVuMono",
+                {s for s in fonts if s != "mono"},
+            )
         else:
             self.sans, self.mono, self.styles = "helvetica", "courier", {"", "B", "I"}
 
@@ -122,11 +149,20 @@ class ReportPDF(FPDF):
         style = style if style in self.styles else ""
         self.set_font(self.mono if mono else self.sans, style, size)
 
-    def face(self, style: str = "", *, mono: bool = False, size: float | None = None,
-             color: Sequence[int] | None = None) -> FontFace:
-        return FontFace(family=self.mono if mono else self.sans,
-                        emphasis=style if style in self.styles and style else None,
-                        size_pt=size, color=color)
+    def face(
+        self,
+        style: str = "",
+        *,
+        mono: bool = False,
+        size: float | None = None,
+        color: Sequence[int] | None = None,
+    ) -> FontFace:
+        return FontFace(
+            family=self.mono if mono else self.sans,
+            emphasis=style if style in self.styles and style else None,
+            size_pt=size,
+            color=color,
+        )
 
     def footer(self) -> None:
         self.set_y(-13)
@@ -155,7 +191,9 @@ class ReportPDF(FPDF):
         self.font(9.5, "B")
         self.cell(0, 6, self.t(text), new_x="LMARGIN", new_y="NEXT")
 
-    def para(self, text: str, size: float = 9, style: str = "", color: Sequence[int] = DARK) -> None:
+    def para(
+        self, text: str, size: float = 9, style: str = "", color: Sequence[int] = DARK
+    ) -> None:
         self.font(size, style)
         self.set_text_color(*color)
         self.multi_cell(0, size * 0.45, self.t(text), new_x="LMARGIN", new_y="NEXT", align="L")
@@ -164,29 +202,60 @@ class ReportPDF(FPDF):
     def box(self, title: str, lines: Sequence[str], fill: Sequence[int] = (255, 243, 205)) -> None:
         self.set_fill_color(*fill)
         self.font(9, "B")
-        self.multi_cell(0, 5, self.t(title), fill=True, new_x="LMARGIN", new_y="NEXT", align="L",
-                        padding=Padding(1.5, 2, 0, 2))
+        self.multi_cell(
+            0,
+            5,
+            self.t(title),
+            fill=True,
+            new_x="LMARGIN",
+            new_y="NEXT",
+            align="L",
+            padding=Padding(1.5, 2, 0, 2),
+        )
         self.font(8.5)
-        self.multi_cell(0, 4.2, self.t("\n".join(f"• {line}" for line in lines)), fill=True,
-                        new_x="LMARGIN", new_y="NEXT", align="L", padding=Padding(0.5, 2, 1.5, 2))
+        self.multi_cell(
+            0,
+            4.2,
+            self.t("\n".join(f"• {line}" for line in lines)),
+            fill=True,
+            new_x="LMARGIN",
+            new_y="NEXT",
+            align="L",
+            padding=Padding(0.5, 2, 1.5, 2),
+        )
         self.set_fill_color(255, 255, 255)
         self.ln(1)
 
-    def grid(self, headers: Sequence[str], rows: Sequence[Sequence[Any]],
-             widths: Sequence[float], *, aligns: Sequence[str] | None = None,
-             styles: Sequence[FontFace | None] | None = None, size: float = 8,
-             col_styles: dict[int, FontFace] | None = None) -> None:
+    def grid(
+        self,
+        headers: Sequence[str],
+        rows: Sequence[Sequence[Any]],
+        widths: Sequence[float],
+        *,
+        aligns: Sequence[str] | None = None,
+        styles: Sequence[FontFace | None] | None = None,
+        size: float = 8,
+        col_styles: dict[int, FontFace] | None = None,
+    ) -> None:
         """A table with a heading row; ``styles`` per row, ``col_styles`` per column."""
         self.font(size)
         self.set_fill_color(247, 247, 247)
         aligns = aligns or ["L"] * len(widths)
-        with self.table(col_widths=tuple(widths), width=sum(widths), align="LEFT",
-                        borders_layout="SINGLE_TOP_LINE" if headers else "NONE",
-                        first_row_as_headings=bool(headers), line_height=size * 0.5,
-                        padding=(0.8, 1.2, 0.8, 1.2), text_align="LEFT",
-                        headings_style=FontFace(emphasis="BOLD" if "B" in self.styles else None,
-                                                fill_color=(232, 238, 246)),
-                        cell_fill_color=(247, 247, 247), cell_fill_mode="ROWS") as table:
+        with self.table(
+            col_widths=tuple(widths),
+            width=sum(widths),
+            align="LEFT",
+            borders_layout="SINGLE_TOP_LINE" if headers else "NONE",
+            first_row_as_headings=bool(headers),
+            line_height=size * 0.5,
+            padding=(0.8, 1.2, 0.8, 1.2),
+            text_align="LEFT",
+            headings_style=FontFace(
+                emphasis="BOLD" if "B" in self.styles else None, fill_color=(232, 238, 246)
+            ),
+            cell_fill_color=(247, 247, 247),
+            cell_fill_mode="ROWS",
+        ) as table:
             if headers:
                 head = table.row()
                 for text, align in zip(headers, aligns, strict=True):
@@ -198,8 +267,12 @@ class ReportPDF(FPDF):
                     row.cell(self.t(value), align=align, style=style)
         self.ln(2)
 
-    def key_values(self, pairs: Sequence[tuple[str, Any]], key_width: float = 42,
-                   mono_keys: frozenset[str] = frozenset()) -> None:
+    def key_values(
+        self,
+        pairs: Sequence[tuple[str, Any]],
+        key_width: float = 42,
+        mono_keys: frozenset[str] = frozenset(),
+    ) -> None:
         width = self.w - self.l_margin - self.r_margin
         for key, value in pairs:
             self.font(8.5, "B")
@@ -207,12 +280,18 @@ class ReportPDF(FPDF):
             self.cell(key_width, 4.8, self.t(key))
             self.set_text_color(*DARK)
             self.font(7.5 if key in mono_keys else 8.5, mono=key in mono_keys)
-            self.multi_cell(width - key_width, 4.8, self.t(value), new_x="LMARGIN", new_y="NEXT",
-                            align="L")
+            self.multi_cell(
+                width - key_width, 4.8, self.t(value), new_x="LMARGIN", new_y="NEXT", align="L"
+            )
 
     # ---------------------------------------------------------------- pictures
-    def pictures(self, items: Sequence[tuple[str, Path]], columns: int = 3, gap: float = 4.0,
-                 title: str | None = None) -> None:
+    def pictures(
+        self,
+        items: Sequence[tuple[str, Path]],
+        columns: int = 3,
+        gap: float = 4.0,
+        title: str | None = None,
+    ) -> None:
         """Rows of captioned pictures, ``columns`` per row, scaled to the width.
 
         ``title`` is set above the first row and kept on the same page.
@@ -220,7 +299,7 @@ class ReportPDF(FPDF):
         width = self.w - self.l_margin - self.r_margin
         cell_w = (width - gap * (columns - 1)) / columns
         for start in range(0, len(items), columns):
-            row = items[start:start + columns]
+            row = items[start : start + columns]
             heights = [cell_w * _aspect(path) for _, path in row]
             row_h = max(heights) + 5
             title_h = 6.0 if title and start == 0 else 0.0
@@ -267,13 +346,17 @@ def picture_groups(pictures: dict[str, str], base: Path) -> dict[str, list[tuple
     used = set()
     for prefix, title in GROUPS:
         keys = [k for k in pictures if k.startswith(prefix) and k not in used]
-        keys.sort(key=lambda k: rank.get(k[len(prefix):], len(rank)))
+        keys.sort(key=lambda k: rank.get(k[len(prefix) :], len(rank)))
         if keys:
-            groups[title] = [(view_caption(k[len(prefix):]), _resolve(pictures[k], base)) for k in keys]
+            groups[title] = [
+                (view_caption(k[len(prefix) :]), _resolve(pictures[k], base)) for k in keys
+            ]
             used.update(keys)
     for key in pictures:
         if key not in used:
-            groups.setdefault(key, []).append((key.replace("_", " "), _resolve(pictures[key], base)))
+            groups.setdefault(key, []).append(
+                (key.replace("_", " "), _resolve(pictures[key], base))
+            )
     return groups
 
 

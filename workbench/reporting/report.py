@@ -53,9 +53,8 @@ from typing import Any
 import jsonschema
 import numpy as np
 
-import workbench
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
-from workbench.model.evidence import sha256_file as evidence_sha256
 from workbench.reporting.pdf import (
     ACCENT,
     DARK,
@@ -70,18 +69,18 @@ from workbench.reporting.pdf import (
 SCHEMA_ID = "reconstruction-report-v1"
 SCHEMA_FILE = "report.schema.json"
 PathArg = str | PathLike[str]
-PUBLISHED = ("Published: 63–74 % within ±2.5 mm (Miranda et al. 2018); 54–77 % within 2.5 mm "
-             "(Lee et al. 2012); 75–90 % within 5 mm (Wilkinson et al. 2006).")
+PUBLISHED = (
+    "Published: 63–74 % within ±2.5 mm (Miranda et al. 2018); 54–77 % within 2.5 mm "
+    "(Lee et al. 2012); 75–90 % within 5 mm (Wilkinson et al. 2006)."
+)
 
 
 def schema_path() -> Path:
     """The report schema: the wheel's ``_data`` copy first, else the source tree."""
-    package = Path(workbench.__file__).parent
-    for folder in (package / "_data" / "data_tables" / "schemas",
-                   package.parent / "data_tables" / "schemas"):
-        if (folder / SCHEMA_FILE).is_file():
-            return folder / SCHEMA_FILE
-    raise FileNotFoundError(f"{SCHEMA_FILE} not found beside the package {package}")
+    path = data_tables_dir() / "schemas" / SCHEMA_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{SCHEMA_FILE} not found in {path.parent}")
+    return path
 
 
 @lru_cache(maxsize=1)
@@ -94,14 +93,6 @@ def _validator() -> jsonschema.Draft202012Validator:
 def utc_now() -> str:
     """The current time as ISO 8601 UTC with a ``Z`` (seconds), for ``"created"``."""
     return datetime.now(UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-
-
-def sha256_file(path: PathArg) -> str:
-    """SHA-256 (lower-case hex) of a file's bytes, read in 1 MiB blocks."""
-    try:
-        return evidence_sha256(path)[0]
-    except OSError as exc:
-        raise InputError(path, f"cannot read the file to hash it ({exc.strerror or exc})") from None
 
 
 def to_jsonable(value: Any, where: str = "$") -> Any:
@@ -125,8 +116,11 @@ def to_jsonable(value: Any, where: str = "$") -> Any:
         if math.isnan(value):
             return None
         if not math.isfinite(value):
-            raise InputError("report", f"{where} is {value}; JSON has no infinity",
-                             "use null for a missing value")
+            raise InputError(
+                "report",
+                f"{where} is {value}; JSON has no infinity",
+                "use null for a missing value",
+            )
         return float(value)
     if isinstance(value, PathLike):
         return os.fspath(value)
@@ -148,8 +142,11 @@ def validate_report(report: Mapping[str, Any]) -> None:
     error = jsonschema.exceptions.best_match(_validator().iter_errors(doc))
     if error is not None:
         message = error.message if len(error.message) < 300 else error.message[:300] + "..."
-        raise InputError("report", f"does not match {SCHEMA_ID} at {error.json_path}: {message}",
-                         "see reports/README.md for the report layout")
+        raise InputError(
+            "report",
+            f"does not match {SCHEMA_ID} at {error.json_path}: {message}",
+            "see reports/README.md for the report layout",
+        )
     _check_consistency(doc)
 
 
@@ -159,8 +156,9 @@ def _check_consistency(doc: Mapping[str, Any]) -> None:
         seen: set[str] = set()
         for i, item in enumerate(doc.get(key) or ()):
             if item[field] in seen:
-                raise InputError("report", f"$.{key}[{i}].{field}: duplicate {field} "
-                                           f"{item[field]!r}")
+                raise InputError(
+                    "report", f"$.{key}[{i}].{field}: duplicate {field} {item[field]!r}"
+                )
             seen.add(item[field])
 
 
@@ -199,8 +197,9 @@ def read_report_json(path: PathArg) -> dict[str, Any]:
     return doc
 
 
-def write_report_pdf(report: Mapping[str, Any], path: PathArg, *,
-                     base_dir: PathArg | None = None) -> Path:
+def write_report_pdf(
+    report: Mapping[str, Any], path: PathArg, *, base_dir: PathArg | None = None
+) -> Path:
     """Validate and write the A4 PDF of ``report``.
 
     ``base_dir`` is where relative picture paths are resolved (default: the
@@ -215,8 +214,13 @@ def write_report_pdf(report: Mapping[str, Any], path: PathArg, *,
 
 
 # -------------------------------------------------------------------- sections
-SOURCE_STYLE = {"table": ("", DARK), "override": ("B", (150, 60, 0)),
-                "interpolated": ("", (40, 90, 40)), "excluded": ("I", GREY), "none": ("", GREY)}
+SOURCE_STYLE = {
+    "table": ("", DARK),
+    "override": ("B", (150, 60, 0)),
+    "interpolated": ("", (40, 90, 40)),
+    "excluded": ("I", GREY),
+    "none": ("", GREY),
+}
 
 
 def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
@@ -235,28 +239,45 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         _guides(pdf, report["guides"])
     if report.get("predictions"):
         pdf.heading("Feature predictions")
-        pdf.grid(("rule", "feature", "value (mm)", "citation"),
-                 [(p["rule_id"], p["label"], num(p["value_mm"]), p["citation"])
-                  for p in report["predictions"]], (30, 45, 20, 85), aligns=("L", "L", "R", "L"))
+        pdf.grid(
+            ("rule", "feature", "value (mm)", "citation"),
+            [
+                (p["rule_id"], p["label"], num(p["value_mm"]), p["citation"])
+                for p in report["predictions"]
+            ],
+            (30, 45, 20, 85),
+            aligns=("L", "L", "R", "L"),
+        )
     if report.get("fit"):
         _fit(pdf, report["fit"])
     shown = [title for _, title in GROUPS if title in pictures]
     if shown:
         pdf.heading("Pictures", min_space=100)
-        pdf.para("Orthographic views oriented by the head frame (Frankfort Horizontal): front, "
-                 "right side and right three-quarter; every picture has the same scale (see the "
-                 "50 mm bars).", size=8, color=GREY)
+        pdf.para(
+            "Orthographic views oriented by the head frame (Frankfort Horizontal): front, "
+            "right side and right three-quarter; every picture has the same scale (see the "
+            "50 mm bars).",
+            size=8,
+            color=GREY,
+        )
         for title in shown:
             pdf.pictures(pictures.pop(title), title=title)
     if report.get("ensemble"):
         _ensemble(pdf, report["ensemble"], pictures.pop("spread", []))
     if report.get("validation"):
-        _validation(pdf, report["validation"],
-                    [item for k in list(pictures) if k.startswith("validation")
-                     for item in pictures.pop(k)])
+        _validation(
+            pdf,
+            report["validation"],
+            [
+                item
+                for k in list(pictures)
+                if k.startswith("validation")
+                for item in pictures.pop(k)
+            ],
+        )
     if pictures:
         pdf.heading("Other pictures", min_space=100)
-        for title, items in pictures.items():
+        for items in pictures.values():
             pdf.pictures(items, columns=1 if len(items) == 1 else 3)
     return pdf
 
@@ -273,23 +294,28 @@ def _title(pdf: ReportPDF, report: dict[str, Any]) -> None:
     pairs = [("Case id", report["case_id"]), ("Created (UTC)", report["created"])]
     if report.get("examiner"):
         pairs.append(("Examiner", report["examiner"]))
-    pairs += [("Software", f"{report['software']['name']} {report['software']['version']}"),
-              ("Template", report["template"]["id"]),
-              ("Template SHA-256", report["template"]["content_hash"]),
-              ("Depth table", f"{table['id']}" + (f" ({table['group']})" if table.get("group") else "")),
-              ("Build", table.get("build") or "–"),
-              ("Units", "mm (every length in this report)"),
-              ("Frame", report["frame"]),
-              ("Report schema", report["@schema"])]
+    pairs += [
+        ("Software", f"{report['software']['name']} {report['software']['version']}"),
+        ("Template", report["template"]["id"]),
+        ("Template SHA-256", report["template"]["content_hash"]),
+        ("Depth table", f"{table['id']}" + (f" ({table['group']})" if table.get("group") else "")),
+        ("Build", table.get("build") or "–"),
+        ("Units", "mm (every length in this report)"),
+        ("Frame", report["frame"]),
+        ("Report schema", report["@schema"]),
+    ]
     pdf.key_values(pairs, mono_keys=frozenset({"Template SHA-256"}))
 
 
 def _inputs(pdf: ReportPDF, inputs: list[dict[str, Any]]) -> None:
     pdf.heading("Input files")
     mono = pdf.face(mono=True, size=6.2)
-    pdf.grid(("role", "file", "units", "SHA-256"),
-             [(f["role"], f["path"], f.get("units") or "–", f["sha256"]) for f in inputs],
-             (19, 60, 11, 90), col_styles={3: mono})
+    pdf.grid(
+        ("role", "file", "units", "SHA-256"),
+        [(f["role"], f["path"], f.get("units") or "–", f["sha256"]) for f in inputs],
+        (19, 60, 11, 90),
+        col_styles={3: mono},
+    )
 
 
 def _table(pdf: ReportPDF, table: dict[str, Any]) -> None:
@@ -297,8 +323,11 @@ def _table(pdf: ReportPDF, table: dict[str, Any]) -> None:
     pairs = [("Table", table["id"])]
     if table.get("title"):
         pairs.append(("Title", table["title"]))
-    pairs += [("Group", table.get("group") or "–"), ("Build", table.get("build") or "–"),
-              ("Citation", table["citation"])]
+    pairs += [
+        ("Group", table.get("group") or "–"),
+        ("Build", table.get("build") or "–"),
+        ("Citation", table["citation"]),
+    ]
     pdf.key_values(pairs)
     if table.get("caveats"):
         pdf.ln(1)
@@ -308,24 +337,50 @@ def _table(pdf: ReportPDF, table: dict[str, Any]) -> None:
 def _landmarks(pdf: ReportPDF, landmarks: list[dict[str, Any]]) -> None:
     pdf.heading("Skull landmarks and tissue depths", min_space=45)
     counts = {s: sum(lm["source"] == s for lm in landmarks) for s in SOURCE_STYLE}
-    pdf.para(f"{len(landmarks)} landmarks: " + ", ".join(
-        f"{n} {'without a depth' if s == 'none' else s}" for s, n in counts.items() if n)
-             + ". Depths in mm along the dowel (skull landmark to skin); 'used' is the depth the fit "
-               "applied. Positions and dowel directions are in report.json.", size=8, color=GREY)
+    pdf.para(
+        f"{len(landmarks)} landmarks: "
+        + ", ".join(
+            f"{n} {'without a depth' if s == 'none' else s}" for s, n in counts.items() if n
+        )
+        + ". Depths in mm along the dowel (skull landmark to skin); 'used' is the depth the fit "
+        "applied. Positions and dowel directions are in report.json.",
+        size=8,
+        color=GREY,
+    )
     pdf.ln(1)
     pdf.font(8)
-    code_w = min(max(12.0, *(pdf.get_string_width(pdf.t(lm["code"])) + 3 for lm in landmarks)), 30.0)
-    skin_w = min(max(10.0, *(pdf.get_string_width(pdf.t(lm.get("skin_code") or "")) + 3
-                             for lm in landmarks)), 24.0)
+    code_w = min(
+        max(12.0, *(pdf.get_string_width(pdf.t(lm["code"])) + 3 for lm in landmarks)), 30.0
+    )
+    skin_w = min(
+        max(
+            10.0, *(pdf.get_string_width(pdf.t(lm.get("skin_code") or "")) + 3 for lm in landmarks)
+        ),
+        24.0,
+    )
     rows, styles = [], []
     for lm in landmarks:
-        rows.append((lm["code"], lm.get("skin_code") or "–", lm["name"], lm["status"],
-                     num(lm["table_depth_mm"]), num(lm["sd_mm"]), num(lm["depth_mm"]), lm["source"]))
+        rows.append(
+            (
+                lm["code"],
+                lm.get("skin_code") or "–",
+                lm["name"],
+                lm["status"],
+                num(lm["table_depth_mm"]),
+                num(lm["sd_mm"]),
+                num(lm["depth_mm"]),
+                lm["source"],
+            )
+        )
         style, colour = SOURCE_STYLE[lm["source"]]
         styles.append(pdf.face(style, color=colour))
-    pdf.grid(("skull", "skin", "name", "status", "table", "SD", "used", "source"), rows,
-             (code_w, skin_w, 95 - code_w - skin_w, 19, 15, 13, 15, 23), aligns=("L", "L", "L", "L", "R", "R", "R", "L"),
-             styles=styles)
+    pdf.grid(
+        ("skull", "skin", "name", "status", "table", "SD", "used", "source"),
+        rows,
+        (code_w, skin_w, 95 - code_w - skin_w, 19, 15, 13, 15, 23),
+        aligns=("L", "L", "L", "L", "R", "R", "R", "L"),
+        styles=styles,
+    )
     notes = [f"{lm['code']}: {lm['note']}" for lm in landmarks if lm.get("note")]
     if notes:
         pdf.para("Notes: " + "; ".join(notes), size=8)
@@ -333,12 +388,24 @@ def _landmarks(pdf: ReportPDF, landmarks: list[dict[str, Any]]) -> None:
 
 def _guides(pdf: ReportPDF, guides: list[dict[str, Any]]) -> None:
     pdf.heading("Guides")
-    rows = [(g["label"] or g["id"], g["kind"], describe_value(g.get("value")),
-             " ".join(filter(None, (g.get("rule_id"), g.get("citation")))) or "–",
-             g.get("source") or "–", "on" if g["enabled"] else "off") for g in guides]
+    rows = [
+        (
+            g["label"] or g["id"],
+            g["kind"],
+            describe_value(g.get("value")),
+            " ".join(filter(None, (g.get("rule_id"), g.get("citation")))) or "–",
+            g.get("source") or "–",
+            "on" if g["enabled"] else "off",
+        )
+        for g in guides
+    ]
     styles = [None if g["enabled"] else pdf.face("I", color=GREY) for g in guides]
-    pdf.grid(("guide", "kind", "value (mm)", "rule and citation", "source", "use"), rows,
-             (40, 16, 40, 56, 16, 12), styles=styles)
+    pdf.grid(
+        ("guide", "kind", "value (mm)", "rule and citation", "source", "use"),
+        rows,
+        (40, 16, 40, 56, 16, 12),
+        styles=styles,
+    )
 
 
 def _fit(pdf: ReportPDF, fit: dict[str, Any]) -> None:
@@ -354,9 +421,12 @@ def _fit(pdf: ReportPDF, fit: dict[str, Any]) -> None:
 def _ensemble(pdf: ReportPDF, ensemble: dict[str, Any], pictures: list[tuple[str, Path]]) -> None:
     pdf.heading("Uncertainty (ensemble of fits)", min_space=90)
     s = ensemble["spread_mm"]
-    pdf.para(f"{ensemble['n']} fits, each drawing every landmark depth from its table mean ± SD. "
-             f"Per-vertex spread of the face: median {num(s['median'])} mm, 90th percentile "
-             f"{num(s['p90'])} mm, maximum {num(s['max'])} mm.", size=9)
+    pdf.para(
+        f"{ensemble['n']} fits, each drawing every landmark depth from its table mean ± SD. "
+        f"Per-vertex spread of the face: median {num(s['median'])} mm, 90th percentile "
+        f"{num(s['p90'])} mm, maximum {num(s['max'])} mm.",
+        size=9,
+    )
     pdf.ln(1)
     if pictures:
         pdf.pictures(pictures, columns=1)
@@ -365,15 +435,36 @@ def _ensemble(pdf: ReportPDF, ensemble: dict[str, Any], pictures: list[tuple[str
 def _validation(pdf: ReportPDF, v: dict[str, Any], pictures: list[tuple[str, Path]]) -> None:
     pdf.heading("Validation against the known face", min_space=60)
     if v.get("truth"):
-        pdf.para(f"Truth surface: {v['truth']}" + (f"; region: {v['region']}" if v.get("region")
-                                                     else ""), size=8.5)
-    pdf.para(v.get("metric") or "Signed distance from each vertex of the true skin to the "
-             "reconstruction (positive = reconstruction outside).", size=8, color=GREY)
+        pdf.para(
+            f"Truth surface: {v['truth']}"
+            + (f"; region: {v['region']}" if v.get("region") else ""),
+            size=8.5,
+        )
+    pdf.para(
+        v.get("metric")
+        or "Signed distance from each vertex of the true skin to the "
+        "reconstruction (positive = reconstruction outside).",
+        size=8,
+        color=GREY,
+    )
     pdf.ln(1)
-    keys = ["mean_abs_mm", "rms_mm", "signed_mean_mm", "signed_sd_mm", "pct_within_2_5mm",
-            "pct_within_5mm"]
-    heads = ["region", "mean |d| (mm)", "RMS (mm)", "signed mean (mm)", "signed SD (mm)",
-             "≤ 2.5 mm (%)", "≤ 5 mm (%)"]
+    keys = [
+        "mean_abs_mm",
+        "rms_mm",
+        "signed_mean_mm",
+        "signed_sd_mm",
+        "pct_within_2_5mm",
+        "pct_within_5mm",
+    ]
+    heads = [
+        "region",
+        "mean |d| (mm)",
+        "RMS (mm)",
+        "signed mean (mm)",
+        "signed SD (mm)",
+        "≤ 2.5 mm (%)",
+        "≤ 5 mm (%)",
+    ]
     if "coverage" in v:
         keys.append("coverage")
         heads.append("coverage (%)")
@@ -385,11 +476,12 @@ def _validation(pdf: ReportPDF, v: dict[str, Any], pictures: list[tuple[str, Pat
     rows = [("whole", *(cell(v, k) for k in keys))]
     if v.get("baseline"):
         rows.append(("6 mm offset (whole)", *(cell(v["baseline"], k) for k in keys)))
-    rows += [(name, *(cell(fig, k) for k in keys)) for name, fig in (v.get("regions") or {}).items()]
+    rows += [
+        (name, *(cell(fig, k) for k in keys)) for name, fig in (v.get("regions") or {}).items()
+    ]
     styles = [pdf.face("B")] + [None] * (len(rows) - 1)
     width = 150 / len(keys)
-    pdf.grid(heads, rows, (30, *[width] * len(keys)), aligns=("L", *"R" * len(keys)),
-             styles=styles)
+    pdf.grid(heads, rows, (30, *[width] * len(keys)), aligns=("L", *"R" * len(keys)), styles=styles)
     pdf.para(PUBLISHED, size=7.5, color=GREY)
     pdf.ln(1)
     if pictures:

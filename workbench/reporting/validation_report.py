@@ -15,11 +15,20 @@ from typing import Any
 
 from workbench.core.face_metric import TOLERANCES_MM, _pct_key
 
-FIGURES = ("n", "mean_abs_mm", "rms_mm", "signed_mean_mm", "signed_sd_mm",
-           *(_pct_key(t) for t in TOLERANCES_MM), "p95_mm")
+FIGURES = (
+    "n",
+    "mean_abs_mm",
+    "rms_mm",
+    "signed_mean_mm",
+    "signed_sd_mm",
+    *(_pct_key(t) for t in TOLERANCES_MM),
+    "p95_mm",
+)
 REGION_FIGURES = ("n", "mean_abs_mm", "signed_mean_mm", _pct_key(2.5), _pct_key(5.0))
-PUBLISHED = ("Published (% within 2.5 mm): Lee, Wilkinson & Hwang 2012 54-77 %; Miranda et al. "
-             "2018 63-74 %; within 5 mm: Wilkinson et al. 2006 75-90 %.")
+PUBLISHED = (
+    "Published (% within 2.5 mm): Lee, Wilkinson & Hwang 2012 54-77 %; Miranda et al. "
+    "2018 63-74 %; within 5 mm: Wilkinson et al. 2006 75-90 %."
+)
 
 
 def rows(results: Sequence[tuple[Any, str]], region_names: Sequence[str]) -> list[dict[str, Any]]:
@@ -27,12 +36,18 @@ def rows(results: Sequence[tuple[Any, str]], region_names: Sequence[str]) -> lis
     out = []
     for res, label in results:
         if res.status != "ok":
-            out.append({"case": res.case_id, "method": label, "status": res.status,
-                        "error": res.error})
+            out.append(
+                {"case": res.case_id, "method": label, "status": res.status, "error": res.error}
+            )
             continue
         for s in res.scores:
-            row: dict[str, Any] = {"case": res.case_id, "method": s.name, "status": "ok",
-                                   "error": "", "seconds": round(res.seconds.get("total", 0.0), 1)}
+            row: dict[str, Any] = {
+                "case": res.case_id,
+                "method": s.name,
+                "status": "ok",
+                "error": "",
+                "seconds": round(res.seconds.get("total", 0.0), 1),
+            }
             row.update({k: s.figures.get(k) for k in FIGURES})
             for name in region_names:
                 fig = s.regions.get(name, {})
@@ -63,16 +78,23 @@ def _fmt(v: Any, digits: int = 1) -> str:
     return str(v)
 
 
-def markdown(results: Sequence[tuple[Any, str]], region_names: Sequence[str],
-             credits: Sequence[str] = ()) -> str:
+def markdown(
+    results: Sequence[tuple[Any, str]], region_names: Sequence[str], credits: Sequence[str] = ()
+) -> str:
     """The summary as Markdown: one table over all cases, then regions per case."""
-    lines = ["# Validation: reconstruction vs uniform 6 mm offset", "",
-             "Metric: `VALIDATION.md` (outermost, anterior-facing true-skin vertices in front of "
-             "the bone centre and within 35 mm of the bone; distance to the reconstructed "
-             "surface; positive = reconstruction outside the true skin). mm and %.", "",
-             PUBLISHED, "",
-             "| case | method | n | mean \\|d\\| | signed mean ± SD | % ≤ 1 | % ≤ 2.5 | % ≤ 5 | "
-             "p95 | s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Validation: reconstruction vs uniform 6 mm offset",
+        "",
+        "Metric: `VALIDATION.md` (outermost, anterior-facing true-skin vertices in front of "
+        "the bone centre and within 35 mm of the bone; distance to the reconstructed "
+        "surface; positive = reconstruction outside the true skin). mm and %.",
+        "",
+        PUBLISHED,
+        "",
+        "| case | method | n | mean \\|d\\| | signed mean ± SD | % ≤ 1 | % ≤ 2.5 | % ≤ 5 | "
+        "p95 | s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for res, label in results:
         if res.status != "ok":
             lines.append(f"| {res.case_id} | {label} | failed: {res.error} | | | | | | | |")
@@ -84,20 +106,27 @@ def markdown(results: Sequence[tuple[Any, str]], region_names: Sequence[str],
                 f"{_fmt(f['signed_mean_mm'], 2)} ± {_fmt(f['signed_sd_mm'], 2)} | "
                 f"{_fmt(f[_pct_key(1.0)])} | **{_fmt(f[_pct_key(2.5)])}** | "
                 f"{_fmt(f[_pct_key(5.0)])} | {_fmt(f['p95_mm'])} | "
-                f"{_fmt(res.seconds.get('total'), 0)} |")
+                f"{_fmt(res.seconds.get('total'), 0)} |"
+            )
     lines.append("")
     for res, label in results:
         if res.status != "ok":
             continue
-        lines += [f"## {res.case_id} — {label}: % within 2.5 mm (mean |d| mm) per face region", "",
-                  "| method | " + " | ".join(region_names) + " |",
-                  "|---|" + "---|" * len(region_names)]
+        lines += [
+            f"## {res.case_id} — {label}: % within 2.5 mm (mean |d| mm) per face region",
+            "",
+            "| method | " + " | ".join(region_names) + " |",
+            "|---|" + "---|" * len(region_names),
+        ]
         for s in res.scores:
             cells = []
             for name in region_names:
                 fig = s.regions.get(name, {})
-                cells.append(f"{_fmt(fig.get(_pct_key(2.5)))} ({_fmt(fig.get('mean_abs_mm'))})"
-                             if fig.get("n") else "–")
+                cells.append(
+                    f"{_fmt(fig.get(_pct_key(2.5)))} ({_fmt(fig.get('mean_abs_mm'))})"
+                    if fig.get("n")
+                    else "–"
+                )
             lines.append(f"| {s.name} | " + " | ".join(cells) + " |")
         notes = {k: v for k, v in res.notes.items() if v is not None}
         if notes:
@@ -108,9 +137,14 @@ def markdown(results: Sequence[tuple[Any, str]], region_names: Sequence[str],
     return "\n".join(lines)
 
 
-def write_pdf(results: Sequence[tuple[Any, str]], region_names: Sequence[str], path: Path,
-              pictures: Mapping[tuple[str, str], list[tuple[str, Path]]] | None = None,
-              credits: Sequence[str] = (), software: str = "workbench") -> Path:
+def write_pdf(
+    results: Sequence[tuple[Any, str]],
+    region_names: Sequence[str],
+    path: Path,
+    pictures: Mapping[tuple[str, str], list[tuple[str, Path]]] | None = None,
+    credits: Sequence[str] = (),
+    software: str = "workbench",
+) -> Path:
     """The PDF: the summary table, per-case regions and pictures, data credits."""
     from workbench.reporting.pdf import ReportPDF
     from workbench.reporting.report import utc_now
@@ -118,10 +152,12 @@ def write_pdf(results: Sequence[tuple[Any, str]], region_names: Sequence[str], p
     pdf = ReportPDF("validation", utc_now(), software)
     pdf.add_page()
     pdf.heading("Validation on real skull/skin pairs")
-    pdf.para("Metric of VALIDATION.md: the true skin's outermost, anterior-facing vertices in "
-             "front of the bone centre and within 35 mm of the bone; for each, the distance to "
-             "the reconstructed surface (positive: the reconstruction lies outside). The uniform "
-             "6 mm offset of the same bone is scored on the same points. mm and %.")
+    pdf.para(
+        "Metric of VALIDATION.md: the true skin's outermost, anterior-facing vertices in "
+        "front of the bone centre and within 35 mm of the bone; for each, the distance to "
+        "the reconstructed surface (positive: the reconstruction lies outside). The uniform "
+        "6 mm offset of the same bone is scored on the same points. mm and %."
+    )
     pdf.para(PUBLISHED, size=8)
     head = ["case", "method", "n", "mean |d|", "signed ± SD", "% ≤ 2.5", "% ≤ 5", "p95"]
     body = []
@@ -131,11 +167,24 @@ def write_pdf(results: Sequence[tuple[Any, str]], region_names: Sequence[str], p
             continue
         for s in res.scores:
             f = s.figures
-            body.append([res.case_id, s.name, f["n"], _fmt(f["mean_abs_mm"], 2),
-                         f"{_fmt(f['signed_mean_mm'], 2)} ± {_fmt(f['signed_sd_mm'], 2)}",
-                         _fmt(f[_pct_key(2.5)]), _fmt(f[_pct_key(5.0)]), _fmt(f["p95_mm"])])
-    pdf.grid(head, body, (24, 44, 14, 18, 30, 16, 16, 16),
-             aligns=("L", "L", "R", "R", "R", "R", "R", "R"))
+            body.append(
+                [
+                    res.case_id,
+                    s.name,
+                    f["n"],
+                    _fmt(f["mean_abs_mm"], 2),
+                    f"{_fmt(f['signed_mean_mm'], 2)} ± {_fmt(f['signed_sd_mm'], 2)}",
+                    _fmt(f[_pct_key(2.5)]),
+                    _fmt(f[_pct_key(5.0)]),
+                    _fmt(f["p95_mm"]),
+                ]
+            )
+    pdf.grid(
+        head,
+        body,
+        (24, 44, 14, 18, 30, 16, 16, 16),
+        aligns=("L", "L", "R", "R", "R", "R", "R", "R"),
+    )
     for res, label in results:
         if res.status != "ok":
             continue
@@ -143,10 +192,18 @@ def write_pdf(results: Sequence[tuple[Any, str]], region_names: Sequence[str], p
         rh = ["method"] + list(region_names)
         rb = []
         for s in res.scores:
-            rb.append([s.name] + [f"{_fmt(s.regions.get(n, {}).get(_pct_key(2.5)))} %"
-                                  if s.regions.get(n, {}).get("n") else "–" for n in region_names])
-        pdf.grid(rh, rb, (44,) + (22,) * len(region_names), aligns=("L",) + ("R",) * len(
-            region_names))
+            rb.append(
+                [s.name]
+                + [
+                    f"{_fmt(s.regions.get(n, {}).get(_pct_key(2.5)))} %"
+                    if s.regions.get(n, {}).get("n")
+                    else "–"
+                    for n in region_names
+                ]
+            )
+        pdf.grid(
+            rh, rb, (44,) + (22,) * len(region_names), aligns=("L",) + ("R",) * len(region_names)
+        )
         pics = (pictures or {}).get((res.case_id, label))
         if pics:
             pdf.pictures(pics, columns=2, title="signed distance on the true skin (mm)")

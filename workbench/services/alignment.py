@@ -110,8 +110,9 @@ def _principal_axes(points: np.ndarray) -> np.ndarray:
     return vt  # rows: axes
 
 
-def hint_rotation(anterior: np.ndarray, superior: np.ndarray,
-                  left: np.ndarray | None = None) -> np.ndarray:
+def hint_rotation(
+    anterior: np.ndarray, superior: np.ndarray, left: np.ndarray | None = None
+) -> np.ndarray:
     """Linear map of input directions to the head frame (rows: left, up, forward).
 
     Without ``left`` the map is a proper rotation.  With ``left`` given and
@@ -128,8 +129,9 @@ def hint_rotation(anterior: np.ndarray, superior: np.ndarray,
     return np.vstack([lft, sup, ant])
 
 
-def _icp(src: np.ndarray, tree: cKDTree, ref: np.ndarray, lin: np.ndarray, t: np.ndarray,
-         rounds: int) -> tuple[np.ndarray, np.ndarray, float]:
+def _icp(
+    src: np.ndarray, tree: cKDTree, ref: np.ndarray, lin: np.ndarray, t: np.ndarray, rounds: int
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Trimmed ICP, src (target samples) → ref (reference samples), keeping ``lin``'s scale.
 
     Scale is not re-estimated: with a partial target and trimming, a scaled
@@ -153,8 +155,9 @@ def _icp(src: np.ndarray, tree: cKDTree, ref: np.ndarray, lin: np.ndarray, t: np
     return lin, t, rms
 
 
-def _scale_if_complete(src: np.ndarray, ref: np.ndarray, tree: cKDTree, lin: np.ndarray,
-                       t: np.ndarray, rms: float) -> tuple[np.ndarray, np.ndarray, float]:
+def _scale_if_complete(
+    src: np.ndarray, ref: np.ndarray, tree: cKDTree, lin: np.ndarray, t: np.ndarray, rms: float
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Fit the uniform scale too, but only when the target covers the reference.
 
     Pairs are taken in both directions (target → reference and reference →
@@ -180,10 +183,15 @@ def _scale_if_complete(src: np.ndarray, ref: np.ndarray, tree: cKDTree, lin: np.
     return lin, t, float(np.sqrt(np.mean(np.sort(d)[: max(1, int(TRIM * len(d)))] ** 2)))
 
 
-def align_to_reference(target: Mesh, reference: Mesh, *,
-                       orientation: tuple | None = None,
-                       seeds: tuple[np.ndarray, np.ndarray] | None = None,
-                       n_samples: int = 1500, seed: int = 0) -> Alignment:
+def align_to_reference(
+    target: Mesh,
+    reference: Mesh,
+    *,
+    orientation: tuple | None = None,
+    seeds: tuple[np.ndarray, np.ndarray] | None = None,
+    n_samples: int = 1500,
+    seed: int = 0,
+) -> Alignment:
     """Similarity mapping ``target`` (input frame, mm) onto ``reference`` (head frame).
 
     Parameters
@@ -205,8 +213,10 @@ def align_to_reference(target: Mesh, reference: Mesh, *,
         # the closer fit wins
         flip = np.diag([-1.0, 1.0, 1.0, 1.0])
         pts, ref_pts = np.asarray(seeds[0], float), np.asarray(seeds[1], float)
-        starts = [similarity_transform(pts, ref_pts),
-                  similarity_transform(pts * [-1.0, 1.0, 1.0], ref_pts) @ flip]
+        starts = [
+            similarity_transform(pts, ref_pts),
+            similarity_transform(pts * [-1.0, 1.0, 1.0], ref_pts) @ flip,
+        ]
         method = "seeds"
     else:
         if orientation is not None:
@@ -220,8 +230,11 @@ def align_to_reference(target: Mesh, reference: Mesh, *,
         # partial scans (a CT cut above the orbits) shift the centroid, and
         # ICP from a partial onto a whole surface can slide: start from a few
         # offsets along the head's long axes too
-        shifts = ([(0.0, dy, dz) for dy in (-40.0, -20.0, 0.0, 20.0, 40.0) for dz in (-20.0, 0.0, 20.0)]
-                  if len(rots) == 1 else [(0.0, dy, 0.0) for dy in (-30.0, 0.0, 30.0)])
+        shifts = (
+            [(0.0, dy, dz) for dy in (-40.0, -20.0, 0.0, 20.0, 40.0) for dz in (-20.0, 0.0, 20.0)]
+            if len(rots) == 1
+            else [(0.0, dy, 0.0) for dy in (-30.0, 0.0, 30.0)]
+        )
         for r in rots:
             for shift in shifts:
                 m = np.eye(4)
@@ -246,5 +259,6 @@ def align_to_reference(target: Mesh, reference: Mesh, *,
     matrix = np.eye(4)
     matrix[:3, :3], matrix[:3, 3] = lin, t
     d, _ = tree.query(src @ lin.T + t)
-    return Alignment(matrix, float(abs(np.linalg.det(lin)) ** (1 / 3)), rms,
-                     float(np.mean(d < 5.0)), method)
+    return Alignment(
+        matrix, float(abs(np.linalg.det(lin)) ** (1 / 3)), rms, float(np.mean(d < 5.0)), method
+    )

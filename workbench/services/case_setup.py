@@ -83,8 +83,9 @@ def start_case_from_skull(
     report = validate(read.mesh)
     notes += [f"skull mesh: {p}" for p in report.problems()]
     with stack.group(f"Open skull {path.name}"):
-        stack.push(AddEvidence(evidence=EvidenceFile.from_path(path, "skull_mesh",
-                                                               units_note=units_note)))
+        stack.push(
+            AddEvidence(evidence=EvidenceFile.from_path(path, "skull_mesh", units_note=units_note))
+        )
         stack.push(SetSpecimen(mesh=read.mesh, units="mm"))
         if landmarks_path is not None:
             result = read_landmarks(landmarks_path, "skull", catalogue=load_catalogue())
@@ -95,10 +96,16 @@ def start_case_from_skull(
             check_landmark_geometry(landmarks, landmarks_path)
             check_landmarks_on_skull(read.mesh, landmarks, landmarks_path)
             notes += list(result.messages)
-            stack.push(AddEvidence(evidence=EvidenceFile.from_path(landmarks_path,
-                                                                   "skull_landmarks")))
-            stack.push(ReplaceLandmarkSet(surface="skull", new_set=landmarks,
-                                          label=f"Import landmarks {Path(landmarks_path).name}"))
+            stack.push(
+                AddEvidence(evidence=EvidenceFile.from_path(landmarks_path, "skull_landmarks"))
+            )
+            stack.push(
+                ReplaceLandmarkSet(
+                    surface="skull",
+                    new_set=landmarks,
+                    label=f"Import landmarks {Path(landmarks_path).name}",
+                )
+            )
     stack.set_clean()
     return OpenedCase(case, stack, notes)
 
@@ -115,9 +122,12 @@ def _refuse_unusable_points(result: Any, path: str | PathLike[str]) -> None:
     if result.duplicates:
         problems.append(f"duplicate codes: {', '.join(result.duplicates)} (given twice)")
     if problems:
-        raise InputError(path, "; ".join(problems),
-                         "use the codes of data_tables/landmarks/catalogue.csv, one point per "
-                         "code ('workbench landmarks check' lists them)")
+        raise InputError(
+            path,
+            "; ".join(problems),
+            "use the codes of data_tables/landmarks/catalogue.csv, one point per "
+            "code ('workbench landmarks check' lists them)",
+        )
 
 
 def _scale_matrix(factor: float) -> np.ndarray:
@@ -151,16 +161,25 @@ def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) ->
         "modified": case.meta.modified,
         "software_version": case.meta.software_version,
         "evidence": [
-            {"name": e.name, "role": e.role, "sha256": e.sha256, "size": e.size,
-             "units_note": e.units_note,
-             "status": loaded.evidence_status.get(f"evidence/{e.name}", "?")}
+            {
+                "name": e.name,
+                "role": e.role,
+                "sha256": e.sha256,
+                "size": e.size,
+                "units_note": e.units_note,
+                "status": loaded.evidence_status.get(f"evidence/{e.name}", "?"),
+            }
             for e in case.evidence
         ],
         "tampered": loaded.tampered,
         "audit_chain": loaded.audit_chain.to_json(),
-        "specimen": None if specimen.mesh is None else {
-            "n_vertices": specimen.mesh.n_vertices, "n_faces": specimen.mesh.n_faces,
-            "units": specimen.units, "extent_mm": specimen.mesh.extent.tolist(),
+        "specimen": None
+        if specimen.mesh is None
+        else {
+            "n_vertices": specimen.mesh.n_vertices,
+            "n_faces": specimen.mesh.n_faces,
+            "units": specimen.units,
+            "extent_mm": specimen.mesh.extent.tolist(),
             "head_frame_set": specimen.input_to_head is not None,
         },
         "landmarks": landmarks,
@@ -168,6 +187,8 @@ def describe_case(path: str | PathLike[str], *, allow_tampered: bool = False) ->
         "orientation": None if case.orientation is None else case.orientation.to_state(),
         "guides": None if case.guides is None else list(case.guides.ids),
         "parameters": thaw_json(case.parameters),  # nested values are frozen mappings
-        "audit": [{k: r.get(k) for k in ("time", "action", "operation", "examiner") if k in r}
-                  for r in loaded.audit_records],
+        "audit": [
+            {k: r.get(k) for k in ("time", "action", "operation", "examiner") if k in r}
+            for r in loaded.audit_records
+        ],
     }

@@ -77,8 +77,16 @@ from workbench.model.template import TemplateHead
 
 #: the regions of :func:`face_regions`, in report order
 REGION_NAMES = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
-FIGURE_KEYS = ("mean_abs_mm", "rms_mm", "signed_mean_mm", "signed_sd_mm", "pct_within_2_5mm",
-               "pct_within_5mm", "n_vertices", "coverage")
+FIGURE_KEYS = (
+    "mean_abs_mm",
+    "rms_mm",
+    "signed_mean_mm",
+    "signed_sd_mm",
+    "pct_within_2_5mm",
+    "pct_within_5mm",
+    "n_vertices",
+    "coverage",
+)
 #: offsets more than this far from the surface normal at a border lie beyond the surface
 BORDER_ANGLE_DEG = 60.0
 #: below this distance (mm) a point counts as on the surface whatever the angle
@@ -88,10 +96,16 @@ ON_SURFACE_MM = 0.5
 PUBLISHED = {
     "pct_within_2_5mm": [
         {"source": "Miranda et al. 2018, PLoS ONE 13(5):e0196770", "range_pct": [63, 74]},
-        {"source": "Lee, Wilkinson & Hwang 2012, J Forensic Sci 57(2):318-327", "range_pct": [54, 77]},
+        {
+            "source": "Lee, Wilkinson & Hwang 2012, J Forensic Sci 57(2):318-327",
+            "range_pct": [54, 77],
+        },
     ],
     "pct_within_5mm": [
-        {"source": "Wilkinson et al. 2006, Forensic Sci Med Pathol 2(3):179-187", "range_pct": [75, 90]},
+        {
+            "source": "Wilkinson et al. 2006, Forensic Sci Med Pathol 2(3):179-187",
+            "range_pct": [75, 90],
+        },
     ],
 }
 
@@ -171,8 +185,9 @@ def face_regions(head: TemplateHead) -> dict[str, np.ndarray]:
     return skin_face_regions(head.skin, head.regions, head.skin_landmarks)
 
 
-def skin_face_regions(skin: Mesh, regions: Mapping[str, np.ndarray],
-                      landmarks: LandmarkSet) -> dict[str, np.ndarray]:
+def skin_face_regions(
+    skin: Mesh, regions: Mapping[str, np.ndarray], landmarks: LandmarkSet
+) -> dict[str, np.ndarray]:
     """Split the template skin's ``face`` region into six disjoint regions.
 
     ``regions`` are the template's labelled vertex sets (``face``, ``nose``,
@@ -210,8 +225,11 @@ def skin_face_regions(skin: Mesh, regions: Mapping[str, np.ndarray],
         y_n, y_sl = lm["n"][1], lm["sl"][1]
         half_mouth = 0.5 * abs(lm["ch_l"][0] - lm["ch_r"][0])
     except KeyError as exc:
-        raise InputError("template skin landmarks", f"missing {exc.args[0]!r} needed for the face "
-                         "regions", "the template needs n, sl, ch_l and ch_r") from exc
+        raise InputError(
+            "template skin landmarks",
+            f"missing {exc.args[0]!r} needed for the face regions",
+            "the template needs n, sl, ch_l and ch_r",
+        ) from exc
     left = face.copy()
     out: dict[str, np.ndarray] = {}
     orbit = members(*(f"{r}_{s}" for r in ("orbit", "eyelid_upper", "eyelid_lower") for s in "lr"))
@@ -239,8 +257,9 @@ def _outward(mesh: Mesh) -> bool:
     return float(np.einsum("ij,ij->", mesh.face_cross, centroids - centre)) >= 0.0
 
 
-def _beyond_border(mesh: Mesh, index: MeshIndex, points: np.ndarray,
-                   cl: ClosestPoints) -> np.ndarray:
+def _beyond_border(
+    mesh: Mesh, index: MeshIndex, points: np.ndarray, cl: ClosestPoints
+) -> np.ndarray:
     """``(k,)`` bool: the closest point is on a border and the offset is tangential."""
     uniq, inverse, counts = mesh._unique_edges
     m = mesh.n_faces
@@ -294,10 +313,15 @@ def summarise(signed_mm: np.ndarray, coverage: float = math.nan) -> dict[str, fl
     }
 
 
-def compare_surfaces(recon: Mesh, truth: Mesh, *,
-                     recon_regions: Mapping[str, np.ndarray] | None = None,
-                     region: str = "face", max_distance_mm: float = 25.0,
-                     truth_name: str = "truth") -> Comparison:
+def compare_surfaces(
+    recon: Mesh,
+    truth: Mesh,
+    *,
+    recon_regions: Mapping[str, np.ndarray] | None = None,
+    region: str = "face",
+    max_distance_mm: float = 25.0,
+    truth_name: str = "truth",
+) -> Comparison:
     """Signed distances from the true skin ``truth`` to the reconstruction ``recon``.
 
     Parameters
@@ -329,16 +353,22 @@ def compare_surfaces(recon: Mesh, truth: Mesh, *,
     names = tuple(k for k in labels if k != "face")
     if region != "all":
         if not labels:
-            raise InputError("region", f"region {region!r} needs region labels on the reconstruction",
-                             "its mesh does not have the template's topology; use region 'all'")
+            raise InputError(
+                "region",
+                f"region {region!r} needs region labels on the reconstruction",
+                "its mesh does not have the template's topology; use region 'all'",
+            )
         if region != "face" and region not in labels:
-            raise InputError("region", f"unknown region {region!r}",
-                             f"use one of: all, face, {', '.join(names)}")
+            raise InputError(
+                "region", f"unknown region {region!r}", f"use one of: all, face, {', '.join(names)}"
+            )
     notes: list[str] = []
     if not _outward(recon):
         recon = Mesh(recon.vertices, recon.faces[:, ::-1])
-        notes.append("the reconstruction's triangles were wound inward; the sign uses the "
-                     "flipped (outward) winding")
+        notes.append(
+            "the reconstruction's triangles were wound inward; the sign uses the "
+            "flipped (outward) winding"
+        )
     label = np.full(recon.n_vertices, -1)
     for i, name in enumerate(names):
         label[labels[name]] = i
@@ -371,10 +401,13 @@ def compare_surfaces(recon: Mesh, truth: Mesh, *,
     if len(ids) == 0:
         gap = cl.distances[referenced]
         nearest_mm = float(gap.min()) if len(gap) else math.nan
-        raise InputError(truth_name, f"the surfaces do not overlap (nearest distance "
-                         f"{nearest_mm:.1f} mm; no true-skin vertex within "
-                         f"{max_distance_mm:g} mm of the reconstruction's {region} region)",
-                         "both meshes must be in the same frame and units")
+        raise InputError(
+            truth_name,
+            f"the surfaces do not overlap (nearest distance "
+            f"{nearest_mm:.1f} mm; no true-skin vertex within "
+            f"{max_distance_mm:g} mm of the reconstruction's {region} region)",
+            "both meshes must be in the same frame and units",
+        )
     signed, region_of = signed[ids], label[vertex[ids]]
 
     # reconstruction -> truth: which part of the region has true skin nearby
@@ -388,15 +421,24 @@ def compare_surfaces(recon: Mesh, truth: Mesh, *,
         total = area[mask].sum()
         return float(area[mask & covered].sum() / total) if total > 0 else math.nan
 
-    per_region = {name: summarise(signed[region_of == i], coverage(allowed & (label == i)))
-                  for i, name in enumerate(names)}
+    per_region = {
+        name: summarise(signed[region_of == i], coverage(allowed & (label == i)))
+        for i, name in enumerate(names)
+    }
     if region == "all" and len(per_region):
         per_region = {k: f for k, f in per_region.items() if f["n_vertices"] or f["coverage"] > 0}
     return Comparison(
-        signed_mm=signed, truth_vertex_ids=ids, region_of=region_of,
-        figures=summarise(signed, coverage(allowed)), regions=per_region, region_names=names,
-        n_truth_vertices=truth.n_vertices, region=region, max_distance_mm=float(max_distance_mm),
-        notes=tuple(notes))
+        signed_mm=signed,
+        truth_vertex_ids=ids,
+        region_of=region_of,
+        figures=summarise(signed, coverage(allowed)),
+        regions=per_region,
+        region_names=names,
+        n_truth_vertices=truth.n_vertices,
+        region=region,
+        max_distance_mm=float(max_distance_mm),
+        notes=tuple(notes),
+    )
 
 
 def template_orientation(recon: Mesh, template_skin: Mesh) -> tuple[np.ndarray, np.ndarray]:

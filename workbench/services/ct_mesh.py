@@ -210,8 +210,9 @@ def mesh_from_ct(
     )
 
 
-def check_extraction_settings(iso: float | None, target_triangles: int | None,
-                              smooth_iterations: int = 0) -> None:
+def check_extraction_settings(
+    iso: float | None, target_triangles: int | None, smooth_iterations: int = 0
+) -> None:
     """Refuse a non-finite iso level, a decimation target or smoothing out of bounds.
 
     The bounds are :data:`~workbench.core.limits.TARGET_TRIANGLES_RANGE` and
@@ -222,11 +223,21 @@ def check_extraction_settings(iso: float | None, target_triangles: int | None,
         finite_number(iso, "--iso")
     if target_triangles is not None:
         lo, hi = TARGET_TRIANGLES_RANGE
-        check_count(target_triangles, "--target-triangles", lo, hi,
-                    why=f"fewer than {lo:,} triangles lose the anatomy; more than {hi:,} is "
-                        "finer than any CT needs")
-    check_count(smooth_iterations, "--smooth", 0, MAX_SMOOTH_ITERATIONS,
-                why="a few tens of iterations smooth a CT surface; thousands melt it")
+        check_count(
+            target_triangles,
+            "--target-triangles",
+            lo,
+            hi,
+            why=f"fewer than {lo:,} triangles lose the anatomy; more than {hi:,} is "
+            "finer than any CT needs",
+        )
+    check_count(
+        smooth_iterations,
+        "--smooth",
+        0,
+        MAX_SMOOTH_ITERATIONS,
+        why="a few tens of iterations smooth a CT surface; thousands melt it",
+    )
 
 
 def _credit(path_or_volume: str | PathLike[str] | Volume) -> str | None:

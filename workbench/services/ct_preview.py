@@ -63,8 +63,11 @@ PERCENTILES = (1.0, 5.0, 25.0, 50.0, 75.0, 95.0, 99.0, 99.9)
 
 
 # ---------------------------------------------------------------- downsampling
-def preview_strides(shape_ijk: tuple[int, int, int] | np.ndarray, spacing_mm: np.ndarray,
-                    max_voxels: int = DEFAULT_MAX_VOXELS) -> tuple[int, int, int]:
+def preview_strides(
+    shape_ijk: tuple[int, int, int] | np.ndarray,
+    spacing_mm: np.ndarray,
+    max_voxels: int = DEFAULT_MAX_VOXELS,
+) -> tuple[int, int, int]:
     """Block strides ``(si, sj, sk)`` giving at most ``max_voxels`` preview voxels.
 
     The smallest target voxel size ``h`` (mm) is found among the multiples of
@@ -79,7 +82,8 @@ def preview_strides(shape_ijk: tuple[int, int, int] | np.ndarray, spacing_mm: np
     top = int(np.max(shape))
     candidates = np.unique((spacing[:, None] * np.arange(1, top + 1)[None, :]).ravel())
     strides = np.maximum(1, np.floor(candidates[:, None] / spacing[None, :] + 1e-9)).astype(
-        np.int64)
+        np.int64
+    )
     strides = np.minimum(strides, shape[None, :])
     counts = np.prod(-(-shape[None, :] // strides), axis=1)  # ceil division
     fits = np.flatnonzero(counts <= max_voxels)
@@ -87,8 +91,9 @@ def preview_strides(shape_ijk: tuple[int, int, int] | np.ndarray, spacing_mm: np
     return int(best[0]), int(best[1]), int(best[2])
 
 
-def block_mean(volume: Volume, strides: tuple[int, int, int],
-               cancel: CancelToken | None = None) -> Volume:
+def block_mean(
+    volume: Volume, strides: tuple[int, int, int], cancel: CancelToken | None = None
+) -> Volume:
     """Block-mean downsampling of ``volume`` by ``strides`` (i, j, k); see the module docstring.
 
     Returns a float32 :class:`Volume` in the same frame and units whose
@@ -111,15 +116,21 @@ def block_mean(volume: Volume, strides: tuple[int, int, int],
                 if part.size:
                     view = acc[: part.shape[0], : part.shape[1], : part.shape[2]]
                     np.add(view, part, out=view, casting="unsafe")
-    counts = [np.minimum(s, n - s * np.arange(m)).astype(np.float32)
-              for s, n, m in ((sk, nk, out_shape[0]), (sj, nj, out_shape[1]),
-                              (si, ni, out_shape[2]))]
+    counts = [
+        np.minimum(s, n - s * np.arange(m)).astype(np.float32)
+        for s, n, m in ((sk, nk, out_shape[0]), (sj, nj, out_shape[1]), (si, ni, out_shape[2]))
+    ]
     acc /= counts[0][:, None, None] * counts[1][None, :, None] * counts[2][None, None, :]
     centre = volume.index_to_physical(np.array([(si - 1) / 2, (sj - 1) / 2, (sk - 1) / 2]))
     metadata = dict(volume.metadata)
     metadata["preview_strides"] = (si, sj, sk)
-    return replace(volume, data=acc, spacing_mm=volume.spacing_mm * (si, sj, sk),
-                   origin_mm=centre, metadata=metadata)
+    return replace(
+        volume,
+        data=acc,
+        spacing_mm=volume.spacing_mm * (si, sj, sk),
+        origin_mm=centre,
+        metadata=metadata,
+    )
 
 
 # ---------------------------------------------------------------- results
@@ -159,8 +170,10 @@ class ThresholdSummary:
 
     def text(self) -> str:
         """One line for a status bar or a label."""
-        return (f"{self.voxels_above:,} voxels ≥ {self.iso:g} {self.units} "
-                f"({100 * self.fraction_above:.2f} %, {self.volume_above_ml:.0f} ml)")
+        return (
+            f"{self.voxels_above:,} voxels ≥ {self.iso:g} {self.units} "
+            f"({100 * self.fraction_above:.2f} %, {self.volume_above_ml:.0f} ml)"
+        )
 
 
 @dataclass(frozen=True)
@@ -243,24 +256,39 @@ class CtPreview:
     source: str = ""
 
     @classmethod
-    def load(cls, path: str | PathLike[str], *, max_voxels: int = DEFAULT_MAX_VOXELS,
-             progress: Progress | None = None, cancel: CancelToken | None = None) -> CtPreview:
+    def load(
+        cls,
+        path: str | PathLike[str],
+        *,
+        max_voxels: int = DEFAULT_MAX_VOXELS,
+        progress: Progress | None = None,
+        cancel: CancelToken | None = None,
+    ) -> CtPreview:
         """Read a DICOM folder / NRRD / MetaImage / NIfTI file and prepare the preview."""
         report = checking(cancel, progress)
         report("reading volume", 0.0)
         start = perf_counter()
         volume = read_volume(path)
         read_s = perf_counter() - start
-        preview = cls.from_volume(volume, max_voxels=max_voxels, cancel=cancel,
-                                  progress=lambda s, f: report(s, 0.5 + 0.5 * f))
+        preview = cls.from_volume(
+            volume,
+            max_voxels=max_voxels,
+            cancel=cancel,
+            progress=lambda s, f: report(s, 0.5 + 0.5 * f),
+        )
         preview.timings_s["read"] = round(read_s, 4)
         preview.source = str(path)
         return preview
 
     @classmethod
-    def from_volume(cls, volume: Volume, *, max_voxels: int = DEFAULT_MAX_VOXELS,
-                    progress: Progress | None = None,
-                    cancel: CancelToken | None = None) -> CtPreview:
+    def from_volume(
+        cls,
+        volume: Volume,
+        *,
+        max_voxels: int = DEFAULT_MAX_VOXELS,
+        progress: Progress | None = None,
+        cancel: CancelToken | None = None,
+    ) -> CtPreview:
         """Prepare the preview of an already loaded volume."""
         report = checking(cancel, progress)
         timings: dict[str, float] = {}
@@ -279,8 +307,7 @@ class CtPreview:
         presets = {tissue: choose_iso(volume, tissue) for tissue in TISSUES}
         timings["presets"] = round(perf_counter() - t0, 4)
         report("ready", 1.0)
-        return cls(volume, preview_volume, strides, presets, values, above, timings,
-                   volume.source)
+        return cls(volume, preview_volume, strides, presets, values, above, timings, volume.source)
 
     # ------------------------------------------------------------ figures
     @property
@@ -317,9 +344,15 @@ class CtPreview:
         total = max(self.n_voxels, 1)
         voxel_ml = float(np.prod(self.volume.spacing_mm)) / 1000.0
         return ThresholdSummary(
-            iso=float(iso), units=self.units, voxels_above=n, fraction_above=n / total,
-            volume_above_ml=n * voxel_ml, percentile=100.0 * (1.0 - n / total),
-            value_range=self.value_range, exact=self.integer_values)
+            iso=float(iso),
+            units=self.units,
+            voxels_above=n,
+            fraction_above=n / total,
+            volume_above_ml=n * voxel_ml,
+            percentile=100.0 * (1.0 - n / total),
+            value_range=self.value_range,
+            exact=self.integer_values,
+        )
 
     def histogram(self, n_bins: int = 128) -> tuple[np.ndarray, np.ndarray]:
         """``(counts, edges)`` of the voxel values over ``n_bins`` equal bins (for display)."""
@@ -348,8 +381,9 @@ class CtPreview:
         }
 
     # ------------------------------------------------------------ surfaces
-    def surface(self, iso: float, *, largest_component: bool = True,
-                cancel: CancelToken | None = None) -> PreviewSurface:
+    def surface(
+        self, iso: float, *, largest_component: bool = True, cancel: CancelToken | None = None
+    ) -> PreviewSurface:
         """Coarse iso-surface at ``iso`` (volume units), in mm in the volume's frame.
 
         Never raises for a level without a surface: the result is then empty
@@ -361,11 +395,20 @@ class CtPreview:
         summary = self.summary(iso)
         empty = Mesh(np.zeros((0, 3)))
         try:
-            result = extract_isosurface(self.preview_volume, iso, largest_component=False,
-                                        progress=checking(cancel))
+            result = extract_isosurface(
+                self.preview_volume, iso, largest_component=False, progress=checking(cancel)
+            )
         except InputError as exc:
-            return PreviewSurface(iso, empty, empty, 0, self.strides,
-                                  perf_counter() - start, summary, note=exc.problem)
+            return PreviewSurface(
+                iso,
+                empty,
+                empty,
+                0,
+                self.strides,
+                perf_counter() - start,
+                summary,
+                note=exc.problem,
+            )
         vertices, faces = self._clamped(result.mesh.vertices), result.mesh.faces
         labels = face_component_labels(faces, len(vertices))
         n_components = int(labels.max()) + 1 if len(labels) else 0
@@ -374,8 +417,9 @@ class CtPreview:
             mesh, debris = _submesh(vertices, faces[keep]), _submesh(vertices, faces[~keep])
         else:
             mesh, debris = result.mesh, empty
-        return PreviewSurface(iso, mesh, debris, n_components, self.strides,
-                              perf_counter() - start, summary)
+        return PreviewSurface(
+            iso, mesh, debris, n_components, self.strides, perf_counter() - start, summary
+        )
 
     def _clamped(self, vertices: np.ndarray) -> np.ndarray:
         """Pull vertices of partial edge blocks back inside the full volume's extent (mm)."""

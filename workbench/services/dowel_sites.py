@@ -126,9 +126,15 @@ def _pattern() -> tuple[SiteRule, ...]:
 SITE_PATTERN: tuple[SiteRule, ...] = _pattern()
 
 
-def dowel_directions_at(skull: Mesh, points: np.ndarray, midline: np.ndarray,
-                        horizontal: np.ndarray, radius_mm: float = DOWEL_RADIUS_MM, *,
-                        tree: cKDTree | None = None) -> np.ndarray:
+def dowel_directions_at(
+    skull: Mesh,
+    points: np.ndarray,
+    midline: np.ndarray,
+    horizontal: np.ndarray,
+    radius_mm: float = DOWEL_RADIUS_MM,
+    *,
+    tree: cKDTree | None = None,
+) -> np.ndarray:
     """``(k, 3)`` unit dowel directions at ``points`` on ``skull``.
 
     Parameters
@@ -159,19 +165,34 @@ def dowel_directions_at(skull: Mesh, points: np.ndarray, midline: np.ndarray,
     return np.where(length > 1e-9, n / np.maximum(length, 1e-12), [0.0, 0.0, 1.0])
 
 
-def codes_directions(skull: Mesh, points: np.ndarray, codes: list[str],
-                     radius_mm: float = DOWEL_RADIUS_MM, *, tree: cKDTree | None = None
-                     ) -> np.ndarray:
+def codes_directions(
+    skull: Mesh,
+    points: np.ndarray,
+    codes: list[str],
+    radius_mm: float = DOWEL_RADIUS_MM,
+    *,
+    tree: cKDTree | None = None,
+) -> np.ndarray:
     """:func:`dowel_directions_at` for skull landmark codes (side and mouth rules by code)."""
-    return dowel_directions_at(skull, points, np.array([not is_bilateral(c) for c in codes]),
-                               np.array([c in HORIZONTAL_DOWELS for c in codes]), radius_mm,
-                               tree=tree)
+    return dowel_directions_at(
+        skull,
+        points,
+        np.array([not is_bilateral(c) for c in codes]),
+        np.array([c in HORIZONTAL_DOWELS for c in codes]),
+        radius_mm,
+        tree=tree,
+    )
 
 
-def interpolated_sites(skull: Mesh, landmarks: LandmarkSet, *,
-                       radius_mm: float = DOWEL_RADIUS_MM, skipped: list[str] | None = None,
-                       index: MeshIndex | None = None, caster: RayCaster | None = None,
-                       ) -> list[tuple[str, np.ndarray, tuple[tuple[str, float], ...]]]:
+def interpolated_sites(
+    skull: Mesh,
+    landmarks: LandmarkSet,
+    *,
+    radius_mm: float = DOWEL_RADIUS_MM,
+    skipped: list[str] | None = None,
+    index: MeshIndex | None = None,
+    caster: RayCaster | None = None,
+) -> list[tuple[str, np.ndarray, tuple[tuple[str, float], ...]]]:
     """The sites of :data:`SITE_PATTERN` that can be placed on ``skull``.
 
     Parameters
@@ -209,8 +230,11 @@ def interpolated_sites(skull: Mesh, landmarks: LandmarkSet, *,
         bad = [c for c in rule.parents if c not in defined]
         off = [c for c in rule.parents if c in defined and not on_bone[c]]
         if bad or off:
-            why = (f"{', '.join(bad)} not placed" if bad else "") + \
-                  ("; " if bad and off else "") + (f"{', '.join(off)} off the bone" if off else "")
+            why = (
+                (f"{', '.join(bad)} not placed" if bad else "")
+                + ("; " if bad and off else "")
+                + (f"{', '.join(off)} off the bone" if off else "")
+            )
             _note(skipped, rule, why)
             continue
         w = np.asarray(rule.weights)
@@ -244,28 +268,47 @@ def interpolated_sites(skull: Mesh, landmarks: LandmarkSet, *,
         ok = hits.hit & (hits.distance <= limit)
         facing = np.zeros(len(rules))
         if ok.any():
-            n_hit = dowel_directions_at(skull, hits.points[ok], np.zeros(ok.sum(), bool),
-                                        np.zeros(ok.sum(), bool), radius_mm,
-                                        tree=index.centroid_tree)
+            n_hit = dowel_directions_at(
+                skull,
+                hits.points[ok],
+                np.zeros(ok.sum(), bool),
+                np.zeros(ok.sum(), bool),
+                radius_mm,
+                tree=index.centroid_tree,
+            )
             facing[ok] = np.einsum("ij,ij->i", n_hit, d[ok])
         for i, rule in enumerate(rules):
             if not ok[i]:
-                _note(skipped, rule,
-                      f"no bone on its dowel line (missing or damaged {rule.region}?)")
+                _note(
+                    skipped, rule, f"no bone on its dowel line (missing or damaged {rule.region}?)"
+                )
             elif facing[i] < MIN_OUTWARD_COS:
-                _note(skipped, rule, f"the bone there faces away from the dowel line "
-                      f"(missing or damaged {rule.region}?)")
+                _note(
+                    skipped,
+                    rule,
+                    f"the bone there faces away from the dowel line "
+                    f"(missing or damaged {rule.region}?)",
+                )
             else:
-                sites.append((rule.code, hits.points[i].copy(),
-                              tuple(zip(rule.parents, rule.weights, strict=True))))
+                sites.append(
+                    (
+                        rule.code,
+                        hits.points[i].copy(),
+                        tuple(zip(rule.parents, rule.weights, strict=True)),
+                    )
+                )
     return sites
 
 
 _POOLED = ("", "pooled")
 
 
-def choose_depth_group(table: DepthTable, group: str | None = None, sex: str | None = None,
-                       build: str | float = "normal") -> tuple[str, float, str, list[str]]:
+def choose_depth_group(
+    table: DepthTable,
+    group: str | None = None,
+    sex: str | None = None,
+    build: str | float = "normal",
+) -> tuple[str, float, str, list[str]]:
     """Which group of a depth table to use, and the build variant.
 
     A named build picks the table's group of that build (and ``sex``, where
@@ -306,8 +349,9 @@ def choose_depth_group(table: DepthTable, group: str | None = None, sex: str | N
             if not exact and not pooled:
                 raise InputError(table.table_id, f"no depths for {sex}s", listing)
             if not exact:
-                notes.append(f"table {table.table_id} has no {sex}-specific depths: "
-                             "using sexes pooled")
+                notes.append(
+                    f"table {table.table_id} has no {sex}-specific depths: using sexes pooled"
+                )
             cand = exact or pooled
         named = [g for g in cand if table.group_build(g) == build]
         if named:
@@ -316,20 +360,24 @@ def choose_depth_group(table: DepthTable, group: str | None = None, sex: str | N
             cand = [g for g in cand if table.group_build(g) in _POOLED] or cand
         else:
             have = sorted({table.group_build(g) for g in names} - set(_POOLED))
-            raise InputError(table.table_id, f"no {build} build group"
-                             + (f" (builds: {', '.join(have)})" if have else ""),
-                             "use a mean + k SD variant instead, e.g. build = -1 or 1")
+            raise InputError(
+                table.table_id,
+                f"no {build} build group" + (f" (builds: {', '.join(have)})" if have else ""),
+                "use a mean + k SD variant instead, e.g. build = -1 or 1",
+            )
         if len(cand) > 1:
-            notes.append(f"several groups fit ({', '.join(cand)}): using {cand[0]}; "
-                         "choose one with group=")
+            notes.append(
+                f"several groups fit ({', '.join(cand)}): using {cand[0]}; choose one with group="
+            )
     group = cand[0]
     if k:
         sds = [sd for sd, g in zip(table.sd_mm, table.groups, strict=True) if g == group]
         if np.isnan(sds).all():
-            raise InputError(table.table_id,
-                             f"has no standard deviations, so 'mean {signed_k(k)} SD' "
-                             "cannot be computed",
-                             "choose a table with SDs (e.g. ttable_2023) or a named build group")
+            raise InputError(
+                table.table_id,
+                f"has no standard deviations, so 'mean {signed_k(k)} SD' cannot be computed",
+                "choose a table with SDs (e.g. ttable_2023) or a named build group",
+            )
     parts = [group]
     for extra in (table.group_sex(group), table.group_build(group)):
         if extra and all(extra not in p for p in parts):
@@ -349,8 +397,11 @@ def _parse_build(build: str | float) -> tuple[float, str]:
         try:
             k = float(text.removesuffix("sd").strip())
         except ValueError:
-            raise InputError("build", f"unknown build {build!r}",
-                             "use slender, normal, obese, or a number k for mean + k SD") from None
+            raise InputError(
+                "build",
+                f"unknown build {build!r}",
+                "use slender, normal, obese, or a number k for mean + k SD",
+            ) from None
     if not np.isfinite(k):
         raise InputError("build", f"k must be a finite number, got {build!r}")
     return k, "normal"

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
 from workbench.core.limits import check_tissue_depth
 from workbench.core.landmarks import LandmarkSet
@@ -81,7 +82,7 @@ class DepthSettings:
         Add the interpolated vault and mandible dowels.
     """
 
-    table: str = "ttable_2023"
+    table: str = DEFAULT_DEPTH_TABLE
     group: str | None = None
     sex: str | None = None
     build: str | float = "normal"
@@ -144,8 +145,13 @@ class DowelPlan:
         return tuple(d.code for d in self.dowels)
 
 
-def plan_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings = DepthSettings(),
-                *, catalogue: LandmarkCatalogue | None = None) -> DowelPlan:
+def plan_dowels(
+    skull: Mesh,
+    landmarks: LandmarkSet,
+    settings: DepthSettings = DepthSettings(),
+    *,
+    catalogue: LandmarkCatalogue | None = None,
+) -> DowelPlan:
     """Dowels for every placed or suggested skull landmark with a depth.
 
     Parameters
@@ -166,17 +172,24 @@ def plan_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings = D
     """
     catalogue = catalogue or load_catalogue()
     table = load_depth_table(settings.table, catalogue)
-    group, k, label, warnings = choose_depth_group(table, settings.group, settings.sex,
-                                                    settings.build)
-    rows = {c: i for i, (c, g) in enumerate(zip(table.codes, table.groups, strict=True))
-            if g == group}
+    group, k, label, warnings = choose_depth_group(
+        table, settings.group, settings.sex, settings.build
+    )
+    rows = {
+        c: i for i, (c, g) in enumerate(zip(table.codes, table.groups, strict=True)) if g == group
+    }
     site_codes = {r.code for r in SITE_PATTERN}
-    overrides = {_code(c, catalogue, site_codes, "overrides"): _depth(c, v)
-                 for c, v in settings.overrides.items()}
-    excluded = {c for label_ in settings.excluded
-                for c in _codes(label_, catalogue, site_codes, "excluded")}
-    user_dirs = {_code(c, catalogue, site_codes, "directions"): _unit(c, v)
-                 for c, v in settings.directions.items()}
+    overrides = {
+        _code(c, catalogue, site_codes, "overrides"): _depth(c, v)
+        for c, v in settings.overrides.items()
+    }
+    excluded = {
+        c for label_ in settings.excluded for c in _codes(label_, catalogue, site_codes, "excluded")
+    }
+    user_dirs = {
+        _code(c, catalogue, site_codes, "directions"): _unit(c, v)
+        for c, v in settings.directions.items()
+    }
 
     index = MeshIndex(skull)
     status = {lm.code: lm.status for lm in landmarks}
@@ -192,8 +205,9 @@ def plan_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings = D
     dowels: list[Dowel] = []
     if want:
         origins = np.stack([defined[c] for c in want])
-        dirs = codes_directions(skull, origins, want, settings.normal_radius_mm,
-                                tree=index.centroid_tree)
+        dirs = codes_directions(
+            skull, origins, want, settings.normal_radius_mm, tree=index.centroid_tree
+        )
         no_sd, floored = [], []
         for c, o, d in zip(want, origins, dirs, strict=True):
             mean = float(table.mean_mm[rows[c]]) if c in rows else None
@@ -211,31 +225,59 @@ def plan_dowels(skull: Mesh, landmarks: LandmarkSet, settings: DepthSettings = D
                 if depth < MIN_SAMPLE_DEPTH_MM:
                     floored.append(f"{c} ({depth:.1f} mm)")
                     depth = MIN_SAMPLE_DEPTH_MM
-            dowels.append(Dowel(c, skin or None, _ro(o), _ro(user_dirs.get(c, d)), float(depth),
-                                sd_or_none, mean, source, c in excluded))
+            dowels.append(
+                Dowel(
+                    c,
+                    skin or None,
+                    _ro(o),
+                    _ro(user_dirs.get(c, d)),
+                    float(depth),
+                    sd_or_none,
+                    mean,
+                    source,
+                    c in excluded,
+                )
+            )
         if floored:
-            warnings.append(f"mean {signed_k(k)} SD is below {MIN_SAMPLE_DEPTH_MM:g} mm for "
-                            f"{', '.join(floored)}: set to {MIN_SAMPLE_DEPTH_MM:g} mm")
+            warnings.append(
+                f"mean {signed_k(k)} SD is below {MIN_SAMPLE_DEPTH_MM:g} mm for "
+                f"{', '.join(floored)}: set to {MIN_SAMPLE_DEPTH_MM:g} mm"
+            )
         if no_sd:
-            warnings.append(f"no SD in the table for {', '.join(no_sd)}: their depths are the "
-                            f"plain means, not mean {signed_k(k)} SD")
+            warnings.append(
+                f"no SD in the table for {', '.join(no_sd)}: their depths are the "
+                f"plain means, not mean {signed_k(k)} SD"
+            )
     if settings.interpolate:
-        dowels += _interpolated(skull, landmarks, index, dowels, settings, overrides, excluded,
-                                user_dirs, warnings)
+        dowels += _interpolated(
+            skull, landmarks, index, dowels, settings, overrides, excluded, user_dirs, warnings
+        )
     unused = sorted(set(overrides) - {d.code for d in dowels})
     if unused:
         warnings.append(f"overrides not used (no placed landmark or site): {', '.join(unused)}")
     from_table = [d for d in dowels if d.source == "table"]
     if from_table and all(d.sd_mm is None for d in from_table):
-        warnings.append(f"table {table.table_id} has no SDs: the uncertainty ensemble keeps "
-                        "these depths fixed")
+        warnings.append(
+            f"table {table.table_id} has no SDs: the uncertainty ensemble keeps these depths fixed"
+        )
     _check_outward(dowels, warnings)
-    used = [p for d in dowels if d.source != "override"
-            for p in ([d.code] if not d.parents else [c for c, _ in d.parents])]
-    keys = list(dict.fromkeys(table.sources[rows[p]] for p in used
-                              if p in rows and p not in overrides))
-    return DowelPlan(tuple(dowels), table.table_id, str(table.meta.get("title", table.table_id)),
-                     "\n".join(table.citation(key) for key in keys), label, tuple(warnings))
+    used = [
+        p
+        for d in dowels
+        if d.source != "override"
+        for p in ([d.code] if not d.parents else [c for c, _ in d.parents])
+    ]
+    keys = list(
+        dict.fromkeys(table.sources[rows[p]] for p in used if p in rows and p not in overrides)
+    )
+    return DowelPlan(
+        tuple(dowels),
+        table.table_id,
+        str(table.meta.get("title", table.table_id)),
+        "\n".join(table.citation(key) for key in keys),
+        label,
+        tuple(warnings),
+    )
 
 
 def depth_samples(plan: DowelPlan, rng: np.random.Generator) -> np.ndarray:
@@ -248,8 +290,9 @@ def depth_samples(plan: DowelPlan, rng: np.random.Generator) -> np.ndarray:
     """
     n = len(plan.dowels)
     mean = np.array([d.depth_mm for d in plan.dowels])
-    sd = np.array([d.sd_mm if d.sd_mm is not None and d.source == "table" else 0.0
-                   for d in plan.dowels])
+    sd = np.array(
+        [d.sd_mm if d.sd_mm is not None and d.source == "table" else 0.0 for d in plan.dowels]
+    )
     draw = mean + sd * rng.standard_normal(n)
     for _ in range(100):
         low = (draw < MIN_SAMPLE_DEPTH_MM) & (sd > 0)
@@ -269,8 +312,9 @@ def _codes(label: str, catalogue: LandmarkCatalogue, sites: set[str], what: str)
     """Catalogue codes for a settings label; a side-less bilateral label gives both sides."""
     if label in sites or label.startswith("i:"):
         if label not in sites:
-            raise InputError(what, f"unknown interpolated site {label!r}",
-                             f"sites: {', '.join(sorted(sites))}")
+            raise InputError(
+                what, f"unknown interpolated site {label!r}", f"sites: {', '.join(sorted(sites))}"
+            )
         return [label]
     try:
         return [catalogue.normalise(label, "skull")]
@@ -284,15 +328,21 @@ def _codes(label: str, catalogue: LandmarkCatalogue, sites: set[str], what: str)
             break
     if len(both) == 2:
         return both
-    raise InputError(what, f"unknown skull landmark {label!r}",
-                     "use the skull codes of data_tables/landmarks/catalogue.csv")
+    raise InputError(
+        what,
+        f"unknown skull landmark {label!r}",
+        "use the skull codes of data_tables/landmarks/catalogue.csv",
+    )
 
 
 def _code(label: str, catalogue: LandmarkCatalogue, sites: set[str], what: str) -> str:
     codes = _codes(label, catalogue, sites, what)
     if len(codes) != 1:
-        raise InputError(what, f"{label!r} names both sides ({', '.join(codes)})",
-                         "give the side, e.g. " + codes[0])
+        raise InputError(
+            what,
+            f"{label!r} names both sides ({', '.join(codes)})",
+            "give the side, e.g. " + codes[0],
+        )
     return codes[0]
 
 
@@ -310,8 +360,9 @@ def _unit(code: str, value: tuple[float, float, float]) -> np.ndarray:
     v = np.asarray(value, dtype=float).reshape(-1)
     length = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
     if v.shape != (3,) or not np.isfinite(v).all() or length < 1e-9:
-        raise InputError("directions",
-                         f"{code}: a direction must be a non-zero 3-vector, got {value!r}")
+        raise InputError(
+            "directions", f"{code}: a direction must be a non-zero 3-vector, got {value!r}"
+        )
     return v / length
 
 
@@ -322,9 +373,16 @@ def _ro(a: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- helpers
-def _report_skipped(warnings: list[str], table: DepthTable, landmarks: LandmarkSet,
-                    rows: dict[str, int], overrides: dict[str, float], status: dict[str, str],
-                    off_bone: list[str], catalogue: LandmarkCatalogue) -> None:
+def _report_skipped(
+    warnings: list[str],
+    table: DepthTable,
+    landmarks: LandmarkSet,
+    rows: dict[str, int],
+    overrides: dict[str, float],
+    status: dict[str, str],
+    off_bone: list[str],
+    catalogue: LandmarkCatalogue,
+) -> None:
     """Warnings for every landmark or table code that gets no dowel, grouped by reason."""
     dowel_codes = set(rows) | set(overrides)
     for st, why in (("absent", "marked absent"), ("missing", "not placed yet")):
@@ -335,22 +393,40 @@ def _report_skipped(warnings: list[str], table: DepthTable, landmarks: LandmarkS
     if gone:
         warnings.append(f"no dowel for {', '.join(gone)}: not in the landmark set")
     if off_bone:
-        warnings.append(f"no dowel for {', '.join(off_bone)}: farther than {OFF_BONE_MM:g} mm "
-                        "from the skull surface (missing bone, or a misplaced landmark?)")
-    no_value = [c for c in landmarks.codes if status[c] in ("placed", "suggested")
-                and c not in dowel_codes and (e := catalogue.get(c, "skull")) is not None
-                and e.partner]
+        warnings.append(
+            f"no dowel for {', '.join(off_bone)}: farther than {OFF_BONE_MM:g} mm "
+            "from the skull surface (missing bone, or a misplaced landmark?)"
+        )
+    no_value = [
+        c
+        for c in landmarks.codes
+        if status[c] in ("placed", "suggested")
+        and c not in dowel_codes
+        and (e := catalogue.get(c, "skull")) is not None
+        and e.partner
+    ]
     if no_value:
-        warnings.append(f"no depth in table {table.table_id} for {', '.join(no_value)}: "
-                        "no dowels there (set an override to add one)")
+        warnings.append(
+            f"no depth in table {table.table_id} for {', '.join(no_value)}: "
+            "no dowels there (set an override to add one)"
+        )
 
 
-def _interpolated(skull: Mesh, landmarks: LandmarkSet, index: MeshIndex, dowels: list[Dowel],
-                  settings: DepthSettings, overrides: dict[str, float], excluded: set[str],
-                  user_dirs: dict[str, np.ndarray], warnings: list[str]) -> list[Dowel]:
+def _interpolated(
+    skull: Mesh,
+    landmarks: LandmarkSet,
+    index: MeshIndex,
+    dowels: list[Dowel],
+    settings: DepthSettings,
+    overrides: dict[str, float],
+    excluded: set[str],
+    user_dirs: dict[str, np.ndarray],
+    warnings: list[str],
+) -> list[Dowel]:
     skipped: list[str] = []
-    sites = interpolated_sites(skull, landmarks, radius_mm=settings.normal_radius_mm,
-                               skipped=skipped, index=index)
+    sites = interpolated_sites(
+        skull, landmarks, radius_mm=settings.normal_radius_mm, skipped=skipped, index=index
+    )
     by_code = {d.code: d for d in dowels}
     placed = []
     for code, pos, parents in sites:
@@ -365,15 +441,24 @@ def _interpolated(skull: Mesh, landmarks: LandmarkSet, index: MeshIndex, dowels:
         return []
     pts = np.stack([p for _, p, _ in placed])
     midline = np.array([not any(c.endswith(("_l", "_r")) for c, _ in par) for _, _, par in placed])
-    dirs = dowel_directions_at(skull, pts, midline, np.zeros(len(placed), bool),
-                               settings.normal_radius_mm, tree=index.centroid_tree)
+    dirs = dowel_directions_at(
+        skull,
+        pts,
+        midline,
+        np.zeros(len(placed), bool),
+        settings.normal_radius_mm,
+        tree=index.centroid_tree,
+    )
     out, followed = [], []
     for (code, pos, parents), d in zip(placed, dirs, strict=True):
         ps = [by_code[c] for c, _ in parents]
         w = np.array([wt for _, wt in parents])
         depth = float(w @ [p.depth_mm for p in ps])
-        table = ([p.table_depth_mm for p in ps] if all(p.table_depth_mm is not None for p in ps)
-                 else None)
+        table = (
+            [p.table_depth_mm for p in ps]
+            if all(p.table_depth_mm is not None for p in ps)
+            else None
+        )
         sds = [0.0 if p.source == "override" else p.sd_mm for p in ps]
         sd = None if any(s is None for s in sds) else float(np.sqrt(np.sum((w * sds) ** 2)))
         source = "interpolated"
@@ -382,8 +467,20 @@ def _interpolated(skull: Mesh, landmarks: LandmarkSet, index: MeshIndex, dowels:
         off = code in excluded or any(p.excluded for p in ps)
         if off and code not in excluded:
             followed.append(code)
-        out.append(Dowel(code, None, _ro(pos), _ro(user_dirs.get(code, d)), depth, sd,
-                         None if table is None else float(w @ table), source, off, parents))
+        out.append(
+            Dowel(
+                code,
+                None,
+                _ro(pos),
+                _ro(user_dirs.get(code, d)),
+                depth,
+                sd,
+                None if table is None else float(w @ table),
+                source,
+                off,
+                parents,
+            )
+        )
     if followed:
         warnings.append(f"interpolated dowels excluded with a parent: {', '.join(followed)}")
     return out
@@ -397,5 +494,7 @@ def _check_outward(dowels: list[Dowel], warnings: list[str]) -> None:
     n = np.stack([d.direction for d in dowels])
     out = np.einsum("ij,ij->i", o - o.mean(axis=0), n) > 0
     if out.mean() < 0.5:
-        warnings.append(f"{int((~out).sum())} of {len(dowels)} dowels point into the skull: "
-                        "are the mesh's faces wound inward?")
+        warnings.append(
+            f"{int((~out).sum())} of {len(dowels)} dowels point into the skull: "
+            "are the mesh's faces wound inward?"
+        )

@@ -25,7 +25,12 @@ from workbench.model.reconstruction_setup import DEFAULT_TABLE, DowelSettings, G
 from workbench.services.dowels import DowelPlan
 from workbench.services.guide_rules import published_predictions
 from workbench.services.guides import (
-    Guide, apply_guides, check_guides, classic_guides, guides_from_prediction, guides_from_json,
+    Guide,
+    apply_guides,
+    check_guides,
+    classic_guides,
+    guides_from_prediction,
+    guides_from_json,
 )
 
 #: a computed guide that would move its skin landmark farther than this from
@@ -42,8 +47,13 @@ def stored_guides(guides: GuideList | None) -> list[Guide] | None:
     return guides_from_json(guides.to_state(), "case guides")
 
 
-def plausible_guides(guides: list[Guide], skin: dict[str, np.ndarray], skull_h: Mesh,
-                     lms_h: LandmarkSet, rejected: list[str]) -> dict[str, np.ndarray]:
+def plausible_guides(
+    guides: list[Guide],
+    skin: dict[str, np.ndarray],
+    skull_h: Mesh,
+    lms_h: LandmarkSet,
+    rejected: list[str],
+) -> dict[str, np.ndarray]:
     """Guide targets, leaving out computed guides that fail their checks.
 
     A guide set by the user is always applied.  A computed one is switched
@@ -56,13 +66,19 @@ def plausible_guides(guides: list[Guide], skin: dict[str, np.ndarray], skull_h: 
         if not g.enabled or g.source == "user":
             continue
         problems = check_guides([g], skull_h, lms_h)
-        shift = max((float(np.linalg.norm(p - skin[c]))
-                     for c, p in apply_guides([g], skin).items()), default=0.0)
+        shift = max(
+            (float(np.linalg.norm(p - skin[c])) for c, p in apply_guides([g], skin).items()),
+            default=0.0,
+        )
         if problems or shift > MAX_GUIDE_SHIFT_MM:
-            why = problems[0] if problems else \
-                f"it would move {', '.join(g.affects)} by {shift:.1f} mm"
-            rejected.append(f"guide {g.id} switched off ({why}); check the skull there or set "
-                            "the guide by hand")
+            why = (
+                problems[0]
+                if problems
+                else f"it would move {', '.join(g.affects)} by {shift:.1f} mm"
+            )
+            rejected.append(
+                f"guide {g.id} switched off ({why}); check the skull there or set the guide by hand"
+            )
             guides[i] = replace(g, enabled=False)
     return apply_guides(guides, skin)
 
@@ -89,26 +105,29 @@ class FitGuides:
         tips = {d.code: d.tip for d in plan.active()}
         if self.stored is None:
             table = self.dowels.table if not self.dowels.table.endswith(".csv") else DEFAULT_TABLE
-            self.chosen.extend(classic_guides(lms_h, skull_h, dowel_tips=tips,
-                                              sex=self.dowels.sex, table_id=table))
+            self.chosen.extend(
+                classic_guides(lms_h, skull_h, dowel_tips=tips, sex=self.dowels.sex, table_id=table)
+            )
         else:
             self.chosen.extend(self.stored)
         if self.rules:
             self._apply_rules(skull_h, lms_h, tips)
         return lambda skin: plausible_guides(self.chosen, skin, skull_h, lms_h, self.rejected)
 
-    def _apply_rules(self, skull_h: Mesh, lms_h: LandmarkSet,
-                     tips: dict[str, np.ndarray]) -> None:
+    def _apply_rules(self, skull_h: Mesh, lms_h: LandmarkSet, tips: dict[str, np.ndarray]) -> None:
         why: list[str] = []
-        preds = published_predictions(lms_h, self.dowels.sex, rules=self.rules, skull=skull_h,
-                                      dowel_tips=tips, problems=why)
+        preds = published_predictions(
+            lms_h, self.dowels.sex, rules=self.rules, skull=skull_h, dowel_tips=tips, problems=why
+        )
         for pred in preds:
             if pred.target:
                 self.chosen[:] = guides_from_prediction(pred, self.chosen)
         found = {p.rule_id for p in preds}
-        self.rejected.extend(f"published rule {r} not applied: "
-                             f"{'; '.join(why) or 'no prediction for this skull'}"
-                             for r in self.rules if r not in found)
+        self.rejected.extend(
+            f"published rule {r} not applied: {'; '.join(why) or 'no prediction for this skull'}"
+            for r in self.rules
+            if r not in found
+        )
 
     def problems(self, skull_h: Mesh, lms_h: LandmarkSet) -> list[str]:
         """Checks of the enabled guides on the fitted frame (notes for the report)."""

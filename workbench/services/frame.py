@@ -19,8 +19,10 @@ MIDLINE = {
     "skin": ("g", "n", "se", "prn", "sn", "ls", "li", "pg", "gn", "me", "v", "op"),
 }
 ABOVE_FH = {"skull": ("g", "n", "b", "v", "mso_l", "mso_r"), "skin": ("g", "n", "se", "v", "tr")}
-BELOW_FH = {"skull": ("pr", "id", "pg", "gn", "me", "go_l", "go_r"),
-            "skin": ("sn", "ls", "li", "pg", "gn", "me", "go_l", "go_r")}
+BELOW_FH = {
+    "skull": ("pr", "id", "pg", "gn", "me", "go_l", "go_r"),
+    "skin": ("sn", "ls", "li", "pg", "gn", "me", "go_l", "go_r"),
+}
 
 
 def head_frame_from_landmarks(landmarks: LandmarkSet) -> HeadFrame:
@@ -53,7 +55,11 @@ def head_frame_from_landmarks(landmarks: LandmarkSet) -> HeadFrame:
         return [defined[c] for c in codes if c in defined]
 
     return frankfort_frame(
-        defined["po_l"], defined["po_r"], or_l, or_r,
+        defined["po_l"],
+        defined["po_r"],
+        or_l,
+        or_r,
         midline=pick(MIDLINE[surface]) or None,
-        above=pick(ABOVE_FH[surface]), below=pick(BELOW_FH[surface]),
+        above=pick(ABOVE_FH[surface]),
+        below=pick(BELOW_FH[surface]),
     )

@@ -15,7 +15,6 @@ display after Vig & Brundo 1978).  Every measurement says how it was obtained.
 
 from __future__ import annotations
 
-import csv
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -26,41 +25,30 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE, data_tables_dir
+from workbench.io.csv_rows import read_csv_rows
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.raycast import RayCaster
-from workbench.io.catalogue import default_catalogue_path
 from workbench.io.tables import load_depth_table
 
 CONSTANT_COLUMNS = ("name", "sex", "value", "unit", "source", "notes")
 SIDES = (("l", 1.0), ("r", -1.0))
 #: Implementation choices (not published numbers): rays and sections used on the mesh.
-APERTURE_RIM_DEPTH_MM = 4.0   # a frontal ray hitting within this of the row's front is bone
+APERTURE_RIM_DEPTH_MM = 4.0  # a frontal ray hitting within this of the row's front is bone
 SECTION_BELOW_CREST_MM = 3.0  # tooth section this far below prosthion (cervical third of crowns)
 
 
 def guides_dir() -> Path:
     """Folder of the guide tables (``data_tables/guides``)."""
-    return default_catalogue_path().parents[1] / "guides"
+    return data_tables_dir() / "guides"
 
 
 def read_table_csv(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
     """``(line number, row)`` pairs; InputError naming the file for missing columns or ragged rows."""
-    try:
-        with path.open(encoding="utf-8", newline="") as fh:
-            reader = csv.DictReader(fh)
-            missing = [c for c in columns if c not in (reader.fieldnames or ())]
-            if missing:
-                raise InputError(path, f"missing columns: {', '.join(missing)}")
-            rows = []
-            for i, row in enumerate(reader, start=2):
-                if None in row or any(v is None for v in row.values()):
-                    raise InputError(path, f"line {i}: wrong number of values")
-                rows.append((i, {k: v.strip() for k, v in row.items()}))
-            return rows
-    except OSError as exc:
-        raise InputError(path, f"cannot read the guide table ({exc})") from None
+    rows = read_csv_rows(path, columns, what="guide table", short_rows=False)
+    return [(line, {k: v or "" for k, v in row.items()}) for line, row in rows]
 
 
 def parse_number(path: Path, line: int, col: str, text: str, default: float | None = None) -> float:
@@ -93,8 +81,13 @@ def citation(keys: str) -> str:
 def load_constants() -> dict[tuple[str, str], tuple[float, str]]:
     """``{(name, sex): (value, citation)}`` from ``guide_constants.csv``."""
     path = guides_dir() / "guide_constants.csv"
-    return {(r["name"], r["sex"]): (parse_number(path, line, "value", r["value"]), citation(r["source"]))
-            for line, r in read_table_csv(path, CONSTANT_COLUMNS)}
+    return {
+        (r["name"], r["sex"]): (
+            parse_number(path, line, "value", r["value"]),
+            citation(r["source"]),
+        )
+        for line, r in read_table_csv(path, CONSTANT_COLUMNS)
+    }
 
 
 def constant(name: str, sex: str | None = None) -> float:
@@ -119,7 +112,6 @@ def sex_code(sex: str | None) -> str | None:
     if key in ("f", "female"):
         return "F"
     raise InputError("sex", f"unknown sex {sex!r}", "use female, male or leave it out")
-
 
 
 # ------------------------------------------------------------------ measurements
@@ -259,9 +251,14 @@ def _canines(mesh: Mesh, pr: np.ndarray) -> dict[str, tuple[float, float]] | Non
             teeth.append((float(np.arctan2(c[0], c[1] - centre_z)), loop))
     out = {}
     for side, sign in SIDES:
-        row = sorted(((abs(a), lp) for a, lp in teeth
-                      if sign * lp[:, 0].mean() > 0 or (lp[:, 0].min() < -1 and lp[:, 0].max() > 1)),
-                     key=lambda item: item[0])
+        row = sorted(
+            (
+                (abs(a), lp)
+                for a, lp in teeth
+                if sign * lp[:, 0].mean() > 0 or (lp[:, 0].min() < -1 and lp[:, 0].max() > 1)
+            ),
+            key=lambda item: item[0],
+        )
         if len(row) < 3:
             return None
         canine = row[2][1]
@@ -275,9 +272,14 @@ def _canines(mesh: Mesh, pr: np.ndarray) -> dict[str, tuple[float, float]] | Non
     return out
 
 
-def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
-                  dowel_tips: Mapping[str, np.ndarray] | None = None, sex: str | None = None,
-                  table_id: str = "ttable_2023") -> SkullMeasures:
+def measure_skull(
+    lms: LandmarkSet,
+    skull: Mesh | None = None,
+    *,
+    dowel_tips: Mapping[str, np.ndarray] | None = None,
+    sex: str | None = None,
+    table_id: str = DEFAULT_DEPTH_TABLE,
+) -> SkullMeasures:
     """Everything the guide rules need, from landmarks, the mesh (optional) and cited constants."""
     sex = sex_code(sex)
     m = SkullMeasures()
@@ -299,14 +301,21 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
         hi = p["rhi"][1] if "rhi" in p else lo + 40.0
         ys = np.arange(lo, hi, 0.5)
     for side, sign in SIDES:
-        got = (_aperture_width(caster, z0, ys, sign)
-               if caster is not None and ys is not None else None)
+        got = (
+            _aperture_width(caster, z0, ys, sign) if caster is not None and ys is not None else None
+        )
         if got is not None:
-            m.put(f"aperture_x_{side}", sign * got,
-                  "widest nasal aperture in the frontal view (rays on the skull mesh)")
+            m.put(
+                f"aperture_x_{side}",
+                sign * got,
+                "widest nasal aperture in the frontal view (rays on the skull mesh)",
+            )
         elif f"apl_{side}" in p:
-            m.put(f"aperture_x_{side}", p[f"apl_{side}"][0],
-                  f"bony alare apl_{side} (most lateral aperture point)")
+            m.put(
+                f"aperture_x_{side}",
+                p[f"apl_{side}"][0],
+                f"bony alare apl_{side} (most lateral aperture point)",
+            )
         else:
             m.put(f"aperture_x_{side}", None, "", f"no skull mesh aperture and no apl_{side}")
 
@@ -318,18 +327,28 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
         how = "lower aperture margin beside the spine (rays on the skull mesh)"
         if base is None and "ss" in p:
             base, how = p["ss"][2], "depth of subspinale ss (no mesh margin found)"
-        m.put("spine_projection", None if base is None else p["ans"][2] - base,
-              f"ans z minus the spine base z; base from the {how}", "no spine base (mesh or ss)")
+        m.put(
+            "spine_projection",
+            None if base is None else p["ans"][2] - base,
+            f"ans z minus the spine base z; base from the {how}",
+            "no spine base (mesh or ss)",
+        )
     else:
         m.missing["spine_projection"] = "no anterior nasal spine ans"
     if dowel_tips is not None and "mp" in dowel_tips:
-        m.put("mp_dowel_z", float(np.asarray(dowel_tips["mp"], float)[2]),
-              "mid-philtrum dowel tip (given)")
+        m.put(
+            "mp_dowel_z",
+            float(np.asarray(dowel_tips["mp"], float)[2]),
+            "mid-philtrum dowel tip (given)",
+        )
     elif "mp" in p:
         depth = load_depth_table(table_id).lookup(None).get("mp")
-        m.put("mp_dowel_z", None if depth is None else p["mp"][2] + depth[0],
-              f"skull mp + {depth[0] if depth else '?'} mm ({table_id} mean) parallel to FH",
-              f"table {table_id} has no mp depth")
+        m.put(
+            "mp_dowel_z",
+            None if depth is None else p["mp"][2] + depth[0],
+            f"skull mp + {depth[0] if depth else '?'} mm ({table_id} mean) parallel to FH",
+            f"table {table_id} has no mp depth",
+        )
     else:
         m.missing["mp_dowel_z"] = "no mid-philtrum landmark mp and no dowel tip"
 
@@ -339,9 +358,13 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
         m.put("upper_cej_y", p["pr"][1] - crest, f"prosthion pr − {crest} mm (crest to CEJ)")
         edge = _incisal_edge_y(caster, z0, p["pr"]) if caster is not None else None
         crown = constant("upper_central_incisor_crown_length")
-        m.put("incisal_edge_y", edge if edge is not None else p["pr"][1] - crest - crown,
-              "incisal edge of the upper central incisors (rays on the skull mesh)" if edge is not None
-              else f"upper CEJ − {crown} mm crown length (no incisal edge found on a mesh)")
+        m.put(
+            "incisal_edge_y",
+            edge if edge is not None else p["pr"][1] - crest - crown,
+            "incisal edge of the upper central incisors (rays on the skull mesh)"
+            if edge is not None
+            else f"upper CEJ − {crown} mm crown length (no incisal edge found on a mesh)",
+        )
     else:
         for k in ("upper_cej_y", "incisal_edge_y"):
             m.missing[k] = "no prosthion pr (upper alveolar crest)"
@@ -349,16 +372,25 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
         m.put("lower_cej_y", p["id"][1] + crest, f"infradentale id + {crest} mm (crest to CEJ)")
     else:
         m.missing["lower_cej_y"] = "no infradentale id (mandible missing?)"
-    m.put("incisor_display", constant("incisor_display_at_rest", sex),
-          f"incisor display at rest ({sex or 'sex unknown: mean of men and women'})")
+    m.put(
+        "incisor_display",
+        constant("incisor_display_at_rest", sex),
+        f"incisor display at rest ({sex or 'sex unknown: mean of men and women'})",
+    )
     found = _canines(skull, p["pr"]) if skull is not None and "pr" in p else None
     half_md = 0.5 * constant("upper_canine_crown_md")
     for side, sign in SIDES:
         if found is not None:
-            m.put(f"canine_x_{side}", found[side][0],
-                  "lateral aspect of the upper canine (crown section of the mesh)")
-            m.put(f"cp_junction_x_{side}", found[side][1],
-                  "canine–first-premolar junction (crown section of the mesh)")
+            m.put(
+                f"canine_x_{side}",
+                found[side][0],
+                "lateral aspect of the upper canine (crown section of the mesh)",
+            )
+            m.put(
+                f"cp_junction_x_{side}",
+                found[side][1],
+                "canine–first-premolar junction (crown section of the mesh)",
+            )
         elif f"sC_{side}" in p:
             # half a canine crown along the arch, whose direction at the canine is
             # taken from pr → sC → ecm2s when those are placed (else straight lateral)
@@ -370,16 +402,23 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
                 t = d1 / np.linalg.norm(d1) + d2 / np.linalg.norm(d2)
                 lateral = abs(t[0]) / np.linalg.norm(t)
             x = sc[0] + sign * half_md * lateral
-            how = f"supracanine sC_{side} + half the canine crown width ({half_md} mm) along the arch"
+            how = (
+                f"supracanine sC_{side} + half the canine crown width ({half_md} mm) along the arch"
+            )
             m.put(f"canine_x_{side}", x, how)
             m.put(f"cp_junction_x_{side}", x, how)
         else:
             for k in ("canine_x", "cp_junction_x"):
                 m.missing[f"{k}_{side}"] = f"no tooth crowns on a mesh and no sC_{side}"
     if "canine_x_l" in m and "canine_x_r" in m:
-        m.put("intercanine_width", m["canine_x_l"] - m["canine_x_r"], "lateral aspects of the canines")
-        m.put("cp_junction_width", m["cp_junction_x_l"] - m["cp_junction_x_r"],
-              "canine–premolar junctions")
+        m.put(
+            "intercanine_width", m["canine_x_l"] - m["canine_x_r"], "lateral aspects of the canines"
+        )
+        m.put(
+            "cp_junction_width",
+            m["cp_junction_x_l"] - m["cp_junction_x_r"],
+            "canine–premolar junctions",
+        )
 
     # Rynn et al. 2010 distances
     for name, (a, b) in {"X": ("n", "ans"), "Y": ("rhi", "ss"), "Z": ("n", "ss")}.items():
@@ -409,7 +448,9 @@ def measure_skull(lms: LandmarkSet, skull: Mesh | None = None, *,
         cy = 0.5 * (mso[1] + orb[1])
         m.put(f"orbit_cx_{side}", 0.5 * (d[0] + ec[0]), "middle of d and ec")
         m.put(f"orbit_cy_{side}", cy, "middle of mso and or")
-        m.put(f"tangent_z_{side}", orb[2] + (cy - orb[1]) * (mso[2] - orb[2]) / (mso[1] - orb[1]),
-              "mso–or tangent at mid-orbit height")
+        m.put(
+            f"tangent_z_{side}",
+            orb[2] + (cy - orb[1]) * (mso[2] - orb[2]) / (mso[1] - orb[1]),
+            "mso–or tangent at mid-orbit height",
+        )
     return m
-

@@ -19,16 +19,46 @@ from functools import lru_cache
 
 import numpy as np
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.services.guide_measure import (
-    SIDES, SkullMeasures, citation, constant, guides_dir, guides_meta, measure_skull, parse_number,
-    read_table_csv, sex_code)
+    SIDES,
+    SkullMeasures,
+    citation,
+    constant,
+    guides_dir,
+    guides_meta,
+    measure_skull,
+    parse_number,
+    read_table_csv,
+    sex_code,
+)
 
-RULE_COLUMNS = ("rule_id", "feature", "kind", "quantity", "target", "formula", "intercept_mm",
-                "coef_1", "predictor_1", "coef_2", "predictor_2", "sex", "population", "n",
-                "reported_error", "uses", "offered", "status", "source", "where_read", "notes")
+RULE_COLUMNS = (
+    "rule_id",
+    "feature",
+    "kind",
+    "quantity",
+    "target",
+    "formula",
+    "intercept_mm",
+    "coef_1",
+    "predictor_1",
+    "coef_2",
+    "predictor_2",
+    "sex",
+    "population",
+    "n",
+    "reported_error",
+    "uses",
+    "offered",
+    "status",
+    "source",
+    "where_read",
+    "notes",
+)
 
 
 @dataclass(frozen=True)
@@ -68,20 +98,33 @@ def load_rules() -> dict[str, Rule]:
     where = guides_meta()["where_read"]
     out: dict[str, Rule] = {}
     for line, r in read_table_csv(path, RULE_COLUMNS):
-        terms = tuple((parse_number(path, line, f"coef_{k}", r[f"coef_{k}"]), r[f"predictor_{k}"])
-                      for k in (1, 2) if r[f"predictor_{k}"])
+        terms = tuple(
+            (parse_number(path, line, f"coef_{k}", r[f"coef_{k}"]), r[f"predictor_{k}"])
+            for k in (1, 2)
+            if r[f"predictor_{k}"]
+        )
         if r["sex"] not in ("pooled", "M", "F") or r["rule_id"] in out:
             raise InputError(path, f"line {line}: bad sex or duplicate rule {r['rule_id']!r}")
         out[r["rule_id"]] = Rule(
-            r["rule_id"], r["feature"], r["kind"], r["quantity"],
-            tuple(t for t in r["target"].split(";") if t), r["formula"],
-            parse_number(path, line, "intercept_mm", r["intercept_mm"], 0.0), terms, r["sex"],
-            r["population"], r["reported_error"], tuple(u for u in r["uses"].split(";") if u),
-            r["offered"], r["status"], citation(r["source"]),
-            where.get(r["where_read"], r["where_read"]), r["notes"])
+            r["rule_id"],
+            r["feature"],
+            r["kind"],
+            r["quantity"],
+            tuple(t for t in r["target"].split(";") if t),
+            r["formula"],
+            parse_number(path, line, "intercept_mm", r["intercept_mm"], 0.0),
+            terms,
+            r["sex"],
+            r["population"],
+            r["reported_error"],
+            tuple(u for u in r["uses"].split(";") if u),
+            r["offered"],
+            r["status"],
+            citation(r["source"]),
+            where.get(r["where_read"], r["where_read"]),
+            r["notes"],
+        )
     return out
-
-
 
 
 @dataclass(frozen=True)
@@ -133,9 +176,9 @@ def _rynn_point(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Pred
     pa, pv = pa_rule.evaluate(vals), pv_rule.evaluate(vals)
     n = np.array([m["n_y"], m["n_z"]])
     e = np.array([m["pr_y"], m["pr_z"]]) - n
-    e /= np.linalg.norm(e)                         # down along the nasion–prosthion line
+    e /= np.linalg.norm(e)  # down along the nasion–prosthion line
     perp = np.array([e[1], -e[0]])
-    perp = perp if perp[1] > 0 else -perp          # forward, perpendicular to it
+    perp = perp if perp[1] > 0 else -perp  # forward, perpendicular to it
     y, z = n + pa * perp + pv * e
     inputs = {p: vals[p] for r in (pa_rule, pv_rule) for _, p in r.terms} | {"PA": pa, "PV": pv}
     return Prediction(rule.rule_id, "", rule.quantity, pa, {"prn": _point(0.0, y, z)}, inputs)
@@ -155,9 +198,11 @@ def _eye_centres(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Pre
             apex = _point(v["d_x"] + sign * ml, v["sk_y"] - si, v["dlom_z"] + ap)
             inputs |= {f"SI_{side}": si, f"ML_{side}": ml, f"AP_{side}": ap}
         elif rule.rule_id == "eye_stephan2009_globe":
-            apex = _point(v["orbit_cx"] + sign * constant("stephan2009_lateral_offset"),
-                          v["orbit_cy"] + constant("stephan2009_superior_offset"),
-                          v["dlom_z"] + constant("stephan2009_globe_projection"))
+            apex = _point(
+                v["orbit_cx"] + sign * constant("stephan2009_lateral_offset"),
+                v["orbit_cy"] + constant("stephan2009_superior_offset"),
+                v["dlom_z"] + constant("stephan2009_globe_projection"),
+            )
         elif rule.rule_id == "eye_stephan2002_projection":
             apex = _point(z=v["tangent_z"] + constant("stephan2002_tangent_offset"))
         else:
@@ -167,8 +212,14 @@ def _eye_centres(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Pre
         proj.append(apex[2] - v["dlom_z"])
     if not target:
         raise _Missing(m.missing.get("OBH_l", "orbit landmarks"))
-    return Prediction(rule.rule_id, "", "corneal apex in front of the lateral orbital margin",
-                      float(np.mean(proj)), target, inputs)
+    return Prediction(
+        rule.rule_id,
+        "",
+        "corneal apex in front of the lateral orbital margin",
+        float(np.mean(proj)),
+        target,
+        inputs,
+    )
 
 
 def _predict(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Prediction:
@@ -181,20 +232,32 @@ def _predict(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Predict
         side = "l" if "OBH_l" in m else "r"
         _need(m, [f"{p}_{side}" for _, p in rule.terms])
         value = rule.evaluate({p: vals[f"{p}_{side}"] for _, p in rule.terms})
-        return Prediction(rule.rule_id, "", rule.quantity, value, {},
-                          {f"{p}_{side}": vals[f"{p}_{side}"] for _, p in rule.terms})
+        return Prediction(
+            rule.rule_id,
+            "",
+            rule.quantity,
+            value,
+            {},
+            {f"{p}_{side}": vals[f"{p}_{side}"] for _, p in rule.terms},
+        )
     preds = [p for _, p in rule.terms]
     if {"canine_pupil_sum", "interpupillary_width"} & set(preds):
         eyes = _eye_centres(table["eye_guyomarch2012_globe"], m, table).target
         if len(eyes) < 2 or "canine_x_l" not in m or "canine_x_r" not in m:
             raise _Missing("both pupils (orbit landmarks) and both canines")
         pl, pr_ = eyes["eye_centre_l"][0], eyes["eye_centre_r"][0]
-        vals |= {"pupil_x_l": pl, "pupil_x_r": pr_, "interpupillary_width": pl - pr_,
-                 "canine_pupil_sum": (pl - vals["canine_x_l"]) + (vals["canine_x_r"] - pr_)}
+        vals |= {
+            "pupil_x_l": pl,
+            "pupil_x_r": pr_,
+            "interpupillary_width": pl - pr_,
+            "canine_pupil_sum": (pl - vals["canine_x_l"]) + (vals["canine_x_r"] - pr_),
+        }
     else:
         _need(m, preds)
     value = rule.evaluate(vals)
-    inputs = {p: vals[p] for p in preds} | {k: vals[k] for k in ("pupil_x_l", "pupil_x_r") if k in vals}
+    inputs = {p: vals[p] for p in preds} | {
+        k: vals[k] for k in ("pupil_x_l", "pupil_x_r") if k in vals
+    }
     target: dict[str, np.ndarray] = {}
     quantity = rule.quantity
     if rule.feature == "mouth":
@@ -213,11 +276,16 @@ def _predict(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Predict
     return Prediction(rule.rule_id, "", quantity, value, target, inputs)
 
 
-def published_predictions(skull_landmarks: LandmarkSet, sex: str | None, *,
-                          rules: Iterable[str] | None = None, skull: Mesh | None = None,
-                          dowel_tips: Mapping[str, np.ndarray] | None = None,
-                          table_id: str = "ttable_2023",
-                          problems: list[str] | None = None) -> list[Prediction]:
+def published_predictions(
+    skull_landmarks: LandmarkSet,
+    sex: str | None,
+    *,
+    rules: Iterable[str] | None = None,
+    skull: Mesh | None = None,
+    dowel_tips: Mapping[str, np.ndarray] | None = None,
+    table_id: str = DEFAULT_DEPTH_TABLE,
+    problems: list[str] | None = None,
+) -> list[Prediction]:
     """Apply published prediction rules to a skull.
 
     Parameters
@@ -249,8 +317,11 @@ def published_predictions(skull_landmarks: LandmarkSet, sex: str | None, *,
         bad = [i for i in ids if i not in table or table[i].kind == "classic"]
         if bad:
             known = sorted(k for k, r in table.items() if r.kind != "classic")
-            raise InputError("rules", f"unknown prediction rule(s): {', '.join(bad)}",
-                             f"known rules: {', '.join(known)}")
+            raise InputError(
+                "rules",
+                f"unknown prediction rule(s): {', '.join(bad)}",
+                f"known rules: {', '.join(known)}",
+            )
         chosen = [table[i] for i in ids]
     m = measure_skull(skull_landmarks, skull, dowel_tips=dowel_tips, sex=sx, table_id=table_id)
     out = []
@@ -265,7 +336,9 @@ def published_predictions(skull_landmarks: LandmarkSet, sex: str | None, *,
         if rule.status == "attribution_inconsistent":
             notes.insert(0, "NOT OFFERED: the source attributes this equation inconsistently")
         elif rule.status == "secondary":
-            notes.append("coefficients from a secondary transcription, not checked against the paper")
+            notes.append(
+                "coefficients from a secondary transcription, not checked against the paper"
+            )
         if rule.sex != "pooled" and rule.sex != sx:
             who = "women" if rule.sex == "F" else "men"
             notes.append(f"rule is for {who}; subject sex: {sex or 'unknown'}")
@@ -273,6 +346,16 @@ def published_predictions(skull_landmarks: LandmarkSet, sex: str | None, *,
             notes.append(f"reported error: {rule.reported_error}")
         cite = rule.citation + (f" (read in: {rule.where_read})" if rule.where_read else "")
         label = f"{rule.quantity} ({rule.rule_id}; {rule.population or 'pooled'}, {rule.sex})"
-        out.append(Prediction(pred.rule_id, label, pred.quantity, float(pred.value_mm), pred.target,
-                              pred.inputs, cite, "; ".join(notes)))
+        out.append(
+            Prediction(
+                pred.rule_id,
+                label,
+                pred.quantity,
+                float(pred.value_mm),
+                pred.target,
+                pred.inputs,
+                cite,
+                "; ".join(notes),
+            )
+        )
     return out

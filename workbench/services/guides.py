@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
@@ -90,8 +91,9 @@ class Guide:
         object.__setattr__(self, "affects", tuple(self.affects))
         object.__setattr__(self, "value", _check_value(self.id, self.kind, self.view, self.value))
         if self.source not in ("computed", "user"):
-            raise InputError(f"guide {self.id!r}",
-                             f"source must be 'computed' or 'user', not {self.source!r}")
+            raise InputError(
+                f"guide {self.id!r}", f"source must be 'computed' or 'user', not {self.source!r}"
+            )
         if not self.affects or not all(isinstance(c, str) and c for c in self.affects):
             raise InputError(f"guide {self.id!r}", "affects must list at least one landmark code")
 
@@ -124,10 +126,16 @@ def _rule(rule_id: str) -> tuple[str, str]:
     return rule_id, r.citation
 
 
-def classic_guides(skull_landmarks: LandmarkSet, skull: Mesh | None = None, *,
-                   dowel_tips: Mapping[str, np.ndarray] | None = None, sex: str | None = None,
-                   spine_base: np.ndarray | None = None, table_id: str = "ttable_2023",
-                   problems: list[str] | None = None) -> list[Guide]:
+def classic_guides(
+    skull_landmarks: LandmarkSet,
+    skull: Mesh | None = None,
+    *,
+    dowel_tips: Mapping[str, np.ndarray] | None = None,
+    sex: str | None = None,
+    spine_base: np.ndarray | None = None,
+    table_id: str = DEFAULT_DEPTH_TABLE,
+    problems: list[str] | None = None,
+) -> list[Guide]:
     """Kähler's five guide rules, computed from a skull.
 
     Parameters
@@ -181,15 +189,25 @@ def classic_guides(skull_landmarks: LandmarkSet, skull: Mesh | None = None, *,
 
     def lateral(rule_id: str, name: str, side: str, sign: float) -> float:
         """A per-side rule on |x|, mirrored back to the side."""
-        return sign * rules[rule_id].evaluate({rules[rule_id].terms[0][1]: abs(m[f"{name}_{side}"])})
+        return sign * rules[rule_id].evaluate(
+            {rules[rule_id].terms[0][1]: abs(m[f"{name}_{side}"])}
+        )
 
     width = rules["kaehler_nose_width"]
     for side, sign, word in (("l", 1.0, "left"), ("r", -1.0, "right")):
         if not skip(f"nose width ({word})", [f"aperture_x_{side}"]):
-            out.append(Guide(f"nose_width_{side}", f"Nose width ({word} ala)", "vline", "frontal",
-                             (lateral(width.rule_id, "aperture_x", side, sign),), (f"al_{side}",),
-                             *_rule(width.rule_id),
-                             derivation=f"{how(f'aperture_x_{side}')} + {width.intercept} mm"))
+            out.append(
+                Guide(
+                    f"nose_width_{side}",
+                    f"Nose width ({word} ala)",
+                    "vline",
+                    "frontal",
+                    (lateral(width.rule_id, "aperture_x", side, sign),),
+                    (f"al_{side}",),
+                    *_rule(width.rule_id),
+                    derivation=f"{how(f'aperture_x_{side}')} + {width.intercept} mm",
+                )
+            )
 
     if not skip("nose tip", ["spine_projection", "mp_dowel_z", "ans_y", "ans_z"]):
         krogman = rules["krogman_nose_tip"]
@@ -200,36 +218,74 @@ def classic_guides(skull_landmarks: LandmarkSet, skull: Mesh | None = None, *,
             u = ans - base
             length = float(np.linalg.norm(u))
             if not np.isfinite(length) or length < 1.0 or u[1] < 0.2 * length:
-                raise InputError("spine_base", "the spine base must lie at least 1 mm behind ans, "
-                                 "with the spine pointing forward")
+                raise InputError(
+                    "spine_base",
+                    "the spine base must lie at least 1 mm behind ans, "
+                    "with the spine pointing forward",
+                )
             u /= length
             tip = ans + (m["mp_dowel_z"] - ans[1]) / u[1] * u + factor * length * u
             text = f"spine line from the given base, length {length:.1f} mm"
         else:
             tip = np.array([ans[0], krogman.evaluate(m.numbers())])
             text = how("spine_projection") + "; spine line parallel to FH through ans"
-        out.append(Guide("nose_tip", "Nose tip (pronasale)", "point", "lateral", tuple(tip), ("prn",),
-                         *_rule("krogman_nose_tip"),
-                         derivation=f"{text}; {how('mp_dowel_z')}; factor {factor}"))
+        out.append(
+            Guide(
+                "nose_tip",
+                "Nose tip (pronasale)",
+                "point",
+                "lateral",
+                tuple(tip),
+                ("prn",),
+                *_rule("krogman_nose_tip"),
+                derivation=f"{text}; {how('mp_dowel_z')}; factor {factor}",
+            )
+        )
 
     for side, sign, word in (("l", 1.0, "left"), ("r", -1.0, "right")):
         if not skip(f"mouth width ({word})", [f"cp_junction_x_{side}"]):
-            out.append(Guide(f"mouth_width_{side}", f"Mouth width ({word} corner)", "vline", "frontal",
-                             (lateral("kaehler_mouth_width", "cp_junction_x", side, sign),),
-                             (f"ch_{side}",),
-                             *_rule("kaehler_mouth_width"), derivation=how(f"cp_junction_x_{side}")))
+            out.append(
+                Guide(
+                    f"mouth_width_{side}",
+                    f"Mouth width ({word} corner)",
+                    "vline",
+                    "frontal",
+                    (lateral("kaehler_mouth_width", "cp_junction_x", side, sign),),
+                    (f"ch_{side}",),
+                    *_rule("kaehler_mouth_width"),
+                    derivation=how(f"cp_junction_x_{side}"),
+                )
+            )
     for gid, label, name, code, rule in (
-            ("lip_upper_margin", "Upper lip margin", "upper_cej_y", "ls", "kaehler_lip_upper"),
-            ("lip_lower_margin", "Lower lip margin", "lower_cej_y", "li", "kaehler_lip_lower")):
+        ("lip_upper_margin", "Upper lip margin", "upper_cej_y", "ls", "kaehler_lip_upper"),
+        ("lip_lower_margin", "Lower lip margin", "lower_cej_y", "li", "kaehler_lip_lower"),
+    ):
         if not skip(label.lower(), [name]):
-            out.append(Guide(gid, label, "hline", "frontal", (rules[rule].evaluate(m.numbers()),),
-                             (code,), *_rule(rule),
-                             derivation=how(name)))
+            out.append(
+                Guide(
+                    gid,
+                    label,
+                    "hline",
+                    "frontal",
+                    (rules[rule].evaluate(m.numbers()),),
+                    (code,),
+                    *_rule(rule),
+                    derivation=how(name),
+                )
+            )
     if not skip("lip parting line", ["incisal_edge_y"]):
-        out.append(Guide("lip_parting", "Lip parting line", "hline", "frontal",
-                         (rules["kaehler_lip_parting"].evaluate(m.numbers()),), ("sto", "ch_l", "ch_r"),
-                         *_rule("kaehler_lip_parting"),
-                         derivation=f"{how('incisal_edge_y')} + {how('incisor_display')}"))
+        out.append(
+            Guide(
+                "lip_parting",
+                "Lip parting line",
+                "hline",
+                "frontal",
+                (rules["kaehler_lip_parting"].evaluate(m.numbers()),),
+                ("sto", "ch_l", "ch_r"),
+                *_rule("kaehler_lip_parting"),
+                derivation=f"{how('incisal_edge_y')} + {how('incisor_display')}",
+            )
+        )
     return out
 
 
@@ -257,25 +313,40 @@ def guides_from_prediction(pred: Prediction, guides: list[Guide]) -> list[Guide]
             idx = [i for i, g in enumerate(out) if g.kind == kind and code in g.affects]
             if kind == "point" and not math.isfinite(value[0]):
                 if not idx:
-                    raise InputError(pred.rule_id, f"the rule fixes only z of {code} and there is "
-                                     "no lateral guide to take y from")
+                    raise InputError(
+                        pred.rule_id,
+                        f"the rule fixes only z of {code} and there is "
+                        "no lateral guide to take y from",
+                    )
                 value = (out[idx[0]].value[0], value[1])
             new: dict[str, Any] = {
-                "rule_id": pred.rule_id, "citation": pred.citation, "source": "computed",
+                "rule_id": pred.rule_id,
+                "citation": pred.citation,
+                "source": "computed",
                 "value": value,
-                "derivation": f"{pred.label}: {pred.quantity} = {pred.value_mm:.1f} mm"}
+                "derivation": f"{pred.label}: {pred.quantity} = {pred.value_mm:.1f} mm",
+            }
             if idx:
                 for i in idx:
                     out[i] = replace(out[i], **new)
             else:
                 suffix = {"vline": "x", "hline": "y", "point": "yz"}[kind]
-                out.append(Guide(id=f"{code}_{suffix}", label=f"{code} ({pred.quantity})", kind=kind,
-                                 view=KINDS[kind][0], affects=(code,), **new))
+                out.append(
+                    Guide(
+                        id=f"{code}_{suffix}",
+                        label=f"{code} ({pred.quantity})",
+                        kind=kind,
+                        view=KINDS[kind][0],
+                        affects=(code,),
+                        **new,
+                    )
+                )
     return out
 
 
-def apply_guides(guides: Iterable[Guide],
-                 skin_targets: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+def apply_guides(
+    guides: Iterable[Guide], skin_targets: Mapping[str, np.ndarray]
+) -> dict[str, np.ndarray]:
     """New target positions for the skin codes the enabled guides affect.
 
     A vline replaces x, an hline y, a lateral point (y, z); every other
@@ -298,15 +369,19 @@ def apply_guides(guides: Iterable[Guide],
             p = out.setdefault(code, np.array(skin_targets[code], dtype=float).reshape(3))
             for axis, v in zip(AXES[g.kind], g.value, strict=True):
                 if (code, axis) in owner:
-                    raise InputError(f"guide {g.id!r}", f"{code} {'xyz'[axis]} is already set by guide "
-                                     f"{owner[code, axis]!r}", "disable one of them")
+                    raise InputError(
+                        f"guide {g.id!r}",
+                        f"{code} {'xyz'[axis]} is already set by guide {owner[code, axis]!r}",
+                        "disable one of them",
+                    )
                 owner[code, axis] = g.id
                 p[axis] = v
     return out
 
 
-def check_guides(guides: Iterable[Guide | Mapping[str, Any]], skull: Mesh | None,
-                 skull_landmarks: LandmarkSet) -> list[str]:
+def check_guides(
+    guides: Iterable[Guide | Mapping[str, Any]], skull: Mesh | None, skull_landmarks: LandmarkSet
+) -> list[str]:
     """Human-readable problems with the enabled guides (empty list = none found).
 
     Flags guides outside the skull's extent (mesh bounds, else the landmarks' with
@@ -336,8 +411,10 @@ def check_guides(guides: Iterable[Guide | Mapping[str, Any]], skull: Mesh | None
         for axis, v in zip(AXES[g.kind], g.value, strict=True):
             top = hi[axis] + (45.0 if axis == 2 else 0.0)
             if not lo[axis] <= v <= top:
-                problems.append(f"{name}: {'xyz'[axis]} = {v:.1f} mm lies outside the skull "
-                                f"({lo[axis]:.1f} … {top:.1f} mm)")
+                problems.append(
+                    f"{name}: {'xyz'[axis]} = {v:.1f} mm lies outside the skull "
+                    f"({lo[axis]:.1f} … {top:.1f} mm)"
+                )
         for code in g.affects:
             if g.kind == "hline":
                 ys[code] = g.value[0]
@@ -347,31 +424,48 @@ def check_guides(guides: Iterable[Guide | Mapping[str, Any]], skull: Mesh | None
             elif g.kind == "vline" and code in ("al_l", "al_r"):
                 apl = lm.get("apl" + code[2:])
                 if apl is not None and side * (g.value[0] - apl[0]) < 0:
-                    problems.append(f"{name}: the nose wing lies inside the nasal aperture "
-                                    f"(|x| {abs(g.value[0]):.1f} < {abs(apl[0]):.1f} mm "
-                                    f"of apl{code[2:]})")
+                    problems.append(
+                        f"{name}: the nose wing lies inside the nasal aperture "
+                        f"(|x| {abs(g.value[0]):.1f} < {abs(apl[0]):.1f} mm "
+                        f"of apl{code[2:]})"
+                    )
             elif g.kind == "vline" and code in ("ch_l", "ch_r"):
                 sc = lm.get("sC" + code[2:])
                 if sc is not None and side * (g.value[0] - sc[0]) < 0:
-                    problems.append(f"{name}: the mouth corner lies medial to the canine "
-                                    f"(sC{code[2:]})")
+                    problems.append(
+                        f"{name}: the mouth corner lies medial to the canine (sC{code[2:]})"
+                    )
             elif g.kind == "point" and code == "prn" and "ans" in lm and g.value[1] <= lm["ans"][2]:
                 problems.append(f"{name}: the nose tip lies behind the anterior nasal spine")
     if "ans" in lm:
         for code in ("sto", "ls", "li"):
             if code in ys and ys[code] > lm["ans"][1]:
-                problems.append(f"{code} line (y = {ys[code]:.1f} mm) lies above the "
-                                "anterior nasal spine")
+                problems.append(
+                    f"{code} line (y = {ys[code]:.1f} mm) lies above the anterior nasal spine"
+                )
     order = [c for c in ("ls", "sto", "li") if c in ys]
     if any(ys[a] <= ys[b] for a, b in itertools.pairwise(order)):
-        problems.append("lip lines out of order: expected upper margin > parting line > lower margin "
-                        f"({', '.join(f'{c} {ys[c]:.1f}' for c in order)})")
+        problems.append(
+            "lip lines out of order: expected upper margin > parting line > lower margin "
+            f"({', '.join(f'{c} {ys[c]:.1f}' for c in order)})"
+        )
     return problems
 
 
 # ------------------------------------------------------------------ JSON
-FIELDS = ("id", "label", "kind", "view", "value", "affects", "rule_id", "citation", "source",
-          "enabled", "derivation")
+FIELDS = (
+    "id",
+    "label",
+    "kind",
+    "view",
+    "value",
+    "affects",
+    "rule_id",
+    "citation",
+    "source",
+    "enabled",
+    "derivation",
+)
 
 
 def guides_to_json(guides: Iterable[Guide]) -> list[dict[str, Any]]:
@@ -386,8 +480,11 @@ def guide_from_dict(d: Any, source: str, index: int = 0) -> Guide:
     missing = [k for k in ("id", "kind", "view", "value", "affects") if k not in d]
     unknown = [k for k in d if k not in FIELDS]
     if missing or unknown:
-        raise InputError(where, f"missing keys: {missing}" if missing else f"unknown keys: {unknown}",
-                         f"keys are {', '.join(FIELDS)}")
+        raise InputError(
+            where,
+            f"missing keys: {missing}" if missing else f"unknown keys: {unknown}",
+            f"keys are {', '.join(FIELDS)}",
+        )
     affects = d["affects"]
     if isinstance(affects, str) or not isinstance(affects, (list, tuple)):
         raise InputError(where, "affects must be a list of landmark codes")
@@ -398,9 +495,19 @@ def guide_from_dict(d: Any, source: str, index: int = 0) -> Guide:
     if not isinstance(d.get("enabled", True), bool):
         raise InputError(where, "enabled must be true or false")
     try:
-        return Guide(str(d["id"]), str(d.get("label", d["id"])), d["kind"], d["view"], d["value"],
-                     tuple(affects), str(d.get("rule_id", "")), str(d.get("citation", "")),
-                     d.get("source", "user"), d.get("enabled", True), str(d.get("derivation", "")))
+        return Guide(
+            str(d["id"]),
+            str(d.get("label", d["id"])),
+            d["kind"],
+            d["view"],
+            d["value"],
+            tuple(affects),
+            str(d.get("rule_id", "")),
+            str(d.get("citation", "")),
+            d.get("source", "user"),
+            d.get("enabled", True),
+            str(d.get("derivation", "")),
+        )
     except InputError as exc:
         raise InputError(where, exc.problem, exc.hint) from None
 

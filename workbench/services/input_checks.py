@@ -63,31 +63,44 @@ def check_skull_mesh(mesh: Mesh, source: Source, *, units_note: str | None = Non
     """
     nonfinite = int((~np.isfinite(mesh.vertices)).any(axis=1).sum())
     if nonfinite:
-        raise InputError(source, f"{nonfinite} vertices of {mesh.n_vertices} have NaN or "
-                         "infinite coordinates")
+        raise InputError(
+            source, f"{nonfinite} vertices of {mesh.n_vertices} have NaN or infinite coordinates"
+        )
     if mesh.n_faces < MIN_SKULL_TRIANGLES:
-        raise InputError(source, f"has only {mesh.n_faces} triangles; a skull surface has "
-                         f"thousands (at least {MIN_SKULL_TRIANGLES})",
-                         "is this the right file?")
+        raise InputError(
+            source,
+            f"has only {mesh.n_faces} triangles; a skull surface has "
+            f"thousands (at least {MIN_SKULL_TRIANGLES})",
+            "is this the right file?",
+        )
     extent = mesh.extent
     lo, hi, _ = PLAUSIBLE_EXTENT_MM["skull"]
     largest = float(extent.max())
     how = f" after {units_note}" if units_note else ""
     if not lo <= largest <= hi:
-        raise InputError(source, f"the skull is {_sizes(extent)} mm{how} (largest side "
-                         f"{largest:.0f} mm); a skull is {lo:.0f}-{hi:.0f} mm",
-                         "check --units / --scale: the file's numbers are not in the units given")
+        raise InputError(
+            source,
+            f"the skull is {_sizes(extent)} mm{how} (largest side "
+            f"{largest:.0f} mm); a skull is {lo:.0f}-{hi:.0f} mm",
+            "check --units / --scale: the file's numbers are not in the units given",
+        )
     if float(extent.min()) < MIN_SKULL_THICKNESS_MM:
-        raise InputError(source, f"the skull is flat: {_sizes(extent)} mm, thinner than "
-                         f"{MIN_SKULL_THICKNESS_MM:g} mm in one direction",
-                         "a skull (even a mandible alone) has depth in every direction; the "
-                         "file holds a plane, a line or a projection")
+        raise InputError(
+            source,
+            f"the skull is flat: {_sizes(extent)} mm, thinner than "
+            f"{MIN_SKULL_THICKNESS_MM:g} mm in one direction",
+            "a skull (even a mandible alone) has depth in every direction; the "
+            "file holds a plane, a line or a projection",
+        )
     counts = mesh.edge_face_counts
     bad = int((counts > 2).sum())
     if len(counts) and bad > MAX_NONMANIFOLD_FRACTION * len(counts):
-        raise InputError(source, f"{bad} of {len(counts)} edges are non-manifold (shared by "
-                         "more than 2 triangles); the surface is not a usable skull",
-                         "repair it first, e.g. 'workbench mesh convert --clean'")
+        raise InputError(
+            source,
+            f"{bad} of {len(counts)} edges are non-manifold (shared by "
+            "more than 2 triangles); the surface is not a usable skull",
+            "repair it first, e.g. 'workbench mesh convert --clean'",
+        )
 
 
 def check_landmark_geometry(landmarks: LandmarkSet, source: Source) -> None:
@@ -99,17 +112,23 @@ def check_landmark_geometry(landmarks: LandmarkSet, source: Source) -> None:
         other = defined.get(code[:-2] + "_r")
         if other is not None and float(np.linalg.norm(p - other)) < COINCIDENT_MM:
             name = "porions" if code == "po_l" else f"{code} and {code[:-2]}_r"
-            raise InputError(source, f"the left and right {name} coincide "
-                             f"({code} and {code[:-2]}_r are "
-                             f"{float(np.linalg.norm(p - other)):.2f} mm apart)",
-                             "one side was typed twice; place each side on its own")
+            raise InputError(
+                source,
+                f"the left and right {name} coincide "
+                f"({code} and {code[:-2]}_r are "
+                f"{float(np.linalg.norm(p - other)):.2f} mm apart)",
+                "one side was typed twice; place each side on its own",
+            )
     if len(defined) >= 3:
         pts = np.stack(list(defined.values()))
         spread = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False) / np.sqrt(len(pts))
         if spread[1] < COLLINEAR_MM:
-            raise InputError(source, f"the {len(pts)} landmarks lie on a line (spread "
-                             f"{spread[0]:.1f} mm along it, {spread[1]:.2f} mm across)",
-                             "the coordinates are damaged or were exported along one axis")
+            raise InputError(
+                source,
+                f"the {len(pts)} landmarks lie on a line (spread "
+                f"{spread[0]:.1f} mm along it, {spread[1]:.2f} mm across)",
+                "the coordinates are damaged or were exported along one axis",
+            )
 
 
 def _distances(index: Any, points: np.ndarray) -> np.ndarray:
@@ -140,18 +159,25 @@ def check_landmarks_on_skull(mesh: Mesh, landmarks: LandmarkSet, source: Source)
         return
     n, m = int(off.sum()), len(defined)
     flipped = _distances(index, pts * np.array([-1.0, -1.0, 1.0]))
-    hint = ("if the file's coordinates are LPS/RAS flipped (x and y negated), convert them "
-            "with 'workbench landmarks convert --coordinate-system', and check that the "
-            "landmarks belong to this skull, in its frame and units")
+    hint = (
+        "if the file's coordinates are LPS/RAS flipped (x and y negated), convert them "
+        "with 'workbench landmarks convert --coordinate-system', and check that the "
+        "landmarks belong to this skull, in its frame and units"
+    )
     if np.median(flipped) <= LANDMARK_OFF_SURFACE_MM < np.median(dist):
-        hint = ("with x and y negated they lie on the skull (median "
-                f"{np.median(flipped):.1f} mm): the file's coordinates are LPS/RAS flipped; "
-                "fix the file's coordinate system (workbench landmarks convert)")
-    worst = ", ".join(f"{defined[i].code} {dist[i]:.0f} mm"
-                      for i in np.argsort(-dist)[:3])
-    raise InputError(source, f"{n} of {m} skull landmarks are more than "
-                     f"{LANDMARK_OFF_SURFACE_MM:g} mm from the skull surface (median "
-                     f"{np.median(dist):.1f} mm; farthest: {worst})", hint)
+        hint = (
+            "with x and y negated they lie on the skull (median "
+            f"{np.median(flipped):.1f} mm): the file's coordinates are LPS/RAS flipped; "
+            "fix the file's coordinate system (workbench landmarks convert)"
+        )
+    worst = ", ".join(f"{defined[i].code} {dist[i]:.0f} mm" for i in np.argsort(-dist)[:3])
+    raise InputError(
+        source,
+        f"{n} of {m} skull landmarks are more than "
+        f"{LANDMARK_OFF_SURFACE_MM:g} mm from the skull surface (median "
+        f"{np.median(dist):.1f} mm; farthest: {worst})",
+        hint,
+    )
 
 
 def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> None:
@@ -164,21 +190,27 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
         from workbench.services.guide_rules import load_rules
 
         table_of_rules = load_rules()
-        bad = [r for r in rules if r not in table_of_rules
-               or table_of_rules[r].kind == "classic"]
+        bad = [r for r in rules if r not in table_of_rules or table_of_rules[r].kind == "classic"]
         if bad:
             known = sorted(k for k, r in table_of_rules.items() if r.kind != "classic")
-            raise InputError("--rule", f"unknown prediction rule(s): {', '.join(bad)}",
-                             f"known rules: {', '.join(known)}")
+            raise InputError(
+                "--rule",
+                f"unknown prediction rule(s): {', '.join(bad)}",
+                f"known rules: {', '.join(known)}",
+            )
     from workbench.io.tables import load_depth_table
     from workbench.services.dowels import choose_depth_group
 
-    check_count(ensemble, "--ensemble", 0, MAX_ENSEMBLE,
-                why=f"the spread map settles by ~50 fits; more than {MAX_ENSEMBLE} only "
-                    "takes longer")
+    check_count(
+        ensemble,
+        "--ensemble",
+        0,
+        MAX_ENSEMBLE,
+        why=f"the spread map settles by ~50 fits; more than {MAX_ENSEMBLE} only takes longer",
+    )
     if not isinstance(dowels.build, str):
         check_build_sd(dowels.build)
-    table = load_depth_table(dowels.table)   # refuses depths and SDs out of bounds
+    table = load_depth_table(dowels.table)  # refuses depths and SDs out of bounds
     choose_depth_group(table, None, dowels.sex, dowels.build)
 
 
@@ -198,9 +230,13 @@ def check_output_location(path: Source, option: str = "--out") -> Path:
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if parent.exists() and not parent.is_dir():
-        raise InputError(path, f"cannot be created: {parent} is a file, not a folder",
-                         f"choose another {option}")
+        raise InputError(
+            path, f"cannot be created: {parent} is a file, not a folder", f"choose another {option}"
+        )
     if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(path, f"cannot be written: no permission to write in {parent}",
-                         f"choose another {option}")
+        raise InputError(
+            path,
+            f"cannot be written: no permission to write in {parent}",
+            f"choose another {option}",
+        )
     return path

@@ -54,6 +54,9 @@ def open_jaw(head: TemplateHead, angle_deg: float) -> TemplateHead:
         moved.append(lm)
     provenance = dict(head.provenance)
     provenance["jaw_angle_deg"] = float(provenance.get("jaw_angle_deg", 0.0)) + float(angle_deg)
-    return replace(head, meshes=meshes,
-                   skull_landmarks=LandmarkSet(head.skull_landmarks.surface, tuple(moved)),
-                   provenance=provenance)
+    return replace(
+        head,
+        meshes=meshes,
+        skull_landmarks=LandmarkSet(head.skull_landmarks.surface, tuple(moved)),
+        provenance=provenance,
+    )

@@ -18,7 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from workbench.commands.landmarks import (
-    DeleteLandmark, MoveLandmark, PlaceLandmark, SetLandmarkStatus,
+    DeleteLandmark,
+    MoveLandmark,
+    PlaceLandmark,
+    SetLandmarkStatus,
 )
 from workbench.commands.stack import CommandStack
 from workbench.core.errors import LandmarkError
@@ -45,8 +48,13 @@ class SurfacePlacement:
     surface : "skull" | "skin"
     """
 
-    def __init__(self, mesh: Mesh, stack: CommandStack, surface: str = "skull",
-                 catalogue: LandmarkCatalogue | None = None):
+    def __init__(
+        self,
+        mesh: Mesh,
+        stack: CommandStack,
+        surface: str = "skull",
+        catalogue: LandmarkCatalogue | None = None,
+    ):
         self.mesh = mesh
         self.stack = stack
         self.surface = surface
@@ -63,8 +71,10 @@ class SurfacePlacement:
         p = np.asarray(point, dtype=float).reshape(1, 3)
         cp = self._index.closest_points(p)
         if cp.distances[0] > MAX_SNAP_MM:
-            raise LandmarkError(f"the point is {cp.distances[0]:.1f} mm from the {self.surface}; "
-                                f"pick on the surface (within {MAX_SNAP_MM:g} mm)")
+            raise LandmarkError(
+                f"the point is {cp.distances[0]:.1f} mm from the {self.surface}; "
+                f"pick on the surface (within {MAX_SNAP_MM:g} mm)"
+            )
         return cp.points[0]
 
     def landmark(self, code: str) -> Landmark | None:
@@ -121,11 +131,15 @@ class SurfacePlacement:
         """
         if self.surface != "skull":
             raise LandmarkError("snapping to a feature is defined for skull landmarks only")
-        result = snap_landmark(self.mesh, self.stack.case.landmarks["skull"], self.code(code),
-                               catalogue=self.catalogue)
+        result = snap_landmark(
+            self.mesh, self.stack.case.landmarks["skull"], self.code(code), catalogue=self.catalogue
+        )
         if result.moves:
-            self.stack.push(MoveLandmark(surface="skull", code=result.code,
-                                         position=result.position, label=result.label))
+            self.stack.push(
+                MoveLandmark(
+                    surface="skull", code=result.code, position=result.position, label=result.label
+                )
+            )
         return result
 
     def snap_all_to_features(self, codes: list[str] | None = None) -> list[SnapResult]:
@@ -141,10 +155,14 @@ class SurfacePlacement:
         if codes is None:
             rules = load_snap_rules()
             codes = [lm.code for lm in current if lm.is_defined and lm.code in rules]
-        results = [snap_landmark(self.mesh, current, self.code(c), catalogue=self.catalogue)
-                   for c in codes]
-        moves = [MoveLandmark(surface="skull", code=r.code, position=r.position, label=r.label)
-                 for r in results if r.moves]
+        results = [
+            snap_landmark(self.mesh, current, self.code(c), catalogue=self.catalogue) for c in codes
+        ]
+        moves = [
+            MoveLandmark(surface="skull", code=r.code, position=r.position, label=r.label)
+            for r in results
+            if r.moves
+        ]
         if len(moves) == 1:
             self.stack.push(moves[0])
         elif moves:

@@ -142,17 +142,26 @@ def snap_frame(landmarks: LandmarkSet) -> np.ndarray:
     try:
         return input_frame(landmarks)[0]
     except LandmarkError as exc:
-        raise LandmarkError(f"Snap works in the head frame (place or suggest po_l, po_r and "
-                            f"or_l or or_r first): {exc}") from None
+        raise LandmarkError(
+            f"Snap works in the head frame (place or suggest po_l, po_r and "
+            f"or_l or or_r first): {exc}"
+        ) from None
     except ValueError as exc:
-        raise LandmarkError(f"Snap cannot build the head frame from these landmarks ({exc}); "
-                            "check po_l, po_r, or_l and or_r") from None
+        raise LandmarkError(
+            f"Snap cannot build the head frame from these landmarks ({exc}); "
+            "check po_l, po_r, or_l and or_r"
+        ) from None
 
 
-def snap_landmark(mesh: Mesh, landmarks: LandmarkSet, code: str,
-                  position: np.ndarray | None = None, *,
-                  rules: dict[str, SnapRule] | None = None,
-                  catalogue: LandmarkCatalogue | None = None) -> SnapResult:
+def snap_landmark(
+    mesh: Mesh,
+    landmarks: LandmarkSet,
+    code: str,
+    position: np.ndarray | None = None,
+    *,
+    rules: dict[str, SnapRule] | None = None,
+    catalogue: LandmarkCatalogue | None = None,
+) -> SnapResult:
     """Where skull landmark ``code`` snaps to from ``position``; changes nothing.
 
     Parameters
@@ -185,16 +194,22 @@ def snap_landmark(mesh: Mesh, landmarks: LandmarkSet, code: str,
     start = _start(landmarks, code, position)
     rule = rules.get(code)
     if rule is None and catalogue.entry(code, "skull").side != "midline":
-        return SnapResult(code, start, start, 0.0, "", None, True,
-                          f"{code} has no snap rule (its definition names no extremum); "
-                          "not moved")
+        return SnapResult(
+            code,
+            start,
+            start,
+            0.0,
+            "",
+            None,
+            True,
+            f"{code} has no snap rule (its definition names no extremum); not moved",
+        )
     to_head = snap_frame(landmarks)
     index = snap_index(mesh)
     if rule is None:
         return _onto_midline(index, to_head, start, code)
     limits = _limits(landmarks, rule, to_head)
-    ends = (np.array([landmarks[c].position for c in rule.between])
-            if limits is not None else None)
+    ends = np.array([landmarks[c].position for c in rule.between]) if limits is not None else None
 
     def radius_at(point: np.ndarray) -> float:
         if ends is None:
@@ -226,8 +241,9 @@ def _start(landmarks: LandmarkSet, code: str, position: np.ndarray | None) -> np
     return start
 
 
-def _candidates(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, radius_mm: float,
-                midline: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _candidates(
+    index: PatchIndex, to_head: np.ndarray, start: np.ndarray, radius_mm: float, midline: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(input points, head points, head normals)``, each ``(k, 3)``, of the patch.
 
     Its vertices, or for ``midline`` the points where its edges cross head x = 0.
@@ -240,15 +256,17 @@ def _candidates(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, radiu
     return pts, pts @ rot.T + to_head[:3, 3], nrm @ rot.T
 
 
-def _limits(landmarks: LandmarkSet, rule: SnapRule, to_head: np.ndarray
-            ) -> tuple[float, float] | None:
+def _limits(
+    landmarks: LandmarkSet, rule: SnapRule, to_head: np.ndarray
+) -> tuple[float, float] | None:
     """Profile coordinates (head frame, mm) of a ``deepest`` rule's bounding landmarks."""
     defined = landmarks.as_dict()
     if len(rule.between) != 2 or any(c not in defined for c in rule.between):
         return None
     along = _along(rule)
-    ends = sorted(float((to_head[:3, :3] @ defined[c] + to_head[:3, 3])[along])
-                  for c in rule.between)
+    ends = sorted(
+        float((to_head[:3, :3] @ defined[c] + to_head[:3, 3])[along]) for c in rule.between
+    )
     return (ends[0], ends[1]) if ends[1] - ends[0] > 1.0 else None
 
 
@@ -257,9 +275,15 @@ def _along(rule: SnapRule) -> int:
     return 1 if abs(rule.axis[2]) > 0 else 2
 
 
-def _climb(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: SnapRule,
-           radius_at: Callable[[np.ndarray], float], code: str,
-           limits: tuple[float, float] | None) -> tuple[np.ndarray | str, bool]:
+def _climb(
+    index: PatchIndex,
+    to_head: np.ndarray,
+    start: np.ndarray,
+    rule: SnapRule,
+    radius_at: Callable[[np.ndarray], float],
+    code: str,
+    limits: tuple[float, float] | None,
+) -> tuple[np.ndarray | str, bool]:
     """``(position, settled)`` of the feature, or ``(why not, True)``.
 
     Every search repeats from its winner until the winner stays put, so the
@@ -280,13 +304,19 @@ def _climb(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: Snap
     return point, False
 
 
-def _search(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: SnapRule,
-            radius_mm: float, code: str, limits: tuple[float, float] | None
-            ) -> np.ndarray | str:
+def _search(
+    index: PatchIndex,
+    to_head: np.ndarray,
+    start: np.ndarray,
+    rule: SnapRule,
+    radius_mm: float,
+    code: str,
+    limits: tuple[float, float] | None,
+) -> np.ndarray | str:
     """The feature's position in one ball (input frame), or a sentence saying why none."""
     pts, head, nrm = _candidates(index, to_head, start, radius_mm, rule.midline)
     axis = rule.axis
-    keep = nrm @ axis > 0.0                              # outer surface facing the direction
+    keep = nrm @ axis > 0.0  # outer surface facing the direction
     if limits is not None:
         along = head[:, _along(rule)]
         keep &= (along > limits[0]) & (along < limits[1])
@@ -294,8 +324,10 @@ def _search(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: Sna
         where = " on the midline profile" if rule.midline else ""
         if limits is not None:
             where += f" between {rule.between[0]} and {rule.between[1]}"
-        return (f"{code}: no outer surface facing {rule.direction} (head frame){where} within "
-                f"{radius_mm:.0f} mm; move it nearer the feature and snap again; not moved")
+        return (
+            f"{code}: no outer surface facing {rule.direction} (head frame){where} within "
+            f"{radius_mm:.0f} mm; move it nearer the feature and snap again; not moved"
+        )
     pts, head = pts[keep], head[keep]
     height = head @ axis
     if rule.rule == "extremum":
@@ -303,29 +335,48 @@ def _search(index: PatchIndex, to_head: np.ndarray, start: np.ndarray, rule: Sna
         return pts[near[np.argmin(np.linalg.norm(pts[near] - start, axis=1))]]
     depth = depth_below_upper_hull(head[:, _along(rule)], height)
     if depth is None or depth.max() < MIN_DEPTH_MM:
-        return (f"{code}: no concavity deeper than {MIN_DEPTH_MM:g} mm in the midline profile "
-                f"within {radius_mm:.0f} mm; not moved")
+        return (
+            f"{code}: no concavity deeper than {MIN_DEPTH_MM:g} mm in the midline profile "
+            f"within {radius_mm:.0f} mm; not moved"
+        )
     return pts[np.argmax(depth)]
 
 
-def _onto_midline(index: PatchIndex, to_head: np.ndarray, start: np.ndarray,
-                  code: str) -> SnapResult:
+def _onto_midline(
+    index: PatchIndex, to_head: np.ndarray, start: np.ndarray, code: str
+) -> SnapResult:
     """A midline landmark without a rule: the nearest point of the surface's midline profile."""
     pts, _, _ = _candidates(index, to_head, start, MIDLINE_RADIUS_MM, midline=True)
     if not len(pts):
-        return SnapResult(code, start, start, 0.0, "", None, True,
-                          f"{code} has no snap rule, and no surface within "
-                          f"{MIDLINE_RADIUS_MM:g} mm crosses the midsagittal plane; not moved")
+        return SnapResult(
+            code,
+            start,
+            start,
+            0.0,
+            "",
+            None,
+            True,
+            f"{code} has no snap rule, and no surface within "
+            f"{MIDLINE_RADIUS_MM:g} mm crosses the midsagittal plane; not moved",
+        )
     end = pts[np.argmin(np.linalg.norm(pts - start, axis=1))]
     moved = float(np.linalg.norm(end - start))
-    return SnapResult(code, start, end, moved, "the midsagittal plane", None, True,
-                      f"{code} has no snap rule (its definition names no extremum): moved onto "
-                      f"the midsagittal plane, {moved:.1f} mm")
+    return SnapResult(
+        code,
+        start,
+        end,
+        moved,
+        "the midsagittal plane",
+        None,
+        True,
+        f"{code} has no snap rule (its definition names no extremum): moved onto "
+        f"the midsagittal plane, {moved:.1f} mm",
+    )
 
 
-def snap_suggested(mesh: Mesh, landmarks: LandmarkSet, *,
-                   catalogue: LandmarkCatalogue | None = None
-                   ) -> tuple[LandmarkSet, list[str]]:
+def snap_suggested(
+    mesh: Mesh, landmarks: LandmarkSet, *, catalogue: LandmarkCatalogue | None = None
+) -> tuple[LandmarkSet, list[str]]:
     """Every *suggested* landmark with a snap rule moved to its feature (input frame, mm).
 
     Used after the dense registration: the registration puts a landmark

@@ -40,8 +40,16 @@ from workbench.core.tps import fit_warp
 from workbench.services.alignment import SCALE_RANGE, Alignment, align_to_reference
 
 #: (search radius mm, smoothing λ) per refinement round
-ROUNDS = ((15.0, 40.0), (12.0, 30.0), (10.0, 20.0), (8.0, 12.0), (6.0, 8.0), (5.0, 5.0),
-          (4.0, 3.0), (3.0, 2.0))
+ROUNDS = (
+    (15.0, 40.0),
+    (12.0, 30.0),
+    (10.0, 20.0),
+    (8.0, 12.0),
+    (6.0, 8.0),
+    (5.0, 5.0),
+    (4.0, 3.0),
+    (3.0, 2.0),
+)
 N_SAMPLES = 350
 #: a landmark this far from the target surface (after the warp) is absent
 ABSENT_MM = 6.0
@@ -101,8 +109,14 @@ def rim_faces(mesh: Mesh) -> np.ndarray:
     return rim_vertices[mesh.faces].any(axis=1)
 
 
-def _match(index: MeshIndex, rim: np.ndarray, tnormals: np.ndarray, pts: np.ndarray,
-           normals: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _match(
+    index: MeshIndex,
+    rim: np.ndarray,
+    tnormals: np.ndarray,
+    pts: np.ndarray,
+    normals: np.ndarray,
+    radius: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     cp = index.closest_points(pts)
     d = np.linalg.norm(cp.points - pts, axis=1)
     dot = np.abs(np.einsum("ij,ij->i", tnormals[cp.face_ids], normals))
@@ -114,10 +128,16 @@ def _match(index: MeshIndex, rim: np.ndarray, tnormals: np.ndarray, pts: np.ndar
     return ok, cp.points, d
 
 
-def transfer_landmarks(target: Mesh, reference: Mesh, reference_landmarks: LandmarkSet, *,
-                       seeds: LandmarkSet | None = None, orientation: tuple | None = None,
-                       alignment: Alignment | None = None,
-                       n_samples: int = N_SAMPLES) -> TransferResult:
+def transfer_landmarks(
+    target: Mesh,
+    reference: Mesh,
+    reference_landmarks: LandmarkSet,
+    *,
+    seeds: LandmarkSet | None = None,
+    orientation: tuple | None = None,
+    alignment: Alignment | None = None,
+    n_samples: int = N_SAMPLES,
+) -> TransferResult:
     """Suggest ``reference_landmarks`` (head frame) on ``target`` (input frame, mm).
 
     Parameters
@@ -145,8 +165,10 @@ def transfer_landmarks(target: Mesh, reference: Mesh, reference_landmarks: Landm
             seed_pair = (np.array([seed_pts[c] for c in common]), ref_lms.positions_of(common))
         alignment = align_to_reference(target, reference, orientation=orientation, seeds=seed_pair)
     if not (SCALE_RANGE[0] + 0.01 < alignment.scale < SCALE_RANGE[1] - 0.01):
-        warnings.append(f"the target is about {1 / alignment.scale:.2f} times the reference size; "
-                        "check the units or scale of the mesh")
+        warnings.append(
+            f"the target is about {1 / alignment.scale:.2f} times the reference size; "
+            "check the units or scale of the mesh"
+        )
     # target in head-frame coordinates (the reference does not move)
     tmesh = target.with_vertices(alignment.apply(target.vertices))
     index = MeshIndex(tmesh)
@@ -168,8 +190,10 @@ def transfer_landmarks(target: Mesh, reference: Mesh, reference_landmarks: Landm
         moved = src if warp is None else warp(src)
         ok, matched, d = _match(index, rim, tnormals, moved, srcn, radius)
         if ok.sum() < 12:
-            warnings.append(f"only {int(ok.sum())} surface matches within {radius:g} mm; "
-                            "the suggestion is a coarse alignment only")
+            warnings.append(
+                f"only {int(ok.sum())} surface matches within {radius:g} mm; "
+                "the suggestion is a coarse alignment only"
+            )
             break
         resid = float(np.sqrt(np.mean(d[ok] ** 2)))
         s = np.vstack([src[ok], seed_src])
@@ -184,34 +208,56 @@ def transfer_landmarks(target: Mesh, reference: Mesh, reference_landmarks: Landm
     cp = index.closest_points(moved)
     dist = np.linalg.norm(cp.points - moved, axis=1)
     dot = np.einsum("ij,ij->i", tnormals[cp.face_ids], lm_normals)
-    support = (np.min(np.linalg.norm(moved[:, None] - matched[ok][None], axis=2), axis=1)
-               if ok.any() else np.full(len(codes), np.inf))
+    support = (
+        np.min(np.linalg.norm(moved[:, None] - matched[ok][None], axis=2), axis=1)
+        if ok.any()
+        else np.full(len(codes), np.inf)
+    )
     positions = alignment.inverse(cp.points)
     out = []
     for i, code in enumerate(codes):
         if code in seed_pts:
-            out.append(Landmark(code, seed_pts[code], "placed", 1.0,
-                                seeds[code].description if seeds is not None else ""))
+            out.append(
+                Landmark(
+                    code,
+                    seed_pts[code],
+                    "placed",
+                    1.0,
+                    seeds[code].description if seeds is not None else "",
+                )
+            )
             continue
         on_rim = bool(rim[cp.face_ids[i]])
         # absent: beyond the rim of a hole/cut, or far off with no surface
         # match anywhere near (a missing part); a far point among matches is
         # a poor fit instead, kept with a low confidence
         if (on_rim and dist[i] > 2.0) or (dist[i] > ABSENT_MM and support[i] > UNSUPPORTED_MM):
-            why = "beyond a hole or the scan's edge" if on_rim else f"{dist[i]:.1f} mm off the surface"
-            out.append(Landmark(code, np.full(3, np.nan), "absent", 0.0,
-                                f"no surface here ({why})"))
+            why = (
+                "beyond a hole or the scan's edge"
+                if on_rim
+                else f"{dist[i]:.1f} mm off the surface"
+            )
+            out.append(
+                Landmark(code, np.full(3, np.nan), "absent", 0.0, f"no surface here ({why})")
+            )
             continue
-        conf = (np.exp(-(dist[i] / 3.0) ** 2) * np.clip(abs(dot[i]), 0.0, 1.0)
-                * np.exp(-max(support[i] - 10.0, 0.0) / 20.0))
+        conf = (
+            np.exp(-((dist[i] / 3.0) ** 2))
+            * np.clip(abs(dot[i]), 0.0, 1.0)
+            * np.exp(-max(support[i] - 10.0, 0.0) / 20.0)
+        )
         out.append(Landmark(code, positions[i], "suggested", float(np.clip(conf, 0.01, 0.99))))
     absent = [lm.code for lm in out if lm.status == "absent"]
     if absent:
         warnings.append(f"{len(absent)} landmarks absent (no surface): {', '.join(absent)}")
-    return TransferResult(LandmarkSet(reference_landmarks.surface, tuple(out)), alignment, resid,
-                          int(ok.sum()),
-                          (src[ok], matched[ok]) if ok.any() else (np.zeros((0, 3)),) * 2,
-                          tuple(warnings))
+    return TransferResult(
+        LandmarkSet(reference_landmarks.surface, tuple(out)),
+        alignment,
+        resid,
+        int(ok.sum()),
+        (src[ok], matched[ok]) if ok.any() else (np.zeros((0, 3)),) * 2,
+        tuple(warnings),
+    )
 
 
 def _normals_at(mesh: Mesh, points: np.ndarray) -> np.ndarray:

@@ -36,20 +36,26 @@ from functools import cached_property
 import numpy as np
 
 from workbench.core.headgen.muscle_paths import (
-    MIRROR, linear_rows, mirror_maps, mirror_surface_points, polar_radius, unit,
+    MIRROR,
+    linear_rows,
+    mirror_maps,
+    mirror_surface_points,
+    polar_radius,
+    unit,
 )
-from workbench.core.headgen.skin import SkinTemplate, data_tables_dir
+from workbench.core.data_paths import data_tables_dir
+from workbench.core.headgen.skin import SkinTemplate
 from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
 from workbench.model.muscles import MuscleGrid, SurfacePoints
 
 TAU_SKIN = 2.0
 TAU_MUSCLE = (2.0, 6.0)
-GRID_DEPTH_MM = TAU_SKIN + (TAU_MUSCLE[0] + TAU_MUSCLE[1]) / 4.0   # 4 mm (Kähler §7.4)
+GRID_DEPTH_MM = TAU_SKIN + (TAU_MUSCLE[0] + TAU_MUSCLE[1]) / 4.0  # 4 mm (Kähler §7.4)
 AXIS_DEPTHS_MM = (10.0, 20.0)
-RAY_AXIS_Z = 10.0      # radial rays leave a vertical axis at (x=0, z=RAY_AXIS_Z)
-RAY_BACKOFF = 40.0     # rays start this far outside the guide point
-MAX_GUIDE_GAP = 15.0   # a hit farther than this from the guide point is rejected
+RAY_AXIS_Z = 10.0  # radial rays leave a vertical axis at (x=0, z=RAY_AXIS_Z)
+RAY_BACKOFF = 40.0  # rays start this far outside the guide point
+MAX_GUIDE_GAP = 15.0  # a hit farther than this from the guide point is rejected
 
 
 def read_table71() -> list[dict[str, str]]:
@@ -85,14 +91,17 @@ class _Ctx:
 def _radial(p: np.ndarray) -> np.ndarray:
     p = np.atleast_2d(p)
     return unit(np.stack([p[:, 0], np.zeros(len(p)), p[:, 2] - RAY_AXIS_Z], axis=1)).reshape(
-        np.shape(p))
+        np.shape(p)
+    )
 
 
 def _below(p: np.ndarray) -> np.ndarray:
     return np.tile([0.0, -1.0, 0.0], (len(np.atleast_2d(p)), 1))
 
 
-def _project(ctx: _Ctx, pts: np.ndarray, outward: Callable = _radial) -> tuple[np.ndarray, np.ndarray]:
+def _project(
+    ctx: _Ctx, pts: np.ndarray, outward: Callable = _radial
+) -> tuple[np.ndarray, np.ndarray]:
     """Cast guide points onto the skin: first hit coming in along -outward."""
     pts = np.asarray(pts, float).reshape(-1, 3)
     u = outward(pts)
@@ -101,7 +110,7 @@ def _project(ctx: _Ctx, pts: np.ndarray, outward: Callable = _radial) -> tuple[n
     # a miss, or a hit far from the guide point (through an opening, or on
     # another part of the head), falls back to the closest skin point
     miss = (fid < 0) | (np.abs(t - RAY_BACKOFF) > MAX_GUIDE_GAP)
-    if miss.any():                      # fall back to the closest skin point
+    if miss.any():  # fall back to the closest skin point
         cp = ctx.index.closest_points(pts[miss])
         fid[miss], bary[miss] = cp.face_ids, cp.barycentric
     return fid, bary
@@ -115,38 +124,90 @@ def _surface(fid: np.ndarray, bary: np.ndarray, depth: float | np.ndarray) -> Su
 def _linear_specs(ctx: _Ctx) -> dict[str, tuple]:
     """code -> (fixed centre, free centre, row lengths, (w_fixed, w_free), outward)."""
     L = ctx.lm
-    lerp = lambda a, b, t: (1 - t) * L[a] + t * L[b]    # noqa: E731
+    lerp = lambda a, b, t: (1 - t) * L[a] + t * L[b]  # noqa: E731
     ch = L["ch_l"]
-    brow_y = 0.5 * (L["sci_l"][1] + L["ex_l"][1]) + 10.0       # brow line above the eye
-    top_y = L["tr"][1] - 8.0                                     # just below the hairline
+    brow_y = 0.5 * (L["sci_l"][1] + L["ex_l"][1]) + 10.0  # brow line above the eye
+    top_y = L["tr"][1] - 8.0  # just below the hairline
     return {
         # corrugator: medial brow near g/n -> laterally above the eye (mid brow)
-        "corrugator": (0.5 * (L["g"] + L["n"]) + [10.0, 0.0, -3.0],
-                       L["sci_l"] + [2.0, -4.0, 0.0], (2, 2, 2), (6.0, 5.0), _radial),
+        "corrugator": (
+            0.5 * (L["g"] + L["n"]) + [10.0, 0.0, -3.0],
+            L["sci_l"] + [2.0, -4.0, 0.0],
+            (2, 2, 2),
+            (6.0, 5.0),
+            _radial,
+        ),
         # zygomaticus major: skin over the zygomatic body, anterior-inferior of zy -> just lateral of ch
-        "zygomaticus_major": (lerp("zy_l", "ch_l", 0.3) + [0.0, -2.0, 4.0],
-                              ch + [3.0, 1.0, -1.0], (2, 2), (8.0, 5.0), _radial),
+        "zygomaticus_major": (
+            lerp("zy_l", "ch_l", 0.3) + [0.0, -2.0, 4.0],
+            ch + [3.0, 1.0, -1.0],
+            (2, 2),
+            (8.0, 5.0),
+            _radial,
+        ),
         # risorius: cheek over the masseter (towards go / ol) horizontally to ch
-        "risorius": (np.array([L["ol_l"][0], ch[1], L["ol_l"][2]]) + [0.0, 0.0, 6.0],
-                     ch + [4.0, 0.0, -2.0], (2, 2), (8.0, 5.0), _radial),
+        "risorius": (
+            np.array([L["ol_l"][0], ch[1], L["ol_l"][2]]) + [0.0, 0.0, 6.0],
+            ch + [4.0, 0.0, -2.0],
+            (2, 2),
+            (8.0, 5.0),
+            _radial,
+        ),
         # levator labii superioris: below the infraorbital margin -> upper lip lateral of the philtrum
-        "levator_labii": (np.array([lerp("en_l", "ex_l", 0.3)[0], L["or_l"][1] - 5.0, L["or_l"][2] + 2.0]),
-                          0.5 * (L["cph_l"] + L["mvs_l"]) + [0.0, 2.0, 0.0], (3, 2), (12.0, 6.0), _radial),
+        "levator_labii": (
+            np.array([lerp("en_l", "ex_l", 0.3)[0], L["or_l"][1] - 5.0, L["or_l"][2] + 2.0]),
+            0.5 * (L["cph_l"] + L["mvs_l"]) + [0.0, 2.0, 0.0],
+            (3, 2),
+            (12.0, 6.0),
+            _radial,
+        ),
         # frontalis: vertical strips from the hairline down to the brow above the inner / outer eye
-        "frontalis_inner": (np.array([L["en_l"][0], top_y, L["g"][2] - 8.0]),
-                            np.array([L["en_l"][0], brow_y, L["g"][2] - 4.0]), (2, 2, 2), (10.0, 10.0), _radial),
-        "frontalis_outer": (np.array([lerp("en_l", "ex_l", 0.7)[0], top_y - 4.0, L["g"][2] - 20.0]),
-                            np.array([lerp("en_l", "ex_l", 0.7)[0], brow_y, L["ex_l"][2] + 8.0]),
-                            (2, 2, 2), (12.0, 12.0), _radial),
+        "frontalis_inner": (
+            np.array([L["en_l"][0], top_y, L["g"][2] - 8.0]),
+            np.array([L["en_l"][0], brow_y, L["g"][2] - 4.0]),
+            (2, 2, 2),
+            (10.0, 10.0),
+            _radial,
+        ),
+        "frontalis_outer": (
+            np.array([lerp("en_l", "ex_l", 0.7)[0], top_y - 4.0, L["g"][2] - 20.0]),
+            np.array([lerp("en_l", "ex_l", 0.7)[0], brow_y, L["ex_l"][2] + 8.0]),
+            (2, 2, 2),
+            (12.0, 12.0),
+            _radial,
+        ),
         # triangularis: mandible border below ch -> up to ch
-        "triangularis": (lerp("mmb_l", "ch_l", 0.12), ch + [1.0, -2.0, 0.0], (2, 2, 2), (14.0, 5.0), _radial),
+        "triangularis": (
+            lerp("mmb_l", "ch_l", 0.12),
+            ch + [1.0, -2.0, 0.0],
+            (2, 2, 2),
+            (14.0, 5.0),
+            _radial,
+        ),
         # quadratus labii inferioris: mandible border (medial) -> lower lip lateral of li
-        "quadratus_labii": (lerp("gn", "mmb_l", 0.45) + [0.0, 3.0, 0.0],
-                            np.array([9.0, L["li"][1] + 1.0, L["li"][2] - 2.0]), (2, 2, 2), (10.0, 7.0), _radial),
+        "quadratus_labii": (
+            lerp("gn", "mmb_l", 0.45) + [0.0, 3.0, 0.0],
+            np.array([9.0, L["li"][1] + 1.0, L["li"][2] - 2.0]),
+            (2, 2, 2),
+            (10.0, 7.0),
+            _radial,
+        ),
         # mentalis (midline, jaw): chin (pg) up toward the labiomental sulcus (sl)
-        "mentalis": (L["pg"] + [0.0, -2.0, 0.0], L["sl"] + [0.0, -2.0, 0.0], (3, 2), (16.0, 10.0), _radial),
+        "mentalis": (
+            L["pg"] + [0.0, -2.0, 0.0],
+            L["sl"] + [0.0, -2.0, 0.0],
+            (3, 2),
+            (16.0, 10.0),
+            _radial,
+        ),
         # mylohyoideus (midline, jaw): under the chin, from behind me back towards the hyoid
-        "mylohyoideus": (L["me"] + [0.0, 0.0, -6.0], L["me"] + [0.0, 0.0, -22.0], (2, 2), (30.0, 24.0), _below),
+        "mylohyoideus": (
+            L["me"] + [0.0, 0.0, -6.0],
+            L["me"] + [0.0, 0.0, -22.0],
+            (2, 2),
+            (30.0, 24.0),
+            _below,
+        ),
     }
 
 
@@ -156,8 +217,8 @@ def _mouth_arcs(ctx: _Ctx) -> tuple[np.ndarray, np.ndarray]:
     loop = ctx.v[ctx.skin.openings["mouth"]]
     i0, i1 = int(np.argmin(loop[:, 0])), int(np.argmax(loop[:, 0]))
     a, b = sorted((i0, i1))
-    arc1 = loop[a:b + 1]
-    arc2 = np.vstack([loop[b:], loop[:a + 1]])
+    arc1 = loop[a : b + 1]
+    arc2 = np.vstack([loop[b:], loop[: a + 1]])
     upper, lower = (arc1, arc2) if arc1[:, 1].mean() > arc2[:, 1].mean() else (arc2, arc1)
     return upper[np.argsort(upper[:, 0])], lower[np.argsort(lower[:, 0])]
 
@@ -173,11 +234,13 @@ def _oris_rings(ctx: _Ctx, upper: bool) -> list[np.ndarray]:
         n_rings, n_pts, height = 3, 7, 0.75 * (L["sti"][1] - L["sl"][1])
     s = np.linspace(-1.0, 1.0, n_pts)
     rings = []
-    for f in np.linspace(1.0, 0.0, n_rings):                    # outer ring first
+    for f in np.linspace(1.0, 0.0, n_rings):  # outer ring first
         half = L["ch_l"][0] + 1.0 + 7.0 * f
         x = s * half
         xc = np.clip(x, arc[0, 0], arc[-1, 0])
-        y = np.interp(xc, arc[:, 0], arc[:, 1]) + sign * (1.5 + f * height * np.sqrt(1 - np.abs(s) ** 3))
+        y = np.interp(xc, arc[:, 0], arc[:, 1]) + sign * (
+            1.5 + f * height * np.sqrt(1 - np.abs(s) ** 3)
+        )
         z = np.interp(xc, arc[:, 0], arc[:, 2]) - 3.0 * np.abs(s) * f
         rings.append(np.stack([x, y, z], axis=1))
     return rings
@@ -187,11 +250,11 @@ def _eye_rings(ctx: _Ctx, part: str) -> tuple[list[np.ndarray], np.ndarray]:
     """Open rings around the left eye opening (gap at the medial side), outer first."""
     loop = ctx.v[ctx.skin.openings["eye_l"]]
     c = loop.mean(axis=0)
-    if part == "orbital":        # brow and upper cheek, beyond the orbital rim
+    if part == "orbital":  # brow and upper cheek, beyond the orbital rim
         offsets, n_pts, span = ((17.0, 0.8), (9.0, 0.8)), 7, np.deg2rad(150.0)
-    else:                         # in the lids
+    else:  # in the lids
         offsets, n_pts, span = ((6.5, 1.0), (2.0, 1.0)), 9, np.deg2rad(160.0)
-    th = np.linspace(span, -span, n_pts)                     # upper-medial, lateral, lower-medial
+    th = np.linspace(span, -span, n_pts)  # upper-medial, lateral, lower-medial
     r = polar_radius(loop[:, :2], c[:2], th)
     rings = []
     for off, lat in offsets:
@@ -200,7 +263,9 @@ def _eye_rings(ctx: _Ctx, part: str) -> tuple[list[np.ndarray], np.ndarray]:
         y = c[1] + rr * np.sin(th)
         z = np.full(n_pts, c[2] + 4.0)
         rings.append(np.stack([x, y, z], axis=1))
-    top = np.array([c[0], c[1] + polar_radius(loop[:, :2], c[:2], np.array([np.pi / 2]))[0] + 3.0, c[2] + 4.0])
+    top = np.array(
+        [c[0], c[1] + polar_radius(loop[:, :2], c[:2], np.array([np.pi / 2]))[0] + 3.0, c[2] + 4.0]
+    )
     return rings, top
 
 
@@ -214,19 +279,32 @@ def _base(code: str) -> str:
     return code[:-2] if code.endswith(("_l", "_r")) else code
 
 
-def _left_or_midline_grid(ctx: _Ctx, row: dict[str, str], specs: dict) -> tuple[list[np.ndarray], Callable,
-                                                                                  np.ndarray | None]:
+def _left_or_midline_grid(
+    ctx: _Ctx, row: dict[str, str], specs: dict
+) -> tuple[list[np.ndarray], Callable, np.ndarray | None]:
     base = _base(row["code"])
     if row["kind"] == "linear":
         fixed, free, lengths, widths, outward = specs[base]
-        return linear_rows(fixed, free, lengths, widths, lambda p: outward(p[None])[0]), outward, None
+        return (
+            linear_rows(fixed, free, lengths, widths, lambda p: outward(p[None])[0]),
+            outward,
+            None,
+        )
     L = ctx.lm
     if base == "orbicularis_oris_upper":
         h = L["sn"][1] - L["sts"][1]
-        return _oris_rings(ctx, True), _radial, np.array([0.0, L["sts"][1] + 1.5 + 0.35 * h, L["ls"][2]])
+        return (
+            _oris_rings(ctx, True),
+            _radial,
+            np.array([0.0, L["sts"][1] + 1.5 + 0.35 * h, L["ls"][2]]),
+        )
     if base == "orbicularis_oris_lower":
         h = L["sti"][1] - L["sl"][1]
-        return _oris_rings(ctx, False), _radial, np.array([0.0, L["sti"][1] - 1.5 - 0.35 * h, L["li"][2]])
+        return (
+            _oris_rings(ctx, False),
+            _radial,
+            np.array([0.0, L["sti"][1] - 1.5 - 0.35 * h, L["li"][2]]),
+        )
     part = "orbital" if "orbital" in base else "palpebral"
     rings, top = _eye_rings(ctx, part)
     return rings, _radial, top
@@ -245,7 +323,7 @@ def layout_muscles(skin: SkinTemplate) -> tuple[MuscleGrid, ...]:
     table = read_table71()
     vp, fp = mirror_maps(skin.mesh.vertices, skin.mesh.faces)
     built: dict[str, MuscleGrid] = {}
-    for row in table:                                  # left and midline muscles first
+    for row in table:  # left and midline muscles first
         if row["side"] == "right":
             continue
         rows, outward, axis_pt = _left_or_midline_grid(ctx, row, specs)
@@ -255,10 +333,18 @@ def layout_muscles(skin: SkinTemplate) -> tuple[MuscleGrid, ...]:
             if axis_pt is None:
                 raise ValueError(f"sphincter {row['code']} has no axis point")
             axis = _axis(ctx, axis_pt)
-        built[row["code"]] = MuscleGrid(row["code"], row["name"], row["kind"], row["attachment"], row["side"],
-                                        tuple(len(r) for r in rows), _surface(fid, bary, GRID_DEPTH_MM), axis)
+        built[row["code"]] = MuscleGrid(
+            row["code"],
+            row["name"],
+            row["kind"],
+            row["attachment"],
+            row["side"],
+            tuple(len(r) for r in rows),
+            _surface(fid, bary, GRID_DEPTH_MM),
+            axis,
+        )
     faces = skin.mesh.faces
-    for row in table:                                  # right = mirror of the left partner
+    for row in table:  # right = mirror of the left partner
         if row["side"] != "right":
             continue
         left = built[row["code"][:-2] + "_l"]
@@ -266,9 +352,17 @@ def layout_muscles(skin: SkinTemplate) -> tuple[MuscleGrid, ...]:
         def mirror(sp: SurfacePoints) -> SurfacePoints:
             f, b = mirror_surface_points(faces, vp, fp, sp.faces, sp.barycentric)
             return SurfacePoints(f, b, sp.depth_mm.copy())
-        built[row["code"]] = MuscleGrid(row["code"], row["name"], row["kind"], row["attachment"], "right",
-                                        left.row_lengths, mirror(left.points),
-                                        None if left.axis is None else mirror(left.axis))
+
+        built[row["code"]] = MuscleGrid(
+            row["code"],
+            row["name"],
+            row["kind"],
+            row["attachment"],
+            "right",
+            left.row_lengths,
+            mirror(left.points),
+            None if left.axis is None else mirror(left.axis),
+        )
     return tuple(built[row["code"]] for row in table)
 
 
@@ -285,4 +379,11 @@ def muscle_polylines(grid: MuscleGrid, mesh) -> list[np.ndarray]:
     return lines
 
 
-__all__ = ["GRID_DEPTH_MM", "AXIS_DEPTHS_MM", "layout_muscles", "muscle_polylines", "read_table71", "MIRROR"]
+__all__ = [
+    "GRID_DEPTH_MM",
+    "AXIS_DEPTHS_MM",
+    "layout_muscles",
+    "muscle_polylines",
+    "read_table71",
+    "MIRROR",
+]

@@ -47,12 +47,12 @@ class PreviewFit:
     change targets and :meth:`skin` returns the previewed skin.
     """
 
-    sources: np.ndarray            # (k, 3) reference skin points, head frame
-    targets: np.ndarray            # (k, 3) current targets, head frame (edited in place)
+    sources: np.ndarray  # (k, 3) reference skin points, head frame
+    targets: np.ndarray  # (k, 3) current targets, head frame (edited in place)
     labels: tuple[str, ...]
-    skin_vertices: np.ndarray      # (n, 3) the skin the last warp applies to, head frame
-    input_to_head: np.ndarray      # (4, 4)
-    dowels: dict[str, tuple[float, np.ndarray]]   # skull code → (depth mm, unit direction)
+    skin_vertices: np.ndarray  # (n, 3) the skin the last warp applies to, head frame
+    input_to_head: np.ndarray  # (4, 4)
+    dowels: dict[str, tuple[float, np.ndarray]]  # skull code → (depth mm, unit direction)
     _rows: dict[str, np.ndarray] = field(default_factory=dict)
 
     @classmethod
@@ -61,16 +61,24 @@ class PreviewFit:
         if len(recon.labels) != len(recon.sources):
             raise ValueError("the fit carries no correspondence labels; fit it again")
         depths = dict(recon.dowel_depths)
-        dowels = {d.code: (float(depths.get(d.code, d.depth_mm)), np.asarray(d.direction, float))
-                  for d in recon.plan.dowels if not d.excluded}
+        dowels = {
+            d.code: (float(depths.get(d.code, d.depth_mm)), np.asarray(d.direction, float))
+            for d in recon.plan.dowels
+            if not d.excluded
+        }
         base = recon.base_skin if recon.base_skin is not None else reference.skin.vertices
         rows: dict[str, list[int]] = {}
         for i, label in enumerate(recon.labels):
             rows.setdefault(label, []).append(i)
-        return cls(np.array(recon.sources, float), np.array(recon.targets, float),
-                   tuple(recon.labels), np.array(base, float),
-                   np.array(recon.input_to_head, float), dowels,
-                   {k: np.array(v, dtype=np.int64) for k, v in rows.items()})
+        return cls(
+            np.array(recon.sources, float),
+            np.array(recon.targets, float),
+            tuple(recon.labels),
+            np.array(base, float),
+            np.array(recon.input_to_head, float),
+            dowels,
+            {k: np.array(v, dtype=np.int64) for k, v in rows.items()},
+        )
 
     # ------------------------------------------------------------ edits
     def move_landmark(self, code: str, position_input: Iterable[float]) -> bool:

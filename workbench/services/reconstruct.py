@@ -156,8 +156,9 @@ class Reconstruction:
 
     def mesh_to_input(self, mesh: Mesh) -> Mesh:
         """A head-frame mesh in the input frame, outward winding kept."""
-        return Mesh(self.to_input(mesh.vertices),
-                    mesh.faces[:, ::-1] if self.mirrored_input else mesh.faces)
+        return Mesh(
+            self.to_input(mesh.vertices), mesh.faces[:, ::-1] if self.mirrored_input else mesh.faces
+        )
 
     @property
     def face(self) -> Mesh:
@@ -181,8 +182,10 @@ def input_frame(landmarks: LandmarkSet) -> tuple[np.ndarray, bool]:
     flip = np.diag([-1.0, 1.0, 1.0, 1.0])
     again = head_frame_from_landmarks(defined.transformed(flip))
     if again.mirrored_input:
-        raise LandmarkError("the skull landmarks contradict each other about left and right "
-                            "(check the porions, orbitales and the _l/_r labels)")
+        raise LandmarkError(
+            "the skull landmarks contradict each other about left and right "
+            "(check the porions, orbitales and the _l/_r labels)"
+        )
     return again.input_to_head @ flip, True
 
 
@@ -197,8 +200,9 @@ def outward(mesh: Mesh) -> Mesh:
     return mesh if agree >= 0 else Mesh(mesh.vertices, mesh.faces[:, ::-1])
 
 
-def warp_head(head: TemplateHead, warp: LandmarkWarp | Callable[[np.ndarray], np.ndarray]
-              ) -> TemplateHead:
+def warp_head(
+    head: TemplateHead, warp: LandmarkWarp | Callable[[np.ndarray], np.ndarray]
+) -> TemplateHead:
     """Every part of ``head`` moved by ``warp``; the eyes rigidly with their centres (§8.3.2)."""
     meshes = {name: m.with_vertices(warp(m.vertices)) for name, m in head.meshes.items()}
     centres = warp(head.eye_centres)
@@ -268,8 +272,11 @@ def _dowel_hits(plan: DowelPlan, skin: Mesh) -> dict[str, tuple[float, np.ndarra
     o = np.array([d.origin for d in active])
     dr = np.array([d.direction for d in active])
     hits = RayCaster(skin).first_hits(o, dr, max_distance=80.0)
-    return {d.code: (float(hits.distance[i]), hits.points[i])
-            for i, d in enumerate(active) if hits.hit[i]}
+    return {
+        d.code: (float(hits.distance[i]), hits.points[i])
+        for i, d in enumerate(active)
+        if hits.hit[i]
+    }
 
 
 def _eye_sides(head: TemplateHead) -> list[tuple[int, str]]:
@@ -279,8 +286,11 @@ def _eye_sides(head: TemplateHead) -> list[tuple[int, str]]:
 
 def _lid_vertices(head: TemplateHead, i: int, side: str) -> np.ndarray:
     """Skin vertices of the lids over eye ``i``: the lid regions and the palpebral opening."""
-    groups = [head.regions[r] for r in (f"eyelid_upper_{side}", f"eyelid_lower_{side}")
-              if r in head.regions]
+    groups = [
+        head.regions[r]
+        for r in (f"eyelid_upper_{side}", f"eyelid_lower_{side}")
+        if r in head.regions
+    ]
     if f"eye_{side}" in head.openings:
         groups.append(head.openings[f"eye_{side}"])
     if groups:
@@ -291,8 +301,12 @@ def _lid_vertices(head: TemplateHead, i: int, side: str) -> np.ndarray:
     return np.flatnonzero(near)
 
 
-def eye_moves(head: TemplateHead, landmarks_h: LandmarkSet | None, placement: str,
-              guided: Mapping[str, np.ndarray]) -> tuple[dict[int, np.ndarray], dict, list[str]]:
+def eye_moves(
+    head: TemplateHead,
+    landmarks_h: LandmarkSet | None,
+    placement: str,
+    guided: Mapping[str, np.ndarray],
+) -> tuple[dict[int, np.ndarray], dict, list[str]]:
     """How far each eyeball (and the lids over it) moves: ``{eye index: (3,) mm}``.
 
     A guide for ``eye_centre_<side>`` (a published eye rule, or set by the
@@ -327,15 +341,19 @@ def eye_moves(head: TemplateHead, landmarks_h: LandmarkSet | None, placement: st
             continue
         ec = lms.get(f"ec_{side}")
         if ec is None or not ec.is_defined:
-            notes.append(f"eye ({side}): no ectoconchion ec_{side} on the skull; the eyeball "
-                         "stays where the reference has it")
+            notes.append(
+                f"eye ({side}): no ectoconchion ec_{side} on the skull; the eyeball "
+                "stays where the reference has it"
+            )
             continue
         apex = float(eyes.vertices[owner == i, 2].max())
         dz = float(ec.position[2]) + constant("stephan2009_globe_projection") - apex
         if abs(dz) > EYE_MAX_SHIFT_MM:
-            notes.append(f"eye ({side}): the published projection would move the eyeball "
-                         f"{dz:+.1f} mm (more than {EYE_MAX_SHIFT_MM:g} mm); check ec_{side} — "
-                         "the eyeball stays where the reference has it")
+            notes.append(
+                f"eye ({side}): the published projection would move the eyeball "
+                f"{dz:+.1f} mm (more than {EYE_MAX_SHIFT_MM:g} mm); check ec_{side} — "
+                "the eyeball stays where the reference has it"
+            )
             continue
         moves[i] = np.array([0.0, 0.0, dz])
         figures[f"eye_{side}_by"] = "stephan2009"
@@ -357,13 +375,20 @@ def move_eyes(head: TemplateHead, moves: Mapping[int, np.ndarray]) -> TemplateHe
     return replace(head, meshes=meshes, eye_centres=head.eye_centres + shift)
 
 
-def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
-             guide_targets: Mapping[str, np.ndarray] | None = None,
-             guides: GuideFn | None = None, settings: FitSettings = FitSettings(),
-             tissue: TissueField | None = None, depths: np.ndarray | None = None,
-             landmarks_h: LandmarkSet | None = None
-             ) -> tuple[TemplateHead, dict, np.ndarray, np.ndarray, dict, tuple[str, ...],
-                        np.ndarray, dict[str, float]]:
+def fit_head(
+    head: TemplateHead,
+    reg: SkullRegistration,
+    plan: DowelPlan,
+    *,
+    guide_targets: Mapping[str, np.ndarray] | None = None,
+    guides: GuideFn | None = None,
+    settings: FitSettings = FitSettings(),
+    tissue: TissueField | None = None,
+    depths: np.ndarray | None = None,
+    landmarks_h: LandmarkSet | None = None,
+) -> tuple[
+    TemplateHead, dict, np.ndarray, np.ndarray, dict, tuple[str, ...], np.ndarray, dict[str, float]
+]:
     """Carry ``head`` with the registration, model the tissue, warp to dowels and guides.
 
     ``landmarks_h`` (the skull landmarks, head frame) place the eyeballs
@@ -390,9 +415,12 @@ def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
     centres = {f"eye_centre_{side}": carried.eye_centres[i] for i, side in _eye_sides(carried)}
     if guides is not None:
         used_guides.update(guides({**prefit, **centres}))
-    moves, eye_figures, eye_notes = eye_moves(carried, landmarks_h, settings.tissue.eye_rule,
-                                              {c: used_guides.pop(c) for c in centres
-                                               if c in used_guides})
+    moves, eye_figures, eye_notes = eye_moves(
+        carried,
+        landmarks_h,
+        settings.tissue.eye_rule,
+        {c: used_guides.pop(c) for c in centres if c in used_guides},
+    )
     carried = move_eyes(carried, moves)
     hits = _dowel_hits(plan, base)
     src, dst, labels = [], [], []
@@ -404,10 +432,13 @@ def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
         depth_now, point = hits[d.code]
         pinned = settings.tissue.pin_dowels or d.source == "override" or depths is not None
         if d.skin_code in used_guides and not d.source == "override":
-            continue   # a guide decides that skin landmark
-        if not pinned and len(guided_pts) and \
-                np.min(np.linalg.norm(guided_pts - point, axis=1)) < ANCHOR_CLEARANCE_MM:
-            continue   # a held dowel beside a guided point would fight the guide
+            continue  # a guide decides that skin landmark
+        if (
+            not pinned
+            and len(guided_pts)
+            and np.min(np.linalg.norm(guided_pts - point, axis=1)) < ANCHOR_CLEARANCE_MM
+        ):
+            continue  # a held dowel beside a guided point would fight the guide
         depth = (float(depths[i]) if depths is not None else d.depth_mm) if pinned else depth_now
         src.append(point)
         dst.append(d.origin + depth * d.direction)
@@ -419,19 +450,22 @@ def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
             dst.append(np.asarray(target, float))
             labels.append(f"guide:{code}")
     for i, side in _eye_sides(carried):
-        if i in moves and np.linalg.norm(moves[i]) > 0.05:   # the lids go with their eyeball
+        if i in moves and np.linalg.norm(moves[i]) > 0.05:  # the lids go with their eyeball
             lids = _lid_vertices(carried, i, side)
             lids = lids[_spread(base.vertices[lids], LID_SPACING_MM)]
             src += list(base.vertices[lids])
             dst += list(base.vertices[lids] + moves[i])
             labels += [f"eye:{side}"] * len(lids)
-    moving = [np.asarray(a) for a, b in zip(src, dst, strict=True)
-              if np.linalg.norm(np.asarray(b) - np.asarray(a)) > 0.05]
+    moving = [
+        np.asarray(a)
+        for a, b in zip(src, dst, strict=True)
+        if np.linalg.norm(np.asarray(b) - np.asarray(a)) > 0.05
+    ]
     anchors = _spread(base.vertices, ANCHOR_SPACING_MM)
     if moving:
         near = cKDTree(np.array(moving)).query(base.vertices[anchors])[0]
         anchors = anchors[near > ANCHOR_CLEARANCE_MM]
-    if src:   # nor on a point held in place (a guide already where it wants its landmark)
+    if src:  # nor on a point held in place (a guide already where it wants its landmark)
         anchors = anchors[cKDTree(np.array(src)).query(base.vertices[anchors])[0] > 0.5]
     src += list(base.vertices[anchors])
     dst += list(base.vertices[anchors])
@@ -446,11 +480,12 @@ def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
     t_weight = reg.target_weight
     refits = 0
     extra = 0
-    for refits in range(settings.max_refits + 1):  # noqa: B007
+    for refits in range(settings.max_refits + 1):
         warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
         moved = warp(base.vertices)
-        thin, signed, bone_pt, normal, checked = _thin_spots(moved, index, t_weight,
-                                                             settings.min_tissue_mm, exempt)
+        thin, signed, bone_pt, normal, checked = _thin_spots(
+            moved, index, t_weight, settings.min_tissue_mm, exempt
+        )
         if not thin.any() or refits == settings.max_refits:
             break
         ids = np.flatnonzero(thin)
@@ -468,12 +503,19 @@ def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
     meshes = {**carried.meshes, "skin": base.with_vertices(moved), "cranium": reg.meshes["cranium"]}
     if reg.part("mandible").present:
         meshes["mandible"] = reg.meshes["mandible"]
-    on_skin = LandmarkSet("skin", tuple(lm.moved(prefit[lm.code], lm.status)
-                                        if lm.code in prefit else lm
-                                        for lm in carried.skin_landmarks))
+    on_skin = LandmarkSet(
+        "skin",
+        tuple(
+            lm.moved(prefit[lm.code], lm.status) if lm.code in prefit else lm
+            for lm in carried.skin_landmarks
+        ),
+    )
     fitted = replace(carried, meshes=meshes, skin_landmarks=_warp_set(on_skin, warp))
-    tip_err = [float(np.linalg.norm(warp(s[None])[0] - t)) for s, t, lab
-               in zip(src_a, dst_a, labels, strict=False) if lab.startswith("dowel:")]
+    tip_err = [
+        float(np.linalg.norm(warp(s[None])[0] - t))
+        for s, t, lab in zip(src_a, dst_a, labels, strict=False)
+        if lab.startswith("dowel:")
+    ]
     figures = {
         "max_tip_error_mm": max(tip_err) if tip_err else 0.0,
         "min_tissue_mm": float(signed[checked].min()) if checked.any() else None,
@@ -489,9 +531,9 @@ def fit_head(head: TemplateHead, reg: SkullRegistration, plan: DowelPlan, *,
     return (fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held)
 
 
-def _thin_spots(skin: np.ndarray, index: MeshIndex, weight: np.ndarray, min_tissue: float,
-                exempt: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _thin_spots(
+    skin: np.ndarray, index: MeshIndex, weight: np.ndarray, min_tissue: float, exempt: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Skin vertices closer than ``min_tissue`` to believed target bone (or inside it).
 
     Returns ``(thin, signed distance, closest bone point, bone normal, checked)``;
@@ -509,12 +551,18 @@ def _thin_spots(skin: np.ndarray, index: MeshIndex, weight: np.ndarray, min_tiss
     return thin, signed, cp.points, normals, near
 
 
-def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, *,
-                settings: FitSettings = FitSettings(),
-                guide_targets: Mapping[str, np.ndarray] | None = None,
-                guides: Callable[[Mesh, LandmarkSet, DowelPlan], GuideFn | None] | None = None,
-                hint: tuple | None = None, registration: SkullRegistration | None = None,
-                progress: Callable[[str], None] | None = None) -> Reconstruction:
+def reconstruct(
+    skull: Mesh,
+    landmarks: LandmarkSet | None,
+    head: TemplateHead,
+    *,
+    settings: FitSettings = FitSettings(),
+    guide_targets: Mapping[str, np.ndarray] | None = None,
+    guides: Callable[[Mesh, LandmarkSet, DowelPlan], GuideFn | None] | None = None,
+    hint: tuple | None = None,
+    registration: SkullRegistration | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Reconstruction:
     """Fit ``head`` over ``skull`` (input frame, mm); see the module docstring.
 
     ``landmarks`` (input frame) may be None: the registration finds them.
@@ -529,9 +577,14 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
     from workbench.services.skull_registration import mirror_from_landmarks, register_skull
 
     t0 = time.perf_counter()
-    reg = registration or register_skull(skull, head, hint=hint, seeds=landmarks,
-                                         mirror=mirror_from_landmarks(landmarks),
-                                         progress=progress)
+    reg = registration or register_skull(
+        skull,
+        head,
+        hint=hint,
+        seeds=landmarks,
+        mirror=mirror_from_landmarks(landmarks),
+        progress=progress,
+    )
     to_head, mirrored = reg.input_to_head, reg.mirrored
     lms = _merge_landmarks(reg.landmarks, landmarks)
     snapped: list[str] = []
@@ -540,17 +593,28 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
 
         lms, snapped = snap_suggested(skull, lms)
     lms_h = lms.transformed(to_head)
-    doubtful = [lm.code for lm in lms_h if lm.status == "suggested"
-                and lm.confidence < settings.min_confidence]
+    doubtful = [
+        lm.code
+        for lm in lms_h
+        if lm.status == "suggested" and lm.confidence < settings.min_confidence
+    ]
     if doubtful:
-        lms_h = LandmarkSet(lms_h.surface, tuple(
-            lm.moved(lm.position, "absent") if lm.code in doubtful else lm for lm in lms_h))
+        lms_h = LandmarkSet(
+            lms_h.surface,
+            tuple(lm.moved(lm.position, "absent") if lm.code in doubtful else lm for lm in lms_h),
+        )
     skull_h = reg.target_h
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
     fitted, figures, src, dst, used, labels, base, held = fit_head(
-        head, reg, plan, guide_targets=guide_targets, guides=guide_fn, settings=settings,
-        landmarks_h=lms_h)
+        head,
+        reg,
+        plan,
+        guide_targets=guide_targets,
+        guides=guide_fn,
+        settings=settings,
+        landmarks_h=lms_h,
+    )
     observed = _skin_observed(fitted.skin, reg)
     face = np.asarray(head.regions.get("face", np.arange(head.skin.n_vertices)), dtype=np.int64)
     figures["registration"] = reg.figures
@@ -559,36 +623,66 @@ def reconstruct(skull: Mesh, landmarks: LandmarkSet | None, head: TemplateHead, 
     figures["seconds_total"] = round(time.perf_counter() - t0, 3)
     warnings = list(reg.warnings) + list(plan.warnings) + list(figures.pop("eye_notes"))
     if doubtful:
-        warnings.append(f"{len(doubtful)} landmarks found with confidence below "
-                        f"{settings.min_confidence:g} got no dowel (confirm or move them): "
-                        + ", ".join(doubtful))
+        warnings.append(
+            f"{len(doubtful)} landmarks found with confidence below "
+            f"{settings.min_confidence:g} got no dowel (confirm or move them): "
+            + ", ".join(doubtful)
+        )
     inferred = 1.0 - figures["face_observed_fraction"]
     if inferred > 0.05:
-        warnings.append(f"{100 * inferred:.0f} % of the face lies over missing bone and is "
-                        "inferred from the reference head (marked in the head pack, the report "
-                        "and the pictures)")
+        warnings.append(
+            f"{100 * inferred:.0f} % of the face lies over missing bone and is "
+            "inferred from the reference head (marked in the head pack, the report "
+            "and the pictures)"
+        )
     if figures["penetrating_vertices"]:
-        warnings.append(f"{figures['penetrating_vertices']} skin vertices still inside the bone "
-                        f"after {figures['refits']} refits")
-    return Reconstruction(fitted, to_head, mirrored, plan, src, dst, figures, used,
-                          tuple(warnings), labels, base, held, observed, lms, reg,
-                          tissue_field(head, settings.depth, settings.tissue))
+        warnings.append(
+            f"{figures['penetrating_vertices']} skin vertices still inside the bone "
+            f"after {figures['refits']} refits"
+        )
+    return Reconstruction(
+        fitted,
+        to_head,
+        mirrored,
+        plan,
+        src,
+        dst,
+        figures,
+        used,
+        tuple(warnings),
+        labels,
+        base,
+        held,
+        observed,
+        lms,
+        reg,
+        tissue_field(head, settings.depth, settings.tissue),
+    )
 
 
 def _merge_landmarks(found: LandmarkSet, given: LandmarkSet | None) -> LandmarkSet:
     """The registration's landmarks, with the user's placed (and absent-by-hand) ones kept."""
     if given is None:
         return found
-    keep = {lm.code: lm for lm in given
-            if lm.status == "placed" or (lm.status == "absent" and lm.confidence > 0.5)}
+    keep = {
+        lm.code: lm
+        for lm in given
+        if lm.status == "placed" or (lm.status == "absent" and lm.confidence > 0.5)
+    }
     out = [keep.get(lm.code, lm) for lm in found]
     out += [lm for c, lm in keep.items() if c not in found]
     return LandmarkSet("skull", tuple(out))
 
 
-def ensemble_spread(recon: Reconstruction, head: TemplateHead, skull_h: Mesh | None = None,
-                    n: int = 20, *, seed: int = 0, settings: FitSettings = FitSettings()
-                    ) -> np.ndarray:
+def ensemble_spread(
+    recon: Reconstruction,
+    head: TemplateHead,
+    skull_h: Mesh | None = None,
+    n: int = 20,
+    *,
+    seed: int = 0,
+    settings: FitSettings = FitSettings(),
+) -> np.ndarray:
     """Per-skin-vertex spread (mm, RMS distance from the mean) over ``n`` depth draws.
 
     Each member redraws every site depth of the tissue model from its table
@@ -603,7 +697,7 @@ def ensemble_spread(recon: Reconstruction, head: TemplateHead, skull_h: Mesh | N
     if field_.sites and n > 0:
         sd = np.array([s.sd_mm or 0.0 for s in field_.sites])
         draws = rng.standard_normal((n, len(sd))) * sd
-        offsets = draws @ field_.influence.T          # (n, n_skin) mm along the normal
+        offsets = draws @ field_.influence.T  # (n, n_skin) mm along the normal
         var = ((offsets - offsets.mean(axis=0)) ** 2).mean(axis=0)
     else:
         var = np.zeros(n_skin)

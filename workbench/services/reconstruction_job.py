@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from workbench import __version__
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.commands.case_edits import SetParameter
 from workbench.commands.landmarks import ReplaceLandmarkSet
 from workbench.commands.reconstruction_setup import SetDowelSettings, SetGuides, SetOrientation
@@ -48,14 +49,29 @@ from workbench.services.guides import guides_from_json, guides_to_json
 from workbench.services.landmark_transfer import TransferResult
 from workbench.services.reconstruct import FitSettings, Reconstruction
 from workbench.services.reconstruction_service import (
-    MAX_WORKING_TRIANGLES, WORKING_TRIANGLES, FitInputs, FitResult, run_fit,
+    MAX_WORKING_TRIANGLES,
+    WORKING_TRIANGLES,
+    FitInputs,
+    FitResult,
+    run_fit,
 )
 from workbench.services.tissue_model import TissueSettings
 
-__all__ = ["FITTED_HEAD_FRAME_TEXT", "MAX_GUIDE_SHIFT_MM", "MAX_WORKING_TRIANGLES",
-           "MIN_CONFIDENCE", "WORKING_TRIANGLES", "JobResult", "JobSettings", "build_report",
-           "head_in_input_frame", "job_inputs", "plausible_guides", "run_reconstruction",
-           "write_outputs"]
+__all__ = [
+    "FITTED_HEAD_FRAME_TEXT",
+    "MAX_GUIDE_SHIFT_MM",
+    "MAX_WORKING_TRIANGLES",
+    "MIN_CONFIDENCE",
+    "WORKING_TRIANGLES",
+    "JobResult",
+    "JobSettings",
+    "build_report",
+    "head_in_input_frame",
+    "job_inputs",
+    "plausible_guides",
+    "run_reconstruction",
+    "write_outputs",
+]
 
 Progress = Callable[[str], None]
 MIN_CONFIDENCE = FitSettings().min_confidence
@@ -68,16 +84,16 @@ class JobSettings:
     units: str = "auto"
     scale: float | None = None
     landmarks: str | PathLike[str] | None = None
-    table: str = "ttable_2023"
+    table: str = DEFAULT_DEPTH_TABLE
     sex: str = "male"
     build: str | float = "normal"
-    guides: str | PathLike[str] = "default"      # "default" | "none" | JSON file
-    rules: tuple[str, ...] = ()                  # published rules replacing classic guides
+    guides: str | PathLike[str] = "default"  # "default" | "none" | JSON file
+    rules: tuple[str, ...] = ()  # published rules replacing classic guides
     ensemble: int = 0
     template: str | PathLike[str] | None = None
     #: two or more reference packs: one fit each, the face their per-vertex median
     templates: tuple = ()
-    orientation: tuple | None = None             # (anterior, superior[, left]) in file coords
+    orientation: tuple | None = None  # (anterior, superior[, left]) in file coords
     excluded: frozenset[str] = frozenset()
     overrides: dict = field(default_factory=dict)
     examiner: str = ""
@@ -123,63 +139,113 @@ class JobResult:
 def record_settings(opened: OpenedCase, settings: JobSettings) -> None:
     """The job's settings as typed commands on the case (each one undo step, audited)."""
     stack = opened.stack
-    stack.push(SetDowelSettings(
-        table=settings.table, sex=settings.sex, build=settings.build,
-        overrides={k: float(v) for k, v in settings.overrides.items()},
-        excluded=tuple(settings.excluded), tissue_model=settings.tissue.model,
-        region_factors=dict(settings.tissue.region_factors), label="Dowel settings of the job"))
+    stack.push(
+        SetDowelSettings(
+            table=settings.table,
+            sex=settings.sex,
+            build=settings.build,
+            overrides={k: float(v) for k, v in settings.overrides.items()},
+            excluded=tuple(settings.excluded),
+            tissue_model=settings.tissue.model,
+            region_factors=dict(settings.tissue.region_factors),
+            label="Dowel settings of the job",
+        )
+    )
     if settings.orientation is not None:
-        stack.push(SetOrientation(Orientation.from_hint(settings.orientation),
-                                  label="Orientation of the skull file"))
+        stack.push(
+            SetOrientation(
+                Orientation.from_hint(settings.orientation), label="Orientation of the skull file"
+            )
+        )
     if settings.guides_file is not None:
-        guides = guides_from_json(settings.guides_file)    # checked, names the file
-        stack.push(SetGuides(GuideList(tuple(guides_to_json(guides))),
-                             label=f"Guides from {settings.guides_file.name}"))
+        guides = guides_from_json(settings.guides_file)  # checked, names the file
+        stack.push(
+            SetGuides(
+                GuideList(tuple(guides_to_json(guides))),
+                label=f"Guides from {settings.guides_file.name}",
+            )
+        )
 
 
-def run_reconstruction(skull_path: str | PathLike[str], settings: JobSettings = JobSettings(),
-                       progress: Progress | None = None) -> JobResult:
+def run_reconstruction(
+    skull_path: str | PathLike[str],
+    settings: JobSettings = JobSettings(),
+    progress: Progress | None = None,
+) -> JobResult:
     """Open the skull as a case and reconstruct the face (see the module docstring)."""
     say = progress or (lambda _msg: None)
     times: dict[str, float] = {}
     t = time.perf_counter()
-    opened = start_case_from_skull(skull_path, units=settings.units, scale=settings.scale,
-                                   examiner=settings.examiner, landmarks_path=settings.landmarks)
+    opened = start_case_from_skull(
+        skull_path,
+        units=settings.units,
+        scale=settings.scale,
+        examiner=settings.examiner,
+        landmarks_path=settings.landmarks,
+    )
     case, stack = opened.case, opened.stack
     record_settings(opened, settings)
-    inputs = FitInputs.from_case(case, template=settings.template, templates=settings.templates,
-                                 rules=settings.rules, use_guides=str(settings.guides) != "none",
-                                 ensemble=settings.ensemble, tissue=settings.tissue)
+    inputs = FitInputs.from_case(
+        case,
+        template=settings.template,
+        templates=settings.templates,
+        rules=settings.rules,
+        use_guides=str(settings.guides) != "none",
+        ensemble=settings.ensemble,
+        tissue=settings.tissue,
+    )
     times["open"] = time.perf_counter() - t
     fit = run_fit(inputs, progress=say)
     times.update(fit.seconds)
-    if fit.recon.landmarks is not None:   # None only when the fit kept no landmark set
-        stack.push(ReplaceLandmarkSet(surface="skull", new_set=fit.recon.landmarks,
-                                      label="Skull landmarks from the dense registration"))
-    for key, value in (("template_id", fit.head.template_id),
-                       ("template_hash", fit.head.content_hash),
-                       ("depth_group", fit.recon.plan.group_label)):
+    if fit.recon.landmarks is not None:  # None only when the fit kept no landmark set
+        stack.push(
+            ReplaceLandmarkSet(
+                surface="skull",
+                new_set=fit.recon.landmarks,
+                label="Skull landmarks from the dense registration",
+            )
+        )
+    for key, value in (
+        ("template_id", fit.head.template_id),
+        ("template_hash", fit.head.content_hash),
+        ("depth_group", fit.recon.plan.group_label),
+    ):
         stack.push(SetParameter(key=key, value=value))
     report = build_report(case, fit, notes=opened.notes, guides_file=settings.guides_file)
-    return JobResult(opened, fit.head, fit.recon, fit.skull_h, None, list(fit.guides),
-                     fit.spread_map, report, times, settings, fit)
+    return JobResult(
+        opened,
+        fit.head,
+        fit.recon,
+        fit.skull_h,
+        None,
+        list(fit.guides),
+        fit.spread_map,
+        report,
+        times,
+        settings,
+        fit,
+    )
 
 
 def _input_record(ev: Any) -> dict[str, Any]:
-    return {"role": "skull" if ev.role == "skull_mesh" else "landmarks", "path": ev.name,
-            "sha256": ev.sha256, "units": ev.units_note or "mm"}
+    return {
+        "role": "skull" if ev.role == "skull_mesh" else "landmarks",
+        "path": ev.name,
+        "sha256": ev.sha256,
+        "units": ev.units_note or "mm",
+    }
 
 
 def _file_record(role: str, path: str | PathLike[str]) -> dict[str, Any]:
     from workbench.io.tables import tables_dir
-    from workbench.reporting.report import sha256_file
+    from workbench.model.evidence import file_sha256
 
     shown = Path(path)
     try:  # built-in tables by their place in the project, not this machine's path
         shown = Path("data_tables") / shown.resolve().relative_to(tables_dir().parent.resolve())
     except ValueError:
         pass
-    return {"role": role, "path": str(shown), "sha256": sha256_file(path), "units": "mm"}
+    return {"role": role, "path": str(shown), "sha256": file_sha256(path), "units": "mm"}
 
 
 def _table_file(table: str) -> Path:
@@ -195,9 +261,14 @@ def _dir_in(recon: Reconstruction, direction: np.ndarray) -> list[float]:
     return [float(x) for x in v / np.linalg.norm(v)]
 
 
-def build_report(case: Case, fit: FitResult, *, notes: Sequence[str] = (),
-                 guides_file: str | PathLike[str] | None = None,
-                 suggestion: TransferResult | None = None) -> dict[str, Any]:
+def build_report(
+    case: Case,
+    fit: FitResult,
+    *,
+    notes: Sequence[str] = (),
+    guides_file: str | PathLike[str] | None = None,
+    suggestion: TransferResult | None = None,
+) -> dict[str, Any]:
     """The report dict (``reconstruction-report-v1``) of one fit, without pictures.
 
     The one report builder of ``workbench reconstruct`` and the window's
@@ -218,28 +289,43 @@ def build_report(case: Case, fit: FitResult, *, notes: Sequence[str] = (),
     for lm in landmarks:
         d = by_code.get(lm.code)
         entry = catalogue.get(lm.code, "skull")
-        rows.append({
-            "code": lm.code, "name": entry.name if entry else lm.code, "status": lm.status,
-            "confidence": float(lm.confidence) if lm.is_defined else None,
-            "position_mm": None if not lm.is_defined else [float(v) for v in lm.position],
-            "skin_code": None if d is None else d.skin_code,
-            "table_depth_mm": None if d is None else d.table_depth_mm,
-            "sd_mm": None if d is None else d.sd_mm,
-            "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
-            "source": "none" if d is None else ("excluded" if d.excluded else d.source),
-            "direction": None if d is None else _dir_in(recon, d.direction),
-            "note": (f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: "
-                     "no dowel until confirmed or moved") if lm.status == "suggested" and d is None
-            and lm.confidence < MIN_CONFIDENCE else None,
-        })
+        rows.append(
+            {
+                "code": lm.code,
+                "name": entry.name if entry else lm.code,
+                "status": lm.status,
+                "confidence": float(lm.confidence) if lm.is_defined else None,
+                "position_mm": None if not lm.is_defined else [float(v) for v in lm.position],
+                "skin_code": None if d is None else d.skin_code,
+                "table_depth_mm": None if d is None else d.table_depth_mm,
+                "sd_mm": None if d is None else d.sd_mm,
+                "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
+                "source": "none" if d is None else ("excluded" if d.excluded else d.source),
+                "direction": None if d is None else _dir_in(recon, d.direction),
+                "note": (
+                    f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: "
+                    "no dowel until confirmed or moved"
+                )
+                if lm.status == "suggested" and d is None and lm.confidence < MIN_CONFIDENCE
+                else None,
+            }
+        )
     for d in plan.dowels:
         if d.source == "interpolated":
-            rows.append({"code": d.code, "name": "interpolated site", "status": "suggested",
-                         "position_mm": [float(v) for v in recon.to_input(d.origin[None])[0]],
-                         "skin_code": None, "table_depth_mm": None, "sd_mm": d.sd_mm,
-                         "depth_mm": None if d.excluded else float(d.depth_mm),
-                         "source": "excluded" if d.excluded else "interpolated",
-                         "direction": _dir_in(recon, d.direction)})
+            rows.append(
+                {
+                    "code": d.code,
+                    "name": "interpolated site",
+                    "status": "suggested",
+                    "position_mm": [float(v) for v in recon.to_input(d.origin[None])[0]],
+                    "skin_code": None,
+                    "table_depth_mm": None,
+                    "sd_mm": d.sd_mm,
+                    "depth_mm": None if d.excluded else float(d.depth_mm),
+                    "source": "excluded" if d.excluded else "interpolated",
+                    "direction": _dir_in(recon, d.direction),
+                }
+            )
     figures = {k: v for k, v in recon.figures.items() if k != "registration"}
     figures["suggested_landmarks"] = sum(lm.status == "suggested" for lm in landmarks)
     figures["placed_landmarks"] = sum(lm.status == "placed" for lm in landmarks)
@@ -250,14 +336,25 @@ def build_report(case: Case, fit: FitResult, *, notes: Sequence[str] = (),
     if suggestion is not None:
         warnings += list(suggestion.warnings)
     reg = recon.registration
-    registration = None if reg is None else {
-        "method": "dense registration of the reference skull onto the bone (orientation search, "
-                  "per-part coarse-to-fine non-rigid), soft tissue carried by the skull's "
-                  "displacement field",
-        **reg.figures,
-        "parts": [{"name": p.name, "present": p.present, "observed_fraction": p.observed_fraction,
-                   "note": p.note} for p in reg.parts],
-    }
+    registration = (
+        None
+        if reg is None
+        else {
+            "method": "dense registration of the reference skull onto the bone (orientation search, "
+            "per-part coarse-to-fine non-rigid), soft tissue carried by the skull's "
+            "displacement field",
+            **reg.figures,
+            "parts": [
+                {
+                    "name": p.name,
+                    "present": p.present,
+                    "observed_fraction": p.observed_fraction,
+                    "note": p.note,
+                }
+                for p in reg.parts
+            ],
+        }
+    )
     dowels = inputs.dowels
     report = {
         "@schema": "reconstruction-report-v1",
@@ -267,33 +364,56 @@ def build_report(case: Case, fit: FitResult, *, notes: Sequence[str] = (),
         "software": {"name": "workbench", "version": __version__},
         "template": {"id": head.template_id, "content_hash": head.content_hash},
         "frame": "input frame of the skull file (mm); the fit ran in the Frankfort head frame"
-                 + (" (mirrored input: reflection included)" if recon.mirrored_input else ""),
+        + (" (mirrored input: reflection included)" if recon.mirrored_input else ""),
         "units": "mm",
         "inputs": [_input_record(ev) for ev in case.evidence]
         + [_file_record("table", _table_file(dowels.table))]
         + ([_file_record("guides", guides_file)] if guides_file is not None else [])
-        + [_file_record("template", Path(p) / "template.json")
-           for p in (inputs.templates or ([inputs.template] if inputs.template else []))],
-        "table": {"id": plan.table_id, "title": plan.table_title, "citation": plan.citation,
-                  "group": plan.group_label, "build": dowels.build_text},
+        + [
+            _file_record("template", Path(p) / "template.json")
+            for p in (inputs.templates or ([inputs.template] if inputs.template else []))
+        ],
+        "table": {
+            "id": plan.table_id,
+            "title": plan.table_title,
+            "citation": plan.citation,
+            "group": plan.group_label,
+            "build": dowels.build_text,
+        },
         "parameters": _run_parameters(inputs),
         "landmarks": rows,
         "guides": guides_to_json(fit.guides),
         "predictions": [
-            {"rule_id": p.rule_id, "label": p.label, "value_mm": float(p.value_mm),
-             "citation": p.citation} for p in fit.predictions if np.isfinite(p.value_mm)],
+            {
+                "rule_id": p.rule_id,
+                "label": p.label,
+                "value_mm": float(p.value_mm),
+                "citation": p.citation,
+            }
+            for p in fit.predictions
+            if np.isfinite(p.value_mm)
+        ],
         "fit": figures,
         "registration": registration,
         "tissue": None if recon.tissue is None else recon.tissue.to_json(),
-        "inferred": None if recon.observed is None else {
+        "inferred": None
+        if recon.observed is None
+        else {
             "face_observed_fraction": recon.figures.get("face_observed_fraction"),
             "note": "skin over bone the registration did not find (missing mandible, defects, a "
-                    "cut vault) takes the reference head's shape; it is marked inferred per "
-                    "vertex (head/observed.npy, the pictures and the uncertainty map)"},
-        "ensemble": None if spread is None else {
+            "cut vault) takes the reference head's shape; it is marked inferred per "
+            "vertex (head/observed.npy, the pictures and the uncertainty map)",
+        },
+        "ensemble": None
+        if spread is None
+        else {
             "n": inputs.ensemble,
-            "spread_mm": {"median": float(np.median(spread)),
-                          "p90": float(np.percentile(spread, 90)), "max": float(spread.max())}},
+            "spread_mm": {
+                "median": float(np.median(spread)),
+                "p90": float(np.percentile(spread, 90)),
+                "max": float(spread.max()),
+            },
+        },
         "validation": None,
         "pictures": {},
         "warnings": warnings,
@@ -303,24 +423,36 @@ def build_report(case: Case, fit: FitResult, *, notes: Sequence[str] = (),
         report["references"] = {
             "method": "one fit per reference head, the face their per-vertex median (input frame)",
             "heads": fit.references["heads"],
-            "spread_between_mm": {"median": float(np.median(between)),
-                                  "p90": float(np.percentile(between, 90))}}
+            "spread_between_mm": {
+                "median": float(np.median(between)),
+                "p90": float(np.percentile(between, 90)),
+            },
+        }
     return report
 
 
 def _run_parameters(inputs: FitInputs) -> dict[str, Any]:
     """The settings of the run as the report records them (the case's typed parts)."""
-    guides = "none" if not inputs.use_guides else (
-        "computed from the skull" if inputs.guides is None else "set in the case")
-    return {"dowels": inputs.dowels.to_state(),
-            "orientation": None if inputs.orientation is None else inputs.orientation.to_state(),
-            "guides": guides, "rules": list(inputs.rules), "ensemble": inputs.ensemble,
-            "tissue_model": inputs.dowels.tissue_model}
+    guides = (
+        "none"
+        if not inputs.use_guides
+        else ("computed from the skull" if inputs.guides is None else "set in the case")
+    )
+    return {
+        "dowels": inputs.dowels.to_state(),
+        "orientation": None if inputs.orientation is None else inputs.orientation.to_state(),
+        "guides": guides,
+        "rules": list(inputs.rules),
+        "ensemble": inputs.ensemble,
+        "tissue_model": inputs.dowels.tissue_model,
+    }
 
 
 #: the frame ``template.json`` records for a fitted head written by the jobs
-FITTED_HEAD_FRAME_TEXT = ("the skull file's frame (input frame of the evidence), mm; the fit "
-                          "ran in the Frankfort head frame and was mapped back")
+FITTED_HEAD_FRAME_TEXT = (
+    "the skull file's frame (input frame of the evidence), mm; the fit "
+    "ran in the Frankfort head frame and was mapped back"
+)
 
 
 def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
@@ -341,20 +473,30 @@ def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
         skin_landmarks=h.skin_landmarks.transformed(inv),
         skull_landmarks=h.skull_landmarks.transformed(inv),
         eye_centres=recon.to_input(h.eye_centres),
-        tmj_axis=np.vstack([axis_pts[0], (axis_pts[1] - axis_pts[0])
-                            / np.linalg.norm(axis_pts[1] - axis_pts[0])]),
+        tmj_axis=np.vstack(
+            [axis_pts[0], (axis_pts[1] - axis_pts[0]) / np.linalg.norm(axis_pts[1] - axis_pts[0])]
+        ),
     )
 
 
-def job_inputs(skull_path: str | PathLike[str] | None, settings: JobSettings,
-               *extra: str | PathLike[str] | None) -> list[Path]:
+def job_inputs(
+    skull_path: str | PathLike[str] | None,
+    settings: JobSettings,
+    *extra: str | PathLike[str] | None,
+) -> list[Path]:
     """Every file or folder a job reads: skull, landmarks, guides, table CSV, packs, ``extra``.
 
     Outputs are checked against these (:mod:`workbench.io.outputs`): none may
     be replaced, and none may lie inside the output folder.
     """
-    found = [skull_path, settings.landmarks, settings.guides_file, settings.template,
-             *settings.templates, *extra]
+    found = [
+        skull_path,
+        settings.landmarks,
+        settings.guides_file,
+        settings.template,
+        *settings.templates,
+        *extra,
+    ]
     table = Path(settings.table)
     if table.suffix == ".csv" and table.is_file():
         found.append(table)
@@ -362,13 +504,15 @@ def job_inputs(skull_path: str | PathLike[str] | None, settings: JobSettings,
 
 
 def _result_inputs(result: JobResult) -> list[Path]:
-    originals = [ev.original_path for ev in result.opened.case.evidence
-                 if getattr(ev, "original_path", None)]
+    originals = [
+        ev.original_path for ev in result.opened.case.evidence if getattr(ev, "original_path", None)
+    ]
     return job_inputs(None, result.settings, *originals)
 
 
-def write_outputs(result: JobResult, out: str | PathLike[str], *, force: bool = False,
-                  staged: bool = False) -> dict[str, Path]:
+def write_outputs(
+    result: JobResult, out: str | PathLike[str], *, force: bool = False, staged: bool = False
+) -> dict[str, Path]:
     """Outputs in the skull file's frame (no report files).
 
     ``face.ply`` is also in the skull file's **units**, so it overlays the
@@ -400,17 +544,25 @@ def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
     k = result.file_units_per_mm
     if k == 1.0:
         files = {"face": write_mesh(out / "face.ply", face)}
-    else:   # the skull file's units, and the header says so (not "mm")
-        files = {"face": ply.write(out / "face.ply", face.scaled(k),
-                                   units=result.file_units_label,
-                                   comments=["same surface in mm: face_mm.ply"])}
+    else:  # the skull file's units, and the header says so (not "mm")
+        files = {
+            "face": ply.write(
+                out / "face.ply",
+                face.scaled(k),
+                units=result.file_units_label,
+                comments=["same surface in mm: face_mm.ply"],
+            )
+        }
     if k != 1.0:
         files["face_mm"] = write_mesh(out / "face_mm.ply", face)
     head_in = head_in_input_frame(result.recon)
     export_template(head_in, out / "head", frame=FITTED_HEAD_FRAME_TEXT)
     files["head"] = out / "head"
-    write_mrk_json(out / "skull_landmarks.mrk.json", result.opened.case.landmarks["skull"],
-                   coordinate_system="RAS")
+    write_mrk_json(
+        out / "skull_landmarks.mrk.json",
+        result.opened.case.landmarks["skull"],
+        coordinate_system="RAS",
+    )
     files["landmarks"] = out / "skull_landmarks.mrk.json"
     files["case"] = save_case(result.opened.case, out / "case.fcase", result.opened.stack)
     return files

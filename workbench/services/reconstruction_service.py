@@ -48,7 +48,11 @@ from workbench.services.guide_rules import Prediction, published_predictions
 from workbench.services.guides import Guide
 from workbench.services.input_checks import check_face_fits_skull, check_fit_settings
 from workbench.services.reconstruct import (
-    FitSettings, Reconstruction, ensemble_spread, outward, reconstruct,
+    FitSettings,
+    Reconstruction,
+    ensemble_spread,
+    outward,
+    reconstruct,
 )
 from workbench.services.template_cache import reference_head
 from workbench.services.tissue_model import TissueSettings
@@ -64,12 +68,16 @@ DEFAULT_TISSUE = TissueSettings()
 
 def depth_settings(dowels: DowelSettings) -> DepthSettings:
     """The dowel planner's settings for the case's dowel settings."""
-    return DepthSettings(table=dowels.table, sex=dowels.sex, build=dowels.build,
-                         overrides=dict(dowels.overrides), excluded=frozenset(dowels.excluded))
+    return DepthSettings(
+        table=dowels.table,
+        sex=dowels.sex,
+        build=dowels.build,
+        overrides=dict(dowels.overrides),
+        excluded=frozenset(dowels.excluded),
+    )
 
 
-def tissue_settings(dowels: DowelSettings, base: TissueSettings = DEFAULT_TISSUE
-                    ) -> TissueSettings:
+def tissue_settings(dowels: DowelSettings, base: TissueSettings = DEFAULT_TISSUE) -> TissueSettings:
     """``base`` (fit internals) with the case's tissue model and region factors."""
     return replace(base, model=dowels.tissue_model, region_factors=dict(dowels.region_factors))
 
@@ -121,10 +129,14 @@ class FitInputs:
     def __post_init__(self) -> None:
         if not isinstance(self.skull, Mesh) or not self.skull.n_faces:
             raise InputError("reconstruction", "there is no skull to fit the face to")
-        if isinstance(self.ensemble, bool) or not isinstance(self.ensemble, int) \
-                or self.ensemble < 0:
-            raise InputError("ensemble", f"the number of fits must be 0 or more, "
-                             f"got {self.ensemble!r}")
+        if (
+            isinstance(self.ensemble, bool)
+            or not isinstance(self.ensemble, int)
+            or self.ensemble < 0
+        ):
+            raise InputError(
+                "ensemble", f"the number of fits must be 0 or more, got {self.ensemble!r}"
+            )
         templates = tuple(Path(p) for p in self.templates)
         template = Path(self.template) if self.template is not None else None
         if template is None and templates:
@@ -136,10 +148,17 @@ class FitInputs:
             object.__setattr__(self, "landmarks", None)
 
     @classmethod
-    def from_case(cls, case: Case, *, template: PathArg | None = None,
-                  templates: Sequence[PathArg] = (), rules: Sequence[str] = (),
-                  use_guides: bool = True, ensemble: int = 0,
-                  tissue: TissueSettings = DEFAULT_TISSUE) -> FitInputs:
+    def from_case(
+        cls,
+        case: Case,
+        *,
+        template: PathArg | None = None,
+        templates: Sequence[PathArg] = (),
+        rules: Sequence[str] = (),
+        use_guides: bool = True,
+        ensemble: int = 0,
+        tissue: TissueSettings = DEFAULT_TISSUE,
+    ) -> FitInputs:
         """A snapshot of ``case`` (skull, skull landmarks, dowels, orientation, guides).
 
         The stored guides are checked here (an :class:`InputError` names the
@@ -148,15 +167,26 @@ class FitInputs:
         if case.specimen.mesh is None:
             raise InputError("reconstruction", "the case has no skull yet", "open a skull first")
         stored_guides(case.guides)
-        return cls(case.specimen.mesh, case.landmarks["skull"], case.dowels, case.orientation,
-                   case.guides, None if template is None else Path(template),
-                   tuple(Path(p) for p in templates), tuple(rules), use_guides, int(ensemble),
-                   case.meta.examiner, tissue)
+        return cls(
+            case.specimen.mesh,
+            case.landmarks["skull"],
+            case.dowels,
+            case.orientation,
+            case.guides,
+            None if template is None else Path(template),
+            tuple(Path(p) for p in templates),
+            tuple(rules),
+            use_guides,
+            int(ensemble),
+            case.meta.examiner,
+            tissue,
+        )
 
     @property
     def fit_settings(self) -> FitSettings:
-        return FitSettings(depth=depth_settings(self.dowels),
-                           tissue=tissue_settings(self.dowels, self.tissue))
+        return FitSettings(
+            depth=depth_settings(self.dowels), tissue=tissue_settings(self.dowels, self.tissue)
+        )
 
     @property
     def hint(self) -> tuple | None:
@@ -169,8 +199,8 @@ class DowelPreview:
     """A dowel plan with origins and tips mapped into the input frame (mm)."""
 
     plan: DowelPlan
-    origins: np.ndarray   # (n, 3) input frame mm, active dowels
-    tips: np.ndarray      # (n, 3)
+    origins: np.ndarray  # (n, 3) input frame mm, active dowels
+    tips: np.ndarray  # (n, 3)
     codes: tuple[str, ...]
 
     @classmethod
@@ -179,8 +209,12 @@ class DowelPreview:
         active = plan.active()
         if not active:
             return cls(plan, np.zeros((0, 3)), np.zeros((0, 3)), ())
-        return cls(plan, to_input(np.array([d.origin for d in active])),
-                   to_input(np.array([d.tip for d in active])), tuple(d.code for d in active))
+        return cls(
+            plan,
+            to_input(np.array([d.origin for d in active])),
+            to_input(np.array([d.tip for d in active])),
+            tuple(d.code for d in active),
+        )
 
 
 @dataclass(frozen=True)
@@ -247,8 +281,10 @@ def working_skull(skull: Mesh, say: Progress = lambda _m: None) -> tuple[Mesh, l
     say(f"decimating the working skull {skull.n_faces} -> {WORKING_TRIANGLES} triangles ...")
     v, f = decimate(skull.vertices, skull.faces, WORKING_TRIANGLES)
     work = Mesh(v, f)
-    return work, [f"working skull decimated from {skull.n_faces} to {work.n_faces} triangles "
-                  "(the original file is kept as evidence)"]
+    return work, [
+        f"working skull decimated from {skull.n_faces} to {work.n_faces} triangles "
+        "(the original file is kept as evidence)"
+    ]
 
 
 def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
@@ -272,24 +308,30 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     fit = inputs.fit_settings
     guides = FitGuides(dowels, stored_guides(inputs.guides), inputs.rules, inputs.use_guides)
     say("registering the reference skull and fitting the head ...")
-    recon = reconstruct(work, inputs.landmarks, head, settings=fit, guides=guides,
-                        hint=inputs.hint, progress=say)
+    recon = reconstruct(
+        work, inputs.landmarks, head, settings=fit, guides=guides, hint=inputs.hint, progress=say
+    )
     references = None
     if len(inputs.templates) > 1:
         recon, references = library_consensus(recon, work, inputs, say)
-    check_face_fits_skull(recon.face, inputs.skull)   # never a garbage face as a result
+    check_face_fits_skull(recon.face, inputs.skull)  # never a garbage face as a result
     skull_h = outward(work.transformed(recon.input_to_head))
     if recon.landmarks is None:  # reconstruct() always records the landmarks it used
         raise RuntimeError("the reconstruction carries no skull landmarks")
     lms_h = recon.landmarks.transformed(recon.input_to_head)
     rejected = tuple(guides.rejected)
-    recon = replace(recon, warnings=recon.warnings + rejected
-                    + tuple(guides.problems(skull_h, lms_h)))
+    recon = replace(
+        recon, warnings=recon.warnings + rejected + tuple(guides.problems(skull_h, lms_h))
+    )
     try:
         predictions = published_predictions(
-            lms_h, dowels.sex, skull=skull_h,
-            dowel_tips={d.code: d.tip for d in recon.plan.active()}, problems=[])
-    except WorkbenchError as exc:   # informative only: a missing measurement must not stop it
+            lms_h,
+            dowels.sex,
+            skull=skull_h,
+            dowel_tips={d.code: d.tip for d in recon.plan.active()},
+            problems=[],
+        )
+    except WorkbenchError as exc:  # informative only: a missing measurement must not stop it
         predictions = []
         notes.append(f"published guide predictions unavailable: {exc}")
     seconds = {"fit": time.perf_counter() - t}
@@ -299,15 +341,27 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
         t = time.perf_counter()
         spread = ensemble_spread(recon, head, skull_h, inputs.ensemble, settings=fit)
         seconds["ensemble"] = time.perf_counter() - t
-    for mesh in (recon.face, recon.head.skin):   # drawn smooth-shaded: normals here, in the
-        _ = mesh.vertex_normals                   # worker, not on the GUI thread
-    return FitResult(recon, head, skull_h, tuple(guides.chosen), spread,
-                     DowelPreview.of(recon.plan, recon.to_input), tuple(predictions), inputs,
-                     tuple(notes), rejected, references, seconds)
+    for mesh in (recon.face, recon.head.skin):  # drawn smooth-shaded: normals here, in the
+        _ = mesh.vertex_normals  # worker, not on the GUI thread
+    return FitResult(
+        recon,
+        head,
+        skull_h,
+        tuple(guides.chosen),
+        spread,
+        DowelPreview.of(recon.plan, recon.to_input),
+        tuple(predictions),
+        inputs,
+        tuple(notes),
+        rejected,
+        references,
+        seconds,
+    )
 
 
-def library_consensus(first: Reconstruction, work: Mesh, inputs: FitInputs, say: Progress
-                      ) -> tuple[Reconstruction, dict[str, Any]]:
+def library_consensus(
+    first: Reconstruction, work: Mesh, inputs: FitInputs, say: Progress
+) -> tuple[Reconstruction, dict[str, Any]]:
     """Fit every reference pack of ``inputs.templates``; the face is their per-vertex median.
 
     All packs must share the first one's skin topology (packs built from the
@@ -318,21 +372,37 @@ def library_consensus(first: Reconstruction, work: Mesh, inputs: FitInputs, say:
     heads = [{"id": first.head.template_id, "path": str(inputs.templates[0])}]
     for i, pack in enumerate(inputs.templates[1:], start=2):
         say(f"reference {i}/{len(inputs.templates)} ...")
-        other = reconstruct(work, inputs.landmarks, reference_head(inputs.dowels.sex, pack),
-                            settings=inputs.fit_settings, hint=inputs.hint)
-        if other.head.skin.n_vertices != first.head.skin.n_vertices or \
-                other.head.skin.n_faces != first.head.skin.n_faces:
-            raise WorkbenchError(f"reference {pack} does not share the skin topology of "
-                                 f"{inputs.templates[0]} (packs must be built from one base head)")
+        other = reconstruct(
+            work,
+            inputs.landmarks,
+            reference_head(inputs.dowels.sex, pack),
+            settings=inputs.fit_settings,
+            hint=inputs.hint,
+        )
+        if (
+            other.head.skin.n_vertices != first.head.skin.n_vertices
+            or other.head.skin.n_faces != first.head.skin.n_faces
+        ):
+            raise WorkbenchError(
+                f"reference {pack} does not share the skin topology of "
+                f"{inputs.templates[0]} (packs must be built from one base head)"
+            )
         faces.append(other.face)
         heads.append({"id": other.head.template_id, "path": str(pack)})
     stack = np.stack([f.vertices for f in faces])
     median = np.median(stack, axis=0)
     spread = np.median(np.linalg.norm(stack - median, axis=2), axis=0)
     skin_h = apply_transform(first.input_to_head, median)
-    head = replace(first.head, meshes={**first.head.meshes,
-                                       "skin": first.head.skin.with_vertices(skin_h)})
-    recon = replace(first, head=head, warnings=first.warnings + (
-        f"face = per-vertex median of {len(faces)} reference heads (spread between them: median "
-        f"{np.median(spread):.1f} mm)",))
+    head = replace(
+        first.head, meshes={**first.head.meshes, "skin": first.head.skin.with_vertices(skin_h)}
+    )
+    recon = replace(
+        first,
+        head=head,
+        warnings=first.warnings
+        + (
+            f"face = per-vertex median of {len(faces)} reference heads (spread between them: median "
+            f"{np.median(spread):.1f} mm)",
+        ),
+    )
     return recon, {"heads": heads, "spread": spread}

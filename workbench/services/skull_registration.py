@@ -157,8 +157,9 @@ class SkullRegistration:
         """A spread subset of (rest, registered) vertex pairs of every part (head frame)."""
         rest = concatenate([self.rest[p] for p in PART_OF]).vertices
         moved = concatenate([self.meshes[p] for p in PART_OF]).vertices
-        _, first = np.unique(np.floor(rest / spacing_mm).astype(np.int64), axis=0,
-                             return_index=True)
+        _, first = np.unique(
+            np.floor(rest / spacing_mm).astype(np.int64), axis=0, return_index=True
+        )
         pick = np.sort(first)
         return rest[pick], moved[pick]
 
@@ -215,8 +216,9 @@ def _rotation_about(axis_point: np.ndarray, axis_dir: np.ndarray, deg: float) ->
     return m
 
 
-def _rigid_fit(points: np.ndarray, normals: np.ndarray, target: Target, tree: cKDTree,
-               rounds: int = 9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rigid_fit(
+    points: np.ndarray, normals: np.ndarray, target: Target, tree: cKDTree, rounds: int = 9
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust rigid ICP of a point set onto the target.
 
     Returns the 4x4 map and, at the end, each point's match weight and matched point.
@@ -241,8 +243,15 @@ def _rigid_fit(points: np.ndarray, normals: np.ndarray, target: Target, tree: cK
     return m, w, q
 
 
-def _pose_mandible(mandible: Mesh, teeth: Mesh, cranium: Mesh, head: TemplateHead,
-                   scale: float, target: Target, tree: cKDTree) -> tuple[np.ndarray, float]:
+def _pose_mandible(
+    mandible: Mesh,
+    teeth: Mesh,
+    cranium: Mesh,
+    head: TemplateHead,
+    scale: float,
+    target: Target,
+    tree: cKDTree,
+) -> tuple[np.ndarray, float]:
     """Best rigid pose of the mandible (with its teeth) over several jaw openings.
 
     Returns the pose and the fraction of mandible points that found bone of
@@ -276,14 +285,21 @@ def _pose_mandible(mandible: Mesh, teeth: Mesh, cranium: Mesh, head: TemplateHea
     return best
 
 
-def _carry_landmarks(head: TemplateHead, rest: Mapping[str, Mesh], moved: Mapping[str, Mesh],
-                     observed: Mapping[str, np.ndarray], scale: float
-                     ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+def _carry_landmarks(
+    head: TemplateHead,
+    rest: Mapping[str, Mesh],
+    moved: Mapping[str, Mesh],
+    observed: Mapping[str, np.ndarray],
+    scale: float,
+) -> tuple[dict[str, np.ndarray], dict[str, float]]:
     """Reference skull landmarks carried by the registration; per code its support 0..1."""
     out: dict[str, np.ndarray] = {}
     support: dict[str, float] = {}
-    groups = {"cranium": ("cranium", "upper_teeth"), "mandible": ("mandible", "lower_teeth"),
-              "teeth": ("upper_teeth", "lower_teeth")}
+    groups = {
+        "cranium": ("cranium", "upper_teeth"),
+        "mandible": ("mandible", "lower_teeth"),
+        "teeth": ("upper_teeth", "lower_teeth"),
+    }
     lms = [lm for lm in head.skull_landmarks if lm.is_defined]
     pos = scale * np.array([lm.position for lm in lms])
     found = {name: MeshIndex(rest[name]).closest_points(pos) for name in rest}
@@ -307,11 +323,14 @@ def reference_in_frame(head: TemplateHead, reg: SkullRegistration) -> TemplateHe
     m = reg.settle @ np.diag([k, k, k, 1.0])
     axis = _apply(m, np.vstack([head.tmj_axis[0], head.tmj_axis[0] + head.tmj_axis[1]]))
     return replace(
-        head, meshes={p: x.with_vertices(_apply(m, x.vertices)) for p, x in head.meshes.items()},
+        head,
+        meshes={p: x.with_vertices(_apply(m, x.vertices)) for p, x in head.meshes.items()},
         skin_landmarks=head.skin_landmarks.transformed(m),
         skull_landmarks=head.skull_landmarks.transformed(m),
-        eye_centres=_apply(m, head.eye_centres), eye_radius=head.eye_radius * k,
-        tmj_axis=np.vstack([axis[0], (axis[1] - axis[0]) / np.linalg.norm(axis[1] - axis[0])]))
+        eye_centres=_apply(m, head.eye_centres),
+        eye_radius=head.eye_radius * k,
+        tmj_axis=np.vstack([axis[0], (axis[1] - axis[0]) / np.linalg.norm(axis[1] - axis[0])]),
+    )
 
 
 def skull_field(reg: SkullRegistration, smoothing_mm: float = 1.0) -> LandmarkWarp:
@@ -357,8 +376,9 @@ _CACHE: dict[str, SkullRegistration] = {}
 _CACHE_SIZE = 4
 
 
-def _cache_key(skull: Mesh, head: TemplateHead, hint: tuple | None, seeds: LandmarkSet | None,
-               mirror: str) -> str:
+def _cache_key(
+    skull: Mesh, head: TemplateHead, hint: tuple | None, seeds: LandmarkSet | None, mirror: str
+) -> str:
     import hashlib
 
     h = hashlib.sha256()
@@ -366,16 +386,22 @@ def _cache_key(skull: Mesh, head: TemplateHead, hint: tuple | None, seeds: Landm
     h.update(np.ascontiguousarray(skull.faces).tobytes())
     h.update(head.content_hash.encode())
     h.update(repr((hint, mirror)).encode())
-    for lm in (seeds or ()):
+    for lm in seeds or ():
         if lm.status == "placed":
             h.update(lm.code.encode())
             h.update(np.ascontiguousarray(lm.position).tobytes())
     return h.hexdigest()
 
 
-def register_skull(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
-                   seeds: LandmarkSet | None = None, mirror: str = "auto",
-                   progress: Progress | None = None) -> SkullRegistration:
+def register_skull(
+    skull: Mesh,
+    head: TemplateHead,
+    *,
+    hint: tuple | None = None,
+    seeds: LandmarkSet | None = None,
+    mirror: str = "auto",
+    progress: Progress | None = None,
+) -> SkullRegistration:
     """Register ``head``'s skull onto ``skull`` (input frame, mm); see the module docstring.
 
     ``seeds`` are skull landmarks the user placed (input frame): three or
@@ -394,9 +420,15 @@ def register_skull(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None
     return result
 
 
-def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
-                   seeds: LandmarkSet | None = None, mirror: str = "auto",
-              progress: Progress | None = None) -> SkullRegistration:
+def _register(
+    skull: Mesh,
+    head: TemplateHead,
+    *,
+    hint: tuple | None = None,
+    seeds: LandmarkSet | None = None,
+    mirror: str = "auto",
+    progress: Progress | None = None,
+) -> SkullRegistration:
     say = progress or (lambda _m: None)
     t0 = time.perf_counter()
     seconds: dict[str, float] = {}
@@ -406,8 +438,11 @@ def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
     ref_full = concatenate([head.meshes[p] for p in PART_OF])
     ref_lms = head.skull_landmarks.as_dict()
     seed_pairs = None
-    placed = {} if seeds is None else {lm.code: lm.position for lm in seeds
-                                       if lm.status == "placed" and lm.code in ref_lms}
+    placed = (
+        {}
+        if seeds is None
+        else {lm.code: lm.position for lm in seeds if lm.status == "placed" and lm.code in ref_lms}
+    )
     if len(placed) >= 3:
         codes = sorted(placed)
         seed_pairs = (np.array([placed[c] for c in codes]), np.array([ref_lms[c] for c in codes]))
@@ -420,48 +455,61 @@ def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
     rigid[:3, :3] = lin / s
     rigid[:3, 3] = pose.matrix[:3, 3] / s
     mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
-    k = 1.0 / s   # the reference is scaled instead of the target
-    target_h = Mesh(_apply(rigid, skull.vertices),
-                    skull.faces[:, ::-1] if mirrored else skull.faces)
+    k = 1.0 / s  # the reference is scaled instead of the target
+    target_h = Mesh(
+        _apply(rigid, skull.vertices), skull.faces[:, ::-1] if mirrored else skull.faces
+    )
     if target_h.volume < 0:
         target_h = Mesh(target_h.vertices, target_h.faces[:, ::-1])
 
     t = time.perf_counter()
     parts = _registration_parts(head, k)
-    layout = dict(parts)   # the scaled reference before the jaw pose: what the field maps from
+    layout = dict(parts)  # the scaled reference before the jaw pose: what the field maps from
     weights, tfig = target_weights(target_h, concatenate(list(parts.values())))
     if not (weights > 0.05).any():
-        raise InputError("skull", "no part of the surface lies near the reference skull after "
-                         "orientation", hint="check the units and that the file holds a skull")
+        raise InputError(
+            "skull",
+            "no part of the surface lies near the reference skull after orientation",
+            hint="check the units and that the file holds a skull",
+        )
     target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 6000))
     tree = cKDTree(target_h.vertices)
     seconds["target"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("posing the mandible ...")
-    jaw, jaw_fraction = _pose_mandible(parts["mandible"], parts["lower_teeth"],
-                                       concatenate([parts["cranium"], parts["upper_teeth"]]),
-                                       head, k, target, tree)
+    jaw, jaw_fraction = _pose_mandible(
+        parts["mandible"],
+        parts["lower_teeth"],
+        concatenate([parts["cranium"], parts["upper_teeth"]]),
+        head,
+        k,
+        target,
+        tree,
+    )
     mandible_present = jaw_fraction >= PRESENT_FRACTION
     if mandible_present:
         for name in ("mandible", "lower_teeth"):
             parts[name] = Mesh(_apply(jaw, parts[name].vertices), parts[name].faces)
     else:
-        warnings.append(f"no mandible found (only {100 * jaw_fraction:.0f} % of the reference "
-                        "mandible finds bone): it follows the cranium and the lower face is "
-                        "inferred from the reference")
+        warnings.append(
+            f"no mandible found (only {100 * jaw_fraction:.0f} % of the reference "
+            "mandible finds bone): it follows the cranium and the lower face is "
+            "inferred from the reference"
+        )
     seconds["mandible"] = time.perf_counter() - t
 
     names = list(PART_OF)
     src = concatenate([parts[p] for p in names])
     offsets = np.cumsum([0] + [parts[p].n_vertices for p in names])
-    labels = np.concatenate([np.full(parts[p].n_vertices, PART_OF[p] if mandible_present else 0)
-                             for p in names])
+    labels = np.concatenate(
+        [np.full(parts[p].n_vertices, PART_OF[p] if mandible_present else 0) for p in names]
+    )
     active = np.ones(src.n_vertices, bool)
     if not mandible_present:
         for p in ("mandible", "lower_teeth"):
             i = names.index(p)
-            active[offsets[i]:offsets[i + 1]] = False
+            active[offsets[i] : offsets[i + 1]] = False
     hard = None
     if seeds is not None:
         user = [(c, p) for c, p in placed.items()]
@@ -487,8 +535,10 @@ def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
         rest[p] = layout[p]
         observed[p] = np.where(active[sl], reg.weights[sl], 0.0)
     reports = []
-    for part, members in (("cranium", ("cranium", "upper_teeth")),
-                          ("mandible", ("mandible", "lower_teeth"))):
+    for part, members in (
+        ("cranium", ("cranium", "upper_teeth")),
+        ("mandible", ("mandible", "lower_teeth")),
+    ):
         frac = float(np.mean(np.concatenate([observed[m] for m in members]) > OBSERVED_WEIGHT))
         present = part == "cranium" or mandible_present
         note = "" if present else "missing: follows the cranium (inferred)"
@@ -496,12 +546,14 @@ def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
 
     carried, support = _carry_landmarks(head, rest, moved, observed, k)
     # the target's own Frankfort frame from the registered porions and orbitales
-    fh_set = LandmarkSet("skull", tuple(Landmark(c, carried[c], "suggested", 1.0)
-                                        for c in carried))
+    fh_set = LandmarkSet("skull", tuple(Landmark(c, carried[c], "suggested", 1.0) for c in carried))
     inferred_fh = [c for c in FH_CODES if support.get(c, 0.0) < OBSERVED_WEIGHT]
     if inferred_fh:
-        warnings.append("Frankfort Horizontal from the registered reference: "
-                        + ", ".join(inferred_fh) + " not on observed bone (inferred)")
+        warnings.append(
+            "Frankfort Horizontal from the registered reference: "
+            + ", ".join(inferred_fh)
+            + " not on observed bone (inferred)"
+        )
     fh = head_frame_from_landmarks(fh_set).input_to_head
     settle = fh if np.isfinite(fh).all() else np.eye(4)
     input_to_head = settle @ rigid
@@ -518,39 +570,79 @@ def _register(skull: Mesh, head: TemplateHead, *, hint: tuple | None = None,
         if lm.code in placed:
             lms.append(Landmark(lm.code, placed[lm.code], "placed", 1.0, lm.description))
         elif sup >= OBSERVED_WEIGHT:
-            lms.append(Landmark(lm.code, _apply(back, carried[lm.code][None])[0], "suggested",
-                                round(min(1.0, sup), 3), "from the dense skull registration"))
+            lms.append(
+                Landmark(
+                    lm.code,
+                    _apply(back, carried[lm.code][None])[0],
+                    "suggested",
+                    round(min(1.0, sup), 3),
+                    "from the dense skull registration",
+                )
+            )
         else:
-            lms.append(Landmark(lm.code, np.full(3, np.nan), "absent", 0.0,
-                                "no bone under the registered reference (inferred position "
-                                "kept by the registration)"))
+            lms.append(
+                Landmark(
+                    lm.code,
+                    np.full(3, np.nan),
+                    "absent",
+                    0.0,
+                    "no bone under the registered reference (inferred position "
+                    "kept by the registration)",
+                )
+            )
     landmarks = LandmarkSet("skull", tuple(lms))
     seconds["total"] = time.perf_counter() - t0
     figures = {
-        "orientation": {"method": pose.method, "cost": round(pose.cost, 4),
-                        "matched_fraction": round(pose.matched_fraction, 4),
-                        "handedness": pose.handedness, "mirrored": mirrored,
-                        "reference_scale": round(k, 4)},
+        "orientation": {
+            "method": pose.method,
+            "cost": round(pose.cost, 4),
+            "matched_fraction": round(pose.matched_fraction, 4),
+            "handedness": pose.handedness,
+            "mirrored": mirrored,
+            "reference_scale": round(k, 4),
+        },
         "mandible_pose_fraction": round(jaw_fraction, 4),
         "observed_fraction": {r.name: r.observed_fraction for r in reports},
-        "median_observed_distance_mm": round(float(np.median(
-            reg.distances[reg.weights > OBSERVED_WEIGHT])) if (reg.weights > OBSERVED_WEIGHT).any()
-            else float("nan"), 3),
+        "median_observed_distance_mm": round(
+            float(np.median(reg.distances[reg.weights > OBSERVED_WEIGHT]))
+            if (reg.weights > OBSERVED_WEIGHT).any()
+            else float("nan"),
+            3,
+        ),
         "iterations": reg.iterations,
         **tfig,
         "seconds": {kk: round(v, 3) for kk, v in seconds.items()},
     }
     if mirrored:
-        warnings.append("the input is mirrored (left-handed coordinates): the head frame "
-                        "includes a reflection, and results are mapped back the same way")
+        warnings.append(
+            "the input is mirrored (left-handed coordinates): the head frame "
+            "includes a reflection, and results are mapped back the same way"
+        )
     if pose.handedness == "assumed":
         figures["orientation"]["handedness_note"] = (
             "a skull is nearly symmetric, so its shape cannot tell a mirrored file; the file's "
-            "handedness was kept (give an orientation with 'left' or left/right landmarks)")
+            "handedness was kept (give an orientation with 'left' or left/right landmarks)"
+        )
     if tfig["target_extra_area_fraction"] > 0.02:
-        warnings.append(f"{100 * tfig['target_extra_area_fraction']:.0f} % of the bone surface "
-                        "lies far from any skull part (C-spine, hyoid, apparatus, debris) and "
-                        "was ignored")
-    return SkullRegistration(input_to_head, mirrored, k, moved, rest, observed, landmarks,
-                             carried, target_h, weights, tuple(reports), pose, settle, figures,
-                             tuple(warnings))
+        warnings.append(
+            f"{100 * tfig['target_extra_area_fraction']:.0f} % of the bone surface "
+            "lies far from any skull part (C-spine, hyoid, apparatus, debris) and "
+            "was ignored"
+        )
+    return SkullRegistration(
+        input_to_head,
+        mirrored,
+        k,
+        moved,
+        rest,
+        observed,
+        landmarks,
+        carried,
+        target_h,
+        weights,
+        tuple(reports),
+        pose,
+        settle,
+        figures,
+        tuple(warnings),
+    )

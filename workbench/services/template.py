@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.normals import normals_within_radius
@@ -56,10 +57,23 @@ BONE_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue")
 #: the bone normal points up or down along the tooth row, while the tissue
 #: depth is measured through the lips and cheeks; Kähler (2003, Fig. 8.17)
 #: notes that skull-skin correspondence there is not orthogonal to the skull.
-HORIZONTAL_DOWELS = frozenset({
-    "ss", "mp", "pr", "id", "sm",
-    "sC_l", "sC_r", "iC_l", "iC_r", "ecm2s_l", "ecm2s_r", "ecm2i_l", "ecm2i_r",
-})
+HORIZONTAL_DOWELS = frozenset(
+    {
+        "ss",
+        "mp",
+        "pr",
+        "id",
+        "sm",
+        "sC_l",
+        "sC_r",
+        "iC_l",
+        "iC_r",
+        "ecm2s_l",
+        "ecm2s_r",
+        "ecm2i_l",
+        "ecm2i_r",
+    }
+)
 
 
 @dataclass(frozen=True)
@@ -84,8 +98,12 @@ class SkullFitReport:
     extra_constraints: int
 
 
-def paired_depths(skull_codes: set[str], skin_codes: set[str], table_id: str = "ttable_2023",
-                  group: str | None = None) -> dict[str, tuple[str, float]]:
+def paired_depths(
+    skull_codes: set[str],
+    skin_codes: set[str],
+    table_id: str = DEFAULT_DEPTH_TABLE,
+    group: str | None = None,
+) -> dict[str, tuple[str, float]]:
     """``{skull code: (skin code, depth mm)}`` for table rows present on both surfaces."""
     table = load_depth_table(table_id)
     depths = table.lookup(group)
@@ -96,8 +114,9 @@ def paired_depths(skull_codes: set[str], skin_codes: set[str], table_id: str = "
     return out
 
 
-def dowel_directions(parts: dict[str, Mesh], points: np.ndarray, part_of: list[str],
-                     codes: list[str]) -> np.ndarray:
+def dowel_directions(
+    parts: dict[str, Mesh], points: np.ndarray, part_of: list[str], codes: list[str]
+) -> np.ndarray:
     """Unit dowel directions: bone normal averaged over :data:`DOWEL_RADIUS_MM`.
 
     For :data:`HORIZONTAL_DOWELS` the vertical (y) component is removed, so
@@ -114,8 +133,9 @@ def dowel_directions(parts: dict[str, Mesh], points: np.ndarray, part_of: list[s
     midline = np.array([not c.endswith(("_l", "_r")) for c in codes])
     if midline.any():
         normals[midline, 0] = 0.0
-        normals[midline] /= np.maximum(np.linalg.norm(normals[midline], axis=1, keepdims=True),
-                                       1e-12)
+        normals[midline] /= np.maximum(
+            np.linalg.norm(normals[midline], axis=1, keepdims=True), 1e-12
+        )
     flat = np.array([c in HORIZONTAL_DOWELS for c in codes])
     if flat.any():
         h = normals[flat].copy()
@@ -187,8 +207,10 @@ def fit_skull_to_skin(
     extra0 = {k: np.asarray(v, float) for k, v in (extra_points or {}).items()}
     lms0 = skull_landmarks
     skin_index = MeshIndex(skin)
-    fn = np.cross(skin.vertices[skin.faces[:, 1]] - skin.vertices[skin.faces[:, 0]],
-                  skin.vertices[skin.faces[:, 2]] - skin.vertices[skin.faces[:, 0]])
+    fn = np.cross(
+        skin.vertices[skin.faces[:, 1]] - skin.vertices[skin.faces[:, 0]],
+        skin.vertices[skin.faces[:, 2]] - skin.vertices[skin.faces[:, 0]],
+    )
     skin_face_normals = fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-12)
     near_opening = cKDTree(openings) if openings is not None and len(openings) else None
     part_names = [part_of.get(c, "cranium") for c in codes]
@@ -210,10 +232,9 @@ def fit_skull_to_skin(
         lateral = np.abs(src[:, 0]) > 0.5 * CLEARANCE_SPACING_MM
         off = off.copy()
         off[~lateral, 0] = 0.0  # midline points stay on the midline
-        return (np.vstack([src, src[lateral] * mirror]),
-                np.vstack([off, off[lateral] * mirror]))
+        return (np.vstack([src, src[lateral] * mirror]), np.vstack([off, off[lateral] * mirror]))
 
-    def solve(n: np.ndarray):  # noqa: ANN202
+    def solve(n: np.ndarray):
         lm_dst = np.vstack([p_skin - d[:, None] * n, fh_dst])
         if not len(c_src):
             return fit_warp(lm_src, lm_dst)
@@ -221,13 +242,16 @@ def fit_skull_to_skin(
         base = fit_warp(lm_src, lm_dst)
         return fit_warp(np.vstack([lm_src, src]), np.vstack([lm_dst, base(src) + off]))
 
-    def apply(w) -> dict[str, Mesh]:  # noqa: ANN001
+    def apply(w) -> dict[str, Mesh]:
         return {k: m.with_vertices(w(m.vertices)) for k, m in orig.items()}
 
     # left/right pairs get mirror-image dowels, so the targets are symmetric
     index = {c: i for i, c in enumerate(codes)}
-    pairs = [(i, index[c[:-2] + "_r"]) for i, c in enumerate(codes)
-             if c.endswith("_l") and c[:-2] + "_r" in index]
+    pairs = [
+        (i, index[c[:-2] + "_r"])
+        for i, c in enumerate(codes)
+        if c.endswith("_l") and c[:-2] + "_r" in index
+    ]
 
     def symmetric(n: np.ndarray) -> np.ndarray:
         n = n.copy()
@@ -255,23 +279,39 @@ def fit_skull_to_skin(
         added, grown = 0, 0.0
         if tip_move < 1.0:  # settle the dowel landmarks before adding clearance constraints
             c_src, c_off, added, grown = _update_clearance(
-                current, orig, w, c_src, c_off, keep_away, skin_index, skin_face_normals,
-                near_opening)
+                current,
+                orig,
+                w,
+                c_src,
+                c_off,
+                keep_away,
+                skin_index,
+                skin_face_normals,
+                near_opening,
+            )
         if tip_move < tolerance_mm and added == 0 and grown < tolerance_mm:
             break
     w = solve(n)
     parts = apply(w)
     extra = {k: w(v) for k, v in extra0.items()}
-    lms = LandmarkSet(lms0.surface, tuple(
-        Landmark(lm.code, w(lm.position[None])[0], lm.status, lm.confidence, lm.description)
-        if lm.is_defined else lm for lm in lms0))
+    lms = LandmarkSet(
+        lms0.surface,
+        tuple(
+            Landmark(lm.code, w(lm.position[None])[0], lm.status, lm.confidence, lm.description)
+            if lm.is_defined
+            else lm
+            for lm in lms0
+        ),
+    )
     s = lms.positions_of(codes)
     n = dowel_directions(parts, s, part_names, codes)
     along = np.einsum("ij,ij->i", p_skin - s, n)
     off_axis = np.linalg.norm(p_skin - s - along[:, None] * n, axis=1)
     report = SkullFitReport(
-        depth_error_mm={c: float(np.hypot(a - di, o))
-                        for c, a, o, di in zip(codes, along, off_axis, d, strict=True)},
+        depth_error_mm={
+            c: float(np.hypot(a - di, o))
+            for c, a, o, di in zip(codes, along, off_axis, d, strict=True)
+        },
         min_clearance_mm=_min_clearance(parts, skin_index, openings),
         iterations=iterations,
         extra_constraints=len(expand(c_src, c_off)[0]),
@@ -284,8 +324,12 @@ def _clearance(mesh: Mesh, skin_index: MeshIndex) -> np.ndarray:
     return -skin_index.signed_distance(mesh.vertices)
 
 
-def _min_clearance(parts: dict[str, Mesh], skin_index: MeshIndex,
-                   openings: np.ndarray | None, margin_mm: float = 12.0) -> float:
+def _min_clearance(
+    parts: dict[str, Mesh],
+    skin_index: MeshIndex,
+    openings: np.ndarray | None,
+    margin_mm: float = 12.0,
+) -> float:
     """Smallest depth of bone under the skin, away from the skin's openings.
 
     Near the eye, mouth and neck openings the open skin has no inside, so
@@ -306,11 +350,18 @@ def _min_clearance(parts: dict[str, Mesh], skin_index: MeshIndex,
     return worst
 
 
-def _update_clearance(current: dict[str, Mesh], orig: dict[str, Mesh], warp,  # noqa: ANN001
-                      c_src: np.ndarray, c_off: np.ndarray, keep_away: np.ndarray,
-                      skin_index: MeshIndex, skin_face_normals: np.ndarray,
-                      near_opening, spacing_mm: float = CLEARANCE_SPACING_MM,  # noqa: ANN001
-                      ) -> tuple[np.ndarray, np.ndarray, int, float]:
+def _update_clearance(
+    current: dict[str, Mesh],
+    orig: dict[str, Mesh],
+    warp,
+    c_src: np.ndarray,
+    c_off: np.ndarray,
+    keep_away: np.ndarray,
+    skin_index: MeshIndex,
+    skin_face_normals: np.ndarray,
+    near_opening,
+    spacing_mm: float = CLEARANCE_SPACING_MM,
+) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Grow the clearance offsets and add clearance points where bone is too shallow.
 
     ``c_src`` are primary source points on the original skull (x >= 0, or on
@@ -382,7 +433,7 @@ def _update_clearance(current: dict[str, Mesh], orig: dict[str, Mesh], warp,  # 
     return c_src, c_off, added, grown
 
 
-def build_reference_head(sex: str = "male", table_id: str = "ttable_2023") -> TemplateHead:
+def build_reference_head(sex: str = "male", table_id: str = DEFAULT_DEPTH_TABLE) -> TemplateHead:
     """The reference head for ``sex``: authored skin, procedural skull fitted under it."""
     from workbench.core.headgen.skin import build_skin
     from workbench.core.headgen.skull import build_skull
@@ -392,16 +443,27 @@ def build_reference_head(sex: str = "male", table_id: str = "ttable_2023") -> Te
     depths = paired_depths(set(skull.landmarks.codes), set(skin.landmarks.codes), table_id)
     bones = {name: getattr(skull, name) for name in BONE_PARTS}
     axis_point, axis_dir = skull.tmj_axis
-    extra = {"tmj": np.vstack([axis_point, axis_point + axis_dir]),
-             "condyles": np.asarray(skull.condyle_centres)}
+    extra = {
+        "tmj": np.vstack([axis_point, axis_point + axis_dir]),
+        "condyles": np.asarray(skull.condyle_centres),
+    }
     bones, skull_lms, extra, report = fit_skull_to_skin(
-        bones, skull.landmarks, dict(skull.landmark_part), skin.mesh, skin.landmarks, depths,
+        bones,
+        skull.landmarks,
+        dict(skull.landmark_part),
+        skin.mesh,
+        skin.landmarks,
+        depths,
         extra_points=extra,
-        openings=skin.mesh.vertices[np.concatenate(list(skin.openings.values()))])
+        openings=skin.mesh.vertices[np.concatenate(list(skin.openings.values()))],
+    )
     eye_centres = np.vstack([skin.eyeballs["l"][0], skin.eyeballs["r"][0]])
     eye_radius = float(skin.eyeballs["l"][1])
-    meshes = {"skin": skin.mesh, **bones, "eyes": _globes(skull.eyes, skull.eye_centres,
-                                                          skull.eye_radius, eye_centres, eye_radius)}
+    meshes = {
+        "skin": skin.mesh,
+        **bones,
+        "eyes": _globes(skull.eyes, skull.eye_centres, skull.eye_radius, eye_centres, eye_radius),
+    }
     tmj_dir = extra["tmj"][1] - extra["tmj"][0]
     return TemplateHead(
         template_id=f"{TEMPLATE_NAME}/{TEMPLATE_VERSION}/{sex}",
@@ -428,8 +490,9 @@ def build_reference_head(sex: str = "male", table_id: str = "ttable_2023") -> Te
     )
 
 
-def _globes(eyes: Mesh, centres: np.ndarray, radius: float, new_centres: np.ndarray,
-            new_radius: float) -> Mesh:
+def _globes(
+    eyes: Mesh, centres: np.ndarray, radius: float, new_centres: np.ndarray, new_radius: float
+) -> Mesh:
     """Move and scale each globe (a rigid part: only position and size follow, §8.3.2)."""
     v = eyes.vertices.copy()
     owner = np.linalg.norm(v[:, None, :] - np.asarray(centres)[None], axis=2).argmin(axis=1)

@@ -49,12 +49,12 @@ from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import Level, Target, register, smoothstep
 from workbench.core.spatial import MeshIndex
-from workbench.model.evidence import sha256_file
+from workbench.model.evidence import file_sha256
 from workbench.model.template import TemplateHead
 from workbench.services.reconstruct import move_eyes, outward
 from workbench.services.skull_registration import SkullRegistration
 
-MIN_TISSUE_MM = 1.0         #: skin kept at least this far outside the skull
+MIN_TISSUE_MM = 1.0  #: skin kept at least this far outside the skull
 #: skin not registered (the simplified ears do not match a real one) / not pushed off the bone
 UNPROJECTED_REGIONS = ("ear_l", "ear_r")
 NO_CLEARANCE_REGIONS = ("neck",)
@@ -70,8 +70,13 @@ SKIN_RIM_MM = 4.0
 #: a skin vertex is "on the scan" when its final match weight exceeds this
 ON_SCAN_WEIGHT = 0.3
 #: the skin registration's levels (spacing, stiffness, robust scale, iterations)
-SKIN_LEVELS = (Level(24.0, 1.0, 8.0, 6), Level(14.0, 0.6, 5.0, 6), Level(8.0, 0.4, 3.0, 6),
-               Level(5.0, 0.3, 2.0, 6), Level(3.5, 0.25, 1.5, 5))
+SKIN_LEVELS = (
+    Level(24.0, 1.0, 8.0, 6),
+    Level(14.0, 0.6, 5.0, 6),
+    Level(8.0, 0.4, 3.0, 6),
+    Level(5.0, 0.3, 2.0, 6),
+    Level(3.5, 0.25, 1.5, 5),
+)
 
 
 Progress = Callable[[str], None]
@@ -164,8 +169,9 @@ def _carry_on(base_mesh: Mesh, new_mesh: Mesh, points: np.ndarray) -> np.ndarray
 BUILD_VERSION = 2
 
 
-def _eyes_behind_lids(carried: TemplateHead, skin_v: np.ndarray,
-                     on_scan: np.ndarray) -> dict[int, np.ndarray]:
+def _eyes_behind_lids(
+    carried: TemplateHead, skin_v: np.ndarray, on_scan: np.ndarray
+) -> dict[int, np.ndarray]:
     """Moves (mm, along z of the head frame) putting each eyeball behind the scanned lids.
 
     The eyeballs come with the skull's field, the lids with the skin scan;
@@ -193,10 +199,17 @@ def _eyes_behind_lids(carried: TemplateHead, skin_v: np.ndarray,
 
 
 # ------------------------------------------------------------------ entry points
-def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
-                   skin_seeds: LandmarkSet | None = None, skull_seeds: LandmarkSet | None = None,
-                   orientation: tuple | None = None, inputs: Sequence[Mapping] = (),
-                   progress: Progress | None = None) -> BuildResult:
+def build_template(
+    skin: Mesh,
+    skull: Mesh,
+    base: TemplateHead,
+    *,
+    skin_seeds: LandmarkSet | None = None,
+    skull_seeds: LandmarkSet | None = None,
+    orientation: tuple | None = None,
+    inputs: Sequence[Mapping] = (),
+    progress: Progress | None = None,
+) -> BuildResult:
     """Adapt ``base`` (head frame) to ``skin`` and ``skull`` (one input frame, mm).
 
     ``skin``/``skull`` may have holes, a cut field of view and extra
@@ -207,7 +220,10 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
     provenance, hashed into the template id).
     """
     from workbench.services.skull_registration import (
-        carry_head, mirror_from_landmarks, register_skull, reference_in_frame,
+        carry_head,
+        mirror_from_landmarks,
+        register_skull,
+        reference_in_frame,
     )
 
     say = progress or (lambda _m: None)
@@ -218,8 +234,14 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
 
         say(f"decimating the bone {skull.n_faces} -> {WORKING_TRIANGLES} triangles ...")
         skull = Mesh(*decimate(skull.vertices, skull.faces, WORKING_TRIANGLES))
-    reg = register_skull(skull, base, hint=orientation, seeds=skull_seeds,
-                         mirror=mirror_from_landmarks(skull_seeds), progress=say)
+    reg = register_skull(
+        skull,
+        base,
+        hint=orientation,
+        seeds=skull_seeds,
+        mirror=mirror_from_landmarks(skull_seeds),
+        progress=say,
+    )
     to_head, mirrored = reg.input_to_head, reg.mirrored
     warnings = list(reg.warnings)
     seconds["skull"] = time.perf_counter() - t0
@@ -227,29 +249,36 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
     t = time.perf_counter()
     say("carrying the reference head and registering its skin onto the scan ...")
     carried = carry_head(base, reg)
-    skin_h = outward(Mesh(_apply(to_head, skin.vertices),
-                          skin.faces[:, ::-1] if mirrored else skin.faces))
+    skin_h = outward(
+        Mesh(_apply(to_head, skin.vertices), skin.faces[:, ::-1] if mirrored else skin.faces)
+    )
     weights, not_head = skin_target_weights(skin_h, carried.skin)
     if not (weights > 0.05).any():
-        raise InputError("skin", "no part of the skin surface lies near the head carried onto the "
-                         "skull", hint="are skin and skull in the same frame and units?")
+        raise InputError(
+            "skin",
+            "no part of the skin surface lies near the head carried onto the skull",
+            hint="are skin and skull in the same frame and units?",
+        )
     if not_head > 0.02:
-        warnings.append(f"{100 * not_head:.0f} % of the skin scan is not the head (shoulders, "
-                        "head holder, gel, table) and was ignored")
+        warnings.append(
+            f"{100 * not_head:.0f} % of the skin scan is not the head (shoulders, "
+            "head holder, gel, table) and was ignored"
+        )
     n_skin = base.skin.n_vertices
     ears = _mask(n_skin, [base.regions[r] for r in UNPROJECTED_REGIONS if r in base.regions])
     target = Target(skin_h, weights, pull_stride=max(1, int((weights > 0.05).sum()) // 8000))
-    sreg = register(carried.skin, target, levels=SKIN_LEVELS, active=~ears,
-                    affine_rounds=0)
+    sreg = register(carried.skin, target, levels=SKIN_LEVELS, active=~ears, affine_rounds=0)
     on_scan = sreg.weights > ON_SCAN_WEIGHT
     meshes = dict(carried.meshes)
     meshes["cranium"] = reg.meshes["cranium"]
     if reg.part("mandible").present:
         meshes["mandible"] = reg.meshes["mandible"]
     keep = [base.regions[r] for r in NO_CLEARANCE_REGIONS if r in base.regions]
-    skin_v, pushed, min_tissue = _push_out(sreg.vertices,
-                                           concatenate([meshes[p] for p in SKULL_PARTS]),
-                                           _mask(n_skin, keep + list(base.openings.values())))
+    skin_v, pushed, min_tissue = _push_out(
+        sreg.vertices,
+        concatenate([meshes[p] for p in SKULL_PARTS]),
+        _mask(n_skin, keep + list(base.openings.values())),
+    )
     meshes["skin"] = carried.skin.with_vertices(skin_v)
     eye_shift = _eyes_behind_lids(carried, skin_v, on_scan)
     carried = move_eyes(replace(carried, meshes=meshes), eye_shift)
@@ -259,22 +288,45 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
     # landmarks: skull with the registered skull, skin with the registered skin
     note = "absent on the target surface: position carried by the warp, not measured"
     absent_skull = [lm.code for lm in reg.landmarks if not lm.is_defined]
-    skull_lms = LandmarkSet("skull", tuple(
-        Landmark(lm.code, reg.inferred[lm.code], lm.status, lm.confidence,
-                 note if lm.code in absent_skull else lm.description)
-        if lm.is_defined and lm.code in reg.inferred else lm for lm in base.skull_landmarks))
+    skull_lms = LandmarkSet(
+        "skull",
+        tuple(
+            Landmark(
+                lm.code,
+                reg.inferred[lm.code],
+                lm.status,
+                lm.confidence,
+                note if lm.code in absent_skull else lm.description,
+            )
+            if lm.is_defined and lm.code in reg.inferred
+            else lm
+            for lm in base.skull_landmarks
+        ),
+    )
     rest = reference_in_frame(base, reg)
     skin_codes = [lm.code for lm in base.skin_landmarks if lm.is_defined]
     pos = rest.skin_landmarks.positions_of(skin_codes)
     moved = _carry_on(rest.skin, meshes["skin"], pos)
-    support = _carry_on(rest.skin, rest.skin.with_vertices(
-        np.column_stack([on_scan.astype(float)] * 3)), pos)[:, 0]
+    support = _carry_on(
+        rest.skin, rest.skin.with_vertices(np.column_stack([on_scan.astype(float)] * 3)), pos
+    )[:, 0]
     absent_skin = [c for c, s_ in zip(skin_codes, support, strict=True) if s_ < 0.5]
     new_pos = dict(zip(skin_codes, moved, strict=True))
-    skin_lms = LandmarkSet("skin", tuple(
-        Landmark(lm.code, new_pos[lm.code], lm.status, lm.confidence,
-                 note if lm.code in absent_skin else lm.description)
-        if lm.code in new_pos else lm for lm in base.skin_landmarks))
+    skin_lms = LandmarkSet(
+        "skin",
+        tuple(
+            Landmark(
+                lm.code,
+                new_pos[lm.code],
+                lm.status,
+                lm.confidence,
+                note if lm.code in absent_skin else lm.description,
+            )
+            if lm.code in new_pos
+            else lm
+            for lm in base.skin_landmarks
+        ),
+    )
     head = replace(carried, meshes=meshes, skin_landmarks=skin_lms, skull_landmarks=skull_lms)
 
     face = np.asarray(base.regions.get("face", np.arange(n_skin)), dtype=np.int64)
@@ -292,53 +344,71 @@ def build_template(skin: Mesh, skull: Mesh, base: TemplateHead, *,
         "bone_observed_fraction": float(np.mean(bone_obs > 0.3)),
         "face_vertices_near_target": int(near.sum()),
         "face_within_1_5mm_fraction": float((cp.distances[near] <= 1.5).mean())
-        if near.any() else 0.0,
+        if near.any()
+        else 0.0,
         "face_median_distance_mm": float(np.median(cp.distances[near])) if near.any() else None,
         "pushed_out_vertices": pushed,
         "eye_shift_mm": {str(i): round(float(m[2]), 2) for i, m in eye_shift.items()},
         "min_tissue_before_push_mm": min_tissue,
         "scan_not_head_area_fraction": round(not_head, 4),
-        "skull_registration": {k: reg.figures[k] for k in ("orientation", "observed_fraction",
-                                                           "median_observed_distance_mm")},
+        "skull_registration": {
+            k: reg.figures[k]
+            for k in ("orientation", "observed_fraction", "median_observed_distance_mm")
+        },
     }
     seconds["total"] = time.perf_counter() - t0
     figures["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
-    digest = hashlib.sha256("".join(str(i.get("sha256", "")) for i in inputs).encode()
-                            + base.content_hash.encode()).hexdigest()[:12]
+    digest = hashlib.sha256(
+        "".join(str(i.get("sha256", "")) for i in inputs).encode() + base.content_hash.encode()
+    ).hexdigest()[:12]
     provenance = {
         "built_from": [dict(i) for i in inputs],
         "base_template": {"template_id": base.template_id, "content_hash": base.content_hash},
         "method": "dense registration of the reference skull onto the bone (per part), the head "
-                  "carried by the skull's displacement field, the skin registered onto the skin "
-                  "scan (rims and non-head parts faded out, the reference's shape over holes)",
+        "carried by the skull's displacement field, the skin registered onto the skin "
+        "scan (rims and non-head parts faded out, the reference's shape over holes)",
         "frame": "the target's head frame (Frankfort Horizontal from its registered porions and "
-                 "orbitales), mm",
-        "input_to_head": to_head, "mirrored_input": bool(mirrored),
-        "skull_parts": {p.name: {"present": p.present, "observed_fraction": p.observed_fraction}
-                        for p in reg.parts},
+        "orbitales), mm",
+        "input_to_head": to_head,
+        "mirrored_input": bool(mirrored),
+        "skull_parts": {
+            p.name: {"present": p.present, "observed_fraction": p.observed_fraction}
+            for p in reg.parts
+        },
         "absent_landmarks": {"skull": absent_skull, "skin": absent_skin},
-        "seeds": {"skull": [] if skull_seeds is None else list(skull_seeds.codes),
-                  "skin": [] if skin_seeds is None else list(skin_seeds.codes)},
-        "settings": {"min_tissue_mm": MIN_TISSUE_MM, "skin_extra_mm": list(SKIN_EXTRA_MM),
-                     "skin_rim_mm": SKIN_RIM_MM},
-        "figures": figures, "warnings": list(warnings), "build_version": BUILD_VERSION,
+        "seeds": {
+            "skull": [] if skull_seeds is None else list(skull_seeds.codes),
+            "skin": [] if skin_seeds is None else list(skin_seeds.codes),
+        },
+        "settings": {
+            "min_tissue_mm": MIN_TISSUE_MM,
+            "skin_extra_mm": list(SKIN_EXTRA_MM),
+            "skin_rim_mm": SKIN_RIM_MM,
+        },
+        "figures": figures,
+        "warnings": list(warnings),
+        "build_version": BUILD_VERSION,
     }
     head = replace(head, template_id=f"{base.template_id}/built/{digest}", provenance=provenance)
     return BuildResult(head, to_head, bool(mirrored), reg, on_scan, figures, tuple(warnings))
 
 
-def _sha256(path: Path) -> str:
-    return sha256_file(path)[0]
-
-
-def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLike[str],
-                        out: str | PathLike[str], *, sex: str = "male", units: str = "auto",
-                        scale: float | None = None,
-                        skin_landmarks: str | PathLike[str] | None = None,
-                        skull_landmarks: str | PathLike[str] | None = None,
-                        orientation: tuple | None = None, base: TemplateHead | None = None,
-                        progress: Progress | None = None, force: bool = False,
-                        staged: bool = False) -> tuple[BuildResult, list[Path]]:
+def build_template_pack(
+    skin_path: str | PathLike[str],
+    skull_path: str | PathLike[str],
+    out: str | PathLike[str],
+    *,
+    sex: str = "male",
+    units: str = "auto",
+    scale: float | None = None,
+    skin_landmarks: str | PathLike[str] | None = None,
+    skull_landmarks: str | PathLike[str] | None = None,
+    orientation: tuple | None = None,
+    base: TemplateHead | None = None,
+    progress: Progress | None = None,
+    force: bool = False,
+    staged: bool = False,
+) -> tuple[BuildResult, list[Path]]:
     """Read the inputs, :func:`build_template` on ``base`` (default: the built-in
     head of ``sex``), and write the pack to ``out``.
 
@@ -366,30 +436,46 @@ def build_template_pack(skin_path: str | PathLike[str], skull_path: str | PathLi
     sources = [skin_path, skull_path, skin_landmarks, skull_landmarks]
     if not staged:
         check_output_location(out)
-        check_output_folder(out, sources, force)    # before the build, which takes a while
+        check_output_folder(out, sources, force)  # before the build, which takes a while
     meshes, factors, inputs = {}, {}, []
-    for role, path, kind in (("skin", Path(skin_path), "head"),
-                             ("skull", Path(skull_path), "skull")):
+    for role, path, kind in (
+        ("skin", Path(skin_path), "head"),
+        ("skull", Path(skull_path), "skull"),
+    ):
         read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind=kind)
         if scale is None and units == "auto":
             resolve_units(read.units, "auto", source=str(path))
         if role == "skull":
             check_skull_mesh(read.mesh, path, units_note=read.units.confirmed)
         meshes[role], factors[role] = read.mesh, read.scale_applied
-        inputs.append({"role": role, "file": path.name, "sha256": _sha256(path)})
+        inputs.append({"role": role, "file": path.name, "sha256": file_sha256(path)})
     seeds: dict[str, LandmarkSet | None] = {"skin": None, "skull": None}
     for surface, lm_path in (("skin", skin_landmarks), ("skull", skull_landmarks)):
         if lm_path is not None:
-            lms = read_landmarks(lm_path, surface, catalogue=load_catalogue(),
-                                 allow_undefined=True).landmarks
+            lms = read_landmarks(
+                lm_path, surface, catalogue=load_catalogue(), allow_undefined=True
+            ).landmarks
             f = factors[surface]
             seeds[surface] = lms.transformed(np.diag([f, f, f, 1.0]))
-            inputs.append({"role": f"{surface}_landmarks", "file": Path(lm_path).name,
-                           "sha256": _sha256(Path(lm_path))})
-    result = build_template(meshes["skin"], meshes["skull"], base or reference_head(sex),
-                            skin_seeds=seeds["skin"], skull_seeds=seeds["skull"],
-                            orientation=orientation, inputs=inputs, progress=progress)
+            inputs.append(
+                {
+                    "role": f"{surface}_landmarks",
+                    "file": Path(lm_path).name,
+                    "sha256": file_sha256(Path(lm_path)),
+                }
+            )
+    result = build_template(
+        meshes["skin"],
+        meshes["skull"],
+        base or reference_head(sex),
+        skin_seeds=seeds["skin"],
+        skull_seeds=seeds["skull"],
+        orientation=orientation,
+        inputs=inputs,
+        progress=progress,
+    )
     if staged:
         return result, export_template(result.head, out)
-    return result, write_folder(out, lambda folder: export_template(result.head, folder),
-                                force=force, inputs=sources)
+    return result, write_folder(
+        out, lambda folder: export_template(result.head, folder), force=force, inputs=sources
+    )

@@ -19,6 +19,7 @@ import tempfile
 from os import PathLike
 from pathlib import Path
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE, data_tables_dir
 from workbench.core import helper_process
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.io.template_pack import export_template, load_template_pack
@@ -26,16 +27,26 @@ from workbench.model.template import TemplateHead
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 #: sources whose content decides the built-in head
-_SOURCE_GLOBS = ("core/headgen/*.py", "services/template.py", "services/muscles.py",
-                 "model/template.py", "model/muscles.py", "core/tps.py", "core/normals.py")
-_TABLE_GLOBS = ("template/*", "tissue_depth/ttable_2023.*", "muscles/*", "landmarks/catalogue.csv")
+_SOURCE_GLOBS = (
+    "core/headgen/*.py",
+    "services/template.py",
+    "services/muscles.py",
+    "model/template.py",
+    "model/muscles.py",
+    "core/tps.py",
+    "core/normals.py",
+)
+_TABLE_GLOBS = (
+    "template/*",
+    f"tissue_depth/{DEFAULT_DEPTH_TABLE}.*",
+    "muscles/*",
+    "landmarks/catalogue.csv",
+)
 SEXES = ("female", "male")
 
 
 def _tables_root() -> Path:
-    from workbench.io.tables import tables_dir
-
-    return tables_dir().parent
+    return data_tables_dir()
 
 
 def source_key() -> str:
@@ -79,8 +90,9 @@ def build_cached(sex: str, root: str) -> bool:
     return (folder / "template.json").is_file()
 
 
-def reference_head(sex: str = "male", pack: str | PathLike[str] | None = None, *,
-                   use_cache: bool = True) -> TemplateHead:
+def reference_head(
+    sex: str = "male", pack: str | PathLike[str] | None = None, *, use_cache: bool = True
+) -> TemplateHead:
     """The head to work with: ``pack`` if given, else the built-in head for ``sex``.
 
     A pack is read as it is (its own sex wins; ``sex`` is ignored).  The
@@ -121,9 +133,9 @@ def _cached_head(sex: str, folder: Path) -> TemplateHead:
         tmp = Path(tempfile.mkdtemp(prefix=f".{sex}-", dir=folder.parent))
         export_template(head, tmp)
         try:
-            tmp.rename(folder)   # atomic publish; a concurrent builder may have won
+            tmp.rename(folder)  # atomic publish; a concurrent builder may have won
         except OSError:
             shutil.rmtree(tmp, ignore_errors=True)
     except OSError:
-        pass                     # a read-only cache only costs time
+        pass  # a read-only cache only costs time
     return head

@@ -60,8 +60,19 @@ EYE_PLACEMENTS = ("auto", "stephan2009", "reference")
 #: regions a factor can be set for (:func:`workbench.services.compare.face_regions`)
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 #: skin regions of the reference head that keep their shape
-FEATURE_REGIONS = ("nose", "upper_lip", "lower_lip", "eyelid_upper_l", "eyelid_upper_r",
-                   "eyelid_lower_l", "eyelid_lower_r", "ear_l", "ear_r", "orbit_l", "orbit_r")
+FEATURE_REGIONS = (
+    "nose",
+    "upper_lip",
+    "lower_lip",
+    "eyelid_upper_l",
+    "eyelid_upper_r",
+    "eyelid_lower_l",
+    "eyelid_lower_r",
+    "ear_l",
+    "ear_r",
+    "orbit_l",
+    "orbit_r",
+)
 #: plausible region factors (the bound of :mod:`workbench.core.limits`)
 FACTOR_RANGE = REGION_FACTOR_RANGE
 
@@ -116,18 +127,23 @@ class TissueSettings:
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
-            raise InputError("tissue", f"unknown tissue model {self.model!r}",
-                             f"use {' or '.join(MODELS)}")
+            raise InputError(
+                "tissue", f"unknown tissue model {self.model!r}", f"use {' or '.join(MODELS)}"
+            )
         if self.eyes not in EYE_PLACEMENTS:
-            raise InputError("eyes", f"unknown eye placement {self.eyes!r}",
-                             f"use {' or '.join(EYE_PLACEMENTS)}")
+            raise InputError(
+                "eyes", f"unknown eye placement {self.eyes!r}", f"use {' or '.join(EYE_PLACEMENTS)}"
+            )
         for region, f in self.region_factors.items():
             if region not in REGIONS:
-                raise InputError("region factor", f"unknown region {region!r}",
-                                 f"regions: {', '.join(REGIONS)}")
+                raise InputError(
+                    "region factor", f"unknown region {region!r}", f"regions: {', '.join(REGIONS)}"
+                )
             if not (np.isfinite(f) and FACTOR_RANGE[0] <= f <= FACTOR_RANGE[1]):
-                raise InputError("region factor", f"{region}={f:g} is outside "
-                                 f"{FACTOR_RANGE[0]:g}-{FACTOR_RANGE[1]:g}")
+                raise InputError(
+                    "region factor",
+                    f"{region}={f:g} is outside {FACTOR_RANGE[0]:g}-{FACTOR_RANGE[1]:g}",
+                )
         if not 0.0 <= self.min_tissue_mm <= 10.0:
             raise InputError("min tissue", f"{self.min_tissue_mm:g} mm is outside 0-10 mm")
 
@@ -174,12 +190,20 @@ class TissueField:
             "model": self.settings.model,
             "region_factors": {k: float(v) for k, v in self.settings.region_factors.items()},
             "pin_dowels": bool(self.settings.pin_dowels),
-            "sites": [{"code": s.code, "table_mm": round(s.table_mm, 2),
-                       "reference_mm": round(s.reference_mm, 2),
-                       "delta_mm": round(s.delta_mm, 2)} for s in self.sites],
-            "delta_mm": {"p5": float(np.percentile(self.delta_mm, 5)),
-                         "median": float(np.median(self.delta_mm)),
-                         "p95": float(np.percentile(self.delta_mm, 95))},
+            "sites": [
+                {
+                    "code": s.code,
+                    "table_mm": round(s.table_mm, 2),
+                    "reference_mm": round(s.reference_mm, 2),
+                    "delta_mm": round(s.delta_mm, 2),
+                }
+                for s in self.sites
+            ],
+            "delta_mm": {
+                "p5": float(np.percentile(self.delta_mm, 5)),
+                "median": float(np.median(self.delta_mm)),
+                "p95": float(np.percentile(self.delta_mm, 95)),
+            },
         }
 
 
@@ -194,8 +218,9 @@ def _mask(n: int, head: TemplateHead, names: tuple[str, ...]) -> np.ndarray:
 _CACHE: dict[tuple, TissueField] = {}
 
 
-def tissue_field(head: TemplateHead, depth: DepthSettings,
-                 settings: TissueSettings = TissueSettings()) -> TissueField:
+def tissue_field(
+    head: TemplateHead, depth: DepthSettings, settings: TissueSettings = TissueSettings()
+) -> TissueField:
     """The thickness change the model makes on ``head``'s skin (cached per head and settings)."""
     key = (head.content_hash, repr(depth), repr(settings))
     if key not in _CACHE:
@@ -222,9 +247,17 @@ def _compute(head: TemplateHead, depth: DepthSettings, settings: TissueSettings)
     influence = np.zeros((n, 0))
     delta = np.zeros(n)
     if settings.model == "table":
-        plan = plan_dowels(bone, head.skull_landmarks,
-                           replace(depth, overrides={}, excluded=frozenset(), directions={},
-                                   interpolate=settings.interpolated_sites))
+        plan = plan_dowels(
+            bone,
+            head.skull_landmarks,
+            replace(
+                depth,
+                overrides={},
+                excluded=frozenset(),
+                directions={},
+                interpolate=settings.interpolated_sites,
+            ),
+        )
         dowels = plan.active()
         if dowels:
             o = np.array([d.origin for d in dowels])
@@ -232,12 +265,19 @@ def _compute(head: TemplateHead, depth: DepthSettings, settings: TissueSettings)
             hits = RayCaster(skin).first_hits(o, dr, max_distance=80.0)
             ok = hits.hit
             chosen = [d for d, k in zip(dowels, ok, strict=True) if k]
-            sites = [SiteCalibration(d.code, float(d.depth_mm), float(h), d.sd_mm)
-                     for d, h in zip(chosen, hits.distance[ok], strict=True)]
+            sites = [
+                SiteCalibration(d.code, float(d.depth_mm), float(h), d.sd_mm)
+                for d, h in zip(chosen, hits.distance[ok], strict=True)
+            ]
             if len(sites) >= 4:
                 values = np.eye(len(sites))
-                rbf = RBFInterpolator(hits.points[ok], values, kernel="linear", degree=0,
-                                      smoothing=settings.smoothing_mm)
+                rbf = RBFInterpolator(
+                    hits.points[ok],
+                    values,
+                    kernel="linear",
+                    degree=0,
+                    smoothing=settings.smoothing_mm,
+                )
                 influence = rbf(skin.vertices)
                 delta = influence @ np.array([s.delta_mm for s in sites])
     if settings.region_factors:
@@ -250,9 +290,12 @@ def _compute(head: TemplateHead, depth: DepthSettings, settings: TissueSettings)
         delta = delta + blend * np.maximum(t_own, 0.0)
     delta = harmonic_fill(adj, ~features, np.where(features, 0.0, delta))
     if influence.shape[1]:
-        influence = np.column_stack([
-            harmonic_fill(adj, ~features, np.where(features, 0.0, influence[:, i]))
-            for i in range(influence.shape[1])])
+        influence = np.column_stack(
+            [
+                harmonic_fill(adj, ~features, np.where(features, 0.0, influence[:, i]))
+                for i in range(influence.shape[1])
+            ]
+        )
     return TissueField(delta, tuple(sites), influence, t_own, features, settings)
 
 
@@ -266,4 +309,4 @@ def spread(field_: TissueField) -> np.ndarray:
     if not field_.sites:
         return np.zeros(len(field_.delta_mm))
     sd = np.array([s.sd_mm or 0.0 for s in field_.sites])
-    return np.sqrt((field_.influence ** 2) @ (sd ** 2))
+    return np.sqrt((field_.influence**2) @ (sd**2))

@@ -68,8 +68,24 @@ from workbench.core.face_metric import (
 from workbench.core.mesh import Mesh
 
 Progress = Callable[[str], None]
-COLUMNS = ("id", "skull", "truth", "units", "mask", "anterior", "superior", "left", "orient",
-           "sex", "build", "tissue", "template", "bone_iso", "skin_iso", "subject")
+COLUMNS = (
+    "id",
+    "skull",
+    "truth",
+    "units",
+    "mask",
+    "anterior",
+    "superior",
+    "left",
+    "orient",
+    "sex",
+    "build",
+    "tissue",
+    "template",
+    "bone_iso",
+    "skin_iso",
+    "subject",
+)
 VOLUME_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mhd", ".mha", ".dcm")
 OFFSET_MM = 6.0
 
@@ -139,8 +155,9 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
     header = [h.strip() for h in (reader.fieldnames or [])]
     unknown = sorted(set(header) - set(COLUMNS))
     if unknown:
-        raise InputError(path, f"unknown columns {', '.join(unknown)}",
-                         f"columns: {', '.join(COLUMNS)}")
+        raise InputError(
+            path, f"unknown columns {', '.join(unknown)}", f"columns: {', '.join(COLUMNS)}"
+        )
     for need in ("id", "skull", "truth"):
         if need not in header:
             raise InputError(path, f"has no {need!r} column")
@@ -156,14 +173,17 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
         if cid in seen:
             raise InputError(where, f"id {cid!r} is used twice")
         seen.add(cid)
-        vec = {k: _vector(row.get(k) or "", f"{where} column {k}")
-               for k in ("anterior", "superior", "left")}
+        vec = {
+            k: _vector(row.get(k) or "", f"{where} column {k}")
+            for k in ("anterior", "superior", "left")
+        }
         orientation = None
         if vec["anterior"] is not None or vec["superior"] is not None:
             if vec["anterior"] is None or vec["superior"] is None:
                 raise InputError(where, "give both anterior and superior, or neither")
             orientation = (vec["anterior"], vec["superior"]) + (
-                (vec["left"],) if vec["left"] is not None else ())
+                (vec["left"],) if vec["left"] is not None else ()
+            )
         try:
             mask = ScoreMask.parse(row.get("mask"))
         except ValueError as exc:
@@ -186,14 +206,24 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
         orient = (row.get("orient") or "hint").strip() or "hint"
         if orient not in ("hint", "auto"):
             raise InputError(f"{where} column orient", f"{orient!r} is not hint or auto")
-        cases.append(ValidationCase(
-            cid, _resolve(row["skull"], path.parent, f"{where} column skull"),
-            _resolve(row["truth"], path.parent, f"{where} column truth"),
-            (row.get("units") or "auto").strip() or "auto", mask, orientation,
-            (row.get("sex") or "male").strip() or "male", build,
-            (row.get("tissue") or "table").strip() or "table",
-            _resolve(template, path.parent, f"{where} column template") if template else None,
-            isos["bone_iso"], isos["skin_iso"], (row.get("subject") or "").strip(), orient))
+        cases.append(
+            ValidationCase(
+                cid,
+                _resolve(row["skull"], path.parent, f"{where} column skull"),
+                _resolve(row["truth"], path.parent, f"{where} column truth"),
+                (row.get("units") or "auto").strip() or "auto",
+                mask,
+                orientation,
+                (row.get("sex") or "male").strip() or "male",
+                build,
+                (row.get("tissue") or "table").strip() or "table",
+                _resolve(template, path.parent, f"{where} column template") if template else None,
+                isos["bone_iso"],
+                isos["skin_iso"],
+                (row.get("subject") or "").strip(),
+                orient,
+            )
+        )
     return cases
 
 
@@ -214,8 +244,9 @@ def _digest(path: Path) -> str:
     return sha256_file(path)[0]
 
 
-def case_surfaces(case: ValidationCase, work: Path, progress: Progress | None = None
-                  ) -> tuple[Path, Path]:
+def case_surfaces(
+    case: ValidationCase, work: Path, progress: Progress | None = None
+) -> tuple[Path, Path]:
     """Bone and true-skin mesh files of a case (extracted from CT volumes when needed).
 
     Extracted surfaces are cached in ``work`` under the volume's SHA-256 and
@@ -227,8 +258,10 @@ def case_surfaces(case: ValidationCase, work: Path, progress: Progress | None = 
     say = progress or (lambda _m: None)
     work.mkdir(parents=True, exist_ok=True)
     out = []
-    for path, tissue, iso in ((case.skull, "bone", case.bone_iso), (case.truth, "skin",
-                                                                     case.skin_iso)):
+    for path, tissue, iso in (
+        (case.skull, "bone", case.bone_iso),
+        (case.truth, "skin", case.skin_iso),
+    ):
         if not is_volume(path):
             out.append(path)
             continue
@@ -290,23 +323,34 @@ def consensus_face(faces: Sequence[Mesh]) -> tuple[Mesh, np.ndarray]:
         raise WorkbenchError("no reconstructions to combine")
     n = faces[0].n_vertices
     if any(f.n_vertices != n or f.n_faces != faces[0].n_faces for f in faces):
-        raise WorkbenchError("the reference heads do not share one skin topology (they must "
-                             "all be built from the same base head): no consensus possible")
+        raise WorkbenchError(
+            "the reference heads do not share one skin topology (they must "
+            "all be built from the same base head): no consensus possible"
+        )
     stack = np.stack([f.vertices for f in faces])
     med = np.median(stack, axis=0)
     spread = np.median(np.linalg.norm(stack - med, axis=2), axis=0)
     return Mesh(med, faces[0].faces), spread
 
 
-def score_surfaces(truth: Mesh, bone: Mesh, surfaces: Sequence[tuple[str, Mesh]],
-                   anterior: np.ndarray, mask: ScoreMask, *, labels_from: Mesh | None = None,
-                   vertex_regions: dict | None = None, region_names: Sequence[str] = ()
-                   ) -> tuple[np.ndarray, list[MethodScore]]:
+def score_surfaces(
+    truth: Mesh,
+    bone: Mesh,
+    surfaces: Sequence[tuple[str, Mesh]],
+    anterior: np.ndarray,
+    mask: ScoreMask,
+    *,
+    labels_from: Mesh | None = None,
+    vertex_regions: dict | None = None,
+    region_names: Sequence[str] = (),
+) -> tuple[np.ndarray, list[MethodScore]]:
     """Score every surface on the same truth points (the metric's selection)."""
     ids = scored_vertices(truth, bone, anterior, mask)
     if len(ids) == 0:
-        raise WorkbenchError("no truth-skin vertex passes the metric's selection (check the "
-                             "anterior direction, the frame and the mask)")
+        raise WorkbenchError(
+            "no truth-skin vertex passes the metric's selection (check the "
+            "anterior direction, the frame and the mask)"
+        )
     labels = None
     if labels_from is not None and vertex_regions:
         labels = region_labels(truth.vertices[ids], labels_from, vertex_regions, region_names)
@@ -317,9 +361,16 @@ def score_surfaces(truth: Mesh, bone: Mesh, surfaces: Sequence[tuple[str, Mesh]]
     return ids, out
 
 
-def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
-             tissue: str | None = None, guides: str = "default", label: str = "reconstruction",
-             progress: Progress | None = None) -> tuple[CaseResult, Any]:
+def run_case(
+    case: ValidationCase,
+    out: Path,
+    *,
+    templates: Sequence[Path] = (),
+    tissue: str | None = None,
+    guides: str = "default",
+    label: str = "reconstruction",
+    progress: Progress | None = None,
+) -> tuple[CaseResult, Any]:
     """Reconstruct one case and score it beside the uniform offset (``out``: its folder).
 
     ``templates`` (two or more): one reconstruction per reference pack and
@@ -342,19 +393,26 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
         truth = _load(truth_path, "mm" if is_volume(case.truth) else case.units)
         res.seconds["surfaces"] = time.perf_counter() - t0
         packs: list[Path | None] = [*templates] or [case.template or None]
-        settings = JobSettings(units=units, sex=case.sex, build=case.build,
-                               orientation=case.orientation if case.orient == "hint" else None,
-                               tissue=TissueSettings(model=tissue or case.tissue),
-                               guides=guides)
+        settings = JobSettings(
+            units=units,
+            sex=case.sex,
+            build=case.build,
+            orientation=case.orientation if case.orient == "hint" else None,
+            tissue=TissueSettings(model=tissue or case.tissue),
+            guides=guides,
+        )
         faces, first = [], None
         t = time.perf_counter()
         for i, pack in enumerate(packs):
-            say(f"{case.case_id}: reconstructing"
-                + (f" with reference {i + 1}/{len(packs)}" if len(packs) > 1 else "") + " ...")
+            say(
+                f"{case.case_id}: reconstructing"
+                + (f" with reference {i + 1}/{len(packs)}" if len(packs) > 1 else "")
+                + " ..."
+            )
             job = run_reconstruction(bone_path, replace(settings, template=pack))
             folder = out / (label if len(packs) == 1 else f"{label}-ref{i + 1}")
             write_outputs(job, folder)
-            faces.append(job.recon.face)   # mm, the skull file's frame
+            faces.append(job.recon.face)  # mm, the skull file's frame
             first = first or job
             res.warnings += [f"{label}: {w}" for w in job.report["warnings"]]
         res.seconds[label] = time.perf_counter() - t
@@ -363,10 +421,13 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
             face, spread = consensus_face(faces)
             write_mesh(out / f"{label}_consensus.ply", face)
             np.save(out / f"{label}_reference_spread.npy", spread)
-            res.notes["reference_spread_mm"] = {"median": float(np.median(spread)),
-                                                "p90": float(np.percentile(spread, 90))}
-        res.files[label] = out / label / "face.ply" if len(faces) == 1 else \
-            out / f"{label}_consensus.ply"
+            res.notes["reference_spread_mm"] = {
+                "median": float(np.median(spread)),
+                "p90": float(np.percentile(spread, 90)),
+            }
+        res.files[label] = (
+            out / label / "face.ply" if len(faces) == 1 else out / f"{label}_consensus.ply"
+        )
         if first is None:  # packs is never empty
             raise RuntimeError(f"{case.case_id}: no reconstruction ran")
         recon = first.recon
@@ -388,14 +449,22 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
             write_mesh(offset_file, offset)
         res.seconds["offset"] = time.perf_counter() - t
         ids, scores = score_surfaces(
-            truth, bone, [(label, face), (f"uniform_{OFFSET_MM:g}mm_offset", offset)], ant,
-            case.mask, labels_from=face, vertex_regions=face_regions(first.template),
-            region_names=REGION_NAMES)
+            truth,
+            bone,
+            [(label, face), (f"uniform_{OFFSET_MM:g}mm_offset", offset)],
+            ant,
+            case.mask,
+            labels_from=face,
+            vertex_regions=face_regions(first.template),
+            region_names=REGION_NAMES,
+        )
         res.truth_ids, res.n_points, res.scores = ids, len(ids), scores
         res.files["truth"], res.files["bone"] = truth_path, bone_path
         res.notes["observed_face_fraction"] = recon.figures.get("face_observed_fraction")
-        res.notes["registration"] = {k: recon.figures.get("registration", {}).get(k)
-                                     for k in ("orientation", "observed_fraction")}
+        res.notes["registration"] = {
+            k: recon.figures.get("registration", {}).get(k)
+            for k in ("orientation", "observed_fraction")
+        }
         return res, first
     except WorkbenchError as exc:
         res.status, res.error = "failed", str(exc)
@@ -404,8 +473,9 @@ def run_case(case: ValidationCase, out: Path, *, templates: Sequence[Path] = (),
         res.seconds["total"] = time.perf_counter() - t0
 
 
-def build_references(cases: Sequence[ValidationCase], out: Path, *,
-                     progress: Progress | None = None) -> dict[str, Path | str]:
+def build_references(
+    cases: Sequence[ValidationCase], out: Path, *, progress: Progress | None = None
+) -> dict[str, Path | str]:
     """A reference pack per subject from its first case's skin and bone (cached).
 
     Returns subject → pack folder, or the reason there is none.
@@ -422,20 +492,31 @@ def build_references(cases: Sequence[ValidationCase], out: Path, *,
         stamp = folder / "built_from.json"
         try:
             bone, skin = case_surfaces(case, out.parent / case.case_id / "inputs", say)
-            key = {"skin": _digest(skin), "skull": _digest(bone), "sex": case.sex,
-                   "build_version": BUILD_VERSION}
+            key = {
+                "skin": _digest(skin),
+                "skull": _digest(bone),
+                "sex": case.sex,
+                "build_version": BUILD_VERSION,
+            }
             if stamp.is_file() and json.loads(stamp.read_text("utf-8")) == key:
                 packs[who] = folder
                 continue
             say(f"{who}: building a reference head from its own skin and bone ...")
             tmp = out / f".{who}.part"
-            if tmp.exists():     # left by an interrupted run: this cache is ours to rebuild
+            if tmp.exists():  # left by an interrupted run: this cache is ours to rebuild
                 import shutil
 
                 shutil.rmtree(tmp)
             units = "mm" if is_volume(case.skull) else case.units
-            build_template_pack(skin, bone, tmp, sex=case.sex, units=units,
-                                orientation=case.orientation, staged=True)
+            build_template_pack(
+                skin,
+                bone,
+                tmp,
+                sex=case.sex,
+                units=units,
+                orientation=case.orientation,
+                staged=True,
+            )
             (tmp / "built_from.json").write_text(json.dumps(key), "utf-8")
             if folder.exists():
                 import shutil
@@ -464,17 +545,27 @@ def reuse_caches(previous: Path, fresh: Path) -> None:
     if not previous.is_dir():
         return
     folders = [(previous / "references", fresh / "references")]
-    folders += [(d / "inputs", fresh / d.name / "inputs") for d in previous.iterdir()
-                if d.is_dir() and not d.name.startswith(".")]
+    folders += [
+        (d / "inputs", fresh / d.name / "inputs")
+        for d in previous.iterdir()
+        if d.is_dir() and not d.name.startswith(".")
+    ]
     for source, target in folders:
         if source.is_dir() and not target.exists():
             shutil.copytree(source, target, ignore=shutil.ignore_patterns(".*"))
 
 
-def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out: bool = False,
-                   identity: bool = False, progress: Progress | None = None,
-                   on_case: Callable[[CaseResult, Any, str], None] | None = None,
-                   force: bool = False, staged: bool = False) -> list[tuple[CaseResult, str]]:
+def run_validation(
+    cases: Sequence[ValidationCase],
+    out: Path,
+    *,
+    leave_one_out: bool = False,
+    identity: bool = False,
+    progress: Progress | None = None,
+    on_case: Callable[[CaseResult, Any, str], None] | None = None,
+    force: bool = False,
+    staged: bool = False,
+) -> list[tuple[CaseResult, str]]:
     """Every case with the built-in head, and with the reference library when asked.
 
     Returns ``(result, method label)`` pairs; ``on_case`` is called after each
@@ -488,24 +579,41 @@ def run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out:
     tables), written straight into.
     """
     if staged:
-        return _run_validation(cases, Path(out), leave_one_out=leave_one_out, identity=identity,
-                               progress=progress, on_case=on_case)
+        return _run_validation(
+            cases,
+            Path(out),
+            leave_one_out=leave_one_out,
+            identity=identity,
+            progress=progress,
+            on_case=on_case,
+        )
     from workbench.io.outputs import relocate, staged_folder
 
     final = Path(os.path.abspath(out))
     with staged_folder(final, force, validation_inputs(cases)) as temp:
         reuse_caches(final, temp)
-        results = _run_validation(cases, temp, leave_one_out=leave_one_out, identity=identity,
-                                  progress=progress, on_case=on_case)
+        results = _run_validation(
+            cases,
+            temp,
+            leave_one_out=leave_one_out,
+            identity=identity,
+            progress=progress,
+            on_case=on_case,
+        )
     for res, _ in results:
         res.files = relocate(res.files, temp, final)
     return results
 
 
-def _run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out: bool,
-                    identity: bool, progress: Progress | None,
-                    on_case: Callable[[CaseResult, Any, str], None] | None
-                    ) -> list[tuple[CaseResult, str]]:
+def _run_validation(
+    cases: Sequence[ValidationCase],
+    out: Path,
+    *,
+    leave_one_out: bool,
+    identity: bool,
+    progress: Progress | None,
+    on_case: Callable[[CaseResult, Any, str], None] | None,
+) -> list[tuple[CaseResult, str]]:
     out.mkdir(parents=True, exist_ok=True)
     results: list[tuple[CaseResult, str]] = []
 
@@ -521,13 +629,17 @@ def _run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out
         packs = build_references(cases, out / "references", progress=progress)
         for case in cases:
             if leave_one_out:
-                others = [p for who, p in packs.items() if who != case.who
-                          and isinstance(p, Path)]
+                others = [p for who, p in packs.items() if who != case.who and isinstance(p, Path)]
                 if others:
                     # the references are real people: their own tissue, not the table's
-                    res, job = run_case(case, out / case.case_id, templates=others,
-                                        tissue="reference", label="library_loo",
-                                        progress=progress)
+                    res, job = run_case(
+                        case,
+                        out / case.case_id,
+                        templates=others,
+                        tissue="reference",
+                        label="library_loo",
+                        progress=progress,
+                    )
                     res.notes["references"] = [p.name for p in others]
                 else:
                     res = CaseResult(case.case_id, "failed", "no other reference pack")
@@ -537,9 +649,15 @@ def _run_validation(cases: Sequence[ValidationCase], out: Path, *, leave_one_out
             if identity:
                 if isinstance(own, Path):
                     # the identity test isolates the registration: no tissue model, no guides
-                    res, job = run_case(case, out / case.case_id, templates=[own],
-                                        tissue="reference", guides="none", label="identity",
-                                        progress=progress)
+                    res, job = run_case(
+                        case,
+                        out / case.case_id,
+                        templates=[own],
+                        tissue="reference",
+                        guides="none",
+                        label="identity",
+                        progress=progress,
+                    )
                 else:
                     res, job = CaseResult(case.case_id, "failed", str(own)), None
                 done(res, job, "identity")

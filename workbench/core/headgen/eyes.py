@@ -30,12 +30,49 @@ from workbench.core.mesh import Mesh
 
 def icosphere(subdivisions: int = 4) -> Mesh:
     """Unit icosphere (outward winding), ``20 * 4**subdivisions`` triangles."""
-    t = (1.0 + 5 ** 0.5) / 2.0
-    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
-    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]], np.int64)
+    t = (1.0 + 5**0.5) / 2.0
+    v = np.array(
+        [
+            [-1, t, 0],
+            [1, t, 0],
+            [-1, -t, 0],
+            [1, -t, 0],
+            [0, -1, t],
+            [0, 1, t],
+            [0, -1, -t],
+            [0, 1, -t],
+            [t, 0, -1],
+            [t, 0, 1],
+            [-t, 0, -1],
+            [-t, 0, 1],
+        ],
+        float,
+    )
+    f = np.array(
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ],
+        np.int64,
+    )
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     for _ in range(subdivisions):
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -43,15 +80,27 @@ def icosphere(subdivisions: int = 4) -> Mesh:
         mid = v[uniq].mean(axis=1)
         mid /= np.linalg.norm(mid, axis=1, keepdims=True)
         m = len(f)
-        a, b, c = (len(v) + inv.ravel()[k * m:(k + 1) * m] for k in range(3))
+        a, b, c = (len(v) + inv.ravel()[k * m : (k + 1) * m] for k in range(3))
         v = np.vstack([v, mid])
-        f = np.concatenate([np.column_stack([f[:, 0], a, c]), np.column_stack([a, f[:, 1], b]),
-                            np.column_stack([c, b, f[:, 2]]), np.column_stack([a, b, c])])
+        f = np.concatenate(
+            [
+                np.column_stack([f[:, 0], a, c]),
+                np.column_stack([a, f[:, 1], b]),
+                np.column_stack([c, b, f[:, 2]]),
+                np.column_stack([a, b, c]),
+            ]
+        )
     return Mesh(v, f)
 
 
-def eyeball_mesh(centre, radius: float = 12.0, axis=(0.0, 0.0, 1.0), cornea_radius: float = 7.8,
-                 limbus_radius: float = 5.85, subdivisions: int = 4) -> Mesh:
+def eyeball_mesh(
+    centre,
+    radius: float = 12.0,
+    axis=(0.0, 0.0, 1.0),
+    cornea_radius: float = 7.8,
+    limbus_radius: float = 5.85,
+    subdivisions: int = 4,
+) -> Mesh:
     """One globe (mm): sphere of ``radius`` with a corneal cap bulging along ``axis``."""
     unit = icosphere(subdivisions)
     d = unit.vertices
@@ -67,7 +116,9 @@ def eyeball_mesh(centre, radius: float = 12.0, axis=(0.0, 0.0, 1.0), cornea_radi
     return Mesh(np.asarray(centre, float) + d * r[:, None], unit.faces)
 
 
-def corneal_apex_offset(radius: float = 12.0, cornea_radius: float = 7.8, limbus_radius: float = 5.85) -> float:
+def corneal_apex_offset(
+    radius: float = 12.0, cornea_radius: float = 7.8, limbus_radius: float = 5.85
+) -> float:
     """Distance (mm) from the globe centre to the corneal apex."""
     limbus_depth = np.sqrt(radius**2 - limbus_radius**2)
     return float(limbus_depth - np.sqrt(cornea_radius**2 - limbus_radius**2) + cornea_radius)

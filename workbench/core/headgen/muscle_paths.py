@@ -25,8 +25,13 @@ def unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
-def linear_rows(fixed: np.ndarray, free: np.ndarray, row_lengths: tuple[int, ...],
-                widths: tuple[float, float], outward) -> list[np.ndarray]:
+def linear_rows(
+    fixed: np.ndarray,
+    free: np.ndarray,
+    row_lengths: tuple[int, ...],
+    widths: tuple[float, float],
+    outward,
+) -> list[np.ndarray]:
     """Guide points of a linear muscle: rows from ``fixed`` (t = 0) to ``free`` (t = 1).
 
     Row i is centred on the straight line between the end centres and
@@ -56,7 +61,9 @@ def polar_radius(loop_xy: np.ndarray, centre: np.ndarray, angles: np.ndarray) ->
     return np.interp(angles, phi[order], r[order], period=2 * np.pi)
 
 
-def mirror_maps(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def mirror_maps(
+    vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray]:
     """Vertex and face partners under x -> -x: ``(vertex_partner, face_partner)``.
 
     ``face_partner[f]`` is the face whose corners are the partners of f's
@@ -70,15 +77,20 @@ def mirror_maps(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-6) -> t
     return vp, fp
 
 
-def mirror_surface_points(faces: np.ndarray, vertex_partner: np.ndarray, face_partner: np.ndarray,
-                          face_ids: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mirror_surface_points(
+    faces: np.ndarray,
+    vertex_partner: np.ndarray,
+    face_partner: np.ndarray,
+    face_ids: np.ndarray,
+    barycentric: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Mirror (face, barycentric) points: same weights on the partner corners."""
     face_ids = np.asarray(face_ids, dtype=np.int64)
     new_f = face_partner[face_ids]
     new_b = np.zeros_like(np.asarray(barycentric, float))
-    src_partners = vertex_partner[faces[face_ids]]          # partner of each source corner
+    src_partners = vertex_partner[faces[face_ids]]  # partner of each source corner
     dst = faces[new_f]
     for k in range(3):
-        match = dst == src_partners[:, k:k + 1]              # where that corner sits in the new face
-        new_b += match * barycentric[:, k:k + 1]
+        match = dst == src_partners[:, k : k + 1]  # where that corner sits in the new face
+        new_b += match * barycentric[:, k : k + 1]
     return new_f, new_b

@@ -63,8 +63,9 @@ def _frame(rotation: np.ndarray | None) -> np.ndarray:
     return np.eye(3) if rotation is None else np.asarray(rotation, float)
 
 
-def rotation_to(axis: np.ndarray,
-                up: np.ndarray | tuple[float, float, float] = (0.0, 1.0, 0.0)) -> np.ndarray:
+def rotation_to(
+    axis: np.ndarray, up: np.ndarray | tuple[float, float, float] = (0.0, 1.0, 0.0)
+) -> np.ndarray:
     """Rows (e1, e2, e3) of an orthonormal frame with e3 along ``axis`` and e2 near ``up``."""
     e3 = np.asarray(axis, float) / np.linalg.norm(axis)
     e1 = np.cross(np.asarray(up, float), e3)
@@ -138,8 +139,11 @@ class SuperEllipsoid(Primitive):
         q = (A**self.p + B**self.p) ** (1.0 / self.p)
         Q = np.sqrt(q * q + C * C)
         f = q ** (2.0 - self.p) / Q
-        grad = np.sqrt((f * A ** (self.p - 1.0) / a) ** 2 + (f * B ** (self.p - 1.0) / b) ** 2
-                       + (C / (Q * c)) ** 2)
+        grad = np.sqrt(
+            (f * A ** (self.p - 1.0) / a) ** 2
+            + (f * B ** (self.p - 1.0) / b) ** 2
+            + (C / (Q * c)) ** 2
+        )
         return (Q - 1.0) / np.maximum(grad, 1e-9)
 
 
@@ -172,8 +176,10 @@ class Box(Primitive):
 
     def __call__(self, x, y, z):
         px, py, pz = x - self.c[0], y - self.c[1], z - self.c[2]
-        q = [np.abs(self.R[i, 0] * px + self.R[i, 1] * py + self.R[i, 2] * pz) - self.h[i]
-             for i in range(3)]
+        q = [
+            np.abs(self.R[i, 0] * px + self.R[i, 1] * py + self.R[i, 2] * pz) - self.h[i]
+            for i in range(3)
+        ]
         out = np.sqrt(sum(np.maximum(qi, 0.0) ** 2 for qi in q))
         return out + np.minimum(np.maximum(np.maximum(q[0], q[1]), q[2]), 0.0) - self.rr
 
@@ -200,8 +206,11 @@ def resample(points, values=None, step: float = 0.5, closed: bool = False):
     tang /= np.linalg.norm(tang, axis=1, keepdims=True)
     out = None
     if vals is not None:
-        out = CubicSpline(t, vals, bc_type=bc)(s) if len(p) >= 4 or closed else np.stack(
-            [np.interp(s, t, vals[:, j]) for j in range(vals.shape[1])], axis=1)
+        out = (
+            CubicSpline(t, vals, bc_type=bc)(s)
+            if len(p) >= 4 or closed
+            else np.stack([np.interp(s, t, vals[:, j]) for j in range(vals.shape[1])], axis=1)
+        )
     return spline(s), tang, out
 
 
@@ -236,8 +245,9 @@ class Sweep(Primitive):
         Section shape: 2 = ellipse, larger = rounded rectangle (superellipse).
     """
 
-    def __init__(self, samples, tangents, radii, up=(0.0, 1.0, 0.0), closed=False,
-                 exponent: float = 2.0):
+    def __init__(
+        self, samples, tangents, radii, up=(0.0, 1.0, 0.0), closed=False, exponent: float = 2.0
+    ):
         self.p = float(exponent)
         self.c, self.t = np.asarray(samples, float), np.asarray(tangents, float)
         self.r = np.maximum(np.asarray(radii, float).reshape(-1, 2), 0.05)
@@ -252,8 +262,14 @@ class Sweep(Primitive):
 
     def __call__(self, x, y, z):
         shape = np.broadcast_shapes(np.shape(x), np.shape(y), np.shape(z))
-        p = np.stack([np.broadcast_to(x, shape).ravel(), np.broadcast_to(y, shape).ravel(),
-                      np.broadcast_to(z, shape).ravel()], axis=1)
+        p = np.stack(
+            [
+                np.broadcast_to(x, shape).ravel(),
+                np.broadcast_to(y, shape).ravel(),
+                np.broadcast_to(z, shape).ravel(),
+            ],
+            axis=1,
+        )
         _, k = self.tree.query(p, workers=-1)
         d = p - self.c[k]
         u = np.einsum("ij,ij->i", d, self.n[k])
@@ -288,15 +304,18 @@ class Profile2D:
         mask[rr, cc] = True
         outside = ndimage.distance_transform_edt(~mask)
         inside = ndimage.distance_transform_edt(mask)
-        self.sdf = ((outside - inside) * pixel + np.where(mask, 0.5, -0.5) * pixel).astype(np.float32)
+        self.sdf = ((outside - inside) * pixel + np.where(mask, 0.5, -0.5) * pixel).astype(
+            np.float32
+        )
         self.size = size
 
     def __call__(self, u, v):
         iu, iv = (u - self.lo[0]) / self.px, (v - self.lo[1]) / self.px
         cu = np.clip(iu, 0, self.size[0] - 1)
         cv = np.clip(iv, 0, self.size[1] - 1)
-        val = ndimage.map_coordinates(self.sdf, [cu.ravel(), cv.ravel()], order=1,
-                                      mode="nearest").reshape(cu.shape)
+        val = ndimage.map_coordinates(
+            self.sdf, [cu.ravel(), cv.ravel()], order=1, mode="nearest"
+        ).reshape(cu.shape)
         return val + np.hypot(iu - cu, iv - cv) * self.px
 
 
@@ -312,10 +331,18 @@ class Extrusion(Primitive):
         self.p, self.o, self.R = profile, np.asarray(origin, float), np.asarray(rotation, float)
         self.front, self.back = float(depth[0]), float(depth[1])
         self.taper, self.rr = float(taper), float(round_mm)
-        corners = np.array([[a, b] for a in (profile.lo[0], profile.lo[0] + profile.size[0] * profile.px)
-                            for b in (profile.lo[1], profile.lo[1] + profile.size[1] * profile.px)])
-        pts = [self.o + c[0] * self.R[0] + c[1] * self.R[1] + w * self.R[2]
-               for c in corners for w in (self.front, -self.back)]
+        corners = np.array(
+            [
+                [a, b]
+                for a in (profile.lo[0], profile.lo[0] + profile.size[0] * profile.px)
+                for b in (profile.lo[1], profile.lo[1] + profile.size[1] * profile.px)
+            ]
+        )
+        pts = [
+            self.o + c[0] * self.R[0] + c[1] * self.R[1] + w * self.R[2]
+            for c in corners
+            for w in (self.front, -self.back)
+        ]
         self.lo, self.hi = np.min(pts, axis=0), np.max(pts, axis=0)
 
     def __call__(self, x, y, z):
@@ -349,11 +376,15 @@ class Grid:
 
     def _block(self, lo, hi):
         i0 = np.clip(np.floor((np.asarray(lo) - self.origin) / self.h).astype(int), 0, self.shape)
-        i1 = np.clip(np.ceil((np.asarray(hi) - self.origin) / self.h).astype(int) + 1, 0, self.shape)
+        i1 = np.clip(
+            np.ceil((np.asarray(hi) - self.origin) / self.h).astype(int) + 1, 0, self.shape
+        )
         if np.any(i1 <= i0):
             return None
-        sl = tuple(slice(a, b) for a, b in zip(i0, i1))
-        ax = [(self.origin[d] + self.h * np.arange(i0[d], i1[d])).astype(np.float32) for d in range(3)]
+        sl = tuple(slice(a, b) for a, b in zip(i0, i1, strict=False))
+        ax = [
+            (self.origin[d] + self.h * np.arange(i0[d], i1[d])).astype(np.float32) for d in range(3)
+        ]
         return sl, ax[0][:, None, None], ax[1][None, :, None], ax[2][None, None, :]
 
     def _apply(self, prim: Primitive, k: float, bilateral: bool, combine, everywhere=False):
@@ -429,8 +460,16 @@ def _decimate_pieces(v: np.ndarray, faces: np.ndarray, target: int):
     return np.concatenate(parts_v), np.concatenate(parts_f)
 
 
-def mesh_from_field(field: np.ndarray, origin, h: float, *, smooth: int = 6,
-                    target: int | None = None, keep_all: bool = False, blur: float = 0.0) -> Mesh:
+def mesh_from_field(
+    field: np.ndarray,
+    origin,
+    h: float,
+    *,
+    smooth: int = 6,
+    target: int | None = None,
+    keep_all: bool = False,
+    blur: float = 0.0,
+) -> Mesh:
     """Zero level set of ``field`` (negative inside) as a closed, outward mesh in mm.
 
     Marching cubes (scikit-image, Lewiner) -> largest component -> Taubin

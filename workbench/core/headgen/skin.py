@@ -36,6 +36,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.headgen.subdivision import loop_subdivide
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops
@@ -43,16 +44,16 @@ from workbench.core.tps import fit_warp
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
 SIDED_REGIONS = ("eyelid_upper", "eyelid_lower", "orbit", "ear")
-FACE_REGIONS = ("face", "nose", "upper_lip", "lower_lip", "perioral", "eyelid_upper", "eyelid_lower", "orbit")
-
-
-def data_tables_dir() -> Path:
-    """``data_tables`` next to the package (installed copy first, then the checkout)."""
-    import workbench
-
-    root = Path(workbench.__file__).resolve().parent
-    packaged = root / "_data" / "data_tables"
-    return packaged if packaged.exists() else root.parent / "data_tables"
+FACE_REGIONS = (
+    "face",
+    "nose",
+    "upper_lip",
+    "lower_lip",
+    "perioral",
+    "eyelid_upper",
+    "eyelid_lower",
+    "orbit",
+)
 
 
 def _template_path(name: str) -> Path:
@@ -109,7 +110,11 @@ def load_control_mesh(path: str | Path | None = None) -> ControlMesh:
     d = _read_json(str(path or _template_path("skin_control_mesh.json")))
     if d.get("units") != "mm":
         raise ValueError("skin control mesh must be in millimetres")
-    header = {k: d[k] for k in ("format", "version", "units", "frame", "symmetry", "subdivision") if k in d}
+    header = {
+        k: d[k]
+        for k in ("format", "version", "units", "frame", "symmetry", "subdivision")
+        if k in d
+    }
     return ControlMesh(
         vertices=np.asarray(d["vertices"], float),
         faces=np.asarray(d["faces"], np.int64),
@@ -174,12 +179,18 @@ def landmark_position(points: dict[str, np.ndarray], code: str) -> np.ndarray:
     return np.asarray(points[code], float)
 
 
-def measure(points: dict[str, np.ndarray] | LandmarkSet, parameters: dict | None = None) -> dict[str, float]:
+def measure(
+    points: dict[str, np.ndarray] | LandmarkSet, parameters: dict | None = None
+) -> dict[str, float]:
     """Every measurement of the parameter file, Euclidean, in mm."""
     pts = points.as_dict() if isinstance(points, LandmarkSet) else points
     params = parameters or load_parameters()
-    return {m["name"]: float(np.linalg.norm(landmark_position(pts, m["a"]) - landmark_position(pts, m["b"])))
-            for m in params["measurements"]}
+    return {
+        m["name"]: float(
+            np.linalg.norm(landmark_position(pts, m["a"]) - landmark_position(pts, m["b"]))
+        )
+        for m in params["measurements"]
+    }
 
 
 # ----------------------------------------------------------------- building blocks
@@ -207,7 +218,9 @@ def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
     return t * t * (3.0 - 2.0 * t)
 
 
-def apply_shape(v: np.ndarray, f: np.ndarray, pts: dict[str, np.ndarray], shape: dict) -> np.ndarray:
+def apply_shape(
+    v: np.ndarray, f: np.ndarray, pts: dict[str, np.ndarray], shape: dict
+) -> np.ndarray:
     """Sex-specific shape changes (``skin_parameters.json`` ``shape``), smooth weights, mm.
 
     ``brow_ridge_mm``: supraorbital/glabella band along the normal;
@@ -221,17 +234,25 @@ def apply_shape(v: np.ndarray, f: np.ndarray, pts: dict[str, np.ndarray], shape:
     brow = float(shape.get("brow_ridge_mm", 0.0))
     if brow:
         band_y = 0.5 * (g[1] + pts["mso_l"][1])
-        w = (np.clip(1.0 - (np.abs(v[:, 0]) / 52.0) ** 2, 0.0, 1.0) * np.exp(-((v[:, 1] - band_y) / 10.0) ** 2)
-             * np.clip((v[:, 2] - (g[2] - 40.0)) / 20.0, 0.0, 1.0))
+        w = (
+            np.clip(1.0 - (np.abs(v[:, 0]) / 52.0) ** 2, 0.0, 1.0)
+            * np.exp(-(((v[:, 1] - band_y) / 10.0) ** 2))
+            * np.clip((v[:, 2] - (g[2] - 40.0)) / 20.0, 0.0, 1.0)
+        )
         v += brow * w[:, None] * nrm
     fore = float(shape.get("forehead_mm", 0.0))
     if fore:
-        w = (np.clip(1.0 - (v[:, 0] / 50.0) ** 2, 0.0, 1.0) * np.exp(-((v[:, 1] - g[1] - 38.0) / 22.0) ** 2)
-             * np.clip((v[:, 2] - (g[2] - 50.0)) / 25.0, 0.0, 1.0))
+        w = (
+            np.clip(1.0 - (v[:, 0] / 50.0) ** 2, 0.0, 1.0)
+            * np.exp(-(((v[:, 1] - g[1] - 38.0) / 22.0) ** 2))
+            * np.clip((v[:, 2] - (g[2] - 50.0)) / 25.0, 0.0, 1.0)
+        )
         v[:, 2] += fore * w
     lar = float(shape.get("larynx_mm", 0.0))
     if lar:
-        w = np.exp(-((v[:, 0] / 14.0) ** 2 + ((v[:, 1] - (me[1] - 28.0)) / 18.0) ** 2)) * (v[:, 2] > 0)
+        w = np.exp(-((v[:, 0] / 14.0) ** 2 + ((v[:, 1] - (me[1] - 28.0)) / 18.0) ** 2)) * (
+            v[:, 2] > 0
+        )
         v[:, 2] += lar * w
     girth = float(shape.get("neck_girth", 1.0))
     if girth != 1.0:
@@ -242,21 +263,28 @@ def apply_shape(v: np.ndarray, f: np.ndarray, pts: dict[str, np.ndarray], shape:
         v[:, 2] = zc + (v[:, 2] - zc) * k
     chin = float(shape.get("chin_width", 1.0))
     if chin != 1.0:
-        w = _smoothstep(pg[1] + 25.0, pg[1] - 5.0, v[:, 1]) * _smoothstep(pg[2] - 45.0, pg[2] - 15.0, v[:, 2])
+        w = _smoothstep(pg[1] + 25.0, pg[1] - 5.0, v[:, 1]) * _smoothstep(
+            pg[2] - 45.0, pg[2] - 15.0, v[:, 2]
+        )
         v[:, 0] *= 1.0 - (1.0 - chin) * w
     return v
 
 
-def _head_scale(v: np.ndarray, pts: dict[str, np.ndarray], scalp: np.ndarray, target: dict) -> np.ndarray:
+def _head_scale(
+    v: np.ndarray, pts: dict[str, np.ndarray], scalp: np.ndarray, target: dict
+) -> np.ndarray:
     """Anisotropic scale about the origin: g-op -> z, eu-eu -> x, vertex height -> y."""
     length = float(np.linalg.norm(pts["g"] - pts["op"]))
     breadth = 2.0 * float(np.abs(v[scalp, 0]).max())
     height = float(pts["v"][1])
-    return np.array([target["eu_eu"] / breadth, target["v_height"] / height, target["g_op"] / length])
+    return np.array(
+        [target["eu_eu"] / breadth, target["v_height"] / height, target["g_op"] / length]
+    )
 
 
-def solve_landmark_targets(points: dict[str, np.ndarray], measurements: list[dict], sex: str,
-                           solver: dict) -> dict[str, np.ndarray]:
+def solve_landmark_targets(
+    points: dict[str, np.ndarray], measurements: list[dict], sex: str, solver: dict
+) -> dict[str, np.ndarray]:
     """Least-squares landmark positions meeting the measurement targets (symmetric, mm).
 
     Unknowns are displacements of the left and midline landmarks (midline: no
@@ -276,13 +304,20 @@ def solve_landmark_targets(points: dict[str, np.ndarray], measurements: list[dic
     lift = np.zeros((3 * n, nf))  # displacement.ravel() = lift @ x
     lift[np.flatnonzero(free.ravel()), np.arange(nf)] = 1.0
     lift3 = lift.reshape(n, 3, nf)
-    wm, wn0, ws, wf = (float(solver[k]) for k in ("measurement_weight", "neighbour_weight", "stay_weight",
-                                                     "fh_weight"))
+    wm, wn0, ws, wf = (
+        float(solver[k])
+        for k in ("measurement_weight", "neighbour_weight", "stay_weight", "fh_weight")
+    )
     pairs = cKDTree(p0).query_pairs(float(solver["neighbour_radius_mm"]), output_type="ndarray")
     wn = wn0 / np.sqrt(1.0 + np.linalg.norm(p0[pairs[:, 0]] - p0[pairs[:, 1]], axis=1) / 10.0)
     fh = [index[c] for c in ("po_l", "or_l") if c in index]
-    lin = np.vstack([(wn[:, None, None] * (lift3[pairs[:, 0]] - lift3[pairs[:, 1]])).reshape(-1, nf),
-                     ws * np.eye(nf), wf * lift3[fh, 1]])
+    lin = np.vstack(
+        [
+            (wn[:, None, None] * (lift3[pairs[:, 0]] - lift3[pairs[:, 1]])).reshape(-1, nf),
+            ws * np.eye(nf),
+            wf * lift3[fh, 1],
+        ]
+    )
     lin_b = np.concatenate([np.zeros(3 * len(pairs) + nf), wf * p0[fh, 1]])
 
     def pick(code: str) -> np.ndarray:
@@ -291,16 +326,22 @@ def solve_landmark_targets(points: dict[str, np.ndarray], measurements: list[dic
             return 0.5 * (pick("sts") + pick("sti"))
         t = np.zeros((3, 3 * n))
         left = code[:-2] + "_l" if code.endswith("_r") else code
-        t[:, 3 * index[left]:3 * index[left] + 3] = np.diag(MIRROR if code.endswith("_r") else np.ones(3))
+        t[:, 3 * index[left] : 3 * index[left] + 3] = np.diag(
+            MIRROR if code.endswith("_r") else np.ones(3)
+        )
         return t
 
     meas = [(pick(m["a"]) - pick(m["b"]), float(m[sex]["mean"])) for m in measurements]
     if "sts" in points and "sti" in points:
-        meas.append((pick("sts") - pick("sti"), float(np.linalg.norm(points["sts"] - points["sti"]))))
+        meas.append(
+            (pick("sts") - pick("sti"), float(np.linalg.norm(points["sts"] - points["sti"])))
+        )
 
     def residuals(x: np.ndarray) -> np.ndarray:
         p = p0.ravel() + lift @ x
-        return np.concatenate([[wm * (np.linalg.norm(t @ p) - d) for t, d in meas], lin @ x + lin_b])
+        return np.concatenate(
+            [[wm * (np.linalg.norm(t @ p) - d) for t, d in meas], lin @ x + lin_b]
+        )
 
     def jacobian(x: np.ndarray) -> np.ndarray:
         p = p0.ravel() + lift @ x
@@ -331,8 +372,13 @@ def _closest_on_midline_edges(p: np.ndarray, v: np.ndarray, faces: np.ndarray) -
 
 
 # ----------------------------------------------------------------- main entry
-def build_skin(sex: str = "male", level: int = 1, *, control: ControlMesh | None = None,
-               parameters: dict | None = None) -> SkinTemplate:
+def build_skin(
+    sex: str = "male",
+    level: int = 1,
+    *,
+    control: ControlMesh | None = None,
+    parameters: dict | None = None,
+) -> SkinTemplate:
     """Build the reference skin for ``sex`` ("male" or "female") at subdivision ``level``.
 
     Level 1 (default) gives about 9 600 triangles; level 0 is the control
@@ -352,12 +398,20 @@ def build_skin(sex: str = "male", level: int = 1, *, control: ControlMesh | None
     lm_ids = _full_landmarks(cm, mp)
 
     # regions (per control face label, sided where it matters)
-    labels = np.array([r + ("_l" if s > 0 else "_r") if r in SIDED_REGIONS else r
-                       for r, s in zip(np.concatenate([cm.face_regions, cm.face_regions]), side)])
+    labels = np.array(
+        [
+            r + ("_l" if s > 0 else "_r") if r in SIDED_REGIONS else r
+            for r, s in zip(np.concatenate([cm.face_regions, cm.face_regions]), side, strict=False)
+        ]
+    )
     fine_labels = labels[sub.parent_face]
     regions = {str(name): np.unique(faces[fine_labels == name]) for name in np.unique(fine_labels)}
-    face_like = np.isin(np.array([lab.rsplit("_", 1)[0] if lab.endswith(("_l", "_r")) else lab
-                                  for lab in fine_labels]), FACE_REGIONS)
+    face_like = np.isin(
+        np.array(
+            [lab.rsplit("_", 1)[0] if lab.endswith(("_l", "_r")) else lab for lab in fine_labels]
+        ),
+        FACE_REGIONS,
+    )
     regions["face"] = np.unique(faces[face_like])
 
     # sex-specific shape, then whole-head scale
@@ -390,12 +444,24 @@ def build_skin(sex: str = "male", level: int = 1, *, control: ControlMesh | None
     sts, sti = v[lm_ids["sts"]], v[lm_ids["sti"]]
     near = np.nonzero(np.isin(faces, [lm_ids["sts"], lm_ids["sti"]]).any(1))[0]
     sto = _closest_on_midline_edges(0.5 * (sts + sti), v, faces[near])
-    lms.append(Landmark("sto", sto, "placed", 1.0, "midline skin point closest to the midpoint of sts and sti"))
+    lms.append(
+        Landmark(
+            "sto", sto, "placed", 1.0, "midline skin point closest to the midpoint of sts and sti"
+        )
+    )
     landmarks = LandmarkSet("skin", tuple(sorted(lms, key=lambda lm: lm.code)))
 
     openings = _openings(mesh, cm, mp)
-    return SkinTemplate(mesh=mesh, landmarks=landmarks, regions=regions, openings=openings,
-                        landmark_vertices=dict(lm_ids), eyeballs=eyeballs, sex=sex, level=level)
+    return SkinTemplate(
+        mesh=mesh,
+        landmarks=landmarks,
+        regions=regions,
+        openings=openings,
+        landmark_vertices=dict(lm_ids),
+        eyeballs=eyeballs,
+        sex=sex,
+        level=level,
+    )
 
 
 def _symmetrise(v: np.ndarray) -> np.ndarray:
@@ -413,7 +479,16 @@ def _symmetrise(v: np.ndarray) -> np.ndarray:
 
 def _openings(mesh: Mesh, cm: ControlMesh, mp: np.ndarray) -> dict[str, np.ndarray]:
     """Name the boundary loops by a control vertex each must contain."""
-    probes = {"eye_l": cm.rings["eye_r0"][0], "eye_r": mp[cm.rings["eye_r0"][0]],
-              "mouth": cm.rings["mouth_m0"][0], "neck": cm.rings["neck_n3"][0]}
+    probes = {
+        "eye_l": cm.rings["eye_r0"][0],
+        "eye_r": mp[cm.rings["eye_r0"][0]],
+        "mouth": cm.rings["mouth_m0"][0],
+        "neck": cm.rings["neck_n3"][0],
+    }
     loops = boundary_loops(mesh)
-    return {name: loop for name, vid in probes.items() for loop in loops if int(vid) in set(loop.tolist())}
+    return {
+        name: loop
+        for name, vid in probes.items()
+        for loop in loops
+        if int(vid) in set(loop.tolist())
+    }

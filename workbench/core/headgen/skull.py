@@ -27,15 +27,22 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 
-import workbench
-from workbench.core.headgen import sdf as S
+from workbench.core.data_paths import data_tables_dir
+from workbench.core.headgen import sdf as S  # noqa: N812 - S.sphere(...) reads as the SDF algebra
 from workbench.core.headgen.eyes import corneal_apex_offset, eyeball_mesh
 from workbench.core.headgen.skull_shapes import cranium_grid, mandible_grid, orbit_frame
-from workbench.core.headgen.skull_landmarks import _X, _Y, _Z, _orbit_edge, _place_left, _Rays, _scan
+from workbench.core.headgen.skull_landmarks import (
+    _X,
+    _Y,
+    _Z,
+    _orbit_edge,
+    _place_left,
+    _Rays,
+    _scan,
+)
 from workbench.core.headgen.teeth import Tooth, dental_arches, teeth_mesh, tongue_mesh
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh
@@ -45,14 +52,9 @@ from workbench.core.spatial import MeshIndex
 SEXES = ("male", "female")
 
 
-def _data_tables() -> Path:
-    packaged = Path(workbench.__file__).resolve().parent / "_data" / "data_tables"
-    return packaged if packaged.exists() else Path(workbench.__file__).resolve().parents[1] / "data_tables"
-
-
 @cache
 def _raw_parameters() -> dict:
-    with open(_data_tables() / "template" / "skull_parameters.json", encoding="utf-8") as fh:
+    with open(data_tables_dir() / "template" / "skull_parameters.json", encoding="utf-8") as fh:
         return json.load(fh)
 
 
@@ -79,13 +81,16 @@ def skull_parameters(sex: str = "male") -> dict:
         for key in ("ra", "rb"):
             p["mastoid"][key] *= f["mastoid"]
         p["mastoid"]["b"][1] *= 0.5 + 0.5 * f["mastoid"]  # shorter process
-        p["occipital_protuberance"]["radii"] = (np.asarray(p["occipital_protuberance"]["radii"])
-                                                * f["occipital_protuberance"]).tolist()
+        p["occipital_protuberance"]["radii"] = (
+            np.asarray(p["occipital_protuberance"]["radii"]) * f["occipital_protuberance"]
+        ).tolist()
         p["vault_frontal"]["centre"][1] += f["forehead_up_mm"]
         p["vault_frontal"]["centre"][2] += f["forehead_forward_mm"]
         m = p["mandible"]
         m["chin"]["radii"] = (np.asarray(m["chin"]["radii"]) * f["chin"]).tolist()
-        m["mental_tubercle"]["radii"] = (np.asarray(m["mental_tubercle"]["radii"]) * f["chin"]).tolist()
+        m["mental_tubercle"]["radii"] = (
+            np.asarray(m["mental_tubercle"]["radii"]) * f["chin"]
+        ).tolist()
         m["ramus"]["roll_deg"] += f["ramus_roll_deg"]  # less everted angles
         arch = p["zygomatic_arch"]
         arch["radii"] = (np.asarray(arch["radii"]) * f["zygomatic_arch"]).tolist()
@@ -167,8 +172,14 @@ class _Map:
     heights of Howells' 1973 female vs male means); it keeps y = 0 fixed.
     """
 
-    def __init__(self, rigid: np.ndarray, scale_xz=(1.0, 1.0), y_face: float = 1.0, y_vault: float = 1.0,
-                 y_range=(-20.0, 40.0)):
+    def __init__(
+        self,
+        rigid: np.ndarray,
+        scale_xz=(1.0, 1.0),
+        y_face: float = 1.0,
+        y_vault: float = 1.0,
+        y_range=(-20.0, 40.0),
+    ):
         self.A, self.sxz = np.asarray(rigid, float), np.asarray(scale_xz, float)
         self.yf, self.yv, self.yr = float(y_face), float(y_vault), y_range
 
@@ -199,11 +210,22 @@ class _Map:
 
 
 def _move_tooth(t: Tooth, f: _Map) -> Tooth:
-    return Tooth(t.code, t.jaw, t.name, t.side, f(t.tip), f.direction(t.tip, t.axis),
-                 f.direction(t.tip, t.mesial), f.direction(t.tip, t.buccal),
-                 f.length(t.tip, t.axis, t.crown), f.length(t.cej, t.axis, t.root),
-                 f.length(t.tip, t.mesial, t.md), f.length(t.cej, t.mesial, t.md_cervix),
-                 f.length(t.tip, t.buccal, t.ll), f.length(t.cej, t.buccal, t.ll_cervix))
+    return Tooth(
+        t.code,
+        t.jaw,
+        t.name,
+        t.side,
+        f(t.tip),
+        f.direction(t.tip, t.axis),
+        f.direction(t.tip, t.mesial),
+        f.direction(t.tip, t.buccal),
+        f.length(t.tip, t.axis, t.crown),
+        f.length(t.cej, t.axis, t.root),
+        f.length(t.tip, t.mesial, t.md),
+        f.length(t.cej, t.mesial, t.md_cervix),
+        f.length(t.tip, t.buccal, t.ll),
+        f.length(t.cej, t.buccal, t.ll_cervix),
+    )
 
 
 def _hints(p: dict, teeth: dict, f: _Map) -> dict:
@@ -218,15 +240,21 @@ def _hints(p: dict, teeth: dict, f: _Map) -> dict:
     ui, li = teeth["U_I1_l"], teeth["L_I1_l"]
     tp = p["teeth"]
     z_ramus = np.mean(np.asarray(p["mandible"]["ramus"]["outline"])[:, 0])
-    y_occ = tp["occlusal_y_incisor"] + (tp["occlusal_z_incisor"] - z_ramus) * np.tan(np.radians(tp["occlusal_plane_deg"]))
+    y_occ = tp["occlusal_y_incisor"] + (tp["occlusal_z_incisor"] - z_ramus) * np.tan(
+        np.radians(tp["occlusal_plane_deg"])
+    )
     return {
         "glabella": f(p["glabella"]["centre"]),
         "rhinion_y": f((0, max(q[1] for q in p["nasal_aperture"]["outline"]), 90))[1],
         "ans_y": f(p["ans"]["b"])[1],
         "upper_crest_y": (ui.cej + p["upper_alveolus"]["crest_above_cej"] * ui.axis)[1],
         "lower_crest_y": (li.cej + p["mandible"]["body"]["crest_below_cej"] * li.axis)[1],
-        "foramen_magnum": (fmc[1], fmc[2], f.length(fm["centre"], _Z, fm["radii"][2]),
-                           f.length(fm["centre"], _Y, fm["radii"][1])),
+        "foramen_magnum": (
+            fmc[1],
+            fmc[2],
+            f.length(fm["centre"], _Z, fm["radii"][2]),
+            f.length(fm["centre"], _Y, fm["radii"][1]),
+        ),
         "orbit_centre": f(oc),
         "orbit_frame": np.stack([np.cross(e2, e3), e2, e3]),
         "canal": (canal[1], canal[2], f.length(canal_c, _Y, ec["radius"])),
@@ -247,8 +275,10 @@ def _frankfort_correction(rays: _Rays, p: dict, teeth: dict) -> np.ndarray:
     xs = rays.one((300, h["canal"][0] + h["canal"][2] + 3.0, h["canal"][1]), -_X, "po")[0]
     po = rays.one((xs - 2.0, h["canal"][0], h["canal"][1]), _Y, "po")
     oc, frame = h["orbit_centre"], h["orbit_frame"]
-    orb = min((_orbit_edge(rays, oc, frame, u, -1.0) for u in np.arange(-14.0, 14.5, 0.5)),
-              key=lambda q: q[1])
+    orb = min(
+        (_orbit_edge(rays, oc, frame, u, -1.0) for u in np.arange(-14.0, 14.5, 0.5)),
+        key=lambda q: q[1],
+    )
     theta = np.arctan2(orb[1] - po[1], orb[2] - po[2])
     c, s = np.cos(theta), np.sin(theta)
     step = np.eye(4)
@@ -276,15 +306,23 @@ def build_skull(sex: str = "male") -> SkullTemplate:
     teeth = dental_arches(p)
     mgrid = mandible_grid(p, teeth)
     cgrid = cranium_grid(p, teeth, mgrid)
-    cr = S.mesh_from_field(*cgrid.full(), cgrid.h, smooth=6, target=p["triangles"]["cranium"], blur=0.6)
-    md = S.mesh_from_field(*mgrid.full(), mgrid.h, smooth=6, target=p["triangles"]["mandible"], blur=0.6)
+    cr = S.mesh_from_field(
+        *cgrid.full(), cgrid.h, smooth=6, target=p["triangles"]["cranium"], blur=0.6
+    )
+    md = S.mesh_from_field(
+        *mgrid.full(), mgrid.h, smooth=6, target=p["triangles"]["mandible"], blur=0.6
+    )
     upper, lower = teeth_mesh(teeth, "U"), teeth_mesh(teeth, "L")
     tongue = tongue_mesh(teeth, avoid=mgrid.sample)
     tooth_map = {t.code: t for t in teeth}
     casters = {"cranium": _Rays(cr), "mandible": _Rays(md)}
     sc = p["_scale"]
-    fmap = _Map(_frankfort_correction(casters["cranium"], p, tooth_map), (sc["x"], sc["z"]),
-                sc["y_face"], sc["y_vault"])
+    fmap = _Map(
+        _frankfort_correction(casters["cranium"], p, tooth_map),
+        (sc["x"], sc["z"]),
+        sc["y_face"],
+        sc["y_vault"],
+    )
     cr, md, upper, lower, tongue = (fmap.mesh(m) for m in (cr, md, upper, lower, tongue))
     tooth_map = {k: _move_tooth(t, fmap) for k, t in tooth_map.items()}
     h = _hints(p, tooth_map, fmap)
@@ -299,32 +337,66 @@ def build_skull(sex: str = "male") -> SkullTemplate:
     normals: dict[str, np.ndarray] = {}
     for part, mesh in meshes.items():
         codes = [c for c in left if left[c][1] == part]
-        normals.update(zip(codes, normals_within_radius(mesh, np.array([left[c][0] for c in codes]), 5.0)))
+        normals.update(
+            zip(
+                codes,
+                normals_within_radius(mesh, np.array([left[c][0] for c in codes]), 5.0),
+                strict=False,
+            )
+        )
     for code, (q, part, how) in left.items():
         if code.endswith("_l"):
             right = _mirror_landmark(rays[part], meshes[part], q, normals[code])
             placed[code[:-2] + "_r"] = (right, part, how + " (mirror of the left point)")
     for part, mesh in meshes.items():
         codes = [c for c in placed if c.endswith("_r") and placed[c][1] == part]
-        normals.update(zip(codes, normals_within_radius(mesh, np.array([placed[c][0] for c in codes]), 5.0)))
+        normals.update(
+            zip(
+                codes,
+                normals_within_radius(mesh, np.array([placed[c][0] for c in codes]), 5.0),
+                strict=False,
+            )
+        )
     catalogue = _skull_codes()
     not_rep = {c: "no geometric construction for this code" for c in catalogue if c not in placed}
     order = [c for c in catalogue if c in placed] + sorted(c for c in placed if c not in catalogue)
-    landmarks = LandmarkSet("skull", tuple(Landmark(c, placed[c][0], "placed", 1.0, f"{placed[c][1]}: {placed[c][2]}")
-                                           for c in order))
+    landmarks = LandmarkSet(
+        "skull",
+        tuple(
+            Landmark(c, placed[c][0], "placed", 1.0, f"{placed[c][1]}: {placed[c][2]}")
+            for c in order
+        ),
+    )
     # eyes: centred on the orbital opening; corneal apex `tangent_offset` mm in front of the
     # mso-mio tangent (Stephan 2002: the tangent rule under-predicts projection by ~4 mm)
     e = p["eye"]
     med = rays["cranium"].one(h["orbit_centre"], -h["orbit_frame"][0], "medial orbital margin")
     ec, mso, mio = placed["ec_l"][0], placed["mso_l"][0], placed["mio_l"][0]
     apex_z = 0.5 * (mso[2] + mio[2]) + e["tangent_offset_mm"]
-    centre_l = np.array([0.5 * (med[0] + ec[0]), 0.5 * (mso[1] + mio[1]),
-                         apex_z - corneal_apex_offset(e["radius"], e["cornea_radius"], e["limbus_radius"])])
+    centre_l = np.array(
+        [
+            0.5 * (med[0] + ec[0]),
+            0.5 * (mso[1] + mio[1]),
+            apex_z - corneal_apex_offset(e["radius"], e["cornea_radius"], e["limbus_radius"]),
+        ]
+    )
     centres = np.array([centre_l, centre_l * [-1.0, 1.0, 1.0]])
-    globes = [eyeball_mesh(c, e["radius"], (0.0, 0.0, 1.0), e["cornea_radius"], e["limbus_radius"]) for c in centres]
-    eyes = Mesh(np.vstack([g.vertices for g in globes]),
-                np.vstack([globes[0].faces, globes[1].faces + globes[0].n_vertices]))
-    cond = fmap(np.array([p["mandible"]["condyle"]["centre"], np.multiply(p["mandible"]["condyle"]["centre"], [-1, 1, 1])]))
+    globes = [
+        eyeball_mesh(c, e["radius"], (0.0, 0.0, 1.0), e["cornea_radius"], e["limbus_radius"])
+        for c in centres
+    ]
+    eyes = Mesh(
+        np.vstack([g.vertices for g in globes]),
+        np.vstack([globes[0].faces, globes[1].faces + globes[0].n_vertices]),
+    )
+    cond = fmap(
+        np.array(
+            [
+                p["mandible"]["condyle"]["centre"],
+                np.multiply(p["mandible"]["condyle"]["centre"], [-1, 1, 1]),
+            ]
+        )
+    )
     tmj = (0.5 * (cond[0] + cond[1]), _unit(cond[0] - cond[1]))
     params = json.loads(json.dumps(p))
     params["frame_correction"] = fmap.A.tolist()
@@ -333,12 +405,28 @@ def build_skull(sex: str = "male") -> SkullTemplate:
         "margin and ectoconchion, y midway between mso and mio; corneal apex %.1f mm anterior to the "
         "mso-mio tangent (Stephan 2002 found the tangent rule under-predicts globe projection by 4 mm "
         "on average); this puts the apex %.1f mm in front of ectoconchion"
-        % (e["radius"], e["tangent_offset_mm"], apex_z - ec[2]))
+        % (e["radius"], e["tangent_offset_mm"], apex_z - ec[2])
+    )
     params["corneal_apex_anterior_to_ec_mm"] = float(apex_z - ec[2])
-    template = SkullTemplate(sex, cr, md, upper, lower, eyes, centres, float(e["radius"]), tongue,
-                             tuple(tooth_map[k] for k in sorted(tooth_map)), landmarks,
-                             {c: placed[c][1] for c in order}, {c: normals[c] for c in order}, tmj, cond,
-                             params, not_rep)
+    template = SkullTemplate(
+        sex,
+        cr,
+        md,
+        upper,
+        lower,
+        eyes,
+        centres,
+        float(e["radius"]),
+        tongue,
+        tuple(tooth_map[k] for k in sorted(tooth_map)),
+        landmarks,
+        {c: placed[c][1] for c in order},
+        {c: normals[c] for c in order},
+        tmj,
+        cond,
+        params,
+        not_rep,
+    )
     params["measurements"] = measure(template, rays["cranium"])
     return template
 
@@ -346,7 +434,9 @@ def build_skull(sex: str = "male") -> SkullTemplate:
 def _skull_codes() -> list[str]:
     import csv
 
-    with open(_data_tables() / "landmarks" / "catalogue.csv", encoding="utf-8", newline="") as fh:
+    with open(
+        data_tables_dir() / "landmarks" / "catalogue.csv", encoding="utf-8", newline=""
+    ) as fh:
         return [row["code"] for row in csv.DictReader(fh) if row["surface"] == "skull"]
 
 
@@ -363,11 +453,17 @@ def measure(t: SkullTemplate, rays: _Rays | None = None) -> dict:
     front = np.isfinite(floor[:, 2]) & (floor[:, 2] > L["ss"][2] - 12.0)
     sill = y0 + 0.1 * (int(np.argmax(~front)) - 1)  # lower margin of the aperture
     return {
-        "g_op": dist("g", "op"), "eu_eu": float(upper[:, 0].max() - upper[:, 0].min()),
-        "ba_b": dist("ba", "b"), "n_pr": dist("n", "pr"), "n_me": dist("n", "me"),
-        "zy_zy": dist("zy_l", "zy_r"), "go_go": dist("go_l", "go_r"),
+        "g_op": dist("g", "op"),
+        "eu_eu": float(upper[:, 0].max() - upper[:, 0].min()),
+        "ba_b": dist("ba", "b"),
+        "n_pr": dist("n", "pr"),
+        "n_me": dist("n", "me"),
+        "zy_zy": dist("zy_l", "zy_r"),
+        "go_go": dist("go_l", "go_r"),
         "orbit_centre_distance": float(np.linalg.norm(t.eye_centres[0] - t.eye_centres[1])),
-        "orbit_width": dist("d_l", "ec_l"), "orbit_height": dist("mso_l", "mio_l"),
-        "aperture_width": dist("apl_l", "apl_r"), "aperture_height": float(L["rhi"][1] - sill),
+        "orbit_width": dist("d_l", "ec_l"),
+        "orbit_height": dist("mso_l", "mio_l"),
+        "aperture_width": dist("apl_l", "apl_r"),
+        "aperture_height": float(L["rhi"][1] - sill),
         "porion_below_orbit_centre": float(mid[1] - L["po_l"][1]),
     }

@@ -23,7 +23,9 @@ class _Rays:
     """
 
     def __init__(self, mesh_or_caster, affine: np.ndarray | None = None):
-        self.caster = mesh_or_caster if isinstance(mesh_or_caster, RayCaster) else RayCaster(mesh_or_caster)
+        self.caster = (
+            mesh_or_caster if isinstance(mesh_or_caster, RayCaster) else RayCaster(mesh_or_caster)
+        )
         self.A = np.eye(4) if affine is None else np.asarray(affine, float)
         self.inv = np.linalg.inv(self.A)
 
@@ -97,7 +99,12 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
     gl = h["glabella"]
     g = _pick(_profile(cr, gl[1] - 10, gl[1] + 15), lambda q: q[:, 2], "g")
     put("g", g, "cranium", "most anterior point of the midline profile between the brows")
-    put("sg", cr.one((0, g[1] + 10, 400), -_Z, "sg"), "cranium", "midline profile 10 mm above glabella")
+    put(
+        "sg",
+        cr.one((0, g[1] + 10, 400), -_Z, "sg"),
+        "cranium",
+        "midline profile 10 mm above glabella",
+    )
     prof = _profile(cr, g[1], g[1] - 45)
     z = prof[:, 2]
     deep = ~np.isfinite(z) | (np.r_[z[0], z[:-1]] - z > 6.0)  # the profile drops into the aperture
@@ -105,8 +112,18 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
     rhi = prof[i_rhi]
     n = _pick(prof[: i_rhi + 1], lambda q: _behind(q, g, rhi), "n")
     put("n", n, "cranium", "deepest point of the midline profile behind the chord glabella-rhinion")
-    put("rhi", rhi, "cranium", "lowest midline point of the nasal bones (profile drops into the aperture)")
-    put("mn", cr.one((0, 0.5 * (n[1] + rhi[1]), 400), -_Z, "mn"), "cranium", "midline profile halfway between n and rhi")
+    put(
+        "rhi",
+        rhi,
+        "cranium",
+        "lowest midline point of the nasal bones (profile drops into the aperture)",
+    )
+    put(
+        "mn",
+        cr.one((0, 0.5 * (n[1] + rhi[1]), 400), -_Z, "mn"),
+        "cranium",
+        "midline profile halfway between n and rhi",
+    )
     ans = _pick(_profile(cr, h["ans_y"] - 5, h["ans_y"] + 5), lambda q: q[:, 2], "ans")
     put("ans", ans, "cranium", "most anterior point of the anterior nasal spine")
     low = _profile(cr, ans[1] - 2, h["upper_crest_y"] - 6)
@@ -114,13 +131,27 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
     pr = low[np.flatnonzero(front)[-1]]
     ss = _pick(low[: np.flatnonzero(front)[-1]], lambda q: _behind(q, ans, pr), "ss")
     put("ss", ss, "cranium", "deepest midline point of the profile behind the line ans-pr")
-    put("pr", pr, "cranium", "lowest point of the midline alveolar profile (between the upper central incisors)")
-    put("mp", cr.one((0, 0.5 * (ss[1] + pr[1]), 400), -_Z, "mp"), "cranium", "midline profile halfway between ss and pr")
+    put(
+        "pr",
+        pr,
+        "cranium",
+        "lowest point of the midline alveolar profile (between the upper central incisors)",
+    )
+    put(
+        "mp",
+        cr.one((0, 0.5 * (ss[1] + pr[1]), 400), -_Z, "mp"),
+        "cranium",
+        "midline profile halfway between ss and pr",
+    )
     v = _pick(_scan(cr, (0, 400, -60), (0, 0, 0.25), 480, -_Y), lambda q: q[:, 1], "v")
     put("v", v, "cranium", "highest midline point of the vault (FH orientation)")
     tilt = np.radians(10.0)
-    put("b", cr.one((0, 0, 0), (0, np.cos(tilt), np.sin(tilt)), "b"), "cranium",
-        "midline vault point 10 deg forward of vertical from the porion midpoint (no sutures modelled)")
+    put(
+        "b",
+        cr.one((0, 0, 0), (0, np.cos(tilt), np.sin(tilt)), "b"),
+        "cranium",
+        "midline vault point 10 deg forward of vertical from the porion midpoint (no sutures modelled)",
+    )
     ang = np.radians(np.arange(-60.0, 60.0, 0.25))
     back = cr((0.0, 30.0, -20.0), np.column_stack([0 * ang, np.sin(ang), -np.cos(ang)]))
     op = _pick(back, lambda q: np.linalg.norm(q - g, axis=1), "op")
@@ -128,61 +159,148 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
     fm = h["foramen_magnum"]
     col = _scan(cr, (0, -300, fm[1]), (0, 0, 0.1), int((fm[2] + 8) / 0.1), _Y)
     outside = np.isfinite(col[:, 1]) & (col[:, 1] < fm[0] + 0.5 * fm[3])
-    put("ba", col[int(np.argmax(outside))], "cranium", "anterior rim of the foramen magnum in the midline")
+    put(
+        "ba",
+        col[int(np.argmax(outside))],
+        "cranium",
+        "anterior rim of the foramen magnum in the midline",
+    )
     # --- midline of the mandible
-    id_ = _pick(_profile(md, h["lower_crest_y"] + 6, h["lower_crest_y"] - 8),
-                lambda q: np.where(q[:, 2] > 60, q[:, 1], -1e9), "id")
+    id_ = _pick(
+        _profile(md, h["lower_crest_y"] + 6, h["lower_crest_y"] - 8),
+        lambda q: np.where(q[:, 2] > 60, q[:, 1], -1e9),
+        "id",
+    )
     put("id", id_, "mandible", "highest point of the midline lower alveolar profile")
     me = _pick(_scan(md, (0, -300, 50), (0, 0, 0.2), 250, _Y), lambda q: -q[:, 1], "me")
     put("me", me, "mandible", "lowest midline point of the symphysis")
     pg = _pick(_profile(md, me[1] + 3, id_[1] - 10), lambda q: q[:, 2], "pg")
     put("pg", pg, "mandible", "most anterior midline point of the chin")
-    alv = _pick(_profile(md, id_[1] - 14, id_[1] - 1), lambda q: q[:, 2], "sm")  # alveolar convexity
-    put("sm", _pick(_profile(md, pg[1], alv[1]), lambda q: _behind(q, alv, pg), "sm"), "mandible",
-        "deepest midline point of the concavity between the alveolar convexity below id and pg")
-    put("gn", md.one((0, pg[1], me[2]), (0, -1, 1), "gn"), "mandible",
-        "chin outline on the bisector between the facial profile and the lower border")
+    alv = _pick(
+        _profile(md, id_[1] - 14, id_[1] - 1), lambda q: q[:, 2], "sm"
+    )  # alveolar convexity
+    put(
+        "sm",
+        _pick(_profile(md, pg[1], alv[1]), lambda q: _behind(q, alv, pg), "sm"),
+        "mandible",
+        "deepest midline point of the concavity between the alveolar convexity below id and pg",
+    )
+    put(
+        "gn",
+        md.one((0, pg[1], me[2]), (0, -1, 1), "gn"),
+        "mandible",
+        "chin outline on the bisector between the facial profile and the lower border",
+    )
     # --- orbit
     oc, frame = h["orbit_centre"], h["orbit_frame"]
     e1, e2, e3 = frame
-    put("mso_l", _orbit_edge(cr, oc, frame, 0.0, 1.0), "cranium", "upper orbital margin on the orbit's vertical bisector")
-    put("mio_l", _orbit_edge(cr, oc, frame, 0.0, -1.0), "cranium", "lower orbital margin on the orbit's vertical bisector")
+    put(
+        "mso_l",
+        _orbit_edge(cr, oc, frame, 0.0, 1.0),
+        "cranium",
+        "upper orbital margin on the orbit's vertical bisector",
+    )
+    put(
+        "mio_l",
+        _orbit_edge(cr, oc, frame, 0.0, -1.0),
+        "cranium",
+        "lower orbital margin on the orbit's vertical bisector",
+    )
     lows = np.array([_orbit_edge(cr, oc, frame, u, -1.0) for u in np.arange(-14.0, 14.5, 0.5)])
     put("or_l", lows[np.argmin(lows[:, 1])], "cranium", "lowest point of the lower orbital margin")
     ec = cr.one(oc, e1, "ec")
     put("ec_l", ec, "cranium", "lateral orbital margin on the orbit's horizontal bisector")
-    put("d_l", cr.one(oc - 5 * e3 + 6 * e2, -e1, "d"), "cranium", "medial orbital wall, 5 mm inside the opening, 6 mm above its centre")
-    put("lo_l", cr.one(ec + (30, -10, 30), (-1, 0, -1), "lo"), "cranium", "zygomatic bone 10 mm below ec")
-    put("im_l", cr.one((ec[0] - 10, out["or_l"][0][1] - 22, 400), -_Z, "im"), "cranium",
-        "front of the zygomaxillary junction, 22 mm below orbitale")
-    put("fe_l", cr.one((28.0, g[1] + 32, 400), -_Z, "fe"), "cranium", "frontal bone 28 mm lateral, 32 mm above glabella")
+    put(
+        "d_l",
+        cr.one(oc - 5 * e3 + 6 * e2, -e1, "d"),
+        "cranium",
+        "medial orbital wall, 5 mm inside the opening, 6 mm above its centre",
+    )
+    put(
+        "lo_l",
+        cr.one(ec + (30, -10, 30), (-1, 0, -1), "lo"),
+        "cranium",
+        "zygomatic bone 10 mm below ec",
+    )
+    put(
+        "im_l",
+        cr.one((ec[0] - 10, out["or_l"][0][1] - 22, 400), -_Z, "im"),
+        "cranium",
+        "front of the zygomaxillary junction, 22 mm below orbitale",
+    )
+    put(
+        "fe_l",
+        cr.one((28.0, g[1] + 32, 400), -_Z, "fe"),
+        "cranium",
+        "frontal bone 28 mm lateral, 32 mm above glabella",
+    )
     # --- lateral face and temporal bone
     yy, zz = np.meshgrid(np.arange(-12.0, 6.0, 0.5), np.arange(10.0, 55.0, 0.5), indexing="ij")
     grid = np.column_stack([np.full(yy.size, 300.0), yy.ravel(), zz.ravel()])
-    put("zy_l", _pick(cr(grid, -_X), lambda q: q[:, 0], "zy"), "cranium", "most lateral point of the zygomatic arch")
+    put(
+        "zy_l",
+        _pick(cr(grid, -_X), lambda q: q[:, 0], "zy"),
+        "cranium",
+        "most lateral point of the zygomatic arch",
+    )
     yy, zz = np.meshgrid(np.arange(-26.0, -10.0, 0.5), np.arange(-25.0, 0.0, 0.5), indexing="ij")
     grid = np.column_stack([np.full(yy.size, 300.0), yy.ravel(), zz.ravel()])
-    put("ms_l", _pick(cr(grid, -_X), lambda q: q[:, 0], "ms"), "cranium", "most lateral point of the mastoid process")
-    put("sgl_l", cr.one((300, 6.0, 10.0), -_X, "sgl"), "cranium", "zygomatic root 6 mm above and 10 mm in front of porion")
+    put(
+        "ms_l",
+        _pick(cr(grid, -_X), lambda q: q[:, 0], "ms"),
+        "cranium",
+        "most lateral point of the mastoid process",
+    )
+    put(
+        "sgl_l",
+        cr.one((300, 6.0, 10.0), -_X, "sgl"),
+        "cranium",
+        "zygomatic root 6 mm above and 10 mm in front of porion",
+    )
     xs = cr.one((300, h["canal"][0] + h["canal"][2] + 3.0, h["canal"][1]), -_X, "po")[0]
-    put("po_l", cr.one((xs - 2.0, h["canal"][0], h["canal"][1]), _Y, "po"), "cranium",
-        "roof of the ear canal 2 mm inside its opening")
+    put(
+        "po_l",
+        cr.one((xs - 2.0, h["canal"][0], h["canal"][1]), _Y, "po"),
+        "cranium",
+        "roof of the ear canal 2 mm inside its opening",
+    )
     # --- nasal aperture and alveolar processes
     y0, y1 = h["ans_y"] + 3.0, h["rhinion_y"] - 3.0
     aps = _scan(cr, (1.5, y0, h["aperture_z"]), (0, 0.25, 0), int((y1 - y0) / 0.25), _X)
     apl = _pick(aps, lambda q: q[:, 0], "apl", mask=aps[:, 0] < 25)
     put("apl_l", apl, "cranium", "most lateral point of the piriform aperture margin")
-    put("ac_l", cr.one((apl[0] + 5, apl[1], 400), -_Z, "ac"), "cranium", "maxilla 5 mm lateral of apl")
+    put(
+        "ac_l",
+        cr.one((apl[0] + 5, apl[1], 400), -_Z, "ac"),
+        "cranium",
+        "maxilla 5 mm lateral of apl",
+    )
     t = h["teeth"]
     uc, lc, um2, lm2 = t["U_C_l"], t["L_C_l"], t["U_M2_l"], t["L_M2_l"]
-    put("sC_l", cr.one(uc.cej + 4 * uc.axis + 25 * uc.buccal, -uc.buccal, "sC"), "cranium",
-        "alveolar bone over the upper canine root, 4 mm above its CEJ")
-    put("iC_l", md.one(lc.cej + 4 * lc.axis + 25 * lc.buccal, -lc.buccal, "iC"), "mandible",
-        "alveolar bone over the lower canine root, 4 mm below its CEJ")
-    put("ecm2s_l", cr.one((300, um2.cej[1] + 2.5, um2.cej[2]), -_X, "ecm2s"), "cranium",
-        "buccal alveolar margin at the upper second molar")
-    put("ecm2i_l", md.one((300, lm2.cej[1] - 2.5, lm2.cej[2]), -_X, "ecm2i"), "mandible",
-        "buccal alveolar margin at the lower second molar")
+    put(
+        "sC_l",
+        cr.one(uc.cej + 4 * uc.axis + 25 * uc.buccal, -uc.buccal, "sC"),
+        "cranium",
+        "alveolar bone over the upper canine root, 4 mm above its CEJ",
+    )
+    put(
+        "iC_l",
+        md.one(lc.cej + 4 * lc.axis + 25 * lc.buccal, -lc.buccal, "iC"),
+        "mandible",
+        "alveolar bone over the lower canine root, 4 mm below its CEJ",
+    )
+    put(
+        "ecm2s_l",
+        cr.one((300, um2.cej[1] + 2.5, um2.cej[2]), -_X, "ecm2s"),
+        "cranium",
+        "buccal alveolar margin at the upper second molar",
+    )
+    put(
+        "ecm2i_l",
+        md.one((300, lm2.cej[1] - 2.5, lm2.cej[2]), -_X, "ecm2i"),
+        "mandible",
+        "buccal alveolar margin at the lower second molar",
+    )
     _place_ramus(md, h, put, out)
     return out
 
@@ -201,21 +319,33 @@ def _place_ramus(md: _Rays, h: dict, put, out: dict) -> None:
     widths = [b[2] - a[2] for a, b in spans]
     a, b = spans[int(np.argmin(widths))]
     y_mr = a[1]
-    put("mr_l", md.one((300, y_mr, 0.5 * (a[2] + b[2])), -_X, "mr"), "mandible",
-        "middle of the narrowest ramus breadth")
+    put(
+        "mr_l",
+        md.one((300, y_mr, 0.5 * (a[2] + b[2])), -_X, "mr"),
+        "mandible",
+        "middle of the narrowest ramus breadth",
+    )
     a, b = breadth(h["ramus_occlusal_y"])
-    put("ol_l", md.one((300, a[1], 0.5 * (a[2] + b[2])), -_X, "ol"), "mandible",
-        "middle of the ramus breadth at the occlusal plane")
+    put(
+        "ol_l",
+        md.one((300, a[1], 0.5 * (a[2] + b[2])), -_X, "ol"),
+        "mandible",
+        "middle of the ramus breadth at the occlusal plane",
+    )
     # lower border profile (lowest points) and posterior border profile (rearmost points)
     zs = np.arange(-5.0, 70.0, 0.5)
     xs = np.arange(0.0, 56.0, 1.0)
     xx, zz = np.meshgrid(xs, zs, indexing="ij")
-    low = md(np.column_stack([xx.ravel(), np.full(xx.size, -300.0), zz.ravel()]), _Y).reshape(len(xs), len(zs), 3)
+    low = md(np.column_stack([xx.ravel(), np.full(xx.size, -300.0), zz.ravel()]), _Y).reshape(
+        len(xs), len(zs), 3
+    )
     lowy = np.where(np.isfinite(low[..., 1]), low[..., 1], np.inf)
     border = low[np.argmin(lowy, axis=0), np.arange(len(zs))]
     yb = np.arange(-62.0, -20.0, 0.5)
     xx, yy = np.meshgrid(np.arange(36.0, 56.0, 1.0), yb, indexing="ij")
-    rear = md(np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, -300.0)]), _Z).reshape(xx.shape + (3,))
+    rear = md(np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, -300.0)]), _Z).reshape(
+        xx.shape + (3,)
+    )
     rearz = np.where(np.isfinite(rear[..., 2]), rear[..., 2], np.inf)
     post = rear[np.argmin(rearz, axis=0), np.arange(len(yb))]
     me = out["me"][0]
@@ -234,9 +364,18 @@ def _place_ramus(md: _Rays, h: dict, put, out: dict) -> None:
     edge = md.one((tb[0], vertex[0], vertex[1]), (0, bis[0], bis[1]), "go")
     inward = 2.5 * bis / np.linalg.norm(bis)
     go = md.one((300.0, edge[1] + inward[0], edge[2] + inward[1]), -_X, "go")
-    put("go_l", go, "mandible", "lateral surface of the angle, 2.5 mm inside the point where the bisector "
-        "of the ramus line and the mandibular line (menton to the lowest point of the angle) meets the border")
+    put(
+        "go_l",
+        go,
+        "mandible",
+        "lateral surface of the angle, 2.5 mm inside the point where the bisector "
+        "of the ramus line and the mandibular line (menton to the lowest point of the angle) meets the border",
+    )
     pg = out["pg"][0]
     zm = 0.5 * (go[2] + pg[2])
-    put("mmb_l", border[int(np.argmin(np.abs(zs - zm)))], "mandible",
-        "lowest point of the lower border halfway between gonion and pogonion")
+    put(
+        "mmb_l",
+        border[int(np.argmin(np.abs(zs - zm)))],
+        "mandible",
+        "lowest point of the lower border halfway between gonion and pogonion",
+    )

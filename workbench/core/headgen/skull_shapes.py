@@ -12,7 +12,7 @@ from typing import overload
 
 import numpy as np
 
-from workbench.core.headgen import sdf as S
+from workbench.core.headgen import sdf as S  # noqa: N812 - S.sphere(...) reads as the SDF algebra
 from workbench.core.headgen.teeth import Tooth
 
 
@@ -73,38 +73,67 @@ def mandible_grid(p: dict, teeth: list[Tooth]) -> S.Grid:
     up /= np.linalg.norm(up)
     frame = np.stack([fwd, up, np.cross(fwd, up)])  # in-plane (forward, up), then the plate normal
     org = np.asarray(r["origin"], float)
-    ring = np.column_stack([np.asarray(r["outline"], float) - [org[2], org[1]], np.zeros(len(r["outline"]))])
+    ring = np.column_stack(
+        [np.asarray(r["outline"], float) - [org[2], org[1]], np.zeros(len(r["outline"]))]
+    )
     outline = S.resample(ring, step=1.0, closed=True)[0][:, :2]  # rounded corners
-    ramus = S.Extrusion(S.Profile2D(outline), org, frame,
-                        (r["half_thickness"], r["half_thickness"]), round_mm=r["round"])
+    ramus = S.Extrusion(
+        S.Profile2D(outline),
+        org,
+        frame,
+        (r["half_thickness"], r["half_thickness"]),
+        round_mm=r["round"],
+    )
     g.union(ramus)
-    ridge = r["posterior_ridge"]  # the thick, rounded posterior border and angle, in the plate's plane
+    ridge = r[
+        "posterior_ridge"
+    ]  # the thick, rounded posterior border and angle, in the plate's plane
     zy = np.asarray(ridge["curve_zy"], float)
-    curve = np.array([org + a * fwd + b * up for a, b in
-                      np.linalg.solve(np.stack([fwd[[2, 1]], up[[2, 1]]], axis=1), (zy - org[[2, 1]]).T).T])
+    curve = np.array(
+        [
+            org + a * fwd + b * up
+            for a, b in np.linalg.solve(
+                np.stack([fwd[[2, 1]], up[[2, 1]]], axis=1), (zy - org[[2, 1]]).T
+            ).T
+        ]
+    )
     g.union(_sweep(curve, ridge["radii"], up=frame[2]), k=2.0)
     g.union(_ell(m["condyle"]), k=3.0)
     c = m["condyle"]["centre"]
-    g.union(S.RoundCone((c[0] - 2, c[1] - 3, c[2] - 1), (org[0] + 1.0, c[1] - 16, c[2] - 3), 4.5, 4.0), k=3.0)
+    g.union(
+        S.RoundCone((c[0] - 2, c[1] - 3, c[2] - 1), (org[0] + 1.0, c[1] - 16, c[2] - 3), 4.5, 4.0),
+        k=3.0,
+    )
     # body: a band lofted between the alveolar crest (top) and the lower border (bottom)
     b = m["body"]
     lower = sorted((t for t in teeth if t.jaw == "L" and t.side == "l"), key=lambda t: -t.tip[2])
     tops = [t.cej + b["crest_below_cej"] * t.axis for t in lower]
-    tops = [np.array([0.0, tops[0][1], tops[0][2]])] + tops + [np.asarray(q, float) for q in b["rear"]]
+    tops = (
+        [np.array([0.0, tops[0][1], tops[0][2]])] + tops + [np.asarray(q, float) for q in b["rear"]]
+    )
     border = np.asarray(b["lower_border"], float)[::-1]
     centres, ups, radii = [], [], []
-    for top, a, flare, lean in zip(tops, b["half_thickness"], b["flare"], b["lean"]):
-        bottom = np.array([top[0] + flare, np.interp(top[2], border[:, 0], border[:, 1]), top[2] - lean])
+    for top, a, flare, lean in zip(tops, b["half_thickness"], b["flare"], b["lean"], strict=False):
+        bottom = np.array(
+            [top[0] + flare, np.interp(top[2], border[:, 0], border[:, 1]), top[2] - lean]
+        )
         centres.append(0.5 * (top + bottom))
         ups.append((top - bottom) / np.linalg.norm(top - bottom))
         radii.append([a, 0.5 * np.linalg.norm(top - bottom)])
-    g.union(_sweep(*_symmetric(np.array(centres), np.array(radii), np.array(ups)), exponent=b["exponent"]), k=9.0)
+    g.union(
+        _sweep(
+            *_symmetric(np.array(centres), np.array(radii), np.array(ups)), exponent=b["exponent"]
+        ),
+        k=9.0,
+    )
     # keep the crowns clear: nothing of the body above the alveolar crest
     crest_z = np.array([q[2] for q in tops[1:9]])[::-1]
     crest_y = np.array([q[1] for q in tops[1:9]])[::-1]
 
     def above_crest(x, y, z):
-        return np.maximum(np.maximum(np.interp(z, crest_z, crest_y) - y, np.abs(x) - 34.0), crest_z[0] - 4.0 - z)
+        return np.maximum(
+            np.maximum(np.interp(z, crest_z, crest_y) - y, np.abs(x) - 34.0), crest_z[0] - 4.0 - z
+        )
 
     g.subtract(S.Function(above_crest, (-34, -70, crest_z[0] - 4), (34, 0, 110)), k=1.0)
     g.union(_ell(m["chin"]), k=4.0)
@@ -129,14 +158,20 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
 
     g.union(S.Function(vault, par.lo, par.hi))
     g.union(_ell(vf), k=vf["blend"])
-    g.intersect(S.Function(lambda x, y, z: p["base_floor_y"] - y + 0 * x + 0 * z,
-                           (-99, -99, -99), (99, 99, 99)), k=6.0)
+    g.intersect(
+        S.Function(
+            lambda x, y, z: p["base_floor_y"] - y + 0 * x + 0 * z, (-99, -99, -99), (99, 99, 99)
+        ),
+        k=6.0,
+    )
     g.union(_ell(p["base_block"]), k=8.0)
     g.union(_ell(p["sphenoid_block"]), k=8.0)
     g.union(_ell(p["occipital_protuberance"]), k=4.0)
     # face: orbit surroundings, nasal root, maxillae, zygomas
     oc, orot = orbit_frame(p)
-    g.union(S.Ellipsoid(oc + np.array([0.0, -1.0, -16.0]), (24, 22, 16), orot), k=6.0, bilateral=True)
+    g.union(
+        S.Ellipsoid(oc + np.array([0.0, -1.0, -16.0]), (24, 22, 16), orot), k=6.0, bilateral=True
+    )
     g.union(_ell(p["glabella"]), k=6.0)
     g.union(_ell(p["nasal_root"]), k=6.0)
     g.union(S.RoundCone(**_cone(p["frontal_process"])), k=4.0, bilateral=True)
@@ -152,14 +187,30 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     g.union(_sweep(br["curve"], br["radii"]), k=br["blend"], bilateral=True)
     # orbital rims, then the orbital cavities
     o = p["orbit"]
-    rim3 = np.array([oc + u * orot[0] + v * orot[1] - o["rim_back"] * orot[2]
-                     for u, v in orbit_outline(p, o["rim_scale"], 48)])
-    g.union(_sweep(rim3, [[o["rim_radius"]] * 2] * len(rim3), up=orot[2], closed=True), k=2.5,
-            bilateral=True)
+    rim3 = np.array(
+        [
+            oc + u * orot[0] + v * orot[1] - o["rim_back"] * orot[2]
+            for u, v in orbit_outline(p, o["rim_scale"], 48)
+        ]
+    )
+    g.union(
+        _sweep(rim3, [[o["rim_radius"]] * 2] * len(rim3), up=orot[2], closed=True),
+        k=2.5,
+        bilateral=True,
+    )
     prof = S.Profile2D(orbit_outline(p))
     g.subtract(S.Extrusion(prof, oc, orot, (20.0, 10.0)), k=1.5, bilateral=True)
-    g.subtract(S.Extrusion(S.Profile2D(orbit_outline(p, 1.04)), oc - 6.0 * orot[2], orot,
-                           (0.0, o["depth"] - 6.0), taper=o["taper"]), k=3.0, bilateral=True)
+    g.subtract(
+        S.Extrusion(
+            S.Profile2D(orbit_outline(p, 1.04)),
+            oc - 6.0 * orot[2],
+            orot,
+            (0.0, o["depth"] - 6.0),
+            taper=o["taper"],
+        ),
+        k=3.0,
+        bilateral=True,
+    )
     # temporal fossa, then the zygomatic arches across it
     tf = p["temporal_fossa"]
     g.subtract(_ell(tf), k=tf["blend"], bilateral=True)
@@ -171,8 +222,15 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     g.union(_ell(p["glenoid_roof"]), k=4.0, bilateral=True)
     g.union(S.RoundCone(**_cone(p["mastoid"])), k=5.0, bilateral=True)
     ec = p["ear_canal"]
-    g.subtract(S.RoundCone((80, ec["centre_y"], ec["centre_z"]), (ec["x_in"], ec["centre_y"], ec["centre_z"]),
-                           ec["radius"]), k=1.0, bilateral=True)
+    g.subtract(
+        S.RoundCone(
+            (80, ec["centre_y"], ec["centre_z"]),
+            (ec["x_in"], ec["centre_y"], ec["centre_z"]),
+            ec["radius"],
+        ),
+        k=1.0,
+        bilateral=True,
+    )
     g.union(_ell(p["occipital_condyle"]), k=3.0, bilateral=True)
     g.subtract(_ell(p["foramen_magnum"]), k=2.0)
     # upper alveolar process and palate
@@ -181,8 +239,14 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     crest = np.array([t.cej + ua["crest_above_cej"] * t.axis for t in upper])
     alv = np.array([t.cej + 0.5 * t.root * t.axis for t in upper])
     pts = np.vstack([[0.0, alv[0, 1], alv[0, 2]], alv, alv[-1] + [1.0, 2.0, -8.0]])  # + tuberosity
-    extra = np.interp(np.arange(len(upper) + 2), [0, 2, 4], [ua["bone_over_incisors"]] * 2 + [ua["bone_over_root"]])
-    half_ll = np.array([0.5 * upper[0].ll_cervix] + [0.5 * t.ll_cervix for t in upper] + [3.0]) + extra
+    extra = np.interp(
+        np.arange(len(upper) + 2),
+        [0, 2, 4],
+        [ua["bone_over_incisors"]] * 2 + [ua["bone_over_root"]],
+    )
+    half_ll = (
+        np.array([0.5 * upper[0].ll_cervix] + [0.5 * t.ll_cervix for t in upper] + [3.0]) + extra
+    )
     ref = np.vstack([[0.0, crest[0, 1], crest[0, 2]], crest, crest[-1] + [1.0, 4.0, -8.0]])
     half_h = np.linalg.norm(pts - ref, axis=1)
     alveolus = _sweep(*_symmetric(pts, np.column_stack([half_ll, half_h])), exponent=3.0)
@@ -199,7 +263,9 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
         above = np.interp(z, cz, cy) + env_h - y
         return np.maximum(-np.minimum(inside, above), cz[0] - 4.0 - z)
 
-    g.subtract(S.Function(envelope, (-45, -75, cz[0] - 4.0), (45, cy.max() + env_h + 6, 115)), k=3.0)
+    g.subtract(
+        S.Function(envelope, (-45, -75, cz[0] - 4.0), (45, cy.max() + env_h + 6, 115)), k=3.0
+    )
     g.union(alveolus, k=4.0)  # fillet the crease the trim leaves above the alveolar process
     # keep the crowns clear: nothing of the maxilla below the alveolar crest
 
@@ -215,10 +281,21 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     g.union(_sweep(nb["curve"], nb["radii"], up=(0.0, 0.0, 1.0)), k=4.0)
     pr = p["piriform_rim"]
     rim = np.column_stack([outline * pr["scale"], pr["z"] + pr["tilt"] * (outline[:, 1] + 14.0)])
-    g.union(_sweep(rim[::2], [[pr["radius"]] * 2] * len(rim[::2]), up=(0.0, 0.0, 1.0), closed=True),
-            k=pr["blend"])
-    g.subtract(S.Extrusion(S.Profile2D(outline), (0, 0, na["origin_z"]), np.eye(3),
-                           (20.0, na["depth"]), taper=na["taper"], round_mm=na["round"]), k=1.5)
+    g.union(
+        _sweep(rim[::2], [[pr["radius"]] * 2] * len(rim[::2]), up=(0.0, 0.0, 1.0), closed=True),
+        k=pr["blend"],
+    )
+    g.subtract(
+        S.Extrusion(
+            S.Profile2D(outline),
+            (0, 0, na["origin_z"]),
+            np.eye(3),
+            (20.0, na["depth"]),
+            taper=na["taper"],
+            round_mm=na["round"],
+        ),
+        k=1.5,
+    )
     g.subtract(_ell(p["nasal_cavity"]), k=3.0)
     g.union(S.Box(p["septum"]["centre"], p["septum"]["half"], round_mm=0.8), k=1.0)
     g.union(_ell(p["concha"]), k=2.0, bilateral=True)
@@ -231,10 +308,12 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
 @overload
 def _symmetric(points: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 @overload
-def _symmetric(points: np.ndarray, radii: np.ndarray, ups: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-def _symmetric(points: np.ndarray, radii: np.ndarray, ups: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _symmetric(
+    points: np.ndarray, radii: np.ndarray, ups: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def _symmetric(
+    points: np.ndarray, radii: np.ndarray, ups: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Control points of a left half-arch starting on the midline, continued through its mirror image.
 
     A sweep that merely started at ``x = 0`` would end in a flat cap there,
@@ -256,8 +335,10 @@ def _cone(d: dict) -> dict:
 def _subtract_grid(g: S.Grid, other: S.Grid, clearance: float, k: float) -> None:
     """``g -= (other dilated by clearance)``, evaluated on the nodes of ``g`` inside ``other``'s box."""
     lo = np.maximum(g.origin, other.origin)
-    hi = np.minimum(g.origin + g.h * (np.array(g.shape) - 1),
-                    other.origin + other.h * (np.array(other.shape) - 1))
+    hi = np.minimum(
+        g.origin + g.h * (np.array(g.shape) - 1),
+        other.origin + other.h * (np.array(other.shape) - 1),
+    )
     if g.half:
         lo[0] = max(lo[0], 0.0)
     i0 = np.ceil((lo - g.origin) / g.h - 1e-6).astype(int)
@@ -265,5 +346,5 @@ def _subtract_grid(g: S.Grid, other: S.Grid, clearance: float, k: float) -> None
     axes = [g.origin[d] + g.h * np.arange(i0[d], i1[d]) for d in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     d = other.sample(pts).reshape([len(a) for a in axes]) - clearance
-    sl = tuple(slice(a, b) for a, b in zip(i0, i1))
+    sl = tuple(slice(a, b) for a, b in zip(i0, i1, strict=False))
     g.field[sl] = S.smax(g.field[sl], -d.astype(np.float32), k)

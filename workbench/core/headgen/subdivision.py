@@ -83,8 +83,12 @@ def _edge_table(faces: np.ndarray, n: int):
     return edges, inv.reshape(3, m).T, counts, opp, inv
 
 
-def loop_step(faces: np.ndarray, n_vertices: int, creases: np.ndarray | None = None,
-              corners: np.ndarray | None = None) -> LoopStep:
+def loop_step(
+    faces: np.ndarray,
+    n_vertices: int,
+    creases: np.ndarray | None = None,
+    corners: np.ndarray | None = None,
+) -> LoopStep:
     """Build one Loop subdivision step for a manifold triangle mesh.
 
     Parameters
@@ -103,10 +107,15 @@ def loop_step(faces: np.ndarray, n_vertices: int, creases: np.ndarray | None = N
     edges, face_edges, counts, opp, inv = _edge_table(faces, n)
     ne = len(edges)
     if (counts > 2).any():
-        raise ValueError(f"{int((counts > 2).sum())} non-manifold edges: Loop subdivision needs a manifold mesh")
+        raise ValueError(
+            f"{int((counts > 2).sum())} non-manifold edges: Loop subdivision needs a manifold mesh"
+        )
     sharp = counts == 1
-    crease_in = (np.zeros((0, 2), np.int64) if creases is None
-                 else np.sort(np.asarray(creases, np.int64).reshape(-1, 2), axis=1))
+    crease_in = (
+        np.zeros((0, 2), np.int64)
+        if creases is None
+        else np.sort(np.asarray(creases, np.int64).reshape(-1, 2), axis=1)
+    )
     if len(crease_in):
         code = edges[:, 0] * n + edges[:, 1]
         ccode = crease_in[:, 0] * n + crease_in[:, 1]
@@ -157,7 +166,9 @@ def loop_step(faces: np.ndarray, n_vertices: int, creases: np.ndarray | None = N
     ea = np.concatenate([a, b])
     eb = np.concatenate([b, a])
     esharp = np.concatenate([sharp, sharp])
-    w_nb = np.where(interior_v[ea], beta[ea], 0.0) + np.where(is_sharp_v[ea] & esharp, 1.0 / 8.0, 0.0)
+    w_nb = np.where(interior_v[ea], beta[ea], 0.0) + np.where(
+        is_sharp_v[ea] & esharp, 1.0 / 8.0, 0.0
+    )
     keep = w_nb != 0.0
     rows.append(ea[keep])
     cols.append(eb[keep])
@@ -169,24 +180,30 @@ def loop_step(faces: np.ndarray, n_vertices: int, creases: np.ndarray | None = N
     cols.append(np.arange(n))
     vals.append(self_w)
 
-    mat = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                            shape=(n + ne, n))
+    mat = sparse.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n + ne, n)
+    )
     mat.sum_duplicates()
 
     # ---------------------------------------------------------------- faces
     ev = n + face_edges  # (m, 3): new vertex on edge (0,1), (1,2), (2,0)
     v0, v1, v2 = faces[:, 0], faces[:, 1], faces[:, 2]
     e01, e12, e20 = ev[:, 0], ev[:, 1], ev[:, 2]
-    new_faces = np.stack([
-        np.stack([v0, e01, e20], 1),
-        np.stack([e01, v1, e12], 1),
-        np.stack([e20, e12, v2], 1),
-        np.stack([e01, e12, e20], 1),
-    ], axis=1).reshape(-1, 3)
+    new_faces = np.stack(
+        [
+            np.stack([v0, e01, e20], 1),
+            np.stack([e01, v1, e12], 1),
+            np.stack([e20, e12, v2], 1),
+            np.stack([e01, e12, e20], 1),
+        ],
+        axis=1,
+    ).reshape(-1, 3)
 
     # crease edges of the child mesh (halves of the parent crease edges)
     ce = np.nonzero(is_crease)[0]
-    child = np.concatenate([np.stack([edges[ce, 0], n + ce], 1), np.stack([n + ce, edges[ce, 1]], 1)])
+    child = np.concatenate(
+        [np.stack([edges[ce, 0], n + ce], 1), np.stack([n + ce, edges[ce, 1]], 1)]
+    )
     child = np.sort(child, axis=1)
     return LoopStep(matrix=mat, faces=new_faces, edges=edges, creases=child)
 
@@ -206,9 +223,13 @@ class Subdivided:
     creases: np.ndarray
 
 
-def loop_subdivide(faces: np.ndarray, n_vertices: int, levels: int = 1,
-                   creases: np.ndarray | None = None,
-                   corners: np.ndarray | None = None) -> Subdivided:
+def loop_subdivide(
+    faces: np.ndarray,
+    n_vertices: int,
+    levels: int = 1,
+    creases: np.ndarray | None = None,
+    corners: np.ndarray | None = None,
+) -> Subdivided:
     """Apply ``levels`` Loop steps; returns the composed subdivision matrix.
 
     Corners stay corners at every level (their indices do not change).
@@ -219,7 +240,11 @@ def loop_subdivide(faces: np.ndarray, n_vertices: int, levels: int = 1,
     n = int(n_vertices)
     total = sparse.identity(n, format="csr")
     parent = np.arange(len(faces))
-    cr = np.zeros((0, 2), np.int64) if creases is None else np.asarray(creases, np.int64).reshape(-1, 2)
+    cr = (
+        np.zeros((0, 2), np.int64)
+        if creases is None
+        else np.asarray(creases, np.int64).reshape(-1, 2)
+    )
     for _ in range(levels):
         step = loop_step(faces, n, cr, corners)
         total = (step.matrix @ total).tocsr()

@@ -29,26 +29,60 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.core.headgen.sdf import Ellipsoid, Function, Grid, mesh_from_field, resample, smax, smin
+from workbench.core.headgen.sdf import (
+    Ellipsoid,
+    Function,
+    Grid,
+    mesh_from_field,
+    resample,
+    smax,
+    smin,
+)
 from workbench.core.mesh import Mesh
 
 TOOTH_NAMES = ("I1", "I2", "C", "PM1", "PM2", "M1", "M2", "M3")
 #: crown length, root length, MD crown, MD cervix, LL crown, LL cervix (mm), Nelson & Ash 2010
 UPPER_DIMS = {
-    "I1": (10.5, 13.0, 8.5, 7.0, 7.0, 6.0), "I2": (9.0, 13.0, 6.5, 5.0, 6.0, 5.0),
-    "C": (10.0, 17.0, 7.5, 5.5, 8.0, 7.0), "PM1": (8.5, 14.0, 7.0, 5.0, 9.0, 8.0),
-    "PM2": (8.5, 14.0, 7.0, 5.0, 9.0, 8.0), "M1": (7.5, 12.5, 10.0, 8.0, 11.0, 10.0),
-    "M2": (7.0, 11.5, 9.0, 7.0, 11.0, 10.0), "M3": (6.5, 11.0, 8.5, 6.5, 10.0, 9.5),
+    "I1": (10.5, 13.0, 8.5, 7.0, 7.0, 6.0),
+    "I2": (9.0, 13.0, 6.5, 5.0, 6.0, 5.0),
+    "C": (10.0, 17.0, 7.5, 5.5, 8.0, 7.0),
+    "PM1": (8.5, 14.0, 7.0, 5.0, 9.0, 8.0),
+    "PM2": (8.5, 14.0, 7.0, 5.0, 9.0, 8.0),
+    "M1": (7.5, 12.5, 10.0, 8.0, 11.0, 10.0),
+    "M2": (7.0, 11.5, 9.0, 7.0, 11.0, 10.0),
+    "M3": (6.5, 11.0, 8.5, 6.5, 10.0, 9.5),
 }
 LOWER_DIMS = {
-    "I1": (9.0, 12.5, 5.0, 3.5, 6.0, 5.3), "I2": (9.5, 14.0, 5.5, 4.0, 6.5, 5.8),
-    "C": (11.0, 16.0, 7.0, 5.5, 7.5, 7.0), "PM1": (8.5, 14.0, 7.0, 5.0, 7.5, 6.5),
-    "PM2": (8.0, 14.5, 7.0, 5.0, 8.0, 7.0), "M1": (7.5, 14.0, 11.0, 9.0, 10.5, 9.0),
-    "M2": (7.0, 13.0, 10.5, 8.0, 10.0, 9.0), "M3": (7.0, 11.0, 10.0, 7.5, 9.5, 9.0),
+    "I1": (9.0, 12.5, 5.0, 3.5, 6.0, 5.3),
+    "I2": (9.5, 14.0, 5.5, 4.0, 6.5, 5.8),
+    "C": (11.0, 16.0, 7.0, 5.5, 7.5, 7.0),
+    "PM1": (8.5, 14.0, 7.0, 5.0, 7.5, 6.5),
+    "PM2": (8.0, 14.5, 7.0, 5.0, 8.0, 7.0),
+    "M1": (7.5, 14.0, 11.0, 9.0, 10.5, 9.0),
+    "M2": (7.0, 13.0, 10.5, 8.0, 10.0, 9.0),
+    "M3": (7.0, 11.0, 10.0, 7.5, 9.5, 9.0),
 }
 #: long-axis inclination to the vertical (deg, crown tipped labially/buccally)
-INCLINATION = {"I1": 20.0, "I2": 18.0, "C": 10.0, "PM1": 5.0, "PM2": 3.0, "M1": 0.0, "M2": -3.0, "M3": -5.0}
-LOWER_INCLINATION = {"I1": 24.0, "I2": 22.0, "C": 12.0, "PM1": 6.0, "PM2": 3.0, "M1": 0.0, "M2": -4.0, "M3": -6.0}
+INCLINATION = {
+    "I1": 20.0,
+    "I2": 18.0,
+    "C": 10.0,
+    "PM1": 5.0,
+    "PM2": 3.0,
+    "M1": 0.0,
+    "M2": -3.0,
+    "M3": -5.0,
+}
+LOWER_INCLINATION = {
+    "I1": 24.0,
+    "I2": 22.0,
+    "C": 12.0,
+    "PM1": 6.0,
+    "PM2": 3.0,
+    "M1": 0.0,
+    "M2": -4.0,
+    "M3": -6.0,
+}
 #: vertical overlap beyond the occlusal plane (mm; upper tips below it, lower tips above it)
 OVERLAP = {"I1": 1.0, "I2": 0.8}
 #: horizontal inset of the lower arch from the upper one, by tooth of the upper arch (mm)
@@ -116,7 +150,7 @@ def _arch(ctrl_xz: np.ndarray, y_of_z, widths, start: float):
 def _inset(ctrl_xz: np.ndarray, inset: np.ndarray) -> np.ndarray:
     """Offset a left half-arch polyline (x, z) inward by ``inset`` mm per point."""
     full = np.vstack([ctrl_xz[:0:-1] * [-1, 1], ctrl_xz])
-    tang = np.gradient(full, axis=0)[len(ctrl_xz) - 1:]
+    tang = np.gradient(full, axis=0)[len(ctrl_xz) - 1 :]
     normal = np.column_stack([tang[:, 1], -tang[:, 0]])
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     out = ctrl_xz + inset[:, None] * normal
@@ -152,16 +186,32 @@ def dental_arches(params: dict) -> list[Tooth]:
             tip = p[i] - OVERLAP.get(name, 0.0) * up + 0.2 * up
             for side, sx in (("l", 1.0), ("r", -1.0)):
                 m = np.array([sx, 1.0, 1.0])
-                teeth.append(Tooth(f"{jaw}_{name}_{side}", jaw, name, side, tip * m, axis * m,
-                                   -t[i] * m, labial * m, crown, root, md, mdc, ll, llc))
+                teeth.append(
+                    Tooth(
+                        f"{jaw}_{name}_{side}",
+                        jaw,
+                        name,
+                        side,
+                        tip * m,
+                        axis * m,
+                        -t[i] * m,
+                        labial * m,
+                        crown,
+                        root,
+                        md,
+                        mdc,
+                        ll,
+                        llc,
+                    )
+                )
     return teeth
 
 
 # ---------------------------------------------------------------- tooth solids
-def _loft(m, l, h, hs, a, b, p=2.6):
+def _loft(m, bl, h, hs, a, b, p=2.6):
     """Superellipse cross-sections (half sizes ``a``, ``b`` at heights ``hs``) stacked along h."""
     aa, bb = np.interp(h, hs, a), np.interp(h, hs, b)
-    um, ul = np.abs(m / aa) + 1e-9, np.abs(l / bb) + 1e-9
+    um, ul = np.abs(m / aa) + 1e-9, np.abs(bl / bb) + 1e-9
     q = (um**p + ul**p) ** (1.0 / p)
     grad = q ** (1.0 - p) * np.hypot(um ** (p - 1.0) / aa, ul ** (p - 1.0) / bb)
     d2 = (q - 1.0) / np.maximum(grad, 1e-6)  # first-order distance to the section outline
@@ -178,34 +228,76 @@ def tooth_sdf(tooth: Tooth):
 
     def f(x, y, z):
         px, py, pz = x - tooth.tip[0], y - tooth.tip[1], z - tooth.tip[2]
-        m, l, h = (R[i, 0] * px + R[i, 1] * py + R[i, 2] * pz for i in range(3))
-        l = l * np.where(l < 0, 1.15, 1.0)  # crowns are thinner and narrower lingually
-        m = m * (1.0 + (0.45 if kind in "IC" else 0.15) * np.clip(-l / B, 0.0, 1.0))
+        m, bl, h = (R[i, 0] * px + R[i, 1] * py + R[i, 2] * pz for i in range(3))
+        bl = bl * np.where(bl < 0, 1.15, 1.0)  # crowns are thinner and narrower lingually
+        m = m * (1.0 + (0.45 if kind in "IC" else 0.15) * np.clip(-bl / B, 0.0, 1.0))
         if kind == "I":  # chisel-shaped: thin at the incisal edge
-            crown = _loft(m, l, h, [0.4, 0.25 * c, 0.7 * c, c],
-                          [A * 0.92 - 0.4, A - 0.4, A * 0.95 - 0.4, Ac - 0.4],
-                          [0.45, 0.45 * B - 0.1, B - 0.4, Bc - 0.4], p=2.6) - 0.4
+            crown = (
+                _loft(
+                    m,
+                    bl,
+                    h,
+                    [0.4, 0.25 * c, 0.7 * c, c],
+                    [A * 0.92 - 0.4, A - 0.4, A * 0.95 - 0.4, Ac - 0.4],
+                    [0.45, 0.45 * B - 0.1, B - 0.4, Bc - 0.4],
+                    p=2.6,
+                )
+                - 0.4
+            )
         elif kind == "C":  # pointed cusp
-            crown = _loft(m, l, h, [0.4, 0.3 * c, 0.65 * c, c], [0.5, A * 0.85 - 0.4, A - 0.4, Ac - 0.4],
-                          [0.5, B * 0.8 - 0.4, B - 0.4, Bc - 0.4], p=2.4) - 0.4
+            crown = (
+                _loft(
+                    m,
+                    bl,
+                    h,
+                    [0.4, 0.3 * c, 0.65 * c, c],
+                    [0.5, A * 0.85 - 0.4, A - 0.4, Ac - 0.4],
+                    [0.5, B * 0.8 - 0.4, B - 0.4, Bc - 0.4],
+                    p=2.4,
+                )
+                - 0.4
+            )
         else:  # premolar / molar: occlusal table with cusps
-            crown = _loft(m, l, h, [0.5, 0.12 * c, 0.45 * c, c],
-                          [A * 0.72 - 0.5, A * 0.93 - 0.5, A - 0.5, Ac - 0.5],
-                          [B * 0.72 - 0.5, B * 0.95 - 0.5, B - 0.5, Bc - 0.5], p=2.8) - 0.5
-            groove = (np.abs(l) - 0.6) if kind == "P" else np.minimum(np.abs(l) - 0.6, np.abs(m) - 0.6)
+            crown = (
+                _loft(
+                    m,
+                    bl,
+                    h,
+                    [0.5, 0.12 * c, 0.45 * c, c],
+                    [A * 0.72 - 0.5, A * 0.93 - 0.5, A - 0.5, Ac - 0.5],
+                    [B * 0.72 - 0.5, B * 0.95 - 0.5, B - 0.5, Bc - 0.5],
+                    p=2.8,
+                )
+                - 0.5
+            )
+            groove = (
+                (np.abs(bl) - 0.6) if kind == "P" else np.minimum(np.abs(bl) - 0.6, np.abs(m) - 0.6)
+            )
             fossa = np.maximum(groove, h - 1.5)
             crown = smax(crown, -fossa, 0.8)
-        root = _loft(m, l, h, [c - 0.5, c + 0.45 * r, c + r], [Ac * 0.95, Ac * 0.75, 0.8],
-                     [Bc * 0.95, Bc * 0.8, 1.0], p=2.0)
+        root = _loft(
+            m,
+            bl,
+            h,
+            [c - 0.5, c + 0.45 * r, c + r],
+            [Ac * 0.95, Ac * 0.75, 0.8],
+            [Bc * 0.95, Bc * 0.8, 1.0],
+            p=2.0,
+        )
         if kind == "M":  # mesial and distal roots: cut the furcation
-            furcation = _loft(m, l, h, [c + 0.3 * r, c + r + 1.0], [Ac * 0.2, Ac * 0.45],
-                              [Bc * 1.3, Bc * 1.3])
+            furcation = _loft(
+                m, bl, h, [c + 0.3 * r, c + r + 1.0], [Ac * 0.2, Ac * 0.45], [Bc * 1.3, Bc * 1.3]
+            )
             root = smax(root, -furcation, 0.5)
         return smin(crown, root, 0.6)
 
     ext = c + r + 1.0
-    corners = [tooth.tip + sm * A * 1.2 * tooth.mesial + sb * B * 1.3 * tooth.buccal + sh * tooth.axis
-               for sm in (-1, 1) for sb in (-1, 1) for sh in (-1.0, ext)]
+    corners = [
+        tooth.tip + sm * A * 1.2 * tooth.mesial + sb * B * 1.3 * tooth.buccal + sh * tooth.axis
+        for sm in (-1, 1)
+        for sb in (-1, 1)
+        for sh in (-1.0, ext)
+    ]
     return f, np.min(corners, axis=0) - 1.0, np.max(corners, axis=0) + 1.0
 
 
@@ -219,8 +311,9 @@ def teeth_mesh(teeth: list[Tooth], jaw: str, h: float = 0.35, target_per_tooth: 
     for f, a, b in sdfs:
         grid.union(Function(f, a, b))
     field, origin = grid.full()
-    return mesh_from_field(field, origin, h, smooth=4, target=target_per_tooth * 2 * len(mine),
-                           keep_all=True)
+    return mesh_from_field(
+        field, origin, h, smooth=4, target=target_per_tooth * 2 * len(mine), keep_all=True
+    )
 
 
 # ---------------------------------------------------------------- tongue
@@ -236,8 +329,10 @@ def _teeth_distance(teeth: list[Tooth], points: np.ndarray) -> np.ndarray:
             out[near] = np.minimum(out[near], f(q[near, 0], q[near, 1], q[near, 2]))
     return out
 
-def tongue_mesh(teeth: list[Tooth], h: float = 0.8, target: int = 3000, avoid=None,
-                clearance: float = 1.0) -> Mesh:
+
+def tongue_mesh(
+    teeth: list[Tooth], h: float = 0.8, target: int = 3000, avoid=None, clearance: float = 1.0
+) -> Mesh:
     """A rounded tongue resting inside the lower arch, its dorsum just below the occlusal plane.
 
     Built from the lower teeth: the body fills the arch from behind the

@@ -34,10 +34,22 @@ from workbench.io.mesh_formats._common import (
 )
 
 _TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 _FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
 _FACE_LISTS = ("vertex_indices", "vertex_index")
@@ -140,7 +152,7 @@ def _read_ascii(r: Reader, elements: list[_Element], start: int) -> ParsedMesh:
             n = el.count * width
             if pos + n > len(values):
                 raise r.truncated(f"the {el.name} element")
-            table = values[pos:pos + n].reshape(el.count, width)
+            table = values[pos : pos + n].reshape(el.count, width)
             pos += n
             if el.name == "vertex":
                 vertices = table[:, _xyz_columns(r, el)]
@@ -168,9 +180,9 @@ def _ascii_rows(
         width = len(props) + int(c)
         n = el.count * width
         if c >= 0 and pos + n <= len(values):
-            table = values[pos:pos + n].reshape(el.count, width)
+            table = values[pos : pos + n].reshape(el.count, width)
             if np.all(table[:, wanted] == c):
-                flat = table[:, wanted + 1:wanted + 1 + int(c)].ravel()
+                flat = table[:, wanted + 1 : wanted + 1 + int(c)].ravel()
                 return np.full(el.count, int(c)), flat, pos + n
     counts = np.empty(el.count, np.int64)
     chunks = []
@@ -184,7 +196,7 @@ def _ascii_rows(
                     raise r.truncated(f"the {el.name} element")
                 if i == wanted:
                     counts[row] = k
-                    chunks.append(values[pos + 1:pos + 1 + k])
+                    chunks.append(values[pos + 1 : pos + 1 + k])
                 pos += 1 + k
             else:
                 pos += 1
@@ -239,7 +251,7 @@ def _binary_rows(
     if pos + el.count * dtype.itemsize <= len(r.data):
         table = np.frombuffer(r.data, dtype, el.count, pos)
         lists = [i for i, p in enumerate(props) if p.count_dtype]
-        if all(np.all(table[f"c{i}"] == c) for i, c in zip(lists, first)):
+        if all(np.all(table[f"c{i}"] == c) for i, c in zip(lists, first, strict=False)):
             flat = table[f"p{wanted}"].reshape(-1).astype(np.int64)
             counts = np.full(el.count, first[lists.index(wanted)])
             return counts, flat, pos + el.count * dtype.itemsize
@@ -306,8 +318,9 @@ def header_comments(source: str | PathLike[str] | bytes) -> list[str]:
             data = stream.read(_HEADER_LIMIT)
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
-        raise Reader(path, data, "PLY").fail("not a PLY file (missing 'ply' magic line or "
-                                             "'end_header')")
+        raise Reader(path, data, "PLY").fail(
+            "not a PLY file (missing 'ply' magic line or 'end_header')"
+        )
     return _comments(data, end)
 
 
@@ -326,7 +339,10 @@ def _comment_lines(comments: Iterable[str]) -> str:
 
 
 def encode(
-    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, comments: Iterable[str] = (),
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    binary: bool = True,
+    comments: Iterable[str] = (),
     units: str = "mm",
 ) -> bytes:
     """PLY bytes: binary little endian (default) or ascii, double vertices.
@@ -338,7 +354,7 @@ def encode(
     """
     fmt = "binary_little_endian" if binary else "ascii"
     units_note = UNITS_NOTE if units == "mm" else f"units: {units}"
-    _comment_lines([units_note])   # one line of ASCII text, like the other comments
+    _comment_lines([units_note])  # one line of ASCII text, like the other comments
     header = (
         f"ply\nformat {fmt} 1.0\ncomment {units_note}\ncomment written by {WRITER_NAME}\n"
         f"{_comment_lines(comments)}"
@@ -356,7 +372,10 @@ def encode(
 
 
 def write(
-    path: str | PathLike[str], mesh: Mesh, binary: bool = True, comments: Iterable[str] = (),
+    path: str | PathLike[str],
+    mesh: Mesh,
+    binary: bool = True,
+    comments: Iterable[str] = (),
     units: str = "mm",
 ) -> Path:
     """Write a PLY mesh (vertices in mm) atomically with extra header ``comments``.
@@ -376,8 +395,9 @@ def write(
         raise InputError(path, "the folder does not exist", "create it first")
     if path.is_dir():
         raise InputError(path, "is a folder, cannot write a mesh file there")
-    payload = encode(mesh.vertices, np.asarray(mesh.faces), binary=binary, comments=comments,
-                     units=units)
+    payload = encode(
+        mesh.vertices, np.asarray(mesh.faces), binary=binary, comments=comments, units=units
+    )
     try:
         _atomic_write(path, payload)
     except OSError as exc:

@@ -25,12 +25,27 @@ from workbench.io.mesh_formats._common import (
 )
 
 _TYPES = {
-    "float": "f4", "double": "f8", "char": "i1", "unsigned_char": "u1",
-    "short": "i2", "unsigned_short": "u2", "int": "i4", "unsigned_int": "u4",
-    "long": "i8", "unsigned_long": "u8", "vtkidtype": "i8",
-    "vtktypeint8": "i1", "vtktypeuint8": "u1", "vtktypeint16": "i2", "vtktypeuint16": "u2",
-    "vtktypeint32": "i4", "vtktypeuint32": "u4", "vtktypeint64": "i8", "vtktypeuint64": "u8",
-    "vtktypefloat32": "f4", "vtktypefloat64": "f8",
+    "float": "f4",
+    "double": "f8",
+    "char": "i1",
+    "unsigned_char": "u1",
+    "short": "i2",
+    "unsigned_short": "u2",
+    "int": "i4",
+    "unsigned_int": "u4",
+    "long": "i8",
+    "unsigned_long": "u8",
+    "vtkidtype": "i8",
+    "vtktypeint8": "i1",
+    "vtktypeuint8": "u1",
+    "vtktypeint16": "i2",
+    "vtktypeuint16": "u2",
+    "vtktypeint32": "i4",
+    "vtktypeuint32": "u4",
+    "vtktypeint64": "i8",
+    "vtktypeuint64": "u8",
+    "vtktypefloat32": "f4",
+    "vtktypefloat64": "f8",
 }
 _CELLS = ("VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS")
 _SECTIONS = (*_CELLS, "POINTS", "POINT_DATA", "CELL_DATA", "FIELD", "METADATA")
@@ -102,7 +117,7 @@ class _Tokens:
     def words(self, k: int) -> list[bytes]:
         if self.i + k > len(self.tokens):
             raise self.r.truncated("a section header")
-        out = self.tokens[self.i:self.i + k]
+        out = self.tokens[self.i : self.i + k]
         self.i += k
         return out
 
@@ -112,7 +127,7 @@ class _Tokens:
     def array(self, count: int, dtype: str, what: str) -> np.ndarray:
         if self.i + count > len(self.tokens):
             raise self.r.truncated(what)
-        chunk = np.array(self.tokens[self.i:self.i + count])
+        chunk = np.array(self.tokens[self.i : self.i + count])
         self.i += count
         if dtype.startswith("f"):
             return self.r.to_float(chunk, what)
@@ -142,7 +157,7 @@ class _Bytes:
         self._skip_space()
         end = self.r.data.find(b"\n", self.pos)
         end = len(self.r.data) if end < 0 else end
-        words = self.r.data[self.pos:end].split()
+        words = self.r.data[self.pos : end].split()
         self.pos = end + 1
         return words
 
@@ -155,7 +170,7 @@ class _Bytes:
     def peek(self) -> bytes:
         self._skip_space()
         end = self.r.data.find(b"\n", self.pos)
-        words = self.r.data[self.pos:end if end >= 0 else None].split()
+        words = self.r.data[self.pos : end if end >= 0 else None].split()
         return words[0] if words else b""
 
     def array(self, count: int, dtype: str, what: str) -> np.ndarray:
@@ -169,7 +184,7 @@ class _Bytes:
             if end < 0:
                 self.pos = len(self.r.data)
                 return
-            line = self.r.data[self.pos:end].strip()
+            line = self.r.data[self.pos : end].strip()
             self.pos = end + 1
             if not line:
                 return

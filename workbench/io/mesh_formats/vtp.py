@@ -31,10 +31,21 @@ from workbench.io.mesh_formats._common import (
 from workbench.io.mesh_formats.vtk_legacy import strips_to_triangles
 
 _TYPES = {
-    "Int8": "i1", "UInt8": "u1", "Int16": "i2", "UInt16": "u2", "Int32": "i4", "UInt32": "u4",
-    "Int64": "i8", "UInt64": "u8", "Float32": "f4", "Float64": "f8",
+    "Int8": "i1",
+    "UInt8": "u1",
+    "Int16": "i2",
+    "UInt16": "u2",
+    "Int32": "i4",
+    "UInt32": "u4",
+    "Int64": "i8",
+    "UInt64": "u8",
+    "Float32": "f4",
+    "Float64": "f8",
 }
-_DECOMPRESS: dict[str, Callable[[bytes], bytes]] = {"vtkZLibDataCompressor": zlib.decompress, "vtkLZMADataCompressor": lzma.decompress}
+_DECOMPRESS: dict[str, Callable[[bytes], bytes]] = {
+    "vtkZLibDataCompressor": zlib.decompress,
+    "vtkLZMADataCompressor": lzma.decompress,
+}
 
 
 def _b64len(n_bytes: int) -> int:
@@ -76,40 +87,40 @@ class _Context:
         """Header ints and payload from base64, header encoded separately or jointly."""
         hs = self.header.itemsize
         n_first = 3 if self.compressor else 1
-        first = self._ints(self._b64(text[:_b64len(n_first * hs)], what), n_first, what)
+        first = self._ints(self._b64(text[: _b64len(n_first * hs)], what), n_first, what)
         n_header = 3 + first[0] if self.compressor else 1
         h_bytes = n_header * hs
         hl = _b64len(h_bytes)
         header = self._ints(self._b64(text[:hl], what), n_header, what)
         size = sum(header[3:]) if self.compressor else header[0]
-        if h_bytes % 3 == 0 or text[hl - 1:hl] == "=":  # header stream stands alone
-            payload = self._b64(text[hl:hl + _b64len(size)], what)
+        if h_bytes % 3 == 0 or text[hl - 1 : hl] == "=":  # header stream stands alone
+            payload = self._b64(text[hl : hl + _b64len(size)], what)
         else:  # header and data encoded as one stream
-            payload = self._b64(text[:_b64len(h_bytes + size)], what)[h_bytes:]
+            payload = self._b64(text[: _b64len(h_bytes + size)], what)[h_bytes:]
         if len(payload) < size:
             raise self.r.truncated(what)
         return header, payload[:size]
 
     def _payload_from_raw(self, offset: int, what: str) -> tuple[list[int], bytes]:
         hs, buf = self.header.itemsize, self.appended
-        n_header = 3 + self._ints(buf[offset:offset + hs], 1, what)[0] if self.compressor else 1
-        header = self._ints(buf[offset:offset + n_header * hs], n_header, what)
+        n_header = 3 + self._ints(buf[offset : offset + hs], 1, what)[0] if self.compressor else 1
+        header = self._ints(buf[offset : offset + n_header * hs], n_header, what)
         size = sum(header[3:]) if self.compressor else header[0]
         start = offset + n_header * hs
         if start + size > len(buf):
             raise self.r.truncated(what)
-        return header, buf[start:start + size]
+        return header, buf[start : start + size]
 
     def _inflate(self, header: list[int], payload: bytes, what: str) -> bytes:
         if not self.compressor:
             return payload
         n_blocks, block, last = header[:3]
-        sizes = header[3:3 + n_blocks]
+        sizes = header[3 : 3 + n_blocks]
         expected = (n_blocks - 1) * block + (last or block) if n_blocks else 0
         out, pos = [], 0
         try:
             for size in sizes:
-                out.append(_DECOMPRESS[self.compressor](payload[pos:pos + size]))
+                out.append(_DECOMPRESS[self.compressor](payload[pos : pos + size]))
                 pos += size
         except (zlib.error, lzma.LZMAError):
             raise self.r.fail(f"compressed data in {what} are damaged") from None
@@ -164,10 +175,10 @@ def _split_appended(r: Reader) -> tuple[bytes, bytes, str]:
     underscore = data.find(b"_", tag_end, close)
     if underscore < 0:
         raise r.fail("the appended data block does not start with '_'")
-    payload = data[underscore + 1:close]
+    payload = data[underscore + 1 : close]
     if encoding == "base64":
         payload = b"".join(payload.split())
-    return data[:tag_end + 1] + data[close:], payload, encoding
+    return data[: tag_end + 1] + data[close:], payload, encoding
 
 
 def _cells(

@@ -63,10 +63,10 @@ class DataSpec:
     dtype: np.dtype
 
 
-def open_header(path: Path):  # noqa: ANN201 - a binary file object
+def open_header(path: Path):
     """Open a header file for reading, turning OS errors into :class:`InputError`."""
     try:
-        return open(path, "rb")  # noqa: SIM115 - the caller closes it with 'with'
+        return open(path, "rb")
     except FileNotFoundError:
         raise InputError(path, "file not found") from None
     except OSError as exc:

@@ -75,8 +75,9 @@ def _float_list(ds, tag: str, n: int, path: Path) -> np.ndarray:
     return values
 
 
-def _pick_series(folder: Path, headers: list[tuple[Path, Dataset]], wanted: str | None
-                 ) -> tuple[str, list[tuple[Path, Dataset]], list[dict[str, Any]]]:
+def _pick_series(
+    folder: Path, headers: list[tuple[Path, Dataset]], wanted: str | None
+) -> tuple[str, list[tuple[Path, Dataset]], list[dict[str, Any]]]:
     groups: dict[str, list[tuple[Path, Dataset]]] = defaultdict(list)
     for f, ds in headers:
         groups[str(ds.SeriesInstanceUID)].append((f, ds))
@@ -176,7 +177,7 @@ def _pixels(series) -> tuple[list[np.ndarray], list[float], list[float]]:
         try:
             ds = pydicom.dcmread(f)
             arr = ds.pixel_array
-        except Exception as exc:  # pydicom raises various errors for undecodable data
+        except Exception as exc:  # noqa: BLE001 - pydicom raises many types for undecodable data
             raise InputError(
                 f,
                 f"cannot decode the pixel data: {exc}",

@@ -23,7 +23,14 @@ import numpy as np
 from workbench.core.errors import InputError
 from workbench.core.volume import Volume
 
-from ._common import DataSpec, check_sizes, expand_file_pattern, open_header, parse_floats, read_block
+from ._common import (
+    DataSpec,
+    check_sizes,
+    expand_file_pattern,
+    open_header,
+    parse_floats,
+    read_block,
+)
 
 _ELEMENT_TYPES = {
     "MET_CHAR": "i1",

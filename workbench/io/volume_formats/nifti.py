@@ -22,7 +22,7 @@ _SPACE_UNITS_TO_MM = {"mm": 1.0, "meter": 1000.0, "micron": 1e-3, "unknown": 1.0
 def _header_text(header, key: str) -> str:
     try:
         value = np.asarray(header[key]).item()
-    except Exception:
+    except Exception:  # noqa: BLE001 - a header field nibabel cannot give: shown as empty
         return ""
     return value.decode("latin-1").strip("\x00 ") if isinstance(value, bytes) else str(value)
 
@@ -56,7 +56,7 @@ def read_nifti(path: Path) -> Volume:
         raise InputError(path, "file not found")
     try:
         img = nib.load(str(path))
-    except Exception as exc:  # nibabel raises many types for bad files
+    except Exception as exc:  # noqa: BLE001 - nibabel raises many types for bad files
         raise InputError(path, f"cannot read NIfTI file: {exc}") from None
     if not isinstance(img, SpatialImage):
         raise InputError(path, f"not a volume image ({type(img).__name__})")
@@ -72,7 +72,7 @@ def read_nifti(path: Path) -> Volume:
     inter = float(getattr(proxy, "inter", 0.0))
     try:
         raw = np.asarray(proxy.get_unscaled() if hasattr(proxy, "get_unscaled") else proxy)
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - damaged data: any nibabel/numpy error
         raise InputError(path, f"cannot read the NIfTI voxel data: {exc}") from None
     if raw.dtype.kind not in "iuf":
         raise InputError(path, f"unsupported NIfTI voxel type {raw.dtype}")
@@ -97,9 +97,11 @@ def read_nifti(path: Path) -> Volume:
     codes = {}
     if isinstance(header, Nifti1Header):
         try:
-            codes = {"sform_code": int(header["sform_code"]),
-                     "qform_code": int(header["qform_code"])}
-        except Exception:  # pragma: no cover - NIfTI-2 headers without codes
+            codes = {
+                "sform_code": int(header["sform_code"]),
+                "qform_code": int(header["qform_code"]),
+            }
+        except Exception:  # noqa: BLE001 # pragma: no cover - NIfTI-2 headers without codes
             pass
     metadata = {
         "format": "NIfTI",

@@ -29,7 +29,15 @@ import numpy as np
 from workbench.core.errors import InputError
 from workbench.core.volume import Volume
 
-from ._common import DataSpec, ENCODINGS, check_sizes, expand_file_pattern, open_header, parse_floats, read_block
+from ._common import (
+    DataSpec,
+    ENCODINGS,
+    check_sizes,
+    expand_file_pattern,
+    open_header,
+    parse_floats,
+    read_block,
+)
 
 _TYPES: dict[str, str] = {}
 for _names, _dt in [

@@ -12,16 +12,27 @@ from typing import TYPE_CHECKING
 
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
-    QHeaderView, QLabel, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
 )
 
 if TYPE_CHECKING:
     from workbench.services.compare import Comparison
 
-FIGURE_ROWS = (("mean_abs_mm", "mean |distance|", "mm"), ("rms_mm", "RMS", "mm"),
-               ("signed_mean_mm", "mean signed", "mm"), ("pct_within_2_5mm", "within 2.5 mm", "%"),
-               ("pct_within_5mm", "within 5 mm", "%"), ("coverage", "coverage", ""),
-               ("n_vertices", "vertices compared", ""))
+FIGURE_ROWS = (
+    ("mean_abs_mm", "mean |distance|", "mm"),
+    ("rms_mm", "RMS", "mm"),
+    ("signed_mean_mm", "mean signed", "mm"),
+    ("pct_within_2_5mm", "within 2.5 mm", "%"),
+    ("pct_within_5mm", "within 5 mm", "%"),
+    ("coverage", "coverage", ""),
+    ("n_vertices", "vertices compared", ""),
+)
 
 
 class ComparePanel(QWidget):
@@ -56,19 +67,25 @@ class ComparePanel(QWidget):
         """Figures of a :class:`~workbench.services.compare.Comparison` (None clears)."""
         if comparison is None:
             self.table.setRowCount(0)
-            self.source.setText(f"{name}: waiting for a reconstruction" if name
-                                else "No true skin loaded.")
+            self.source.setText(
+                f"{name}: waiting for a reconstruction" if name else "No true skin loaded."
+            )
             return
-        self.source.setText(f"True skin: {name}<br>positive = reconstruction outside the "
-                            "true skin (too much tissue)")
+        self.source.setText(
+            f"True skin: {name}<br>positive = reconstruction outside the "
+            "true skin (too much tissue)"
+        )
         figs = comparison.figures
         rows = [(label, figs.get(key), unit) for key, label, unit in FIGURE_ROWS]
         for region, f in comparison.regions.items():
             rows.append((f"{region}: mean |d|", f.get("mean_abs_mm"), "mm"))
         self.table.setRowCount(len(rows))
         for i, (label, value, unit) in enumerate(rows):
-            text = "–" if value is None else (f"{value:.2f}" if isinstance(value, float)
-                                             else str(value))
+            text = (
+                "–"
+                if value is None
+                else (f"{value:.2f}" if isinstance(value, float) else str(value))
+            )
             for col, cell in enumerate((label, text, unit)):
                 self.table.setItem(i, col, QTableWidgetItem(cell))
         self.notes.setText("\n".join(comparison.notes))

@@ -16,12 +16,22 @@ from typing import Any
 
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
-    QAbstractItemView, QComboBox, QFormLayout, QHeaderView, QLabel, QPushButton, QTableWidget,
-    QTableWidgetItem, QVBoxLayout, QWidget,
+    QAbstractItemView,
+    QComboBox,
+    QFormLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
 )
 
 from workbench.commands.reconstruction_setup import (
-    SetDepthOverride, SetDowelExclusion, SetDowelSettings,
+    SetDepthOverride,
+    SetDowelExclusion,
+    SetDowelSettings,
 )
 from workbench.core.errors import WorkbenchError
 from workbench.io.tables import list_tables, load_depth_table
@@ -50,8 +60,9 @@ class DowelsPanel(QWidget):
         self.sex_combo.currentTextChanged.connect(lambda v: self._set("sex", v))
         self.build_combo = QComboBox()
         self.build_combo.addItems(list(BUILDS))
-        self.build_combo.setToolTip("slender/normal/obese where the table has such groups; "
-                                    "a number k means mean + k SD")
+        self.build_combo.setToolTip(
+            "slender/normal/obese where the table has such groups; a number k means mean + k SD"
+        )
         self.build_combo.currentTextChanged.connect(lambda v: self._set("build", v))
         form = QFormLayout()
         form.addRow("Depth table", self.table_combo)
@@ -115,8 +126,13 @@ class DowelsPanel(QWidget):
             self.plan_codes = [d.code for d in dowels]
             self.table.setRowCount(len(dowels))
             for row, d in enumerate(dowels):
-                cells = [d.code, "" if d.table_depth_mm is None else f"{d.table_depth_mm:.1f}",
-                         f"{d.depth_mm:.1f}", d.source, ""]
+                cells = [
+                    d.code,
+                    "" if d.table_depth_mm is None else f"{d.table_depth_mm:.1f}",
+                    f"{d.depth_mm:.1f}",
+                    d.source,
+                    "",
+                ]
                 for col, text in enumerate(cells):
                     item = QTableWidgetItem(text)
                     flags = Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsEnabled
@@ -125,15 +141,18 @@ class DowelsPanel(QWidget):
                         item.setToolTip("Type a depth (mm) to override the table")
                     if col == 4:
                         flags |= Qt.ItemFlag.ItemIsUserCheckable
-                        item.setCheckState(Qt.CheckState.Unchecked if d.excluded
-                                           else Qt.CheckState.Checked)
+                        item.setCheckState(
+                            Qt.CheckState.Unchecked if d.excluded else Qt.CheckState.Checked
+                        )
                     item.setFlags(flags)
                     self.table.setItem(row, col, item)
             notes = list(preview.plan.warnings) if preview is not None else []
             self.warnings.setText("\n".join(([problem] if problem else []) + notes))
             if preview is not None and preview.plan.citation:
-                self.citation.setText(f"<b>{preview.plan.table_title}</b> — "
-                                      f"{preview.plan.group_label}<br>{preview.plan.citation}")
+                self.citation.setText(
+                    f"<b>{preview.plan.table_title}</b> — "
+                    f"{preview.plan.group_label}<br>{preview.plan.citation}"
+                )
         finally:
             self._refreshing = False
 

@@ -15,8 +15,18 @@ from __future__ import annotations
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
-    QAbstractItemView, QCheckBox, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel,
-    QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+    QAbstractItemView,
+    QCheckBox,
+    QComboBox,
+    QFormLayout,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
 )
 
 from workbench.commands.landmarks import DeleteLandmark, SetLandmarkStatus
@@ -25,11 +35,22 @@ from workbench.io.catalogue import LandmarkCatalogue
 from workbench.model.reconstruction_setup import Orientation
 from workbench.qt.document import Document
 
-STATUS_TEXT = {"placed": "placed", "suggested": "suggested", "absent": "absent",
-               "missing": "missing"}
+STATUS_TEXT = {
+    "placed": "placed",
+    "suggested": "suggested",
+    "absent": "absent",
+    "missing": "missing",
+}
 STATUS_BG = {"placed": "#d6f5dd", "suggested": "#ffe3c2", "absent": "#e4e4e4", "missing": ""}
-DIRECTIONS = {"auto": None, "+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0),
-              "-y": (0, -1, 0), "+z": (0, 0, 1), "-z": (0, 0, -1)}
+DIRECTIONS = {
+    "auto": None,
+    "+x": (1, 0, 0),
+    "-x": (-1, 0, 0),
+    "+y": (0, 1, 0),
+    "-y": (0, -1, 0),
+    "+z": (0, 0, 1),
+    "-z": (0, 0, -1),
+}
 
 
 class LandmarksPanel(QWidget):
@@ -48,8 +69,9 @@ class LandmarksPanel(QWidget):
     snap_requested = Signal(str)
     suggest_requested = Signal()
 
-    def __init__(self, document: Document, catalogue: LandmarkCatalogue,
-                 parent: QWidget | None = None) -> None:
+    def __init__(
+        self, document: Document, catalogue: LandmarkCatalogue, parent: QWidget | None = None
+    ) -> None:
         super().__init__(parent)
         self.document = document
         self.catalogue = catalogue
@@ -85,16 +107,20 @@ class LandmarksPanel(QWidget):
         self.absent_button.setToolTip("The anatomy is missing or damaged here (A)")
         self.absent_button.clicked.connect(self.mark_absent)
         self.snap_button = QPushButton("Snap")
-        self.snap_button.setToolTip("Move the selected landmark to the feature its definition "
-                                    "names, near where it is, e.g. glabella to the most "
-                                    "anterior midline point (S)")
+        self.snap_button.setToolTip(
+            "Move the selected landmark to the feature its definition "
+            "names, near where it is, e.g. glabella to the most "
+            "anterior midline point (S)"
+        )
         self.snap_button.clicked.connect(self.request_snap)
         self.delete_button = QPushButton("Clear")
         self.delete_button.setToolTip("Forget this landmark (back to missing)")
         self.delete_button.clicked.connect(self.clear_selected)
         self.suggest_button = QPushButton("Suggest the rest")
-        self.suggest_button.setToolTip("Transfer the reference head's landmarks onto this skull; "
-                                       "placed landmarks are kept and guide the transfer")
+        self.suggest_button.setToolTip(
+            "Transfer the reference head's landmarks onto this skull; "
+            "placed landmarks are kept and guide the transfer"
+        )
         self.suggest_button.clicked.connect(self.suggest_requested.emit)
         buttons = QHBoxLayout()
         for b in (self.absent_button, self.snap_button, self.delete_button, self.suggest_button):
@@ -141,7 +167,9 @@ class LandmarksPanel(QWidget):
                 self._cell(row, 3).setText(conf)
                 colour = STATUS_BG[status]
                 for col in range(4):
-                    self._cell(row, col).setBackground(QColor(colour) if colour else QColor(0, 0, 0, 0))
+                    self._cell(row, col).setBackground(
+                        QColor(colour) if colour else QColor(0, 0, 0, 0)
+                    )
             self.summary.setText(", ".join(f"{n} {s}" for s, n in counts.items()))
             orient = self.document.case.orientation
             self.anterior.setCurrentText(_direction_name(orient, "anterior"))
@@ -168,8 +196,9 @@ class LandmarksPanel(QWidget):
             where = " at (" + ", ".join(f"{v:.1f}" for v in lm.position) + ") mm"
         status = lm.status if lm is not None else "missing"
         note = f"<br><i>{lm.description}</i>" if lm is not None and lm.description else ""
-        self.description.setText(f"<b>{entry.name}</b> ({code}) — {status}{where}<br>"
-                                 f"{entry.definition}{note}")
+        self.description.setText(
+            f"<b>{entry.name}</b> ({code}) — {status}{where}<br>{entry.definition}{note}"
+        )
 
     # ------------------------------------------------------------ widgets → commands
     def selected_code(self) -> str:
@@ -183,7 +212,7 @@ class LandmarksPanel(QWidget):
         """Move the selection to the next landmark without a position."""
         lms = self.document.case.landmarks["skull"]
         start = self._row.get(self.selected_code(), -1)
-        order = self.codes[start + 1:] + self.codes[:start + 1]
+        order = self.codes[start + 1 :] + self.codes[: start + 1]
         for code in order:
             lm = lms.get(code)
             if lm is None or lm.status == "missing":

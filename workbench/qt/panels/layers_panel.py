@@ -52,7 +52,8 @@ class LayersPanel(QWidget):
             slider.setMinimumWidth(80)
             slider.setToolTip(f"Opacity of the {title.lower()} layer (%)")
             slider.valueChanged.connect(
-                lambda v, name=layer: self.scene.set_opacity(name, v / 100.0))
+                lambda v, name=layer: self.scene.set_opacity(name, v / 100.0)
+            )
             percent = QLabel()
             percent.setMinimumWidth(36)
             percent.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
@@ -78,8 +79,10 @@ class LayersPanel(QWidget):
             return
         visible, opacity = self.scene.visible[layer], self.scene.opacity[layer]
         percent = round(opacity * 100)
-        for widget, update in ((self.checks[layer], lambda w: w.setChecked(visible)),
-                               (self.sliders[layer], lambda w: w.setValue(percent))):
+        for widget, update in (
+            (self.checks[layer], lambda w: w.setChecked(visible)),
+            (self.sliders[layer], lambda w: w.setValue(percent)),
+        ):
             blocked = widget.blockSignals(True)
             try:
                 update(widget)

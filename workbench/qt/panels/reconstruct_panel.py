@@ -16,8 +16,20 @@ from typing import TYPE_CHECKING
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QAbstractItemView, QCheckBox, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel,
-    QPushButton, QSlider, QSpinBox, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+    QAbstractItemView,
+    QCheckBox,
+    QComboBox,
+    QFormLayout,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QSlider,
+    QSpinBox,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
 )
 
 from workbench.commands.reconstruction_setup import SetGuides
@@ -30,11 +42,13 @@ if TYPE_CHECKING:
     import numpy as np
 
 GUIDE_COLUMNS = ("Guide", "Value mm", "On", "Rule")
-FIGURES = (("max_tip_error_mm", "largest dowel-tip error", "mm"),
-           ("min_tissue_mm", "thinnest tissue over bone", "mm"),
-           ("penetrating_vertices", "skin vertices inside bone", ""),
-           ("refits", "non-penetration refits", ""),
-           ("seconds", "fit time", "s"))
+FIGURES = (
+    ("max_tip_error_mm", "largest dowel-tip error", "mm"),
+    ("min_tissue_mm", "thinnest tissue over bone", "mm"),
+    ("penetrating_vertices", "skin vertices inside bone", ""),
+    ("refits", "non-penetration refits", ""),
+    ("seconds", "fit time", "s"),
+)
 
 
 class ReconstructPanel(QWidget):
@@ -127,7 +141,7 @@ class ReconstructPanel(QWidget):
         """
         stored = self.document.case.guides
         if part != "guides" or stored is None or stored == guides_state(self.guides):
-            return   # (the list shown is what was just stored: an edit in this table)
+            return  # (the list shown is what was just stored: an edit in this table)
         try:
             guides = user_guides(self.document.case)
         except WorkbenchError as exc:
@@ -152,8 +166,9 @@ class ReconstructPanel(QWidget):
                     flags |= Qt.ItemFlag.ItemIsEditable
                 if col == 2:
                     flags |= Qt.ItemFlag.ItemIsUserCheckable
-                    item.setCheckState(Qt.CheckState.Checked if g.enabled
-                                       else Qt.CheckState.Unchecked)
+                    item.setCheckState(
+                        Qt.CheckState.Checked if g.enabled else Qt.CheckState.Unchecked
+                    )
                 item.setFlags(flags)
                 item.setToolTip(f"{g.citation}\n{g.derivation}\nsource: {g.source}")
                 self.guide_table.setItem(row, col, item)
@@ -169,12 +184,17 @@ class ReconstructPanel(QWidget):
             figs = fit.recon.figures
             lines = [f"{label}: {_num(figs.get(key))} {unit}" for key, label, unit in FIGURES]
             if fit.spread is not None:
-                lines.append(f"ensemble spread: median {_num(float(_median(fit.spread)))} mm, "
-                             f"max {_num(float(fit.spread.max()))} mm")
+                lines.append(
+                    f"ensemble spread: median {_num(float(_median(fit.spread)))} mm, "
+                    f"max {_num(float(fit.spread.max()))} mm"
+                )
             lines += [f"note: {w}" for w in fit.warnings]
             self.figures.setText("\n".join(lines))
-            self.predictions.setText("\n".join(
-                f"{p.label}: {p.quantity} {p.value_mm:.1f} mm" for p in fit.predictions[:8]))
+            self.predictions.setText(
+                "\n".join(
+                    f"{p.label}: {p.quantity} {p.value_mm:.1f} mm" for p in fit.predictions[:8]
+                )
+            )
         finally:
             self._refreshing = False
 
@@ -196,8 +216,9 @@ class ReconstructPanel(QWidget):
         elif item.column() == 2:
             self.set_guide(row, enabled=item.checkState() == Qt.CheckState.Checked)
 
-    def set_guide(self, row: int, value: tuple[float, ...] | None = None,
-                  enabled: bool | None = None) -> None:
+    def set_guide(
+        self, row: int, value: tuple[float, ...] | None = None, enabled: bool | None = None
+    ) -> None:
         """Move (or switch) guide ``row`` and store the guide list in the case."""
         from dataclasses import replace
 
