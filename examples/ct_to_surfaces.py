@@ -41,5 +41,7 @@ anterior = np.asarray(anatomy["anterior"], float)
 depth = skin.vertices @ anterior
 face = depth > depth.max() - 40.0
 q = np.percentile(thickness_mm[face], [10, 50, 90])
-print(f"facial soft tissue over {face.sum()} skin vertices: "
-      f"10th {q[0]:.1f} mm, median {q[1]:.1f} mm, 90th {q[2]:.1f} mm")
+print(
+    f"facial soft tissue over {face.sum()} skin vertices: "
+    f"10th {q[0]:.1f} mm, median {q[1]:.1f} mm, 90th {q[2]:.1f} mm"
+)

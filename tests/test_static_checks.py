@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-CHECKED = ["workbench", "tests", "benchmarks"]
+CHECKED = ["workbench", "tests", "benchmarks", "examples"]
 
 
 def _run(*args: str) -> subprocess.CompletedProcess:
