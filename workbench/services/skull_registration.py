@@ -317,10 +317,16 @@ def _carry_landmarks(
 
 def reference_in_frame(head: TemplateHead, reg: SkullRegistration) -> TemplateHead:
     """``head`` scaled by the registration's reference scale and settled in its frame."""
+    k = reg.reference_scale
+    return head_transformed(head, reg.settle @ np.diag([k, k, k, 1.0]))
+
+
+def head_transformed(head: TemplateHead, m: np.ndarray) -> TemplateHead:
+    """``head`` mapped by the similarity ``m`` (4 x 4, mm → mm; e.g. a scale and a settle
+    into a head frame): meshes, landmarks, eye centres and radius, the jaw axis."""
     from dataclasses import replace
 
-    k = reg.reference_scale
-    m = reg.settle @ np.diag([k, k, k, 1.0])
+    k = float(abs(np.linalg.det(m[:3, :3])) ** (1 / 3))
     axis = _apply(m, np.vstack([head.tmj_axis[0], head.tmj_axis[0] + head.tmj_axis[1]]))
     return replace(
         head,

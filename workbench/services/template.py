@@ -103,14 +103,19 @@ def paired_depths(
     skin_codes: set[str],
     table_id: str = DEFAULT_DEPTH_TABLE,
     group: str | None = None,
+    k: float = 0.0,
 ) -> dict[str, tuple[str, float]]:
-    """``{skull code: (skin code, depth mm)}`` for table rows present on both surfaces."""
+    """``{skull code: (skin code, depth mm)}`` for table rows present on both surfaces.
+
+    The depth is the group's mean + ``k`` SD (``k`` = 0: the mean).
+    """
     table = load_depth_table(table_id)
     depths = table.lookup(group)
     out = {}
     for code, skin_code in zip(table.codes, table.skin_codes, strict=True):
         if code in depths and code in skull_codes and skin_code in skin_codes:
-            out[code] = (skin_code, depths[code][0])
+            mean, sd = depths[code]
+            out[code] = (skin_code, mean + k * sd if k else mean)
     return out
 
 

@@ -47,7 +47,7 @@ from workbench.core.errors import InputError
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
-from workbench.core.nonrigid import Level, Target, register, smoothstep
+from workbench.core.nonrigid import Level, Registration, Target, register, smoothstep
 from workbench.core.spatial import MeshIndex
 from workbench.model.evidence import file_sha256
 from workbench.model.template import TemplateHead
@@ -165,11 +165,120 @@ def _carry_on(base_mesh: Mesh, new_mesh: Mesh, points: np.ndarray) -> np.ndarray
     return np.einsum("ij,ijk->ik", cp.barycentric, tri) + (points - cp.points)
 
 
+ABSENT_NOTE = "absent on the target surface: position carried by the warp, not measured"
+
+
+@dataclass(frozen=True)
+class SkinFit:
+    """The reference skin registered onto a skin scan (head frame, mm).
+
+    Attributes
+    ----------
+    registration : Registration
+        ``vertices`` (the fitted skin), per-vertex match ``weights`` and distances.
+    on_scan : (n_skin,) bool
+        Skin vertices the scan supports (weight > :data:`ON_SCAN_WEIGHT`).
+    target_weights : (n_scan,)
+        Per scan vertex belief (:func:`skin_target_weights`).
+    not_head : float
+        Area fraction of the scan that is not the head.
+    """
+
+    registration: Registration
+    on_scan: np.ndarray
+    target_weights: np.ndarray
+    not_head: float
+    warnings: tuple[str, ...] = ()
+
+
+def scan_in_frame(scan: Mesh, to_head: np.ndarray, mirrored: bool) -> Mesh:
+    """``scan`` mapped by ``to_head`` (input → head frame, mm), wound outward."""
+    return outward(
+        Mesh(_apply(to_head, scan.vertices), scan.faces[:, ::-1] if mirrored else scan.faces)
+    )
+
+
+def fit_skin(
+    skin: Mesh,
+    scan_h: Mesh,
+    regions: Mapping[str, np.ndarray],
+    *,
+    levels: Sequence[Level] = SKIN_LEVELS,
+    affine_rounds: int = 0,
+    source: str = "skin",
+    near: str = "the reference head",
+    hint: str | None = None,
+) -> SkinFit:
+    """Register ``skin`` (the reference skin placed in the head frame) onto ``scan_h``.
+
+    Both in the head frame, mm.  Hole and field-of-view rims of the scan and
+    everything far from ``skin`` fade out (:func:`skin_target_weights`), the
+    ears (:data:`UNPROJECTED_REGIONS` of ``regions``) do not look for the
+    scan, and skin over no scan keeps the reference's shape (membrane).
+
+    Raises
+    ------
+    InputError
+        (naming ``source``) when no part of the scan lies near ``skin``.
+    """
+    weights, not_head = skin_target_weights(scan_h, skin)
+    if not (weights > 0.05).any():
+        raise InputError(source, f"no part of the skin surface lies near {near}", hint=hint)
+    warnings = []
+    if not_head > 0.02:
+        warnings.append(
+            f"{100 * not_head:.0f} % of the skin scan is not the head (shoulders, "
+            "head holder, gel, table) and was ignored"
+        )
+    ears = _mask(skin.n_vertices, [regions[r] for r in UNPROJECTED_REGIONS if r in regions])
+    target = Target(scan_h, weights, pull_stride=max(1, int((weights > 0.05).sum()) // 8000))
+    sreg = register(skin, target, levels=levels, active=~ears, affine_rounds=affine_rounds)
+    return SkinFit(sreg, sreg.weights > ON_SCAN_WEIGHT, weights, not_head, tuple(warnings))
+
+
+def carry_skin_landmarks(
+    rest_skin: Mesh, new_skin: Mesh, landmarks: LandmarkSet, on_scan: np.ndarray
+) -> tuple[LandmarkSet, list[str]]:
+    """Skin ``landmarks`` (on ``rest_skin``) moved with the skin to ``new_skin`` (same
+    topology, head frame, mm): same triangle, same barycentric weights.
+
+    Landmarks over skin the scan does not support (``on_scan``) are *absent on
+    the target*: they keep the carried position with :data:`ABSENT_NOTE`.
+    Returns the set and the absent codes.
+    """
+    codes = [lm.code for lm in landmarks if lm.is_defined]
+    if not codes:
+        return landmarks, []
+    pos = landmarks.positions_of(codes)
+    moved = _carry_on(rest_skin, new_skin, pos)
+    support = _carry_on(
+        rest_skin, rest_skin.with_vertices(np.column_stack([on_scan.astype(float)] * 3)), pos
+    )[:, 0]
+    absent = [c for c, s_ in zip(codes, support, strict=True) if s_ < 0.5]
+    new_pos = dict(zip(codes, moved, strict=True))
+    out = LandmarkSet(
+        landmarks.surface,
+        tuple(
+            Landmark(
+                lm.code,
+                new_pos[lm.code],
+                lm.status,
+                lm.confidence,
+                ABSENT_NOTE if lm.code in absent else lm.description,
+            )
+            if lm.code in new_pos
+            else lm
+            for lm in landmarks
+        ),
+    )
+    return out, absent
+
+
 #: changes whenever the build method does (a cached pack of another version is rebuilt)
 BUILD_VERSION = 2
 
 
-def _eyes_behind_lids(
+def eyes_behind_lids(
     carried: TemplateHead, skin_v: np.ndarray, on_scan: np.ndarray
 ) -> dict[int, np.ndarray]:
     """Moves (mm, along z of the head frame) putting each eyeball behind the scanned lids.
@@ -249,26 +358,19 @@ def build_template(
     t = time.perf_counter()
     say("carrying the reference head and registering its skin onto the scan ...")
     carried = carry_head(base, reg)
-    skin_h = outward(
-        Mesh(_apply(to_head, skin.vertices), skin.faces[:, ::-1] if mirrored else skin.faces)
+    skin_h = scan_in_frame(skin, to_head, mirrored)
+    fit = fit_skin(
+        carried.skin,
+        skin_h,
+        base.regions,
+        source="skin",
+        near="the head carried onto the skull",
+        hint="are skin and skull in the same frame and units?",
     )
-    weights, not_head = skin_target_weights(skin_h, carried.skin)
-    if not (weights > 0.05).any():
-        raise InputError(
-            "skin",
-            "no part of the skin surface lies near the head carried onto the skull",
-            hint="are skin and skull in the same frame and units?",
-        )
-    if not_head > 0.02:
-        warnings.append(
-            f"{100 * not_head:.0f} % of the skin scan is not the head (shoulders, "
-            "head holder, gel, table) and was ignored"
-        )
+    warnings += fit.warnings
+    sreg, on_scan = fit.registration, fit.on_scan
+    not_head = fit.not_head
     n_skin = base.skin.n_vertices
-    ears = _mask(n_skin, [base.regions[r] for r in UNPROJECTED_REGIONS if r in base.regions])
-    target = Target(skin_h, weights, pull_stride=max(1, int((weights > 0.05).sum()) // 8000))
-    sreg = register(carried.skin, target, levels=SKIN_LEVELS, active=~ears, affine_rounds=0)
-    on_scan = sreg.weights > ON_SCAN_WEIGHT
     meshes = dict(carried.meshes)
     meshes["cranium"] = reg.meshes["cranium"]
     if reg.part("mandible").present:
@@ -280,13 +382,13 @@ def build_template(
         _mask(n_skin, keep + list(base.openings.values())),
     )
     meshes["skin"] = carried.skin.with_vertices(skin_v)
-    eye_shift = _eyes_behind_lids(carried, skin_v, on_scan)
+    eye_shift = eyes_behind_lids(carried, skin_v, on_scan)
     carried = move_eyes(replace(carried, meshes=meshes), eye_shift)
     meshes = dict(carried.meshes)
     seconds["skin"] = time.perf_counter() - t
 
     # landmarks: skull with the registered skull, skin with the registered skin
-    note = "absent on the target surface: position carried by the warp, not measured"
+    note = ABSENT_NOTE
     absent_skull = [lm.code for lm in reg.landmarks if not lm.is_defined]
     skull_lms = LandmarkSet(
         "skull",
@@ -304,28 +406,8 @@ def build_template(
         ),
     )
     rest = reference_in_frame(base, reg)
-    skin_codes = [lm.code for lm in base.skin_landmarks if lm.is_defined]
-    pos = rest.skin_landmarks.positions_of(skin_codes)
-    moved = _carry_on(rest.skin, meshes["skin"], pos)
-    support = _carry_on(
-        rest.skin, rest.skin.with_vertices(np.column_stack([on_scan.astype(float)] * 3)), pos
-    )[:, 0]
-    absent_skin = [c for c, s_ in zip(skin_codes, support, strict=True) if s_ < 0.5]
-    new_pos = dict(zip(skin_codes, moved, strict=True))
-    skin_lms = LandmarkSet(
-        "skin",
-        tuple(
-            Landmark(
-                lm.code,
-                new_pos[lm.code],
-                lm.status,
-                lm.confidence,
-                note if lm.code in absent_skin else lm.description,
-            )
-            if lm.code in new_pos
-            else lm
-            for lm in base.skin_landmarks
-        ),
+    skin_lms, absent_skin = carry_skin_landmarks(
+        rest.skin, meshes["skin"], rest.skin_landmarks, on_scan
     )
     head = replace(carried, meshes=meshes, skin_landmarks=skin_lms, skull_landmarks=skull_lms)
 

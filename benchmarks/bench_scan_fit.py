@@ -1,0 +1,124 @@
+"""Benchmark: the reference head fitted to scans (issue 13), figures and seconds.
+
+Run ``python benchmarks/bench_scan_fit.py`` from the repository root with
+``../shared/data`` beside the checkout (or WORKBENCH_SAMPLE_MIRRORS set).
+Cases (units mm, each fitted with the built-in male reference head):
+
+* ``headsq``: the skin surface of the VTK headsq CT (``sample:headsq``,
+  :func:`workbench.services.ct_mesh.mesh_from_ct`), its orientation from the
+  sample registry, and its bone surface for the estimated skull vs the true
+  bone (face → skull);
+* ``nefertiti``: the Nefertiti bust scan (``sample:nefertiti``, no stated
+  units: its numbers are close to mm, the bust being about 48 cm tall;
+  orientation from the registry);
+* ``female_damaged``: the built-in female reference skin rotated, with two
+  discs of triangles removed (cheek, glabella);
+* ``female_damaged_mirrored_landmarks``: the same mirrored, oriented by six
+  skin landmarks.
+
+Prints per case: face-region vertices and the fractions within 1 / 2.5 mm,
+mean distance, skin landmarks' distance to the scan, fold-overs, the
+skin–skull distances at the paired landmarks vs the table, skull vs bone
+(headsq), seconds; then all figures as JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "data"
+os.environ.setdefault("WORKBENCH_SAMPLE_MIRRORS", str(SHARED))
+sys.path.insert(0, str(ROOT))
+
+
+def _cases():
+    from tests.services._scans import damaged_skin
+    from workbench.core.landmarks import LandmarkSet
+    from workbench.io.meshes import read_mesh
+    from workbench.io.samples import fetch, registry
+    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.template_cache import reference_head
+
+    def hint(name: str) -> tuple:
+        a = registry()[name].anatomy
+        return (a["anterior"], a["superior"]) + ((a["left"],) if "left" in a else ())
+
+    ct = fetch("headsq")
+    yield (
+        "headsq",
+        lambda: {
+            "scan": mesh_from_ct(ct, "skin").mesh,
+            "bone": mesh_from_ct(ct, "bone").mesh,
+            "orientation": hint("headsq"),
+        },
+    )
+    yield (
+        "nefertiti",
+        lambda: {
+            "scan": read_mesh(fetch("nefertiti"), units="mm", kind="face").mesh,
+            "orientation": hint("nefertiti"),
+        },
+    )
+    female = reference_head("female")
+    yield "female_damaged", lambda: {"scan": damaged_skin(female)[0]}
+
+    def mirrored() -> dict:
+        scan, lms = damaged_skin(female, mirror=True)
+        codes = ("po_l", "po_r", "or_l", "prn", "n", "ch_l")
+        return {"scan": scan, "landmarks": LandmarkSet("skin", tuple(lms[c] for c in codes))}
+
+    yield "female_damaged_mirrored_landmarks", mirrored
+
+
+def main() -> int:
+    from workbench.services.scan_fit import fit_scan
+    from workbench.services.template_cache import reference_head
+
+    base = reference_head("male")
+    out = {}
+    for name, make in _cases():
+        kw = make()
+        t = time.perf_counter()
+        fit = fit_scan(base=base, **kw)
+        wall = time.perf_counter() - t
+        f = fit.figures
+        td = f["tissue_depths"]
+        lm = f["skin_landmark_to_scan_mm"]
+        line = (
+            f"{name:36s} tri {f['scan_triangles']:7d}  face verts {f['face_region_vertices']:6d}  "
+            f"<=1mm {100 * f['face_within_1mm_fraction']:5.1f}%  "
+            f"<=2.5mm {100 * f['face_within_2_5mm_fraction']:5.1f}%  "
+            f"mean {f['face_mean_distance_mm']:.2f} mm  lm->scan {lm['mean']:.2f} mm "
+            f"(n {lm['n']}, absent {len(lm['absent'])})  folds {f['fold_overs']}  "
+            f"depth |diff| {td['mean_abs_diff_mm']:.2f} mm ({td['pairs']} pairs)  "
+            f"mirrored {fit.mirrored_input}  {wall:.1f} s"
+        )
+        if "skull_vs_bone" in f:
+            b = f["skull_vs_bone"]
+            line += (
+                f"\n{'':36s} skull vs bone: mean |d| {b['mean_abs_mm']:.2f} mm, "
+                f"<=2.5mm {100 * b['within_2_5mm_fraction']:.1f}% "
+                f"({b['face_skull_vertices']} face-region skull vertices)"
+            )
+        if "skin_landmark_to_user_mm" in f:
+            u = f["skin_landmark_to_user_mm"]
+            line += (
+                f"\n{'':36s} skin landmarks vs user: mean {u['mean']:.2f}, max {u['max']:.2f} mm"
+            )
+        print(line, flush=True)
+        out[name] = {k: v for k, v in f.items() if k != "tissue_depths"} | {
+            "tissue_depths": {k: v for k, v in td.items() if k != "per_landmark"},
+            "wall_seconds": round(wall, 2),
+            "warnings": list(fit.warnings),
+        }
+    print(json.dumps(out, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,73 @@
+"""``workbench fit-scan`` end to end: a damaged skin in cm, bad scans, an existing pack."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.services._scans import damaged_skin
+from workbench.cli.main import main
+from workbench.core.mesh import Mesh
+from workbench.io.meshes import write_mesh
+from workbench.io.template_pack import load_template_pack
+
+
+@pytest.fixture(scope="module")
+def scan_cm(tmp_path_factory: pytest.TempPathFactory, head_female) -> Path:
+    scan, _ = damaged_skin(head_female)
+    folder = tmp_path_factory.mktemp("cli-fit-scan")
+    return write_mesh(folder / "face_cm.ply", Mesh(scan.vertices / 10.0, scan.faces))
+
+
+@pytest.fixture(scope="module")
+def fitted(scan_cm: Path, head_male) -> tuple[int, Path]:
+    out = scan_cm.parent / "pack"
+    code = main(["fit-scan", str(scan_cm), "--units", "cm", "--sex", "male", "--out", str(out)])
+    return code, out
+
+
+def test_fit_scan_writes_a_pack_and_its_report(fitted, head_male):
+    code, out = fitted
+    assert code == 0
+    report = json.loads((out / "fit_report.json").read_text())
+    assert report["face_within_1mm_fraction"] >= 0.95
+    assert report["fold_overs"] == 0
+    assert report["tissue_depths"]["mean_abs_diff_mm"] < 1.0
+    head = load_template_pack(out)
+    assert head.skin.n_vertices == head_male.skin.n_vertices
+    assert len(head.muscles) == len(head_male.muscles)
+    assert head.provenance["built_from"][0]["file"] == "face_cm.ply"
+    # the person's size in mm (the female skin, not the male reference, not cm)
+    assert 150 < float(np.ptp(head.skin.vertices[:, 1])) < 320
+
+
+def test_existing_pack_is_refused_without_force(fitted, scan_cm, capsys):
+    _, out = fitted
+    before = (out / "fit_report.json").read_bytes()
+    code = main(["fit-scan", str(scan_cm), "--units", "cm", "--out", str(out)])
+    assert code != 0
+    assert str(out.name) in capsys.readouterr().err
+    assert (out / "fit_report.json").read_bytes() == before
+
+
+def test_cm_scan_without_units_is_refused(scan_cm, capsys):
+    code = main(["fit-scan", str(scan_cm), "--out", str(scan_cm.parent / "other")])
+    assert code != 0
+    assert "face_cm.ply" in capsys.readouterr().err
+
+
+def test_point_cloud_and_few_triangles_are_refused_by_name(tmp_path: Path, capsys):
+    rng = np.random.default_rng(0)
+    cloud = tmp_path / "cloud.ply"
+    write_mesh(cloud, Mesh(rng.random((2000, 3)) * 180.0))
+    few = tmp_path / "few.ply"
+    write_mesh(few, Mesh(rng.random((300, 3)) * 180.0, np.arange(600).reshape(200, 3) % 300))
+    for path, words in ((cloud, "cloud.ply"), (few, "few.ply")):
+        code = main(["fit-scan", str(path), "--out", str(tmp_path / f"out_{path.stem}")])
+        err = capsys.readouterr().err
+        assert code != 0
+        assert words in err, err
+    assert "200 triangles" in err

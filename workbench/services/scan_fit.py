@@ -1,0 +1,541 @@
+"""Fit the built-in reference head to a range scan of a living face (issue 13, Kähler §8.4).
+
+A scan (structured light, photogrammetry, a CT's skin surface) shows skin
+only, with holes (hair, under the chin, the ears, nostrils), noise and
+anatomy that is not the head (shoulders, a head holder).  We adapt the
+reference head to it and keep its topology, landmarks, muscles and inner
+parts, so the result is a template pack like ``workbench template build``
+writes:
+
+1. **Orientation and size** (:func:`workbench.core.rigid_search.search_pose`)
+   of the reference *skin* on the scan: from an orientation hint, from three
+   or more skin landmarks the user placed (input frame; their handedness
+   decides a mirrored scan), or by the multi-start search.  The search scores
+   scan samples against the reference robustly (a missing part costs nothing,
+   shoulders and hair saturate), so the face region decides.  The head frame
+   keeps the person's size: the reference is scaled, not the scan.
+2. **Skin** (:func:`workbench.services.template_build.fit_skin`): the scaled
+   reference skin registered onto the scan, per-part affine stage then coarse
+   to fine (:data:`SCAN_LEVELS`); hole and field-of-view rims fade out, skin
+   over no scan keeps the reference's shape (membrane, no jumps), the ears
+   do not look for the scan.  Skin landmarks ride on the skin (same triangle,
+   same barycentric weights); those over no scan are marked absent.
+3. **The inside follows** (Kähler §8.3.2): at each paired skin/skull landmark
+   of the depth table (chosen sex and build) the skull landmark's target is
+   the fitted skin landmark moved *inward* along the skin normal by the
+   table depth.  A regularised thin-plate spline
+   (:func:`workbench.core.tps.fit_warp`) from the carried skull landmarks to
+   these targets moves cranium, mandible, teeth, tongue and eyes (the eyes
+   rigidly with their centres, then behind the fitted lids); the skin stays
+   as fitted.  Muscles are skin triangles + barycentric weights, so they
+   ride on the fitted skin without change.
+4. **Frame**: the result is settled in the Frankfort frame of its estimated
+   skull landmarks (porions, orbitales), like a built template.
+
+Units mm; head frame of the *fitted person* (x to the subject's left,
+x = 0 midsagittal, y up, z toward the face, Frankfort Horizontal at y = 0).
+``ScanFit.input_to_head`` maps the scan file's coordinates (after units)
+into it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from workbench.core.errors import InputError, WorkbenchError
+from workbench.core.frame import apply_transform
+from workbench.core.landmarks import LandmarkSet
+from workbench.core.mesh import Mesh, boundary_loops, concatenate
+from workbench.core.nonrigid import AFFINE_ROUNDS, Level
+from workbench.core.normals import normals_within_radius
+from workbench.core.spatial import MeshIndex
+from workbench.core.tps import fit_warp
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
+from workbench.model.template import TemplateHead
+
+Progress = Callable[[str], None]
+
+#: fewer triangles than this is not a scan of a face
+MIN_SCAN_TRIANGLES = 1000
+#: largest side of a face, head or head-and-shoulders (bust) scan, mm
+SCAN_EXTENT_MM = (60.0, 700.0)
+#: the skin registration's levels on a scan: the template build's, then finer
+SCAN_LEVELS = (
+    Level(24.0, 1.0, 8.0, 6),
+    Level(14.0, 0.6, 5.0, 6),
+    Level(8.0, 0.4, 3.0, 6),
+    Level(5.0, 0.3, 2.0, 6),
+    Level(3.5, 0.25, 1.5, 6),
+    Level(2.5, 0.2, 1.0, 6),
+)
+#: radius over which the skin normal at a landmark is averaged (mm)
+NORMAL_RADIUS_MM = 6.0
+#: regulariser of the inner parts' thin-plate spline
+INNER_SMOOTHING = 2.0
+#: scan vertices this close to a hole or field-of-view rim are not counted (mm)
+RIM_EXCLUDE_MM = 4.0
+#: a scan vertex counts as "the head" in the report when its belief exceeds this
+HEAD_WEIGHT = 0.5
+INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue", "eyes")
+BONE_PARTS = ("cranium", "mandible")
+FIT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ScanFit:
+    """The reference head fitted to a scan.
+
+    Attributes
+    ----------
+    head : TemplateHead
+        In the fitted person's head frame, mm.
+    input_to_head : (4, 4)
+        Scan coordinates (mm) → head frame (a reflection when ``mirrored_input``).
+    skin_on_scan : (n_skin,) bool
+        Skin vertices the scan supports (the rest keep the reference's shape).
+    figures : dict
+        The fit report (distances mm, fractions, seconds).
+    """
+
+    head: TemplateHead
+    input_to_head: np.ndarray
+    mirrored_input: bool
+    skin_on_scan: np.ndarray
+    figures: dict
+    warnings: tuple[str, ...] = ()
+
+    def to_input(self, points: np.ndarray) -> np.ndarray:
+        """Head-frame points back in the scan's coordinates."""
+        return apply_transform(np.linalg.inv(self.input_to_head), np.reshape(points, (-1, 3)))
+
+
+def check_scan_mesh(mesh: Mesh, source: str | PathLike[str]) -> None:
+    """Refuse a point cloud, a few triangles, non-finite vertices or a size not a head's."""
+    if mesh.n_faces == 0:
+        raise InputError(
+            source,
+            f"is a point cloud ({mesh.n_vertices} points, no triangles); a scan must be a "
+            "triangle surface",
+            "mesh it first (e.g. Poisson surface reconstruction in MeshLab or CloudCompare)",
+        )
+    if mesh.n_faces < MIN_SCAN_TRIANGLES:
+        raise InputError(
+            source,
+            f"has only {mesh.n_faces} triangles; a face scan has thousands "
+            f"(at least {MIN_SCAN_TRIANGLES})",
+            "is this the right file?",
+        )
+    bad = int((~np.isfinite(mesh.vertices)).any(axis=1).sum())
+    if bad:
+        raise InputError(source, f"{bad} vertices have NaN or infinite coordinates")
+    used = mesh.vertices[np.unique(mesh.faces)]
+    extent = used.max(axis=0) - used.min(axis=0)
+    lo, hi = SCAN_EXTENT_MM
+    largest = float(extent.max())
+    if not lo <= largest <= hi:
+        raise InputError(
+            source,
+            f"is {' x '.join(f'{v:.4g}' for v in extent)} mm (largest side {largest:.4g} mm); "
+            f"a face, head or bust scan is {lo:.0f}-{hi:.0f} mm",
+            "check --units / --scale: the file's numbers are not in the units given",
+        )
+
+
+def _seed_pairs(
+    landmarks: LandmarkSet | None, base: TemplateHead
+) -> tuple[np.ndarray, np.ndarray] | None:
+    if landmarks is None:
+        return None
+    ref = base.skin_landmarks.as_dict()
+    placed = {lm.code: lm.position for lm in landmarks if lm.is_defined and lm.code in ref}
+    if len(placed) < 3:
+        return None
+    codes = sorted(placed)
+    return np.array([placed[c] for c in codes], float), np.array([ref[c] for c in codes])
+
+
+def _mask(n: int, groups: Sequence) -> np.ndarray:
+    m = np.zeros(n, dtype=bool)
+    for ids in groups:
+        m[np.asarray(ids, dtype=np.int64)] = True
+    return m
+
+
+def _depth_pairs(
+    head: TemplateHead, table: str, sex: str, build: str | float
+) -> tuple[dict[str, tuple[str, float]], str, list[str]]:
+    from workbench.io.tables import load_depth_table
+    from workbench.services.dowel_sites import choose_depth_group
+    from workbench.services.template import paired_depths
+
+    tab = load_depth_table(table)
+    group, k, label, notes = choose_depth_group(tab, None, sex, build)
+    pairs = paired_depths(
+        set(head.skull_landmarks.as_dict()), set(head.skin_landmarks.as_dict()), table, group, k
+    )
+    return pairs, label, notes
+
+
+def _inward_normals(skin: Mesh, points: np.ndarray, codes: Sequence[str]) -> np.ndarray:
+    """Inward unit skin normals at ``points`` (midline landmarks kept in the midsagittal plane)."""
+    n = normals_within_radius(skin, points, NORMAL_RADIUS_MM)
+    mid = np.array([not c.endswith(("_l", "_r")) for c in codes])
+    if mid.any():
+        n[mid, 0] = 0.0
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return -n
+
+
+def fit_scan(
+    scan: Mesh,
+    *,
+    landmarks: LandmarkSet | None = None,
+    sex: str = "male",
+    table: str = DEFAULT_DEPTH_TABLE,
+    build: str | float = "normal",
+    orientation: tuple | None = None,
+    bone: Mesh | None = None,
+    base: TemplateHead | None = None,
+    source: str = "scan",
+    inputs: Sequence[Mapping] = (),
+    progress: Progress | None = None,
+) -> ScanFit:
+    """Adapt the reference head of ``sex`` (or ``base``) to ``scan`` (input frame, mm).
+
+    Parameters
+    ----------
+    landmarks : LandmarkSet, optional
+        Skin landmarks placed on the scan (input frame, mm): three or more
+        orient it (and decide its handedness); all are compared with the
+        fitted ones in the report.
+    table, sex, build : the depth table, its group and variant (mean + k SD)
+        giving the skin–skull distances the inner parts are placed at.
+    orientation : (anterior, superior[, left]) in the scan's coordinates, optional
+    bone : Mesh, optional
+        The true bone surface in the scan's frame (a CT): the estimated skull
+        is compared with it in the report.
+    source : str
+        Name of the scan in error messages (its file).
+    """
+    from workbench.core.rigid_search import search_pose
+    from workbench.services.compare import face_regions
+    from workbench.services.frame import head_frame_from_landmarks
+    from workbench.services.reconstruct import move_eyes, warp_head
+    from workbench.services.skull_registration import head_transformed
+    from workbench.services.template_build import (
+        carry_skin_landmarks,
+        eyes_behind_lids,
+        fit_skin,
+        scan_in_frame,
+    )
+    from workbench.services.template_cache import reference_head
+
+    say = progress or (lambda _m: None)
+    t0 = time.perf_counter()
+    seconds: dict[str, float] = {}
+    check_scan_mesh(scan, source)
+    base = base or reference_head(sex)
+    pairs, depth_label, warnings = _depth_pairs(base, table, sex, build)
+
+    # 1. orientation and size
+    say("orienting the scan ...")
+    seeds = _seed_pairs(landmarks, base)
+    pose = search_pose(scan, base.skin, hint=orientation, seeds=seeds, mirror="auto")
+    s = pose.scale
+    rigid = pose.matrix.copy()
+    rigid[:3] /= s
+    rigid[3] = (0.0, 0.0, 0.0, 1.0)
+    mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
+    rest = head_transformed(base, np.diag([1 / s, 1 / s, 1 / s, 1.0]))
+    scan_h = scan_in_frame(scan, rigid, mirrored)
+    seconds["orientation"] = time.perf_counter() - t0
+
+    # 2. skin
+    t = time.perf_counter()
+    say("registering the reference skin onto the scan ...")
+    fit = fit_skin(
+        rest.skin,
+        scan_h,
+        base.regions,
+        levels=SCAN_LEVELS,
+        affine_rounds=AFFINE_ROUNDS,
+        source=source,
+        near="the reference head placed on it",
+        hint="check the orientation (--anterior/--superior or 3+ --landmarks) and the units",
+    )
+    warnings += list(fit.warnings)
+    on_scan = fit.on_scan
+    skin = rest.skin.with_vertices(fit.registration.vertices)
+    skin_lms, absent_skin = carry_skin_landmarks(rest.skin, skin, rest.skin_landmarks, on_scan)
+    seconds["skin"] = time.perf_counter() - t
+
+    # 3. the inside follows the skin at the table's depths
+    t = time.perf_counter()
+    say("placing skull, teeth, eyes and tongue at the table's tissue depths ...")
+    skin_at = skin_lms.as_dict()
+    skull_at = rest.skull_landmarks.as_dict()
+    codes = [c for c in pairs if c in skull_at and pairs[c][0] in skin_at]
+    if len(codes) < 4:
+        raise InputError(
+            table, f"only {len(codes)} skin/skull landmark pairs: the skull cannot be placed"
+        )
+    skin_pts = np.array([skin_at[pairs[c][0]] for c in codes])
+    depth = np.array([pairs[c][1] for c in codes])
+    inward = _inward_normals(skin, skin_pts, codes)
+    targets = skin_pts + depth[:, None] * inward
+    src = np.array([skull_at[c] for c in codes])
+    warp = fit_warp(src, targets, smoothing=INNER_SMOOTHING)
+    warped = warp_head(rest, warp)
+    meshes = dict(warped.meshes)
+    meshes["skin"] = skin
+    eye_shift = eyes_behind_lids(warped, skin.vertices, on_scan)
+    head = move_eyes(replace(warped, meshes=meshes, skin_landmarks=skin_lms), eye_shift)
+    seconds["inside"] = time.perf_counter() - t
+
+    # 4. settle in the Frankfort frame of the estimated skull
+    try:
+        settle = head_frame_from_landmarks(head.skull_landmarks).input_to_head
+    except WorkbenchError:
+        settle = np.eye(4)
+    head = head_transformed(head, settle)
+    to_head = settle @ rigid
+    scan_h = scan_h.with_vertices(apply_transform(settle, scan_h.vertices))
+    ref_settled = head_transformed(rest, settle)
+
+    # figures
+    say("measuring the fit ...")
+    fig: dict = {}
+    fitted = head.skin
+    face_ids = np.concatenate(list(face_regions(base).values()))
+    face = _mask(fitted.n_vertices, [face_ids])
+    _, nearest = cKDTree(fitted.vertices).query(scan_h.vertices)
+    rim_d = np.full(scan_h.n_vertices, np.inf)
+    loops = boundary_loops(scan_h)
+    if loops:
+        rim_d, _ = cKDTree(scan_h.vertices[np.concatenate(loops)]).query(scan_h.vertices)
+    in_face = face[nearest] & (rim_d > RIM_EXCLUDE_MM)
+    counted = in_face & (fit.target_weights > HEAD_WEIGHT)
+    d = MeshIndex(fitted).closest_points(scan_h.vertices[counted]).distances
+    fig["scan_vertices"] = int(scan_h.n_vertices)
+    fig["scan_triangles"] = int(scan_h.n_faces)
+    fig["face_region_vertices"] = int(counted.sum())
+    fig["face_region_not_head_vertices"] = int((in_face & ~counted).sum())
+    fig["face_within_1mm_fraction"] = float((d <= 1.0).mean()) if len(d) else 0.0
+    fig["face_within_2_5mm_fraction"] = float((d <= 2.5).mean()) if len(d) else 0.0
+    fig["face_mean_distance_mm"] = float(d.mean()) if len(d) else None
+    fig["face_median_distance_mm"] = float(np.median(d)) if len(d) else None
+    fig["skin_on_scan_fraction"] = float(on_scan.mean())
+    fig["face_on_scan_fraction"] = float(on_scan[face].mean())
+    ref_n, fit_n = ref_settled.skin.face_normals, fitted.face_normals
+    fig["fold_overs"] = int(((ref_n * fit_n).sum(axis=1) < 0).sum())
+    present = [c for c in skin_lms.as_dict() if c not in absent_skin]
+    lm_d = MeshIndex(scan_h).closest_points(head.skin_landmarks.positions_of(present)).distances
+    fig["skin_landmark_to_scan_mm"] = {
+        "mean": float(lm_d.mean()) if len(lm_d) else None,
+        "max": float(lm_d.max()) if len(lm_d) else None,
+        "n": len(present),
+        "absent": list(absent_skin),
+    }
+    if landmarks is not None:
+        placed = {lm.code: lm.position for lm in landmarks if lm.is_defined}
+        common = [c for c in placed if c in skin_lms.as_dict()]
+        if common:
+            user = apply_transform(to_head, np.array([placed[c] for c in common]))
+            gap = np.linalg.norm(user - head.skin_landmarks.positions_of(common), axis=1)
+            fig["skin_landmark_to_user_mm"] = {
+                "mean": float(gap.mean()),
+                "max": float(gap.max()),
+                "per_landmark": {c: round(float(g), 2) for c, g in zip(common, gap, strict=True)},
+            }
+    # skin–skull distances at the paired landmarks vs the table
+    skull = concatenate([head.meshes[p] for p in ("cranium", "mandible")])
+    new_skin_pts = head.skin_landmarks.positions_of([pairs[c][0] for c in codes])
+    new_skull_pts = head.skull_landmarks.positions_of(codes)
+    dowel = np.linalg.norm(new_skin_pts - new_skull_pts, axis=1)
+    to_bone = MeshIndex(skull).closest_points(new_skin_pts).distances
+    fig["tissue_depths"] = {
+        "table": table,
+        "group": depth_label,
+        "pairs": len(codes),
+        "mean_abs_diff_mm": float(np.abs(dowel - depth).mean()),
+        "max_abs_diff_mm": float(np.abs(dowel - depth).max()),
+        "mean_abs_diff_to_skull_surface_mm": float(np.abs(to_bone - depth).mean()),
+        "per_landmark": {
+            c: {"table_mm": round(float(t_), 2), "fitted_mm": round(float(f_), 2)}
+            for c, t_, f_ in zip(codes, depth, dowel, strict=True)
+        },
+    }
+    signed = MeshIndex(skull).signed_distance(fitted.vertices[face])
+    fig["face_skin_inside_skull_vertices"] = int((signed < 0).sum())
+    fig["eye_shift_mm"] = {str(i): round(float(m[2]), 2) for i, m in eye_shift.items()}
+    fig["orientation"] = {
+        "method": pose.method,
+        "handedness": pose.handedness,
+        "mirrored": mirrored,
+        "reference_scale": round(1 / s, 4),
+        "matched_fraction": round(pose.matched_fraction, 3),
+        "cost": round(pose.cost, 4),
+    }
+    fig["scan_not_head_area_fraction"] = round(fit.not_head, 4)
+    if bone is not None:
+        fig["skull_vs_bone"] = _skull_vs_bone(head, bone, to_head, face)
+    seconds["total"] = time.perf_counter() - t0
+    fig["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
+
+    digest = hashlib.sha256(
+        "".join(str(i.get("sha256", "")) for i in inputs).encode()
+        + base.content_hash.encode()
+        + json.dumps([table, sex, str(build)]).encode()
+    ).hexdigest()[:12]
+    provenance = {
+        "built_from": [dict(i) for i in inputs],
+        "base_template": {"template_id": base.template_id, "content_hash": base.content_hash},
+        "method": "reference skin oriented on the scan (rigid multi-start search or landmarks), "
+        "registered onto it (affine then coarse to fine, rims and non-head parts faded "
+        "out, the reference's shape over holes); skull, teeth, tongue and eyes warped "
+        "(thin-plate spline) so the paired skull landmarks lie at the table depths "
+        "inward along the skin normal (Kähler 2003 §8.3.2)",
+        "frame": "the fitted person's head frame (Frankfort Horizontal from the estimated "
+        "skull's porions and orbitales), mm",
+        "input_to_head": to_head,
+        "mirrored_input": mirrored,
+        "absent_landmarks": {"skin": list(absent_skin), "skull": []},
+        "depth_table": {"table": table, "group": depth_label, "sex": sex, "build": str(build)},
+        "figures": fig,
+        "warnings": list(warnings),
+        "fit_version": FIT_VERSION,
+    }
+    head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
+    return ScanFit(head, to_head, mirrored, on_scan, fig, tuple(warnings))
+
+
+def _skull_vs_bone(head: TemplateHead, bone: Mesh, to_head: np.ndarray, face: np.ndarray) -> dict:
+    """Estimated skull (face region) vs the true bone: mean |d| and % within 2.5 mm.
+
+    The face-region skull vertices: cranium and mandible vertices whose
+    nearest fitted-skin vertex lies in the face region (head frame, mm).
+    """
+    est = concatenate([head.meshes[p] for p in BONE_PARTS])
+    bone_h = Mesh(apply_transform(to_head, bone.vertices), bone.faces)
+    _, nearest = cKDTree(head.skin.vertices).query(est.vertices)
+    sel = face[nearest]
+    d = MeshIndex(bone_h).closest_points(est.vertices[sel]).distances
+    return {
+        "face_skull_vertices": int(sel.sum()),
+        "mean_abs_mm": float(d.mean()) if len(d) else None,
+        "median_abs_mm": float(np.median(d)) if len(d) else None,
+        "within_2_5mm_fraction": float((d <= 2.5).mean()) if len(d) else 0.0,
+    }
+
+
+def fit_scan_pack(
+    scan_path: str | PathLike[str],
+    out: str | PathLike[str],
+    *,
+    units: str = "auto",
+    scale: float | None = None,
+    landmarks: str | PathLike[str] | None = None,
+    sex: str = "male",
+    table: str = DEFAULT_DEPTH_TABLE,
+    build: str | float = "normal",
+    orientation: tuple | None = None,
+    bone_path: str | PathLike[str] | None = None,
+    force: bool = False,
+    progress: Progress | None = None,
+) -> tuple[ScanFit, list[Path]]:
+    """Read the scan (and landmarks, bone), :func:`fit_scan`, write the pack and
+    ``fit_report.json`` to ``out``.
+
+    The scan, its landmark file and the bone share one frame and one unit
+    (``units`` or ``scale`` converts them to mm).  ``out`` is written as a
+    whole (:func:`workbench.io.outputs.staged_folder`): an existing pack is
+    replaced only with ``force`` and a failure leaves it as it was.
+    """
+    from workbench.core.units import check_units_choice, resolve_units
+    from workbench.io.catalogue import load_catalogue
+    from workbench.io.markups import read_landmarks
+    from workbench.io.meshes import read_mesh
+    from workbench.io.outputs import check_output_folder, write_folder
+    from workbench.io.template_pack import export_template
+    from workbench.model.evidence import file_sha256
+    from workbench.services.input_checks import check_output_location
+
+    check_units_choice(units, scale)
+    sources = [scan_path, landmarks, bone_path]
+    check_output_location(out)
+    check_output_folder(out, sources, force)  # before the fit, which takes a while
+    path = Path(scan_path)
+    read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="face")
+    check_scan_mesh(read.mesh, path)
+    if scale is None and units == "auto":
+        resolve_units(read.units, "auto", source=str(path))
+    factor = read.scale_applied
+    inputs = [{"role": "scan", "file": path.name, "sha256": file_sha256(path)}]
+    lms = None
+    if landmarks is not None:
+        lms = read_landmarks(
+            landmarks, "skin", catalogue=load_catalogue(), allow_undefined=True
+        ).landmarks.transformed(np.diag([factor, factor, factor, 1.0]))
+        inputs.append(
+            {
+                "role": "skin_landmarks",
+                "file": Path(landmarks).name,
+                "sha256": file_sha256(Path(landmarks)),
+            }
+        )
+    bone = None
+    if bone_path is not None:
+        bone = read_mesh(bone_path, scale=factor, kind="skull").mesh
+        inputs.append(
+            {"role": "bone", "file": Path(bone_path).name, "sha256": file_sha256(Path(bone_path))}
+        )
+    result = fit_scan(
+        read.mesh,
+        landmarks=lms,
+        sex=sex,
+        table=table,
+        build=build,
+        orientation=orientation,
+        bone=bone,
+        source=str(path),
+        inputs=inputs,
+        progress=progress,
+    )
+
+    def write(folder: Path) -> list[Path]:
+        files = export_template(result.head, folder)
+        report = folder / "fit_report.json"
+        report.write_text(
+            json.dumps(
+                {
+                    "template_id": result.head.template_id,
+                    "scan": path.name,
+                    "mirrored_input": result.mirrored_input,
+                    "input_to_head": result.input_to_head.tolist(),
+                    "warnings": list(result.warnings),
+                    **result.figures,
+                },
+                indent=2,
+                default=_json_default,
+            )
+        )
+        return [*files, report]
+
+    return result, write_folder(out, write, force=force, inputs=sources)
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
