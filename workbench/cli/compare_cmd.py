@@ -133,9 +133,6 @@ def run(args: argparse.Namespace) -> int:
         from workbench.cli.common import input_paths
         from workbench.io.outputs import check_output_folder
 
-        from workbench.services.input_checks import check_output_location
-
-        check_output_location(args.out)
         check_output_folder(
             args.out, input_paths(args.recon, args.truth, args.template), args.force
         )

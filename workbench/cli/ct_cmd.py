@@ -72,11 +72,9 @@ def run(args: argparse.Namespace) -> int:
     from workbench.io.outputs import check_output_file, same_file
 
     from workbench.services.ct_mesh import check_extraction_settings
-    from workbench.services.input_checks import check_output_location
 
     check_extraction_settings(args.iso, args.target_triangles, args.smooth)
     source = resolve_input(args.volume)
-    check_output_location(args.out)
     check_output_file(args.out, [source], args.force)  # before the extraction
     if args.report is not None:
         if same_file(args.report, args.out):

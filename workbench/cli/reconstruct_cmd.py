@@ -215,7 +215,6 @@ def _overrides(items: list[str]) -> dict[str, float]:
 def run(args: argparse.Namespace) -> int:
     from workbench.io.samples import resolve_input
     from workbench.services.reconstruction_job import JobSettings
-    from workbench.services.input_checks import check_output_location
     from workbench.services.tissue_model import TissueSettings
 
     check_count(
@@ -225,7 +224,6 @@ def run(args: argparse.Namespace) -> int:
         MAX_ENSEMBLE,
         why=f"the spread map settles by ~50 fits; more than {MAX_ENSEMBLE} only takes longer",
     )
-    check_output_location(args.out)
     settings = JobSettings(
         units=args.units,
         scale=args.scale,

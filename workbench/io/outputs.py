@@ -184,6 +184,29 @@ def _force_hint(path: Path) -> str:
 
 
 # ------------------------------------------------------------------ single files
+def check_output_location(path: PathArg, option: str = "--out") -> Path:
+    """Refuse an output path whose nearest existing parent is a file or not writable.
+
+    Called by :func:`check_output_file` and :func:`check_output_folder`, so every
+    command learns this before its work, not from the first write.
+    """
+    path = Path(path)
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise InputError(
+            path, f"cannot be created: {parent} is a file, not a folder", f"choose another {option}"
+        )
+    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(
+            path,
+            f"cannot be written: no permission to write in {parent}",
+            f"choose another {option}",
+        )
+    return path
+
+
 def check_output_file(
     path: PathArg, inputs: Iterable[PathArg | None] = (), force: bool = False
 ) -> Path:
@@ -194,7 +217,7 @@ def check_output_file(
     keeps it with :func:`backup_existing` (or uses :func:`output_file`, which
     does).  Returns ``path`` as a :class:`~pathlib.Path`.
     """
-    path = Path(path)
+    path = check_output_location(path)
     for source in _real_inputs(inputs):
         if same_file(path, source):
             raise InputError(
@@ -258,7 +281,7 @@ def check_output_folder(
     input inside it is refused even with ``force``.  An existing, non-empty
     folder (or a file of that name) is accepted only with ``force``.
     """
-    path = Path(path)
+    path = check_output_location(path)
     for source in _real_inputs(inputs):
         if same_file(path, source) or _inside(source, path):
             raise InputError(

@@ -21,9 +21,7 @@ fit that would take seconds and end in a misleading error or a garbage face.
 
 from __future__ import annotations
 
-import os
 from os import PathLike
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -221,22 +219,3 @@ def check_face_fits_skull(face: Mesh, skull: Mesh, source: str = "reconstruction
     (see :func:`workbench.core.limits.check_face_fits_skull`).
     """
     _face_fits(face.extent, skull.extent, source)
-
-
-def check_output_location(path: Source, option: str = "--out") -> Path:
-    """Refuse an output path whose nearest existing parent is a file or not writable."""
-    path = Path(path)
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if parent.exists() and not parent.is_dir():
-        raise InputError(
-            path, f"cannot be created: {parent} is a file, not a folder", f"choose another {option}"
-        )
-    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(
-            path,
-            f"cannot be written: no permission to write in {parent}",
-            f"choose another {option}",
-        )
-    return path

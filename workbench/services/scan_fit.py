@@ -467,11 +467,9 @@ def fit_scan_pack(
     from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.template_pack import export_template
     from workbench.model.evidence import file_sha256
-    from workbench.services.input_checks import check_output_location
 
     check_units_choice(units, scale)
     sources = [scan_path, landmarks, bone_path]
-    check_output_location(out)
     check_output_folder(out, sources, force)  # before the fit, which takes a while
     path = Path(scan_path)
     read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="face")

@@ -512,12 +512,11 @@ def build_template_pack(
     from workbench.services.template_cache import reference_head
 
     from workbench.core.units import check_units_choice
-    from workbench.services.input_checks import check_output_location, check_skull_mesh
+    from workbench.services.input_checks import check_skull_mesh
 
     check_units_choice(units, scale)
     sources = [skin_path, skull_path, skin_landmarks, skull_landmarks]
     if not staged:
-        check_output_location(out)
         check_output_folder(out, sources, force)  # before the build, which takes a while
     meshes, factors, inputs = {}, {}, []
     for role, path, kind in (
