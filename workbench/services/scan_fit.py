@@ -104,6 +104,12 @@ class ScanFit:
         Skin vertices the scan supports (the rest keep the reference's shape).
     figures : dict
         The fit report (distances mm, fractions, seconds).
+    scan : Mesh, optional
+        The scan in the head frame (mm), for pictures and colour transfer.
+    scan_distance : (n_scan,) float, optional
+        Each scan vertex's distance to the fitted skin (mm); NaN where it is
+        not counted in the face-region figures (outside the face, near a
+        hole or field-of-view rim, or not the head).
     """
 
     head: TemplateHead
@@ -112,6 +118,8 @@ class ScanFit:
     skin_on_scan: np.ndarray
     figures: dict
     warnings: tuple[str, ...] = ()
+    scan: Mesh | None = None
+    scan_distance: np.ndarray | None = None
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         """Head-frame points back in the scan's coordinates."""
@@ -325,6 +333,8 @@ def fit_scan(
     in_face = face[nearest] & (rim_d > RIM_EXCLUDE_MM)
     counted = in_face & (fit.target_weights > HEAD_WEIGHT)
     d = MeshIndex(fitted).closest_points(scan_h.vertices[counted]).distances
+    scan_distance = np.full(scan_h.n_vertices, np.nan)
+    scan_distance[counted] = d
     fig["scan_vertices"] = int(scan_h.n_vertices)
     fig["scan_triangles"] = int(scan_h.n_faces)
     fig["face_region_vertices"] = int(counted.sum())
@@ -415,7 +425,7 @@ def fit_scan(
         "fit_version": FIT_VERSION,
     }
     head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
-    return ScanFit(head, to_head, mirrored, on_scan, fig, tuple(warnings))
+    return ScanFit(head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance)
 
 
 def _skull_vs_bone(head: TemplateHead, bone: Mesh, to_head: np.ndarray, face: np.ndarray) -> dict:
@@ -451,6 +461,7 @@ def fit_scan_pack(
     bone_path: str | PathLike[str] | None = None,
     force: bool = False,
     progress: Progress | None = None,
+    extra: Callable[[Path, ScanFit], list[Path]] | None = None,
 ) -> tuple[ScanFit, list[Path]]:
     """Read the scan (and landmarks, bone), :func:`fit_scan`, write the pack and
     ``fit_report.json`` to ``out``.
@@ -459,6 +470,8 @@ def fit_scan_pack(
     (``units`` or ``scale`` converts them to mm).  ``out`` is written as a
     whole (:func:`workbench.io.outputs.staged_folder`): an existing pack is
     replaced only with ``force`` and a failure leaves it as it was.
+    ``extra(folder, result)`` writes further files into the staged pack (the
+    CLI's PDF report, which needs the render layer) and returns their paths.
     """
     from workbench.core.units import check_units_choice, resolve_units
     from workbench.io.catalogue import load_catalogue
@@ -526,7 +539,8 @@ def fit_scan_pack(
                 default=_json_default,
             )
         )
-        return [*files, report]
+        more = [] if extra is None else extra(folder, result)
+        return [*files, report, *more]
 
     return result, write_folder(out, write, force=force, inputs=sources)
 
