@@ -12,7 +12,7 @@ from pathlib import Path
 
 from workbench.core.errors import InputError
 
-TOOLS = ("landmarks", "dowels", "reconstruct", "compare")
+TOOLS = ("landmarks", "dowels", "reconstruct", "compare", "fit-scan")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,14 +42,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--units",
         choices=["auto", "mm", "cm", "m", "in"],
         default="auto",
-        help="units of a skull mesh (default: judged from its size)",
+        help="units of a skull mesh or a --scan (default: judged from its size)",
     )
     p.add_argument(
         "--scale",
         type=float,
         default=None,
         metavar="MM_PER_UNIT",
-        help="millimetres per file unit of a skull mesh",
+        help="millimetres per file unit of a skull mesh or a --scan",
     )
     p.add_argument("--suggest", action="store_true", help="suggest the skull landmarks")
     p.add_argument("--reconstruct", action="store_true", help="reconstruct the face")
@@ -57,6 +57,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--truth",
         default=None,
         help="true skin surface to compare with (same frame, mm), or sample:NAME",
+    )
+    p.add_argument(
+        "--scan",
+        default=None,
+        metavar="SCAN_MESH",
+        help="face scan to open in the Fit scan tool (--units/--scale apply to it), or sample:NAME",
+    )
+    p.add_argument(
+        "--fit-scan",
+        action="store_true",
+        help="fit the reference head to the --scan (as workbench fit-scan does)",
     )
     p.add_argument("--tool", choices=TOOLS, default="landmarks", help="dock shown in front")
     p.add_argument(
@@ -87,6 +98,9 @@ def options_from(args: argparse.Namespace):
             skull = path
     ct = None if args.ct is None else resolve_input(str(args.ct))
     truth = None if args.truth is None else resolve_input(str(args.truth))
+    scan = None if args.scan is None else resolve_input(str(args.scan))
+    if args.fit_scan and scan is None:
+        raise InputError("--fit-scan", "needs a scan to fit", "give it with --scan FILE")
     if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
         raise InputError(args.screenshot, "the screenshot must be a .png file")
     return LaunchOptions(
@@ -98,6 +112,8 @@ def options_from(args: argparse.Namespace):
         suggest=args.suggest,
         reconstruct=args.reconstruct,
         truth=truth,
+        scan=scan,
+        fit_scan=args.fit_scan,
         tool=args.tool,
         screenshot=args.screenshot,
         size=(w, h),

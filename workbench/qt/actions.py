@@ -99,6 +99,67 @@ ACTIONS: tuple[ActionSpec, ...] = (
 )
 
 
+#: the Fit scan tool's entries (:class:`workbench.qt.scan_fit_ops.ScanFitTool` methods),
+#: added by :func:`add_tool_actions` after the window's own menus
+SCAN_FIT_ACTIONS: tuple[ActionSpec, ...] = (
+    ActionSpec(
+        "open_scan",
+        "&File",
+        "Open face sca&n…",
+        "Ctrl+Shift+N",
+        "ask_open_scan",
+        "Open a surface scan of a face to fit the reference head to it (Fit scan dock)",
+    ),
+    ActionSpec(
+        "fit_scan",
+        "&Tools",
+        "&Fit scan",
+        "Ctrl+Shift+F",
+        "fit",
+        "Fit the reference head to the open scan (from zero or 3+ placed skin landmarks)",
+    ),
+    ActionSpec(
+        "save_scan_pack",
+        "&Tools",
+        "Save fitted scan &pack…",
+        None,
+        "ask_save",
+        "Fit with the same inputs and write the template pack and fit_report.json",
+    ),
+)
+
+
+def add_tool_actions(
+    window: MenuHost, tool: object, specs: tuple[ActionSpec, ...]
+) -> dict[str, QAction]:
+    """Add ``specs`` (methods of ``tool``) to the window's existing menus, after their
+    entries of the same menu that open things (File) or at the end (other menus)."""
+    bar = window.menuBar()
+    menus = {a.text(): a.menu() for a in bar.actions() if a.menu() is not None}
+    out: dict[str, QAction] = {}
+    for spec in specs:
+        menu: Any = menus.get(spec.menu)
+        if menu is None:
+            menu = menus[spec.menu] = bar.addMenu(spec.menu)
+        action = QAction(spec.title, window.window())
+        if spec.shortcut is not None:
+            action.setShortcut(QKeySequence(spec.shortcut))
+        if spec.tip:
+            action.setStatusTip(spec.tip)
+            action.setToolTip(spec.tip)
+        action.triggered.connect(lambda _checked=False, m=spec.method: getattr(tool, m)())
+        # File: after the "Open …" entries; elsewhere at the end
+        opens = [a for a in menu.actions() if a.text().startswith("Open")]
+        after = menu.actions().index(opens[-1]) + 1 if spec.menu == "&File" and opens else None
+        rest = menu.actions()[after:] if after is not None else []
+        if rest:
+            menu.insertAction(rest[0], action)
+        else:
+            menu.addAction(action)
+        out[spec.id] = action
+    return out
+
+
 def build_menus(window: MenuHost) -> dict[str, QAction]:
     """Create the menus of ``window``; returns ``{action id: QAction}``."""
     menus: dict[str, Any] = {}

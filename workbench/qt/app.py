@@ -1,7 +1,8 @@
 """Start the desktop window (``workbench gui``, ``python -m workbench``).
 
-:func:`run` opens the window, optionally loads a case or a skull, runs the
-requested steps (suggest landmarks, reconstruct, compare) and either enters
+:func:`run` opens the window, optionally loads a case or a skull and a face
+scan, runs the requested steps (suggest landmarks, reconstruct, compare, fit
+the scan) and either enters
 the event loop or, with ``screenshot``, waits for the work to finish, saves
 a picture of the whole window (3D view included; needs a real X display or
 Xvfb with ``QT_QPA_PLATFORM=xcb``) and exits.  Units mm throughout.
@@ -30,6 +31,10 @@ class LaunchOptions:
     suggest: bool = False
     reconstruct: bool = False
     truth: Path | None = None
+    #: a face scan for the Fit scan tool (``units`` / ``scale`` apply to it too), and
+    #: whether to fit it
+    scan: Path | None = None
+    fit_scan: bool = False
     tool: str = "landmarks"
     screenshot: Path | None = None
     size: tuple[int, int] = (1400, 900)
@@ -66,8 +71,15 @@ def prepare(window, options: LaunchOptions) -> list[str]:
         window.load_truth(options.truth)
         window.wait_idle()
         window.wait_idle()
-    if options.tool in window.docks:
-        window.docks[options.tool].raise_()
+    if options.scan is not None:
+        window.open_scan(options.scan, units=options.units, scale=options.scale)
+        window.wait_idle()
+        if options.fit_scan:
+            window.fit_scan()
+            window.wait_idle(timeout_s=600.0)
+    tool = options.tool.replace("-", "_")  # "fit-scan" → the "fit_scan" dock
+    if tool in window.docks:
+        window.docks[tool].raise_()
     return list(window.errors)
 
 

@@ -9,10 +9,12 @@ Wiring (created in this order in ``__init__``)::
     ├── QtInteractor        central 3D view (pyvistaqt)
     │   ├── SceneView       named layers: skull, landmarks, dowels, guides, muscles, face, truth
     │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
-    ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel (docks);
+    ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel,
+    │                       ScanFitPanel (docks);
     │                       LayersPanel below them (visibility + opacity per layer)
     ├── tools               FileTool (open, save, export), LandmarkTool (draw, place,
-    │                       suggest, snap), DragTool (live drags)
+    │                       suggest, snap), DragTool (live drags), ScanFitTool (a face
+    │                       scan fitted by the scan-fit service, its landmarks; own picker)
     ├── GuideView           second view: guides over the session's fit (drags → DragTool)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
 
@@ -47,7 +49,7 @@ from PySide6.QtWidgets import (
 
 from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, gc_guard, jobs
-from workbench.qt.actions import build_menus
+from workbench.qt.actions import SCAN_FIT_ACTIONS, add_tool_actions, build_menus
 from workbench.qt.document import Document
 from workbench.qt.drag_ops import DragTool
 from workbench.qt.file_ops import FileTool
@@ -59,7 +61,9 @@ from workbench.qt.panels.dowels_panel import DowelsPanel
 from workbench.qt.panels.landmarks_panel import LandmarksPanel
 from workbench.qt.panels.layers_panel import LayersPanel
 from workbench.qt.panels.reconstruct_panel import ReconstructPanel
+from workbench.qt.panels.scan_fit_panel import ScanFitPanel
 from workbench.qt.picking import ClickPicker
+from workbench.qt.scan_fit_ops import ScanFitTool
 from workbench.qt.scene import SceneView, is_closed
 from workbench.qt.session import Session
 from workbench.qt.workers import TaskRunner, preload, show_fraction
@@ -150,12 +154,23 @@ class MainWindow(QMainWindow):
             on_drag_start=drags.on_drag_start,
             on_drag_end=drags.on_drag_end,
         )
+        self.scan_fit_panel = ScanFitPanel()
+        self.scan_fit = ScanFitTool(
+            self.scan_fit_panel,
+            self.scene,
+            self.plotter,
+            self.runner,
+            self,
+            skull_picker=self.picker,
+            parent=self,
+        )
         self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (
             ("landmarks", "Skull landmarks", self.landmarks_panel),
             ("dowels", "Dowels", self.dowels_panel),
             ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
             ("compare", "Compare", self.compare_panel),
+            ("fit_scan", "Fit scan", self.scan_fit_panel),
         ):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
@@ -183,6 +198,7 @@ class MainWindow(QMainWindow):
         self.views.setStretchFactor(1, 2)
         self.guide_view.hide()  # shown with the first fit, or from the View menu
         self.actions_by_id = build_menus(self)
+        self.actions_by_id.update(add_tool_actions(self, self.scan_fit, SCAN_FIT_ACTIONS))
 
         self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
         self.progress = QProgressBar()
@@ -199,6 +215,8 @@ class MainWindow(QMainWindow):
             lambda part: self.guide_view.refresh() if part == "guides" else None
         )
         self.document.stack_changed.connect(self._update_title)
+        self.scan_fit.history_changed.connect(self._update_title)
+        self.docks["fit_scan"].visibilityChanged.connect(lambda _v: self._update_title())
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
             lambda _channel, step, f: show_fraction(self.progress, f, step)
@@ -311,6 +329,17 @@ class MainWindow(QMainWindow):
     def ask_screenshot(self) -> None:
         self.files.ask_screenshot()
 
+    # ------------------------------------------------------------ fit scan (the tool's)
+    def open_scan(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
+        """Open a face scan in the Fit scan tool (worker; the case is not touched)."""
+        self.docks["fit_scan"].raise_()
+        self.scan_fit.open_scan(path, units, scale)
+
+    def fit_scan(self) -> None:
+        """Fit the reference head to the open scan (worker, progress, cancel)."""
+        self.docks["fit_scan"].raise_()
+        self.scan_fit.fit()
+
     # ------------------------------------------------------------ messages
     def status(self, text: str) -> None:
         self.status_label.setText(text)
@@ -342,7 +371,7 @@ class MainWindow(QMainWindow):
 
     def _update_title(self) -> None:
         self.setWindowTitle(self.document.title)
-        stack = self.document.stack
+        stack: Any = self.scan_fit.landmarks if self._scan_fit_undo() else self.document.stack
         undo, redo = self.actions_by_id["undo"], self.actions_by_id["redo"]
         undo.setEnabled(stack.can_undo)
         redo.setEnabled(stack.can_redo)
@@ -350,11 +379,28 @@ class MainWindow(QMainWindow):
         redo.setText(f"&Redo {stack.redo_text}" if stack.can_redo else "&Redo")
 
     # ------------------------------------------------------------ edit actions
+    def _scan_fit_undo(self) -> bool:
+        """Undo/redo work on the scan's placed landmarks (the Fit scan dock is in front
+        with a scan open), else on the case (see :mod:`workbench.qt.scan_fit_ops`)."""
+        dock = self.docks.get("fit_scan")
+        return bool(
+            dock is not None
+            and self.scan_fit.has_scan
+            and dock.isVisible()
+            and not dock.visibleRegion().isEmpty()
+        )
+
     def undo(self) -> None:
-        self.document.undo()
+        if self._scan_fit_undo():
+            self.scan_fit.undo()
+        else:
+            self.document.undo()
 
     def redo(self) -> None:
-        self.document.redo()
+        if self._scan_fit_undo():
+            self.scan_fit.redo()
+        else:
+            self.document.redo()
 
     def mark_absent(self) -> None:
         self.landmarks_panel.mark_absent()
@@ -363,12 +409,16 @@ class MainWindow(QMainWindow):
         self.landmarks_panel.select_next_missing()
 
     def reset_view(self) -> None:
+        if self.document.case.specimen.mesh is None and self.scan_fit.has_scan:
+            self.scan_fit.reset_camera()  # only a scan is shown: look at its face
+            return
         axes = jobs.view_axes(self.document.case)
         self.scene.reset_camera(*(axes or (None, None)))
 
     def cancel_drag(self) -> None:
         """Esc: end a landmark or guide drag without moving anything."""
         self.drags.cancel_drag()
+        self.scan_fit.cancel_drag()
 
     # ------------------------------------------------------------ landmark actions (the tool's)
     def on_pick(self, point: Any) -> None:
@@ -660,6 +710,7 @@ class MainWindow(QMainWindow):
         self.autosaver.close()  # a clean close: the snapshot of unsaved work goes
         self.runner.shutdown()
         self.picker.detach()
+        self.scan_fit.detach()
         self.detail.detach()
         self.scene.detach()
         self.guide_view.close_view()

@@ -1,0 +1,389 @@
+"""Fit scan dock: open a face scan, fit the reference head, show its figures, assist landmarks.
+
+Widgets and signals only; :class:`workbench.qt.scan_fit_ops.ScanFitTool`
+does the work (worker jobs, drawing, picking) and hands results back through
+``show_*``.  The landmark table lists the reference head's skin landmark
+codes with their state (placed by the user, the fit's first guess, a guess
+over a hole, or nothing) and the guess's distance to the scan (mm, its
+confidence).  Units mm.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QCheckBox,
+    QComboBox,
+    QFormLayout,
+    QGridLayout,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QSlider,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from workbench.core.landmarks import LandmarkSet
+from workbench.io.tables import list_tables
+from workbench.qt.panels.dowels_panel import BUILDS
+
+if TYPE_CHECKING:
+    from workbench.qt.scan_fit_ops import FitView, OpenedScan, ScanLandmarks
+
+COLUMNS = ("Code", "Name", "State", "To scan mm")
+UNITS = ("auto", "mm", "cm", "m", "in")
+#: drawn layers of the tool and their check-box titles
+LAYER_TITLES = {"scan": "Scan", "skin": "Fitted skin", "landmarks": "Landmarks"}
+STATE_TEXT = {"placed": "placed", "guess": "first guess", "over hole": "guess, over a hole"}
+
+
+class ScanFitPanel(QWidget):
+    """See the module docstring.
+
+    Signals
+    -------
+    open_requested(), fit_requested(), cancel_requested(), save_requested()
+    accept_requested(), accept_all_requested(), remove_requested()
+    undo_requested(), redo_requested()
+    place_toggled(bool)
+        Clicks on the scan place the selected code (and drags move it).
+    selection_changed(str)
+        The selected landmark code ('' for none).
+    visibility_changed(str, bool)
+        ``("scan" | "skin" | "landmarks", visible)``.
+    opacity_changed(float)
+        The fitted skin's opacity, 0..1.
+    """
+
+    open_requested = Signal()
+    fit_requested = Signal()
+    cancel_requested = Signal()
+    save_requested = Signal()
+    accept_requested = Signal()
+    accept_all_requested = Signal()
+    remove_requested = Signal()
+    undo_requested = Signal()
+    redo_requested = Signal()
+    place_toggled = Signal(bool)
+    selection_changed = Signal(str)
+    visibility_changed = Signal(str, bool)
+    opacity_changed = Signal(float)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.codes: list[str] = []
+        self._filling = False
+
+        self.open_button = QPushButton("Open scan…")
+        self.open_button.setToolTip("A face scan: PLY, STL, OBJ, VTK or VTP (holes are fine)")
+        self.open_button.clicked.connect(self.open_requested.emit)
+        self.file_label = QLabel("No scan open.")
+        self.file_label.setWordWrap(True)
+        self.units_combo = QComboBox()
+        self.units_combo.addItems(list(UNITS))
+        self.units_combo.setToolTip("Units of the scan file (auto: judged from its size)")
+        self.sex_combo = QComboBox()
+        self.sex_combo.addItems(["male", "female"])
+        self.sex_combo.setToolTip("Reference head and depth-table group")
+        self.table_combo = QComboBox()
+        self.table_combo.addItems(list_tables())
+        self.table_combo.setToolTip("Tissue depths that place the skull under the fitted skin")
+        self.build_combo = QComboBox()
+        self.build_combo.addItems(list(BUILDS))
+        self.build_combo.setCurrentText("normal")
+        self.build_combo.setToolTip(
+            "slender/normal/obese where the table has such groups; a number k means mean + k SD"
+        )
+        self.fit_button = QPushButton("Fit")
+        self.fit_button.setToolTip(
+            "Fit the reference head to the scan: from zero landmarks, or seeded by the "
+            "3+ placed ones"
+        )
+        self.fit_button.clicked.connect(self.fit_requested.emit)
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.clicked.connect(self.cancel_requested.emit)
+        self.cancel_button.setEnabled(False)
+        self.save_button = QPushButton("Save pack…")
+        self.save_button.setToolTip(
+            "Fit with the same inputs and write the template pack + fit_report.json into a "
+            "new folder (an existing one is replaced only if you confirm)"
+        )
+        self.save_button.clicked.connect(self.save_requested.emit)
+        self.state_label = QLabel("")
+        self.state_label.setWordWrap(True)
+
+        form = QFormLayout()
+        top = QHBoxLayout()
+        top.addWidget(self.open_button)
+        top.addWidget(QLabel("units"))
+        top.addWidget(self.units_combo)
+        form.addRow(top)
+        form.addRow(self.file_label)
+        person = QHBoxLayout()
+        person.addWidget(self.sex_combo, 1)
+        person.addWidget(QLabel("build"))
+        person.addWidget(self.build_combo, 1)
+        form.addRow("Sex", person)
+        form.addRow("Depth table", self.table_combo)
+        buttons = QHBoxLayout()
+        buttons.addWidget(self.fit_button, 2)
+        buttons.addWidget(self.cancel_button, 1)
+        buttons.addWidget(self.save_button, 2)
+        form.addRow(buttons)
+        form.addRow(self.state_label)
+
+        self.figures = QLabel("Not fitted yet.")
+        self.figures.setWordWrap(True)
+        self.figures.setTextFormat(Qt.TextFormat.RichText)
+        self.figures.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+
+        self.layer_checks: dict[str, QCheckBox] = {}
+        shown = QGridLayout()
+        for col, (layer, title) in enumerate(LAYER_TITLES.items()):
+            check = QCheckBox(title)
+            check.setChecked(True)
+            check.toggled.connect(lambda on, name=layer: self.visibility_changed.emit(name, on))
+            shown.addWidget(check, 0, col)
+            self.layer_checks[layer] = check
+        self.opacity = QSlider(Qt.Orientation.Horizontal)
+        self.opacity.setRange(0, 100)
+        self.opacity.setValue(35)
+        self.opacity.setToolTip("Opacity of the fitted skin over the scan (%)")
+        self.opacity.valueChanged.connect(lambda v: self.opacity_changed.emit(v / 100.0))
+        shown.addWidget(QLabel("Fitted skin opacity"), 1, 0)
+        shown.addWidget(self.opacity, 1, 1, 1, 2)
+
+        self.place_check = QCheckBox("Place and drag landmarks on the scan")
+        self.place_check.setToolTip(
+            "Click the scan to place the selected code; drag the selected landmark to move it"
+        )
+        self.place_check.toggled.connect(self.place_toggled.emit)
+        self.table = QTableWidget(0, len(COLUMNS))
+        self.table.setHorizontalHeaderLabels(list(COLUMNS))
+        self.table.verticalHeader().setVisible(False)
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.horizontalHeader().setSectionResizeMode(1, QHeaderView.ResizeMode.Stretch)
+        self.table.setMinimumHeight(180)
+        self.table.itemSelectionChanged.connect(self._on_selection)
+        self.accept_button = QPushButton("Accept")
+        self.accept_button.setToolTip("Take the selected first-guess landmark as placed")
+        self.accept_button.clicked.connect(self.accept_requested.emit)
+        self.accept_all_button = QPushButton("Accept all")
+        self.accept_all_button.setToolTip("Take every first-guess landmark over the scan as placed")
+        self.accept_all_button.clicked.connect(self.accept_all_requested.emit)
+        self.remove_button = QPushButton("Remove")
+        self.remove_button.setToolTip("Remove the selected placed landmark")
+        self.remove_button.clicked.connect(self.remove_requested.emit)
+        self.undo_button = QPushButton("Undo")
+        self.undo_button.clicked.connect(self.undo_requested.emit)
+        self.redo_button = QPushButton("Redo")
+        self.redo_button.clicked.connect(self.redo_requested.emit)
+        self.undo_button.setEnabled(False)
+        self.redo_button.setEnabled(False)
+        lm_buttons = QGridLayout()
+        lm_buttons.addWidget(self.accept_button, 0, 0)
+        lm_buttons.addWidget(self.accept_all_button, 0, 1)
+        lm_buttons.addWidget(self.remove_button, 0, 2)
+        lm_buttons.addWidget(self.undo_button, 1, 0)
+        lm_buttons.addWidget(self.redo_button, 1, 1)
+        self.legend = QLabel(
+            "<span style='color:#1abf40'>●</span> placed &nbsp; "
+            "<span style='color:#ff8c00'>●</span> first guess &nbsp; "
+            "<span style='color:#9e6bf2'>●</span> guess over a hole &nbsp; "
+            "<span style='color:#e6d600'>●</span> selected"
+        )
+        self.legend.setTextFormat(Qt.TextFormat.RichText)
+        self.seed_label = QLabel("")
+        self.seed_label.setWordWrap(True)
+
+        layout = QVBoxLayout(self)
+        layout.addLayout(form)
+        layout.addWidget(self.figures)
+        layout.addLayout(shown)
+        layout.addWidget(QLabel("<b>Skin landmarks</b> (scan frame, mm)"))
+        layout.addWidget(self.place_check)
+        layout.addWidget(self.legend)
+        layout.addWidget(self.table, 1)
+        layout.addLayout(lm_buttons)
+        layout.addWidget(self.seed_label)
+        self.set_running(False)
+        self.show_scan(None)
+
+    # ------------------------------------------------------------ reads
+    def selected_code(self) -> str:
+        rows = self.table.selectionModel().selectedRows()
+        if not rows:
+            return ""
+        item = self.table.item(rows[0].row(), 0)
+        return item.text() if item is not None else ""
+
+    def select_code(self, code: str) -> None:
+        if code in self.codes:
+            self.table.selectRow(self.codes.index(code))
+
+    def select_next_unplaced(self, after: str, placed: LandmarkSet) -> None:
+        """Select the next code after ``after`` that has no placed landmark (wrapping)."""
+        if after not in self.codes:
+            return
+        start = self.codes.index(after)
+        for k in range(1, len(self.codes) + 1):
+            code = self.codes[(start + k) % len(self.codes)]
+            if code not in placed:
+                self.select_code(code)
+                return
+
+    def layer_visible(self, layer: str) -> bool:
+        check = self.layer_checks.get(layer)
+        return True if check is None else check.isChecked()
+
+    def skin_opacity(self) -> float:
+        return self.opacity.value() / 100.0
+
+    def _on_selection(self) -> None:
+        if not self._filling:
+            self.selection_changed.emit(self.selected_code())
+
+    # ------------------------------------------------------------ results → widgets
+    def set_running(self, running: bool) -> None:
+        self.cancel_button.setEnabled(running)
+        self.fit_button.setEnabled(not running and bool(self.codes))
+        self.save_button.setEnabled(not running and bool(self.codes))
+        self.open_button.setEnabled(not running)
+
+    def show_state(self, text: str) -> None:
+        self.state_label.setText(text)
+
+    def show_scan(self, scan: OpenedScan | None) -> None:
+        if scan is None:
+            self.file_label.setText("No scan open.")
+            return
+        n = scan.mesh.n_faces
+        extent = scan.mesh.vertices.max(axis=0) - scan.mesh.vertices.min(axis=0)
+        self.file_label.setText(
+            f"{scan.path.name}: {n:,} triangles, "
+            f"{' x '.join(f'{v:.0f}' for v in extent)} mm ({scan.factor:g} mm per unit)"
+        )
+        self.codes = list(scan.codes)
+        self.set_running(False)
+
+    def show_fit(self, view: FitView | None) -> None:
+        if view is None:
+            self.figures.setText("Not fitted yet.")
+            self.fit_button.setText("Fit")
+            return
+        self.figures.setText(figures_html(view))
+        self.fit_button.setText("Fit again")
+
+    def show_landmarks(
+        self,
+        codes: tuple[str, ...] | list[str],
+        names: Mapping[str, str],
+        placed: LandmarkSet,
+        guess: Mapping[str, np.ndarray],
+        over_holes: frozenset[str],
+        to_scan_mm: Mapping[str, float],
+    ) -> None:
+        """Fill the table (the selection is kept)."""
+        selected = self.selected_code()
+        self._filling = True
+        try:
+            self.codes = list(codes)
+            self.table.setRowCount(len(self.codes))
+            for row, code in enumerate(self.codes):
+                if code in placed and placed[code].is_defined:
+                    state = "placed"
+                elif code in guess:
+                    state = "over hole" if code in over_holes else "guess"
+                else:
+                    state = ""
+                d = to_scan_mm.get(code)
+                cells = (
+                    code,
+                    names.get(code, ""),
+                    STATE_TEXT.get(state, "—"),
+                    "" if d is None or state == "placed" else f"{d:.1f}",
+                )
+                for col, text in enumerate(cells):
+                    item = QTableWidgetItem(text)
+                    if col == 3:
+                        item.setTextAlignment(Qt.AlignmentFlag.AlignRight)
+                    self.table.setItem(row, col, item)
+            if selected in self.codes:
+                self.table.selectRow(self.codes.index(selected))
+        finally:
+            self._filling = False
+        self.table.resizeColumnToContents(0)
+        self.table.resizeColumnToContents(2)
+        n = sum(1 for lm in placed if lm.is_defined)
+        self.seed_label.setText(
+            f"{n} placed: " + ("they seed the next fit." if n >= 3 else "3 or more seed the fit.")
+        )
+        if self.selected_code() != selected:
+            self.selection_changed.emit(self.selected_code())
+
+    def show_history(self, history: ScanLandmarks) -> None:
+        self.undo_button.setEnabled(history.can_undo)
+        self.redo_button.setEnabled(history.can_redo)
+        self.undo_button.setToolTip(f"Undo {history.undo_text}" if history.can_undo else "")
+        self.redo_button.setToolTip(f"Redo {history.redo_text}" if history.can_redo else "")
+
+
+def _pct(value: object) -> str:
+    return f"{float(value) * 100:.1f} %" if isinstance(value, (int, float)) else "–"
+
+
+def _mm(value: object) -> str:
+    return f"{float(value):.2f} mm" if isinstance(value, (int, float)) else "–"
+
+
+def figures_html(view: FitView) -> str:
+    """The fit's main figures as a small HTML table."""
+    fig = view.fit.figures
+    lms = fig.get("skin_landmark_to_scan_mm", {}) or {}
+    absent = list(lms.get("absent", []))
+    orient = fig.get("orientation", {}) or {}
+    depths = fig.get("tissue_depths", {}) or {}
+    rows = [
+        ("Face within 1 mm", _pct(fig.get("face_within_1mm_fraction"))),
+        ("Face within 2.5 mm", _pct(fig.get("face_within_2_5mm_fraction"))),
+        ("Mean distance", _mm(fig.get("face_mean_distance_mm"))),
+        ("Fold-overs", str(fig.get("fold_overs", "–"))),
+        (
+            "Skin landmarks",
+            f"{len(view.guess)} ({len(view.guess) - len(absent)} on the scan, "
+            f"{len(absent)} over holes)",
+        ),
+        ("Landmarks to scan", f"mean {_mm(lms.get('mean'))}, max {_mm(lms.get('max'))}"),
+        (
+            "Orientation",
+            f"{orient.get('method', '–')}"
+            + (f", {view.seeds} placed landmarks given" if view.seeds else "")
+            + (", mirrored scan" if orient.get("mirrored") else ""),
+        ),
+    ]
+    user = fig.get("skin_landmark_to_user_mm")
+    if isinstance(user, dict):
+        rows.append(("To placed landmarks", f"mean {_mm(user.get('mean'))}"))
+    if depths:
+        rows.append(
+            (
+                "Tissue depths vs table",
+                f"mean |diff| {_mm(depths.get('mean_abs_diff_mm'))} ({depths.get('pairs', 0)} pairs)",
+            )
+        )
+    body = "<tr><td colspan=2><b>Fit</b> (face region, mm)</td></tr>" + "".join(
+        f"<tr><td>{k}</td><td>&nbsp;<b>{v}</b></td></tr>" for k, v in rows
+    )
+    notes = "".join(f"<br><i>note: {w}</i>" for w in view.fit.warnings)
+    return f"<table>{body}</table>{notes}"

@@ -1,0 +1,997 @@
+"""The "Fit scan" tool of the window: open a face scan, fit the reference head, assist landmarks.
+
+The fit is the service's (:func:`workbench.services.scan_fit.fit_scan`,
+``workbench fit-scan``), run in the window's worker with progress and
+cancel; "Save pack…" runs :func:`~workbench.services.scan_fit.fit_scan_pack`
+with the same inputs (the scan file, its units, the landmarks the user
+placed, sex, table, build), which refuses an existing folder unless the
+user confirms.
+
+Frames and units: mm.  The 3D view shows the scan in **its own input frame**
+(the scan file's coordinates after units), so the fitted skin and its
+landmarks are mapped back with :meth:`ScanFit.to_input`.  The scan is
+coloured by each vertex's distance to the fitted skin (0–2.5 mm; grey where
+the service does not count it: outside the face, at hole rims, not the head).
+
+Landmarks (skin, the reference head's codes): the fit's landmarks are the
+*first guess* (orange; violet over holes, where the service marks them
+absent).  The user places a landmark by clicking the scan (code chosen in
+the panel), drags the selected one, accepts the guess of one or all; these
+*placed* landmarks (green) seed "Fit again" (3 or more orient the scan).
+
+Undo: placements live here, not in the case: the case's landmark sets are in
+the skull specimen's frame and a scan is not part of a case (holding it
+there needs a new model part).  :class:`ScanLandmarks` keeps a local undo /
+redo list; the window's Edit → Undo (Ctrl+Z) works on it while this tool's
+dock is in front with a scan open.
+
+The functions :func:`read_scan`, :func:`run_fit` and :func:`save_pack` are
+the worker side (plain data, no Qt, no VTK); :class:`ScanFitTool` is the GUI
+side (drawing, picking, dialogs).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from PySide6.QtCore import QObject, QTimer, Signal
+
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
+from workbench.core.errors import InputError, UnitsError, WorkbenchError
+from workbench.core.landmarks import Landmark, LandmarkSet
+from workbench.core.mesh import Mesh
+
+if TYPE_CHECKING:
+    from PySide6.QtWidgets import QWidget
+
+    from workbench.io.catalogue import LandmarkCatalogue
+    from workbench.qt.panels.scan_fit_panel import ScanFitPanel
+    from workbench.qt.picking import ClickPicker
+    from workbench.qt.scene import SceneView
+    from workbench.qt.workers import TaskRunner
+    from workbench.services.scan_fit import ScanFit
+
+#: the worker channel of fits and saves (a newer job supersedes the older)
+CHANNEL = "scan_fit"
+#: distance colouring of the scan (mm)
+DISTANCE_RANGE_MM = (0.0, 2.5)
+DISTANCE_TITLE = "scan to fitted skin mm"
+SCAN_GREY = (0.78, 0.78, 0.80)
+NAN_GREY = (0.55, 0.55, 0.57)
+#: landmark marker colours by state
+STATE_COLOURS = {
+    "placed": (0.10, 0.75, 0.25),
+    "guess": (1.0, 0.55, 0.0),
+    "over hole": (0.62, 0.42, 0.95),
+}
+SELECTED = (1.0, 0.95, 0.1)
+MARKER_PX = 10.0
+#: fraction of the fit done when the service reports a step (by the step's first word)
+STEP_FRACTIONS = {"orienting": 0.03, "registering": 0.12, "placing": 0.85, "measuring": 0.92}
+#: the placed landmarks in a saved pack (scan frame, mm)
+PLACED_FILE = "landmarks_on_scan.mrk.json"
+
+
+class ScanFitHost(Protocol):
+    """What the tool uses of the window: status line, readable errors, dialogs' parent."""
+
+    messages: list[str]
+    interactive: bool
+
+    def status(self, text: str) -> None: ...
+
+    def show_error(self, what: str, exc: BaseException) -> None: ...
+
+    def window(self) -> QWidget: ...
+
+
+# ------------------------------------------------------------------ worker side (plain data)
+@dataclass(frozen=True)
+class FitSettings:
+    """Sex, depth table and build of the fit (the panel's choices)."""
+
+    sex: str = "male"
+    table: str = DEFAULT_DEPTH_TABLE
+    build: str | float = "normal"
+
+
+@dataclass(frozen=True)
+class OpenedScan:
+    """A scan read as ``workbench fit-scan`` reads it (mm, the file's frame).
+
+    ``units`` / ``scale`` are what the user chose (given again to the pack
+    writer); ``factor`` is the mm per file unit applied; ``codes`` the
+    reference head's skin landmark codes with their ``names``.
+    """
+
+    path: Path
+    units: str
+    scale: float | None
+    mesh: Mesh
+    factor: float
+    codes: tuple[str, ...]
+    names: dict[str, str]
+    messages: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class FitView:
+    """A fit ready to draw: everything in the scan's input frame (mm).
+
+    Attributes
+    ----------
+    fit : ScanFit
+        The service's result (head frame).
+    skin : Mesh
+        The fitted skin in the scan's frame.
+    skin_parts : (Mesh, Mesh)
+        Its triangles over no scan (holes, outside the scan: drawn over the scan)
+        and those on the scan (drawn only while the scan is hidden: the two
+        lie within a fraction of a millimetre, and would show stripes of both).
+    distance : (n_scan,) float
+        Per scan vertex distance to the fitted skin (mm, NaN = not counted).
+    guess : dict
+        ``{code: position}`` of the fitted skin landmarks.
+    over_holes : frozenset
+        Codes the service marks absent (over no scan).
+    to_scan_mm : dict
+        ``{code: distance}`` of each guess to the scan surface (its confidence).
+    anterior, superior : (3,)
+        The fitted head's face and up directions in the scan's frame (camera).
+    face_bounds : (6,)
+        ``xmin, xmax, ymin, ymax, zmin, zmax`` of the fitted face (camera).
+    seeds : int
+        Placed landmarks the fit was given.
+    """
+
+    fit: ScanFit
+    skin: Mesh
+    skin_parts: tuple[Mesh, Mesh]
+    distance: np.ndarray
+    guess: dict[str, np.ndarray]
+    over_holes: frozenset[str]
+    to_scan_mm: dict[str, float]
+    anterior: np.ndarray
+    superior: np.ndarray
+    face_bounds: np.ndarray
+    seeds: int = 0
+
+
+def read_scan(path: str | Path, units: str = "auto", scale: float | None = None) -> OpenedScan:
+    """Worker: read and check a scan exactly as :func:`fit_scan_pack` does (mm).
+
+    Raises :class:`~workbench.core.errors.UnitsError` when ``units`` is
+    "auto" and the size does not look like mm (the window asks), and
+    :class:`~workbench.core.errors.InputError` for a file that is not a
+    face scan (a point cloud, a few triangles, a size not a head's).
+    """
+    from workbench.core.units import check_units_choice, resolve_units
+    from workbench.io.catalogue import load_catalogue
+    from workbench.io.meshes import read_mesh
+    from workbench.services.scan_fit import check_scan_mesh
+    from workbench.services.template_cache import reference_head
+
+    check_units_choice(units, scale)
+    path = Path(path)
+    read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="face")
+    if scale is None and units == "auto":
+        resolve_units(read.units, "auto", source=str(path))
+    check_scan_mesh(read.mesh, path)
+    _ = read.mesh.vertex_normals  # cached: spares the GUI thread when drawing
+    codes = reference_head("male").skin_landmarks.codes
+    catalogue = load_catalogue()
+    names = {}
+    for code in codes:
+        entry = catalogue.get(code, "skin")
+        names[code] = entry.name if entry is not None else ""
+    return OpenedScan(
+        path, units, scale, read.mesh, float(read.scale_applied), tuple(codes), names, read.messages
+    )
+
+
+def _fraction_reporter(report: Callable[[str, float], None] | None) -> Callable[[str], None]:
+    """The service's step messages as ``report(step, fraction)`` (which may cancel)."""
+    last = [0.0]
+
+    def say(message: str) -> None:
+        words = message.split()
+        first = words[0] if words else ""
+        last[0] = max(last[0], STEP_FRACTIONS.get(first, last[0]))
+        if report is not None:
+            report(message, last[0])
+
+    return say
+
+
+def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
+    """Worker: map a fit into the scan's frame for drawing (see :class:`FitView`)."""
+    from workbench.core.spatial import MeshIndex
+    from workbench.services.compare import face_regions
+
+    back = np.linalg.inv(fit.input_to_head)
+    skin = fit.head.skin.transformed(back)  # winding flipped when the scan was mirrored
+    on = np.asarray(fit.skin_on_scan, bool)[skin.faces].all(axis=1)
+    parts = (Mesh(skin.vertices, skin.faces[~on]), Mesh(skin.vertices, skin.faces[on]))
+    for part in parts:
+        part.__dict__["vertex_normals"] = skin.vertex_normals  # shading of the whole skin
+    lms = fit.head.skin_landmarks.defined()
+    codes = list(lms.codes)
+    guess_pts = fit.to_input(lms.positions_of(codes)) if codes else np.zeros((0, 3))
+    guess = {c: p for c, p in zip(codes, guess_pts, strict=True)}
+    absent = fit.figures.get("skin_landmark_to_scan_mm", {}).get("absent", [])
+    to_scan = MeshIndex(scan).closest_points(guess_pts).distances if len(guess_pts) else np.zeros(0)
+    ids = np.concatenate(list(face_regions(fit.head).values()))
+    face = skin.vertices[np.unique(ids)] if len(ids) else skin.vertices
+    lo, hi = face.min(axis=0), face.max(axis=0)
+    a, s = back[:3, :3] @ [0.0, 0.0, 1.0], back[:3, :3] @ [0.0, 1.0, 0.0]
+    distance = (
+        np.asarray(fit.scan_distance, float)
+        if fit.scan_distance is not None
+        else np.full(scan.n_vertices, np.nan)
+    )
+    return FitView(
+        fit,
+        skin,
+        parts,
+        distance,
+        guess,
+        frozenset(absent),
+        {c: float(d) for c, d in zip(codes, to_scan, strict=True)},
+        a / np.linalg.norm(a),
+        s / np.linalg.norm(s),
+        np.column_stack([lo, hi]).ravel(),
+        seeds,
+    )
+
+
+def run_fit(
+    scan: OpenedScan,
+    placed: LandmarkSet | None,
+    settings: FitSettings,
+    report: Callable[[str, float], None] | None = None,
+) -> FitView:
+    """Worker: :func:`fit_scan` on the opened scan, seeded by ``placed`` (scan frame, mm)."""
+    from workbench.model.evidence import file_sha256
+    from workbench.services.scan_fit import fit_scan
+
+    seeds = placed if placed is not None and len(placed) else None
+    result = fit_scan(
+        scan.mesh,
+        landmarks=seeds,
+        sex=settings.sex,
+        table=settings.table,
+        build=settings.build,
+        source=str(scan.path),
+        inputs=[{"role": "scan", "file": scan.path.name, "sha256": file_sha256(scan.path)}],
+        progress=_fraction_reporter(report),
+    )
+    if report is not None:
+        report("drawing the fit", 0.98)
+    return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds))
+
+
+def save_pack(
+    scan: OpenedScan,
+    out: str | Path,
+    placed: LandmarkSet | None,
+    settings: FitSettings,
+    *,
+    force: bool = False,
+    report: Callable[[str, float], None] | None = None,
+) -> tuple[FitView, list[Path]]:
+    """Worker: :func:`fit_scan_pack` with the tool's inputs; returns the fit and the files.
+
+    The placed landmarks go to the service as a landmark file in the scan
+    file's units (it scales them as it scales the scan) and are copied into
+    the pack as :data:`PLACED_FILE` (scan frame, mm).
+    """
+    from workbench.io.markups import write_mrk_json
+    from workbench.services.scan_fit import fit_scan_pack
+
+    seeds = placed if placed is not None and len(placed) else None
+    with tempfile.TemporaryDirectory(prefix="workbench-scan-") as tmp:
+        lm_file = None
+        if seeds is not None:
+            lm_file = Path(tmp) / f"{scan.path.stem}_skin_landmarks.mrk.json"
+            k = 1.0 / scan.factor
+            write_mrk_json(lm_file, seeds.transformed(np.diag([k, k, k, 1.0])), "RAS")
+
+        def extra(folder: Path, _result: ScanFit) -> list[Path]:
+            if seeds is None:
+                return []
+            write_mrk_json(folder / PLACED_FILE, seeds, "RAS")
+            return [folder / PLACED_FILE]
+
+        result, files = fit_scan_pack(
+            scan.path,
+            out,
+            units=scan.units,
+            scale=scan.scale,
+            landmarks=lm_file,
+            sex=settings.sex,
+            table=settings.table,
+            build=settings.build,
+            force=force,
+            progress=_fraction_reporter(report),
+            extra=extra,
+        )
+    return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds)), list(files)
+
+
+# ------------------------------------------------------------------ placed landmarks + undo
+@dataclass
+class ScanLandmarks:
+    """The landmarks the user placed on the scan, with a local undo / redo list.
+
+    Positions mm in the scan's frame, status "placed".  Each change stores the
+    previous set (``undo``) and clears the redo list.
+    """
+
+    placed: LandmarkSet = field(default_factory=lambda: LandmarkSet("skin"))
+    _undo: list[tuple[str, LandmarkSet]] = field(default_factory=list)
+    _redo: list[tuple[str, LandmarkSet]] = field(default_factory=list)
+
+    def change(self, label: str, new: LandmarkSet) -> bool:
+        if new.equals(self.placed):
+            return False
+        self._undo.append((label, self.placed))
+        self._redo.clear()
+        self.placed = new
+        return True
+
+    def place(self, code: str, position: np.ndarray, label: str = "") -> bool:
+        lm = Landmark(code, np.asarray(position, float), "placed")
+        what = label or ("Move" if code in self.placed else "Place")
+        return self.change(f"{what} {code}", self.placed.with_landmark(lm))
+
+    def place_many(self, points: dict[str, np.ndarray], label: str) -> bool:
+        new = self.placed
+        for code, p in points.items():
+            new = new.with_landmark(Landmark(code, np.asarray(p, float), "placed"))
+        return self.change(label, new)
+
+    def remove(self, code: str) -> bool:
+        if code not in self.placed:
+            return False
+        return self.change(f"Remove {code}", self.placed.without(code))
+
+    @property
+    def can_undo(self) -> bool:
+        return bool(self._undo)
+
+    @property
+    def can_redo(self) -> bool:
+        return bool(self._redo)
+
+    @property
+    def undo_text(self) -> str:
+        return self._undo[-1][0] if self._undo else ""
+
+    @property
+    def redo_text(self) -> str:
+        return self._redo[-1][0] if self._redo else ""
+
+    def undo(self) -> bool:
+        if not self._undo:
+            return False
+        label, before = self._undo.pop()
+        self._redo.append((label, self.placed))
+        self.placed = before
+        return True
+
+    def redo(self) -> bool:
+        if not self._redo:
+            return False
+        label, after = self._redo.pop()
+        self._undo.append((label, self.placed))
+        self.placed = after
+        return True
+
+    def clear(self) -> None:
+        self.placed = LandmarkSet("skin")
+        self._undo.clear()
+        self._redo.clear()
+
+
+# ------------------------------------------------------------------ GUI side
+class ScanFitTool(QObject):
+    """The "Fit scan" tool: see the module docstring.
+
+    Signals
+    -------
+    history_changed()
+        The placed landmarks' undo / redo state changed (the Edit menu follows).
+    """
+
+    history_changed = Signal()
+
+    def __init__(
+        self,
+        panel: ScanFitPanel,
+        scene: SceneView,
+        plotter: Any,
+        runner: TaskRunner,
+        host: ScanFitHost,
+        *,
+        skull_picker: ClickPicker | None = None,
+        catalogue: LandmarkCatalogue | None = None,
+        parent: QObject | None = None,
+    ) -> None:
+        super().__init__(parent)
+        from workbench.qt.picking import ClickPicker
+
+        self.panel = panel
+        self.scene = scene
+        self.plotter = plotter
+        self.runner = runner
+        self.host = host
+        self.catalogue = catalogue
+        self.skull_picker = skull_picker
+        self.scan: OpenedScan | None = None
+        self.view: FitView | None = None
+        self.landmarks = ScanLandmarks()
+        self.saved: list[Path] = []
+        self._actors: dict[str, list[Any]] = {}
+        self._scan_poly: Any = None
+        self._on_scan_skin: Any = None
+        self._drag: tuple[str, np.ndarray] | None = None
+        self._drag_scheduled = False
+        self.picker: ClickPicker | None = ClickPicker(
+            plotter,
+            self._scan_actor,
+            self.on_pick,
+            target_surface=lambda: self._scan_poly,
+            grab_target=self.grab_target,
+            on_drag=self.on_drag,
+            on_drag_end=self.on_drag_end,
+        )
+        self.picker.enabled = False
+        p = panel
+        p.open_requested.connect(self.ask_open_scan)
+        p.fit_requested.connect(self.fit)
+        p.cancel_requested.connect(self.cancel)
+        p.save_requested.connect(self.ask_save)
+        p.accept_requested.connect(self.accept_selected)
+        p.accept_all_requested.connect(self.accept_all)
+        p.remove_requested.connect(self.remove_selected)
+        p.undo_requested.connect(self.undo)
+        p.redo_requested.connect(self.redo)
+        p.place_toggled.connect(self.set_placing)
+        p.selection_changed.connect(lambda _code: self.draw_landmarks())
+        p.visibility_changed.connect(self.set_visible)
+        p.opacity_changed.connect(lambda v: self._set_opacity("skin", v))
+        runner.progress_changed.connect(self._on_progress)
+        runner.cancelled.connect(lambda ch: self._on_cancelled() if ch == CHANNEL else None)
+
+    # ------------------------------------------------------------ state
+    @property
+    def has_scan(self) -> bool:
+        return self.scan is not None
+
+    @property
+    def fit_result(self) -> ScanFit | None:
+        return None if self.view is None else self.view.fit
+
+    def settings(self) -> FitSettings:
+        from workbench.model.reconstruction_setup import parse_build
+
+        p = self.panel
+        return FitSettings(
+            p.sex_combo.currentText(),
+            p.table_combo.currentText() or DEFAULT_DEPTH_TABLE,
+            parse_build(p.build_combo.currentText()),
+        )
+
+    # ------------------------------------------------------------ open
+    def ask_open_scan(self) -> None:
+        from PySide6.QtWidgets import QFileDialog
+
+        from workbench.qt.file_ops import MESH_FILTER
+
+        name, _ = QFileDialog.getOpenFileName(
+            self.host.window(), "Open a face scan (mm, or choose its units)", "", MESH_FILTER
+        )
+        if name:
+            self.open_scan(name, self.panel.units_combo.currentText())
+
+    def open_scan(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
+        """Read the scan in the worker; then show it (the previous fit and placements go)."""
+        path = Path(path)
+        self.panel.show_state(f"Reading {path.name} …")
+        self.runner.submit(
+            "scan_open",
+            f"Opening the scan {path.name} …",
+            lambda: read_scan(path, units, scale),
+            self._scan_opened,
+            lambda exc: self._open_failed(path, exc),
+        )
+
+    def _open_failed(self, path: Path, exc: BaseException) -> None:
+        if isinstance(exc, UnitsError) and self.host.interactive:
+            from workbench.qt import dialogs
+
+            factor = dialogs.ask_units(self.host.window(), path.name, exc.problem)
+            if factor is not None:
+                self.open_scan(path, scale=factor)
+                return
+        self.panel.show_state(f"Could not open {path.name}.")
+        self.host.show_error(f"Could not open the scan {path.name}", exc)
+
+    def _scan_opened(self, scan: OpenedScan) -> None:
+        self.runner.cancel(CHANNEL)  # a fit of the previous scan is of no use now
+        self.scan, self.view = scan, None
+        self.landmarks.clear()
+        self.panel.show_scan(scan)
+        self.panel.show_fit(None)
+        self._refresh_landmarks()
+        self.draw_scan()
+        self._clear("skin")
+        self.draw_landmarks()
+        self.reset_camera()
+        self.history_changed.emit()
+        n = scan.mesh.n_faces
+        self.host.status(
+            f"Scan {scan.path.name}: {n:,} triangles ({scan.factor:g} mm per file unit). "
+            "Fit it (Fit scan dock) or place 3+ skin landmarks first."
+        )
+        self.host.messages.extend(scan.messages)
+
+    # ------------------------------------------------------------ fit
+    def fit(self) -> None:
+        """Fit the reference head in the worker (seeded by the placed landmarks)."""
+        scan = self.scan
+        if scan is None:
+            self.host.status("Open a scan first (File → Open face scan…).")
+            return
+        try:
+            settings = self.settings()
+        except WorkbenchError as exc:
+            self.host.show_error("The fit settings are not usable", exc)
+            return
+        placed = self.landmarks.placed
+        if 0 < len(placed) < 3:
+            self.host.messages.append(
+                f"{len(placed)} landmark(s) placed: 3 or more orient the scan; "
+                "the orientation is searched automatically"
+            )
+        self.panel.set_running(True)
+        self.panel.show_state("Fitting …")
+        self.runner.submit(
+            CHANNEL,
+            f"Fitting the reference head to {scan.path.name} …",
+            lambda report: run_fit(scan, placed, settings, report),
+            self._show_fit,
+            lambda exc: self._failed("Could not fit the scan", exc),
+            progress=True,
+        )
+
+    def cancel(self) -> None:
+        self.runner.cancel(CHANNEL)
+
+    def _on_cancelled(self) -> None:
+        self.panel.set_running(False)
+        self.panel.show_state("Cancelled; nothing changed.")
+        self.host.status("Scan fit cancelled.")
+
+    def _on_progress(self, channel: str, step: str, fraction: float) -> None:
+        if channel == CHANNEL:
+            self.panel.show_state(f"{step} ({fraction * 100:.0f} %)")
+
+    def _failed(self, what: str, exc: BaseException) -> None:
+        self.panel.set_running(False)
+        self.panel.show_state(f"{what}.")
+        self.host.show_error(what, exc)
+
+    def _show_fit(self, view: FitView) -> None:
+        self.panel.set_running(False)
+        self.view = view
+        fig = view.fit.figures
+        seconds = self.runner.timings.get(CHANNEL, 0.0)
+        self.panel.show_fit(view)
+        self.panel.show_state(f"Fitted in {seconds:.1f} s.")
+        self._refresh_landmarks()
+        self.draw_scan()
+        self.draw_skin()
+        self.draw_landmarks()
+        self.reset_camera()
+        self.host.messages.extend(view.fit.warnings)
+        self.host.status(
+            f"Scan fitted: {fig.get('face_within_1mm_fraction', 0) * 100:.1f} % of the face "
+            f"within 1 mm, {fig.get('fold_overs', 0)} fold-overs ({seconds:.1f} s)"
+        )
+
+    # ------------------------------------------------------------ save
+    def ask_save(self) -> None:
+        from PySide6.QtWidgets import QFileDialog
+
+        if self.scan is None:
+            self.host.status("Open a scan first.")
+            return
+        default = str(self.scan.path.with_name(f"{self.scan.path.stem}_fit"))
+        name, _ = QFileDialog.getSaveFileName(
+            self.host.window(), "Save the fitted head as a pack (a new folder)", default, ""
+        )
+        if name:
+            self.save_to(name)
+
+    def _may_replace(self, folder: Path) -> bool:
+        """Ask before replacing a non-empty folder (never when not interactive)."""
+        if not self.host.interactive:
+            return False
+        from PySide6.QtWidgets import QMessageBox
+
+        answer = QMessageBox.question(
+            self.host.window(),
+            "Replace the folder?",
+            f"{folder} already exists and is not empty.\n\nReplace it (everything in it) "
+            "with the fitted pack?",
+            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Cancel,
+            QMessageBox.StandardButton.Cancel,
+        )
+        return answer == QMessageBox.StandardButton.Yes
+
+    def save_to(self, folder: str | Path, force: bool = False) -> bool:
+        """Fit again and write the pack into ``folder`` (worker); False if refused at once.
+
+        An existing, non-empty ``folder`` is replaced only with ``force`` or
+        when the user confirms (the service replaces the folder as a whole).
+        """
+        scan = self.scan
+        if scan is None:
+            self.host.status("Open a scan first.")
+            return False
+        out = Path(folder)
+        if not force and not folder_is_free(out):
+            if not self._may_replace(out):
+                self.host.show_error(
+                    "The pack was not saved",
+                    InputError(
+                        out,
+                        "already exists and is not empty; refusing to replace it",
+                        "choose a new folder name, or confirm replacing it",
+                    ),
+                )
+                return False
+            force = True
+        try:
+            settings = self.settings()
+        except WorkbenchError as exc:
+            self.host.show_error("The fit settings are not usable", exc)
+            return False
+        placed = self.landmarks.placed
+        self.panel.set_running(True)
+        self.panel.show_state(f"Fitting and writing {out.name} …")
+        self.runner.submit(
+            CHANNEL,
+            f"Saving the fitted pack {out.name} …",
+            lambda report: save_pack(scan, out, placed, settings, force=force, report=report),
+            self._saved,
+            lambda exc: self._failed("The pack was not saved", exc),
+            progress=True,
+        )
+        return True
+
+    def _saved(self, result: tuple[FitView, list[Path]]) -> None:
+        view, files = result
+        self.saved = files
+        self._show_fit(view)
+        folder = files[0].parent if files else None
+        self.panel.show_state(f"Saved {len(files)} files to {folder}.")
+        self.host.status(f"Fitted pack saved: {folder} ({len(files)} files)")
+
+    # ------------------------------------------------------------ landmarks
+    def _refresh_landmarks(self) -> None:
+        scan, view = self.scan, self.view
+        codes = scan.codes if scan is not None else ()
+        self.panel.show_landmarks(
+            codes,
+            scan.names if scan is not None else {},
+            self.landmarks.placed,
+            view.guess if view is not None else {},
+            view.over_holes if view is not None else frozenset(),
+            view.to_scan_mm if view is not None else {},
+        )
+
+    def _changed(self) -> None:
+        self._refresh_landmarks()
+        self.panel.show_history(self.landmarks)
+        self.draw_landmarks()
+        self.history_changed.emit()
+
+    def position_of(self, code: str) -> np.ndarray | None:
+        """The landmark ``code`` as drawn: placed, else the first guess (scan frame, mm)."""
+        lm = self.landmarks.placed.get(code)
+        if lm is not None and lm.is_defined:
+            return np.asarray(lm.position, float)
+        if self.view is not None and code in self.view.guess:
+            return np.asarray(self.view.guess[code], float)
+        return None
+
+    def set_placing(self, on: bool) -> None:
+        """Clicks and drags go to the scan (the skull's picker rests meanwhile)."""
+        if self.picker is not None:
+            self.picker.enabled = bool(on)
+        if self.skull_picker is not None:
+            self.skull_picker.enabled = not on
+
+    def on_pick(self, point: np.ndarray) -> None:
+        """A click on the scan: place the selected code there, then select the next free one."""
+        code = self.panel.selected_code()
+        if not code:
+            self.host.status("Choose a landmark code in the Fit scan list, then click the scan.")
+            return
+        if self.landmarks.place(code, point):
+            self._changed()
+            self.panel.select_next_unplaced(code, self.landmarks.placed)
+            self.host.status(f"Placed {code} on the scan (Ctrl+Z undoes it).")
+
+    def place(self, code: str, point: np.ndarray) -> bool:
+        """Place (or move) ``code`` at ``point`` (scan frame, mm); one undo step."""
+        ok = self.landmarks.place(code, point)
+        if ok:
+            self._changed()
+        return ok
+
+    def grab_target(self) -> tuple[str, np.ndarray] | None:
+        code = self.panel.selected_code()
+        if not code:
+            return None
+        p = self.position_of(code)
+        return None if p is None else (code, p)
+
+    def on_drag(self, code: str, point: np.ndarray) -> None:
+        self._drag = (code, np.asarray(point, float))
+        if not self._drag_scheduled:
+            self._drag_scheduled = True
+            QTimer.singleShot(0, self._draw_drag)
+
+    def _draw_drag(self) -> None:
+        self._drag_scheduled = False
+        if self._drag is not None:
+            self.draw_landmarks({self._drag[0]: self._drag[1]})
+
+    def on_drag_end(self, code: str, point: np.ndarray | None) -> None:
+        self._drag = None
+        if point is None or not self.landmarks.place(code, point, "Drag"):
+            self.draw_landmarks()
+            return
+        self._changed()
+
+    def cancel_drag(self) -> None:
+        if self.picker is not None and self.picker.dragging is not None:
+            self.picker.finish_drag(cancel=True)
+
+    def accept_selected(self) -> None:
+        code = self.panel.selected_code()
+        if not code or self.view is None or code not in self.view.guess:
+            self.host.status("Select a landmark of the first guess to accept it.")
+            return
+        if self.landmarks.place(code, self.view.guess[code], "Accept"):
+            self._changed()
+
+    def accept_all(self) -> None:
+        """Accept every guess over the scan not placed yet (one undo step)."""
+        view = self.view
+        if view is None:
+            self.host.status("Fit the scan first: its landmarks are the first guess.")
+            return
+        todo = {
+            c: p
+            for c, p in view.guess.items()
+            if c not in view.over_holes and c not in self.landmarks.placed
+        }
+        if self.landmarks.place_many(todo, f"Accept {len(todo)} guessed landmarks"):
+            self._changed()
+            self.host.status(f"Accepted {len(todo)} landmarks of the first guess.")
+
+    def remove_selected(self) -> None:
+        code = self.panel.selected_code()
+        if code and self.landmarks.remove(code):
+            self._changed()
+
+    def undo(self) -> None:
+        if self.landmarks.undo():
+            self._changed()
+
+    def redo(self) -> None:
+        if self.landmarks.redo():
+            self._changed()
+
+    # ------------------------------------------------------------ drawing
+    def _scan_actor(self) -> Any:
+        actors = self._actors.get("scan")
+        return actors[0] if actors else None
+
+    def _clear(self, layer: str) -> None:
+        if layer == "skin":
+            self._on_scan_skin = None
+        for actor in self._actors.pop(layer, []):
+            self.plotter.remove_actor(actor, render=False)
+        self.scene.request_render()
+
+    def _add(self, layer: str, actor: Any) -> None:
+        self._actors.setdefault(layer, []).append(actor)
+        actor.SetVisibility(self.panel.layer_visible(layer))
+        if layer == "skin":
+            actor.GetProperty().SetOpacity(self.panel.skin_opacity())
+
+    def actors(self, layer: str) -> list[Any]:
+        """The drawn actors of ``"scan"``, ``"skin"`` or ``"landmarks"`` (tests)."""
+        return list(self._actors.get(layer, []))
+
+    def set_visible(self, layer: str, on: bool) -> None:
+        for actor in self._actors.get(layer, []):
+            actor.SetVisibility(bool(on))
+        if self._on_scan_skin is not None:  # the fitted skin on the scan: instead of the scan
+            self._on_scan_skin.SetVisibility(
+                self.panel.layer_visible("skin") and not self._scan_shown()
+            )
+        self.scene.request_render()
+
+    def _set_opacity(self, layer: str, value: float) -> None:
+        for actor in self._actors.get(layer, []):
+            actor.GetProperty().SetOpacity(float(value))
+        self.scene.request_render()
+
+    def draw_scan(self) -> None:
+        from workbench.qt.scene import SCALAR_BAR, SMOOTH
+        from workbench.render.snapshots import to_polydata
+
+        self._clear("scan")
+        self._scan_poly = None
+        if self.scan is None:
+            return
+        poly = to_polydata(self.scan.mesh, normals=True)
+        kw: dict[str, Any] = {"color": SCAN_GREY}
+        view = self.view
+        if view is not None and len(view.distance) == poly.n_points:
+            poly.point_data[DISTANCE_TITLE] = view.distance
+            kw = {
+                "scalars": DISTANCE_TITLE,
+                "cmap": "viridis",
+                "clim": DISTANCE_RANGE_MM,
+                "nan_color": NAN_GREY,
+                "scalar_bar_args": dict(SCALAR_BAR, title=DISTANCE_TITLE, n_labels=6, fmt="%.1f"),
+            }
+        actor = self.plotter.add_mesh(
+            poly, **SMOOTH, pickable=True, render=False, name="scan_fit_scan", **kw
+        )
+        self._scan_poly = poly
+        self._add("scan", actor)
+        self.scene.request_render()
+
+    def draw_skin(self) -> None:
+        from workbench.qt.scene import SKIN, SMOOTH
+        from workbench.render.snapshots import to_polydata
+
+        self._clear("skin")
+        if self.view is None:
+            return
+        for i, part in enumerate(self.view.skin_parts):
+            if not part.n_faces:
+                continue
+            actor = self.plotter.add_mesh(
+                to_polydata(part, normals=True),
+                color=SKIN,
+                **SMOOTH,
+                pickable=False,
+                render=False,
+                name=f"scan_fit_skin_{'on' if i else 'off'}_scan",
+            )
+            actor.GetProperty().BackfaceCullingOn()  # translucent over the scan (no sorting)
+            self._add("skin", actor)
+            if i:  # the part on the scan: only while the scan is hidden
+                self._on_scan_skin = actor
+                actor.SetVisibility(self.panel.layer_visible("skin") and not self._scan_shown())
+        self.scene.request_render()
+
+    def _scan_shown(self) -> bool:
+        return self.panel.layer_visible("scan") and self.scan is not None
+
+    def landmark_states(self) -> dict[str, str]:
+        """``{code: "placed" | "guess" | "over hole"}`` of every drawn landmark."""
+        out: dict[str, str] = {}
+        view = self.view
+        if view is not None:
+            for code in view.guess:
+                out[code] = "over hole" if code in view.over_holes else "guess"
+        for lm in self.landmarks.placed.defined():
+            out[lm.code] = "placed"
+        return out
+
+    def draw_landmarks(self, override: dict[str, np.ndarray] | None = None) -> None:
+        """Placed (green), first guess (orange; violet over holes), the selected one yellow."""
+        self._clear("landmarks")
+        override = override or {}
+        states = self.landmark_states()
+        for state, colour in STATE_COLOURS.items():
+            codes = [c for c, s in states.items() if s == state]
+            pts = [override.get(c, self.position_of(c)) for c in codes]
+            pts = [p for p in pts if p is not None]
+            if pts:
+                self._add(
+                    "landmarks",
+                    self.plotter.add_points(
+                        np.array(pts, float),
+                        color=colour,
+                        point_size=MARKER_PX,
+                        render_points_as_spheres=True,
+                        pickable=False,
+                        render=False,
+                        name=f"scan_fit_landmarks_{state.replace(' ', '_')}",
+                    ),
+                )
+        code = self.panel.selected_code()
+        p = override.get(code) if code else None
+        if p is None and code:
+            p = self.position_of(code)
+        if code and p is not None:
+            self._add(
+                "landmarks",
+                self.plotter.add_points(
+                    np.asarray(p, float)[None],
+                    color=SELECTED,
+                    point_size=MARKER_PX * 1.8,
+                    render_points_as_spheres=True,
+                    pickable=False,
+                    render=False,
+                    name="scan_fit_landmarks_selected",
+                ),
+            )
+            if not override:
+                name = self.scan.names.get(code, "") if self.scan is not None else ""
+                self._add(
+                    "landmarks",
+                    self.plotter.add_point_labels(
+                        np.asarray(p, float)[None],
+                        [f"{code}: {name} ({states.get(code, 'not placed')})"],
+                        font_size=14,
+                        point_size=1,
+                        shape_opacity=0.6,
+                        always_visible=True,
+                        pickable=False,
+                        render=False,
+                        name="scan_fit_landmarks_label",
+                    ),
+                )
+        self.scene.request_render()
+
+    def reset_camera(self) -> None:
+        """Look at the fitted face from the front; before a fit, at the whole scan."""
+        renderer = self.plotter.renderer
+        view = self.view
+        if view is None:
+            if self.scan is not None:
+                lo, hi = self.scan.mesh.vertices.min(axis=0), self.scan.mesh.vertices.max(axis=0)
+                renderer.ResetCamera(*np.column_stack([lo, hi]).ravel())
+                renderer.ResetCameraClippingRange()
+            self.scene.request_render()
+            return
+        b = view.face_bounds
+        centre = np.array([(b[0] + b[1]) / 2, (b[2] + b[3]) / 2, (b[4] + b[5]) / 2])
+        camera = renderer.GetActiveCamera()
+        camera.SetFocalPoint(*centre)
+        camera.SetPosition(*(centre + 600.0 * view.anterior))
+        camera.SetViewUp(*view.superior)
+        renderer.ResetCamera(*b)  # keeps the direction, fits the face
+        camera.Zoom(1.15)
+        renderer.ResetCameraClippingRange()
+        self.scene.request_render()
+
+    def detach(self) -> None:
+        """Remove the picker's observers (before the view closes)."""
+        if self.picker is not None:
+            self.picker.detach()
+            self.picker = None
+
+
+def folder_is_free(folder: str | Path) -> bool:
+    """True when ``folder`` does not exist or is an empty folder."""
+    path = Path(folder)
+    return not os.path.lexists(path) or (path.is_dir() and not any(path.iterdir()))
