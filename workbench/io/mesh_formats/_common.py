@@ -31,11 +31,29 @@ class ParsedMesh:
         Zero-based triangle corner indices (already range-checked).
     messages : list of str
         Notes for the user (polygons split, properties ignored, ...).
+    vertex_rgb : (n, 3) uint8, optional
+        Per-vertex colours the file carries (PLY red/green/blue, OBJ
+        ``v x y z r g b``), aligned with ``vertices``; None when there are none.
+    corner_uv : (m, 3, 2) float64, optional
+        Texture coordinates (u, v) of every triangle corner, aligned with
+        ``faces`` (OBJ ``vt`` records); None when the faces carry none.
+    material_libraries : list of str
+        Material files named by the mesh file, as written (OBJ ``mtllib``).
+    material_names : list of str
+        Materials the faces use (OBJ ``usemtl``), in order of first use.
+    face_material : (m,) int64, optional
+        Index into ``material_names`` per triangle, -1 for none; None when
+        the file names no materials.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     messages: list[str] = field(default_factory=list)
+    vertex_rgb: np.ndarray | None = field(default=None, kw_only=True)
+    corner_uv: np.ndarray | None = field(default=None, kw_only=True)
+    material_libraries: list[str] = field(default_factory=list, kw_only=True)
+    material_names: list[str] = field(default_factory=list, kw_only=True)
+    face_material: np.ndarray | None = field(default=None, kw_only=True)
 
 
 class Reader:
@@ -116,7 +134,9 @@ class Reader:
         return ParsedMesh(vertices, faces, self.messages)
 
 
-def fan_triangulate(counts: np.ndarray, flat: np.ndarray, reader: Reader) -> np.ndarray:
+def fan_triangulate(
+    counts: np.ndarray, flat: np.ndarray, reader: Reader, *, quiet: bool = False
+) -> np.ndarray:
     """Split polygons into triangle fans, vectorised.
 
     Parameters
@@ -126,7 +146,8 @@ def fan_triangulate(counts: np.ndarray, flat: np.ndarray, reader: Reader) -> np.
     flat : (sum(counts),) int
         Corner indices of all polygons, one after another.
     reader : Reader
-        Receives a note when polygons are split or dropped.
+        Receives a note when polygons are split or dropped (unless ``quiet``:
+        for a second table, e.g. texture indices, split the same way).
 
     Returns
     -------
@@ -143,17 +164,34 @@ def fan_triangulate(counts: np.ndarray, flat: np.ndarray, reader: Reader) -> np.
         return flat.reshape(-1, 3)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     small = counts < 3
-    if small.any():
+    if small.any() and not quiet:
         reader.note(f"{int(small.sum())} polygons with fewer than 3 corners were skipped")
     n_tri = np.maximum(counts - 2, 0)
     big = int((counts > 3).sum())
-    if big:
+    if big and not quiet:
         reader.note(f"{big} polygons with more than 3 corners were split into triangles")
     poly = np.repeat(np.arange(len(counts)), n_tri)
     first_tri = np.cumsum(n_tri) - n_tri
     j = np.arange(int(n_tri.sum())) - first_tri[poly]
     s = starts[poly]
     return np.stack([flat[s], flat[s + j + 1], flat[s + j + 2]], axis=1)
+
+
+def colour_bytes(values: np.ndarray, integer_max: float | None) -> np.ndarray:
+    """Colour channels as uint8 0-255.
+
+    ``integer_max`` is the full scale of integer channels (255 for uchar,
+    65535 for ushort); None for floating-point channels, which are taken as
+    0..1 unless some value exceeds 1 (then 0..255, as some writers do).
+    Values outside the range are clipped; NaN becomes 0.
+    """
+    values = np.nan_to_num(np.asarray(values, dtype=np.float64), nan=0.0)
+    if integer_max is None:
+        top = float(values.max()) if values.size else 0.0
+        scale = 255.0 if top <= 1.0 else 1.0
+    else:
+        scale = 255.0 / integer_max
+    return np.clip(np.rint(values * scale), 0, 255).astype(np.uint8)
 
 
 def format_rows(fmt: str, values: np.ndarray) -> str:

@@ -1,9 +1,17 @@
-"""Wavefront OBJ: ``v`` and ``f`` records only.
+"""Wavefront OBJ: ``v`` and ``f`` records, plus what colours the faces.
 
 Face corners may be written ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``; indices
 are 1-based, negative indices count back from the latest vertex.  Polygons are
-split into triangle fans.  Texture coordinates, normals, groups, objects,
-materials, smoothing groups, lines and comments are ignored.
+split into triangle fans.  Normals, groups, objects, smoothing groups, lines
+and comments are ignored.
+
+Colour data are kept but never make a readable mesh unreadable: vertex
+colours written ``v x y z r g b`` (0..1, or 0..255) become
+:attr:`ParsedMesh.vertex_rgb`; ``vt`` texture coordinates become
+:attr:`ParsedMesh.corner_uv` (per triangle corner, split like the faces)
+when every face corner has one, else a note says why they were dropped;
+``mtllib`` names and each triangle's ``usemtl`` material are kept for
+:mod:`workbench.io.scan_colours`, which reads the material files.
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ from workbench.io.mesh_formats._common import (
     WRITER_NAME,
     ParsedMesh,
     Reader,
+    colour_bytes,
     fan_triangulate,
     format_rows,
 )
@@ -27,6 +36,9 @@ _SLASH_SUFFIX = re.compile(r"/\S*")
 _INDENTED = re.compile(r"^[ \t]", re.MULTILINE)
 _V = ("v ", "v\t")
 _F = ("f ", "f\t")
+_VT = ("vt ", "vt\t")
+_NO_UV_CORNER = re.compile(r"(?<!\S)[^\s/]+(?!\S)|(?<!\S)[^\s/]*//\S*")
+_UV_OF_CORNER = re.compile(r"(?<!\S)[^\s/]*/([^\s/]+)\S*")
 
 
 def _fast_table(
@@ -62,6 +74,84 @@ def _face_corners(r: Reader, lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
     counts = np.array([len(row) for row in rows], np.int64)
     flat = r.to_int([tok for row in rows for tok in row], "face vertex indices")
     return counts, flat
+
+
+def _vertex_colours(r: Reader, lines: list[str]) -> np.ndarray | None:
+    """``v x y z r g b`` colours when every vertex line has them, else None."""
+    first = lines[0].split("#")[0].split()
+    if len(first) != 7:
+        return None
+    table = _fast_table(lines, np.float64, (4, 5, 6))
+    if table is None or len(table) != len(lines):
+        r.note("vertex colours are on only some 'v' lines and were ignored")
+        return None
+    return colour_bytes(table, None)
+
+
+def _corner_uv(
+    r: Reader, lines: list[str], f_lines: list[str], counts: np.ndarray
+) -> np.ndarray | None:
+    """Texture coordinates per triangle corner, or None (with a note why)."""
+    vt_lines = [line for line in lines if line[:3] in _VT]
+    if not vt_lines:
+        return None
+    body = "\n".join(line[1:].split("#")[0] for line in f_lines)
+    if _NO_UV_CORNER.search(body):
+        r.note("some face corners have no texture coordinate; the 'vt' records were ignored")
+        return None
+    uv = _fast_table(vt_lines, np.float64, (1, 2))
+    if uv is None or len(uv) != len(vt_lines):
+        r.note("unreadable 'vt' texture coordinates were ignored")
+        return None
+    flat_text = _UV_OF_CORNER.sub(r"\1", body).split()
+    try:
+        idx = np.asarray(flat_text, dtype=np.int64)
+    except ValueError:
+        r.note("unreadable texture indices in the faces; the 'vt' records were ignored")
+        return None
+    if len(idx) != int(counts.sum()):
+        r.note("texture indices do not match the face corners; the 'vt' records were ignored")
+        return None
+    if np.any(idx < 0):  # relative to the texture coordinates defined so far
+        seen, n_before = 0, []
+        for line in lines:
+            if line[:3] in _VT:
+                seen += 1
+            elif line[:2] in _F:
+                n_before.append(seen)
+        line_of = np.repeat(np.arange(len(counts)), counts)
+        idx = np.where(idx > 0, idx, np.asarray(n_before, np.int64)[line_of] + idx + 1)
+    if np.any(idx < 1) or np.any(idx > len(uv)):
+        r.note(
+            f"texture indices out of range (the file has {len(uv)} 'vt' records); "
+            "the 'vt' records were ignored"
+        )
+        return None
+    corners = fan_triangulate(counts, idx - 1, r, quiet=True)
+    return uv[corners]
+
+
+def _materials(lines: list[str], counts: np.ndarray) -> tuple[list[str], list[str], np.ndarray]:
+    """``mtllib`` names, material names and each triangle's material (-1: none)."""
+    libraries: list[str] = []
+    names: list[str] = []
+    per_line: list[int] = []
+    current = -1
+    for line in lines:
+        head = line[:2]
+        if head in _F:
+            per_line.append(current)
+        elif line.startswith(("mtllib ", "mtllib\t")):
+            name = line[6:].split("#")[0].strip()
+            if name and name not in libraries:
+                libraries.append(name)
+        elif line.startswith(("usemtl ", "usemtl\t")):
+            name = line[6:].split("#")[0].strip()
+            if name not in names:
+                names.append(name)
+            current = names.index(name)
+    n_tri = np.maximum(counts - 2, 0)
+    return libraries, names, np.repeat(np.asarray(per_line, np.int64), n_tri)
 
 
 def read(path: Path, data: bytes) -> ParsedMesh:
@@ -106,7 +196,14 @@ def read(path: Path, data: bytes) -> ParsedMesh:
         zero_based = np.where(idx > 0, idx - 1, np.asarray(n_before, np.int64)[line_of] + idx)
     else:
         zero_based = idx - 1
-    return r.finish(vertices, fan_triangulate(counts, zero_based, r))
+    parsed = r.finish(vertices, fan_triangulate(counts, zero_based, r))
+    parsed.vertex_rgb = _vertex_colours(r, v_lines)
+    parsed.corner_uv = _corner_uv(r, lines, f_lines, counts)
+    if "mtllib" in text or "usemtl" in text:
+        libraries, names, face_material = _materials(lines, counts)
+        parsed.material_libraries, parsed.material_names = libraries, names
+        parsed.face_material = face_material if names else None
+    return parsed
 
 
 def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:

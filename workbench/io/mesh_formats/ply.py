@@ -2,9 +2,13 @@
 
 Reads the ``vertex`` element's x/y/z (any numeric type) and the ``face``
 element's ``vertex_indices`` / ``vertex_index`` list (any count and index
-type); other elements and properties are skipped.  Polygons are split into
-triangle fans.  Writes double-precision vertices and ``uchar int`` faces with a
-``comment units: mm`` line.
+type); other elements and properties are skipped, except per-vertex colours
+(``red``/``green``/``blue``, or ``r``/``g``/``b``, or ``diffuse_red``... ;
+uchar, ushort or float 0..1; alpha ignored), which are kept as
+:attr:`ParsedMesh.vertex_rgb` (uint8, aligned with the vertices).  Polygons
+are split into triangle fans.  Writes double-precision vertices (optionally
+``uchar`` red/green/blue) and ``uchar int`` faces with a ``comment units: mm``
+line.
 
 Header comments: :func:`encode` and :func:`write` take extra ``comments``
 (one header line each, e.g. ``credit: Courtesy of ...`` for data that must
@@ -29,6 +33,7 @@ from workbench.io.mesh_formats._common import (
     WRITER_NAME,
     ParsedMesh,
     Reader,
+    colour_bytes,
     fan_triangulate,
     format_rows,
 )
@@ -53,6 +58,12 @@ _TYPES = {
 }
 _FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
 _FACE_LISTS = ("vertex_indices", "vertex_index")
+_COLOUR_NAMES = (
+    ("red", "green", "blue"),
+    ("r", "g", "b"),
+    ("diffuse_red", "diffuse_green", "diffuse_blue"),
+)
+_RGB_PROPERTIES = "property uchar red\nproperty uchar green\nproperty uchar blue\n"
 _HEADER_LIMIT = 1 << 20  # header_comments reads at most this many bytes looking for end_header
 
 
@@ -130,6 +141,23 @@ def _xyz_columns(r: Reader, element: _Element) -> list[int]:
     return cols
 
 
+def _colour_columns(element: _Element) -> list[int] | None:
+    """Columns of the vertex colour channels, or None when there are none."""
+    names = [p.name for p in element.properties]
+    for triple in _COLOUR_NAMES:
+        if all(n in names for n in triple):
+            cols = [names.index(n) for n in triple]
+            if not any(element.properties[c].count_dtype for c in cols):
+                return cols
+    return None
+
+
+def _colour_scale(element: _Element, cols: list[int]) -> float | None:
+    """Full scale of the colour channels' type (None for floating point)."""
+    kind = np.dtype(element.properties[cols[0]].dtype)
+    return None if kind.kind == "f" else float(np.iinfo(kind).max)
+
+
 def _face_list(r: Reader, element: _Element) -> int:
     for i, p in enumerate(element.properties):
         if p.name in _FACE_LISTS and p.count_dtype:
@@ -142,7 +170,7 @@ def _read_ascii(r: Reader, elements: list[_Element], start: int) -> ParsedMesh:
     tokens = np.array(r.data[start:].split())
     values = r.to_float(tokens, "numbers") if tokens.size else np.zeros(0)
     pos = 0
-    vertices = faces = None
+    vertices = faces = rgb = None
     for el in elements:
         if vertices is not None and faces is not None:
             break
@@ -156,6 +184,9 @@ def _read_ascii(r: Reader, elements: list[_Element], start: int) -> ParsedMesh:
             pos += n
             if el.name == "vertex":
                 vertices = table[:, _xyz_columns(r, el)]
+                cols = _colour_columns(el)
+                if cols is not None:
+                    rgb = colour_bytes(table[:, cols], _colour_scale(el, cols))
             continue
         wanted = _face_list(r, el) if el.name == "face" else lists[0]
         counts, flat, pos = _ascii_rows(r, el, values, pos, wanted)
@@ -163,7 +194,9 @@ def _read_ascii(r: Reader, elements: list[_Element], start: int) -> ParsedMesh:
             faces = fan_triangulate(counts, r.to_int(flat, "face indices"), r)
     if vertices is None or faces is None:
         raise r.fail("the file needs both a 'vertex' and a 'face' element")
-    return r.finish(vertices, faces)
+    parsed = r.finish(vertices, faces)
+    parsed.vertex_rgb = rgb
+    return parsed
 
 
 def _ascii_rows(
@@ -207,7 +240,7 @@ def _ascii_rows(
 # ------------------------------------------------------------------ binary
 def _read_binary(r: Reader, elements: list[_Element], start: int, order: str) -> ParsedMesh:
     pos = start
-    vertices = faces = None
+    vertices = faces = rgb = None
     for el in elements:
         if vertices is not None and faces is not None:
             break
@@ -218,6 +251,10 @@ def _read_binary(r: Reader, elements: list[_Element], start: int, order: str) ->
             if el.name == "vertex":
                 cols = _xyz_columns(r, el)
                 vertices = np.stack([table[f"p{c}"].astype(np.float64) for c in cols], axis=1)
+                colour = _colour_columns(el)
+                if colour is not None:
+                    channels = np.stack([table[f"p{c}"] for c in colour], axis=1)
+                    rgb = colour_bytes(channels, _colour_scale(el, colour))
             continue
         wanted = _face_list(r, el) if el.name == "face" else 0
         counts, flat, pos = _binary_rows(r, el, pos, order, wanted)
@@ -225,7 +262,9 @@ def _read_binary(r: Reader, elements: list[_Element], start: int, order: str) ->
             faces = fan_triangulate(counts, flat, r)
     if vertices is None or faces is None:
         raise r.fail("the file needs both a 'vertex' and a 'face' element")
-    return r.finish(vertices, faces)
+    parsed = r.finish(vertices, faces)
+    parsed.vertex_rgb = rgb
+    return parsed
 
 
 def _binary_rows(
@@ -300,7 +339,13 @@ def read(path: Path, data: bytes) -> PlyMesh:
     else:
         parsed = _read_binary(r, elements, start, _FORMATS[fmt])
     comments = _comments(data, data.find(b"end_header"))
-    return PlyMesh(parsed.vertices, parsed.faces, parsed.messages, comments)
+    return PlyMesh(
+        parsed.vertices,
+        parsed.faces,
+        parsed.messages,
+        comments,
+        vertex_rgb=parsed.vertex_rgb,
+    )
 
 
 def header_comments(source: str | PathLike[str] | bytes) -> list[str]:
@@ -344,8 +389,12 @@ def encode(
     binary: bool = True,
     comments: Iterable[str] = (),
     units: str = "mm",
+    vertex_rgb: np.ndarray | None = None,
 ) -> bytes:
     """PLY bytes: binary little endian (default) or ascii, double vertices.
+
+    ``vertex_rgb`` ``(n, 3)`` uint8 adds ``uchar red/green/blue`` vertex
+    properties.
 
     ``comments`` are extra header lines (``comment TEXT``), written after
     the units and writer comments; each must be one line of ASCII text
@@ -360,14 +409,32 @@ def encode(
         f"{_comment_lines(comments)}"
         f"element vertex {len(vertices)}\n"
         "property double x\nproperty double y\nproperty double z\n"
+        f"{_RGB_PROPERTIES if vertex_rgb is not None else ''}"
         f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n"
     ).encode("ascii")
+    if vertex_rgb is not None:
+        rgb = np.asarray(vertex_rgb)
+        if rgb.shape != (len(vertices), 3):
+            raise ValueError(f"expected ({len(vertices)}, 3) vertex colours, got {rgb.shape}")
+        rgb = np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
     if binary:
         rec = np.empty(len(faces), np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
         rec["n"] = 3
         rec["i"] = faces
-        return header + np.ascontiguousarray(vertices, "<f8").tobytes() + rec.tobytes()
-    body = format_rows("%r %r %r\n", vertices) + format_rows("3 %d %d %d\n", faces)
+        if vertex_rgb is None:
+            verts = np.ascontiguousarray(vertices, "<f8").tobytes()
+        else:
+            table = np.empty(len(vertices), np.dtype([("p", "<f8", (3,)), ("c", "u1", (3,))]))
+            table["p"], table["c"] = vertices, rgb
+            verts = table.tobytes()
+        return header + verts + rec.tobytes()
+    if vertex_rgb is None:
+        body = format_rows("%r %r %r\n", vertices)
+    else:
+        rows = np.empty((len(vertices), 6), object)
+        rows[:, :3], rows[:, 3:] = np.asarray(vertices, np.float64), rgb.astype(int)
+        body = format_rows("%r %r %r %d %d %d\n", rows)
+    body += format_rows("3 %d %d %d\n", faces)
     return header + body.encode("ascii")
 
 
