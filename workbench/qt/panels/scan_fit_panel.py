@@ -274,6 +274,8 @@ class ScanFitPanel(QWidget):
             f"{scan.path.name}: {n:,} triangles, "
             f"{' x '.join(f'{v:.0f}' for v in extent)} mm ({scan.factor:g} mm per unit)"
         )
+        if scan.scale is None and self.units_combo.findText(scan.units) >= 0:
+            self.units_combo.setCurrentText(scan.units)  # what the scan was read with
         self.codes = list(scan.codes)
         self.set_running(False)
 
