@@ -143,9 +143,9 @@ def read_scan_colours(
     Parameters
     ----------
     path : path-like
-        The scan mesh (``.ply`` or ``.obj`` carry colours; other formats
-        only with ``texture``... which needs texture coordinates, so give
-        a PLY or OBJ).
+        The scan mesh.  Only ``.ply`` and ``.obj`` carry colours; for the
+        other formats the answer is None (and ``texture`` is refused: they
+        have no texture coordinates).
     texture : path-like, optional
         A texture image used instead of the OBJ material's ``map_Kd``.
 
