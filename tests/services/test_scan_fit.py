@@ -8,7 +8,7 @@ import pytest
 from tests.services._scans import damaged_skin
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.services.scan_fit import check_scan_mesh, fit_scan
 
 
@@ -82,3 +82,43 @@ def test_bad_scans_are_refused_by_name():
     few = Mesh(grid, np.arange(600).reshape(200, 3) % 300)
     with pytest.raises(InputError, match="few.stl.*200 triangles"):
         check_scan_mesh(few, "few.stl")
+
+
+def test_two_heads_in_one_file_are_refused(head_female):
+    scan, _ = damaged_skin(head_female)
+    two = concatenate([scan, scan.with_vertices(scan.vertices + (260.0, 0.0, 0.0))])
+    with pytest.raises(InputError, match="pair.ply.*2 separate surfaces"):
+        check_scan_mesh(two, "pair.ply")
+    # a small stray fragment beside one head is fine
+    check_scan_mesh(concatenate([scan, _ball(8.0, (260.0, 0.0, 0.0))]), "one.ply")
+
+
+def test_a_scan_that_is_not_a_face_is_refused(head_male):
+    # a head-sized ball: the skin can be bent onto it, but the face finds no surface of
+    # its shape; that must not come back as a fitted face
+    with pytest.raises(InputError, match="ball.ply.*does not look like a face"):
+        fit_scan(_ball(90.0), base=head_male, source="ball.ply")
+
+
+def test_cavity_walls_are_not_counted(head_male, head_female):
+    """A CT skin surface holds the airway; no scanner sees it: excluded, the face is fitted."""
+    scan, _ = damaged_skin(head_female)
+    from tests.services._scans import scan_pose
+
+    inside = head_female.skin_landmarks.as_dict()["prn"] - (0.0, 5.0, 25.0)
+    airway = _ball(6.0, tuple(inside))
+    airway = airway.with_vertices(airway.vertices @ scan_pose()[:3, :3].T + scan_pose()[:3, 3])
+    fit = fit_scan(concatenate([scan, airway]), base=head_male)
+    fig = fit.figures
+    # most of it not counted (walls that look out through the punched holes or the open
+    # neck are seen, as a scanner would see them)
+    assert np.isnan(fit.scan_distance[scan.n_vertices :]).mean() > 0.8
+    assert fig["face_region_hidden_vertices"] > 1000  # ... and said in the report
+    assert fig["face_within_1mm_fraction"] >= 0.95
+    assert fig["face_skin_to_scan_mm"]["within_2_5mm_fraction"] >= 0.98
+
+
+def _ball(radius: float, centre=(0.0, 0.0, 0.0)) -> Mesh:
+    from tests.core.test_visibility import _sphere
+
+    return _sphere(radius, centre=centre, n=40)

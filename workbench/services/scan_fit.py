@@ -59,6 +59,7 @@ from workbench.core.nonrigid import AFFINE_ROUNDS, Level
 from workbench.core.normals import normals_within_radius
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
+from workbench.core.visibility import seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.model.template import TemplateHead
 
@@ -85,6 +86,18 @@ INNER_SMOOTHING = 2.0
 RIM_EXCLUDE_MM = 4.0
 #: a scan vertex counts as "the head" in the report when its belief exceeds this
 HEAD_WEIGHT = 0.5
+#: a fitted skin vertex is "on the scan" when the scan surface is this close (mm) ...
+#: (a miss of the fit, e.g. a sharper nose tip than a coarse scan's, is not a hole:
+#: holes are told by the rim-faded belief of the closest point)
+ON_SCAN_MM = 5.0
+#: ... at a point of belief above HEAD_WEIGHT facing the same side (creases at the mouth
+#: corners and canthi turn the normals of a coarse scan by up to ~90°)
+ON_SCAN_COS = 0.0
+#: a second connected piece this large (area fraction of the largest) and this far away
+#: (mm, between centroids) is a second head or body, not a stray fragment
+SECOND_PIECE = (0.4, 150.0)
+#: below this fraction of the reference face supported by the scan, it is not a face
+MIN_FACE_SUPPORT = 0.6
 INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue", "eyes")
 BONE_PARTS = ("cranium", "mandible")
 FIT_VERSION = 1
@@ -155,6 +168,26 @@ def check_scan_mesh(mesh: Mesh, source: str | PathLike[str]) -> None:
             f"is {' x '.join(f'{v:.4g}' for v in extent)} mm (largest side {largest:.4g} mm); "
             f"a face, head or bust scan is {lo:.0f}-{hi:.0f} mm",
             "check --units / --scale: the file's numbers are not in the units given",
+        )
+    _check_one_body(mesh, source)
+
+
+def _check_one_body(mesh: Mesh, source: str | PathLike[str]) -> None:
+    """Refuse a file holding two (or more) heads or bodies: large pieces far apart."""
+    labels = mesh.face_components
+    areas = np.bincount(labels, weights=mesh.face_areas)
+    big = np.flatnonzero(areas >= SECOND_PIECE[0] * areas.max())
+    if len(big) < 2:
+        return
+    centres = mesh.vertices[mesh.faces].mean(axis=1)
+    cent = np.array([centres[labels == b].mean(axis=0) for b in big])
+    gap = float(np.linalg.norm(cent[:, None] - cent[None], axis=2).max())
+    if gap > SECOND_PIECE[1]:
+        raise InputError(
+            source,
+            f"holds {len(big)} separate surfaces of similar size {gap:.0f} mm apart "
+            "(two heads, or a head and another body, in one file)",
+            "keep one head in the file (e.g. delete the other pieces in MeshLab or Blender)",
         )
 
 
@@ -265,6 +298,9 @@ def fit_scan(
     mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
     rest = head_transformed(base, np.diag([1 / s, 1 / s, 1 / s, 1.0]))
     scan_h = scan_in_frame(scan, rigid, mirrored)
+    # walls of the airway, mouth and nostrils (a CT's skin surface, parted lips): no
+    # scanner sees them and the reference has no surface for them
+    seen = seen_from_outside(scan_h)
     seconds["orientation"] = time.perf_counter() - t0
 
     # 2. skin
@@ -279,9 +315,27 @@ def fit_scan(
         source=source,
         near="the reference head placed on it",
         hint="check the orientation (--anterior/--superior or 3+ --landmarks) and the units",
+        belief=seen.astype(float),
     )
     warnings += list(fit.warnings)
-    on_scan = fit.on_scan
+    facing, to_scan = _scan_support(
+        fit.registration.vertices, rest.skin.faces, scan_h, fit.target_weights
+    )
+    on_scan = facing & (to_scan <= ON_SCAN_MM)
+    face_ids = np.concatenate(list(face_regions(base).values()))
+    face = _mask(rest.skin.n_vertices, [face_ids])
+    support = float(on_scan[face].mean())
+    if support < MIN_FACE_SUPPORT:
+        # a hand, an object, the back of a head: the skin was bent onto it, but most of
+        # the face found no surface of its shape near it; that is not a fitted face
+        raise InputError(
+            source,
+            f"does not look like a face: only {100 * support:.0f} % of the reference face "
+            f"found scan surface of its shape near it (a face scan gives over "
+            f"{100 * MIN_FACE_SUPPORT:.0f} %)",
+            "is this a scan of a face? check the orientation (--anterior/--superior or 3+ "
+            "--landmarks) and the units",
+        )
     skin = rest.skin.with_vertices(fit.registration.vertices)
     skin_lms, absent_skin = carry_skin_landmarks(rest.skin, skin, rest.skin_landmarks, on_scan)
     seconds["skin"] = time.perf_counter() - t
@@ -323,8 +377,6 @@ def fit_scan(
     say("measuring the fit ...")
     fig: dict = {}
     fitted = head.skin
-    face_ids = np.concatenate(list(face_regions(base).values()))
-    face = _mask(fitted.n_vertices, [face_ids])
     _, nearest = cKDTree(fitted.vertices).query(scan_h.vertices)
     rim_d = np.full(scan_h.n_vertices, np.inf)
     loops = boundary_loops(scan_h)
@@ -332,17 +384,30 @@ def fit_scan(
         rim_d, _ = cKDTree(scan_h.vertices[np.concatenate(loops)]).query(scan_h.vertices)
     in_face = face[nearest] & (rim_d > RIM_EXCLUDE_MM)
     counted = in_face & (fit.target_weights > HEAD_WEIGHT)
+    hidden = in_face & ~seen
+    counted &= seen
     d = MeshIndex(fitted).closest_points(scan_h.vertices[counted]).distances
     scan_distance = np.full(scan_h.n_vertices, np.nan)
     scan_distance[counted] = d
     fig["scan_vertices"] = int(scan_h.n_vertices)
     fig["scan_triangles"] = int(scan_h.n_faces)
     fig["face_region_vertices"] = int(counted.sum())
-    fig["face_region_not_head_vertices"] = int((in_face & ~counted).sum())
+    fig["face_region_not_head_vertices"] = int((in_face & ~hidden & ~counted).sum())
+    fig["face_region_hidden_vertices"] = int(hidden.sum())
     fig["face_within_1mm_fraction"] = float((d <= 1.0).mean()) if len(d) else 0.0
     fig["face_within_2_5mm_fraction"] = float((d <= 2.5).mean()) if len(d) else 0.0
     fig["face_mean_distance_mm"] = float(d.mean()) if len(d) else None
     fig["face_median_distance_mm"] = float(np.median(d)) if len(d) else None
+    # the other direction: fitted face skin over believed scan → the scan (a nose longer than
+    # the scan's passes the scan → skin test, every scan point lying near its sides)
+    back = to_scan[face & facing]
+    fig["face_skin_to_scan_mm"] = {
+        "n": len(back),
+        "mean": float(back.mean()) if len(back) else None,
+        "p95": float(np.percentile(back, 95)) if len(back) else None,
+        "max": float(back.max()) if len(back) else None,
+        "within_2_5mm_fraction": float((back <= 2.5).mean()) if len(back) else 0.0,
+    }
     fig["skin_on_scan_fraction"] = float(on_scan.mean())
     fig["face_on_scan_fraction"] = float(on_scan[face].mean())
     ref_n, fit_n = ref_settled.skin.face_normals, fitted.face_normals
@@ -426,6 +491,25 @@ def fit_scan(
     }
     head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
     return ScanFit(head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance)
+
+
+def _scan_support(
+    skin_v: np.ndarray, faces: np.ndarray, scan_h: Mesh, scan_weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per fitted skin vertex: is its closest scan point believed (not a hole rim, not a
+    cavity wall, not the shoulders) and facing the same side; and its distance (mm).
+
+    Measured to the scan's *surface* (not its vertices), so a coarse scan (5 mm
+    edges) supports the skin as well as a dense one.  A vertex is on the scan
+    when supported within :data:`ON_SCAN_MM`.
+    """
+    from workbench.core.normals import vertex_normals
+
+    cp = MeshIndex(scan_h).closest_points(skin_v)
+    w = np.einsum("ij,ij->i", cp.barycentric, scan_weights[scan_h.faces[cp.face_ids]])
+    n = vertex_normals(Mesh(skin_v, faces))
+    cos = np.einsum("ij,ij->i", n, scan_h.face_normals[cp.face_ids])
+    return (w > HEAD_WEIGHT) & (cos > ON_SCAN_COS), cp.distances
 
 
 def _skull_vs_bone(head: TemplateHead, bone: Mesh, to_head: np.ndarray, face: np.ndarray) -> dict:

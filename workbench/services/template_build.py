@@ -208,6 +208,7 @@ def fit_skin(
     source: str = "skin",
     near: str = "the reference head",
     hint: str | None = None,
+    belief: np.ndarray | None = None,
 ) -> SkinFit:
     """Register ``skin`` (the reference skin placed in the head frame) onto ``scan_h``.
 
@@ -216,12 +217,17 @@ def fit_skin(
     ears (:data:`UNPROJECTED_REGIONS` of ``regions``) do not look for the
     scan, and skin over no scan keeps the reference's shape (membrane).
 
+    ``belief`` (per scan vertex, 0..1) multiplies the scan's weights, e.g.
+    0 for walls of a cavity no scanner sees (:mod:`workbench.core.visibility`).
+
     Raises
     ------
     InputError
         (naming ``source``) when no part of the scan lies near ``skin``.
     """
     weights, not_head = skin_target_weights(scan_h, skin)
+    if belief is not None:
+        weights = weights * np.clip(np.asarray(belief, float), 0.0, 1.0)
     if not (weights > 0.05).any():
         raise InputError(source, f"no part of the skin surface lies near {near}", hint=hint)
     warnings = []

@@ -1,0 +1,59 @@
+"""``workbench.core.visibility``: walls of a cavity are not seen from outside (mm)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench.core.mesh import Mesh, concatenate
+from workbench.core.visibility import seen_from_outside
+
+
+def _sphere(radius: float, centre=(0.0, 0.0, 0.0), n: int = 24) -> Mesh:
+    """A UV sphere wound outward (mm)."""
+    th = np.linspace(0, np.pi, n + 1)[1:-1]
+    ph = np.linspace(0, 2 * np.pi, 2 * n, endpoint=False)
+    t, p = np.meshgrid(th, ph, indexing="ij")
+    ring = np.column_stack(
+        [
+            np.sin(t).ravel() * np.cos(p).ravel(),
+            np.sin(t).ravel() * np.sin(p).ravel(),
+            np.cos(t).ravel(),
+        ]
+    )
+    v = np.vstack([[0, 0, 1], ring, [0, 0, -1]]) * radius + centre
+    m, k = len(th), len(ph)
+    idx = lambda i, j: 1 + i * k + (j % k)  # noqa: E731
+    faces = [(0, idx(0, j), idx(0, j + 1)) for j in range(k)]
+    for i in range(m - 1):
+        for j in range(k):
+            a, b, c, d = idx(i, j), idx(i, j + 1), idx(i + 1, j), idx(i + 1, j + 1)
+            faces += [(a, c, b), (b, c, d)]
+    last = len(v) - 1
+    faces += [(idx(m - 1, j), last, idx(m - 1, j + 1)) for j in range(k)]
+    mesh = Mesh(v, np.array(faces))
+    # wind outward whatever the construction did
+    if np.einsum("ij,ij->", mesh.face_normals, mesh.vertices[mesh.faces].mean(1) - centre) < 0:
+        mesh = Mesh(v, mesh.faces[:, ::-1])
+    return mesh
+
+
+def test_outer_surface_seen_cavity_walls_hidden():
+    outer = _sphere(45.0)
+    cavity = _sphere(10.0, centre=(0.0, -10.0, 15.0))  # an "airway" inside the head
+    mesh = concatenate([outer, cavity])
+    seen = seen_from_outside(mesh)
+    assert seen[: outer.n_vertices].all()
+    assert not seen[outer.n_vertices :].any()
+
+
+def test_far_surfaces_do_not_block():
+    # a second body 300 mm away (beyond the blocking range) does not hide the first
+    a, b = _sphere(20.0), _sphere(40.0, centre=(0.0, 0.0, 320.0))
+    seen = seen_from_outside(concatenate([a, b]))
+    assert seen.all()
+    # within range, a surface facing another closely (a chin over the chest) is hidden
+    near = _sphere(40.0, centre=(0.0, 0.0, 70.0))
+    seen = seen_from_outside(concatenate([a, near]))[: a.n_vertices]
+    n = a.vertices / 20.0
+    assert not seen[n[:, 2] > 0.97].any()
+    assert seen[n[:, 2] < 0.0].all()

@@ -1,0 +1,87 @@
+"""Which surface points a range scanner could see: not buried in a cavity of the mesh.
+
+A CT's skin iso-surface is closed around the airway, the mouth and the
+nostrils; a photogrammetry mesh may hold the inside of the ear canal or
+the oral cavity between parted lips.  A scanner looking at the head from
+outside never records these walls, and the reference head has no such
+surfaces to fit them with (its lips are closed, its nostrils end a few
+millimetres in).  A point is *seen from outside* when at least one ray in
+a cone around its outward normal leaves the mesh without hitting it
+again (:data:`MIN_FREE_RAYS` of them); a wall inside a cavity has every
+such ray blocked by the opposite wall.
+
+Units: mm (any frame; only distances along rays are used).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench.core.mesh import Mesh
+from workbench.core.normals import vertex_normals
+from workbench.core.raycast import RayCaster
+
+#: rays start this far out along the normal, so they do not hit their own triangles
+RAY_OFFSET_MM = 0.3
+#: half-angle of the cone of rays around the normal (degrees)
+CONE_DEG = 35.0
+#: rays tilted around the normal, besides the normal itself
+CONE_RAYS = 6
+#: a vertex is seen when at least this many of its rays leave freely: one free ray may
+#: be the way out of a cavity through an open end of the mesh (the neck of a CT skin cut
+#: by the field of view), not a line of sight of a scanner
+MIN_FREE_RAYS = 2
+#: hits farther than this do not block (a head is smaller; a table or wall far behind is not
+#: a cavity)
+MAX_BLOCK_MM = 250.0
+
+
+def _cone(normals: np.ndarray, half_angle_deg: float, count: int) -> np.ndarray:
+    """(n, count + 1, 3) unit directions: the normal and ``count`` tilted around it."""
+    n = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    # any vector not parallel to n gives the first tangent
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(n, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    a = np.radians(half_angle_deg)
+    phi = 2 * np.pi * np.arange(count) / max(count, 1)
+    tilted = (
+        np.cos(a) * n[:, None, :]
+        + np.sin(a) * np.cos(phi)[None, :, None] * t1[:, None, :]
+        + np.sin(a) * np.sin(phi)[None, :, None] * t2[:, None, :]
+    )
+    return np.concatenate([n[:, None, :], tilted], axis=1)
+
+
+def seen_from_outside(
+    mesh: Mesh,
+    *,
+    normals: np.ndarray | None = None,
+    cone_deg: float = CONE_DEG,
+    rays: int = CONE_RAYS,
+    max_block_mm: float = MAX_BLOCK_MM,
+    min_free: int = MIN_FREE_RAYS,
+) -> np.ndarray:
+    """``(n_vertices,)`` bool: the vertex is visible from outside the mesh along ``min_free``
+    of its rays (the normal and ``rays`` around it, ``cone_deg`` off it).
+
+    ``normals`` (outward, per vertex) default to the area-weighted vertex
+    normals, so the mesh must be wound outward.  A ray blocks only when it
+    hits the mesh within ``max_block_mm``; isolated vertices count as seen.
+    """
+    nrm = vertex_normals(mesh) if normals is None else np.asarray(normals, float)
+    used = np.linalg.norm(nrm, axis=1) > 0.5
+    seen = np.ones(mesh.n_vertices, bool)
+    if mesh.n_faces == 0 or not used.any():
+        return seen
+    ids = np.flatnonzero(used)
+    dirs = _cone(nrm[ids], cone_deg, rays)  # (k, r, 3)
+    k, r = dirs.shape[:2]
+    origins = np.repeat(mesh.vertices[ids] + RAY_OFFSET_MM * dirs[:, 0], r, axis=0)
+    hits = RayCaster.shared(mesh).first_hits(
+        origins, dirs.reshape(-1, 3), max_distance=max_block_mm
+    )
+    blocked = hits.hit.reshape(k, r)
+    seen[ids] = (~blocked).sum(axis=1) >= min_free
+    return seen
