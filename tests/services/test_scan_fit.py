@@ -122,3 +122,36 @@ def _ball(radius: float, centre=(0.0, 0.0, 0.0)) -> Mesh:
     from tests.core.test_visibility import _sphere
 
     return _sphere(radius, centre=centre, n=40)
+
+
+def test_scan_colour_is_carried_onto_the_fitted_skin(tmp_path, head_female):
+    """A coloured PLY scan: the pack gets a vertex-coloured skin and a texture atlas whose
+    colours follow the scan's (a ramp along the head's height)."""
+    from workbench.io.mesh_formats import ply
+    from workbench.io.meshes import read_mesh
+    from workbench.services.scan_fit import fit_scan_pack
+
+    scan, _ = damaged_skin(head_female)
+    height = head_female.skin.vertices[:, 1]  # same vertex order as the scan
+    level = np.interp(height, (height.min(), height.max()), (20.0, 220.0))
+    rgb = np.column_stack([level, 255 - level, np.full_like(level, 128)]).astype(np.uint8)
+    path = tmp_path / "coloured.ply"
+    path.write_bytes(ply.encode(scan.vertices, scan.faces, vertex_rgb=rgb))
+    result, files = fit_scan_pack(path, tmp_path / "pack", units="mm", sex="female")
+    names = {f.name for f in files}
+    assert {"skin_colour.ply", "skin_textured.obj", "skin_texture.png"} <= names
+    assert result.figures["colour"]["observed_fraction"] > 0.8
+    coloured = read_mesh(tmp_path / "pack" / "skin_colour.ply", units="mm")
+    out = tmp_path / "pack" / "skin_colour.ply"
+    parsed = ply.read(out, out.read_bytes())
+    assert coloured.mesh.n_vertices == result.head.skin.n_vertices
+    # the fitted skin's colour at each vertex is the scan's colour there: map the fitted
+    # skin back into the scan's frame and compare with the nearest scan vertex's colour
+    from scipy.spatial import cKDTree
+
+    back = result.to_input(result.head.skin.vertices)
+    d, j = cKDTree(scan.vertices).query(back)
+    near = d < 1.5
+    err = np.abs(parsed.vertex_rgb[near].astype(float) - rgb[j[near]].astype(float))
+    assert near.mean() > 0.5
+    assert np.median(err) < 4.0
