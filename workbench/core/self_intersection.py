@@ -1,0 +1,320 @@
+"""Self-intersections of a triangle mesh: pairs of faces that cross each other.
+
+Units: mm in the mesh's frame.
+
+What counts
+-----------
+Two faces *intersect* when they cross: an edge of one passes through the
+other, its endpoints more than ``tol_mm`` from the other's plane on opposite
+sides, meeting the plane inside the other face or on its boundary (the face
+widened by ``tol_mm``).  Every crossing of two triangles has an endpoint of
+the intersection segment on an edge of one of them, so testing the three
+edges of A against B and the three edges of B against A covers them all.
+Counting a meeting point on the boundary catches the degenerate crossings of
+symmetric meshes, where one surface leaves the other exactly along its edges
+or through its vertices.  Faces that only touch - a corner on or within
+``tol_mm`` of the other face, or any gap - are not reported.  Coplanar faces
+(every corner of one within ``tol_mm`` of the other's plane) are tested in
+that plane instead: they intersect when their interiors overlap by more than
+``tol_mm`` (two edges cross properly, or a corner or the centroid of one
+lies strictly inside the other).
+
+Adjacency is by vertex index:
+
+* faces sharing an **edge** (two or three vertices) are skipped: they can
+  only meet beyond the shared edge when folded flat onto each other, a
+  fold-over that the fold-over check reports;
+* faces sharing **one vertex** are tested with only the edges that do not
+  contain it (the edge opposite the shared corner, of each face), so a fold
+  through the shared vertex is caught while the common corner is not.
+
+Vertices that coincide without sharing an index (unwelded seams) touch, which
+the tolerance excludes.
+
+Candidate pairs
+---------------
+Each face is bounded by the sphere about its centroid through its farthest
+corner.  Faces are grouped by that radius in classes a factor √2 apart; for
+every pair of classes a k-d tree over the centroids returns the face pairs
+whose centres are within the two classes' largest radii.  The pairs are then
+kept only when their exact spheres and their axis-aligned boxes (widened by
+``tol_mm``) overlap and they share fewer than two vertices; those
+*candidates* are tested exactly in chunks of :data:`CHUNK_PAIRS`, so the
+memory stays bounded whatever the mesh size.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from workbench.core.mesh import Mesh
+
+CHUNK_PAIRS = 200_000  # candidate pairs tested at once (~100 MB of temporaries)
+
+
+@dataclass(frozen=True)
+class SelfIntersections:
+    """Result of :func:`self_intersections`.
+
+    Attributes
+    ----------
+    pairs : (k, 2) int64
+        Intersecting face pairs, ``i < j`` in each row, rows sorted.
+    faces : (f,) int64
+        Sorted unique face ids that take part in at least one pair.
+    candidates : int
+        Face pairs that passed the spatial prefilter and were tested exactly.
+    """
+
+    pairs: np.ndarray
+    faces: np.ndarray
+    candidates: int = 0
+
+    @property
+    def count(self) -> int:
+        """Number of intersecting face pairs."""
+        return int(len(self.pairs))
+
+
+def count_self_intersections(mesh: Mesh, *, tol_mm: float = 1e-6) -> int:
+    """Number of intersecting face pairs of ``mesh`` (see :func:`self_intersections`)."""
+    return self_intersections(mesh, tol_mm=tol_mm).count
+
+
+def self_intersections(mesh: Mesh, *, tol_mm: float = 1e-6) -> SelfIntersections:
+    """Face pairs of ``mesh`` that cross each other (module docstring: what counts)."""
+    tol = float(tol_mm)
+    if not tol >= 0.0:
+        raise ValueError(f"tol_mm must be >= 0, got {tol_mm}")
+    faces = np.asarray(mesh.faces, np.int64)
+    tri = np.asarray(mesh.triangles, np.float64)
+    normal, good = _unit_normals(tri)
+    found: list[np.ndarray] = []
+    n_candidates = 0
+    for cand in _candidate_pairs(tri, faces, tol):
+        n_candidates += len(cand)
+        for start in range(0, len(cand), CHUNK_PAIRS):
+            chunk = cand[start : start + CHUNK_PAIRS]
+            hit = _pairs_intersect(tri, normal, good, faces, chunk, tol)
+            if hit.any():
+                found.append(chunk[hit])
+    pairs = np.concatenate(found) if found else np.zeros((0, 2), np.int64)
+    if len(pairs):
+        pairs = np.unique(pairs, axis=0)
+    return SelfIntersections(
+        pairs=pairs.astype(np.int64),
+        faces=np.unique(pairs).astype(np.int64),
+        candidates=n_candidates,
+    )
+
+
+# ---------------------------------------------------------------- candidates
+def _candidate_pairs(tri: np.ndarray, faces: np.ndarray, tol: float) -> Iterator[np.ndarray]:
+    """Yield ``(k, 2)`` int64 arrays of face pairs ``i < j`` worth testing exactly."""
+    m = len(tri)
+    if m < 2:
+        return
+    centre = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
+    lo = tri.min(axis=1) - tol
+    hi = tri.max(axis=1) + tol
+    live = np.flatnonzero(np.isfinite(radius) & np.isfinite(centre).all(axis=1))
+    if len(live) < 2:
+        return
+    # radius classes a factor sqrt(2) apart (tiny faces all in the lowest class)
+    r_live = radius[live]
+    floor = max(float(r_live.max()) * 2.0**-40, 1e-300)
+    level = np.floor(2.0 * np.log2(np.maximum(r_live, floor))).astype(np.int64)
+    classes = []
+    for lv in np.unique(level):
+        ids = live[level == lv]
+        classes.append((ids, cKDTree(centre[ids]), float(radius[ids].max())))
+    for a, (ids_a, tree_a, r_a) in enumerate(classes):
+        for ids_b, tree_b, r_b in classes[a:]:
+            reach = r_a + r_b + 2.0 * tol
+            if ids_a is ids_b:
+                local = tree_a.query_pairs(reach, output_type="ndarray")
+                if not len(local):
+                    continue
+                i, j = ids_a[local[:, 0]], ids_a[local[:, 1]]
+            else:
+                sdm = tree_a.sparse_distance_matrix(tree_b, reach, output_type="ndarray")
+                if not len(sdm):
+                    continue
+                i, j = ids_a[sdm["i"]], ids_b[sdm["j"]]
+            pair = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1).astype(np.int64)
+            for start in range(0, len(pair), 4 * CHUNK_PAIRS):
+                kept = _prefilter(
+                    pair[start : start + 4 * CHUNK_PAIRS], centre, radius, lo, hi, faces, tol
+                )
+                if len(kept):
+                    yield kept
+
+
+def _prefilter(
+    pair: np.ndarray,
+    centre: np.ndarray,
+    radius: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    faces: np.ndarray,
+    tol: float,
+) -> np.ndarray:
+    """Pairs whose bounding spheres and boxes overlap and that share < 2 vertices."""
+    i, j = pair[:, 0], pair[:, 1]
+    gap = np.linalg.norm(centre[i] - centre[j], axis=1)
+    keep = gap <= radius[i] + radius[j] + 2.0 * tol
+    keep &= np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
+    pair = pair[keep]
+    fi, fj = faces[pair[:, 0]], faces[pair[:, 1]]
+    shared = (fi[:, :, None] == fj[:, None, :]).any(axis=2).sum(axis=1)
+    return pair[shared < 2]
+
+
+# ---------------------------------------------------------------- exact test
+def _pairs_intersect(
+    tri: np.ndarray,
+    normal: np.ndarray,
+    good: np.ndarray,
+    faces: np.ndarray,
+    pair: np.ndarray,
+    tol: float,
+) -> np.ndarray:
+    """``(k,)`` True where the faces of ``pair`` cross (module docstring).
+
+    ``normal`` and ``good`` are the faces' unit normals and non-degeneracy flags.
+    """
+    i, j = pair[:, 0], pair[:, 1]
+    ta, tb = tri[i], tri[j]
+    fa, fb = faces[i], faces[j]
+    # shared[:, v]: corner v of A is also a corner of B (and vice versa)
+    shared_a = (fa[:, :, None] == fb[:, None, :]).any(axis=2)
+    shared_b = (fb[:, :, None] == fa[:, None, :]).any(axis=2)
+    hit_ab, flat_ab = _edges_through(ta, tb, normal[j], good[j], shared_a, tol)
+    hit_ba, flat_ba = _edges_through(tb, ta, normal[i], good[i], shared_b, tol)
+    hit = hit_ab | hit_ba
+    flat = np.flatnonzero((flat_ab | flat_ba) & ~hit)
+    if len(flat):
+        hit[flat] = _coplanar_overlap(
+            ta[flat], tb[flat], normal[j[flat]], shared_a[flat], shared_b[flat], tol
+        )
+    return hit
+
+
+def _unit_normals(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals ``(k, 3)`` of triangles ``t`` and whether each is non-degenerate."""
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    length = np.linalg.norm(n, axis=1)
+    scale = np.einsum("kvc,kvc->k", t - t[:, :1], t - t[:, :1])  # ~ squared size
+    good = length > 1e-14 * np.maximum(scale, 1e-300)
+    n /= np.where(good, length, 1.0)[:, None]
+    return n, good
+
+
+def _edges_through(
+    ta: np.ndarray,
+    tb: np.ndarray,
+    n: np.ndarray,
+    good: np.ndarray,
+    shared_a: np.ndarray,
+    tol: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whether an edge of A (one avoiding the shared corners) crosses B's interior.
+
+    Returns ``(hit, coplanar)``, both ``(k,)``: ``coplanar`` marks pairs whose
+    corners of A all lie within ``tol`` of B's (non-degenerate) plane.
+    """
+    k = len(ta)
+    d = np.einsum("kvc,kc->kv", ta - tb[:, :1], n)  # (k, 3) heights of A's corners over B
+    coplanar = good & (np.abs(d) <= tol).all(axis=1)
+    d_next = np.roll(d, -1, axis=1)
+    # edge e of A runs from corner e to corner e + 1
+    valid = ~(shared_a | np.roll(shared_a, -1, axis=1))
+    cross = valid & good[:, None] & (d * d_next < 0.0)
+    cross &= (np.abs(d) > tol) & (np.abs(d_next) > tol)
+    hit = np.zeros(k, bool)
+    row, edge = np.nonzero(cross)
+    if not len(row):
+        return hit, coplanar
+    p = ta[row, edge]
+    q = ta[row, (edge + 1) % 3]
+    dp, dq = d[row, edge], d_next[row, edge]
+    x = p + (dp / (dp - dq))[:, None] * (q - p)  # where the edge meets B's plane
+    b, nb = tb[row], n[row]
+    inside = np.ones(len(row), bool)
+    for s in range(3):
+        e = b[:, (s + 1) % 3] - b[:, s]
+        side = np.einsum("kc,kc->k", np.cross(e, x - b[:, s]), nb)
+        inside &= side >= -tol * np.linalg.norm(e, axis=1)  # closed B, widened by tol
+    np.logical_or.at(hit, row, inside)
+    return hit, coplanar
+
+
+def _coplanar_overlap(
+    ta: np.ndarray,
+    tb: np.ndarray,
+    n: np.ndarray,
+    shared_a: np.ndarray,
+    shared_b: np.ndarray,
+    tol: float,
+) -> np.ndarray:
+    """Whether coplanar triangles A and B (unit normal ``n``) overlap in area by > ``tol``."""
+    u = tb[:, 1] - tb[:, 0]
+    u /= np.maximum(np.linalg.norm(u, axis=1), 1e-300)[:, None]
+    w = np.cross(n, u)
+    origin = tb[:, :1]
+    a2 = np.stack(
+        [np.einsum("kvc,kc->kv", ta - origin, u), np.einsum("kvc,kc->kv", ta - origin, w)], -1
+    )
+    b2 = np.stack(
+        [np.einsum("kvc,kc->kv", tb - origin, u), np.einsum("kvc,kc->kv", tb - origin, w)], -1
+    )
+    # proper crossings of the 3 x 3 edge pairs (signed distances to the edge lines)
+    pa, qa = a2, np.roll(a2, -1, axis=1)  # (k, 3, 2) edges of A
+    pb, qb = b2, np.roll(b2, -1, axis=1)
+    ea, eb = qa - pa, qb - pb
+    la = np.maximum(np.linalg.norm(ea, axis=2), 1e-300)  # (k, 3)
+    lb = np.maximum(np.linalg.norm(eb, axis=2), 1e-300)
+
+    def side(
+        origin: np.ndarray, edge: np.ndarray, length: np.ndarray, pt: np.ndarray
+    ) -> np.ndarray:
+        # origin/edge/length indexed [:, e, None], pt [:, None, v]
+        r = pt - origin
+        return (edge[..., 0] * r[..., 1] - edge[..., 1] * r[..., 0]) / length
+
+    # distances of A's edge endpoints from B's edge lines: [k, edge of B, edge of A]
+    s1 = side(pb[:, :, None], eb[:, :, None], lb[:, :, None], pa[:, None])
+    s2 = side(pb[:, :, None], eb[:, :, None], lb[:, :, None], qa[:, None])
+    # distances of B's edge endpoints from A's edge lines: [k, edge of A, edge of B]
+    s3 = side(pa[:, :, None], ea[:, :, None], la[:, :, None], pb[:, None])
+    s4 = side(pa[:, :, None], ea[:, :, None], la[:, :, None], qb[:, None])
+    s3, s4 = np.swapaxes(s3, 1, 2), np.swapaxes(s4, 1, 2)  # -> [k, edge of B, edge of A]
+    proper = (s1 * s2 < 0) & (s3 * s4 < 0)
+    proper &= (np.abs(s1) > tol) & (np.abs(s2) > tol) & (np.abs(s3) > tol) & (np.abs(s4) > tol)
+    hit = proper.any(axis=(1, 2))
+
+    def strictly_inside(pts: np.ndarray, t2: np.ndarray) -> np.ndarray:
+        """[k, p]: points ``pts`` (k, p, 2) more than ``tol`` inside triangles ``t2``."""
+        e = np.roll(t2, -1, axis=1) - t2
+        area = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+        sign = np.where(area < 0, -1.0, 1.0)[:, None]
+        ok = np.abs(area)[:, None] > 0
+        for s in range(3):
+            length = np.maximum(np.linalg.norm(e[:, s], axis=1), 1e-300)[:, None]
+            r = pts - t2[:, s, None]
+            dist = sign * (e[:, s, None, 0] * r[..., 1] - e[:, s, None, 1] * r[..., 0]) / length
+            ok = ok & (dist > tol)
+        return ok
+
+    pts_a = np.concatenate([a2, a2.mean(axis=1, keepdims=True)], axis=1)
+    pts_b = np.concatenate([b2, b2.mean(axis=1, keepdims=True)], axis=1)
+    own_a = np.concatenate([~shared_a, np.ones((len(ta), 1), bool)], axis=1)
+    own_b = np.concatenate([~shared_b, np.ones((len(tb), 1), bool)], axis=1)
+    hit |= (strictly_inside(pts_a, b2) & own_a).any(axis=1)
+    hit |= (strictly_inside(pts_b, a2) & own_b).any(axis=1)
+    return hit
