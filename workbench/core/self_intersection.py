@@ -166,12 +166,16 @@ def _prefilter(
 ) -> np.ndarray:
     """Pairs whose bounding spheres and boxes overlap and that share < 2 vertices."""
     i, j = pair[:, 0], pair[:, 1]
-    gap = np.linalg.norm(centre[i] - centre[j], axis=1)
-    keep = gap <= radius[i] + radius[j] + 2.0 * tol
-    keep &= np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
-    pair = pair[keep]
+    gap = centre[i] - centre[j]
+    reach = radius[i] + radius[j] + 2.0 * tol
+    pair = pair[np.einsum("kc,kc->k", gap, gap) <= reach * reach]
+    i, j = pair[:, 0], pair[:, 1]
+    pair = pair[np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)]
     fi, fj = faces[pair[:, 0]], faces[pair[:, 1]]
-    shared = (fi[:, :, None] == fj[:, None, :]).any(axis=2).sum(axis=1)
+    shared = np.zeros(len(pair), np.int8)  # shared corners (distinct corners per face)
+    for a in range(3):
+        for b in range(3):
+            shared += fi[:, a] == fj[:, b]
     return pair[shared < 2]
 
 
