@@ -11,6 +11,13 @@ Cases (units mm, each fitted with the built-in male reference head):
 * ``nefertiti``: the Nefertiti bust scan (``sample:nefertiti``, no stated
   units: its numbers are close to mm, the bust being about 48 cm tall;
   orientation from the registry);
+* ``fsaverage``: FreeSurfer's fsaverage head surface as shipped by MNE
+  (``../shared/data/fsaverage_head_mne``, mm; a coarse 4k-triangle scalp
+  and face), oriented by the search;
+* ``demosthenes``: a photogrammetry scan of the Louvre's bearded Demosthenes
+  bust (``../shared/data/head_bust_scans``, CC BY 4.0 ryanfb; units not
+  stated, read at 180 mm per unit, which makes the bust 485 mm tall and
+  the face life-sized; +z anterior, +y up);
 * ``female_damaged``: the built-in female reference skin rotated, with two
   discs of triangles removed (cheek, glabella);
 * ``female_damaged_mirrored_landmarks``: the same mirrored, oriented by six
@@ -64,6 +71,18 @@ def _cases():
             "orientation": hint("nefertiti"),
         },
     )
+    fsaverage = SHARED / "fsaverage_head_mne" / "fsaverage-head_mm.ply"
+    if fsaverage.exists():
+        yield "fsaverage", lambda: {"scan": read_mesh(fsaverage, units="mm", kind="face").mesh}
+    busts = SHARED / "head_bust_scans" / "demosthenes-low-res.obj"
+    if busts.exists():
+        yield (
+            "demosthenes",
+            lambda: {
+                "scan": read_mesh(busts, scale=180.0, kind="face").mesh,
+                "orientation": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+            },
+        )
     female = reference_head("female")
     yield "female_damaged", lambda: {"scan": damaged_skin(female)[0]}
 
@@ -76,6 +95,7 @@ def _cases():
 
 
 def main() -> int:
+    from workbench.core.errors import WorkbenchError
     from workbench.services.scan_fit import fit_scan
     from workbench.services.template_cache import reference_head
 
@@ -84,7 +104,11 @@ def main() -> int:
     for name, make in _cases():
         kw = make()
         t = time.perf_counter()
-        fit = fit_scan(base=base, **kw)
+        try:
+            fit = fit_scan(base=base, **kw)
+        except WorkbenchError as e:
+            print(f"{name:36s} refused: {e}", flush=True)
+            continue
         wall = time.perf_counter() - t
         f = fit.figures
         td = f["tissue_depths"]
@@ -93,7 +117,9 @@ def main() -> int:
             f"{name:36s} tri {f['scan_triangles']:7d}  face verts {f['face_region_vertices']:6d}  "
             f"<=1mm {100 * f['face_within_1mm_fraction']:5.1f}%  "
             f"<=2.5mm {100 * f['face_within_2_5mm_fraction']:5.1f}%  "
-            f"mean {f['face_mean_distance_mm']:.2f} mm  lm->scan {lm['mean']:.2f} mm "
+            f"mean {f['face_mean_distance_mm']:.2f} mm  hidden {f['face_region_hidden_vertices']}  "
+            f"skin->scan <=2.5mm {100 * f['face_skin_to_scan_mm']['within_2_5mm_fraction']:.1f}% "
+            f"p95 {f['face_skin_to_scan_mm']['p95']:.2f} mm  lm->scan {lm['mean']:.2f} mm "
             f"(n {lm['n']}, absent {len(lm['absent'])})  folds {f['fold_overs']}  "
             f"depth |diff| {td['mean_abs_diff_mm']:.2f} mm ({td['pairs']} pairs)  "
             f"mirrored {fit.mirrored_input}  {wall:.1f} s"

@@ -57,6 +57,7 @@ from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import AFFINE_ROUNDS, Level
 from workbench.core.normals import normals_within_radius
+from workbench.core.self_intersection import self_intersections
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
 from workbench.core.visibility import seen_from_outside
@@ -415,6 +416,15 @@ def fit_scan(
     fig["face_on_scan_fraction"] = float(on_scan[face].mean())
     ref_n, fit_n = ref_settled.skin.face_normals, fitted.face_normals
     fig["fold_overs"] = int(((ref_n * fit_n).sum(axis=1) < 0).sum())
+    # the reference skin itself has a few crossing triangles at the mouth corners (the
+    # lips' seam, ≤ 0.6 mm deep); the fit must add none
+    fitted_x = self_intersections(fitted).pairs
+    ref_x = {tuple(p) for p in self_intersections(rest.skin).pairs.tolist()}
+    fig["self_intersections"] = {
+        "pairs": len(fitted_x),
+        "reference_pairs": len(ref_x),
+        "new_pairs": sum(tuple(p) not in ref_x for p in fitted_x.tolist()),
+    }
     present = [c for c in skin_lms.as_dict() if c not in absent_skin]
     lm_d = MeshIndex(scan_h).closest_points(head.skin_landmarks.positions_of(present)).distances
     fig["skin_landmark_to_scan_mm"] = {
