@@ -1,0 +1,318 @@
+"""The PDF of ``workbench fit-scan`` (issue 13): key figures of the fit and the distance maps.
+
+Units mm and per cent; frame: the fitted person's head frame (x to the
+subject's left, x = 0 midsagittal, y up, z toward the face, Frankfort
+Horizontal at y = 0), as in :mod:`workbench.services.scan_fit`.
+
+Two steps, so the layout can be tested without a fit:
+
+* :func:`fit_scan_summary` turns a :class:`~workbench.services.scan_fit.ScanFit`
+  into a plain, JSON-able dict (provenance, the figure rows beside the
+  issue's targets, warnings, per-landmark tables);
+* :func:`write_fit_scan_pdf` lays that dict out with the look of the other
+  reports (:mod:`workbench.reporting.pdf`) and adds the pictures (PNG paths
+  from :mod:`workbench.render.scan_fit_pictures`, drawn by the caller).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Final
+
+#: issue 13's targets: share of the counted face-region scan vertices within 1 / 2.5 mm
+TARGET_WITHIN_1MM: Final = 0.95
+TARGET_WITHIN_2_5MM: Final = 0.99
+UNITS: Final = "mm (every length in this report); shares in per cent"
+FRAME: Final = (
+    "the fitted person's head frame: x to the subject's left, x = 0 midsagittal, y up, "
+    "z toward the face; Frankfort Horizontal (estimated skull's porions and orbitales) at y = 0"
+)
+COUNTED: Final = (
+    "Counted: scan vertices whose nearest fitted-skin vertex lies in the face region, more "
+    "than 4 mm from a hole or scan rim, seen from outside and believed to be the head; for "
+    "each, the distance to the fitted skin surface."
+)
+#: captions and legends of the pictures (keys of :func:`render_scan_fit_pictures`)
+PICTURES: Final = {
+    "distance": (
+        "Distance of each scan vertex to the fitted skin (mm), front, left and right",
+        "Pale yellow: on the fitted skin; darkest red: 2.5 mm or more. Grey: not counted "
+        "(outside the face region, near a hole or scan rim, a cavity wall, not the head). "
+        "White through the scan: a hole.",
+    ),
+    "signed": (
+        "Signed distance (mm): which side of the fitted skin the scan lies on",
+        "Red: the scan lies outside the fitted skin (the fit is too shallow there); blue: "
+        "inside (the fit stands proud). Sign from the fitted skin's outward normal at the "
+        "closest point. Grey: not counted.",
+    ),
+    "histogram": (
+        "Distances of the counted scan vertices (log count) with the 1 mm and 2.5 mm lines",
+        "",
+    ),
+}
+
+
+def _pct(share: Any) -> str:
+    return "–" if share is None else f"{100.0 * float(share):.1f} %"
+
+
+def _mm(value: Any, digits: int = 2) -> str:
+    return "–" if value is None else f"{float(value):.{digits}f} mm"
+
+
+def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
+    """The report's content from a ``ScanFit`` (mm, shares 0..1 turned into per cent text).
+
+    Keys: ``scan``, ``template_id``, ``base_template``, ``inputs`` (role, file,
+    sha256), ``frame``, ``units``, ``mirrored_input``, ``rows`` (figure,
+    value, target, met: True/False/None), ``warnings``, ``depths`` (code,
+    table mm, fitted mm) with ``depth_table`` / ``depth_group``, and
+    ``user_landmarks`` (code, mm) when landmarks were placed.
+    """
+    fig: Mapping[str, Any] = result.figures
+    prov: Mapping[str, Any] = result.head.provenance or {}
+    rows: list[dict[str, Any]] = []
+
+    def row(figure: str, value: str, target: str = "", met: bool | None = None) -> None:
+        rows.append({"figure": figure, "value": value, "target": target, "met": met})
+
+    if "scan_vertices" in fig:
+        row("Scan", f"{fig['scan_vertices']} vertices, {fig.get('scan_triangles', '–')} triangles")
+    hidden = fig.get("face_region_hidden_vertices")
+    not_head = fig.get("face_region_not_head_vertices")
+    left_out = [
+        f"{n} {what}" for n, what in ((hidden, "cavity walls"), (not_head, "not the head")) if n
+    ]
+    row(
+        "Face-region scan vertices counted",
+        str(fig["face_region_vertices"])
+        + (f" (also left out: {', '.join(left_out)})" if left_out else ""),
+    )
+    w1, w25 = fig["face_within_1mm_fraction"], fig["face_within_2_5mm_fraction"]
+    row(
+        "Within 1 mm of the fitted skin",
+        _pct(w1),
+        f"≥ {_pct(TARGET_WITHIN_1MM)}",
+        w1 >= TARGET_WITHIN_1MM,
+    )
+    row(
+        "Within 2.5 mm of the fitted skin",
+        _pct(w25),
+        f"≥ {_pct(TARGET_WITHIN_2_5MM)}",
+        w25 >= TARGET_WITHIN_2_5MM,
+    )
+    row(
+        "Distance scan → fitted skin, mean / median",
+        f"{_mm(fig.get('face_mean_distance_mm'))} / {_mm(fig.get('face_median_distance_mm'))}",
+    )
+    back = fig.get("face_skin_to_scan_mm")
+    if back:
+        row(
+            "Fitted face skin → scan (where on the scan)",
+            f"mean {_mm(back.get('mean'))}, p95 {_mm(back.get('p95'))}, "
+            f"{_pct(back.get('within_2_5mm_fraction'))} within 2.5 mm (n = {back.get('n')})",
+        )
+    if "face_on_scan_fraction" in fig:
+        row("Face skin supported by the scan", _pct(fig["face_on_scan_fraction"]))
+    folds = int(fig["fold_overs"])
+    row("Fold-overs (triangles turned over)", str(folds), "0", folds == 0)
+    lm = fig.get("skin_landmark_to_scan_mm") or {}
+    absent = list(lm.get("absent") or [])
+    row(
+        "Skin landmarks → scan",
+        f"mean {_mm(lm.get('mean'))}, max {_mm(lm.get('max'))} (n = {lm.get('n', 0)}"
+        + (f"; over no scan: {', '.join(absent)})" if absent else ")"),
+    )
+    user = fig.get("skin_landmark_to_user_mm")
+    row(
+        "Skin landmarks → user-placed",
+        f"mean {_mm(user['mean'])}, max {_mm(user['max'])} (n = {len(user.get('per_landmark', {}))})"
+        if user
+        else "none placed",
+    )
+    depths = fig["tissue_depths"]
+    row(
+        "Tissue depths vs the table",
+        f"mean |fitted − table| {_mm(depths['mean_abs_diff_mm'])}, max "
+        f"{_mm(depths.get('max_abs_diff_mm'))} over {depths['pairs']} pairs "
+        f"({depths['table']}, {depths['group']})",
+    )
+    if "face_skin_inside_skull_vertices" in fig:
+        inside = int(fig["face_skin_inside_skull_vertices"])
+        row("Face skin vertices inside the skull", str(inside), "0", inside == 0)
+    bone = fig.get("skull_vs_bone")
+    row(
+        "Estimated skull vs true bone (face region)",
+        f"mean |d| {_mm(bone.get('mean_abs_mm'))}, {_pct(bone.get('within_2_5mm_fraction'))} "
+        f"within 2.5 mm (n = {bone.get('face_skull_vertices', '–')})"
+        if bone
+        else "no bone given",
+    )
+    orient = fig.get("orientation") or {}
+    row(
+        "Orientation",
+        f"{orient.get('method', '–')}, {orient.get('handedness', '–')}; reference scaled "
+        f"{orient.get('reference_scale', '–')}; matched {_pct(orient.get('matched_fraction'))}",
+    )
+    row("Mirrored input", "yes" if result.mirrored_input else "no")
+    secs = dict(fig.get("seconds") or {})
+    total = secs.pop("total", None)
+    row(
+        "Seconds",
+        ("–" if total is None else f"{float(total):.1f}")
+        + (" (" + ", ".join(f"{k} {float(v):.1f}" for k, v in secs.items()) + ")" if secs else ""),
+    )
+    per = depths.get("per_landmark") or {}
+    base = prov.get("base_template") or {}
+    return {
+        "scan": scan_name,
+        "template_id": result.head.template_id,
+        "base_template": f"{base.get('template_id', '–')} ({base.get('content_hash', '–')})"
+        if base
+        else "–",
+        "inputs": [
+            {"role": i.get("role", ""), "file": i.get("file", ""), "sha256": i.get("sha256", "")}
+            for i in prov.get("built_from") or []
+        ],
+        "frame": FRAME,
+        "units": UNITS,
+        "mirrored_input": bool(result.mirrored_input),
+        "rows": rows,
+        "warnings": list(result.warnings),
+        "depth_table": depths["table"],
+        "depth_group": depths["group"],
+        "depths": [
+            {"code": c, "table_mm": float(v["table_mm"]), "fitted_mm": float(v["fitted_mm"])}
+            for c, v in per.items()
+        ],
+        "user_landmarks": [
+            {"code": c, "mm": float(g)} for c, g in ((user or {}).get("per_landmark") or {}).items()
+        ],
+    }
+
+
+def write_fit_scan_pdf(
+    summary: Mapping[str, Any],
+    path: str | Path,
+    pictures: Mapping[str, Path] | None = None,
+    *,
+    notes: Sequence[str] = (),
+    software: str = "workbench",
+    created: str | None = None,
+) -> Path:
+    """Write the A4 PDF of ``summary`` (from :func:`fit_scan_summary`) to ``path`` atomically.
+
+    ``pictures`` maps "distance", "signed", "histogram" (any subset) to PNG
+    files; ``notes`` (e.g. "no OpenGL: no pictures") are printed where the
+    pictures would be.
+    """
+    from workbench.reporting.pdf import ACCENT, DARK, GREY, ReportPDF
+    from workbench.reporting.report import utc_now
+
+    created = created or utc_now()
+    pdf = ReportPDF(summary["scan"], created, software)
+    pdf.set_title(f"Scan fit report, {summary['scan']}")
+    pdf.add_page()
+    pdf.font(17, "B")
+    pdf.set_text_color(*ACCENT)
+    pdf.cell(0, 9, pdf.t("Reference head fitted to a scan"), new_x="LMARGIN", new_y="NEXT")
+    pdf.font(12)
+    pdf.set_text_color(*DARK)
+    pdf.cell(0, 7, pdf.t(f"Scan {summary['scan']}"), new_x="LMARGIN", new_y="NEXT")
+    pdf.ln(2)
+    pairs: list[tuple[str, Any]] = [
+        ("Scan file", summary["scan"]),
+        ("Created (UTC)", created),
+        ("Software", software),
+        ("Template", summary["template_id"]),
+        ("Fitted from", summary["base_template"]),
+        ("Mirrored input", "yes" if summary["mirrored_input"] else "no"),
+        ("Units", summary["units"]),
+        ("Frame", summary["frame"]),
+    ]
+    sha_keys = set()
+    for item in summary["inputs"]:
+        key = f"SHA-256 {item['role']}"
+        pairs.append((key, f"{item['sha256']}  {item['file']}"))
+        sha_keys.add(key)
+    pdf.key_values(pairs, key_width=34, mono_keys=frozenset(sha_keys))
+    if summary["warnings"]:
+        pdf.box("Warnings", summary["warnings"])
+
+    pdf.heading("Key figures")
+    pdf.para(COUNTED, size=8, color=GREY)
+    # a missed target prints in bold red (the row), the rest in the usual dark grey
+    missed = pdf.face("B", color=(170, 40, 20))
+    styles = [missed if r["met"] is False else None for r in summary["rows"]]
+    body = [
+        (
+            r["figure"],
+            r["value"],
+            r["target"],
+            "" if r["met"] is None else ("met" if r["met"] else "not met"),
+        )
+        for r in summary["rows"]
+    ]
+    pdf.grid(
+        ("figure", "value", "target", ""),
+        body,
+        (58, 92, 16, 14),
+        aligns=("L", "L", "R", "R"),
+        styles=styles,
+        size=7.8,
+    )
+
+    pics = dict(pictures or {})
+    if pics or notes:
+        pdf.heading("Distance maps", min_space=90)
+    for key in ("distance", "signed", "histogram"):
+        if key not in pics:
+            continue
+        caption, legend = PICTURES[key]
+        pdf.pictures([(caption, Path(pics[key]))], columns=1)
+        if legend:
+            pdf.para(legend, size=7.5, color=GREY)
+            pdf.ln(1)
+    for note in notes:
+        pdf.para(f"Note: {note}", size=8, color=GREY)
+
+    if summary["depths"]:
+        pdf.heading("Tissue depths at the paired landmarks", min_space=45)
+        pdf.para(
+            f"Table {summary['depth_table']}, group {summary['depth_group']}: the table's "
+            "depth and the fitted skin-to-skull landmark distance (mm).",
+            size=8,
+            color=GREY,
+        )
+        rows = [
+            (
+                d["code"],
+                f"{d['table_mm']:.2f}",
+                f"{d['fitted_mm']:.2f}",
+                f"{d['fitted_mm'] - d['table_mm']:+.2f}",
+            )
+            for d in summary["depths"]
+        ]
+        pdf.grid(
+            ("landmark", "table (mm)", "fitted (mm)", "fitted − table"),
+            rows,
+            (30, 24, 24, 26),
+            aligns=("L", "R", "R", "R"),
+            size=7.5,
+        )
+    if summary["user_landmarks"]:
+        pdf.heading("Skin landmarks: fitted vs user-placed", min_space=45)
+        pdf.grid(
+            ("landmark", "distance (mm)"),
+            [(u["code"], f"{u['mm']:.2f}") for u in summary["user_landmarks"]],
+            (30, 26),
+            aligns=("L", "R"),
+            size=7.5,
+        )
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    pdf.output(str(tmp))
+    tmp.replace(path)
+    return path
