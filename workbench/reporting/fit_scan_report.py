@@ -258,7 +258,7 @@ def write_fit_scan_pdf(
     pdf.grid(
         ("figure", "value", "target", ""),
         body,
-        (58, 92, 16, 14),
+        (56, 84, 22, 18),
         aligns=("L", "L", "R", "R"),
         styles=styles,
         size=7.8,
