@@ -71,3 +71,42 @@ def test_point_cloud_and_few_triangles_are_refused_by_name(tmp_path: Path, capsy
         assert code != 0
         assert words in err, err
     assert "200 triangles" in err
+
+
+def test_fit_scan_writes_the_pdf_with_its_distance_maps(fitted):
+    import pypdf
+
+    code, out = fitted
+    assert code == 0
+    pdf = out / "fit_report.pdf"
+    assert pdf.read_bytes().startswith(b"%PDF")
+    for name in ("scan_distance.png", "scan_signed_distance.png", "distance_histogram.png"):
+        assert (out / "pictures" / name).stat().st_size > 10_000, name
+    reader = pypdf.PdfReader(pdf)
+    text = " ".join(" ".join(page.extract_text().split()) for page in reader.pages)
+    report = json.loads((out / "fit_report.json").read_text())
+    assert "face_cm.ply" in text
+    assert f"{100 * report['face_within_1mm_fraction']:.1f} %" in text
+    assert report["tissue_depths"]["table"] in text
+    assert sum(len(page.images) for page in reader.pages) == 3
+
+
+def test_fit_scan_pdf_without_opengl_has_no_pictures(scan_cm, monkeypatch, capsys):
+    from workbench.render import scan_fit_pictures
+
+    def no_gl(*_a, **_k):
+        raise RuntimeError("no OpenGL context")
+
+    monkeypatch.setattr(scan_fit_pictures, "render_distance_views", no_gl)
+    out = scan_cm.parent / "pack_no_gl"
+    code = main(["fit-scan", str(scan_cm), "--units", "cm", "--out", str(out)])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "no distance picture (no OpenGL context)" in printed
+    assert f"wrote {out / 'fit_report.pdf'}" in printed
+    assert (out / "pictures" / "distance_histogram.png").is_file()
+    assert not (out / "pictures" / "scan_distance.png").exists()
+    import pypdf
+
+    text = " ".join(p.extract_text() for p in pypdf.PdfReader(out / "fit_report.pdf").pages)
+    assert "no OpenGL context" in text

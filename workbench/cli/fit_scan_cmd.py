@@ -3,13 +3,15 @@
 See :mod:`workbench.services.scan_fit`.  The pack (skin, skull parts,
 teeth, eyes, tongue, muscles, skin and skull landmarks) is in the fitted
 person's Frankfort head frame, mm; ``fit_report.json`` beside it holds the
-figures of the fit.
+figures of the fit, ``fit_report.pdf`` the same with the scan's distance maps
+(``pictures/``, see :mod:`workbench.render.scan_fit_pictures`).
 """
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from workbench.cli.common import add_force_option, add_units_options, write_json
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
@@ -76,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         bone_path=None if args.bone is None else resolve_input(args.bone),
         force=args.force,
         progress=lambda m: print(f"  {m}"),
+        extra=lambda folder, fit: _write_pdf(folder, fit, Path(args.scan).name),
     )
     for path in files:
         print(f"wrote {path}")
@@ -103,3 +106,26 @@ def run(args: argparse.Namespace) -> int:
         None,
     )
     return 0
+
+
+def _write_pdf(folder: Path, result: Any, scan_name: str) -> list[Path]:
+    """``pictures/*.png`` and ``fit_report.pdf`` into the staged pack; without OpenGL, no maps."""
+    from workbench import __version__
+    from workbench.reporting.fit_scan_report import fit_scan_summary, write_fit_scan_pdf
+
+    try:
+        from workbench.render.scan_fit_pictures import render_scan_fit_pictures
+
+        pictures, notes = render_scan_fit_pictures(result, folder / "pictures")
+    except (ImportError, RuntimeError, OSError) as exc:  # no pyvista / OpenGL at all
+        pictures, notes = {}, [f"no pictures ({exc})"]
+    for note in notes:
+        print(f"  note: {note}")
+    pdf = write_fit_scan_pdf(
+        fit_scan_summary(result, scan_name),
+        folder / "fit_report.pdf",
+        pictures,
+        notes=notes,
+        software=f"workbench {__version__}",
+    )
+    return [*pictures.values(), pdf]
