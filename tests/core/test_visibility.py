@@ -57,3 +57,17 @@ def test_far_surfaces_do_not_block():
     n = a.vertices / 20.0
     assert not seen[n[:, 2] > 0.97].any()
     assert seen[n[:, 2] < 0.0].all()
+
+
+def test_field_of_view_caps_are_the_flat_lids_on_the_box():
+    from workbench.core.visibility import field_of_view_caps
+
+    # a sphere cut flat at z = -30 (a CT volume ending below the chin), the cut closed by a lid
+    ball = _sphere(50.0, n=40)
+    v = ball.vertices.copy()
+    v[:, 2] = np.maximum(v[:, 2], -30.0)
+    caps = field_of_view_caps(Mesh(v, ball.faces))
+    lid = v[:, 2] <= -30.0 + 1e-9
+    inner = lid & (np.hypot(v[:, 0], v[:, 1]) < 35.0)  # away from the lid's rim
+    assert caps[inner].all()
+    assert not caps[v[:, 2] > -29.0].any()  # the round surface is skin, even at its poles

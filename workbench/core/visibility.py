@@ -85,3 +85,38 @@ def seen_from_outside(
     blocked = hits.hit.reshape(k, r)
     seen[ids] = (~blocked).sum(axis=1) >= min_free
     return seen
+
+
+#: a cap face has its three corners this close (mm) to a side of the bounding box ...
+#: (a CT's lid sits exactly on a voxel plane; a rounded surface touching the box does not)
+CAP_TOLERANCE_MM = 0.1
+#: ... and faces out of that side (|cos| of its normal and the side's axis) ...
+CAP_COS = 0.95
+#: ... and the lid on that side covers at least this area (mm²)
+MIN_CAP_AREA_MM2 = 200.0
+
+
+def field_of_view_caps(mesh: Mesh) -> np.ndarray:
+    """``(n_vertices,)`` bool: vertices of flat lids on the sides of the mesh's bounding box.
+
+    A CT's iso-surface is closed where the body leaves the scanned volume
+    (below the chin, at a cut vault): a flat lid exactly on a side of the
+    volume, facing out of it.  That lid is where the field of view ended,
+    not skin.  Only the box of the mesh in *its own* coordinates (the file's,
+    where a CT's volume sides are axis-aligned) is meaningful, so call this on
+    the mesh as read.
+    """
+    caps = np.zeros(mesh.n_vertices, bool)
+    if mesh.n_faces == 0:
+        return caps
+    corners = mesh.vertices[mesh.faces]  # (m, 3, 3)
+    used = mesh.vertices[np.unique(mesh.faces)]
+    lo, hi = used.min(axis=0), used.max(axis=0)
+    fn, area = mesh.face_normals, mesh.face_areas
+    for axis in range(3):
+        facing = np.abs(fn[:, axis]) > CAP_COS
+        for plane in (lo[axis], hi[axis]):
+            lid = facing & (np.abs(corners[:, :, axis] - plane) <= CAP_TOLERANCE_MM).all(axis=1)
+            if area[lid].sum() >= MIN_CAP_AREA_MM2:
+                caps[mesh.faces[lid].ravel()] = True
+    return caps

@@ -55,12 +55,12 @@ from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
-from workbench.core.nonrigid import AFFINE_ROUNDS, Level
+from workbench.core.nonrigid import AFFINE_ROUNDS, Level, smoothstep
 from workbench.core.normals import normals_within_radius
 from workbench.core.self_intersection import self_intersections
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
-from workbench.core.visibility import seen_from_outside
+from workbench.core.visibility import field_of_view_caps, seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.model.template import TemplateHead
 
@@ -305,6 +305,14 @@ def fit_scan(
     # walls of the airway, mouth and nostrils (a CT's skin surface, parted lips): no
     # scanner sees them and the reference has no surface for them
     seen = seen_from_outside(scan_h)
+    # lids where a CT's volume ended (below the chin, a cut vault): not skin, and their
+    # edges are rims like a hole's (found in the file's own axes, where the volume's
+    # sides are)
+    caps = field_of_view_caps(scan)
+    cap_d = np.full(scan.n_vertices, np.inf)
+    if caps.any():
+        cap_d, _ = cKDTree(scan_h.vertices[caps]).query(scan_h.vertices)
+    belief = seen * smoothstep(cap_d / RIM_EXCLUDE_MM)
     seconds["orientation"] = time.perf_counter() - t0
 
     # 2. skin
@@ -319,7 +327,7 @@ def fit_scan(
         source=source,
         near="the reference head placed on it",
         hint="check the orientation (--anterior/--superior or 3+ --landmarks) and the units",
-        belief=seen.astype(float),
+        belief=belief,
     )
     warnings += list(fit.warnings)
     facing, to_scan = _scan_support(
@@ -386,6 +394,7 @@ def fit_scan(
     loops = boundary_loops(scan_h)
     if loops:
         rim_d, _ = cKDTree(scan_h.vertices[np.concatenate(loops)]).query(scan_h.vertices)
+    rim_d = np.minimum(rim_d, cap_d)
     in_face = face[nearest] & (rim_d > RIM_EXCLUDE_MM)
     counted = in_face & (fit.target_weights > HEAD_WEIGHT)
     hidden = in_face & ~seen
@@ -398,6 +407,7 @@ def fit_scan(
     fig["face_region_vertices"] = int(counted.sum())
     fig["face_region_not_head_vertices"] = int((in_face & ~hidden & ~counted).sum())
     fig["face_region_hidden_vertices"] = int(hidden.sum())
+    fig["field_of_view_cap_vertices"] = int(caps.sum())
     fig["face_within_1mm_fraction"] = float((d <= 1.0).mean()) if len(d) else 0.0
     fig["face_within_2_5mm_fraction"] = float((d <= 2.5).mean()) if len(d) else 0.0
     fig["face_mean_distance_mm"] = float(d.mean()) if len(d) else None
