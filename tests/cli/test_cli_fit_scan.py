@@ -110,3 +110,26 @@ def test_fit_scan_pdf_without_opengl_has_no_pictures(scan_cm, monkeypatch, capsy
 
     text = " ".join(p.extract_text() for p in pypdf.PdfReader(out / "fit_report.pdf").pages)
     assert "no OpenGL context" in text
+
+
+def test_texture_without_uvs_is_refused_before_the_fit(scan_cm, tmp_path: Path, capsys):
+    from PIL import Image
+
+    image = tmp_path / "skin.png"
+    Image.new("RGB", (8, 8), (200, 150, 120)).save(image)
+    code = main(
+        [
+            "fit-scan",
+            str(scan_cm),
+            "--units",
+            "cm",
+            "--texture",
+            str(image),
+            "--out",
+            str(tmp_path / "pack"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code != 0
+    assert scan_cm.name in err and "texture coordinates" in err and "Traceback" not in err
+    assert not (tmp_path / "pack").exists()

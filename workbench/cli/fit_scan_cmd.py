@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "light, photogrammetry, a CT's skin surface; holes and noise are fine): the skin "
         "registered onto the scan, the skull, teeth, eyes and tongue placed at the depth "
         "table's tissue depths under it. Writes a template pack (mm, the person's "
-        "Frankfort head frame) with fit_report.json.",
+        "Frankfort head frame) with fit_report.json and fit_report.pdf (distance maps); "
+        "a scan's vertex colours or texture are carried onto the fitted skin.",
     )
     p.add_argument("scan", help="scan mesh (PLY/STL/OBJ/VTK/VTP) or sample:NAME")
     add_units_options(p)
@@ -53,6 +54,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the true bone surface in the scan's frame and units (a CT): the estimated "
         "skull is compared with it in the report",
     )
+    p.add_argument(
+        "--texture",
+        type=Path,
+        default=None,
+        metavar="IMAGE",
+        help="the texture image the scan's UVs refer to (instead of its OBJ material); "
+        "vertex colours or a texture are carried onto the fitted skin",
+    )
     add_orientation_options(p)
     p.add_argument("--out", type=Path, required=True, metavar="PACK")
     add_force_option(p, folder=True)
@@ -76,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
         build=args.build,
         orientation=orientation,
         bone_path=None if args.bone is None else resolve_input(args.bone),
+        texture=args.texture,
         force=args.force,
         progress=lambda m: print(f"  {m}"),
         extra=lambda folder, fit: _write_pdf(folder, fit, Path(args.scan).name),
