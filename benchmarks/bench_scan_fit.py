@@ -37,6 +37,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
 os.environ.setdefault("WORKBENCH_SAMPLE_MIRRORS", str(SHARED))
@@ -86,10 +88,35 @@ def _cases():
     female = reference_head("female")
     yield "female_damaged", lambda: {"scan": damaged_skin(female)[0]}
 
+    def noisy() -> dict:
+        scan = damaged_skin(female)[0]
+        rng = np.random.default_rng(13)
+        return {
+            "scan": scan.with_vertices(scan.vertices + rng.normal(0.0, 0.3, scan.vertices.shape))
+        }
+
+    yield "female_damaged_noise_0.3mm", noisy
+
+    def no_chin() -> dict:
+        from tests.services._scans import scan_pose
+
+        scan = damaged_skin(female)[0]
+        pose = scan_pose()
+        head_y = ((scan.vertices - pose[:3, 3]) @ pose[:3, :3])[:, 1]
+        cut = female.skin_landmarks.as_dict()["pg"][1] + 8.0
+        keep = head_y[scan.faces].mean(axis=1) > cut
+        return {"scan": type(scan)(scan.vertices, scan.faces[keep])}
+
+    yield "female_damaged_no_chin", no_chin
+
     def mirrored() -> dict:
         scan, lms = damaged_skin(female, mirror=True)
         codes = ("po_l", "po_r", "or_l", "prn", "n", "ch_l")
-        return {"scan": scan, "landmarks": LandmarkSet("skin", tuple(lms[c] for c in codes))}
+        return {
+            "scan": scan,
+            "landmarks": LandmarkSet("skin", tuple(lms[c] for c in codes)),
+            "truth": lms,
+        }
 
     yield "female_damaged_mirrored_landmarks", mirrored
 
@@ -103,6 +130,7 @@ def main() -> int:
     out = {}
     for name, make in _cases():
         kw = make()
+        truth = kw.pop("truth", None)
         t = time.perf_counter()
         try:
             fit = fit_scan(base=base, **kw)
@@ -135,6 +163,25 @@ def main() -> int:
             u = f["skin_landmark_to_user_mm"]
             line += (
                 f"\n{'':36s} skin landmarks vs user: mean {u['mean']:.2f}, max {u['max']:.2f} mm"
+            )
+        if truth is not None:
+            placed = {lm.code for lm in kw["landmarks"]}
+            true = truth.as_dict()
+            others = [c for c in fit.head.skin_landmarks.as_dict() if c in true and c not in placed]
+            gap = np.linalg.norm(
+                fit.to_input(fit.head.skin_landmarks.positions_of(others))
+                - np.array([true[c] for c in others]),
+                axis=1,
+            )
+            f["first_guess_vs_true_mm"] = {
+                "n": len(others),
+                "mean": float(gap.mean()),
+                "median": float(np.median(gap)),
+                "max": float(gap.max()),
+            }
+            line += (
+                f"\n{'':36s} first guess (not placed) vs true: mean {gap.mean():.2f}, "
+                f"median {np.median(gap):.2f}, max {gap.max():.2f} mm ({len(others)} landmarks)"
             )
         print(line, flush=True)
         out[name] = {k: v for k, v in f.items() if k != "tissue_depths"} | {

@@ -208,6 +208,32 @@ def _seed_pairs(
     return np.array([placed[c] for c in codes], float), np.array([ref[c] for c in codes])
 
 
+def _user_constraints(
+    landmarks: LandmarkSet | None, rest: TemplateHead, to_head: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Skin landmarks the user placed as hard constraints of the skin fit.
+
+    Each placed landmark (scan frame) is mapped into the head frame; the three
+    vertices of the reference skin triangle holding that landmark are pulled to
+    where the triangle would sit with the landmark on the user's point (the
+    triangle moved by the landmark's offset), so the fitted landmark lands on
+    it whether or not the scan has surface there ("in empty space").
+    """
+    if landmarks is None:
+        return None
+    ref = rest.skin_landmarks.as_dict()
+    placed = {lm.code: lm.position for lm in landmarks if lm.is_defined and lm.code in ref}
+    if not placed:
+        return None
+    codes = sorted(placed)
+    user = apply_transform(to_head, np.array([placed[c] for c in codes]))
+    at = np.array([ref[c] for c in codes])
+    tri = rest.skin.faces[MeshIndex(rest.skin).closest_points(at).face_ids]  # (k, 3)
+    targets = rest.skin.vertices[tri] + (user - at)[:, None, :]
+    ids, first = np.unique(tri.ravel(), return_index=True)  # a vertex shared: first wins
+    return ids, targets.reshape(-1, 3)[first]
+
+
 def _mask(n: int, groups: Sequence) -> np.ndarray:
     m = np.zeros(n, dtype=bool)
     for ids in groups:
@@ -328,6 +354,7 @@ def fit_scan(
         near="the reference head placed on it",
         hint="check the orientation (--anterior/--superior or 3+ --landmarks) and the units",
         belief=belief,
+        hard=_user_constraints(landmarks, rest, rigid),
     )
     warnings += list(fit.warnings)
     facing, to_scan = _scan_support(

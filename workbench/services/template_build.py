@@ -209,6 +209,7 @@ def fit_skin(
     near: str = "the reference head",
     hint: str | None = None,
     belief: np.ndarray | None = None,
+    hard: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SkinFit:
     """Register ``skin`` (the reference skin placed in the head frame) onto ``scan_h``.
 
@@ -219,6 +220,8 @@ def fit_skin(
 
     ``belief`` (per scan vertex, 0..1) multiplies the scan's weights, e.g.
     0 for walls of a cavity no scanner sees (:mod:`workbench.core.visibility`).
+    ``hard`` (skin vertex ids, head-frame points) are pulled onto those points
+    (landmarks a user placed).
 
     Raises
     ------
@@ -238,7 +241,9 @@ def fit_skin(
         )
     ears = _mask(skin.n_vertices, [regions[r] for r in UNPROJECTED_REGIONS if r in regions])
     target = Target(scan_h, weights, pull_stride=max(1, int((weights > 0.05).sum()) // 8000))
-    sreg = register(skin, target, levels=levels, active=~ears, affine_rounds=affine_rounds)
+    sreg = register(
+        skin, target, levels=levels, active=~ears, affine_rounds=affine_rounds, hard=hard
+    )
     return SkinFit(sreg, sreg.weights > ON_SCAN_WEIGHT, weights, not_head, tuple(warnings))
 
 
