@@ -164,3 +164,11 @@ def test_scan_colour_is_carried_onto_the_fitted_skin(tmp_path, head_female):
     err = np.abs(parsed.vertex_rgb[near].astype(float) - rgb[j[near]].astype(float))
     assert near.mean() > 0.5
     assert np.median(err) < 4.0
+
+
+def test_first_guess_landmarks_carry_confidences(female_fit):
+    fit, _ = female_fit
+    lms = {lm.code: lm for lm in fit.head.skin_landmarks}
+    assert lms["prn"].status == "suggested" and lms["prn"].confidence > 0.7  # on the scan
+    hole = lms["chk_l"]  # at the centre of a punched hole: in empty space, said so
+    assert hole.confidence <= 0.2 and "absent" in hole.description

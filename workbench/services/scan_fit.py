@@ -208,6 +208,45 @@ def _seed_pairs(
     return np.array([placed[c] for c in codes], float), np.array([ref[c] for c in codes])
 
 
+#: a first-guess landmark's confidence falls to 1/e at this distance from the scan (mm)
+CONFIDENCE_MM = 1.5
+#: ... and is at most this over a hole (its position is the reference's, not measured)
+HOLE_CONFIDENCE = 0.2
+
+
+def _with_confidences(
+    lms: LandmarkSet, absent: Sequence[str], scan_h: Mesh, placed: LandmarkSet | None
+) -> LandmarkSet:
+    """The fitted skin landmarks as a first guess with confidences (head frame, mm).
+
+    Those the user placed stay ``placed`` with confidence 1; the others are
+    ``suggested`` with ``exp(-d / CONFIDENCE_MM)`` for their distance ``d`` to
+    the scan, capped at :data:`HOLE_CONFIDENCE` over a hole (in empty space:
+    their description says so).
+    """
+    from workbench.core.landmarks import Landmark
+
+    user = set() if placed is None else {lm.code for lm in placed if lm.is_defined}
+    codes = [lm.code for lm in lms if lm.is_defined]
+    if not codes:
+        return lms
+    dist = MeshIndex(scan_h).closest_points(lms.positions_of(codes)).distances
+    d = dict(zip(codes, dist, strict=True))
+    out = []
+    for lm in lms:
+        if not lm.is_defined:
+            out.append(lm)
+            continue
+        if lm.code in user:
+            out.append(Landmark(lm.code, lm.position, "placed", 1.0, lm.description))
+            continue
+        conf = float(np.exp(-d[lm.code] / CONFIDENCE_MM))
+        if lm.code in absent:
+            conf = min(conf, HOLE_CONFIDENCE)
+        out.append(Landmark(lm.code, lm.position, "suggested", round(conf, 3), lm.description))
+    return LandmarkSet(lms.surface, tuple(out))
+
+
 def _user_constraints(
     landmarks: LandmarkSet | None, rest: TemplateHead, to_head: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -377,6 +416,7 @@ def fit_scan(
         )
     skin = rest.skin.with_vertices(fit.registration.vertices)
     skin_lms, absent_skin = carry_skin_landmarks(rest.skin, skin, rest.skin_landmarks, on_scan)
+    skin_lms = _with_confidences(skin_lms, absent_skin, scan_h, landmarks)
     seconds["skin"] = time.perf_counter() - t
 
     # 3. the inside follows the skin at the table's depths
