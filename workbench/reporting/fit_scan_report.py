@@ -118,6 +118,21 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
         row("Face skin supported by the scan", _pct(fig["face_on_scan_fraction"]))
     folds = int(fig["fold_overs"])
     row("Fold-overs (triangles turned over)", str(folds), "0", folds == 0)
+    cross = fig.get("self_intersections")
+    if cross:
+        new = int(cross.get("new_pairs", 0))
+        row(
+            "Self-intersections added by the fit",
+            f"{new} crossing triangle pairs ({cross.get('pairs')} in all; the reference skin "
+            f"has {cross.get('reference_pairs')} at the mouth corners)",
+            "0",
+            new == 0,
+        )
+    if fig.get("face_region_hidden_vertices"):
+        row(
+            "Scan left out: cavity walls no scanner sees",
+            f"{fig['face_region_hidden_vertices']} vertices (airway, mouth, nostrils)",
+        )
     lm = fig.get("skin_landmark_to_scan_mm") or {}
     absent = list(lm.get("absent") or [])
     row(
