@@ -172,3 +172,16 @@ def test_first_guess_landmarks_carry_confidences(female_fit):
     assert lms["prn"].status == "suggested" and lms["prn"].confidence > 0.7  # on the scan
     hole = lms["chk_l"]  # at the centre of a punched hole: in empty space, said so
     assert hole.confidence <= 0.2 and "absent" in hole.description
+
+
+def test_size_search_at_its_limit_is_said(head_male, head_female):
+    # a head 1.6 times life size (a sculpture, or the wrong units): the reference can only
+    # grow by 1.25; the result must say so rather than pass as a fit
+    scan, _ = damaged_skin(head_female)
+    big = scan.with_vertices(scan.vertices * 1.6)
+    try:
+        fit = fit_scan(big, base=head_male)
+    except InputError as e:  # or it is refused outright as not a face of this size
+        assert "does not look like a face" in str(e)
+        return
+    assert any("size search stopped at its limit" in w for w in fit.warnings)

@@ -336,7 +336,7 @@ def fit_scan(
     source : str
         Name of the scan in error messages (its file).
     """
-    from workbench.core.rigid_search import search_pose
+    from workbench.core.rigid_search import SCALE_RANGE, search_pose
     from workbench.services.compare import face_regions
     from workbench.services.frame import head_frame_from_landmarks
     from workbench.services.reconstruct import move_eyes, warp_head
@@ -365,6 +365,12 @@ def fit_scan(
     rigid[:3] /= s
     rigid[3] = (0.0, 0.0, 0.0, 1.0)
     mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
+    if seeds is None and np.isclose(1 / s, SCALE_RANGE, rtol=0.02).any():
+        warnings.append(
+            f"the size search stopped at its limit (reference scaled {1 / s:.2f}): the scan "
+            "may not be in the units given, or parts that are not a face (a crown, hair, "
+            "shoulders) misled it; place 3 or more skin landmarks (--landmarks) to set the size"
+        )
     rest = head_transformed(base, np.diag([1 / s, 1 / s, 1 / s, 1.0]))
     scan_h = scan_in_frame(scan, rigid, mirrored)
     # walls of the airway, mouth and nostrils (a CT's skin surface, parted lips): no
