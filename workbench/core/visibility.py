@@ -77,13 +77,20 @@ def seen_from_outside(
         return seen
     ids = np.flatnonzero(used)
     dirs = _cone(nrm[ids], cone_deg, rays)  # (k, r, 3)
-    k, r = dirs.shape[:2]
-    origins = np.repeat(mesh.vertices[ids] + RAY_OFFSET_MM * dirs[:, 0], r, axis=0)
-    hits = RayCaster.shared(mesh).first_hits(
-        origins, dirs.reshape(-1, 3), max_distance=max_block_mm
-    )
-    blocked = hits.hit.reshape(k, r)
-    seen[ids] = (~blocked).sum(axis=1) >= min_free
+    caster = RayCaster.shared(mesh)
+    free = np.zeros(dirs.shape[:2], bool)
+    # the first min_free rays of every vertex, then the rest only where those were not
+    # all free (most of a head's outer surface is decided by the first rays)
+    todo = np.arange(len(ids))
+    for j in range(dirs.shape[1]):
+        if j >= min_free:
+            todo = todo[free[todo].sum(axis=1) < min_free]
+            if not len(todo):
+                break
+        origins = mesh.vertices[ids[todo]] + RAY_OFFSET_MM * dirs[todo, 0]
+        hits = caster.first_hits(origins, dirs[todo, j], max_distance=max_block_mm)
+        free[todo, j] = ~hits.hit
+    seen[ids] = free.sum(axis=1) >= min_free
     return seen
 
 
