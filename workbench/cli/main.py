@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import workbench
 from workbench.cli import (
+    animate_cmd,
     case_cmd,
     compare_cmd,
     gui_cmd,
@@ -42,6 +43,7 @@ _MODULES = (
     compare_cmd,
     reconstruct_cmd,
     validate_cmd,
+    animate_cmd,
     gui_cmd,
 )
 

@@ -1,0 +1,171 @@
+"""``workbench animate HEAD``: pose a head with an expression, muscle contractions and the jaw.
+
+HEAD is a template pack folder, a reconstruction folder (its ``head/`` pack)
+or ``reference:male`` / ``reference:female``.  The skin is simulated to rest
+in the pose (:class:`workbench.services.animation.Animator`) and the last
+frame's skin is written to ``--out`` (``.ply`` or ``.obj``; mm, in the
+head's own frame, which a PLY header names).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from workbench.cli.common import add_force_option, output_path
+from workbench.core.errors import InputError
+from workbench.model.template import TemplateHead
+
+OUT_EXTENSIONS = (".ply", ".obj")
+HEAD_FRAME = (
+    "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward the face, "
+    "Frankfort Horizontal at y = 0; mm"
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "animate",
+        help="pose a head (expression, muscles, jaw) and write the skin",
+        description="Simulate the skin of a head (mass-spring skin driven by the 24 muscles and "
+        "the jaw) to rest in a pose and write the skin mesh (mm). Muscle contractions are 0 "
+        "(relaxed) .. 1 (fully contracted); --muscle values override the expression's.",
+    )
+    p.add_argument(
+        "head",
+        help="template pack folder, reconstruction folder (with head/), or reference:male | "
+        "reference:female",
+    )
+    p.add_argument(
+        "--expression", default=None, metavar="NAME", help="palette expression (see --list)"
+    )
+    p.add_argument(
+        "--muscle",
+        action="append",
+        default=[],
+        metavar="NAME=C",
+        help="contract one muscle, C in 0..1 (repeatable)",
+    )
+    p.add_argument("--jaw", type=float, default=None, metavar="DEG", help="jaw opening in degrees")
+    p.add_argument(
+        "--jaw-protrusion",
+        type=float,
+        default=0.0,
+        metavar="MM",
+        help="jaw forward shift in mm (default 0)",
+    )
+    p.add_argument("--list", action="store_true", help="print the expressions and muscles and exit")
+    p.add_argument("--out", type=Path, default=None, help="output skin mesh (.ply or .obj)")
+    add_force_option(p)
+    p.set_defaults(handler=run)
+
+
+def _parse_muscles(items: list[str]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise InputError(f"--muscle {item}", "expected NAME=C, e.g. zygomaticus_major_l=0.4")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise InputError(f"--muscle {item}", f"'{value}' is not a number") from None
+    return out
+
+
+def load_head(spec: str) -> tuple[TemplateHead, str, list[Path]]:
+    """``(head, frame description, input paths)`` for a HEAD argument."""
+    if spec.startswith("reference:"):
+        sex = spec.split(":", 1)[1]
+        if sex not in ("male", "female"):
+            raise InputError(
+                spec, "unknown reference head", "use reference:male or reference:female"
+            )
+        from workbench.services.template_cache import reference_head
+
+        return reference_head(sex), HEAD_FRAME, []
+    root = Path(spec)
+    if not root.is_dir():
+        raise InputError(
+            root,
+            "is not a folder",
+            "give a template pack, a reconstruction folder, or reference:male | reference:female",
+        )
+    pack = root if (root / "template.json").is_file() else root / "head"
+    if not (pack / "template.json").is_file():
+        raise InputError(
+            root,
+            "is neither a template pack (template.json) nor a reconstruction folder (head/)",
+        )
+    from workbench.io.template_pack import load_template_pack
+
+    head = load_template_pack(pack)
+    try:
+        frame = str(
+            json.loads((pack / "template.json").read_text(encoding="utf-8")).get("frame", "")
+        )
+    except (OSError, ValueError):
+        frame = ""
+    return head, frame or HEAD_FRAME, [root]
+
+
+def run(args: argparse.Namespace) -> int:
+    from workbench.services.animation import EXPRESSIONS, Animator
+
+    if args.list:
+        print("expressions: " + ", ".join(EXPRESSIONS))
+    muscles = _parse_muscles(args.muscle)
+    if args.expression is not None and args.expression not in EXPRESSIONS:
+        raise InputError(
+            f"--expression {args.expression}",
+            "is not an expression",
+            "valid names: " + ", ".join(EXPRESSIONS),
+        )
+    if args.out is None and not args.list:
+        raise InputError("--out", "is required", "give the skin mesh to write (.ply or .obj)")
+    if args.out is not None and args.out.suffix.lower() not in OUT_EXTENSIONS:
+        raise InputError(args.out, "has an unsupported extension", "use .ply or .obj")
+    head, frame, inputs = load_head(args.head)
+    if args.list:
+        print("muscles: " + ", ".join(m.code for m in head.muscles))
+        if args.out is None:
+            return 0
+    from workbench.io.outputs import check_output_file
+
+    check_output_file(args.out, inputs, args.force)  # before the simulation, not after
+    anim = Animator(head)
+    if args.expression is not None:
+        anim.set_expression(args.expression)
+    if muscles:
+        anim.set_muscles(muscles)
+    if args.jaw is not None or args.jaw_protrusion:
+        anim.set_jaw(anim.jaw_deg if args.jaw is None else args.jaw, args.jaw_protrusion)
+    steps = anim.settle()
+    skin = anim.skin()
+    moved = float(np.linalg.norm(skin.vertices - head.skin.vertices, axis=1).max())
+    pose = f"expression={args.expression or 'none'} jaw={anim.jaw_deg:g}deg"
+    if muscles:
+        pose += " " + " ".join(f"{k}={v:g}" for k, v in muscles.items())
+    with output_path(args.out, args, *inputs) as target:
+        if target.suffix.lower() == ".ply":
+            from workbench.io.mesh_formats import ply
+
+            ply.write(
+                target, skin, comments=[f"frame: {_ascii(frame)}", f"animate: {_ascii(pose)}"]
+            )
+        else:
+            from workbench.io.meshes import write_mesh
+
+            write_mesh(target, skin)
+    print(
+        f"wrote {args.out} ({skin.n_vertices} vertices; {pose}; settled in {steps} iterations; "
+        f"largest skin movement {moved:.1f} mm)"
+    )
+    return 0
+
+
+def _ascii(text: str) -> str:
+    return " ".join(text.encode("ascii", "replace").decode("ascii").split())
