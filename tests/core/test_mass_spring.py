@@ -179,3 +179,16 @@ def test_linear_muscle_shortens_along_its_polygon_and_sphincter_shrinks() -> Non
     t = rig.targets(np.array([0.5, 0.0]))
     k = list(rig.nodes).index(2)  # the node above the free end
     assert t[k][0] < 30.0 - 10.0
+
+
+def test_numba_kernels_match_the_numpy_path(skin: Mesh, bone: MeshIndex) -> None:
+    pytest.importorskip("numba")
+    runs = []
+    for compiled in (True, False):
+        sim, top = _pulled(skin, bone, np.array([5.0, 3.0, 0.0]), compiled=compiled)
+        assert sim.compiled is compiled
+        sim.step(30)
+        sim.settle(tol_mm=1e-4, max_steps=200)
+        runs.append(sim.x.copy())
+    assert np.abs(runs[0] - runs[1]).max() < 1e-8
+    assert np.abs(runs[0] - skin.vertices).max() > 1.0

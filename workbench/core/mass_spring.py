@@ -16,7 +16,10 @@ The model (digest §7.4)
   an outside static node so that the node slides tangentially; a distance
   constraint on a sphere about the bone point has exactly that behaviour
   (tangential motion is free to first order), so one constraint stands for
-  the pair.  Which bone (cranium or mandible) is decided at initialisation:
+  the pair.  ``tether_fraction`` (30 %) of that stiffness is instead a
+  zero-length tether to the node's rest position on its bone: with only
+  sliding constraints the local/global iteration converges very slowly in
+  the tangential directions and "relaxed" would not come back to rest.  Which bone (cranium or mandible) is decided at initialisation:
   in the lower face a node closer to the mandible than to the cranium goes
   with the jaw (K 7.4.5, 12);  nodes in regions without bone (lips, cheeks;
   passed in as ``bone_free``) or farther than ``bone_max_mm`` from bone get
@@ -24,6 +27,9 @@ The model (digest §7.4)
 * muscle-attached nodes (chosen by :mod:`workbench.core.muscle_model`) get
   zero-length springs to targets the muscles move; their bone spring is
   scaled down by their muscle weight so the two blend;
+* simulated nodes with neither bone nor muscle springs (deep cheeks, nose
+  tip) get a weak pull to rest (``hold_ratio`` = 10 % of the foundation),
+  Lee et al.'s restoring force ``h_i`` (digest §8.5);
 * only ``simulated`` nodes move; the others are kinematic (scalp, ears,
   neck: Kähler also simulates only the face) and follow their bone rigidly.
 
@@ -38,7 +44,14 @@ each spring onto its rest length, each bone node onto its sphere, each
 muscle node onto its target; vectorised numpy) and one *global* step (two
 triangular solves with three right-hand sides).  It is unconditionally
 stable for any stiffness and time step, which is what the seeds' unitless
-values need.
+values need.  The local step and the two triangular solves (SuperLU's
+factors) run in numba kernels when numba is installed (``cache=True``; the
+arithmetic is the same as the numpy/scipy fallback, to 1e-8 mm), which is
+what reaches the issue's 300 steps/s on the reference head.
+
+:meth:`SkinSimulation.settle` runs the same iteration quasi-statically (a
+0.1 s step, no velocity) with Chebyshev acceleration (Wang 2015) to reach
+the static pose of an expression in a few hundred iterations.
 
 Scaling the seeds' unitless constants
 -------------------------------------
@@ -82,6 +95,7 @@ does the exact test with a :class:`~workbench.core.spatial.MeshIndex`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -90,7 +104,145 @@ from scipy.sparse.linalg import splu
 
 from workbench.core.spatial import MeshIndex
 
+_numba: ModuleType | None
+try:  # numba is optional: without it the same step runs as vectorised numpy/scipy
+    import numba as _numba
+except ImportError:  # pragma: no cover - numba is a dependency, this is the fallback
+    _numba = None
+
 NONE, SKULL, JAW = 0, 1, 2
+
+
+# ---------------------------------------------------------------------- compiled kernels
+# Plain-Python loops compiled by numba (``cache=True``: compiled once per machine and
+# kept in __pycache__; the first compile takes a few seconds, see benchmarks/bench_animation.py).
+def _springs_kernel(s, si, sj, rest, w, out):
+    """Scatter ``w * rest * d/|d|`` of every spring (d = s_i - s_j) into ``out`` (+ at i, - at j)."""
+    for k in range(si.shape[0]):
+        i = si[k]
+        j = sj[k]
+        d0 = s[i, 0] - s[j, 0]
+        d1 = s[i, 1] - s[j, 1]
+        d2 = s[i, 2] - s[j, 2]
+        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        f = w[k] * rest[k] / max(length, 1e-12)
+        out[i, 0] += f * d0
+        out[i, 1] += f * d1
+        out[i, 2] += f * d2
+        out[j, 0] -= f * d0
+        out[j, 1] -= f * d1
+        out[j, 2] -= f * d2
+
+
+def _bone_kernel(
+    s, bn, ptr, ring, faces, rest_area, anchor, bone_rest, tether, normal, bw, tw, tau, out
+):
+    """Bone spheres (radius grown by the volume term) and tethers of the bone nodes into ``out``."""
+    for k in range(bn.shape[0]):
+        v = bn[k]
+        area = 0.0
+        for q in range(ptr[k], ptr[k + 1]):
+            f = ring[q]
+            a = faces[f, 0]
+            b = faces[f, 1]
+            c = faces[f, 2]
+            e0 = s[b, 0] - s[a, 0]
+            e1 = s[b, 1] - s[a, 1]
+            e2 = s[b, 2] - s[a, 2]
+            g0 = s[c, 0] - s[a, 0]
+            g1 = s[c, 1] - s[a, 1]
+            g2 = s[c, 2] - s[a, 2]
+            c0 = e1 * g2 - e2 * g1
+            c1 = e2 * g0 - e0 * g2
+            c2 = e0 * g1 - e1 * g0
+            area += 0.5 * np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        area /= 3.0
+        grow = tau * (rest_area[v] / max(area, 1e-9) - 1.0)
+        grow = min(max(grow, -0.5 * tau), 2.0 * tau)
+        u0 = s[v, 0] - anchor[k, 0]
+        u1 = s[v, 1] - anchor[k, 1]
+        u2 = s[v, 2] - anchor[k, 2]
+        sc = (bone_rest[v] + grow) / max(np.sqrt(u0 * u0 + u1 * u1 + u2 * u2), 1e-12)
+        out[v, 0] += bw[k] * (anchor[k, 0] + u0 * sc) + tw[k] * (tether[k, 0] + normal[k, 0] * grow)
+        out[v, 1] += bw[k] * (anchor[k, 1] + u1 * sc) + tw[k] * (tether[k, 1] + normal[k, 1] * grow)
+        out[v, 2] += bw[k] * (anchor[k, 2] + u2 * sc) + tw[k] * (tether[k, 2] + normal[k, 2] * grow)
+
+
+def _lu_kernel(lp, li, lx, up, ui, ux, perm_r, perm_c, b, y, out):
+    """Solve ``A x = b`` (3 columns) from SuperLU factors ``Pr A Pc = L U`` (CSC, sorted rows)."""
+    n = b.shape[0]
+    for i in range(n):
+        r = perm_r[i]
+        y[r, 0] = b[i, 0]
+        y[r, 1] = b[i, 1]
+        y[r, 2] = b[i, 2]
+    for j in range(n):  # L: the diagonal is each column's first entry
+        d = lx[lp[j]]
+        y0 = y[j, 0] / d
+        y1 = y[j, 1] / d
+        y2 = y[j, 2] / d
+        y[j, 0] = y0
+        y[j, 1] = y1
+        y[j, 2] = y2
+        for q in range(lp[j] + 1, lp[j + 1]):
+            i = li[q]
+            y[i, 0] -= lx[q] * y0
+            y[i, 1] -= lx[q] * y1
+            y[i, 2] -= lx[q] * y2
+    for j in range(n - 1, -1, -1):  # U: the diagonal is each column's last entry
+        d = ux[up[j + 1] - 1]
+        y0 = y[j, 0] / d
+        y1 = y[j, 1] / d
+        y2 = y[j, 2] / d
+        y[j, 0] = y0
+        y[j, 1] = y1
+        y[j, 2] = y2
+        for q in range(up[j], up[j + 1] - 1):
+            i = ui[q]
+            y[i, 0] -= ux[q] * y0
+            y[i, 1] -= ux[q] * y1
+            y[i, 2] -= ux[q] * y2
+    for i in range(n):
+        c = perm_c[i]
+        out[i, 0] = y[c, 0]
+        out[i, 1] = y[c, 1]
+        out[i, 2] = y[c, 2]
+
+
+if _numba is not None:
+    _springs_jit = _numba.njit(cache=True, nogil=True)(_springs_kernel)
+    _bone_jit = _numba.njit(cache=True, nogil=True)(_bone_kernel)
+    _lu_jit = _numba.njit(cache=True, nogil=True)(_lu_kernel)
+
+
+class _Solver:
+    """Prefactorised ``A x = b`` for the free block: SuperLU, solved by numba when it is there."""
+
+    def __init__(self, matrix: sp.csc_matrix, compiled: bool) -> None:
+        self.lu = splu(
+            matrix,
+            permc_spec="MMD_AT_PLUS_A",
+            diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
+        self.compiled = compiled
+        if compiled:
+            low = self.lu.L.tocsc()
+            upp = self.lu.U.tocsc()
+            low.sort_indices()
+            upp.sort_indices()
+            self._l = (low.indptr, low.indices, low.data)
+            self._u = (upp.indptr, upp.indices, upp.data)
+            self._pr = np.asarray(self.lu.perm_r, np.int64)
+            self._pc = np.asarray(self.lu.perm_c, np.int64)
+            self._y = np.zeros((matrix.shape[0], 3))
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        if not self.compiled:
+            return np.asarray(self.lu.solve(b))
+        out = np.empty((b.shape[0], 3))
+        _lu_jit(*self._l, *self._u, self._pr, self._pc, np.ascontiguousarray(b), self._y, out)
+        return out
 
 
 @dataclass(frozen=True)
@@ -178,8 +330,11 @@ class SkinSimulation:
         muscle_nodes: np.ndarray | None = None,
         muscle_weights: np.ndarray | None = None,
         params: SkinParameters | None = None,
+        compiled: bool | None = None,
     ) -> None:
         p = params or SkinParameters()
+        #: numba kernels in use (default: whenever numba imports); False: numpy/scipy only
+        self.compiled = (_numba is not None) if compiled is None else bool(compiled and _numba)
         self.params = p
         x0 = np.array(vertices, dtype=np.float64).reshape(-1, 3)
         f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -324,6 +479,9 @@ class SkinSimulation:
         bone_face_ids = np.unique(self._vf[self.bone_nodes].indices)
         self._bone_faces = f[bone_face_ids]
         self._face_of_bone = self._vf[self.bone_nodes][:, bone_face_ids].tocsr()
+        ring = self._vf[self.bone_nodes].tocsr()  # one-ring faces of each bone node, for the kernel
+        self._ring_ptr = ring.indptr.astype(np.int64)
+        self._ring_faces = ring.indices.astype(np.int64)
         free_pos = np.full(n, -1, np.int64)
         free_pos[self.free] = np.arange(len(self.free))
         self._bone_free_pos = free_pos[self.bone_nodes]
@@ -349,8 +507,7 @@ class SkinSimulation:
         inertia = self.mass / h**2
         system = (self._stiff + sp.diags(inertia)).tocsc()
         free = self.free
-        lu = splu(system[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A")
-        return lu, inertia[free, None]
+        return _Solver(system[free][:, free].tocsc(), self.compiled), inertia[free, None]
 
     # ------------------------------------------------------------------ control
     def set_jaw(self, rotation: np.ndarray, translation: np.ndarray) -> None:
@@ -405,6 +562,8 @@ class SkinSimulation:
 
     def _iterate(self, s: np.ndarray, lu: Any, inertia: np.ndarray, kin_rhs: Any) -> np.ndarray:
         """One local/global iteration from the predicted positions ``s``; returns new positions."""
+        if self.compiled:
+            return self._iterate_compiled(s, lu, inertia, kin_rhs)
         tau = self.params.thickness_mm
         free = self.free
         # local step: springs onto their rest length
@@ -431,6 +590,42 @@ class SkinSimulation:
             rhs[self._muscle_free_pos] += self._muscle_wv * self._targets
         if len(self.hold_nodes):
             rhs[self._hold_free_pos] += self._hold_wv * self._hold_rest
+        new = s.copy()
+        new[self.kinematic] = self.x[self.kinematic]
+        new[free] = lu.solve(rhs)
+        self._keep_above_bone(new)
+        return new
+
+    def _iterate_compiled(
+        self, s: np.ndarray, lu: Any, inertia: np.ndarray, kin_rhs: Any
+    ) -> np.ndarray:
+        """:meth:`_iterate` with the local step and the solve in numba kernels (same arithmetic)."""
+        s = np.ascontiguousarray(s)
+        full = np.zeros_like(s)
+        _springs_jit(s, self.spring_i, self.spring_j, self.spring_rest, self.spring_w, full)
+        if len(self.bone_nodes):
+            _bone_jit(
+                s,
+                self.bone_nodes,
+                self._ring_ptr,
+                self._ring_faces,
+                self.faces,
+                self.rest_area,
+                self._bone_anchor,
+                self.bone_rest,
+                self._tether_rest,
+                self._bone_normal,
+                self._bone_wv[:, 0],
+                self._tether_wv[:, 0],
+                self.params.thickness_mm,
+                full,
+            )
+        if len(self.muscle_nodes):
+            full[self.muscle_nodes] += self._muscle_wv * self._targets
+        if len(self.hold_nodes):
+            full[self.hold_nodes] += self._hold_wv * self._hold_rest
+        free = self.free
+        rhs = inertia * s[free] + full[free] - kin_rhs
         new = s.copy()
         new[self.kinematic] = self.x[self.kinematic]
         new[free] = lu.solve(rhs)
