@@ -148,6 +148,9 @@ class FitView:
         ``xmin, xmax, ymin, ymax, zmin, zmax`` of the fitted face (camera).
     seeds : int
         Placed landmarks the fit was given.
+    confidence : dict
+        ``{code: 0..1}``: the service's confidence in each guess (from its
+        distance to the scan; low over holes).
     """
 
     fit: ScanFit
@@ -161,6 +164,7 @@ class FitView:
     superior: np.ndarray
     face_bounds: np.ndarray
     seeds: int = 0
+    confidence: dict[str, float] = field(default_factory=dict)
 
 
 def read_scan(path: str | Path, units: str = "auto", scale: float | None = None) -> OpenedScan:
@@ -247,6 +251,7 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
         s / np.linalg.norm(s),
         np.column_stack([lo, hi]).ravel(),
         seeds,
+        {c: float(lms[c].confidence) for c in codes},
     )
 
 
@@ -696,6 +701,7 @@ class ScanFitTool(QObject):
             view.guess if view is not None else {},
             view.over_holes if view is not None else frozenset(),
             view.to_scan_mm if view is not None else {},
+            view.confidence if view is not None else {},
         )
 
     def _changed(self) -> None:

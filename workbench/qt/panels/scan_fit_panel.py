@@ -39,7 +39,7 @@ from workbench.qt.panels.dowels_panel import BUILDS
 if TYPE_CHECKING:
     from workbench.qt.scan_fit_ops import FitView, OpenedScan, ScanLandmarks
 
-COLUMNS = ("Code", "Name", "State", "To scan mm")
+COLUMNS = ("Code", "Name", "State", "Conf. (mm)")
 UNITS = ("auto", "mm", "cm", "m", "in")
 #: drawn layers of the tool and their check-box titles
 LAYER_TITLES = {"scan": "Scan", "skin": "Fitted skin", "landmarks": "Landmarks"}
@@ -295,6 +295,7 @@ class ScanFitPanel(QWidget):
         guess: Mapping[str, np.ndarray],
         over_holes: frozenset[str],
         to_scan_mm: Mapping[str, float],
+        confidence: Mapping[str, float] | None = None,
     ) -> None:
         """Fill the table (the selection is kept)."""
         selected = self.selected_code()
@@ -310,12 +311,11 @@ class ScanFitPanel(QWidget):
                 else:
                     state = ""
                 d = to_scan_mm.get(code)
-                cells = (
-                    code,
-                    names.get(code, ""),
-                    STATE_TEXT.get(state, "—"),
-                    "" if d is None or state == "placed" else f"{d:.1f}",
-                )
+                c = (confidence or {}).get(code)
+                shown = "" if d is None or state == "placed" else f"({d:.1f})"
+                if shown and c is not None:
+                    shown = f"{c:.2f} {shown}"
+                cells = (code, names.get(code, ""), STATE_TEXT.get(state, "—"), shown)
                 for col, text in enumerate(cells):
                     item = QTableWidgetItem(text)
                     if col == 3:
