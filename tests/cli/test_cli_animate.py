@@ -77,3 +77,24 @@ def test_animate_bad_head_and_output(tmp_path: Path, capsys) -> None:
     assert main(["animate", "reference:cat", "--out", str(tmp_path / "a.ply")]) == 2
     assert main(["animate", "reference:male", "--out", str(tmp_path / "a.stl")]) == 2
     assert ".ply or .obj" in capsys.readouterr().err
+
+
+def test_animate_reconstruction_folder(tmp_path: Path, head_male) -> None:
+    """A reconstruction folder holds its head as head/ in the skull file's frame."""
+    from workbench.io.template_pack import export_template
+    from workbench.services.reconstruct import warp_head
+
+    shift = np.array([10.0, 200.0, -35.0])
+    export_template(
+        warp_head(head_male, lambda p: np.asarray(p) + shift),
+        tmp_path / "recon" / "head",
+        frame="the skull file's frame, mm",
+    )
+    out = tmp_path / "recon_smile.ply"
+    assert (
+        main(["animate", str(tmp_path / "recon"), "--expression", "smile", "--out", str(out)]) == 0
+    )
+    assert "the skull file's frame" in " ".join(ply.header_comments(out))
+    mesh = read_mesh(out, units="mm").mesh
+    moved = np.linalg.norm(mesh.vertices - (head_male.skin.vertices + shift), axis=1)
+    assert 3.0 < moved.max() < 30.0  # posed, and still in the pack's frame

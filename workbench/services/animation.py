@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from workbench.core.errors import InputError
+from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.mass_spring import SkinParameters, SkinSimulation
 from workbench.core.mesh import Mesh
 from workbench.core.muscle_model import MuscleRig, MuscleSpec
@@ -69,6 +69,7 @@ class ActionUnit:
     jaw_deg: float = 0.0
     protrusion: Mapping[str, float] = field(default_factory=dict)
     note: str = ""
+    lids: float = 0.0
 
 
 def _both(stem: str, c: float) -> dict[str, float]:
@@ -169,20 +170,23 @@ ACTION_UNITS: dict[str, ActionUnit] = {
     "AU43": ActionUnit(
         43,
         "eyes closed",
-        _both("orbicularis_oculi_palpebral", 0.8),
-        note="orbicularis oculi, pars palpebralis (levator palpebrae relaxation not modelled)",
+        _both("orbicularis_oculi_palpebral", 0.2),
+        lids=1.0,
+        note="levator palpebrae relaxed (the lids close about the eye centre) with a little "
+        "orbicularis oculi, pars palpebralis",
     ),
 }
 
 
 @dataclass(frozen=True)
 class Expression:
-    """Muscle contractions (0..1), sphincter protrusions (-1..1) and jaw angle (degrees)."""
+    """Muscle contractions (0..1), sphincter protrusions (-1..1), jaw angle (degrees), lids (0..1)."""
 
     muscles: Mapping[str, float] = field(default_factory=dict)
     protrusion: Mapping[str, float] = field(default_factory=dict)
     jaw_deg: float = 0.0
     note: str = ""
+    lids: float = 0.0
 
 
 def from_action_units(units: Mapping[str, float], note: str = "") -> Expression:
@@ -190,6 +194,7 @@ def from_action_units(units: Mapping[str, float], note: str = "") -> Expression:
     muscles: dict[str, float] = {}
     prot: dict[str, float] = {}
     jaw = 0.0
+    lids = 0.0
     for name, k in units.items():
         au = ACTION_UNITS[name]
         for code, c in au.muscles.items():
@@ -197,7 +202,8 @@ def from_action_units(units: Mapping[str, float], note: str = "") -> Expression:
         for code, a in au.protrusion.items():
             prot[code] = float(np.clip(prot.get(code, 0.0) + k * a, -1, 1))
         jaw += k * au.jaw_deg
-    return Expression(muscles, prot, jaw, note)
+        lids += k * au.lids
+    return Expression(muscles, prot, jaw, note, min(1.0, lids))
 
 
 #: the palette: neutral, the six basic emotions (EMFACS prototypes), eye closure and every AU
@@ -229,6 +235,7 @@ def mix(weights: Mapping[str, float]) -> Expression:
     muscles: dict[str, float] = {}
     prot: dict[str, float] = {}
     jaw = 0.0
+    lids = 0.0
     for name, w in weights.items():
         if name not in EXPRESSIONS:
             raise InputError(
@@ -240,7 +247,10 @@ def mix(weights: Mapping[str, float]) -> Expression:
         for code, a in e.protrusion.items():
             prot[code] = float(np.clip(prot.get(code, 0.0) + w * a, -1, 1))
         jaw += w * e.jaw_deg
-    return Expression(muscles, prot, jaw, "mix of " + ", ".join(weights))
+        lids += w * e.lids
+    return Expression(
+        muscles, prot, jaw, "mix of " + ", ".join(weights), float(np.clip(lids, 0, 1))
+    )
 
 
 def _mask(n: int, head: TemplateHead, names: tuple[str, ...]) -> np.ndarray:
@@ -252,18 +262,27 @@ def _mask(n: int, head: TemplateHead, names: tuple[str, ...]) -> np.ndarray:
 
 
 def _to_head_frame(head: TemplateHead) -> tuple[TemplateHead, np.ndarray | None]:
-    """The head in its Frankfort frame and the 4x4 back to its own frame (None: already there)."""
+    """The head in the Frankfort frame of its skull landmarks, and the 4x4 back (None: no move).
+
+    Every head is animated in the frame its own landmarks define, so a head
+    stored in another frame (a reconstruction's ``head/`` pack, in the skull
+    file's frame) animates exactly like the same head stored in the head frame.
+    """
     from workbench.services.frame import head_frame_from_landmarks
     from workbench.services.reconstruct import warp_head
 
     try:
         frame = head_frame_from_landmarks(head.skull_landmarks.defined())
-    except Exception:  # noqa: BLE001 - no FH landmarks: take the head as it is
+    except WorkbenchError:  # no Frankfort landmarks: take the head as it is
         return head, None
     m = np.asarray(frame.input_to_head, float)
-    # already in its Frankfort frame (the reference head: within 1 mm / 1 deg), or mirrored
-    angle = np.degrees(np.arccos(np.clip((np.trace(m[:3, :3]) - 1) / 2, -1, 1)))
-    if (angle < 1.0 and np.linalg.norm(m[:3, 3]) < 1.0) or np.linalg.det(m[:3, :3]) < 0:
+    if np.linalg.det(m[:3, :3]) < 0:
+        raise InputError(
+            head.template_id,
+            "is stored mirrored (its landmarks give a left-handed head frame)",
+            "animate the head exported in the head frame instead",
+        )
+    if np.allclose(m, np.eye(4), atol=1e-12):
         return head, None
 
     def move(p: np.ndarray) -> np.ndarray:
@@ -342,9 +361,39 @@ class Animator:
         self.jaw_deg = 0.0
         self.protrusion_mm = 0.0
         self.gaze = (0.0, 0.0)
+        self.lids = 0.0
+        self._lid_parts = self._lid_setup(head, x0)
         self._jaw_matrix = np.eye(4)
         self._sim_jaw = np.eye(4)
         self._dirty = True
+
+    def _lid_setup(
+        self, head: TemplateHead, x0: np.ndarray
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """Per lid: muscle-node slots, positions about the eye centre, centre, full turn (rad)."""
+        parts = []
+        lm = head.skin_landmarks.as_dict()
+        slot = np.full(len(x0), -1, np.int64)
+        slot[self.rig.nodes] = np.arange(len(self.rig.nodes))
+        for k, side in enumerate(("l", "r")):
+            ps, pi = lm.get(f"ps_{side}"), lm.get(f"pi_{side}")
+            up = head.regions.get(f"eyelid_upper_{side}")
+            low = head.regions.get(f"eyelid_lower_{side}")
+            if ps is None or pi is None or up is None or low is None:
+                continue
+            c = np.asarray(head.eye_centres[k], float)
+            el_ps = float(np.arctan2(ps[1] - c[1], ps[2] - c[2]))
+            el_pi = float(np.arctan2(pi[1] - c[1], pi[2] - c[2]))
+            meet = el_pi + 0.2 * (el_ps - el_pi)
+            for nodes, margin, goal in ((up, el_ps, meet), (low, el_pi, meet)):
+                nodes = np.asarray(nodes, np.int64)
+                nodes = nodes[slot[nodes] >= 0]
+                rel = x0[nodes] - c
+                el = np.arctan2(rel[:, 1], rel[:, 2])
+                far = el.max() if margin > goal else el.min()  # the lid's edge away from the eye
+                fade = np.clip((far - el) / (far - margin), 0.0, 1.0)
+                parts.append((slot[nodes], rel, c, (margin - goal) * fade))
+        return parts
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -412,11 +461,19 @@ class Animator:
         self.gaze = (float(yaw_deg), float(pitch_deg))
 
     def set_lids(self, closure: float) -> None:
-        """Eyelid closure 0 (open) .. 1 (closed) through the palpebral orbicularis oculi."""
-        if not 0.0 <= closure <= 1.0:
+        """Eyelid closure 0 (open) .. 1 (closed), MEDUSA's eyelid aperture (digest §12).
+
+        The levator palpebrae is not among the 24 muscles: the eyelid skin
+        is turned about the horizontal axis through the eye centre (as
+        Breton's lids are pieces of a sphere turned about its centre), the
+        upper lid's margin down to 80 % of the way to the lower lid's, the
+        lower lid's up the rest, fading to nothing at the lid's far edge.
+        The turned positions are targets of the lid nodes' muscle springs.
+        """
+        if not np.isfinite(closure) or not 0.0 <= closure <= 1.0:
             raise InputError(f"lid closure {closure}", "must be between 0 (open) and 1 (closed)")
-        codes = [c for c in self.rig.codes if c.startswith("orbicularis_oculi_palpebral")]
-        self.set_muscles({c: 0.8 * closure for c in codes})
+        self.lids = float(closure)
+        self._dirty = True
 
     def set_expression(self, name_or_expression: str | Expression, weight: float = 1.0) -> None:
         """Replace all muscle, protrusion and jaw parameters with one palette expression."""
@@ -435,12 +492,14 @@ class Animator:
                 {c: min(1.0, weight * v) for c, v in e.muscles.items()},
                 {c: float(np.clip(weight * v, -1, 1)) for c, v in e.protrusion.items()},
                 weight * e.jaw_deg,
+                lids=e.lids,
             )
         muscles = {c: v for c, v in e.muscles.items() if c in self.rig.index}
         self.set_muscles(muscles, reset=True)
         self.protrusion[:] = 0.0
         self.set_protrusion({c: v for c, v in e.protrusion.items() if c in self.rig.index})
         self.set_jaw(e.jaw_deg, self.protrusion_mm)
+        self.set_lids(min(1.0, weight * e.lids))
 
     # ------------------------------------------------------------------ simulation
     def update_muscles(self) -> None:
@@ -450,7 +509,15 @@ class Animator:
         if not np.array_equal(m, self._sim_jaw):  # moving the bone anchors costs ~0.5 ms
             self.sim.set_jaw(*jaw)
             self._sim_jaw = m.copy()
-        self.sim.set_muscle_targets(self.rig.targets(self.contraction, self.protrusion, jaw))
+        targets = self.rig.targets(self.contraction, self.protrusion, jaw)
+        if self.lids > 0:
+            for local, rel, centre, turn in self._lid_parts:
+                targets[local] += (
+                    _turned_down(rel, turn * self.lids)
+                    + centre
+                    - self.sim.rest[self.rig.nodes[local]]
+                )
+        self.sim.set_muscle_targets(targets)
         self._dirty = False
 
     def step(self, n: int = 1) -> None:
@@ -518,6 +585,16 @@ class Animator:
             sel = owner == k
             out[sel] = (v[sel] - c) @ r.T + c
         return out
+
+
+def _turned_down(rel: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Points about an eye centre turned about the x axis, lowering their elevation by ``angle``."""
+    y, z = rel[:, 1], rel[:, 2]
+    ca, sa = np.cos(angle), np.sin(angle)
+    out = rel.copy()
+    out[:, 1] = y * ca - z * sa
+    out[:, 2] = z * ca + y * sa
+    return out
 
 
 def animate_head(
