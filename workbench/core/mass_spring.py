@@ -63,12 +63,19 @@ time step.  Here they become two resolution-independent physical scales:
   period 2πT whatever its area); per node ``k_b A_i``;
 * the membrane modulus is ``E = k_b λ²`` with ``λ = membrane_length_mm``,
   the distance over which a point displacement of the skin decays on the
-  foundation.  Kähler's values (E = 100, bone 30 on ≈ 100 mm² nodes of
-  his 1027-vertex head) give λ ≈ sqrt(100 / 0.3) ≈ 18 mm, the default;
+  foundation.  Kähler's values (E = 100, bone 30 on ≈ 140 mm² nodes of
+  his 1027-vertex head) give λ ≈ sqrt(100 / 0.21) ≈ 20 mm; the default is
+  12 mm, tuned so that the muscle-driven regions (a few mm to a few cm
+  wide) are not flattened by the membrane (a 20 mm λ halves the mouth
+  corners' movement in a smile);
 * edge springs follow Van Gelder: ``k_s = E Σ area(T_s) / r_s²`` (rest
   areas), so the membrane energy does not change when the mesh is refined;
   bending springs are ``bending_ratio`` of that;
-* muscle springs are ``muscle_ratio × k_b A_i`` (Kähler 10 : 30).
+* muscle springs are ``muscle_ratio × k_b A_i`` = 5 × the foundation.
+  Kähler's skin-muscle springs are weaker (10 against 30 for the bone), but
+  he also moves each attached skin node with its muscle every frame
+  ("over-relaxation", K 7.3.5), so his skin follows the muscles closely;
+  a stiffer spring gives that without the violence he reports.
 
 Damping: implicit Euler damps on its own; on top of that velocities decay
 with the time constant ``damping_time_s`` (Kähler's γ = 30 on 0.31 g
@@ -247,20 +254,32 @@ class _Solver:
 
 @dataclass(frozen=True)
 class SkinParameters:
-    """Physical parameters of the skin model (mm, s, g)."""
+    """Physical parameters of the skin model (mm, s, g); see the module docstring."""
 
+    #: skin thickness τs (Kähler: 2 mm) and density (1100 kg/m³) for the masses
     thickness_mm: float = 2.0
     density_g_per_mm3: float = 1.1e-3
+    #: real-time step (10 steps per 60 Hz frame)
     time_step_s: float = 1.0 / 600.0
+    #: T of the bone foundation, k_b = ρ τ / T² per mm² of skin
     response_time_s: float = 0.004
+    #: λ: membrane modulus E = k_b λ²
     membrane_length_mm: float = 12.0
+    #: bending springs relative to the Van Gelder edge stiffness
     bending_ratio: float = 0.05
+    #: muscle springs relative to the foundation
     muscle_ratio: float = 5.0
+    #: velocity decay time constant (Kähler's γ/m ≈ 100 /s)
     damping_time_s: float = 0.010
+    #: no bone spring (and no jaw following) farther than this from bone
     bone_max_mm: float = 14.0
+    #: skin is kept this far outside the bone's tangent plane (or its rest depth, if less)
     bone_margin_mm: float = 1.0
+    #: step of the quasi-static settle
     settle_step_s: float = 0.1
+    #: share of the bone stiffness that is a tether to the rest position on the bone
     tether_fraction: float = 0.3
+    #: pull to rest of nodes with neither bone nor muscle springs, relative to the foundation
     hold_ratio: float = 0.1
 
 

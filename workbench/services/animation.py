@@ -19,9 +19,10 @@ Table 7.1, built from FACS action units (Ekman & Friesen 1978; Ekman,
 Friesen & Hager 2002).  :data:`ACTION_UNITS` says which muscles produce
 which AU; the six basic emotions follow the EMFACS prototypes (Friesen &
 Ekman 1983; Ekman, Friesen & Hager 2002, *FACS Investigator's Guide*,
-Table 10-1).  Muscles of those AUs that the reference set does not have
-(levator palpebrae for AU5, buccinator for AU14, zygomaticus minor, the
-platysma) are left out and said so.
+EMFACS).  Muscles of those AUs that the reference set does not have are
+left out and said so: the levator palpebrae (its relaxation, AU43, is
+modelled as a lid turn, :meth:`Animator.set_lids`; its contraction, AU5
+upper lid raiser, is not), buccinator (AU14), zygomaticus minor, platysma.
 """
 
 from __future__ import annotations
@@ -165,7 +166,8 @@ ACTION_UNITS: dict[str, ActionUnit] = {
         "mouth stretch",
         {"mylohyoideus": 0.3},
         jaw_deg=22.0,
-        note="jaw rotation; mylohyoideus pulls the floor of the mouth",
+        note="jaw rotation (FACS: pterygoids, digastric); the reference set's mylohyoideus "
+        "stands in for the suprahyoid pull",
     ),
     "AU43": ActionUnit(
         43,
@@ -216,8 +218,8 @@ EXPRESSIONS: dict[str, Expression] = {
         {"AU1": 1.0, "AU2": 1.0, "AU26": 1.0}, "AU1+2+5B+26 (AU5 not modelled)"
     ),
     "fear": from_action_units(
-        {"AU1": 1.0, "AU2": 1.0, "AU4": 1.0, "AU20": 1.0, "AU26": 0.8},
-        "AU1+2+4+5+20+26 (AU5 not modelled)",
+        {"AU1": 1.0, "AU2": 1.0, "AU4": 1.0, "AU7": 1.0, "AU20": 1.0, "AU26": 0.8},
+        "AU1+2+4+5+7+20+26 (AU5 not modelled)",
     ),
     "anger": from_action_units(
         {"AU4": 1.0, "AU7": 1.0, "AU23": 1.0}, "AU4+5+7+23 (AU5 not modelled)"
