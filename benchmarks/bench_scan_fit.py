@@ -148,7 +148,7 @@ def main() -> int:
             f"mean {f['face_mean_distance_mm']:.2f} mm  hidden {f['face_region_hidden_vertices']}  "
             f"skin->scan <=2.5mm {100 * f['face_skin_to_scan_mm']['within_2_5mm_fraction']:.1f}% "
             f"p95 {f['face_skin_to_scan_mm']['p95']:.2f} mm  lm->scan {lm['mean']:.2f} mm "
-            f"(n {lm['n']}, absent {len(lm['absent'])})  folds {f['fold_overs']}  "
+            f"(n {lm['n']}, absent {len(lm['absent'])})  folds {f['fold_overs']} ({f['fold_overs_outside_mouth_corner_seam']} off the seam)  "
             f"depth |diff| {td['mean_abs_diff_mm']:.2f} mm ({td['pairs']} pairs)  "
             f"mirrored {fit.mirrored_input}  {wall:.1f} s"
         )

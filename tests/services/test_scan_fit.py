@@ -25,6 +25,7 @@ def test_female_skin_fitted_with_the_male_reference(female_fit, head_male):
     assert fig["face_within_1mm_fraction"] >= 0.95  # the target
     assert fig["face_within_2_5mm_fraction"] >= 0.98
     assert fig["fold_overs"] == 0
+    assert fig["fold_overs_outside_mouth_corner_seam"] == 0
     assert fig["self_intersections"]["new_pairs"] == 0
     assert fig["skin_landmark_to_scan_mm"]["mean"] < 0.5
     assert not fit.mirrored_input

@@ -118,6 +118,14 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
         row("Face skin supported by the scan", _pct(fig["face_on_scan_fraction"]))
     folds = int(fig["fold_overs"])
     row("Fold-overs (triangles turned over)", str(folds), "0", folds == 0)
+    if "fold_overs_outside_mouth_corner_seam" in fig:
+        off = int(fig["fold_overs_outside_mouth_corner_seam"])
+        row(
+            "… outside the reference's mouth-corner seam",
+            f"{off} (the rest are the reference skin's own sliver triangles there)",
+            "0",
+            off == 0,
+        )
     cross = fig.get("self_intersections")
     if cross:
         new = int(cross.get("new_pairs", 0))
