@@ -98,3 +98,61 @@ def test_animate_reconstruction_folder(tmp_path: Path, head_male) -> None:
     mesh = read_mesh(out, units="mm").mesh
     moved = np.linalg.norm(mesh.vertices - (head_male.skin.vertices + shift), axis=1)
     assert 3.0 < moved.max() < 30.0  # posed, and still in the pack's frame
+
+
+def test_animate_glb_morph_targets(tmp_path: Path, head_male, capsys) -> None:
+    """--out .glb: the expressions as morph targets; weight 1 on one = its settled skin."""
+    import pygltflib
+
+    from workbench.services.animation import Animator
+
+    out = tmp_path / "head.glb"
+    args = ["animate", "reference:male", "--targets", "smile,au26", "--expression", "happiness"]
+    assert main([*args, "--out", str(out)]) == 0
+    assert "3 morph targets" in capsys.readouterr().out
+    gltf = pygltflib.GLTF2().load(str(out))
+    by_name = {n.name: i for i, n in enumerate(gltf.nodes)}
+    assert {"skin", "eyes", "upper_teeth", "lower_teeth", "tongue", "mandible"} <= set(by_name)
+    mesh = gltf.meshes[gltf.nodes[by_name["skin"]].mesh]
+    names = mesh.extras["targetNames"]
+    assert names == ["smile", "au26", "happiness"]
+    assert mesh.weights == [0.0, 0.0, 1.0]
+    (prim,) = mesh.primitives
+    blob = gltf.binary_blob()
+
+    def read(index: int) -> np.ndarray:
+        acc = gltf.accessors[index]
+        assert acc.componentType == pygltflib.FLOAT
+        view = gltf.bufferViews[acc.bufferView]
+        width = 3 if acc.type == "VEC3" else 1
+        data = np.frombuffer(
+            blob, "<f4", acc.count * width, view.byteOffset + (acc.byteOffset or 0)
+        )
+        return data.reshape(acc.count, width).astype(float)
+
+    rest = read(prim.attributes.POSITION) * 1000.0  # metres -> mm
+    assert len(rest) == head_male.skin.n_vertices
+    anim = Animator(head_male)
+    anim.set_expression("smile")
+    anim.settle()
+    want = anim.skin_in_head_frame()
+    k = names.index("smile")
+    assert gltf.accessors[prim.targets[k]["POSITION"]].count == len(rest)
+    frame = rest + 1.0 * read(prim.targets[k]["POSITION"]) * 1000.0
+    assert np.abs(frame - want).max() < 0.01  # the glTF frame is the simulation's frame
+    # au26 opens the jaw: the mandible node carries the same targets and moves for au26
+    mand = gltf.meshes[gltf.nodes[by_name["mandible"]].mesh]
+    assert mand.extras["targetNames"] == names
+    assert np.abs(read(mand.primitives[0].targets[1]["POSITION"])).max() > 1e-3  # > 1 mm
+    (clip,) = gltf.animations
+    assert {c.target.path for c in clip.channels} == {"weights"}
+    assert by_name["skin"] in {c.target.node for c in clip.channels}
+    times = read(clip.samplers[0].input)[:, 0]
+    assert times[0] == 0.0 and times[-1] == 1.0
+    # bad requests are refused before any simulation
+    bad = tmp_path / "bad.glb"
+    assert main(["animate", "reference:male", "--targets", "smile,grin", "--out", str(bad)]) == 2
+    assert "grin is not an expression" in capsys.readouterr().err
+    assert main(["animate", "reference:male", "--jaw", "5", "--out", str(bad)]) == 2
+    assert "morph targets" in capsys.readouterr().err
+    assert not bad.exists()

@@ -5,6 +5,13 @@ or ``reference:male`` / ``reference:female``.  The skin is simulated to rest
 in the pose (:class:`workbench.services.animation.Animator`) and the last
 frame's skin is written to ``--out`` (``.ply`` or ``.obj``; mm, in the
 head's own frame, which a PLY header names).
+
+``--out OUT.glb`` writes glTF 2.0 binary instead: the rest skin with every
+palette expression (or those of ``--targets``) as a morph target settled from
+rest, the eyes, teeth, tongue, mandible and cranium as nodes, in the
+Frankfort head frame in metres (glTF +Y up, +Z forward).  With
+``--expression`` that expression's weight is 1 by default and the file holds
+a clip from neutral to it over ``--clip-seconds`` (1 s).
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ from workbench.cli.common import add_force_option, output_path
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
 
-OUT_EXTENSIONS = (".ply", ".obj")
+OUT_EXTENSIONS = (".ply", ".obj", ".glb")
 HEAD_FRAME = (
     "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward the face, "
     "Frankfort Horizontal at y = 0; mm"
@@ -58,7 +65,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="jaw forward shift in mm (default 0)",
     )
     p.add_argument("--list", action="store_true", help="print the expressions and muscles and exit")
-    p.add_argument("--out", type=Path, default=None, help="output skin mesh (.ply or .obj)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output skin mesh (.ply or .obj), or .glb: glTF with every expression as a "
+        "morph target",
+    )
+    p.add_argument(
+        "--targets",
+        default=None,
+        metavar="A,B,...",
+        help=".glb only: the expressions to export as morph targets (default: all)",
+    )
+    p.add_argument(
+        "--clip-seconds",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help=".glb with --expression: length of the clip from neutral to it (default 1 s)",
+    )
     add_force_option(p)
     p.set_defaults(handler=run)
 
@@ -127,7 +153,11 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None and not args.list:
         raise InputError("--out", "is required", "give the skin mesh to write (.ply or .obj)")
     if args.out is not None and args.out.suffix.lower() not in OUT_EXTENSIONS:
-        raise InputError(args.out, "has an unsupported extension", "use .ply or .obj")
+        raise InputError(
+            args.out, "has an unsupported extension", "use .ply or .obj (or .glb for glTF)"
+        )
+    glb = args.out is not None and args.out.suffix.lower() == ".glb"
+    targets = _glb_targets(args, muscles) if glb else None
     head, frame, inputs = load_head(args.head)
     if args.list:
         print("muscles: " + ", ".join(m.code for m in head.muscles))
@@ -136,6 +166,8 @@ def run(args: argparse.Namespace) -> int:
     from workbench.io.outputs import check_output_file
 
     check_output_file(args.out, inputs, args.force)  # before the simulation, not after
+    if targets is not None:
+        return _write_glb(args, head, targets, inputs)
     anim = Animator(head)
     if args.expression is not None:
         anim.set_expression(args.expression)
@@ -163,6 +195,57 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.out} ({skin.n_vertices} vertices; {pose}; settled in {steps} iterations; "
         f"largest skin movement {moved:.1f} mm)"
+    )
+    return 0
+
+
+def _glb_targets(args: argparse.Namespace, muscles: dict[str, float]) -> list[str]:
+    """The morph targets of a .glb (checked before the head is loaded)."""
+    from workbench.services.animation import EXPRESSIONS
+
+    if muscles or args.jaw is not None or args.jaw_protrusion:
+        raise InputError(
+            args.out,
+            "a .glb holds the palette expressions as morph targets, not --muscle/--jaw poses",
+            "use --expression NAME (and --targets), or write .ply/.obj for a free pose",
+        )
+    if not np.isfinite(args.clip_seconds) or args.clip_seconds <= 0:
+        raise InputError(f"--clip-seconds {args.clip_seconds}", "must be a positive number")
+    if args.targets is None:
+        names = list(EXPRESSIONS)
+    else:
+        names = [n.strip() for n in args.targets.split(",") if n.strip()]
+        unknown = [n for n in names if n not in EXPRESSIONS]
+        if unknown or not names:
+            raise InputError(
+                f"--targets {args.targets}",
+                "names no expression"
+                if not names
+                else f"{', '.join(unknown)} is not an expression",
+                "valid names: " + ", ".join(EXPRESSIONS),
+            )
+    if args.expression is not None and args.expression not in names:
+        names.append(args.expression)
+    return list(dict.fromkeys(names))
+
+
+def _write_glb(
+    args: argparse.Namespace, head: TemplateHead, names: list[str], inputs: list[Path]
+) -> int:
+    from workbench.services.gltf_animation import export_head_glb, ramp_keyframes
+
+    weights = keyframes = None
+    if args.expression is not None:
+        weights = {args.expression: 1.0}
+        keyframes = ramp_keyframes(args.expression, args.clip_seconds)
+    with output_path(args.out, args, *inputs) as target:
+        _, settled, seconds = export_head_glb(head, target, names, keyframes, weights=weights)
+    size = args.out.stat().st_size
+    clip = f"; clip neutral -> {args.expression} over {args.clip_seconds:g} s" if keyframes else ""
+    print(
+        f"wrote {args.out} ({settled.rest['skin'].n_vertices} vertices, {len(names)} morph "
+        f"targets settled in {seconds:.1f} s{clip}; {size / 1e6:.1f} MB; Frankfort head frame, "
+        "metres, +Y up, +Z forward)"
     )
     return 0
 

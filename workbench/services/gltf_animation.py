@@ -1,0 +1,143 @@
+"""An animated head as glTF: every palette expression as a morph target of the skin.
+
+:func:`expression_targets` settles each expression from rest (a fresh
+:class:`~workbench.services.animation.Animator` per expression, so no
+expression inherits another's residue) and returns the skin and the jaw
+parts in the Frankfort head frame (mm).  :func:`export_head_glb` writes them
+with :func:`workbench.io.gltf_export.write_glb` (vertices in metres, glTF
++Y up / +Z forward = the head frame's axes); the rest skin and the inner
+parts are the head's own meshes in the head frame, so a glTF frame with
+weight 1 on one target is that expression's settled skin.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.errors import InputError
+from workbench.core.mesh import Mesh
+from workbench.io.gltf_export import Keyframes, write_glb
+from workbench.model.template import TemplateHead
+from workbench.services.animation import EXPRESSIONS, Animator
+from workbench.services.jaw import JAW_PARTS, axis_rotation
+
+__all__ = [
+    "ExpressionTargets",
+    "export_head_glb",
+    "expression_targets",
+    "ramp_keyframes",
+    "settle_expressions",
+]
+
+
+@dataclass
+class ExpressionTargets:
+    """Rest meshes and per-expression positions, all in the head frame (mm)."""
+
+    rest: dict[str, Mesh]  #: every part of the head at rest ("skin", "eyes", "mandible" ...)
+    skin: dict[str, np.ndarray] = field(default_factory=dict)  #: name -> (n, 3) skin positions
+    #: part -> name -> positions, for jaw parts of expressions that move the jaw
+    parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    steps: dict[str, int] = field(default_factory=dict)
+
+
+def _check_names(names: Iterable[str] | None) -> list[str]:
+    chosen = list(EXPRESSIONS) if names is None else list(names)
+    unknown = [n for n in chosen if n not in EXPRESSIONS]
+    if unknown:
+        raise InputError(
+            ", ".join(unknown), "is not an expression", "valid names: " + ", ".join(EXPRESSIONS)
+        )
+    if not chosen:
+        raise InputError("expressions", "none given", "name at least one expression")
+    return list(dict.fromkeys(chosen))
+
+
+def settle_expressions(
+    head: TemplateHead,
+    names: Iterable[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ExpressionTargets:
+    """Settle each expression from rest; skin and moved jaw parts in the head frame (mm)."""
+    chosen = _check_names(names)
+    out: ExpressionTargets | None = None
+    for name in chosen:
+        anim = Animator(head)
+        if out is None:
+            out = ExpressionTargets(rest=dict(anim.head.meshes))
+        anim.set_expression(name)
+        out.steps[name] = anim.settle()
+        out.skin[name] = anim.skin_in_head_frame()
+        if anim.jaw_deg != 0.0 or anim.protrusion_mm != 0.0:
+            # Animator.meshes() is in the head's own frame: the same jaw pose in the head frame
+            point, direction = anim.head.tmj_axis
+            m = axis_rotation(point, direction, np.deg2rad(anim.jaw_deg))
+            m[:3, 3] += np.array([0.0, 0.0, anim.protrusion_mm])
+            for part in JAW_PARTS:
+                if part in out.rest:
+                    v = out.rest[part].vertices
+                    out.parts.setdefault(part, {})[name] = v @ m[:3, :3].T + m[:3, 3]
+        if progress is not None:
+            progress(name)
+    assert out is not None
+    return out
+
+
+def expression_targets(
+    head: TemplateHead, names: Iterable[str] | None = None
+) -> dict[str, np.ndarray]:
+    """``{expression: (n, 3) settled skin positions}`` in the head frame (mm), from rest.
+
+    ``names``: expressions of :data:`~workbench.services.animation.EXPRESSIONS`
+    (default: all of them, the emotions and the FACS action units).
+    """
+    return settle_expressions(head, names).skin
+
+
+def export_head_glb(
+    head: TemplateHead,
+    path: str | PathLike[str],
+    names: Iterable[str] | None = None,
+    keyframes: Keyframes | None = None,
+    *,
+    weights: Mapping[str, float] | None = None,
+    names_arkit: Mapping[str, Mapping[str, float]] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[Path, ExpressionTargets, float]:
+    """Write the head as ``.glb`` with the expressions as morph targets.
+
+    Returns ``(path, the settled targets, seconds spent settling)``.  The rest
+    skin and the parts are the head's meshes in the Frankfort head frame;
+    parts that follow the jaw get morph targets for the expressions that
+    open or push the jaw.
+    """
+    t0 = time.perf_counter()
+    settled = settle_expressions(head, names, progress)
+    seconds = time.perf_counter() - t0
+    rest = settled.rest
+    extra = {k: m for k, m in rest.items() if k != "skin"}
+    out = write_glb(
+        path,
+        rest["skin"],
+        settled.skin,
+        extra_nodes=extra,
+        node_targets=settled.parts,
+        weights=weights,
+        animation=keyframes,
+        names_arkit=names_arkit,
+    )
+    return out, settled, seconds
+
+
+def ramp_keyframes(
+    name: str, seconds: float = 1.0, steps: int = 1
+) -> Sequence[tuple[float, dict[str, float]]]:
+    """Keyframes from neutral (all weights 0) to ``name`` at weight 1 over ``seconds``."""
+    ts = np.linspace(0.0, seconds, steps + 1)
+    return [(float(t), {name: float(t / seconds)}) for t in ts]
