@@ -12,7 +12,7 @@ from pathlib import Path
 
 from workbench.core.errors import InputError
 
-TOOLS = ("landmarks", "dowels", "reconstruct", "compare", "fit-scan")
+TOOLS = ("landmarks", "dowels", "reconstruct", "compare", "fit-scan", "animate")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -71,6 +71,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--tool", choices=TOOLS, default="landmarks", help="dock shown in front")
     p.add_argument(
+        "--expression",
+        default=None,
+        metavar="NAME",
+        help="Animate tool: show the reference head with this preset (e.g. smile; "
+        "implies --tool animate)",
+    )
+    p.add_argument(
+        "--intensity",
+        type=float,
+        default=1.0,
+        metavar="0..1",
+        help="intensity of the --expression (default 1)",
+    )
+    p.add_argument(
         "--screenshot",
         type=Path,
         default=None,
@@ -101,6 +115,19 @@ def options_from(args: argparse.Namespace):
     scan = None if args.scan is None else resolve_input(str(args.scan))
     if args.fit_scan and scan is None:
         raise InputError("--fit-scan", "needs a scan to fit", "give it with --scan FILE")
+    tool = args.tool
+    if args.expression is not None:
+        from workbench.services.animation import EXPRESSIONS
+
+        if args.expression not in EXPRESSIONS:
+            raise InputError(
+                args.expression,
+                "is not an expression",
+                "valid names: " + ", ".join(sorted(EXPRESSIONS)),
+            )
+        if not 0.0 <= args.intensity <= 1.0:
+            raise InputError("--intensity", f"must be between 0 and 1, got {args.intensity}")
+        tool = "animate"
     if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
         raise InputError(args.screenshot, "the screenshot must be a .png file")
     return LaunchOptions(
@@ -114,7 +141,9 @@ def options_from(args: argparse.Namespace):
         truth=truth,
         scan=scan,
         fit_scan=args.fit_scan,
-        tool=args.tool,
+        tool=tool,
+        expression=args.expression,
+        intensity=args.intensity,
         screenshot=args.screenshot,
         size=(w, h),
     )

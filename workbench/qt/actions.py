@@ -129,6 +129,20 @@ SCAN_FIT_ACTIONS: tuple[ActionSpec, ...] = (
 )
 
 
+#: the Animate tool's entries (window methods: the dock comes to the front first)
+ANIMATE_ACTIONS: tuple[ActionSpec, ...] = (
+    ActionSpec(
+        "animate",
+        "&Tools",
+        "&Animate a reference head",
+        "Ctrl+Shift+A",
+        "show_animate",
+        "Expression presets, muscle sliders and the jaw on a reference head (Animate dock; "
+        "view only, the case is not changed)",
+    ),
+)
+
+
 def add_tool_actions(
     window: MenuHost, tool: object, specs: tuple[ActionSpec, ...]
 ) -> dict[str, QAction]:

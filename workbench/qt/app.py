@@ -36,6 +36,9 @@ class LaunchOptions:
     scan: Path | None = None
     fit_scan: bool = False
     tool: str = "landmarks"
+    #: the Animate tool's preset and its intensity (0..1); the tool is "animate" then
+    expression: str | None = None
+    intensity: float = 1.0
     screenshot: Path | None = None
     size: tuple[int, int] = (1400, 900)
     steps: list[str] = field(default_factory=list)
@@ -78,7 +81,12 @@ def prepare(window, options: LaunchOptions) -> list[str]:
             window.fit_scan()
             window.wait_idle(timeout_s=600.0)
     tool = options.tool.replace("-", "_")  # "fit-scan" → the "fit_scan" dock
-    if tool in window.docks:
+    if tool == "animate" or options.expression is not None:
+        window.show_animate(options.expression, options.intensity)
+        window.wait_idle()  # the head loads in the worker
+        if options.screenshot is not None:  # the face moved to its pose before the picture
+            window.animate.settle_now()
+    elif tool in window.docks:
         window.docks[tool].raise_()
     return list(window.errors)
 

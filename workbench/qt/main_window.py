@@ -10,11 +10,12 @@ Wiring (created in this order in ``__init__``)::
     │   ├── SceneView       named layers: skull, landmarks, dowels, guides, muscles, face, truth
     │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
     ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel,
-    │                       ScanFitPanel (docks);
+    │                       ScanFitPanel, AnimatePanel (docks);
     │                       LayersPanel below them (visibility + opacity per layer)
     ├── tools               FileTool (open, save, export), LandmarkTool (draw, place,
     │                       suggest, snap), DragTool (live drags), ScanFitTool (a face
-    │                       scan fitted by the scan-fit service, its landmarks; own picker)
+    │                       scan fitted by the scan-fit service, its landmarks; own picker),
+    │                       AnimateTool (the animation service's Animator, live skin)
     ├── GuideView           second view: guides over the session's fit (drags → DragTool)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
 
@@ -49,13 +50,20 @@ from PySide6.QtWidgets import (
 
 from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, gc_guard, jobs
-from workbench.qt.actions import SCAN_FIT_ACTIONS, add_tool_actions, build_menus
+from workbench.qt.actions import (
+    ANIMATE_ACTIONS,
+    SCAN_FIT_ACTIONS,
+    add_tool_actions,
+    build_menus,
+)
+from workbench.qt.animate_ops import AnimateTool
 from workbench.qt.document import Document
 from workbench.qt.drag_ops import DragTool
 from workbench.qt.file_ops import FileTool
 from workbench.qt.guide_view import GuideView
 from workbench.qt.landmark_ops import LandmarkTool
 from workbench.qt.lod import InteractiveDetail
+from workbench.qt.panels.animate_panel import AnimatePanel
 from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
 from workbench.qt.panels.landmarks_panel import LandmarksPanel
@@ -164,6 +172,12 @@ class MainWindow(QMainWindow):
             skull_picker=self.picker,
             parent=self,
         )
+        from workbench.services.animation import EXPRESSIONS
+
+        self.animate_panel = AnimatePanel(EXPRESSIONS)
+        self.animate = AnimateTool(
+            self.animate_panel, self.scene, self.plotter, self.runner, self, parent=self
+        )
         self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (
             ("landmarks", "Skull landmarks", self.landmarks_panel),
@@ -171,6 +185,7 @@ class MainWindow(QMainWindow):
             ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
             ("compare", "Compare", self.compare_panel),
             ("fit_scan", "Fit scan", self.scan_fit_panel),
+            ("animate", "Animate", self.animate_panel),
         ):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
@@ -199,6 +214,7 @@ class MainWindow(QMainWindow):
         self.guide_view.hide()  # shown with the first fit, or from the View menu
         self.actions_by_id = build_menus(self)
         self.actions_by_id.update(add_tool_actions(self, self.scan_fit, SCAN_FIT_ACTIONS))
+        self.actions_by_id.update(add_tool_actions(self, self, ANIMATE_ACTIONS))
 
         self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
         self.progress = QProgressBar()
@@ -217,6 +233,9 @@ class MainWindow(QMainWindow):
         self.document.stack_changed.connect(self._update_title)
         self.scan_fit.history_changed.connect(self._update_title)
         self.docks["fit_scan"].visibilityChanged.connect(lambda _v: self._update_title())
+        self.docks["animate"].visibilityChanged.connect(
+            lambda v: self.animate.ensure_loaded() if v else None
+        )
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
             lambda _channel, step, f: show_fraction(self.progress, f, step)
@@ -340,6 +359,27 @@ class MainWindow(QMainWindow):
         self.docks["fit_scan"].raise_()
         self.scan_fit.fit()
 
+    # ------------------------------------------------------------ animate (the tool's)
+    def show_animate(self, expression: str | None = None, weight: float = 1.0) -> None:
+        """Bring the Animate dock to the front (loading its head); optionally pick a preset."""
+        dock = self.docks["animate"]
+        dock.show()
+        dock.raise_()
+        if expression is not None:
+            panel = self.animate_panel
+            panel.intensity.setValue(round(100 * weight))
+            panel.expression.setCurrentText(expression)
+        self.animate.ensure_loaded()
+
+    def _animate_in_front(self) -> bool:
+        dock = self.docks.get("animate")
+        return bool(
+            dock is not None
+            and self.animate.animator is not None
+            and dock.isVisible()
+            and not dock.visibleRegion().isEmpty()
+        )
+
     # ------------------------------------------------------------ messages
     def status(self, text: str) -> None:
         self.status_label.setText(text)
@@ -409,6 +449,9 @@ class MainWindow(QMainWindow):
         self.landmarks_panel.select_next_missing()
 
     def reset_view(self) -> None:
+        if self._animate_in_front():  # the animated head: look at its face
+            self.animate.reset_camera()
+            return
         if self.document.case.specimen.mesh is None and self.scan_fit.has_scan:
             self.scan_fit.reset_camera()  # only a scan is shown: look at its face
             return
@@ -711,6 +754,7 @@ class MainWindow(QMainWindow):
         self.runner.shutdown()
         self.picker.detach()
         self.scan_fit.detach()
+        self.animate.detach()
         self.detail.detach()
         self.scene.detach()
         self.guide_view.close_view()
