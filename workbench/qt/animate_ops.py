@@ -160,6 +160,7 @@ class AnimateTool(QObject):
             f"Reference {sex} head: {len(anim.head.skin.vertices):,} skin vertices, "
             f"{len(anim.muscle_codes)} muscles."
         )
+        self.host.status(f"Animate: the reference {sex} head (view only: the case is not changed).")
         self.loaded.emit()
         name = self.panel.expression.currentText()
         if name and name != "neutral":
