@@ -221,6 +221,21 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     bad = skin.copy()
     bad[7] = np.nan
     f["nan_skin"] = _ply(folder / "nan_skin.ply", bad, t)
+    # scans for fit-scan: two heads in one file, a point cloud (vertices, no faces)
+    f["two_heads"] = write_mesh(
+        folder / "two_heads.ply",
+        Mesh(np.vstack([skin, skin + np.array([300.0, 0.0, 0.0])]), np.vstack([t, t + len(skin)])),
+    )
+    cloud = folder / "point_cloud.ply"
+    cloud.write_text(
+        "ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n"
+        % len(skin)
+        + "\n".join(" ".join(f"{c:.3f}" for c in p) for p in skin)
+        + "\n",
+        encoding="ascii",
+    )
+    f["point_cloud"] = cloud
     f["not_a_file_out"] = folder / "regular_file"
     f["not_a_file_out"].write_text("I am a file, not a folder\n", encoding="utf-8")
     # landmarks

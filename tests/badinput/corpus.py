@@ -42,6 +42,35 @@ R = "reconstruct {skull} --no-pictures --out {out}"
 CT = "mesh-from-ct {ct_good} --out {out}.ply --quiet"
 
 ENTRIES: tuple[Entry, ...] = (
+    # fit-scan (issue 13): scans that are not one face's surface, in the units given
+    _e(
+        "scan_point_cloud",
+        "O",
+        "fit-scan {point_cloud} --units mm --out {out}",
+        "point cloud",
+        "point_cloud.ply",
+    ),
+    _e(
+        "scan_two_heads",
+        "O",
+        "fit-scan {two_heads} --units mm --out {out}",
+        ("2 separate surfaces", "two heads"),
+        "two_heads.ply",
+    ),
+    _e(
+        "scan_few_triangles",
+        "O",
+        "fit-scan {two_triangles} --units mm --out {out}",
+        "only 2 triangles",
+        "two_triangles.ply",
+    ),
+    _e(
+        "scan_mm_read_as_m",
+        "D",
+        "fit-scan {skin} --units m --out {out}",
+        ("largest side", "--units"),
+        "skin.ply",
+    ),
     # ---------------------------------------------------------------- A: absurd values
     _e("table_depth_5500mm", "A", R + " --table {table_5500}", ("5500", "60 mm"), "table_5500.csv"),
     _e("table_depth_zero", "A", R + " --table {table_zero}", "mean_mm", "table_zero.csv"),

@@ -193,7 +193,7 @@ def _read_ascii(r: Reader, elements: list[_Element], start: int) -> ParsedMesh:
         if el.name == "face":
             faces = fan_triangulate(counts, r.to_int(flat, "face indices"), r)
     if vertices is None or faces is None:
-        raise r.fail("the file needs both a 'vertex' and a 'face' element")
+        raise r.fail(_missing_element(vertices))
     parsed = r.finish(vertices, faces)
     parsed.vertex_rgb = rgb
     return parsed
@@ -261,7 +261,7 @@ def _read_binary(r: Reader, elements: list[_Element], start: int, order: str) ->
         if el.name == "face":
             faces = fan_triangulate(counts, flat, r)
     if vertices is None or faces is None:
-        raise r.fail("the file needs both a 'vertex' and a 'face' element")
+        raise r.fail(_missing_element(vertices))
     parsed = r.finish(vertices, faces)
     parsed.vertex_rgb = rgb
     return parsed
@@ -324,6 +324,15 @@ def _comments(data: bytes, end: int) -> list[str]:
         if words and words[0] == "comment":
             out.append(words[1].strip() if len(words) > 1 else "")
     return out
+
+
+def _missing_element(vertices: np.ndarray | None) -> str:
+    if vertices is not None:
+        return (
+            f"holds {len(vertices)} points and no 'face' element: a point cloud, not a "
+            "triangle surface (mesh it first, e.g. Poisson reconstruction in MeshLab)"
+        )
+    return "the file needs both a 'vertex' and a 'face' element"
 
 
 def read(path: Path, data: bytes) -> PlyMesh:
