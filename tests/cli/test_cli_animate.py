@@ -156,3 +156,50 @@ def test_animate_glb_morph_targets(tmp_path: Path, head_male, capsys) -> None:
     assert main(["animate", "reference:male", "--jaw", "5", "--out", str(bad)]) == 2
     assert "morph targets" in capsys.readouterr().err
     assert not bad.exists()
+
+
+def test_animate_glb_arkit_targets(tmp_path: Path, head_male, capsys) -> None:
+    """--arkit: the 52 ARKit names as extra targets, each the weighted sum of its AU targets."""
+    import pygltflib
+
+    from workbench.io.arkit_table import read_arkit_table
+
+    out = tmp_path / "arkit.glb"
+    args = ["animate", "reference:male", "--targets", "au12,au26", "--arkit", "--out", str(out)]
+    assert main(args) == 0
+    assert "52 ARKit targets" in capsys.readouterr().out
+    gltf = pygltflib.GLTF2().load(str(out))
+    by_name = {n.name: i for i, n in enumerate(gltf.nodes)}
+    mesh = gltf.meshes[gltf.nodes[by_name["skin"]].mesh]
+    names = mesh.extras["targetNames"]
+    recipes = read_arkit_table()
+    needed = {t for mix in recipes.values() for t in mix}
+    assert names[:2] == ["au12", "au26"] and needed <= set(names)  # settled automatically
+    assert {"mouthSmileLeft", "jawOpen", "tongueOut"} <= set(names)
+    assert set(recipes) <= set(names)
+    (prim,) = mesh.primitives
+    blob = gltf.binary_blob()
+
+    def read(index: int) -> np.ndarray:
+        acc = gltf.accessors[index]
+        view = gltf.bufferViews[acc.bufferView]
+        data = np.frombuffer(blob, "<f4", acc.count * 3, view.byteOffset + (acc.byteOffset or 0))
+        return data.reshape(acc.count, 3).astype(float) * 1000.0  # metres -> mm
+
+    def delta(name: str) -> np.ndarray:
+        return read(prim.targets[names.index(name)]["POSITION"])
+
+    want = sum(w * delta(t) for t, w in recipes["jawOpen"].items())
+    got = delta("jawOpen")
+    assert np.abs(got).max() > 1.0 and np.abs(got - want).max() < 0.01
+    assert np.abs(delta("tongueOut")).max() == 0.0  # no AU basis: zero displacement
+    # a user table naming an unknown target is refused before any simulation
+    table = tmp_path / "mine.csv"
+    table.write_text("arkit_name,recipe,source,notes\njawOpen,au26:1;grin:1,me,\n", "utf-8")
+    bad = tmp_path / "bad.glb"
+    assert main(["animate", "reference:male", "--arkit", str(table), "--out", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "mine.csv" in err and "line 2" in err and "grin" in err and "valid names" in err
+    assert main(["animate", "reference:male", "--arkit", "--out", str(tmp_path / "a.ply")]) == 2
+    assert "--arkit" in capsys.readouterr().err
+    assert not bad.exists()

@@ -11,7 +11,12 @@ palette expression (or those of ``--targets``) as a morph target settled from
 rest, the eyes, teeth, tongue, mandible and cranium as nodes, in the
 Frankfort head frame in metres (glTF +Y up, +Z forward).  With
 ``--expression`` that expression's weight is 1 by default and the file holds
-a clip from neutral to it over ``--clip-seconds`` (1 s).
+a clip from neutral to it over ``--clip-seconds`` (1 s).  ``--arkit`` adds the
+52 ARKit blendshape names as further targets, each a weighted sum of the
+FACS action-unit targets (the built-in table
+``data_tables/animation/arkit52_from_facs.csv``, an approximation, or
+``--arkit FILE.csv``); the action units a recipe needs are settled too, and
+shapes with an empty recipe are written as zero displacement.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
 
 OUT_EXTENSIONS = (".ply", ".obj", ".glb")
+ARKIT_BUILTIN = "builtin"  #: ``--arkit`` without a file
 HEAD_FRAME = (
     "head frame: x to the subject's left (x = 0 midsagittal), y up, z toward the face, "
     "Frankfort Horizontal at y = 0; mm"
@@ -84,6 +90,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         metavar="S",
         help=".glb with --expression: length of the clip from neutral to it (default 1 s)",
+    )
+    p.add_argument(
+        "--arkit",
+        nargs="?",
+        const=ARKIT_BUILTIN,
+        default=None,
+        metavar="FILE.csv",
+        help=".glb only: add the 52 ARKit blendshape names as extra morph targets, each a "
+        "weighted sum of FACS action-unit targets (the AUs a recipe needs are settled too). "
+        "Alone: the built-in table (data_tables/animation/arkit52_from_facs.csv, an "
+        "approximation: there is no official ARKit-FACS mapping); or a table of your own with "
+        "the columns arkit_name,recipe,source,notes (recipe like au26:0.5;au27:0.5). Shapes "
+        "with an empty recipe (gaze, tongueOut, cheekPuff ...) are written as zero displacement",
     )
     add_force_option(p)
     p.set_defaults(handler=run)
@@ -157,7 +176,15 @@ def run(args: argparse.Namespace) -> int:
             args.out, "has an unsupported extension", "use .ply or .obj (or .glb for glTF)"
         )
     glb = args.out is not None and args.out.suffix.lower() == ".glb"
+    if args.arkit is not None and not glb:
+        raise InputError("--arkit", "needs --out FILE.glb", "ARKit targets are glTF morph targets")
     targets = _glb_targets(args, muscles) if glb else None
+    recipes = None
+    if targets is not None and args.arkit is not None:
+        from workbench.services.gltf_animation import arkit_needed, arkit_recipes
+
+        recipes = arkit_recipes(None if args.arkit == ARKIT_BUILTIN else Path(args.arkit))
+        targets = list(dict.fromkeys([*targets, *arkit_needed(recipes)]))
     head, frame, inputs = load_head(args.head)
     if args.list:
         print("muscles: " + ", ".join(m.code for m in head.muscles))
@@ -167,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_output_file(args.out, inputs, args.force)  # before the simulation, not after
     if targets is not None:
-        return _write_glb(args, head, targets, inputs)
+        return _write_glb(args, head, targets, inputs, recipes)
     anim = Animator(head)
     if args.expression is not None:
         anim.set_expression(args.expression)
@@ -230,7 +257,11 @@ def _glb_targets(args: argparse.Namespace, muscles: dict[str, float]) -> list[st
 
 
 def _write_glb(
-    args: argparse.Namespace, head: TemplateHead, names: list[str], inputs: list[Path]
+    args: argparse.Namespace,
+    head: TemplateHead,
+    names: list[str],
+    inputs: list[Path],
+    recipes: dict[str, dict[str, float]] | None = None,
 ) -> int:
     from workbench.services.gltf_animation import export_head_glb, ramp_keyframes
 
@@ -239,9 +270,14 @@ def _write_glb(
         weights = {args.expression: 1.0}
         keyframes = ramp_keyframes(args.expression, args.clip_seconds)
     with output_path(args.out, args, *inputs) as target:
-        _, settled, seconds = export_head_glb(head, target, names, keyframes, weights=weights)
+        _, settled, seconds = export_head_glb(
+            head, target, names, keyframes, weights=weights, names_arkit=recipes
+        )
     size = args.out.stat().st_size
     clip = f"; clip neutral -> {args.expression} over {args.clip_seconds:g} s" if keyframes else ""
+    if recipes:
+        empty = sum(1 for mix in recipes.values() if not mix)
+        clip += f"; {len(recipes)} ARKit targets, {empty} of them zero (no AU basis)"
     print(
         f"wrote {args.out} ({settled.rest['skin'].n_vertices} vertices, {len(names)} morph "
         f"targets settled in {seconds:.1f} s{clip}; {size / 1e6:.1f} MB; Frankfort head frame, "

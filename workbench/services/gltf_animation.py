@@ -22,6 +22,7 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
+from workbench.io.arkit_table import read_arkit_table
 from workbench.io.gltf_export import Keyframes, write_glb
 from workbench.model.template import TemplateHead
 from workbench.services.animation import EXPRESSIONS, Animator
@@ -29,6 +30,8 @@ from workbench.services.jaw import JAW_PARTS, axis_rotation
 
 __all__ = [
     "ExpressionTargets",
+    "arkit_needed",
+    "arkit_recipes",
     "export_head_glb",
     "expression_targets",
     "ramp_keyframes",
@@ -115,7 +118,9 @@ def export_head_glb(
     Returns ``(path, the settled targets, seconds spent settling)``.  The rest
     skin and the parts are the head's meshes in the Frankfort head frame;
     parts that follow the jaw get morph targets for the expressions that
-    open or push the jaw.
+    open or push the jaw.  ``names_arkit`` (see :func:`arkit_recipes`) adds
+    targets that are weighted sums of the settled ones; the expressions they
+    use must be among ``names``.
     """
     t0 = time.perf_counter()
     settled = settle_expressions(head, names, progress)
@@ -141,3 +146,27 @@ def ramp_keyframes(
     """Keyframes from neutral (all weights 0) to ``name`` at weight 1 over ``seconds``."""
     ts = np.linspace(0.0, seconds, steps + 1)
     return [(float(t), {name: float(t / seconds)}) for t in ts]
+
+
+def arkit_recipes(path: str | PathLike[str] | None = None) -> dict[str, dict[str, float]]:
+    """``{ARKit name: {expression: weight}}`` from an ARKit table (default: the built-in one).
+
+    Every recipe target must be an expression of
+    :data:`~workbench.services.animation.EXPRESSIONS` (else :class:`InputError`
+    naming the file, row and the valid names); an empty recipe is a shape
+    with no AU basis, written as zero displacement.
+    """
+    recipes = read_arkit_table(path, valid=EXPRESSIONS)
+    clash = [n for n in recipes if n in EXPRESSIONS]
+    if clash:
+        raise InputError(
+            path or "ARKit table",
+            f"{', '.join(clash)} is an expression name, not a new target name",
+            "give the ARKit shapes names of their own",
+        )
+    return recipes
+
+
+def arkit_needed(recipes: Mapping[str, Mapping[str, float]]) -> list[str]:
+    """The expressions the recipes use, in first-use order (to add to the settled set)."""
+    return list(dict.fromkeys(t for mix in recipes.values() for t in mix))
