@@ -215,7 +215,7 @@ HOLE_CONFIDENCE = 0.2
 
 
 def _with_confidences(
-    lms: LandmarkSet, absent: Sequence[str], scan_h: Mesh, placed: LandmarkSet | None
+    lms: LandmarkSet, absent: Sequence[str], scan_index: MeshIndex, placed: LandmarkSet | None
 ) -> LandmarkSet:
     """The fitted skin landmarks as a first guess with confidences (head frame, mm).
 
@@ -230,7 +230,7 @@ def _with_confidences(
     codes = [lm.code for lm in lms if lm.is_defined]
     if not codes:
         return lms
-    dist = MeshIndex(scan_h).closest_points(lms.positions_of(codes)).distances
+    dist = scan_index.closest_points(lms.positions_of(codes)).distances
     d = dict(zip(codes, dist, strict=True))
     out = []
     for lm in lms:
@@ -402,8 +402,9 @@ def fit_scan(
         hard=_user_constraints(landmarks, rest, rigid),
     )
     warnings += list(fit.warnings)
+    scan_index = MeshIndex(scan_h)  # ~1 s for 300k triangles: built once, used thrice
     facing, to_scan = _scan_support(
-        fit.registration.vertices, rest.skin.faces, scan_h, fit.target_weights
+        fit.registration.vertices, rest.skin.faces, scan_h, fit.target_weights, scan_index
     )
     on_scan = facing & (to_scan <= ON_SCAN_MM)
     face_ids = np.concatenate(list(face_regions(base).values()))
@@ -422,7 +423,7 @@ def fit_scan(
         )
     skin = rest.skin.with_vertices(fit.registration.vertices)
     skin_lms, absent_skin = carry_skin_landmarks(rest.skin, skin, rest.skin_landmarks, on_scan)
-    skin_lms = _with_confidences(skin_lms, absent_skin, scan_h, landmarks)
+    skin_lms = _with_confidences(skin_lms, absent_skin, scan_index, landmarks)
     seconds["skin"] = time.perf_counter() - t
 
     # 3. the inside follows the skin at the table's depths
@@ -515,7 +516,8 @@ def fit_scan(
         "new_pairs": sum(tuple(p) not in ref_x for p in fitted_x.tolist()),
     }
     present = [c for c in skin_lms.as_dict() if c not in absent_skin]
-    lm_d = MeshIndex(scan_h).closest_points(head.skin_landmarks.positions_of(present)).distances
+    # before the settling move (rigid: same distances), with the index built above
+    lm_d = scan_index.closest_points(skin_lms.positions_of(present)).distances
     fig["skin_landmark_to_scan_mm"] = {
         "mean": float(lm_d.mean()) if len(lm_d) else None,
         "max": float(lm_d.max()) if len(lm_d) else None,
@@ -596,18 +598,22 @@ def fit_scan(
 
 
 def _scan_support(
-    skin_v: np.ndarray, faces: np.ndarray, scan_h: Mesh, scan_weights: np.ndarray
+    skin_v: np.ndarray,
+    faces: np.ndarray,
+    scan_h: Mesh,
+    scan_weights: np.ndarray,
+    index: MeshIndex,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per fitted skin vertex: is its closest scan point believed (not a hole rim, not a
     cavity wall, not the shoulders) and facing the same side; and its distance (mm).
 
     Measured to the scan's *surface* (not its vertices), so a coarse scan (5 mm
     edges) supports the skin as well as a dense one.  A vertex is on the scan
-    when supported within :data:`ON_SCAN_MM`.
+    when supported within :data:`ON_SCAN_MM`.  ``index`` is ``scan_h``'s.
     """
     from workbench.core.normals import vertex_normals
 
-    cp = MeshIndex(scan_h).closest_points(skin_v)
+    cp = index.closest_points(skin_v)
     w = np.einsum("ij,ij->i", cp.barycentric, scan_weights[scan_h.faces[cp.face_ids]])
     n = vertex_normals(Mesh(skin_v, faces))
     cos = np.einsum("ij,ij->i", n, scan_h.face_normals[cp.face_ids])
