@@ -195,13 +195,18 @@ def _check_one_body(mesh: Mesh, source: str | PathLike[str]) -> None:
         )
 
 
+def _placed_on(landmarks: LandmarkSet | None, ref: Mapping[str, np.ndarray]) -> dict:
+    """``{code: position}`` of the user's defined landmarks the reference also has."""
+    if landmarks is None:
+        return {}
+    return {lm.code: lm.position for lm in landmarks if lm.is_defined and lm.code in ref}
+
+
 def _seed_pairs(
     landmarks: LandmarkSet | None, base: TemplateHead
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    if landmarks is None:
-        return None
     ref = base.skin_landmarks.as_dict()
-    placed = {lm.code: lm.position for lm in landmarks if lm.is_defined and lm.code in ref}
+    placed = _placed_on(landmarks, ref)
     if len(placed) < 3:
         return None
     codes = sorted(placed)
@@ -258,10 +263,8 @@ def _user_constraints(
     triangle moved by the landmark's offset), so the fitted landmark lands on
     it whether or not the scan has surface there ("in empty space").
     """
-    if landmarks is None:
-        return None
     ref = rest.skin_landmarks.as_dict()
-    placed = {lm.code: lm.position for lm in landmarks if lm.is_defined and lm.code in ref}
+    placed = _placed_on(landmarks, ref)
     if not placed:
         return None
     codes = sorted(placed)
