@@ -333,4 +333,12 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     f["ct_garbage"].write_bytes(gzip.compress(b"not a nifti" * 40))
     f["ct_empty"] = folder / "ct_empty.nrrd"
     f["ct_empty"].write_bytes(b"")
+    # a growth norms table whose SD column is empty (issue 15)
+    f["norms_no_sd"] = folder / "norms_no_sd.csv"
+    f["norms_no_sd"].write_text(
+        "measurement_id,name,kind,a,b,ethnicity,sex,age_years,mean_mm,sd_mm,n,source\n"
+        "nasal_width,Nasal Width,euclidean,al_l,al_r,European,male,3,28.1,,,mine\n"
+        "nasal_width,Nasal Width,euclidean,al_l,al_r,European,male,18,36.0,,,mine\n",
+        encoding="utf-8",
+    )
     return f

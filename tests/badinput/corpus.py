@@ -529,6 +529,49 @@ ENTRIES: tuple[Entry, ...] = (
     _e("case_info_not_a_case", "O", "case info {garbage_ply}", "case", "garbage.ply"),
     _e("snap_not_a_case", "O", "landmarks snap {skull} --all --dry-run", "damaged", "skull.ply"),
     _e("convert_unsupported_out", "O", "mesh convert {skull} {out}.xyz", "'.xyz'", ".xyz"),
+    # age (issue 15): ages the norms do not cover, unknown populations, tables without SDs
+    _e(
+        "age_outside_norms",
+        "A",
+        "age reference:male --sex male --from 18 --to 60 --out {out}",
+        "outside the norms' range",
+        "--to",
+    ),
+    _e(
+        "age_negative",
+        "A",
+        "age reference:male --sex male --from -3 --to 8 --out {out}",
+        "not an age",
+        "--from",
+    ),
+    _e(
+        "age_unknown_ethnicity",
+        "O",
+        "age reference:female --sex female --from 18 --to 8 --ethnicity Martian --out {out}",
+        "has no norms",
+        "--ethnicity",
+    ),
+    _e(
+        "age_norms_without_sd",
+        "O",
+        "age reference:male --sex male --from 18 --to 8 --norms {norms_no_sd} --out {out}",
+        "sd",
+        "norms_no_sd.csv",
+    ),
+    _e(
+        "age_ages_not_numbers",
+        "O",
+        "age reference:male --sex male --from 18 --ages 3,x --out {out}",
+        "not a number",
+        "--ages",
+    ),
+    _e(
+        "age_head_not_a_pack",
+        "O",
+        "age {folder_ply} --sex male --from 18 --to 8 --out {out}",
+        "neither a template pack",
+        "folder.ply",
+    ),
 )
 
 
