@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import workbench
 from workbench.cli import (
     animate_cmd,
+    batch_cmd,
     case_cmd,
     compare_cmd,
     gui_cmd,
@@ -44,6 +45,7 @@ _MODULES = (
     reconstruct_cmd,
     validate_cmd,
     animate_cmd,
+    batch_cmd,
     gui_cmd,
 )
 

@@ -1,0 +1,136 @@
+"""``workbench batch MANIFEST.csv --out DIR``: a study of many jobs, each its own single command.
+
+Each row of the manifest (columns ``id``, ``job``, ``input`` and the job's
+options; see :mod:`workbench.services.batch_manifest`) runs exactly the
+sub-command it names through this CLI's ``main``, in a Dask worker
+(:mod:`workbench.services.batch`), into ``DIR/<id>/``.  Afterwards
+``DIR/summary.csv``, ``summary.md``, ``plots/`` and ``summary.pdf``
+(:mod:`workbench.reporting.batch_report`); each row's output in
+``DIR/logs/<id>.log``.  Exit status 0 when every row is ok, 2 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "batch",
+        help="run a manifest of reconstruct/validate/fit-scan/age/animate jobs on Dask",
+        description="Run every row of a CSV manifest (columns id, job, input and one column per "
+        "long option of the job, named without dashes; empty = default, true = a bare flag, "
+        "several values of a repeatable option separated by ';') as its own single command, "
+        "on a Dask LocalCluster or an existing scheduler. Each row writes DIR/<id>/ (the "
+        "files the single command writes, plus batch_row.json); then DIR/summary.csv, "
+        "summary.md, plots/ and summary.pdf.",
+    )
+    p.add_argument("manifest", type=Path)
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="batch folder: new or empty (or a previous batch's with --resume); the inputs may "
+        "not lie in it",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="local worker processes, one thread each (default: the number of cores, at most "
+        "the number of jobs); 0 runs the jobs one after another in this process, without Dask",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="an existing Dask scheduler, tcp://HOST:PORT (e.g. a dask-jobqueue SLURMCluster's); "
+        "its workers must see the same paths and have the workbench installed",
+    )
+    p.add_argument(
+        "--memory-limit",
+        default=None,
+        metavar="SIZE",
+        help="memory per local worker (e.g. 4GiB, the default); a job that goes over it is "
+        "recorded as failed",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="skip rows whose folder has an ok batch_row.json with the same command line and "
+        "the same input SHA-256s; run the others again (a stale folder is kept as DIR/<id>.1)",
+    )
+    p.set_defaults(handler=run)
+
+
+def commands() -> dict[str, argparse.ArgumentParser]:
+    """The sub-command parsers of this CLI by name (the manifest's columns are checked on them)."""
+    from workbench.cli.main import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(sub.choices)
+
+
+def run(args: argparse.Namespace) -> int:
+    from workbench import __version__
+    from workbench.cli.main import main
+    from workbench.core.errors import InputError
+    from workbench.reporting.batch_report import write_summary
+    from workbench.services.batch import DEFAULT_MEMORY_LIMIT, run_batch, summary_record
+
+    if args.workers is not None and not 0 <= args.workers <= 256:
+        raise InputError(f"--workers {args.workers}", "must be 0 .. 256")
+    if args.scheduler and (args.workers is not None or args.memory_limit):
+        raise InputError(
+            "--scheduler",
+            "runs on that cluster's workers",
+            "--workers and --memory-limit are for the local cluster; size the remote one itself",
+        )
+    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
+    memory = args.memory_limit or DEFAULT_MEMORY_LIMIT
+    _check_memory(memory)
+    results = run_batch(
+        args.manifest,
+        args.out,
+        commands={k: v for k, v in commands().items() if k != "batch"},
+        entry=main,
+        workers=workers,
+        scheduler=args.scheduler,
+        resume=args.resume,
+        memory_limit=memory,
+        notify=lambda m: print(m, file=sys.stderr, flush=True),
+    )
+    engine = (
+        f"Dask scheduler {args.scheduler}"
+        if args.scheduler
+        else "this process, one job after another"
+        if workers == 0
+        else f"Dask LocalCluster, up to {workers} worker processes x 1 thread, {memory} each"
+    )
+    info = {"manifest": str(args.manifest), "output folder": str(args.out), "engine": engine}
+    records = [summary_record(r) for r in results]
+    written = write_summary(records, Path(args.out), info, software=f"workbench {__version__}")
+    failed = [r for r in results if r.status != "ok"]
+    print(
+        f"{len(results) - len(failed)} of {len(results)} jobs ok; wrote "
+        + ", ".join(str(p) for p in written[:4])
+    )
+    return 2 if failed else 0
+
+
+def _check_memory(text: str) -> None:
+    from dask.utils import parse_bytes
+
+    from workbench.core.errors import InputError
+
+    try:
+        size = parse_bytes(text)
+    except (ValueError, TypeError):
+        raise InputError(f"--memory-limit {text}", "is not a size", "e.g. 4GiB or 2000MB") from None
+    if size < 256 * 2**20:
+        raise InputError(f"--memory-limit {text}", "is too small for any job (256 MiB at least)")
