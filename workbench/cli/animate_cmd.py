@@ -17,19 +17,39 @@ FACS action-unit targets (the built-in table
 ``data_tables/animation/arkit52_from_facs.csv``, an approximation, or
 ``--arkit FILE.csv``); the action units a recipe needs are settled too, and
 shapes with an empty recipe are written as zero displacement.
+
+``--track FILE.json`` animates over time (keyframed expressions, muscles,
+jaw, gaze and lids, and a timed phoneme track with Cohen-Massaro
+coarticulation; the format is in :mod:`workbench.services.animation_track`).
+The skin is simulated frame by frame (the first frame settled, then the
+Animator's own 1/600 s steps, 20 a frame at 30 fps).  ``--out OUT.ply|.obj``
+writes the last frame; ``--out DIR/frame_####.ply`` (or ``.obj``) writes
+every frame, numbered from 0 with as many digits as there are ``#``, into
+the folder DIR, which is written as a whole (an existing folder is refused
+without ``--force`` and then kept as ``DIR.1``); ``--out OUT.glb`` writes
+the track as a glTF clip: morph targets for the expressions the keys name
+(and ``--targets``), for each key that is not a plain expression mix
+(``key_<i>``) and for each spoken phoneme (``viseme_<P>``), with their
+weights at every frame (LINEAR) as the clip.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from workbench.cli.common import add_force_option, output_path
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
+
+if TYPE_CHECKING:
+    from workbench.services.animation import Animator
+    from workbench.services.animation_track import Track
 
 OUT_EXTENSIONS = (".ply", ".obj", ".glb")
 ARKIT_BUILTIN = "builtin"  #: ``--arkit`` without a file
@@ -76,7 +96,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         help="output skin mesh (.ply or .obj), or .glb: glTF with every expression as a "
-        "morph target",
+        "morph target; with --track also DIR/frame_####.ply (or .obj): every frame, numbered",
+    )
+    p.add_argument(
+        "--track",
+        type=Path,
+        default=None,
+        metavar="FILE.json",
+        help='animate over time: {"fps": 30, "keys": [{"t": 0.5, "expression": "smile", '
+        '"weight": 0.8}, {"t": 1.0, "muscles": {"mentalis": 0.4}, "jaw_deg": 8, "gaze": [10, 0], '
+        '"lids": 0.5}], "phonemes": [{"p": "HH", "start": 1.2, "end": 1.3}]} (keys smoothstep-'
+        "interpolated full poses; phonemes ARPAbet or TIMIT labels with times in s, "
+        "coarticulated after Cohen & Massaro 1993). --out: .ply/.obj (last frame), "
+        "DIR/frame_####.ply (every frame) or .glb (a clip)",
     )
     p.add_argument(
         "--targets",
@@ -162,6 +194,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.list:
         print("expressions: " + ", ".join(EXPRESSIONS))
+    if args.track is not None:
+        return _run_track(args)
+    if args.out is not None and _frame_pattern(args.out) is not None:
+        raise InputError(args.out, "a numbered frame sequence needs --track FILE.json")
     muscles = _parse_muscles(args.muscle)
     if args.expression is not None and args.expression not in EXPRESSIONS:
         raise InputError(
@@ -288,3 +324,162 @@ def _write_glb(
 
 def _ascii(text: str) -> str:
     return " ".join(text.encode("ascii", "replace").decode("ascii").split())
+
+
+# ---------------------------------------------------------------------- --track
+def _frame_pattern(out: Path) -> tuple[str, int, str] | None:
+    """``(prefix, digits, suffix)`` of a file name like ``frame_####.ply`` (None: no ``#``)."""
+    name = out.name
+    if "#" not in name:
+        return None
+    start = name.index("#")
+    digits = len(name) - start - len(name[start:].lstrip("#"))
+    rest = name[start + digits :]
+    if "#" in rest:
+        raise InputError(out, "has more than one run of #", "use one, e.g. DIR/frame_####.ply")
+    return name[:start], digits, rest
+
+
+def _run_track(args: argparse.Namespace) -> int:
+    from workbench.services.animation import Animator
+    from workbench.services.animation_track import evaluate_track, load_track, play_track
+
+    clash = [
+        opt
+        for opt, given in (
+            ("--expression", args.expression is not None),
+            ("--muscle", bool(args.muscle)),
+            ("--jaw", args.jaw is not None),
+            ("--jaw-protrusion", bool(args.jaw_protrusion)),
+            ("--arkit", args.arkit is not None),
+        )
+        if given
+    ]
+    if clash:
+        raise InputError(
+            "--track",
+            f"cannot be combined with {', '.join(clash)}",
+            "put the poses into the track's keys",
+        )
+    if args.out is None:
+        raise InputError(
+            "--out", "is required", "give .ply/.obj (last frame), DIR/frame_####.ply or .glb"
+        )
+    suffix = args.out.suffix.lower()
+    if suffix not in OUT_EXTENSIONS:
+        raise InputError(
+            args.out,
+            "has an unsupported extension",
+            "use .ply or .obj (last frame), DIR/frame_####.ply (every frame) or .glb (a clip)",
+        )
+    pattern = _frame_pattern(args.out)
+    if pattern is not None and suffix == ".glb":
+        raise InputError(args.out, "a .glb holds the whole clip", "drop the #### from the name")
+    if pattern is not None:
+        _check_frame_folder(args.out.parent)
+    track = load_track(args.track)
+    head, frame, inputs = load_head(args.head)
+    inputs = [*inputs, args.track]
+    if suffix == ".glb":
+        return _write_track_glb(args, head, track, inputs)
+    from workbench.io.outputs import check_output_file, check_output_folder
+
+    if pattern is None:
+        check_output_file(args.out, inputs, args.force)
+    else:
+        check_output_folder(args.out.parent, inputs, args.force)
+    anim = Animator(head)
+    frames = evaluate_track(track, anim.muscle_codes)
+    t0 = time.perf_counter()
+    label = f"track {args.track.name}"
+    if pattern is None:
+        for _ in play_track(anim, frames, track.fps):
+            pass
+        with output_path(args.out, args, *inputs) as target:
+            _write_skin(target, anim, frame, f"{label} last frame t={frames.times[-1]:g}s")
+        where = f"{args.out} (the last frame, t = {frames.times[-1]:g} s)"
+    else:
+        from workbench.io.outputs import staged_folder
+
+        prefix, digits, rest = pattern
+        with staged_folder(args.out.parent, args.force, inputs, notify=print) as folder:
+            for i in play_track(anim, frames, track.fps):
+                name = f"{prefix}{i:0{digits}d}{rest}"
+                _write_skin(folder / name, anim, frame, f"{label} frame {i} t={frames.times[i]:g}s")
+        where = f"{frames.n_frames} frames {args.out.parent / (prefix + '0' * digits + rest)} ..."
+    seconds = time.perf_counter() - t0
+    from workbench.services.animation_track import steps_per_frame
+
+    print(
+        f"wrote {where}; {frames.n_frames} frames at {track.fps:g} fps over "
+        f"{frames.times[-1]:g} s, {len(track.keys)} keys, {len(track.phonemes)} phonemes; "
+        f"{steps_per_frame(anim, track.fps)} simulation steps a frame, simulated in "
+        f"{seconds:.1f} s ({anim.skin().n_vertices} vertices, mm)"
+    )
+    return 0
+
+
+def _check_frame_folder(folder: Path) -> None:
+    """A frame sequence needs a folder of its own (it is written as a whole)."""
+    here = Path.cwd().resolve()
+    target = folder.resolve()
+    if str(folder) in ("", ".") or target == here or target in here.parents:
+        raise InputError(
+            folder / "frame_####.ply",
+            "a frame sequence is written into a folder of its own, replaced as a whole",
+            "name a new folder, e.g. --out frames/frame_####.ply",
+        )
+
+
+def _write_skin(target: Path, anim: Animator, frame: str, what: str) -> None:
+    skin = anim.skin()
+    if target.suffix.lower() == ".ply":
+        from workbench.io.mesh_formats import ply
+
+        ply.write(target, skin, comments=[f"frame: {_ascii(frame)}", f"animate: {_ascii(what)}"])
+    else:
+        from workbench.io.meshes import write_mesh
+
+        write_mesh(target, skin)
+
+
+def _write_track_glb(
+    args: argparse.Namespace, head: TemplateHead, track: Track, inputs: list[Path]
+) -> int:
+    from workbench.io.outputs import check_output_file
+    from workbench.services.animation import EXPRESSIONS
+    from workbench.services.animation_track import evaluate_track, glb_clip
+    from workbench.services.gltf_animation import export_head_glb
+
+    if args.targets is not None:
+        names = [n.strip() for n in args.targets.split(",") if n.strip()]
+        unknown = [n for n in names if n not in EXPRESSIONS]
+        if unknown:
+            raise InputError(
+                f"--targets {args.targets}",
+                f"{', '.join(unknown)} is not an expression",
+                "valid names: " + ", ".join(EXPRESSIONS),
+            )
+    else:
+        names = []
+    used = [n for k in track.keys if k.is_mix for n in k.expressions if n != "neutral"]
+    names = list(dict.fromkeys([*names, *used]))
+    check_output_file(args.out, inputs, args.force)
+    frames = evaluate_track(track)
+    poses, keyframes = glb_clip(track, frames, names)
+    if not names and not poses:
+        raise InputError(args.track, "animates nothing a .glb can hold (only neutral keys)")
+    with output_path(args.out, args, *inputs) as target:
+        _, settled, seconds = export_head_glb(head, target, names, keyframes, poses=poses)
+    size = args.out.stat().st_size
+    gaze = any(k.gaze != (0.0, 0.0) for k in track.keys)
+    print(
+        f"wrote {args.out} ({settled.rest['skin'].n_vertices} vertices, "
+        f"{len(names) + len(poses)} morph targets ({len(names)} expressions, "
+        f"{sum(1 for n in poses if n.startswith('key_'))} key poses, "
+        f"{sum(1 for n in poses if n.startswith('viseme_'))} visemes) settled in {seconds:.1f} s; "
+        f"clip of {frames.n_frames} frames at {track.fps:g} fps over {frames.times[-1]:g} s"
+        + ("; gaze is not in the .glb" if gaze else "")
+        + f"; {size / 1e6:.1f} MB; Frankfort head frame, metres, +Y up, +Z forward)"
+    )
+    return 0

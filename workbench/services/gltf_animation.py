@@ -25,7 +25,7 @@ from workbench.core.mesh import Mesh
 from workbench.io.arkit_table import read_arkit_table
 from workbench.io.gltf_export import Keyframes, write_glb
 from workbench.model.template import TemplateHead
-from workbench.services.animation import EXPRESSIONS, Animator
+from workbench.services.animation import EXPRESSIONS, Animator, Expression
 from workbench.services.jaw import JAW_PARTS, axis_rotation
 
 __all__ = [
@@ -36,6 +36,7 @@ __all__ = [
     "expression_targets",
     "ramp_keyframes",
     "settle_expressions",
+    "settle_poses",
 ]
 
 
@@ -69,12 +70,26 @@ def settle_expressions(
 ) -> ExpressionTargets:
     """Settle each expression from rest; skin and moved jaw parts in the head frame (mm)."""
     chosen = _check_names(names)
+    return settle_poses(head, {name: EXPRESSIONS[name] for name in chosen}, progress)
+
+
+def settle_poses(
+    head: TemplateHead,
+    poses: Mapping[str, Expression],
+    progress: Callable[[str], None] | None = None,
+) -> ExpressionTargets:
+    """Settle each pose (an :class:`Expression`, e.g. a track's key or viseme) from rest.
+
+    Skin and moved jaw parts in the head frame (mm), keyed by the poses' names.
+    """
+    if not poses:
+        raise InputError("expressions", "none given", "name at least one expression")
     out: ExpressionTargets | None = None
-    for name in chosen:
+    for name, pose in poses.items():
         anim = Animator(head)
         if out is None:
             out = ExpressionTargets(rest=dict(anim.head.meshes))
-        anim.set_expression(name)
+        anim.set_expression(pose)
         out.steps[name] = anim.settle()
         out.skin[name] = anim.skin_in_head_frame()
         if anim.jaw_deg != 0.0 or anim.protrusion_mm != 0.0:
@@ -112,6 +127,7 @@ def export_head_glb(
     weights: Mapping[str, float] | None = None,
     names_arkit: Mapping[str, Mapping[str, float]] | None = None,
     progress: Callable[[str], None] | None = None,
+    poses: Mapping[str, Expression] | None = None,
 ) -> tuple[Path, ExpressionTargets, float]:
     """Write the head as ``.glb`` with the expressions as morph targets.
 
@@ -120,10 +136,19 @@ def export_head_glb(
     parts that follow the jaw get morph targets for the expressions that
     open or push the jaw.  ``names_arkit`` (see :func:`arkit_recipes`) adds
     targets that are weighted sums of the settled ones; the expressions they
-    use must be among ``names``.
+    use must be among ``names``.  ``poses`` adds targets that are not palette
+    expressions (a track's key poses and visemes, named by the caller), after
+    ``names``; ``names=[]`` with ``poses`` exports only those.
     """
     t0 = time.perf_counter()
-    settled = settle_expressions(head, names, progress)
+    given = None if names is None else list(names)
+    chosen = [] if given is not None and not given and poses else _check_names(given)
+    clash = [n for n in (poses or {}) if n in chosen]
+    if clash:
+        raise InputError(", ".join(clash), "is both an expression target and a pose target")
+    settled = settle_poses(
+        head, {**{n: EXPRESSIONS[n] for n in chosen}, **dict(poses or {})}, progress
+    )
     seconds = time.perf_counter() - t0
     rest = settled.rest
     extra = {k: m for k, m in rest.items() if k != "skin"}
