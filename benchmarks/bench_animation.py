@@ -12,7 +12,11 @@ Prints (no budgets, no assertions; targets from issue 14 in brackets):
   1/600 s) on a ~1k-vertex skin [>= 2000] and on the male reference head's
   skin [>= 300], compiled and numpy-only;
 * one muscle update (24 muscles -> skin spring targets) in ms [< 1 ms];
-* quasi-static settle of a smile on the reference head (iterations, s).
+* quasi-static settle of a smile on the reference head (iterations, s);
+* keyframe track + speech evaluation (``--only-track`` runs just this):
+  a 60 s track with keys every 0.5 s and ~600 phonemes at 30 fps, all
+  frames at once (ms, µs a frame), against one simulated frame of the
+  reference head (20 steps of 1/600 s plus setting the frame's parameters).
 
 The ~1k-vertex skin is the reference skin decimated with fast-simplification
 (its face side, z > -30 mm, simulated; the rest kinematic) over the cranium.
@@ -92,10 +96,61 @@ def decimated_skin(head, target_vertices: int = 1000):
     return np.asarray(pts, np.float64), np.asarray(tris, np.int64)
 
 
+def track_evaluation(head, seconds: float = 60.0, reps: int = 5) -> None:
+    """Print the cost of evaluating a long keyframe + phoneme track against the physics."""
+    from workbench.services.animation_track import (
+        apply_frame,
+        evaluate_track,
+        parse_track,
+        steps_per_frame,
+    )
+    from workbench.services.speech import load_visemes
+
+    rng = np.random.default_rng(1)
+    labels = [p for p in load_visemes().phonemes if p != "sil"]
+    names = ["smile", "happiness", "surprise", "sadness", "au26", "neutral"]
+    keys = [
+        {"t": float(t), "expression": names[k % len(names)], "weight": float(rng.uniform(0.3, 1))}
+        for k, t in enumerate(np.arange(0.0, seconds, 0.5))
+    ]
+    phonemes, t = [], 0.1
+    while t < seconds - 0.5:
+        d = float(rng.uniform(0.05, 0.11))
+        phonemes.append({"p": str(rng.choice(labels)), "start": t, "end": t + d})
+        t += d + (0.3 if rng.random() < 0.05 else 0.0)  # a pause now and then
+    track = parse_track({"fps": 30, "keys": keys, "phonemes": phonemes})
+    anim = Animator(head)
+    evaluate_track(track, anim.muscle_codes)  # warm-up
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        frames = evaluate_track(track, anim.muscle_codes)
+    ms = (time.perf_counter() - t0) / reps * 1e3
+    n = frames.n_frames
+    steps = steps_per_frame(anim, track.fps)
+    apply_frame(anim, frames, 0)
+    anim.step(steps)  # warm-up
+    k = 30
+    t0 = time.perf_counter()
+    for i in range(1, k + 1):
+        apply_frame(anim, frames, i)
+        anim.step(steps)
+    frame_ms = (time.perf_counter() - t0) / k * 1e3
+    print(
+        f"track evaluation: {n} frames ({track.duration:.1f} s at 30 fps), {len(keys)} keys, "
+        f"{len(phonemes)} phonemes: {ms:.1f} ms for all frames, {ms / n * 1e3:.1f} us a frame; "
+        f"one simulated frame of the reference head ({steps} steps + parameters): "
+        f"{frame_ms:.1f} ms, {frame_ms / (ms / n):,.0f}x the track's share"
+    )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=3.0, help="wall time per steps/s figure")
+    ap.add_argument("--only-track", action="store_true", help="only the track-evaluation figure")
     args = ap.parse_args()
+    if args.only_track:
+        track_evaluation(reference_head("male"))
+        return 0
 
     with tempfile.TemporaryDirectory() as cache:
         cold = compile_seconds(cache)
@@ -154,6 +209,7 @@ def main() -> int:
     t0 = time.perf_counter()
     n = anim.settle()
     print(f"settle a smile on the reference head: {n} iterations, {time.perf_counter() - t0:.2f} s")
+    track_evaluation(head)
     return 0
 
 
