@@ -39,6 +39,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -192,6 +193,23 @@ def _hc_age(hc: Any, sex: str, age: float, notes: list[str]) -> float:
     return max(float(lo), age)
 
 
+_NORMS: dict[tuple[str, int], Any] = {}
+
+
+def _cached_norms(norms: str, load: Callable[[str], Any]) -> Any:
+    """A norms table loaded once per file version (tables are immutable values)."""
+    from workbench.io.growth_norms import growth_dir
+
+    path = Path(norms) if str(norms).lower().endswith(".csv") else growth_dir() / f"{norms}.csv"
+    try:
+        key = (str(path.resolve()), path.stat().st_mtime_ns)
+    except OSError:
+        return load(norms)  # let the loader say what is wrong with it
+    if key not in _NORMS:
+        _NORMS[key] = load(norms)
+    return _NORMS[key]
+
+
 def hc_scale(hc: Any, sex: str, a0: float, a1: float, z: float) -> float:
     """Factor by which a head circumference at z-score ``z`` changes from age a0 to a1.
 
@@ -247,9 +265,10 @@ def age_head(
             f"{arc_increase:g} is outside 0-{MAX_ARC_INCREASE:g} (Kähler's young-child arc "
             "increase is at most 10 %)",
         )
-    table = load_growth_norms(norms)
+    table = _cached_norms(norms, load_growth_norms)
     known = table.ethnicities()
     eth = ethnicity or ("European" if "European" in known else known[0])
+    eth = next((k for k in known if k.lower() == eth.lower()), eth)
     if eth not in known:
         raise InputError(
             "--ethnicity", f"'{eth}' has no norms in {table.norms_id}", "known: " + ", ".join(known)
@@ -431,9 +450,11 @@ def age_head(
     src_pts = [p]
     dst_pts = [q]
     arc_rows = []
+    skin_index = MeshIndex(head.skin) if arcs else None
     for t in arcs:
         ia, ib = index[t.a], index[t.b]
-        mid, normal = _arc_middle(head.skin, p[ia], p[ib])
+        assert skin_index is not None
+        mid, normal = _arc_middle(head.skin, skin_index, p[ia], p[ib])
         chord_c = float(np.linalg.norm(p[ia] - p[ib]))
         h_c = max(0.0, float((mid - (p[ia] + p[ib]) / 2) @ normal))
         arc_c = arc_length(chord_c, h_c)
@@ -471,8 +492,10 @@ def age_head(
             value = float(np.linalg.norm(a - b))
         target = row.target_mm if row.constraint == "norms" else scale * row.before_mm
         out_rows.append(replace(row, after_mm=value, target_mm=target))
+    aged_index = MeshIndex(aged.skin) if arc_rows else None
     for t, arc_c, arc_t in arc_rows:
-        mid_new, normal = _arc_middle(aged.skin, after[t.a], after[t.b])
+        assert aged_index is not None
+        mid_new, normal = _arc_middle(aged.skin, aged_index, after[t.a], after[t.b])
         chord = float(np.linalg.norm(after[t.a] - after[t.b]))
         h = max(0.0, float((mid_new - (after[t.a] + after[t.b]) / 2) @ normal))
         out_rows.append(
@@ -498,8 +521,7 @@ def age_head(
     skull = MeshIndex(_concat([aged.meshes["cranium"], aged.meshes["mandible"]]))
     face = np.unique(np.concatenate([np.asarray(v) for k, v in aged.regions.items()]))
     inside = int((skull.signed_distance(aged.skin.vertices[face]) < 0).sum())
-    skull0 = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
-    inside0 = int((skull0.signed_distance(head.skin.vertices[face]) < 0).sum())
+    inside0 = _inside_before(head, face)
     ref_n = head.skin.face_normals
     new_n = aged.skin.face_normals
     figures: dict[str, Any] = {
@@ -552,16 +574,29 @@ def age_head(
     )
 
 
+_INSIDE: dict[str, int] = {}
+
+
+def _inside_before(head: TemplateHead, face: np.ndarray) -> int:
+    """Face skin vertices inside the source skull (once per source head: a sequence reuses it)."""
+    key = head.content_hash
+    if key not in _INSIDE:
+        skull = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
+        _INSIDE[key] = int((skull.signed_distance(head.skin.vertices[face]) < 0).sum())
+    return _INSIDE[key]
+
+
 def _concat(meshes: Sequence[Mesh]) -> Mesh:
     from workbench.core.mesh import concatenate
 
     return concatenate(list(meshes))
 
 
-def _arc_middle(skin: Mesh, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _arc_middle(
+    skin: Mesh, index: MeshIndex, a: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The skin point over the middle of chord a–b and the outward normal there (mm)."""
     middle = (a + b) / 2
-    index = MeshIndex(skin)
     hit = index.closest_points(middle[None]).points[0]
     normal = normals_within_radius(skin, hit[None], NORMAL_RADIUS_MM)[0]
     normal = normal / max(float(np.linalg.norm(normal)), 1e-12)
