@@ -127,6 +127,10 @@ def test_speech_adds_to_the_keys() -> None:
         ({"keys": [{"t": 0, "gaze": [80, 0]}]}, r"key 0: gaze yaw"),
         ({"keys": [{"t": 0, "jaw": 5}]}, r"key 0: unknown field jaw .*jaw_deg"),
         ({"keys": [{"t": "soon"}]}, r"key 0: time t must be a number"),
+        ({"keys": [{"t": 0, "expressions": ["smile"]}]}, r"key 0: expressions must be an object"),
+        ({"keys": [{"t": 0, "expression": ["smile"]}]}, r"key 0: \['smile'\] is not an expression"),
+        ({"keys": [{"t": 0, "weight": 0.5}]}, r"key 0: has a weight but no expression"),
+        ([{"t": 0}], r"must be an object"),
         (
             {"phonemes": [{"p": "XX", "start": 0, "end": 0.1}]},
             r"phoneme 0: \"XX\" is not an ARPAbet",

@@ -122,7 +122,7 @@ class Key:
 
     @property
     def is_mix(self) -> bool:
-        """True when the pose is only a weighted sum of palette expressions (and no gaze)."""
+        """True when the pose is only a weighted sum of palette expressions (gaze aside)."""
         return not self.muscles and self.jaw_deg is None and self.lids is None
 
 
@@ -193,13 +193,16 @@ def _parse_key(ck: _Checker, item: Any, where: str, codes: Sequence[str]) -> Key
         raise ck.fail(where, "has no time t (seconds)")
     t = ck.number(d["t"], where, "time t", 0.0, MAX_DURATION_S)
     weights: dict[str, float] = {}
-    names = dict(d.get("expressions") or {})
+    raw_mix = d.get("expressions") or {}
+    if not isinstance(raw_mix, Mapping):
+        raise ck.fail(where, "expressions must be an object {NAME: weight}")
+    pairs = list(raw_mix.items())
     if "expression" in d:
-        names[d["expression"]] = d.get("weight", 1.0)
+        pairs.append((d["expression"], d.get("weight", 1.0)))
     elif "weight" in d:
         raise ck.fail(where, "has a weight but no expression")
-    for name, w in names.items():
-        if name not in EXPRESSIONS:
+    for name, w in pairs:
+        if not isinstance(name, str) or name not in EXPRESSIONS:
             raise ck.fail(
                 where, f"{name!r} is not an expression", "valid names: " + ", ".join(EXPRESSIONS)
             )
