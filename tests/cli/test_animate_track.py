@@ -66,31 +66,41 @@ def test_track_glb_clip(tmp_path: Path, head_male, capsys) -> None:
             {
                 "fps": 10,
                 "keys": [{"t": 0.0}, {"t": 0.5, "expression": "smile"}],
-                "phonemes": [{"p": "M", "start": 0.1, "end": 0.2}],
+                "phonemes": [
+                    {"p": "M", "start": 0.1, "end": 0.2},
+                    {"p": "AA", "start": 0.2, "end": 0.3},
+                ],
             }
         ),
         "utf-8",
     )
     out = tmp_path / "clip.glb"
     assert main(["animate", "reference:male", "--track", str(path), "--out", str(out)]) == 0
-    assert "2 morph targets (1 expressions, 0 key poses, 1 visemes)" in capsys.readouterr().out
+    assert "3 morph targets (1 expressions, 0 key poses, 2 visemes)" in capsys.readouterr().out
     gltf = pygltflib.GLTF2().load(str(out))
     by_name = {n.name: i for i, n in enumerate(gltf.nodes)}
     mesh = gltf.meshes[gltf.nodes[by_name["skin"]].mesh]
-    assert mesh.extras["targetNames"] == ["smile", "viseme_M"]
+    assert mesh.extras["targetNames"] == ["smile", "viseme_M", "viseme_AA"]
+    # the /aa/ opens the jaw: the mandible carries the same targets, and its clip too
+    mand_node = by_name["mandible"]
+    mand = gltf.meshes[gltf.nodes[mand_node].mesh]
+    assert mand.extras["targetNames"] == mesh.extras["targetNames"]
+    k = mand.primitives[0].targets[2]["POSITION"]
+    assert gltf.accessors[k].min[1] < -0.002  # metres: the chin goes down > 2 mm
     (clip,) = gltf.animations
     assert {c.target.path for c in clip.channels} == {"weights"}
-    assert by_name["skin"] in {c.target.node for c in clip.channels}
+    assert {by_name["skin"], mand_node} <= {c.target.node for c in clip.channels}
     sampler = clip.samplers[clip.channels[0].sampler]
     times = gltf.accessors[sampler.input]
-    assert times.count == 6 and times.max == [pytest.approx(0.5)]
+    assert times.count == 7 and times.max == [pytest.approx(0.6)]
     blob = gltf.binary_blob()
     acc = gltf.accessors[sampler.output]
     view = gltf.bufferViews[acc.bufferView]
     w = np.frombuffer(blob, "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0))
-    w = w.reshape(6, 2)
+    w = w.reshape(7, 3)
     assert w[-1, 0] == pytest.approx(1.0) and w[0, 0] == 0.0  # neutral -> smile
     assert w[:, 1].argmax() in (1, 2) and w[:, 1].max() > 0.5  # the /m/ at 0.1-0.2 s
+    assert w[:, 2].argmax() in (2, 3) and w[:, 2].max() > 0.5  # the /aa/ at 0.2-0.3 s
 
 
 @pytest.mark.parametrize(
