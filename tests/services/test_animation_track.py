@@ -222,3 +222,11 @@ def test_frames_step_the_animator(head_male) -> None:
     chin = head_male.skin.vertices[:, 1] < -80
     assert (poses[0][chin, 1] - poses[-1][chin, 1]).max() > 5.0  # the jaw opened meanwhile
     assert anim.jaw_deg == pytest.approx(10.0)
+
+
+def test_the_example_track_parses() -> None:
+    example = Path(__file__).resolve().parents[2] / "examples" / "hello_world_track.json"
+    tr = load_track(example)
+    assert [p.phoneme for p in tr.phonemes][:4] == ["HH", "AH", "L", "OW"]
+    f = evaluate_track(tr)
+    assert f.n_frames == 61 and f.lids.max() == pytest.approx(1.0)
