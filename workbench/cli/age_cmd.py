@@ -133,8 +133,53 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_pdf(folder: Path, head: TemplateHead, results: list[AgeResult]) -> list[Path]:
+    """``pictures/*.png`` and ``report.pdf`` into the staged output folder; without OpenGL, no pictures.
+
+    The norms' citations and the source head's data credits (a Visible Human
+    sample named anywhere in its provenance) are looked up here, so the
+    reporting layer needs neither ``workbench.io`` nor the render layer.
+    """
+    from workbench import __version__
+    from workbench.io.growth_norms import load_growth_norms, load_head_circumference
+    from workbench.io.samples import registry
+    from workbench.reporting.age_report import (
+        chart_references,
+        provenance_credits,
+        source_keys,
+        write_age_report,
+    )
+
     try:
-        from workbench.reporting.age_report import write_age_report
-    except ImportError:  # the report module is optional while it is being built
-        return []
-    return write_age_report(folder, head, results)
+        from workbench.render.age_pictures import render_age_pictures
+
+        pictures, notes = render_age_pictures(head, results, folder / "pictures")
+    except (ImportError, RuntimeError, OSError) as exc:  # no pyvista / OpenGL at all
+        pictures, notes = {}, [f"no pictures ({exc})"]
+    for note in notes:
+        print(f"  note: {note}")
+    change = dict(results[0].head.provenance.get("age_change") or {})
+    table = load_growth_norms(str(change.get("norms") or results[0].figures["norms"]))
+    citations = {key: table.citation(key) for key in source_keys(results)}
+    charts = load_head_circumference()
+    citations |= {name: charts.citation(name) for name in chart_references(results)}
+    credited: dict[str, str] = {}
+    for sample in registry().values():
+        if not sample.credit:
+            continue
+        for f in (*sample.files, *sample.extra_files):
+            credited[f.sha256] = sample.credit
+            credited[Path(f.path).name] = sample.credit
+        credited[sample.name] = sample.credit
+        if "visible human" in sample.description.lower():
+            credited["visible human"] = sample.credit
+    pdf = write_age_report(
+        folder,
+        head,
+        results,
+        pictures,
+        notes=notes,
+        software=f"workbench {__version__}",
+        citations=citations,
+        credits=provenance_credits(head.provenance or {}, credited),
+    )
+    return [*pictures.values(), pdf]
