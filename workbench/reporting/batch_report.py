@@ -13,13 +13,15 @@ display): seconds per job; for validate rows the distribution of the
 unsigned error |d| of every case (the cumulative share of the truth points
 within 1, 2.5 and 5 mm and the 95th percentile, which is what
 ``results.csv`` holds: validate writes no per-point distances) and the share
-within 2.5 mm per face region.
+within 2.5 mm per face region; for age rows the head circumference at each
+target age (growth curves).
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -248,12 +250,47 @@ def plot_regions(records: Sequence[Mapping[str, Any]], path: Path) -> Path | Non
     return _save(fig, path)
 
 
+AGE_CURVE = re.compile(r"^head_circumference_mm_(?P<kind>after|target)_(?P<age>[0-9.]+)y$")
+
+
+def plot_growth(records: Sequence[Mapping[str, Any]], path: Path) -> Path | None:
+    """Age rows: the aged head's circumference (mm) at each target age, one curve per row,
+    beside the growth chart's target (dashed)."""
+    curves = []
+    for r in records:
+        if r["job"] != "age" or r["status"] != "ok":
+            continue
+        found: dict[str, list[tuple[float, float]]] = {"after": [], "target": []}
+        for key, value in r.get("figures", {}).items():
+            if (m := AGE_CURVE.match(key)) and (v := _float(value)) is not None:
+                found[m["kind"]].append((float(m["age"]), v))
+        if found["after"]:
+            curves.append((r["id"], sorted(found["after"]), sorted(found["target"])))
+    if not curves:
+        return None
+    fig = _figure(6.4, 3.6)
+    ax = fig.add_subplot()
+    for i, (name, after, target) in enumerate(curves):
+        colour = PALETTE[i % len(PALETTE)]
+        ax.plot(*zip(*after, strict=True), marker="o", color=colour, label=f"{name} aged head")
+        if target:
+            ax.plot(*zip(*target, strict=True), linestyle="--", color=colour, label=f"{name} chart")
+    ax.set_xlabel("target age (years)")
+    ax.set_ylabel("head circumference (mm)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=6)
+    ax.set_title("Age rows: growth curves", fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
 def write_plots(records: Sequence[Mapping[str, Any]], folder: Path) -> list[Path]:
     """Every plot that has data, as PNG files in ``folder``."""
     made = [
         plot_seconds(records, folder / "seconds.png"),
         plot_error_distributions(records, folder / "validate_error_distribution.png"),
         plot_regions(records, folder / "validate_regions.png"),
+        plot_growth(records, folder / "age_growth.png"),
     ]
     return [p for p in made if p is not None]
 
@@ -264,6 +301,7 @@ CAPTIONS = {
     "seconds": "Seconds per job",
     "validate_error_distribution": "Validate rows: |d| distribution per case",
     "validate_regions": "Validate rows: % within 2.5 mm per face region",
+    "age_growth": "Age rows: head circumference by target age",
 }
 
 

@@ -6,7 +6,8 @@ Each sub-command leaves its figures where its single run puts them:
 the metric of ``VALIDATION.md`` overall and per face region), ``fit-scan``
 in ``fit_report.json`` (the face within 1 / 2.5 mm, distances in mm) and
 ``animate`` only in its closing line on stdout (vertices, settle iterations,
-largest skin movement in mm).  A sub-command this module does not know (a new
+largest skin movement in mm), ``age`` in the summary it prints (per target
+age: head circumference, residual in mm, largest z-score change).  A sub-command this module does not know (a new
 one, such as ``age``) gets the numbers of the last JSON object it printed.
 
 Figures are flat ``{name: number or text}`` dicts (units in the names: ``_mm``,
@@ -39,6 +40,12 @@ FIT_SCAN_KEYS = (
     "face_mean_distance_mm",
     "fold_overs",
 )
+#: what an age row's summary keeps per target age (sub-keys of the printed figures)
+AGE_KEYS = {
+    "head_circumference_mm": ("before", "after", "target"),
+    "hard_residual_mm": ("max",),
+    "z_change_max": ("",),
+}
 ANIMATE_LINE = re.compile(
     r"\((?P<vertices>\d+) vertices(?:; .*?settled in (?P<iterations>\d+) iterations; largest skin "
     r"movement (?P<movement>[0-9.]+) mm)?(?:, (?P<targets>\d+) morph targets settled in "
@@ -157,8 +164,8 @@ def animate_figures(output: Path, stdout: str) -> Figures:
     return out
 
 
-def printed_json(stdout: str) -> Figures:
-    """The numbers of the last JSON object a command printed (one level of nesting)."""
+def _last_json(stdout: str) -> dict[str, Any]:
+    """The last JSON object a command printed (starting at the beginning of a line)."""
     decoder = json.JSONDecoder()
     last: dict[str, Any] = {}
     for i, ch in enumerate(stdout):
@@ -169,12 +176,40 @@ def printed_json(stdout: str) -> Figures:
                 continue
             if isinstance(data, dict):
                 last = data
+    return last
+
+
+def printed_json(stdout: str) -> Figures:
+    """The numbers of the last JSON object a command printed (one level of nesting)."""
     out: Figures = {}
-    for k, v in last.items():
+    for k, v in _last_json(stdout).items():
         if isinstance(v, dict):
             out.update(_scalars(v, None, f"{k}_"))
         elif (n := _number(v)) is not None and not isinstance(n, str):
             out[k] = n
+    return out
+
+
+def age_figures(stdout: str) -> Figures:
+    """``age``: the source head's circumference and per target age (``_<age>y`` in the name)
+    the aged head's and the chart's target (mm), the largest hard-landmark residual (mm) and
+    the largest z-score change, from the summary it prints."""
+    ages = _last_json(stdout).get("ages")
+    out: Figures = {}
+    for item in ages if isinstance(ages, list) else ():
+        age = _number(item.get("to_age")) if isinstance(item, dict) else None
+        if not isinstance(age, int | float):
+            continue
+        for key, subs in AGE_KEYS.items():
+            value = item.get(key)
+            for sub in subs:
+                number = _number(value.get(sub) if isinstance(value, dict) else value)
+                if not isinstance(number, int | float):
+                    continue
+                if sub == "before":  # the source head, the same for every age
+                    out[f"{key}_before"] = number
+                else:
+                    out[f"{key}{'_' + sub if sub else ''}_{age:g}y"] = number
     return out
 
 
@@ -189,4 +224,6 @@ def row_figures(job: str, argv: list[str], stdout: str) -> Figures:
         return fit_scan_figures(out)
     if job == "animate":
         return animate_figures(out, stdout)
+    if job == "age":
+        return age_figures(stdout) or printed_json(stdout)
     return printed_json(stdout)
