@@ -117,3 +117,45 @@ def test_missing_landmarks_are_listed_as_unconstrained(male) -> None:
 
     r = age_head(replace(male, skin_landmarks=lms), sex="male", from_age=18, to_age=10)
     assert "nasal_width" in r.figures["unconstrained"]
+
+
+def test_a_head_stored_mirrored_in_a_file_frame_ages_like_the_head(male, to_three) -> None:
+    """A reconstruction of a mirrored skull file is stored mirrored with reversed winding."""
+    from dataclasses import replace
+
+    from workbench.services.skull_registration import head_transformed
+
+    c, s = np.cos(0.4), np.sin(0.4)
+    m = np.array([[-1.0, 0, 0, 90], [0, c, -s, 40], [0, s, c, -25], [0, 0, 0, 1]])
+    stored = head_transformed(male, m)
+    stored = replace(
+        stored, meshes={k: Mesh(v.vertices, v.faces[:, ::-1]) for k, v in stored.meshes.items()}
+    )
+    r = age_head(stored, sex="male", from_age=18, to_age=3)
+    assert any("Frankfort frame" in w for w in r.warnings)
+    assert np.array_equal(r.head.skin.faces, male.skin.faces)
+    # the same head up to its frame re-measured on its landmarks (0.01 mm) and the unfold
+    d = np.linalg.norm(r.head.skin.vertices - to_three.head.skin.vertices, axis=1)
+    assert np.median(d) < 0.05 and d.max() < 0.2
+
+
+def test_unfold_relaxes_a_turned_triangle_only() -> None:
+    from workbench.services.age import unfold
+
+    # a flat 5 x 5 grid, one inner vertex pushed across its neighbours
+    xs, ys = np.meshgrid(np.arange(5.0), np.arange(5.0))
+    v = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(25)])
+    faces = []
+    for i in range(4):
+        for j in range(4):
+            a = i * 5 + j
+            faces += [(a, a + 1, a + 6), (a, a + 6, a + 5)]
+    flat = Mesh(v, np.array(faces))
+    bent = v.copy()
+    bent[12] += (1.6, 1.4, 0.0)  # vertex (2, 2) pushed past (3, 3): triangles turn over
+    turned = flat.with_vertices(bent)
+    assert ((turned.face_normals * flat.face_normals).sum(axis=1) < 0).any()
+    fixed = unfold(turned, flat.face_normals)
+    assert not ((fixed.face_normals * flat.face_normals).sum(axis=1) < 0).any()
+    far = np.linalg.norm(v[:, :2] - v[12, :2], axis=1) > 2.5
+    assert np.allclose(fixed.vertices[far], v[far])

@@ -69,6 +69,8 @@ AGE_LIMITS = (0.0, 100.0)
 MAX_ARC_INCREASE = 0.10
 #: regulariser of the inner parts' depth-restoring warp (as the scan fit's)
 INNER_SMOOTHING = 2.0
+#: regulariser of the skin warp (0: the landmarks land exactly on their targets)
+SKIN_SMOOTHING = 0.0
 #: radius of the skin normal average at a landmark or arc middle (mm)
 NORMAL_RADIUS_MM = 6.0
 #: nearest landmarks each landmark is softly tied to
@@ -154,6 +156,34 @@ class AgeResult:
 
 def _r(value: float, digits: int = 2) -> float | None:
     return None if not np.isfinite(value) else round(float(value), digits)
+
+
+def in_frankfort_frame(head: TemplateHead) -> tuple[TemplateHead, bool]:
+    """``head`` moved into the Frankfort frame of its skull landmarks, and whether it moved.
+
+    Axis-aligned measurements and the head circumference's plane are read in
+    this frame; a head already in it (a template pack) is returned as is.
+    """
+    from workbench.services.reconstruct import input_frame
+    from workbench.services.skull_registration import head_transformed
+
+    try:
+        settle, mirrored = input_frame(head.skull_landmarks)
+    except WorkbenchError:
+        return head, False
+    # a pack already in its frame (to within 0.05 mm and 0.01°: the frame re-measured on
+    # its own landmarks) stays as it is
+    if np.allclose(settle[:3, :3], np.eye(3), atol=2e-4) and np.abs(settle[:3, 3]).max() < 0.05:
+        return head, False
+    moved = head_transformed(head, settle)
+    if mirrored:
+        # a reconstruction of a mirrored skull file is stored mirrored, with its triangles
+        # wound the other way to keep the normals outward; the reflection back restores the
+        # reference's own winding (the muscles' triangles and morph targets rely on it)
+        moved = replace(
+            moved, meshes={k: Mesh(m.vertices, m.faces[:, ::-1]) for k, m in moved.meshes.items()}
+        )
+    return moved, True
 
 
 def head_points(head: TemplateHead) -> dict[str, np.ndarray]:
@@ -276,6 +306,12 @@ def age_head(
     hc_ref = load_head_circumference()
     notes: list[str] = []
 
+    head, reframed = in_frankfort_frame(head)
+    if reframed:
+        notes.append(
+            "the head was not in its Frankfort frame (a reconstruction is stored in the skull "
+            "file's frame): measured and aged in the frame of its porions and orbitales"
+        )
     pts = head_points(head)
     codes = list(pts)
     index = {c: i for i, c in enumerate(codes)}
@@ -522,8 +558,8 @@ def age_head(
     face = np.unique(np.concatenate([np.asarray(v) for k, v in aged.regions.items()]))
     inside = int((skull.signed_distance(aged.skin.vertices[face]) < 0).sum())
     inside0 = _inside_before(head, face)
-    ref_n = head.skin.face_normals
-    new_n = aged.skin.face_normals
+    folded = (head.skin.face_normals * aged.skin.face_normals).sum(axis=1) < 0
+    sliver = head.skin.face_areas < SLIVER_MM2
     figures: dict[str, Any] = {
         "from_age": a0,
         "to_age": a1,
@@ -555,7 +591,10 @@ def age_head(
         },
         # the reference heads have a few orbit vertices a fraction of a mm inside the bone
         "face_skin_inside_skull_vertices": {"after": inside, "before": inside0},
-        "fold_overs": int(((ref_n * new_n).sum(axis=1) < 0).sum()),
+        # turned-over skin triangles, apart from the reference's own slivers at the mouth
+        # corners (< 0.05 mm², the lips' seam), which are counted on their own
+        "fold_overs": int((folded & ~sliver).sum()),
+        "fold_overs_mouth_corner_slivers": int((folded & sliver).sum()),
         "seconds": round(seconds, 3),
         "unconstrained": [r.measurement_id for r in out_rows if r.constraint == "unconstrained"],
     }
@@ -603,6 +642,50 @@ def _arc_middle(
     return hit, normal
 
 
+#: relaxation rounds for skin triangles the warp turned over (each round: the vertices
+#: of turned triangles and their neighbours move halfway to their neighbours' mean)
+UNFOLD_ROUNDS = 30
+#: skin triangles smaller than this (mm²) are the reference's mouth-corner slivers
+SLIVER_MM2 = 0.05
+
+
+def unfold(skin: Mesh, rest_normals: np.ndarray, keep: np.ndarray | None = None) -> Mesh:
+    """``skin`` with triangles that turned over (against ``rest_normals``) relaxed flat again.
+
+    A thin-plate spline driven by landmarks that move unevenly (the chin
+    rising past the cheek landmarks for a young child) can turn a few skin
+    triangles over between landmarks.  Only the vertices of turned triangles
+    and their one-ring move (umbrella relaxation toward their neighbours'
+    mean), so the landmarks (stored as points) and the rest of the skin stay;
+    ``keep`` lists triangles not to look at (the reference's own slivers).
+    """
+    from scipy import sparse
+
+    f = skin.faces
+    n = skin.n_vertices
+    e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    adj = ((adj + adj.T) > 0).astype(float)
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    # rims (neck, eye and mouth openings) stay: relaxing them would shrink the openings
+    rim = np.zeros(n, bool)
+    rim[skin.edges_unique[skin.edge_face_counts == 1].ravel()] = True
+    v = skin.vertices.copy()
+    ignore = np.zeros(len(f), bool) if keep is None else np.asarray(keep, bool)
+    for _ in range(UNFOLD_ROUNDS):
+        cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        turned = ((cross * rest_normals).sum(axis=1) < 0) & ~ignore
+        if not turned.any():
+            break
+        move = np.zeros(n, bool)
+        move[f[turned].ravel()] = True
+        move |= np.asarray(adj[move].sum(axis=0)).ravel() > 0
+        move &= ~rim
+        mean = (adj @ v) / np.maximum(degree, 1)[:, None]
+        v[move] += 0.5 * (mean[move] - v[move])
+    return skin.with_vertices(v)
+
+
 def _local_scale(warp: Callable[[np.ndarray], np.ndarray], point: np.ndarray) -> float:
     """Cube root of the warp's Jacobian determinant at ``point`` (central differences, 1 mm)."""
     e = np.eye(3)
@@ -631,8 +714,13 @@ def _deform(
     merged = np.zeros((len(first), 3))
     np.add.at(merged, inverse, dst)
     merged /= np.bincount(inverse, minlength=len(first))[:, None]
-    warp = fit_warp(src[first], merged)
+    warp = fit_warp(src[first], merged, smoothing=SKIN_SMOOTHING)
     warped = warp_head(head, warp)
+    # triangles the warp turned over, relaxed (the reference's own sub-0.01 mm² slivers at
+    # the mouth corners turn over at the slightest push and are left to themselves)
+    sliver = head.skin.face_areas < SLIVER_MM2
+    skin = unfold(warped.skin, head.skin.face_normals, keep=sliver)
+    warped = replace(warped, meshes={**warped.meshes, "skin": skin})
     # eyeballs: scaled about their new centres by the warp's local size change
     eyes = warped.meshes["eyes"].vertices
     owner = np.linalg.norm(eyes[:, None] - warped.eye_centres[None], axis=2).argmin(axis=1)

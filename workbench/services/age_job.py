@@ -31,7 +31,7 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
-from workbench.services.age import AgeResult, Progress, age_head
+from workbench.services.age import AgeResult, Progress, age_head, in_frankfort_frame
 
 #: most ages one request may ask for
 MAX_AGES = 40
@@ -215,6 +215,9 @@ def age_to_folder(
         for r in results
     ]
     seconds = time.perf_counter() - t0
+    # the aged heads are in their Frankfort frames; so is the source for the morph
+    # targets and the pictures (a reconstruction's head is stored in the skull file's frame)
+    source = in_frankfort_frame(head)[0]
 
     def write(folder: Path) -> list[Path]:
         files: list[Path] = []
@@ -226,9 +229,9 @@ def age_to_folder(
         path = folder / "report.json"
         path.write_text(json.dumps(report, indent=1, default=_json_default) + "\n", "utf-8")
         files.append(path)
-        files.append(write_sequence_glb(folder / "sequence.glb", head, results))
+        files.append(write_sequence_glb(folder / "sequence.glb", source, results))
         if extra is not None:
-            files += extra(folder, head, results)
+            files += extra(folder, source, results)
         return files
 
     return results, write_folder(out, write, force=force, inputs=list(input_paths))
