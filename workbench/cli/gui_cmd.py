@@ -12,7 +12,7 @@ from pathlib import Path
 
 from workbench.core.errors import InputError
 
-TOOLS = ("landmarks", "dowels", "reconstruct", "compare", "fit-scan", "animate")
+TOOLS = ("landmarks", "dowels", "reconstruct", "compare", "fit-scan", "animate", "age")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -85,6 +85,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="intensity of the --expression (default 1)",
     )
     p.add_argument(
+        "--age-to",
+        type=float,
+        default=None,
+        metavar="AGE",
+        help="Age progression tool: show the head aged to AGE years (implies --tool age)",
+    )
+    p.add_argument(
+        "--age-from",
+        type=float,
+        default=None,
+        metavar="AGE",
+        help="Age progression tool: the head's age now (default 18, the reference heads)",
+    )
+    p.add_argument(
+        "--sex",
+        choices=["female", "male"],
+        default=None,
+        help="Age progression tool: the reference head and norms of this sex (default male)",
+    )
+    p.add_argument(
+        "--age-view",
+        choices=["side", "overlay"],
+        default=None,
+        help="Age progression tool: before/after side by side or overlaid with a distance "
+        "colour map (default side)",
+    )
+    p.add_argument(
         "--screenshot",
         type=Path,
         default=None,
@@ -128,6 +155,9 @@ def options_from(args: argparse.Namespace):
         if not 0.0 <= args.intensity <= 1.0:
             raise InputError("--intensity", f"must be between 0 and 1, got {args.intensity}")
         tool = "animate"
+    age_asked = any(v is not None for v in (args.age_to, args.age_from, args.sex, args.age_view))
+    if age_asked:
+        tool = "age"
     if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
         raise InputError(args.screenshot, "the screenshot must be a .png file")
     return LaunchOptions(
@@ -144,14 +174,27 @@ def options_from(args: argparse.Namespace):
         tool=tool,
         expression=args.expression,
         intensity=args.intensity,
+        age=(
+            {
+                "to_age": args.age_to,
+                "from_age": args.age_from,
+                "sex": args.sex,
+                "view": args.age_view,
+            }
+            if age_asked or tool == "age"
+            else None
+        ),
         screenshot=args.screenshot,
         size=(w, h),
     )
 
 
 def run(args: argparse.Namespace) -> int:
+    from workbench.cli.age_cmd import _write_pdf
+    from workbench.qt.age_ops import set_pdf_hook
     from workbench.qt.app import run as run_window
 
+    set_pdf_hook(_write_pdf)  # the window's age export writes report.pdf as `workbench age`
     return run_window(options_from(args))
 
 

@@ -143,6 +143,20 @@ ANIMATE_ACTIONS: tuple[ActionSpec, ...] = (
 )
 
 
+#: the Age progression tool's entries (window methods: the dock comes to the front first)
+AGE_ACTIONS: tuple[ActionSpec, ...] = (
+    ActionSpec(
+        "age",
+        "&Tools",
+        "A&ge progression",
+        "Ctrl+Shift+G",
+        "show_age",
+        "A head at another age from growth norms: target-age slider, before/after, "
+        "z-score table, export (Age progression dock; the case is not changed)",
+    ),
+)
+
+
 def add_tool_actions(
     window: MenuHost, tool: object, specs: tuple[ActionSpec, ...]
 ) -> dict[str, QAction]:

@@ -39,6 +39,8 @@ class LaunchOptions:
     #: the Animate tool's preset and its intensity (0..1); the tool is "animate" then
     expression: str | None = None
     intensity: float = 1.0
+    #: the Age progression tool's ``{"to_age", "from_age", "sex", "view"}`` (None: not asked)
+    age: dict | None = None
     screenshot: Path | None = None
     size: tuple[int, int] = (1400, 900)
     steps: list[str] = field(default_factory=list)
@@ -86,6 +88,14 @@ def prepare(window, options: LaunchOptions) -> list[str]:
         window.wait_idle()  # the head loads in the worker
         if options.screenshot is not None:  # the face moved to its pose before the picture
             window.animate.settle_now()
+    elif tool == "age":
+        age = options.age or {}
+        if age.get("view"):
+            window.age_panel.mode_buttons[age["view"]].setChecked(True)
+        if options.screenshot is not None:
+            window.age.prefetch_years = 0  # the picture needs the target age only
+        window.show_age(age.get("to_age"), age.get("from_age"), age.get("sex"))
+        window.wait_idle(timeout_s=300.0)  # the head loads, then the ages are computed
     elif tool in window.docks:
         window.docks[tool].raise_()
     return list(window.errors)

@@ -10,12 +10,13 @@ Wiring (created in this order in ``__init__``)::
     │   ├── SceneView       named layers: skull, landmarks, dowels, guides, muscles, face, truth
     │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
     ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel,
-    │                       ScanFitPanel, AnimatePanel (docks);
+    │                       ScanFitPanel, AnimatePanel, AgePanel (docks);
     │                       LayersPanel below them (visibility + opacity per layer)
     ├── tools               FileTool (open, save, export), LandmarkTool (draw, place,
     │                       suggest, snap), DragTool (live drags), ScanFitTool (a face
     │                       scan fitted by the scan-fit service, its landmarks; own picker),
-    │                       AnimateTool (the animation service's Animator, live skin)
+    │                       AnimateTool (the animation service's Animator, live skin),
+    │                       AgeTool (the age service under a target-age slider)
     ├── GuideView           second view: guides over the session's fit (drags → DragTool)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
 
@@ -51,11 +52,13 @@ from PySide6.QtWidgets import (
 from workbench.io.catalogue import load_catalogue
 from workbench.qt import dialogs, gc_guard, jobs
 from workbench.qt.actions import (
+    AGE_ACTIONS,
     ANIMATE_ACTIONS,
     SCAN_FIT_ACTIONS,
     add_tool_actions,
     build_menus,
 )
+from workbench.qt.age_ops import AgeTool
 from workbench.qt.animate_ops import AnimateTool
 from workbench.qt.document import Document
 from workbench.qt.drag_ops import DragTool
@@ -63,6 +66,7 @@ from workbench.qt.file_ops import FileTool
 from workbench.qt.guide_view import GuideView
 from workbench.qt.landmark_ops import LandmarkTool
 from workbench.qt.lod import InteractiveDetail
+from workbench.qt.panels.age_panel import AgePanel
 from workbench.qt.panels.animate_panel import AnimatePanel
 from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
@@ -178,6 +182,17 @@ class MainWindow(QMainWindow):
         self.animate = AnimateTool(
             self.animate_panel, self.scene, self.plotter, self.runner, self, parent=self
         )
+        self.age_panel = AgePanel()
+        self.age = AgeTool(
+            self.age_panel,
+            self.scene,
+            self.plotter,
+            self.runner,
+            self,
+            fitted_head=lambda: None if self.session.fit is None else self.session.fit.recon.head,
+            case_sex=lambda: self.document.case.dowels.sex,
+            parent=self,
+        )
         self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (
             ("landmarks", "Skull landmarks", self.landmarks_panel),
@@ -186,6 +201,7 @@ class MainWindow(QMainWindow):
             ("compare", "Compare", self.compare_panel),
             ("fit_scan", "Fit scan", self.scan_fit_panel),
             ("animate", "Animate", self.animate_panel),
+            ("age", "Age progression", self.age_panel),
         ):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
@@ -215,6 +231,7 @@ class MainWindow(QMainWindow):
         self.actions_by_id = build_menus(self)
         self.actions_by_id.update(add_tool_actions(self, self.scan_fit, SCAN_FIT_ACTIONS))
         self.actions_by_id.update(add_tool_actions(self, self, ANIMATE_ACTIONS))
+        self.actions_by_id.update(add_tool_actions(self, self, AGE_ACTIONS))
 
         self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
         self.progress = QProgressBar()
@@ -236,6 +253,8 @@ class MainWindow(QMainWindow):
         self.docks["animate"].visibilityChanged.connect(
             lambda v: self.animate.ensure_loaded() if v else None
         )
+        self.docks["age"].visibilityChanged.connect(self.age.set_active)
+        self.session.fit_changed.connect(lambda fit: self.age.fit_changed(fit is not None))
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
             lambda _channel, step, f: show_fraction(self.progress, f, step)
@@ -371,6 +390,33 @@ class MainWindow(QMainWindow):
             panel.expression.setCurrentText(expression)
         self.animate.ensure_loaded()
 
+    def show_age(
+        self, to_age: float | None = None, from_age: float | None = None, sex: str | None = None
+    ) -> None:
+        """Bring the Age progression dock to the front (loading its head); optionally set
+        the source age and sex and the target age (years)."""
+        dock = self.docks["age"]
+        dock.show()
+        dock.raise_()
+        panel = self.age_panel
+        if sex is not None:
+            panel.source.setCurrentText(f"Reference {sex}")
+        if from_age is not None:
+            panel.from_age.setValue(from_age)
+        if to_age is not None:
+            panel.target.setValue(round(to_age))
+            self.age.request(to_age)
+        self.age.ensure_loaded()
+
+    def _age_in_front(self) -> bool:
+        dock = self.docks.get("age")
+        return bool(
+            dock is not None
+            and self.age.source is not None
+            and dock.isVisible()
+            and not dock.visibleRegion().isEmpty()
+        )
+
     def _animate_in_front(self) -> bool:
         dock = self.docks.get("animate")
         return bool(
@@ -451,6 +497,9 @@ class MainWindow(QMainWindow):
     def reset_view(self) -> None:
         if self._animate_in_front():  # the animated head: look at its face
             self.animate.reset_camera()
+            return
+        if self._age_in_front():  # the source and aged heads: look at their faces
+            self.age.reset_camera()
             return
         if self.document.case.specimen.mesh is None and self.scan_fit.has_scan:
             self.scan_fit.reset_camera()  # only a scan is shown: look at its face
@@ -755,6 +804,7 @@ class MainWindow(QMainWindow):
         self.picker.detach()
         self.scan_fit.detach()
         self.animate.detach()
+        self.age.detach()
         self.detail.detach()
         self.scene.detach()
         self.guide_view.close_view()
