@@ -266,7 +266,9 @@ def _affine_rank(points: np.ndarray) -> int:
     return int((s > s[0] * 1e-9).sum())
 
 
-def fit_warp(source: np.ndarray, target: np.ndarray, *, smoothing: float = 0.0) -> LandmarkWarp:
+def fit_warp(
+    source: np.ndarray, target: np.ndarray, *, smoothing: float | np.ndarray = 0.0
+) -> LandmarkWarp:
     """Fit the warp mapping ``source`` landmarks onto ``target`` landmarks.
 
     Parameters
@@ -274,8 +276,11 @@ def fit_warp(source: np.ndarray, target: np.ndarray, *, smoothing: float = 0.0) 
     source, target : (N, 3) float64
         Corresponding landmarks p_i → q_i in mm.  Source points must be
         distinct.
-    smoothing : float
-        Regulariser λ ≥ 0 (0 = exact interpolation).
+    smoothing : float or (N,) array
+        Regulariser λ ≥ 0 (0 = exact interpolation), one for all landmarks
+        or one per landmark: a landmark with λ_i = 0 is still met exactly
+        while the others are only approached (its residual is λ_i times its
+        kernel weight), e.g. targets met exactly and guesses followed loosely.
 
     Returns
     -------
@@ -285,9 +290,12 @@ def fit_warp(source: np.ndarray, target: np.ndarray, *, smoothing: float = 0.0) 
     dst = _as_points(target, "target landmarks")
     if src.shape != dst.shape:
         raise ValueError(f"source {src.shape} and target {dst.shape} landmarks differ in number")
-    if smoothing < 0:
-        raise ValueError("smoothing must be >= 0")
     n = len(src)
+    lam = np.asarray(smoothing, dtype=np.float64)
+    if lam.ndim not in (0, 1) or (lam.ndim == 1 and lam.shape != (n,)):
+        raise ValueError(f"smoothing must be a number or one per landmark ({n})")
+    if not np.all(np.isfinite(lam)) or (lam < 0).any():
+        raise ValueError("smoothing must be >= 0")
     if n > 1:
         uniq = np.unique(src, axis=0)
         if len(uniq) != n:
@@ -298,18 +306,20 @@ def fit_warp(source: np.ndarray, target: np.ndarray, *, smoothing: float = 0.0) 
     p = src - offset
     q = dst - offset
     if n >= 4 and _affine_rank(p) == 3:
-        return _fit_tps(p, q, offset, smoothing)
-    return _fit_similarity_rbf(p, q, offset, smoothing)
+        return _fit_tps(p, q, offset, lam if lam.ndim else float(lam))
+    return _fit_similarity_rbf(p, q, offset, float(lam.max()) if lam.size else 0.0)
 
 
-def _kernel_matrix(p: np.ndarray, smoothing: float) -> np.ndarray:
+def _kernel_matrix(p: np.ndarray, smoothing: float | np.ndarray) -> np.ndarray:
     k = cdist(p, p)  # exact pairwise distances, 20x faster than broadcasting
-    if smoothing:
+    if np.any(smoothing):
         k[np.diag_indices_from(k)] -= smoothing  # see "Regularisation" above
     return k
 
 
-def _fit_tps(p: np.ndarray, q: np.ndarray, offset: np.ndarray, smoothing: float) -> LandmarkWarp:
+def _fit_tps(
+    p: np.ndarray, q: np.ndarray, offset: np.ndarray, smoothing: float | np.ndarray
+) -> LandmarkWarp:
     n = len(p)
     a = np.zeros((n + 4, n + 4))
     a[:n, :n] = _kernel_matrix(p, smoothing)
@@ -326,7 +336,7 @@ def _fit_tps(p: np.ndarray, q: np.ndarray, offset: np.ndarray, smoothing: float)
         affine=_ro(x[n:]),
         offset=_ro(offset),
         method="tps",
-        smoothing=float(smoothing),
+        smoothing=float(np.max(smoothing)),
     )
 
 
