@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import workbench
 from workbench.cli import (
+    age_cmd,
     animate_cmd,
     batch_cmd,
     case_cmd,
@@ -45,6 +46,7 @@ _MODULES = (
     reconstruct_cmd,
     validate_cmd,
     animate_cmd,
+    age_cmd,
     batch_cmd,
     gui_cmd,
 )
