@@ -162,7 +162,12 @@ def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
     assert np.allclose(tool.drawn_points("after"), step.result.head.skin.vertices)
 
 
-def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path):
+def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path, monkeypatch):
+    from workbench.cli.age_cmd import _write_pdf
+    from workbench.qt import age_ops
+
+    monkeypatch.setattr(age_ops, "_PDF_HOOK", None)
+    age_ops.set_pdf_hook(_write_pdf)  # as `workbench gui` does
     w = ageing
     tool = w.age
     out = tmp_path / "aged"
@@ -178,11 +183,42 @@ def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path):
     theirs = {m["measurement_id"]: m for m in report["ages"][0]["measurements"]}
     for mid, row in ours.items():
         assert theirs[mid]["z_after"] == pytest.approx(row.z_after, abs=1e-3)
-    assert set(tool.files) >= {out / "report.json", out / "sequence.glb"}
+    assert set(tool.files) >= {out / "report.json", out / "sequence.glb", out / "report.pdf"}
+    assert (out / "report.pdf").read_bytes()[:5] == b"%PDF-"
+    assert tool.gui_call.runs == 1  # the PDF (pictures: VTK) was written on the GUI thread
     # a folder that is not empty is not replaced (not interactive: nobody to confirm)
     assert not tool.export_to(out)
     assert "already exists" in w.age_panel.error.text()
     assert not w.document.stack.can_undo  # export only: the case is not changed
+
+
+def test_the_export_hook_runs_on_the_gui_thread_inside_the_folder_write(
+    ageing, qtbot, tmp_path, monkeypatch
+):
+    import threading
+
+    from workbench.qt import age_ops
+
+    seen = []
+
+    def hook(folder, head, results):
+        seen.append((threading.current_thread() is threading.main_thread(), folder))
+        path = folder / "extra.txt"
+        path.write_text(",".join(f"{r.to_age:g}" for r in results), "utf-8")
+        return [path]
+
+    monkeypatch.setattr(age_ops, "_PDF_HOOK", hook)
+    w = ageing
+    tool = w.age
+    w.age_panel.export_all.setChecked(True)  # every computed age: here only 10 y
+    out = tmp_path / "aged"
+    assert tool.export_to(out)
+    with qtbot.waitSignal(tool.exported, timeout=STEP_MS):
+        pass
+    assert len(seen) == 1 and seen[0][0]  # on the GUI thread ...
+    assert seen[0][1] != out  # ... into the folder being written, renamed into place after
+    assert (out / "extra.txt").read_text("utf-8") == "10"
+    assert out / "extra.txt" in tool.files
 
 
 def test_a_bad_request_shows_a_message_not_a_traceback(ageing, qtbot):

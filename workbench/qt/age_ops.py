@@ -6,7 +6,11 @@ results.  Export runs :func:`workbench.services.age_job.age_to_folder`, the
 function the command line calls, with the same ``extra`` hook for
 ``report.pdf`` (the command line's writer, handed to this module by
 ``workbench gui`` through :func:`set_pdf_hook`: the window's layer may not
-import the command line's).
+import the command line's).  The export runs in the worker, but the hook
+draws the report's pictures with VTK, and worker threads never touch VTK
+(ARCHITECTURE.md §3.4): the worker hands the hook to the GUI thread
+(:class:`GuiCall`) and waits for it, so the folder is still written as one
+piece by ``age_to_folder``.
 
 Live preview
 ------------
@@ -50,6 +54,7 @@ worker side (plain data, no Qt, no VTK); :class:`AgeTool` is the GUI side.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,6 +64,7 @@ import numpy as np
 from PySide6.QtCore import QObject, Signal
 
 from workbench.core.errors import InputError, WorkbenchError
+from workbench.qt import relay
 from workbench.core.mesh import Mesh
 from workbench.model.template import TemplateHead
 
@@ -100,6 +106,53 @@ def set_pdf_hook(hook: ExtraHook | None) -> None:
 
 def pdf_hook() -> ExtraHook | None:
     return _PDF_HOOK
+
+
+class GuiCall:
+    """Lets a worker run a function on the GUI thread and wait for its result.
+
+    Made on the GUI thread; :meth:`wrap` gives the worker a stand-in for
+    ``fn`` that posts the call through :mod:`workbench.qt.relay` (plain data:
+    the function, its arguments, a box and an event) and waits, checking
+    ``report`` (which raises :class:`~workbench.core.errors.Cancelled` when
+    the job is cancelled or the window shuts down) while it waits.
+    """
+
+    def __init__(self) -> None:
+        self._key = relay.register(self._run)
+        self.runs = 0
+
+    def _run(self, payload: Any) -> None:
+        fn, args, box, done = payload
+        try:
+            box.append((True, fn(*args)))
+        except BaseException as exc:  # noqa: BLE001 - handed back to the waiting worker
+            box.append((False, exc))
+        finally:
+            self.runs += 1
+            done.set()
+
+    def wrap(
+        self, fn: Callable[..., Any], report: Callable[[str, float], None] | None, step: str
+    ) -> Callable[..., Any]:
+        key = self._key
+
+        def on_gui_thread(*args: Any) -> Any:
+            box: list[tuple[bool, Any]] = []
+            done = threading.Event()
+            relay.post(key, (fn, args, box, done))
+            while not done.wait(0.1):
+                if report is not None:
+                    report(step, 0.96)
+            ok, value = box[0]
+            if not ok:
+                raise value
+            return value
+
+        return on_gui_thread
+
+    def close(self) -> None:
+        relay.unregister(self._key)
 
 
 class AgeHost(Protocol):
@@ -228,9 +281,16 @@ def export_ages(
     force: bool = False,
     extra: ExtraHook | None = None,
     report: Callable[[str, float], None] | None = None,
+    gui: GuiCall | None = None,
 ) -> tuple[list[AgeResult], list[Path]]:
-    """Worker: :func:`~workbench.services.age_job.age_to_folder` with the tool's inputs."""
+    """Worker: :func:`~workbench.services.age_job.age_to_folder` with the tool's inputs.
+
+    With ``gui``, ``extra`` (which may draw with VTK) runs on the GUI thread.
+    """
     from workbench.services.age_job import age_to_folder
+
+    if extra is not None and gui is not None:
+        extra = gui.wrap(extra, report, "writing report.pdf (pictures on the GUI thread)")
 
     n = max(len(ages), 1)
     done = [0]
@@ -314,6 +374,7 @@ class AgeTool(QObject):
         self._generation = 0
         self._actors: dict[str, Any] = {}
         self._caption: Any = None
+        self.gui_call = GuiCall()
         panel.source_changed.connect(self.load)
         panel.settings_changed.connect(self._settings_changed)
         panel.target_changed.connect(self.request)
@@ -745,13 +806,14 @@ class AgeTool(QObject):
                 return False
             force = True
         head, settings, ages, extra = source.head, self.settings(), self.ages_to_export(), _PDF_HOOK
+        gui = self.gui_call
         self.panel.export_button.setEnabled(False)
         self.panel.show_status(f"Exporting {', '.join(f'{a} y' for a in ages)} to {out.name} …")
         self.runner.submit(
             EXPORT_CHANNEL,
             f"Exporting the aged head to {out.name} …",
             lambda report: export_ages(
-                head, settings, ages, out, force=force, extra=extra, report=report
+                head, settings, ages, out, force=force, extra=extra, report=report, gui=gui
             ),
             self._exported,
             self._export_failed,
@@ -780,6 +842,7 @@ class AgeTool(QObject):
     def detach(self) -> None:
         """Stop computing (before the view closes)."""
         self.runner.cancel(CHANNEL)
+        self.gui_call.close()
 
 
 def figures_html(result: AgeResult) -> str:
