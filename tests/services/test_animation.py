@@ -199,3 +199,26 @@ def test_eye_closure_closes_the_lids(anim: Animator, marks) -> None:
     anim.relax()
     with pytest.raises(InputError):
         anim.set_lids(1.5)
+
+
+def test_a_head_stored_mirrored_animates_like_the_head(head_male, smiled) -> None:
+    """A reconstruction of a mirrored skull file is stored mirrored with reversed winding."""
+    from dataclasses import replace
+
+    from workbench.core.frame import apply_transform
+    from workbench.core.mesh import Mesh
+    from workbench.services.skull_registration import head_transformed
+
+    c, s = np.cos(0.5), np.sin(0.5)
+    m = np.array([[-1.0, 0, 0, 70], [0, c, -s, 10], [0, s, c, -40], [0, 0, 0, 1]])
+    stored = head_transformed(head_male, m)
+    stored = replace(
+        stored, meshes={k: Mesh(v.vertices, v.faces[:, ::-1]) for k, v in stored.meshes.items()}
+    )
+    other = Animator(stored)
+    other.set_expression("smile")
+    other.settle()
+    out = other.skin()
+    assert np.array_equal(out.faces, stored.skin.faces)  # the stored winding comes back
+    back = apply_transform(np.linalg.inv(m), out.vertices)
+    assert np.abs(back - smiled).max() < 0.05

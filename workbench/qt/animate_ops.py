@@ -230,7 +230,9 @@ class AnimateTool(QObject):
             return
         t0 = time.perf_counter()
         anim.step(STEPS_PER_FRAME)
-        points = anim.skin().vertices
+        # a live frame: the filtered skin without the exact (slow) inside-bone test; at rest
+        # (settle_now, the final frame) the exact one is drawn
+        points = anim.skin(exact=False).vertices
         before = self._points
         self.last_move_mm = (
             float(np.abs(points - before).max()) if before is not None else float("inf")
@@ -244,6 +246,8 @@ class AnimateTool(QObject):
         self._quiet_frames = self._quiet_frames + 1 if self.last_move_mm < SETTLED_MM else 0
         if self._quiet_frames >= SETTLED_FRAMES:
             self.timer.stop()
+            self._move_skin(anim.skin().vertices)
+            self.scene.request_render()
             ms = np.median(self.frame_ms[-50:])
             self.panel.show_status(
                 f"At rest ({STEPS_PER_FRAME} steps a frame, {ms:.0f} ms median frame)."

@@ -28,7 +28,8 @@ upper lid raiser, is not), buccinator (AU14), zygomaticus minor, platysma.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -47,6 +48,17 @@ JAW_RANGE_DEG = (-5.0, 35.0)
 PROTRUSION_RANGE_MM = (-3.0, 10.0)
 #: gaze limits (degrees)
 GAZE_RANGE_DEG = 45.0
+#: passes of the visible skin's displacement filter (see :meth:`Animator.visible`): the
+#: simulated nodes are the reference skin's vertices, 2-4 mm apart, and a mass-spring
+#: net has no bending stiffness at that scale, so skin that muscles compress (the
+#: frontalis' forehead, the orbicularis' lips, the chin over an opening jaw) buckles into
+#: ripples one or two edges long.  Real facial skin is 1.5-4 mm thick over its fat and
+#: folds with wavelengths of 10 mm and more, so the surface shown and exported is the
+#: nodes' displacement field low-passed by this many umbrella passes (each half-way to
+#: the neighbours' mean: a diffusion over ~3 edges, ~10 mm) and added to the rest shape,
+#: which keeps the rest shape's own detail (a Delta-Mush-like filter, Mancewicz et al.
+#: 2014, on displacements).  0 shows the raw nodes.
+VISIBLE_SMOOTHING_PASSES = 10
 #: skin regions that never move (Kähler simulates only the face)
 STATIC_REGIONS = ("scalp", "ear_l", "ear_r", "neck")
 #: skin regions without bone below (K 7.4.5: lips, cheeks; the eyelids lie on the eyes)
@@ -263,34 +275,37 @@ def _mask(n: int, head: TemplateHead, names: tuple[str, ...]) -> np.ndarray:
     return m
 
 
-def _to_head_frame(head: TemplateHead) -> tuple[TemplateHead, np.ndarray | None]:
-    """The head in the Frankfort frame of its skull landmarks, and the 4x4 back (None: no move).
+def _to_head_frame(head: TemplateHead) -> tuple[TemplateHead, np.ndarray | None, bool]:
+    """The head in the Frankfort frame of its skull landmarks, the 4x4 back (None: no move)
+    and whether that back map is a reflection.
 
     Every head is animated in the frame its own landmarks define, so a head
     stored in another frame (a reconstruction's ``head/`` pack, in the skull
     file's frame) animates exactly like the same head stored in the head frame.
+    A reconstruction of a mirrored skull file is stored mirrored with its
+    triangles wound the other way; it is reflected back (the reference's own
+    winding, which the muscles' triangles rely on) and its results reflected
+    out again with the stored winding.
     """
-    from workbench.services.frame import head_frame_from_landmarks
-    from workbench.services.reconstruct import warp_head
+    from workbench.services.reconstruct import input_frame, warp_head
 
     try:
-        frame = head_frame_from_landmarks(head.skull_landmarks.defined())
+        m, mirrored = input_frame(head.skull_landmarks)
     except WorkbenchError:  # no Frankfort landmarks: take the head as it is
-        return head, None
-    m = np.asarray(frame.input_to_head, float)
-    if np.linalg.det(m[:3, :3]) < 0:
-        raise InputError(
-            head.template_id,
-            "is stored mirrored (its landmarks give a left-handed head frame)",
-            "animate the head exported in the head frame instead",
-        )
-    if np.allclose(m, np.eye(4), atol=1e-12):
-        return head, None
+        return head, None, False
+    m = np.asarray(m, float)
+    if not mirrored and np.allclose(m, np.eye(4), atol=1e-12):
+        return head, None, False
 
     def move(p: np.ndarray) -> np.ndarray:
         return np.asarray(p, float) @ m[:3, :3].T + m[:3, 3]
 
-    return warp_head(head, move), np.linalg.inv(m)
+    moved = warp_head(head, move)
+    if mirrored:
+        moved = replace(
+            moved, meshes={k: Mesh(v.vertices, v.faces[:, ::-1]) for k, v in moved.meshes.items()}
+        )
+    return moved, np.linalg.inv(m), mirrored
 
 
 class Animator:
@@ -314,9 +329,10 @@ class Animator:
             raise InputError(
                 head.template_id, "has no muscles to animate", "use a head built with muscles"
             )
-        head, back = _to_head_frame(head)
+        head, back, mirrored = _to_head_frame(head)
         self.head = head
         self._back = back
+        self._mirrored = mirrored
         skin = head.skin
         x0 = skin.vertices
         n = len(x0)
@@ -368,6 +384,41 @@ class Animator:
         self._jaw_matrix = np.eye(4)
         self._sim_jaw = np.eye(4)
         self._dirty = True
+        self._rest = x0.copy()
+        self._umbrella = _umbrella_operator(skin)
+
+    def visible(self, x: np.ndarray | None = None, *, exact: bool = True) -> np.ndarray:
+        """``(n, 3)`` skin shown and exported (head frame, mm): the simulated nodes ``x``
+        (default: the current ones) with their displacement from rest low-passed by
+        :data:`VISIBLE_SMOOTHING_PASSES` umbrella passes.
+
+        The filtered skin is kept out of the bone by the simulation's tangent-plane
+        guard and, with ``exact`` (for results), by the exact inside test on the nodes
+        near bone; a live preview (``exact=False``) skips the latter (~60 ms a call).
+        """
+        x = self.sim.x if x is None else x
+        d = np.asarray(x, float) - self._rest
+        if VISIBLE_SMOOTHING_PASSES == 0:
+            return self._rest + d
+        for _ in range(VISIBLE_SMOOTHING_PASSES):
+            d = self._umbrella @ d
+        y = self._rest + d
+        # the filter must not take skin into the bone: the simulation's tangent-plane guard,
+        # then the exact test on the nodes near bone (as the simulation does when it settles)
+        self.sim._keep_above_bone(y)
+        g = self.sim.guard_nodes
+        if exact and len(g):
+            for index, m in ((self._cranium, None), (self._mandible, self._jaw_matrix)):
+                pts = y[g]
+                r, t = (np.eye(3), np.zeros(3)) if m is None else (m[:3, :3], m[:3, 3])
+                local = (pts - t) @ r
+                bad = index.signed_distance(local) < 0.0
+                if bad.any():
+                    cl = index.closest_points(local[bad])
+                    nrm = index.pseudo_normals(cl.face_ids, cl.barycentric)
+                    fixed = cl.points + nrm * self.sim.params.bone_margin_mm
+                    y[g[bad]] = fixed @ r.T + t
+        return y
 
     def _lid_setup(
         self, head: TemplateHead, x0: np.ndarray
@@ -549,13 +600,17 @@ class Animator:
             return points
         return points @ self._back[:3, :3].T + self._back[:3, 3]
 
-    def skin(self) -> Mesh:
-        """The current skin (mm, in the head's own frame)."""
-        return Mesh(self._out(self.sim.x.copy()), self.head.skin.faces)
+    def _faces_out(self, mesh: Mesh) -> np.ndarray:
+        """Triangles as stored: wound the other way for a head stored mirrored."""
+        return mesh.faces[:, ::-1] if self._mirrored else mesh.faces
+
+    def skin(self, *, exact: bool = True) -> Mesh:
+        """The current skin as shown (:meth:`visible`; mm, in the head's own frame)."""
+        return Mesh(self._out(self.visible(exact=exact)), self._faces_out(self.head.skin))
 
     def skin_in_head_frame(self) -> np.ndarray:
-        """``(n, 3)`` current skin vertices in the Frankfort head frame (mm)."""
-        return self.sim.x.copy()
+        """``(n, 3)`` current skin vertices as shown, in the Frankfort head frame (mm)."""
+        return self.visible()
 
     def meshes(self) -> dict[str, Mesh]:
         """Every part in the current pose: jaw parts moved with the jaw, eyes turned by the gaze."""
@@ -564,12 +619,12 @@ class Animator:
         for part, mesh in self.head.meshes.items():
             v = mesh.vertices
             if part == "skin":
-                v = self.sim.x
+                v = self.visible()
             elif part in JAW_PARTS:
                 v = v @ m[:3, :3].T + m[:3, 3]
             elif part == "eyes" and self.gaze != (0.0, 0.0):
                 v = self._turned_eyes(v)
-            out[part] = Mesh(self._out(np.asarray(v, float)), mesh.faces)
+            out[part] = Mesh(self._out(np.asarray(v, float)), self._faces_out(mesh))
         return out
 
     def _turned_eyes(self, v: np.ndarray) -> np.ndarray:
@@ -587,6 +642,20 @@ class Animator:
             sel = owner == k
             out[sel] = (v[sel] - c) @ r.T + c
         return out
+
+
+def _umbrella_operator(skin: Mesh) -> Any:
+    """Sparse (n, n) operator taking each vertex half-way to its edge neighbours' mean."""
+    from scipy import sparse
+
+    f = skin.faces
+    n = skin.n_vertices
+    e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    adj = ((adj + adj.T) > 0).astype(np.float64)
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    mean = sparse.diags(1.0 / np.maximum(degree, 1.0)) @ adj
+    return (0.5 * sparse.identity(n, format="csr") + 0.5 * mean).tocsr()
 
 
 def _turned_down(rel: np.ndarray, angle: np.ndarray) -> np.ndarray:
