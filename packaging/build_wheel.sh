@@ -2,7 +2,8 @@
 # Build the wheel and the sdist, install the wheel into a FRESH virtual
 # environment and smoke-test it from outside the checkout; print the figures.
 #
-#   bash packaging/build_wheel.sh
+#   bash packaging/build_wheel.sh                # build, install, smoke-test
+#   bash packaging/build_wheel.sh --smoke-only   # smoke-test the venv there is
 #
 # Steps: `python -m build` (sdist, then the wheel from the sdist) into dist/;
 # a new venv with `pip install dist/*.whl -c packaging/constraints.txt`; then,
@@ -11,7 +12,10 @@
 # `workbench demo` headless (no DISPLAY), and the window under its own Xvfb
 # (xvfb-run) with a screenshot.  Checks that the package and its data tables
 # are imported from the venv, that the reference heads were cached in the
-# platform cache folder and that nothing was written into the installed package.
+# platform cache folder and that nothing was written into the installed package
+# (but __pycache__: Python's bytecode and numba's compiled animation kernels,
+# which numba keeps beside a writable module; a read-only install sends them
+# to ~/.cache/numba).
 #
 # Environment (all optional):
 #   WORKBENCH_TOOLS_VENV  venv with the build tools (default build/tools-venv;
@@ -39,6 +43,15 @@ fail() { echo "build_wheel: FAILED: $*" >&2; exit 1; }
 mib() { awk -v b="$(stat -c %s "$1")" 'BEGIN { printf "%.2f MiB", b / 1048576 }'; }
 
 mkdir -p build
+build=1
+case "${1:-}" in
+  "") ;;
+  --smoke-only) build=0 ;;
+  *) echo "usage: bash packaging/build_wheel.sh [--smoke-only]" >&2; exit 64 ;;
+esac
+build_s="n/a" install_s="n/a (not reinstalled)"
+
+build_all() {
 # ------------------------------------------------------------------ build tools
 if [ ! -x "$tools/bin/python" ]; then
   "$py" -m venv "$tools"
@@ -77,6 +90,15 @@ t0="$(now)"
 "$venv/bin/python" -m pip install -q "$wheel" -c "$constraints" > build/install-wheel.log 2>&1 \
   || { tail -30 build/install-wheel.log; fail "pip install of the wheel"; }
 install_s="$(since "$t0")"
+}
+
+version="$("$py" -c 'import tomllib; print(tomllib.load(open("pyproject.toml", "rb"))["project"]["version"])')"
+wheel="$root/dist/forensic_workbench-$version-py3-none-any.whl"
+sdist="$root/dist/forensic_workbench-$version.tar.gz"
+if [ "$build" = 1 ]; then
+  build_all
+fi
+[ -x "$venv/bin/workbench" ] || fail "no $venv/bin/workbench (build first)"
 
 # ------------------------------------------------------------------ smoke tests
 rm -rf "$smoke"
@@ -91,11 +113,13 @@ site="$("$venv/bin/python" -c 'import pathlib, workbench; print(pathlib.Path(wor
 case "$site" in "$venv"/*) ;; *) fail "workbench imported from $site, not from the venv" ;; esac
 tables="$("$venv/bin/python" -c 'from workbench.core.data_paths import data_tables_dir; print(data_tables_dir())')"
 [ "$tables" = "$site/_data/data_tables" ] || fail "data tables read from $tables"
-before="$(find "$site" -type f | sort | sha256sum)"
+package_files() { find "$site" -type f -not -path "*/__pycache__/*" -printf '%P %s %T@\n' | sort | sha256sum; }
+before="$(package_files)"
 
 got="$("$venv/bin/workbench" --version)"
 [ "$got" = "workbench $version" ] || fail "--version said '$got'"
-"$venv/bin/workbench" samples list | grep -q "Courtesy of the U.S. National Library of Medicine" \
+"$venv/bin/workbench" samples list > "$work/samples.txt" || fail "workbench samples list"
+grep -q "Courtesy of the U.S. National Library of Medicine" "$work/samples.txt" \
   || fail "samples list shows no NLM credit"
 
 t0="$(now)"
@@ -118,7 +142,7 @@ if command -v xvfb-run > /dev/null 2>&1; then
 else
   echo "xvfb-run not found: window not tested (apt-get install xvfb xauth)" >&2
 fi
-after="$(find "$site" -type f | sort | sha256sum)"
+after="$(package_files)"
 [ "$before" = "$after" ] || fail "files were written into the installed package $site"
 stray="$(ls -A "$work/run")"
 [ -z "$stray" ] || fail "files left in the working folder: $stray"

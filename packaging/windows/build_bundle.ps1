@@ -22,7 +22,10 @@ if (-not (Test-Path $python)) { py -3.11 -m venv $venv }
 & $python -m pip install -q --upgrade pip
 & $python -m pip install -q -r (Join-Path $root "packaging\pyinstaller\requirements.txt")
 & $python -m build --wheel --outdir (Join-Path $out "wheel") $root
-& $python -m pip uninstall -q -y forensic-workbench 2>$null
+# (not installed yet is fine: stderr of a native command must not stop the script)
+$ErrorActionPreference = "Continue"
+& $python -m pip uninstall -q -y forensic-workbench 2>&1 | Out-Null
+$ErrorActionPreference = "Stop"
 $wheel = Get-ChildItem (Join-Path $out "wheel\*.whl") | Select-Object -First 1
 & $python -m pip install -q $wheel.FullName -c (Join-Path $root "packaging\constraints.txt")
 if ($LASTEXITCODE -ne 0) { throw "pip install failed" }
