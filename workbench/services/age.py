@@ -516,6 +516,7 @@ def age_head(
     # 5. deform the whole head
     say("warping the head ...")
     aged = _deform(head, src, dst, lam)
+    aged, pushed = _skin_out_of_skull(aged)
     seconds = time.perf_counter() - t0
 
     # the report: measure the aged head as it came out
@@ -599,6 +600,7 @@ def age_head(
         },
         # the reference heads have a few orbit vertices a fraction of a mm inside the bone
         "face_skin_inside_skull_vertices": {"after": inside, "before": inside0},
+        "skin_vertices_moved_out_of_skull": pushed,
         # turned-over skin triangles, apart from the reference's own slivers at the mouth
         # corners (< 0.05 mm², the lips' seam), which are counted on their own
         "fold_overs": int((folded & ~sliver).sum()),
@@ -619,6 +621,29 @@ def age_head(
         before_lm,
         {c: after[c] for c in codes if c in after},
     )
+
+
+#: skin found inside the aged skull is put this far outside it (mm)
+SKULL_CLEARANCE_MM = 0.5
+
+
+def _skin_out_of_skull(head: TemplateHead) -> tuple[TemplateHead, int]:
+    """Skin vertices inside the cranium or mandible moved to just outside (mm; how many).
+
+    The warps keep the source's tissue depths at the paired landmarks, but
+    between them thin skin (the orbit rims, where the reference heads already
+    have a few vertices a fraction of a mm inside the bone) can end inside.
+    """
+    skull = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
+    v = head.skin.vertices
+    bad = np.flatnonzero(skull.signed_distance(v) < 0)
+    if not len(bad):
+        return head, 0
+    cl = skull.closest_points(v[bad])
+    normal = skull.pseudo_normals(cl.face_ids, cl.barycentric)
+    moved = v.copy()
+    moved[bad] = cl.points + SKULL_CLEARANCE_MM * normal
+    return replace(head, meshes={**head.meshes, "skin": head.skin.with_vertices(moved)}), len(bad)
 
 
 _INSIDE: dict[str, int] = {}
