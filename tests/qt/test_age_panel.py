@@ -136,6 +136,7 @@ def test_z_scores_beyond_two_are_highlighted(qtbot):
 
 
 def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
+    from workbench.qt import age_ops
     from workbench.qt.age_ops import DISTANCE_TITLE, OVERLAY_OPACITY
 
     w = ageing
@@ -147,7 +148,7 @@ def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
     assert np.allclose(tool.offset(), 0)
     assert np.allclose(tool.drawn_points("before"), src)  # in place, translucent
     assert tool.actors()["before"].GetProperty().GetOpacity() == pytest.approx(OVERLAY_OPACITY)
-    data = tool.actors()["after"].GetMapper().GetInput()
+    data = age_ops.drawn_data(tool.actors()["after"])
     from vtkmodules.util.numpy_support import vtk_to_numpy
 
     shown = vtk_to_numpy(data.GetPointData().GetArray(DISTANCE_TITLE))
@@ -242,6 +243,29 @@ def test_a_bad_request_shows_a_message_not_a_traceback(ageing, qtbot):
     assert not tool.cache  # the results of 18 y are stale
     qtbot.waitUntil(lambda: 10 in tool.failed, timeout=STEP_MS)
     assert "outside the norms' range" in panel.error.text()
+
+
+def test_the_case_layers_are_hidden_while_the_dock_is_in_front(
+    head_male, new_window, qtbot, skull_obj
+):
+    w = new_window(1200, 800)
+    w.age.prefetch_years = 0
+    w.open_skull(skull_obj, scale=15.0)
+    qtbot.waitUntil(lambda: not w.busy, timeout=60_000)
+    assert w.scene.visible["skull"] and w.scene.has("skull")
+    w.scene.set_visible("muscles", False)  # hidden by the user: stays hidden
+    w.show_age(10)
+    qtbot.waitUntil(lambda: w.age.shown_age == 10, timeout=STEP_MS)
+    assert not w.scene.visible["skull"]
+    assert not w.scene.actors("skull")[0].GetVisibility()
+    assert w.age.actors()["after"].GetVisibility()
+    assert w.age.actors()["before"].GetVisibility()
+    w.docks["landmarks"].raise_()  # another tool in front: the case comes back, the heads go
+    qtbot.waitUntil(lambda: w.scene.visible["skull"], timeout=5_000)
+    assert w.scene.actors("skull")[0].GetVisibility()
+    assert not w.scene.visible["muscles"]
+    assert not w.age.actors()["after"].GetVisibility()
+    assert not w.age.actors()["before"].GetVisibility()
 
 
 def test_gui_options_accept_the_age_tool():

@@ -89,7 +89,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         metavar="AGE",
-        help="Age progression tool: show the head aged to AGE years (implies --tool age)",
+        help="Age progression tool: show the head aged to AGE years (implies --tool age); "
+        "the reference head, or with --reconstruct the reconstructed one",
     )
     p.add_argument(
         "--age-from",

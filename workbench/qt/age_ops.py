@@ -231,7 +231,14 @@ def norms_info(norms: str = "facial_norms") -> NormsInfo:
 
 
 def load_source(key: str, head: TemplateHead | None = None) -> SourceHead:
-    """Worker: the source head (``reference:male|female``, or ``head`` as given) and its norms."""
+    """Worker: the source head (``reference:male|female``, or ``head`` as given) and its norms.
+
+    The head is put in the Frankfort frame of its skull landmarks, where the
+    service measures and ages it (a reconstruction is stored in the skull
+    file's frame; a reference head already is in it), so the source drawn and
+    the displacements are in the aged heads' frame.
+    """
+    from workbench.services.age import in_frankfort_frame
     from workbench.services.template_cache import reference_head
 
     if head is None:
@@ -239,6 +246,7 @@ def load_source(key: str, head: TemplateHead | None = None) -> SourceHead:
         if kind != "reference" or sex not in ("female", "male"):
             raise InputError("age progression", f"no head '{key}' to age")
         head = reference_head(sex)
+    head, _moved = in_frankfort_frame(head)
     return SourceHead(key, head, norms_info())
 
 
@@ -375,6 +383,7 @@ class AgeTool(QObject):
         self._actors: dict[str, Any] = {}
         self._caption: Any = None
         self.gui_call = GuiCall()
+        self._hidden_layers: list[str] = []
         panel.source_changed.connect(self.load)
         panel.settings_changed.connect(self._settings_changed)
         panel.target_changed.connect(self.request)
@@ -393,8 +402,13 @@ class AgeTool(QObject):
         return None if self.shown_age is None else self.cache.get(self.shown_age)
 
     def set_active(self, on: bool) -> None:
-        """The dock was shown (load, draw) or hidden (the heads are hidden with it)."""
+        """The dock was shown (load, draw) or hidden (the heads are hidden with it).
+
+        While it is in front the case's layers (skull, landmarks, face ...: the
+        specimen's frame, not the heads') are hidden, and shown again after.
+        """
         self.active = bool(on)
+        self._hide_case_layers(self.active)
         for actor in self._actors.values():
             actor.SetVisibility(self.active and self._wanted(actor))
         if self._caption is not None:
@@ -402,6 +416,19 @@ class AgeTool(QObject):
         self.scene.request_render()
         if on:
             self.ensure_loaded()
+
+    def _hide_case_layers(self, hide: bool) -> None:
+        scene = self.scene
+        if hide:
+            for layer, visible in scene.visible.items():
+                if visible and scene.has(layer):
+                    scene.set_visible(layer, False)
+                    self._hidden_layers.append(layer)
+            return
+        for layer in self._hidden_layers:  # unless the user showed or hid it meanwhile
+            if not scene.visible.get(layer, True):
+                scene.set_visible(layer, True)
+        self._hidden_layers.clear()
 
     def _wanted(self, actor: Any) -> bool:
         return actor is not self._actors.get("after") or self.step is not None
@@ -464,9 +491,14 @@ class AgeTool(QObject):
         self.reset_camera()
         self.loaded.emit()
         n = source.head.skin.n_vertices
+        what = (
+            "the case's reconstructed head"
+            if source.key == "fit"
+            else f"the reference {source.key.partition(':')[2]} head"
+        )
         self.host.status(
-            f"Age progression: {source.head.template_id} ({n:,} skin vertices; view only, "
-            "the case is not changed)."
+            f"Age progression: {what} ({n:,} skin vertices; view only, the case is not "
+            "changed; its layers are hidden while this dock is in front)."
         )
         self.request(self.panel.target_age())
 
@@ -691,7 +723,7 @@ class AgeTool(QObject):
             )
             self._actors["after"] = actor
         if step is not None:
-            data = actor.GetMapper().GetInput()
+            data = drawn_data(actor)
             _set_array(data.GetPoints().GetData(), step.result.head.skin.vertices)
             data.GetPoints().Modified()
             normals = data.GetPointData().GetNormals()
@@ -728,7 +760,7 @@ class AgeTool(QObject):
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
         actor = self._actors[which]
-        return vtk_to_numpy(actor.GetMapper().GetInput().GetPoints().GetData()).copy()
+        return vtk_to_numpy(drawn_data(actor).GetPoints().GetData()).copy()
 
     def reset_camera(self) -> None:
         """Look at both heads from the front (+z toward the face, +y up)."""
@@ -874,6 +906,15 @@ def figures_html(result: AgeResult) -> str:
     if unconstrained:
         notes += f"<br><i>unconstrained (landmark missing): {', '.join(unconstrained)}</i>"
     return f"<table>{body}</table>{notes}"
+
+
+def drawn_data(actor: Any) -> Any:
+    """The polydata an actor of ``plotter.add_mesh`` draws (mm): pyvista's mapper dataset.
+
+    Not ``GetMapper().GetInput()``: with scalars the mapper is fed through a
+    pipeline connection, and its input is an empty output until the first render.
+    """
+    return actor.mapper.dataset
 
 
 def _shift(offset: np.ndarray) -> np.ndarray:

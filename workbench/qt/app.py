@@ -94,7 +94,12 @@ def prepare(window, options: LaunchOptions) -> list[str]:
             window.age_panel.mode_buttons[age["view"]].setChecked(True)
         if options.screenshot is not None:
             window.age.prefetch_years = 0  # the picture needs the target age only
-        window.show_age(age.get("to_age"), age.get("from_age"), age.get("sex"))
+        window.show_age(  # with --reconstruct: the reconstructed head is aged
+            age.get("to_age"),
+            age.get("from_age"),
+            age.get("sex"),
+            reconstructed=options.reconstruct,
+        )
         window.wait_idle(timeout_s=300.0)  # the head loads, then the ages are computed
     elif tool in window.docks:
         window.docks[tool].raise_()

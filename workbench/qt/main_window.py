@@ -391,15 +391,24 @@ class MainWindow(QMainWindow):
         self.animate.ensure_loaded()
 
     def show_age(
-        self, to_age: float | None = None, from_age: float | None = None, sex: str | None = None
+        self,
+        to_age: float | None = None,
+        from_age: float | None = None,
+        sex: str | None = None,
+        *,
+        reconstructed: bool = False,
     ) -> None:
         """Bring the Age progression dock to the front (loading its head); optionally set
-        the source age and sex and the target age (years)."""
+        the source age and sex and the target age (years).  The head: the reference of
+        ``sex``, or with ``reconstructed`` the case's reconstructed head (aged with the
+        norms of the case's sex)."""
         dock = self.docks["age"]
         dock.show()
         dock.raise_()
         panel = self.age_panel
-        if sex is not None:
+        if reconstructed and self.session.fit is not None:
+            panel.source.setCurrentText("Reconstructed head (this case)")
+        elif sex is not None:
             panel.source.setCurrentText(f"Reference {sex}")
         if from_age is not None:
             panel.from_age.setValue(from_age)
