@@ -125,3 +125,21 @@ def test_validate_row_figures_and_plots(tmp_path, head_female):
     for name in ("seconds", "validate_error_distribution", "validate_regions"):
         assert (out / "plots" / f"{name}.png").stat().st_size > 1000
     assert "validate_regions.png" in (out / "summary.md").read_text(encoding="utf-8")
+
+
+@pytest.mark.slow
+def test_a_job_over_the_memory_limit_is_a_failed_row(tmp_path, skull_obj, capsys):
+    m = tmp_path / "m.csv"
+    m.write_text(
+        "id,job,input,scale,anterior,superior,no-pictures\n"
+        f'big,reconstruct,{skull_obj},15,"0,0,1","0,1,0",true\n',
+        encoding="utf-8",
+    )
+    out = tmp_path / "out"
+    args = ["batch", str(m), "--out", str(out), "--workers", "1", "--memory-limit", "300MB"]
+    assert main(args) == 2
+    row = _rows(out / "summary.csv")["big"]
+    assert row["status"] == "failed" and row["exit_status"] == ""
+    assert "the worker running it died (over its memory limit of 300MB" in row["message"]
+    assert "KilledWorker" in (out / "logs" / "big.log").read_text(encoding="utf-8")
+    assert "1/1 big (reconstruct): failed" in capsys.readouterr().err

@@ -357,8 +357,12 @@ def _run_dask(
         try:
             outcome = future.result()
         except Exception as exc:  # noqa: BLE001 - a worker's death must not stop the batch
-            reason = f"{died} ({type(exc).__name__}: {exc})"
-            outcome = {"exit_status": None, "seconds": None, "died": reason}
+            outcome = {
+                "exit_status": None,
+                "seconds": None,
+                "stderr": f"{type(exc).__name__}: {exc}\n",  # the whole story, in the log
+                "died": f"{died} ({type(exc).__name__})",
+            }
         done(row, outcome)
 
 
