@@ -52,10 +52,11 @@ def test_a_child_head_is_smaller_and_plausible(male, to_three) -> None:
 
 def test_ageing_back_returns_close_to_the_start(male, to_three) -> None:
     back = age_head(to_three.head, sex="male", from_age=3, to_age=18)
+    # not an exact inverse: the z-scores are read in the WHO chart at 3 y and in UK90 at 18 y
     d = np.linalg.norm(back.head.skin.vertices - male.skin.vertices, axis=1)
-    assert np.median(d) < 1.0
+    assert np.median(d) < 1.5
     hc = measure_circumference(back.head)
-    assert hc == pytest.approx(measure_circumference(male), rel=0.02)
+    assert hc == pytest.approx(measure_circumference(male), rel=0.01)
 
 
 def test_no_change_when_the_age_does_not_change(male) -> None:

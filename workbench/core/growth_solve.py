@@ -175,12 +175,31 @@ def _rows(
     return np.array(rows), what
 
 
+_PINV: dict[bytes, tuple[np.ndarray, int, float]] = {}
+
+
 def _pinv(matrix: np.ndarray) -> tuple[np.ndarray, int, float]:
+    """Clamped pseudo-inverse, dropped directions, kept condition number (cached per matrix:
+    re-solves with other targets, a sequence of ages, reuse it)."""
+    import hashlib
+
+    key = (
+        hashlib.sha1(np.ascontiguousarray(matrix).tobytes()).digest() + repr(matrix.shape).encode()
+    )
+    hit = _PINV.get(key)
+    if hit is not None:
+        return hit
+    # a few-hundred-row SVD takes ~3.5 ms on one thread; OpenBLAS's own threads on a
+    # busy 2-core machine made it take up to 3 s (the caller limits them)
     u, sv, vt = np.linalg.svd(matrix, full_matrices=False)
     keep = sv >= sv[0] / CONDITION_NUMBER
     inv = np.zeros_like(sv)
     inv[keep] = 1.0 / sv[keep]
-    return (vt.T * inv) @ u.T, int((~keep).sum()), float(sv[0] / sv[keep][-1])
+    out = ((vt.T * inv) @ u.T, int((~keep).sum()), float(sv[0] / sv[keep][-1]))
+    if len(_PINV) >= 48:
+        _PINV.pop(next(iter(_PINV)))
+    _PINV[key] = out
+    return out
 
 
 def solve_landmarks(
@@ -195,6 +214,20 @@ def solve_landmarks(
     ``anchor`` lists the landmarks whose mean stays where it is (the
     translation anchor).  See the module docstring for the method.
     """
+    from workbench.core.tps import single_threaded_blas
+
+    # small dense products only: OpenBLAS threads on a busy 2-core machine slow them 10-100x
+    with single_threaded_blas():
+        return _solve(points, hard, soft, scale, anchor)
+
+
+def _solve(
+    points: np.ndarray,
+    hard: Sequence[Constraint],
+    soft: Sequence[SoftPair],
+    scale: float,
+    anchor: Sequence[int],
+) -> GrowthSolution:
     p = np.asarray(points, float)
     n = len(p)
     if not anchor:

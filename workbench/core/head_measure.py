@@ -50,7 +50,32 @@ def head_circumference_mm(
     if np.linalg.norm(normal) < 1e-9:
         return float("nan")
     pts = plane_section_points(skin, op, normal)
-    if len(pts) < 8:
+    return section_perimeter(pts, g, op, lateral)
+
+
+def head_section(
+    skin: Mesh, glabella: np.ndarray, opisthocranion: np.ndarray, lateral=(1.0, 0.0, 0.0)
+) -> np.ndarray:
+    """The skin's section points through glabella and opisthocranion (mm; see the module)."""
+    g = np.asarray(glabella, float)
+    op = np.asarray(opisthocranion, float)
+    normal = np.cross(g - op, np.asarray(lateral, float))
+    if np.linalg.norm(normal) < 1e-9:
+        return np.zeros((0, 3))
+    return plane_section_points(skin, op, normal)
+
+
+def section_perimeter(
+    pts: np.ndarray, glabella: np.ndarray, opisthocranion: np.ndarray, lateral=(1.0, 0.0, 0.0)
+) -> float:
+    """Tape length around section points ``pts`` (mm): their convex hull's perimeter in the
+    plane through glabella and opisthocranion that contains the lateral axis (NaN if the
+    points do not go round a head)."""
+    g = np.asarray(glabella, float)
+    op = np.asarray(opisthocranion, float)
+    along = g - op
+    normal = np.cross(along, np.asarray(lateral, float))
+    if len(pts) < 8 or np.linalg.norm(normal) < 1e-9:
         return float("nan")
     u = along / np.linalg.norm(along)
     w = np.cross(normal / np.linalg.norm(normal), u)

@@ -113,7 +113,7 @@ def similarity_transform(source: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 @contextlib.contextmanager
-def _single_threaded_blas() -> Iterator[None]:
+def single_threaded_blas() -> Iterator[None]:
     """Run the block with the BLAS limited to one thread.
 
     Each warp parallelises over point chunks with its own threads; letting
@@ -242,7 +242,7 @@ class LandmarkWarp:
         blocks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
         # our threads split the work; BLAS threads inside each small GEMM
         # would only contend with them (up to 10x slower with OpenBLAS)
-        with _single_threaded_blas():
+        with single_threaded_blas():
             if workers == 1:
                 run(blocks[0])
             else:
@@ -328,7 +328,7 @@ def _fit_tps(
     a[n:, :n] = a[:n, n:].T
     b = np.zeros((n + 4, 3))
     b[:n] = q
-    with _single_threaded_blas():  # BLAS threads only slow an (N+4)² LU down
+    with single_threaded_blas():  # BLAS threads only slow an (N+4)² LU down
         x = lu_solve(lu_factor(a, check_finite=False), b, check_finite=False)
     return LandmarkWarp(
         centres=_ro(p),
@@ -350,7 +350,7 @@ def _fit_similarity_rbf(
     if n >= 2:
         residual = q - (p @ affine[:3] + affine[3])
         if np.abs(residual).max() > 1e-12 * max(1.0, np.abs(q).max()):
-            with _single_threaded_blas():
+            with single_threaded_blas():
                 weights = np.linalg.solve(_kernel_matrix(p, smoothing), residual)
     return LandmarkWarp(
         centres=_ro(p),

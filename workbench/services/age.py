@@ -54,7 +54,7 @@ from workbench.core.growth_solve import (
     nearby_pairs,
     solve_landmarks,
 )
-from workbench.core.head_measure import head_circumference_mm
+from workbench.core.head_measure import head_circumference_mm, head_section, section_perimeter
 from workbench.core.mesh import Mesh
 from workbench.core.normals import normals_within_radius
 from workbench.core.spatial import MeshIndex
@@ -81,6 +81,8 @@ SOFT_NEIGHBOURS = 4
 #: the head-circumference scale s, since the circumference chart is the norm of the head's
 #: size (as soft pairs the face's norms pulled the vault along: 0.7 % below the chart)
 HEAD_SIZE = ("depth:g-op", "horizontal:t_l-t_r", "vertical:v-t_l", "vertical:v-t_r")
+#: rounds of the head-size correction (the tape predicted from the warp, a secant step)
+HEAD_SIZE_ROUNDS = 4
 INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue", "eyes")
 
 
@@ -477,45 +479,36 @@ def age_head(
     if not anchor:
         raise InputError("HEAD", "has neither tragia nor porions: the growth solve has no anchor")
 
-    # 3. solve
+    # 3-4. solve, then the arcs; the head-size targets are corrected until the skin's
+    # tape around the head (predicted from the warp of its g-op section) meets the chart
     say("solving the landmark constraints ...")
     t_solve = time.perf_counter()
-    sol = solve_landmarks(p, hard, soft, scale, anchor)
-    solve_s = time.perf_counter() - t_solve
-    q = sol.points
-
-    # 4. arcs: a middle point on the skin moved along the normal (after the solve)
-    src_pts = [p]
-    dst_pts = [q]
-    arc_rows = []
+    section = head_section(head.skin, pts["g"], pts["op"])
+    size_rows = [i for i, c in enumerate(hard) if c.label in HEAD_SIZE]
     skin_index = MeshIndex(head.skin) if arcs else None
-    for t in arcs:
-        ia, ib = index[t.a], index[t.b]
-        assert skin_index is not None
-        mid, normal = _arc_middle(head.skin, skin_index, p[ia], p[ib])
-        chord_c = float(np.linalg.norm(p[ia] - p[ib]))
-        h_c = max(0.0, float((mid - (p[ia] + p[ib]) / 2) @ normal))
-        arc_c = arc_length(chord_c, h_c)
-        arc_t = scale * arc_c * (1.0 + arc_increase)
-        chord_t = float(np.linalg.norm(q[ia] - q[ib]))
-        h_t = arc_sagitta(chord_t, arc_t)
-        # the middle moves with the solved chord's middle, then to the target sagitta
-        new_mid = mid + ((q[ia] + q[ib]) - (p[ia] + p[ib])) / 2 + (h_t - h_c) * normal
-        src_pts.append(mid[None])
-        dst_pts.append(new_mid[None])
-        arc_rows.append((t, arc_c, arc_t))
-    src = np.vstack(src_pts)
-    dst = np.vstack(dst_pts)
-    # the warp meets the targets of hard constraints (and the arc middles) exactly and
-    # follows the other landmarks, whose places are the solve's compromise, loosely
-    exact = np.zeros(len(src), bool)
-    exact[[c.a for c in hard] + [c.b for c in hard]] = True
-    exact[len(p) :] = True
-    lam = np.where(exact, 0.0, LOOSE_SMOOTHING)
+    k_size = 1.0
+    for _round in range(HEAD_SIZE_ROUNDS):
+        hard_k = [
+            replace(c, target=c.target * k_size) if i in size_rows else c
+            for i, c in enumerate(hard)
+        ]
+        sol = solve_landmarks(p, hard_k, soft, scale, anchor)
+        q = sol.points
+        src, dst, lam, arc_rows = _warp_points(
+            head, p, q, hard_k, arcs, index, scale, arc_increase, skin_index
+        )
+        warp = _skin_warp(src, dst, lam)
+        moved = warp(np.vstack([section, pts["g"], pts["op"]]))
+        predicted = section_perimeter(moved[:-2], moved[-2], moved[-1])
+        if not np.isfinite(predicted) or abs(predicted / hc_t - 1.0) < 1e-3:
+            break
+        k_size *= hc_t / predicted
+    hard = hard_k
+    solve_s = time.perf_counter() - t_solve
 
     # 5. deform the whole head
     say("warping the head ...")
-    aged = _deform(head, src, dst, lam)
+    aged = _deform(head, warp)
     aged, pushed = _skin_out_of_skull(aged)
     seconds = time.perf_counter() - t0
 
@@ -727,13 +720,9 @@ def _local_scale(warp: Callable[[np.ndarray], np.ndarray], point: np.ndarray) ->
     return float(np.cbrt(det)) if det > 0 else 1.0
 
 
-def _deform(head: TemplateHead, src: np.ndarray, dst: np.ndarray, lam: np.ndarray) -> TemplateHead:
-    from workbench.io.catalogue import load_catalogue
-    from workbench.services.frame import head_frame_from_landmarks
-    from workbench.services.reconstruct import warp_head
-    from workbench.services.skull_registration import head_transformed
-
-    # coinciding landmarks (stomion and stomion superius of closed lips) are one point
+def _skin_warp(src: np.ndarray, dst: np.ndarray, lam: np.ndarray) -> Any:
+    """The thin-plate spline of the skin: coinciding sources (stomion and stomion superius
+    of closed lips) merged, hard-constraint landmarks exact, the rest loose."""
     key = np.round(src, 6)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
@@ -742,7 +731,56 @@ def _deform(head: TemplateHead, src: np.ndarray, dst: np.ndarray, lam: np.ndarra
     merged /= np.bincount(inverse, minlength=len(first))[:, None]
     lam_merged = np.full(len(first), np.inf)
     np.minimum.at(lam_merged, inverse, lam)
-    warp = fit_warp(src[first], merged, smoothing=lam_merged)
+    return fit_warp(src[first], merged, smoothing=lam_merged)
+
+
+def _warp_points(
+    head: TemplateHead,
+    p: np.ndarray,
+    q: np.ndarray,
+    hard: Sequence[Constraint],
+    arcs: Sequence[Any],
+    index: Mapping[str, int],
+    scale: float,
+    arc_increase: float,
+    skin_index: MeshIndex | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[Any, float, float]]]:
+    """Source and target points of the skin warp (landmarks, then arc middles) and their λ."""
+    src_pts = [p]
+    dst_pts = [q]
+    arc_rows = []
+    for t in arcs:
+        ia, ib = index[t.a], index[t.b]
+        assert skin_index is not None
+        mid, normal = _arc_middle(head.skin, skin_index, p[ia], p[ib])
+        chord_c = float(np.linalg.norm(p[ia] - p[ib]))
+        h_c = max(0.0, float((mid - (p[ia] + p[ib]) / 2) @ normal))
+        arc_c = arc_length(chord_c, h_c)
+        arc_t = scale * arc_c * (1.0 + arc_increase)
+        chord_t = float(np.linalg.norm(q[ia] - q[ib]))
+        h_t = arc_sagitta(chord_t, arc_t)
+        # the middle moves with the solved chord's middle, then to the target sagitta
+        new_mid = mid + ((q[ia] + q[ib]) - (p[ia] + p[ib])) / 2 + (h_t - h_c) * normal
+        src_pts.append(mid[None])
+        dst_pts.append(new_mid[None])
+        arc_rows.append((t, arc_c, arc_t))
+    src = np.vstack(src_pts)
+    dst = np.vstack(dst_pts)
+    # the warp meets the targets of hard constraints (and the arc middles) exactly and
+    # follows the other landmarks, whose places are the solve's compromise, loosely
+    exact = np.zeros(len(src), bool)
+    exact[[c.a for c in hard] + [c.b for c in hard]] = True
+    exact[len(p) :] = True
+    lam = np.where(exact, 0.0, LOOSE_SMOOTHING)
+    return src, dst, lam, arc_rows
+
+
+def _deform(head: TemplateHead, warp: Any) -> TemplateHead:
+    from workbench.io.catalogue import load_catalogue
+    from workbench.services.frame import head_frame_from_landmarks
+    from workbench.services.reconstruct import warp_head
+    from workbench.services.skull_registration import head_transformed
+
     warped = warp_head(head, warp)
     # triangles the warp turned over, relaxed (the reference's own sub-0.01 mm² slivers at
     # the mouth corners turn over at the slightest push and are left to themselves)
