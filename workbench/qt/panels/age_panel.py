@@ -264,8 +264,9 @@ class AgePanel(QWidget):
         self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         header = self.table.horizontalHeader()
         header.setSectionResizeMode(0, QHeaderView.ResizeMode.Stretch)
-        for col in range(1, len(COLUMNS)):
-            header.setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
+        # number columns sized once, on the first rows: re-measuring every row on each
+        # slider move (ResizeToContents) cost ~40 ms of the GUI thread per move
+        self._sized = False
         self.table.setMinimumHeight(240)
         layout.addWidget(
             QLabel(f"<b>Measurements</b> (mm; |z| &gt; {Z_LIMIT:g} highlighted; norms first)")
@@ -344,6 +345,10 @@ class AgePanel(QWidget):
 
     def show_rows(self, rows: Sequence[MeasurementRow]) -> None:
         self.model.set_rows(rows)
+        if rows and not self._sized:
+            self._sized = True
+            for col in range(1, len(COLUMNS)):
+                self.table.resizeColumnToContents(col)
 
     def show_figures(self, html: str) -> None:
         self.figures.setText(html)
