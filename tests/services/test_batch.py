@@ -36,13 +36,13 @@ def test_rows_become_the_single_commands_argv(tmp_path, parsers):
     (tmp_path / "lm.mrk.json").write_text("{}", encoding="utf-8")
     m = _write(
         tmp_path / "m.csv",
-        "id,job,input,sex,no_pictures,template,landmarks,ensemble,expression,jaw,out\n"
-        ",,,,,,,,,,\n"
+        "id,job,input,sex,no_pictures,template,landmarks,ensemble,expression,jaw,out,#notes\n"
+        ",,,,,,,,,,,\n"
         "# a comment line\n"
-        "r1,reconstruct,skull.ply,male,true,a;b,lm.mrk.json,3,,,\n"
-        "r2,reconstruct,sample:skull,,false,,,,,,\n"
-        "a1,animate,reference:male,,,,,,smile,5,\n"
-        "a2,animate,reference:female,,,,,,,,open.glb\n",
+        "r1,reconstruct,skull.ply,male,true,a;b,lm.mrk.json,3,,,,my own note\n"
+        "r2,reconstruct,sample:skull,,false,,,,,,,\n"
+        "a1,animate,reference:male,,,,,,smile,5,,\n"
+        "a2,animate,reference:female,,,,,,,,open.glb,\n",
     )
     out = tmp_path / "out"
     rows = {r.row_id: r for r in read_batch_manifest(m, out, parsers)}
@@ -79,6 +79,7 @@ def test_manifest_errors_name_every_line_before_anything_runs(tmp_path, parsers)
         read_batch_manifest(m, tmp_path / "out", parsers)
     text = str(err.value)
     for expected in (
+        "line 1: column colour is no option of any job",
         "line 3: id a is used twice (first on line 2)",
         "line 4: job 'paint' is not one of",
         "line 5: reconstruct has no option --colour",

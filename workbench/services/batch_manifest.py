@@ -21,7 +21,8 @@ for those that write one file (``animate``) ``DIR/<id>/skin.ply`` unless the
 row's ``out`` column gives a bare file name (``smile.glb``).  ``--force`` is
 never a column: the batch never replaces an output the user made.
 
-Lines starting with ``#`` are comments.  Every structural problem (unknown job,
+Lines starting with ``#`` are comments, and so are columns whose name starts
+with ``#`` (``#notes``).  Every structural problem (unknown job,
 an option the job does not have, a duplicate or unsafe id, no input) is
 collected and raised as one :class:`~workbench.core.errors.InputError` naming
 each manifest line, before anything runs.  The check is against the
@@ -189,7 +190,14 @@ def read_batch_manifest(
     if dupes or "" in header:
         raise InputError(path, f"line 1: empty or repeated column names {dupes or ['']}")
     rows: list[BatchRow] = []
-    problems: list[str] = []
+    known = {n for parser in commands.values() for n in _option_map(parser)}
+    problems: list[str] = [
+        f"line 1: column {h} is no option of any job"
+        for h in header
+        if h not in ("id", "job", "input", "out")
+        and not h.startswith("#")
+        and h.replace("_", "-") not in known
+    ]
     seen: dict[str, int] = {}
     line = reader.line_num
     for cells in reader:
@@ -200,7 +208,11 @@ def read_batch_manifest(
         if len(cells) > len(header):
             problems.append(f"{where}: {len(cells)} cells for {len(header)} columns")
             continue
-        values = {h: c.strip() for h, c in zip(header, cells, strict=False) if c.strip()}
+        values = {
+            h: c.strip()
+            for h, c in zip(header, cells, strict=False)
+            if c.strip() and not h.startswith("#")  # a "#notes" column is the user's own
+        }
         row_id, job = values.get("id", ""), values.get("job", "")
         if not ID_PATTERN.match(row_id) or row_id in RESERVED or ".partial" in row_id:
             problems.append(
