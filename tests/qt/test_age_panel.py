@@ -231,6 +231,7 @@ def test_a_bad_request_shows_a_message_not_a_traceback(ageing, qtbot):
     text = panel.error.text()
     assert panel.error.isVisible()
     assert "outside the norms' range" in text and "60" in text
+    assert "Target age" in text and "--to" not in text  # the dock's field, not the CLI's
     assert "Traceback" not in text and "Unexpected" not in text
     assert tool.shown_age is None and not tool.actors()["after"].GetVisibility()
     assert panel.model.rowCount() == 0
@@ -243,6 +244,7 @@ def test_a_bad_request_shows_a_message_not_a_traceback(ageing, qtbot):
     assert not tool.cache  # the results of 18 y are stale
     qtbot.waitUntil(lambda: 10 in tool.failed, timeout=STEP_MS)
     assert "outside the norms' range" in panel.error.text()
+    assert "Age now: age 60 y" in panel.error.text()
 
 
 def test_the_case_layers_are_hidden_while_the_dock_is_in_front(

@@ -582,7 +582,7 @@ class AgeTool(QObject):
             return
         from workbench.qt import dialogs
 
-        self.failed[age] = dialogs.error_text(f"Could not age the head to {age} y", exc)[0]
+        self.failed[age] = dialogs.error_text(f"Could not age the head to {age} y", in_dock(exc))[0]
         if not isinstance(exc, WorkbenchError):  # a bug: the details go to the error dialog
             self.host.show_error(f"Could not age the head to {age} y", exc)
         self.show()
@@ -875,6 +875,27 @@ class AgeTool(QObject):
         """Stop computing (before the view closes)."""
         self.runner.cancel(CHANNEL)
         self.gui_call.close()
+
+
+#: the service's option names (its command line's) as the dock's fields
+FIELDS = {
+    "--from": "Age now",
+    "--to": "Target age",
+    "--sex": "Sex",
+    "--ethnicity": "Norms of",
+    "--norms": "Norms",
+    "--arc-increase": "Arc increase",
+}
+
+
+def in_dock(exc: BaseException) -> BaseException:
+    """An :class:`InputError` naming a command-line option renamed after the dock's field."""
+    if isinstance(exc, InputError) and exc.source in FIELDS:
+        hint = exc.hint
+        if hint and "--norms" in hint:  # the dock has no norms import: keep the first advice
+            hint = hint.split(", or ")[0]
+        return InputError(FIELDS[exc.source], exc.problem, hint)
+    return exc
 
 
 def figures_html(result: AgeResult) -> str:
