@@ -910,7 +910,10 @@ def figures_html(result: AgeResult) -> str:
             "Head circumference",
             f"{hc.get('before')} → {hc.get('after')} mm (target {hc.get('target')})",
         ),
-        ("  z-score", f"{hc.get('z_before')} → {hc.get('z_after')} ({hc.get('chart', '')})"),
+        (
+            "  z-score",
+            f"{_z_html(hc.get('z_before'))} → {_z_html(hc.get('z_after'))} ({hc.get('chart', '')})",
+        ),
         ("Global scale", f"{f.get('global_scale')}"),
         (
             "Hard constraints",
@@ -936,6 +939,17 @@ def drawn_data(actor: Any) -> Any:
     pipeline connection, and its input is an empty output until the first render.
     """
     return actor.mapper.dataset
+
+
+def _z_html(z: Any) -> str:
+    """A z-score, marked (as in the table) when it is beyond ±2."""
+    from workbench.qt.panels.age_panel import HIGHLIGHT, out_of_range
+
+    if not isinstance(z, (int, float)):
+        return "–"
+    if out_of_range(float(z)):
+        return f"<span style='background-color:{HIGHLIGHT.name()}'>{z}</span>"
+    return f"{z}"
 
 
 def _shift(offset: np.ndarray) -> np.ndarray:
