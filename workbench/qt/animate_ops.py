@@ -20,16 +20,49 @@ this tool, not to :data:`workbench.qt.scene.LAYERS`.
 Undo: slider and preset changes are view state, not case edits.  The case
 is not changed, nothing goes on the document's undo stack, and Relax is the
 way back to the face at rest.
+
+Gaze and lids: the gaze sliders turn the eyes (drawn from the animator's
+pose of the eyes, as :meth:`Animator.meshes` gives it; the skin does not
+depend on the gaze, so nothing is simulated), the lid slider sets the lid
+nodes' targets and the timer carries the lids there.
+
+Timeline (a track: :mod:`workbench.services.animation_track`).  Frame ``i``
+of a track means exactly what :func:`~workbench.services.animation_track.run_track`
+computes: frame 0 is the rest skin settled in frame 0's pose, every later
+frame is frame ``i``'s pose (``apply_frame``) and ``steps_per_frame`` steps
+(20 steps of 1/600 s at 30 fps) from frame ``i - 1``'s simulated state, so
+the skin keeps its own dynamics (lag, overshoot) between keys.  Play runs
+that, one frame per tick of a :class:`QTimer` at the track's fps (slower
+than real time when a frame takes longer to compute than ``1 / fps``; no
+frame is skipped, since each one's state is the next one's start).
+
+Scrubbing semantics, chosen so that a scrubbed frame is the same skin as
+``run_track``'s (not a quasi-static approximation): the simulation state
+(node positions and velocities) of every computed frame is kept as a
+checkpoint (every ``stride``-th frame once a track's checkpoints would pass
+:data:`CHECKPOINT_BUDGET_BYTES`).  Scrubbing to a frame, backwards or
+forwards, restores its checkpoint (instant); a frame not computed yet is
+reached by simulating on from the nearest earlier checkpoint, one frame per
+timer tick so the window stays responsive (the time label says so).
+Resetting to a frame's pose and settling instead would be quicker on a long
+jump but shows the face at rest in that pose, which differs from the
+played frame wherever the face is moving (speech: millimetres).  A slider,
+preset or Relax change leaves the track: the skin is then the slider pose
+(moving under the live timer as before), and "Record keyframe" stores that
+pose as a key at the timeline's time.
 """
 
 from __future__ import annotations
 
+import math
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
+from workbench.core.errors import WorkbenchError
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
 
@@ -40,6 +73,7 @@ if TYPE_CHECKING:
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
     from workbench.services.animation import Animator
+    from workbench.services.animation_track import Key, Track, TrackFrames
 
 #: the worker channel of head loading (a newer load supersedes the older)
 CHANNEL = "animate"
@@ -54,6 +88,13 @@ SETTLED_FRAMES = 3
 INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth")
 ALWAYS_SHOWN = ("eyes",)
 INNER_COLOURS = {"eyes": (0.95, 0.95, 0.95), "upper_teeth": (1.0, 1.0, 0.94)}
+#: parts moved with the jaw, and the parts the gaze turns
+JAW_MOVED = ("mandible", "lower_teeth", "tongue")
+GAZE_MOVED = ("eyes",)
+#: memory for a track's frame checkpoints (positions + velocities of every skin node)
+CHECKPOINT_BUDGET_BYTES = 96 * 2**20
+#: length of a track started by "Record keyframe" with no track loaded (seconds)
+NEW_TRACK_S = 2.0
 
 
 class AnimateHost(Protocol):
@@ -81,10 +122,12 @@ class AnimateTool(QObject):
     -------
     loaded()    a head was loaded (``animator`` is set)
     settled()   the timer stopped: the skin is at rest for the current parameters
+    frame_shown(int)  the timeline stopped on this track frame (scrubbed or paused there)
     """
 
     loaded = Signal()
     settled = Signal()
+    frame_shown = Signal(int)
 
     def __init__(
         self,
@@ -118,6 +161,44 @@ class AnimateTool(QObject):
         panel.jaw_changed.connect(self.set_jaw)
         panel.relax_requested.connect(self.relax)
         panel.bones_toggled.connect(self._show_inner)
+        panel.gaze_changed.connect(self.set_gaze)
+        panel.lids_changed.connect(self.set_lids)
+        panel.open_track_requested.connect(self._ask_open_track)
+        panel.save_track_requested.connect(self._ask_save_track)
+        panel.record_requested.connect(self.record_key)
+        panel.frame_requested.connect(self.seek)
+        panel.play_toggled.connect(lambda on: self.play() if on else self.pause())
+        panel.loop_toggled.connect(self.set_loop)
+        panel.length_changed.connect(self.set_length)
+        self._faces: dict[str, np.ndarray] = {}  # triangles of the drawn parts
+        self._vf: dict[str, Any] = {}
+        self._gaze_drawn = (0.0, 0.0)
+        self._preset: tuple[str, float] | None = None  # the last preset applied (Record)
+        # ---- timeline
+        #: the track on the timeline (None: none), the file it came from (never overwritten)
+        self.track: Track | None = None
+        self.track_path: Path | None = None
+        self._saved_as: Path | None = None
+        #: its per-frame parameters for the loaded head's muscle order
+        self.frames: TrackFrames | None = None
+        #: the timeline's frame (the slider)
+        self.position = 0
+        #: the track frame the simulated skin is in (None: off the track, e.g. a slider moved)
+        self.frame: int | None = None
+        self.playing = False
+        self.loop = False
+        #: milliseconds per played frame (simulating or restoring + moving the drawn points;
+        #: the render runs after it), newest last
+        self.play_ms: list[float] = []
+        #: milliseconds from one played frame to the next (the render and event loop included)
+        self.play_interval_ms: list[float] = []
+        self._last_tick: float | None = None
+        self._checkpoints: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._stride = 1
+        self._target: int | None = None
+        self.track_timer = QTimer(self)
+        self.track_timer.setInterval(0)
+        self.track_timer.timeout.connect(self._track_tick)
 
     # ------------------------------------------------------------ loading
     def ensure_loaded(self) -> None:
@@ -162,6 +243,9 @@ class AnimateTool(QObject):
         )
         self.host.status(f"Animate: the reference {sex} head (view only: the case is not changed).")
         self.loaded.emit()
+        if self.track is not None:  # opened before the head was there: frames for its muscles
+            self.set_track(self.track, self.track_path)
+            return
         name = self.panel.expression.currentText()
         if name and name != "neutral":
             self.set_expression(name, self.panel.weight())
@@ -172,7 +256,9 @@ class AnimateTool(QObject):
         anim = self.animator
         if anim is None or not name:
             return
+        self._leave_track()
         anim.set_expression(name, weight)
+        self._preset = (name, float(weight))
         self._show_state()
         self._start()
 
@@ -180,6 +266,7 @@ class AnimateTool(QObject):
         anim = self.animator
         if anim is None:
             return
+        self._leave_track()
         anim.set_muscles({code: float(contraction)})
         self._start()
 
@@ -187,16 +274,41 @@ class AnimateTool(QObject):
         anim = self.animator
         if anim is None:
             return
+        self._leave_track()
         anim.set_jaw(float(degrees), anim.protrusion_mm)
         self._start()
 
-    def relax(self) -> None:
-        """All muscles relaxed, jaw closed; the timer carries the face back to rest."""
+    def set_gaze(self, yaw_deg: float, pitch_deg: float) -> None:
+        """Turn the eyes (degrees: yaw toward the subject's left, pitch up); drawn at once."""
         anim = self.animator
         if anim is None:
             return
+        self._leave_track()
+        anim.set_gaze(float(yaw_deg), float(pitch_deg))
+        self._move_inner()
+        self.scene.request_render()
+
+    def set_lids(self, closure: float) -> None:
+        """Lid closure 0 (open) .. 1 (closed); the timer carries the lids there."""
+        anim = self.animator
+        if anim is None:
+            return
+        self._leave_track()
+        anim.set_lids(float(closure))
+        self._start()
+
+    def relax(self) -> None:
+        """All muscles relaxed, jaw closed, lids open, eyes ahead; the timer carries the
+        face back to rest."""
+        anim = self.animator
+        if anim is None:
+            return
+        self._leave_track()
         anim.set_expression("neutral")
+        anim.set_gaze(0.0, 0.0)
+        self._preset = None
         self._show_state()
+        self._move_inner()
         self._start()
 
     def contraction(self) -> dict[str, float]:
@@ -209,7 +321,7 @@ class AnimateTool(QObject):
     def _show_state(self) -> None:
         anim = self.animator
         if anim is not None:
-            self.panel.show_state(self.contraction(), anim.jaw_deg)
+            self.panel.show_state(self.contraction(), anim.jaw_deg, anim.gaze, anim.lids)
 
     # ------------------------------------------------------------ running
     @property
@@ -238,8 +350,7 @@ class AnimateTool(QObject):
             float(np.abs(points - before).max()) if before is not None else float("inf")
         )
         self._move_skin(points)
-        if anim.jaw_deg != self._jaw_drawn:
-            self._move_inner()
+        self._move_inner_if_moved()
         self.scene.request_render()
         self.frame_ms.append(1000.0 * (time.perf_counter() - t0))
         del self.frame_ms[:-200]
@@ -275,6 +386,395 @@ class AnimateTool(QObject):
             return np.zeros(0)
         return np.linalg.norm(anim.skin().vertices - anim.head.skin.vertices, axis=1)
 
+    # ------------------------------------------------------------ timeline
+    def open_track(self, path: str | Path) -> bool:
+        """Load a track file onto the timeline (frame 0 shown); False (and a message in the
+        dock) when the file is not a valid track."""
+        from workbench.services.animation_track import load_track
+
+        try:
+            track = load_track(path)
+        except WorkbenchError as exc:
+            self.panel.show_track_message(str(exc))
+            self.host.status(f"Track not opened: {exc}")
+            return False
+        self.panel.show_track_message("")
+        self.set_track(track, Path(path))
+        return True
+
+    def set_track(self, track: Track, path: Path | None = None) -> None:
+        """Put ``track`` on the timeline (``path``: the file it was read from, or None) and
+        show its first frame; every checkpoint of an earlier track is dropped."""
+        self.pause()
+        self.track, self.track_path = track, path
+        self._saved_as = None
+        self.frames = None
+        self._checkpoints.clear()
+        self._target = None
+        self.frame = None
+        self.position = 0
+        self._show_track_label()
+        self.panel.show_length(track.duration)
+        anim = self.animator
+        if anim is None:  # frames need the head's muscle order: evaluated when it is loaded
+            self.panel.show_timeline(track.n_frames, 0, track.fps, playing=False)
+            return
+        from workbench.services.animation_track import evaluate_track
+
+        self.frames = evaluate_track(track, anim.muscle_codes)
+        self._stride = max(
+            1, math.ceil(self.frames.n_frames * 2 * anim.sim.x.nbytes / CHECKPOINT_BUDGET_BYTES)
+        )
+        self.seek(0)
+
+    def _replace_track(self, track: Track) -> None:
+        """An edited track: checkpoints before the first frame whose pose changed are kept."""
+        from workbench.services.animation_track import evaluate_track
+
+        anim, old = self.animator, self.frames
+        self.track = track
+        self._show_track_label()
+        self.panel.show_length(track.duration)
+        if anim is None:
+            return
+        new = evaluate_track(track, anim.muscle_codes)
+        first = 0
+        if old is not None:
+            n = min(old.n_frames, new.n_frames)
+            same = np.ones(n, bool)
+            for name in ("contraction", "protrusion", "jaw_deg", "gaze", "lids"):
+                a, b = getattr(old, name)[:n], getattr(new, name)[:n]
+                same &= np.all(np.isclose(a, b, rtol=0, atol=1e-12).reshape(n, -1), axis=1)
+            first = int(np.argmin(same)) if not same.all() else n
+        self.frames = new
+        self._checkpoints = {k: v for k, v in self._checkpoints.items() if k < first}
+        if self.frame is not None and self.frame >= first:
+            self.frame = None
+        self.position = min(self.position, new.n_frames - 1)
+        self._show_timeline()
+
+    def _show_track_label(self) -> None:
+        track = self.track
+        if track is None:
+            self.panel.show_track("No track: open one, or record keyframes.")
+            return
+        shown = self._saved_as or self.track_path
+        name = shown.name if shown is not None else "new track (not saved)"
+        self.panel.show_track(
+            f"{name}: {track.duration:.2f} s at {track.fps:g} fps, {len(track.keys)} keys, "
+            f"{len(track.phonemes)} phonemes"
+        )
+
+    def _show_timeline(self) -> None:
+        track = self.track
+        if track is None:
+            self.panel.show_timeline(0, 0, 1.0, playing=False)
+            return
+        n = self.frames.n_frames if self.frames is not None else track.n_frames
+        computing = self._target if self._target is not None and not self.playing else None
+        self.panel.show_timeline(n, self.position, track.fps, computing_to=computing)
+
+    @property
+    def time_s(self) -> float:
+        """The timeline's time (seconds)."""
+        return self.position / self.track.fps if self.track is not None else 0.0
+
+    def seek(self, frame: int) -> None:
+        """Show track frame ``frame`` (see the module docstring: the same state as
+        ``run_track`` there); a frame not computed yet is simulated toward, tick by tick."""
+        frames = self.frames
+        if frames is None or self.animator is None:
+            return
+        self.timer.stop()
+        frame = int(np.clip(frame, 0, frames.n_frames - 1))
+        self.position = frame
+        self._target = frame
+        self._show_timeline()
+        if not self.track_timer.isActive():
+            self.track_timer.setInterval(0)
+            self.track_timer.start()
+
+    def show_frame_now(self, frame: int) -> None:
+        """:meth:`seek` and run the ticks until the frame is there (blocks; scripts, tests)."""
+        self.seek(frame)
+        while self._target is not None and self.frames is not None:
+            self._track_tick()
+
+    def play(self) -> None:
+        """Play from the timeline's frame at the track's fps (from 0 when at the end)."""
+        frames, track = self.frames, self.track
+        if frames is None or track is None or self.animator is None:
+            self.panel.show_timeline(0, 0, 1.0, playing=False)
+            return
+        self.timer.stop()
+        if self.position >= frames.n_frames - 1 and self.frame == self.position:
+            self.position = 0
+            self._target = 0
+        elif self.frame != self.position:
+            self._target = self.position  # first get to the shown frame
+        self.playing = True
+        self.play_ms.clear()
+        self.play_interval_ms.clear()
+        self._last_tick = None
+        self.panel.show_timeline(frames.n_frames, self.position, track.fps, playing=True)
+        self.track_timer.setInterval(round(1000.0 / track.fps))
+        self.track_timer.start()
+
+    def pause(self) -> None:
+        """Stop playing; the frame reached stays (drawn with the exact skin)."""
+        was = self.playing
+        self.playing = False
+        if self.track is not None:
+            self.panel.show_timeline(
+                self.frames.n_frames if self.frames is not None else self.track.n_frames,
+                self.position,
+                self.track.fps,
+                playing=False,
+            )
+        if was:
+            self._report_play()
+        if was and self._target is None:
+            self.track_timer.stop()
+            self._at_frame()
+
+    def set_loop(self, on: bool) -> None:
+        self.loop = bool(on)
+
+    def set_length(self, seconds: float) -> None:
+        """The track's duration (seconds); with no track, a new neutral track of that length."""
+        from workbench.services.track_edit import new_track, with_duration
+
+        try:
+            if self.track is None:
+                self.set_track(new_track(seconds))
+            elif abs(seconds - self.track.duration) > 1e-9:
+                self._replace_track(with_duration(self.track, seconds))
+        except WorkbenchError as exc:
+            self.panel.show_track_message(str(exc))
+
+    def _leave_track(self) -> None:
+        """A slider or preset changed the pose: stop playing; the skin is off the track."""
+        if self.playing:
+            self.pause()
+        self.track_timer.stop()
+        self._target = None
+        self.frame = None
+
+    def _track_tick(self) -> None:
+        """One timeline tick: one frame nearer the target (restore or simulate), drawn."""
+        anim, frames = self.animator, self.frames
+        if anim is None or frames is None or self.scene.closed:
+            self.track_timer.stop()
+            self.playing = False
+            return
+        t0 = time.perf_counter()
+        if self._target is None:
+            if not self.playing:
+                self.track_timer.stop()
+                return
+            nxt = self.position + 1
+            if nxt >= frames.n_frames:
+                if not self.loop:
+                    self.pause()
+                    return
+                nxt = 0
+            self._target = nxt
+        target = self._target
+        self._one_toward(target)
+        self.position = self.frame if self.frame is not None else self.position
+        points = anim.skin(exact=False).vertices
+        self._move_skin(points)
+        self._move_inner_if_moved()
+        self.scene.request_render()
+        if self.frame == target:
+            self._target = None
+        if self.playing:
+            self.play_ms.append(1000.0 * (time.perf_counter() - t0))
+            del self.play_ms[:-500]
+            if self._last_tick is not None:
+                self.play_interval_ms.append(1000.0 * (t0 - self._last_tick))
+                del self.play_interval_ms[:-500]
+            self._last_tick = t0
+            fps = self.track.fps if self.track is not None else 30.0
+            self.track_timer.setInterval(0 if self._target is not None else round(1000.0 / fps))
+            self._show_state()
+            self._show_timeline()
+            if len(self.play_ms) % 15 == 0:
+                self._report_play()
+        elif self._target is None:
+            self.track_timer.stop()
+            self._at_frame()
+        else:
+            self._show_timeline()
+
+    def _report_play(self) -> None:
+        """The median frame times in the dock and the status line (while and after playing)."""
+        if not self.play_ms or self.track is None:
+            return
+        ms = float(np.median(self.play_ms))
+        budget = 1000.0 / self.track.fps
+        every = float(np.median(self.play_interval_ms)) if self.play_interval_ms else ms
+        text = (
+            f"{'Playing' if self.playing else 'Played'}: {ms:.0f} ms median frame, a frame every {every:.0f} ms with drawing "
+            f"({len(self.play_ms)} frames; {min(1.0, budget / max(every, 1e-9)):.0%} of "
+            f"real time at {self.track.fps:g} fps)."
+        )
+        self.panel.show_status(text)
+        self.host.status(f"Animate: {text}")
+
+    def _at_frame(self) -> None:
+        """Stopped on a track frame: the exact skin, sliders and timeline shown."""
+        anim = self.animator
+        if anim is None:
+            return
+        self._move_skin(anim.skin().vertices)
+        self._move_inner()
+        self._show_state()
+        self._show_timeline()
+        self.scene.request_render()
+        if self.frame is not None:
+            self.frame_shown.emit(self.frame)
+
+    def _one_toward(self, target: int) -> None:
+        """Restore ``target``'s checkpoint, or the nearest earlier one, or simulate a frame."""
+        if self.frame == target:
+            return
+        if target in self._checkpoints:
+            self._restore(target)
+            return
+        below = max((k for k in self._checkpoints if k < target), default=None)
+        if (
+            self.frame is not None
+            and self.frame < target
+            and (below is None or self.frame >= below)
+        ):
+            self._simulate(self.frame + 1)
+        elif below is not None:
+            self._restore(below)
+        else:
+            self._simulate(0)
+
+    def _simulate(self, i: int) -> None:
+        """Frame ``i`` from frame ``i - 1``'s state, as ``play_track`` does (0: from rest)."""
+        from workbench.services.animation_track import apply_frame, steps_per_frame
+
+        anim, frames, track = self.animator, self.frames, self.track
+        assert anim is not None and frames is not None and track is not None
+        apply_frame(anim, frames, i)
+        if i == 0:
+            anim.sim.reset()  # run_track starts a fresh head: the rest skin
+            anim.settle()
+        else:
+            anim.step(steps_per_frame(anim, track.fps))
+        self.frame = i
+        if i % self._stride == 0:
+            self._checkpoints[i] = (anim.sim.x.copy(), anim.sim.v.copy())
+
+    def _restore(self, i: int) -> None:
+        from workbench.services.animation_track import apply_frame
+
+        anim, frames = self.animator, self.frames
+        assert anim is not None and frames is not None
+        x, v = self._checkpoints[i]
+        apply_frame(anim, frames, i)
+        anim.update_muscles()  # targets and jaw anchors of frame i (moves only kinematic nodes)
+        anim.sim.x = x.copy()
+        anim.sim.v = v.copy()
+        self.frame = i
+
+    def computed_frames(self) -> list[int]:
+        """Frames with a checkpoint (scrubbing there is instant)."""
+        return sorted(self._checkpoints)
+
+    # ------------------------------------------------------------ authoring
+    def current_key(self) -> Key:
+        """The animator's pose as a key at the timeline's time (all 24 contractions, jaw,
+        gaze, lids; lip protrusion only through the last preset, when it is the preset's)."""
+        from workbench.services.animation import EXPRESSIONS
+        from workbench.services.animation_track import Key
+
+        anim = self.animator
+        assert anim is not None
+        expressions: dict[str, float] = {}
+        if np.any(anim.protrusion != 0) and self._preset is not None:
+            name, w = self._preset
+            e = EXPRESSIONS[name]
+            want = np.array(
+                [np.clip(w * e.protrusion.get(c, 0.0), -1, 1) for c in anim.muscle_codes]
+            )
+            if np.allclose(want, anim.protrusion, atol=1e-9):
+                expressions = {name: w}
+        return Key(
+            round(self.time_s, 6),
+            expressions,
+            {c: round(float(anim.contraction[i]), 4) for i, c in enumerate(anim.muscle_codes)},
+            round(float(anim.jaw_deg), 4),
+            (round(anim.gaze[0], 4), round(anim.gaze[1], 4)),
+            round(float(anim.lids), 4),
+        )
+
+    def record_key(self) -> Key | None:
+        """Add the current pose as a key at the timeline's time (a new track if none)."""
+        from workbench.services.track_edit import new_track, with_key
+
+        if self.animator is None:
+            return None
+        try:
+            track = self.track
+            if track is None:
+                track = new_track(NEW_TRACK_S)
+                self.set_track(track)
+                self._leave_track()  # keep the slider pose on screen
+            key = self.current_key()
+            track = with_key(track, key)
+        except WorkbenchError as exc:
+            self.panel.show_track_message(str(exc))
+            return None
+        self.panel.show_track_message("")
+        self._replace_track(track)
+        dropped = (
+            ""
+            if key.expressions or not np.any(self.animator.protrusion != 0)
+            else " (lip protrusion not kept: a key has it only through a preset)"
+        )
+        self.panel.show_status(f"Key recorded at {key.t:.2f} s{dropped}.")
+        return key
+
+    def save_track_to(self, path: str | Path, *, force: bool = False) -> Path | None:
+        """Write the timeline's track as JSON (atomic; never over the file it came from)."""
+        from workbench.services.track_edit import save_track
+
+        if self.track is None:
+            return None
+        try:
+            out = save_track(self.track, path, [self.track_path], force=force)
+        except WorkbenchError as exc:
+            self.panel.show_track_message(str(exc))
+            return None
+        self.panel.show_track_message("")
+        self._saved_as = Path(out)
+        self._show_track_label()
+        self.panel.show_status(f"Track saved: {out}")
+        return out
+
+    def _ask_open_track(self) -> None:
+        from PySide6.QtWidgets import QFileDialog
+
+        path, _ = QFileDialog.getOpenFileName(
+            self.host.window(), "Open a keyframe track", "", "Tracks (*.json);;All files (*)"
+        )
+        if path:
+            self.open_track(path)
+
+    def _ask_save_track(self) -> None:
+        from PySide6.QtWidgets import QFileDialog
+
+        path, _ = QFileDialog.getSaveFileName(
+            self.host.window(), "Save the track", "", "Tracks (*.json)"
+        )
+        if path:  # the dialog asked before replacing a file; it is kept as a backup
+            self.save_track_to(path, force=True)
+
     # ------------------------------------------------------------ drawing
     def draw(self) -> None:
         """(Re)draw the skin and the inner parts of the loaded head."""
@@ -296,13 +796,21 @@ class AnimateTool(QObject):
             name="animate_skin",
         )
         self._actors["skin"] = actor
+        self._faces = {part: mesh.faces for part, mesh in meshes.items()}
+        # vertex-face incidence of each part, kept for the per-frame normals
+        self._vf = {part: mesh.vertex_faces_matrix for part, mesh in meshes.items()}
         self._points = skin.vertices.copy()
         for part in INNER_PARTS + ALWAYS_SHOWN:
             if part not in meshes:
                 continue
+            poly = to_polydata(meshes[part], normals=True)
+            paint: dict[str, Any] = {"color": INNER_COLOURS.get(part, BONE)}
+            if part == "eyes":  # an iris and pupil, so that the gaze can be seen
+                poly.point_data["rgb"] = eye_colours(anim)
+                paint = {"scalars": "rgb", "rgb": True}
             actor = self.plotter.add_mesh(
-                to_polydata(meshes[part], normals=True),
-                color=INNER_COLOURS.get(part, BONE),
+                poly,
+                **paint,
                 **SMOOTH,
                 pickable=False,
                 render=False,
@@ -311,6 +819,7 @@ class AnimateTool(QObject):
             actor.SetVisibility(part in ALWAYS_SHOWN or self.panel.bones.isChecked())
             self._actors[part] = actor
         self._jaw_drawn = anim.jaw_deg
+        self._gaze_drawn = anim.gaze
         self._show_inner(self.panel.bones.isChecked())
 
     def actors(self) -> dict[str, Any]:
@@ -343,19 +852,33 @@ class AnimateTool(QObject):
         anim = self.animator
         if actor is None or anim is None:
             return
-        _set_points(actor, points, anim.head.skin.faces)
+        _set_points(actor, points, self._faces["skin"], self._vf.get("skin"))
         self._points = points
 
     def _move_inner(self) -> None:
+        """Move the jaw's parts and the eyes to the animator's pose (points in place)."""
         anim = self.animator
         if anim is None:
             return
-        meshes = anim.meshes()
-        for part in ("mandible", "lower_teeth", "tongue"):
+        for part, points in inner_points(anim, JAW_MOVED + GAZE_MOVED).items():
             actor = self._actors.get(part)
-            if actor is not None and part in meshes:
-                _set_points(actor, meshes[part].vertices, meshes[part].faces)
+            if actor is not None:
+                _set_points(actor, points, self._faces[part], self._vf.get(part))
         self._jaw_drawn = anim.jaw_deg
+        self._gaze_drawn = anim.gaze
+        self.scene.request_render()
+
+    def _move_inner_if_moved(self) -> None:
+        anim = self.animator
+        if anim is not None and (anim.jaw_deg != self._jaw_drawn or anim.gaze != self._gaze_drawn):
+            self._move_inner()
+
+    def drawn_points(self, part: str) -> np.ndarray:
+        """``(n, 3)`` vertices (mm) of a drawn part as the 3D view has them (tests)."""
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        data = self._actors[part].GetMapper().GetInput()
+        return vtk_to_numpy(data.GetPoints().GetData()).copy()
 
     def reset_camera(self) -> None:
         """Look at the face from the front (the head frame: +z toward the face, +y up)."""
@@ -380,12 +903,68 @@ class AnimateTool(QObject):
         self.scene.request_render()
 
     def detach(self) -> None:
-        """Stop the timer (before the view closes)."""
+        """Stop the timers (before the view closes)."""
         self.timer.stop()
+        self.track_timer.stop()
+        self.playing = False
 
 
-def _set_points(actor: Any, points: np.ndarray, faces: np.ndarray) -> None:
-    """Move an actor's polydata points (and its normals) in place."""
+def inner_points(anim: Animator, parts: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """``{part: (n, 3)}`` vertices (mm, the head's own frame) of the jaw's parts and the
+    eyes in the animator's current pose: :meth:`Animator.meshes` without its skin.
+
+    ``meshes()`` also computes the exact skin (~50 ms on the reference head),
+    too slow for every frame of a track whose jaw or gaze moves; this takes the
+    same transforms (the animator's jaw matrix, its eye turn and its map back to
+    the stored frame).  ``tests/qt/test_qt_animate.py`` checks it against
+    ``meshes()``.
+    """
+    from workbench.services.jaw import JAW_PARTS
+
+    m = anim._jaw_matrix
+    out: dict[str, np.ndarray] = {}
+    for part in parts:
+        mesh = anim.head.meshes.get(part)
+        if mesh is None:
+            continue
+        v = np.asarray(mesh.vertices, float)
+        if part in JAW_PARTS:
+            v = v @ m[:3, :3].T + m[:3, 3]
+        elif part == "eyes" and anim.gaze != (0.0, 0.0):
+            v = anim._turned_eyes(v)
+        out[part] = anim._out(v)
+    return out
+
+
+#: iris and pupil half-angles (degrees from the eye's forward axis, +z at rest): an iris
+#: about 12 mm across on a 24 mm eye, a pupil about 4 mm
+IRIS_DEG, PUPIL_DEG, EDGE_DEG = 30.0, 11.0, 4.0
+EYE_WHITE, IRIS, PUPIL = (242, 240, 235), (88, 110, 128), (14, 12, 12)
+
+
+def eye_colours(anim: Animator) -> np.ndarray:
+    """``(n, 3)`` uint8 colours of the eyes' vertices: white, an iris and a pupil about each
+    eye's forward axis at rest (+z in the head frame), so a turned eye is seen turned."""
+    v = np.asarray(anim.head.meshes["eyes"].vertices, float)
+    centres = np.asarray(anim.head.eye_centres, float)
+    owner = np.linalg.norm(v[:, None] - centres[None], axis=2).argmin(axis=1)
+    d = v - centres[owner]
+    cos = d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    # soft edges over EDGE_DEG (per-vertex colours of a 2.5k-vertex eye look jagged otherwise)
+    iris = np.clip((IRIS_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
+    pupil = np.clip((PUPIL_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
+    rgb = np.asarray(EYE_WHITE, float) * (1 - iris) + np.asarray(IRIS, float) * iris
+    rgb = rgb * (1 - pupil) + np.asarray(PUPIL, float) * pupil
+    return np.round(rgb).astype(np.uint8)
+
+
+def _set_points(actor: Any, points: np.ndarray, faces: np.ndarray, vf: Any = None) -> None:
+    """Move an actor's polydata points (and its normals) in place.
+
+    ``vf``: the part's ``Mesh.vertex_faces_matrix`` (its topology does not
+    change), so a frame's normals are one sparse product, not a rebuild.
+    """
     from vtkmodules.util.numpy_support import vtk_to_numpy
 
     data = actor.GetMapper().GetInput()
@@ -395,6 +974,12 @@ def _set_points(actor: Any, points: np.ndarray, faces: np.ndarray) -> None:
     vtk_points.Modified()
     normals = data.GetPointData().GetNormals()
     if normals is not None:
-        vtk_to_numpy(normals)[:] = vertex_normals(Mesh(new, faces))
+        if vf is None:
+            vtk_to_numpy(normals)[:] = vertex_normals(Mesh(new, faces))
+        else:
+            t = new[faces]
+            summed = np.asarray(vf @ np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
+            length = np.linalg.norm(summed, axis=1, keepdims=True)
+            vtk_to_numpy(normals)[:] = summed / np.where(length > 0, length, 1.0)
         normals.Modified()
     data.Modified()

@@ -1,10 +1,14 @@
-"""Animate dock: a reference head's expression presets, muscle sliders, jaw, Relax.
+"""Animate dock: presets, muscle sliders, jaw, gaze, lids, Relax and a track timeline.
 
 Widgets and signals only; :class:`workbench.qt.animate_ops.AnimateTool`
 drives the :class:`workbench.services.animation.Animator` and the 3D view,
-and hands the animator's state back through :meth:`AnimatePanel.show_state`.
+and hands the animator's state back through :meth:`AnimatePanel.show_state`
+and the timeline's through :meth:`AnimatePanel.show_timeline`.
 Contractions are 0..1 (slider 0..100 %), the jaw in degrees (positive
-opens).  These controls are view state: nothing here edits the case.
+opens), gaze in degrees (yaw toward the subject's left, pitch up, within
+the service's ``GAZE_RANGE_DEG``), lids 0 (open) .. 1 (closed) (slider
+0..100 %).  The timeline's slider is the frame index of the loaded track.
+These controls are view state: nothing here edits the case.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
+    QDoubleSpinBox,
     QFormLayout,
     QGridLayout,
     QGroupBox,
@@ -22,14 +27,19 @@ from PySide6.QtWidgets import (
     QLabel,
     QPushButton,
     QSlider,
+    QToolButton,
     QVBoxLayout,
     QWidget,
 )
+
+from workbench.services.animation import GAZE_RANGE_DEG
 
 #: head chooser entries: title → reference head sex
 HEADS = {"Reference male": "male", "Reference female": "female"}
 #: jaw slider range (degrees; the service allows more, 20° is a wide-open mouth)
 JAW_MAX_DEG = 20.0
+#: gaze slider range (degrees either way; the service's GAZE_RANGE_DEG)
+GAZE_MAX_DEG = int(GAZE_RANGE_DEG)
 #: muscle groups of the sliders, by code stem (first match wins)
 GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("Brow and forehead", ("frontalis", "corrugator")),
@@ -64,23 +74,42 @@ class AnimatePanel(QWidget):
     expression_changed(str, float)   preset name and intensity 0..1
     muscle_changed(str, float)       muscle code and contraction 0..1
     jaw_changed(float)         degrees
+    gaze_changed(float, float) yaw (toward the subject's left) and pitch (up), degrees
+    lids_changed(float)        lid closure 0 (open) .. 1 (closed)
     relax_requested()
     bones_toggled(bool)        show the skull and teeth under a translucent skin
+    open_track_requested()     "Open track…" clicked (the tool asks for the file)
+    save_track_requested()     "Save track…" clicked
+    record_requested()         "Record keyframe": the current pose as a key at the current time
+    frame_requested(int)       the timeline slider moved to this frame (by the user)
+    play_toggled(bool)         Play (True) / Pause (False)
+    loop_toggled(bool)
+    length_changed(float)      the track's duration (seconds) edited
     """
 
     head_changed = Signal(str)
     expression_changed = Signal(str, float)
     muscle_changed = Signal(str, float)
     jaw_changed = Signal(float)
+    gaze_changed = Signal(float, float)
+    lids_changed = Signal(float)
     relax_requested = Signal()
     bones_toggled = Signal(bool)
+    open_track_requested = Signal()
+    save_track_requested = Signal()
+    record_requested = Signal()
+    frame_requested = Signal(int)
+    play_toggled = Signal(bool)
+    loop_toggled = Signal(bool)
+    length_changed = Signal(float)
 
     def __init__(self, expressions: Iterable[str] = (), parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self._quiet = False
         layout = QVBoxLayout(self)
         intro = QLabel(
-            "Move a reference head's face: presets, single muscles, the jaw. "
+            "Move a reference head's face: presets, single muscles, the jaw, gaze and "
+            "lids, or play a keyframe track. "
             "View only: the case is not changed."
         )
         intro.setWordWrap(True)
@@ -102,6 +131,22 @@ class AnimatePanel(QWidget):
         self.jaw, self.jaw_value = _slider(int(JAW_MAX_DEG * 10), 0, unit="°", scale=0.1)
         self.jaw.valueChanged.connect(self._emit_jaw)
         form.addRow("Jaw opening", _row(self.jaw, self.jaw_value))
+        self.gaze_yaw, self.gaze_yaw_value = _slider(
+            GAZE_MAX_DEG, 0, unit="°", minimum=-GAZE_MAX_DEG
+        )
+        self.gaze_yaw.setToolTip("Eyes turned toward the subject's left (+) or right (−)")
+        self.gaze_yaw.valueChanged.connect(lambda _v: self._emit_gaze())
+        form.addRow("Gaze left/right", _row(self.gaze_yaw, self.gaze_yaw_value))
+        self.gaze_pitch, self.gaze_pitch_value = _slider(
+            GAZE_MAX_DEG, 0, unit="°", minimum=-GAZE_MAX_DEG
+        )
+        self.gaze_pitch.setToolTip("Eyes turned up (+) or down (−)")
+        self.gaze_pitch.valueChanged.connect(lambda _v: self._emit_gaze())
+        form.addRow("Gaze up/down", _row(self.gaze_pitch, self.gaze_pitch_value))
+        self.lids, self.lids_value = _slider(100, 0)
+        self.lids.setToolTip("Eyelid closure: 0 % open, 100 % closed")
+        self.lids.valueChanged.connect(self._emit_lids)
+        form.addRow("Lids closed", _row(self.lids, self.lids_value))
         layout.addLayout(form)
 
         buttons = QHBoxLayout()
@@ -117,6 +162,7 @@ class AnimatePanel(QWidget):
         self.status = QLabel("Open this dock to load the head.")
         self.status.setWordWrap(True)
         layout.addWidget(self.status)
+        layout.addWidget(self._timeline_box())
 
         self._muscle_box = QWidget()
         self._muscle_layout = QVBoxLayout(self._muscle_box)
@@ -125,6 +171,71 @@ class AnimatePanel(QWidget):
         layout.addStretch(1)
         self.muscles: dict[str, QSlider] = {}
         self._muscle_values: dict[str, QLabel] = {}
+
+    def _timeline_box(self) -> QGroupBox:
+        box = QGroupBox("Timeline")
+        grid = QVBoxLayout(box)
+        files = QHBoxLayout()
+        self.open_track = QPushButton("Open track…")
+        self.open_track.setToolTip(
+            "A JSON keyframe/phoneme track (the format of `workbench animate --track`)"
+        )
+        self.open_track.clicked.connect(self.open_track_requested)
+        files.addWidget(self.open_track)
+        self.record = QPushButton("Record keyframe")
+        self.record.setToolTip(
+            "Add the current pose (sliders, jaw, gaze, lids) as a key at the current time"
+        )
+        self.record.clicked.connect(self.record_requested)
+        files.addWidget(self.record)
+        self.save_track = QPushButton("Save track…")
+        self.save_track.setEnabled(False)
+        self.save_track.clicked.connect(self.save_track_requested)
+        files.addWidget(self.save_track)
+        files.addStretch(1)
+        grid.addLayout(files)
+        self.track_label = QLabel("No track: open one, or record keyframes.")
+        self.track_label.setWordWrap(True)
+        grid.addWidget(self.track_label)
+        transport = QHBoxLayout()
+        self.play = QToolButton()
+        self.play.setText("Play")
+        self.play.setCheckable(True)
+        self.play.setEnabled(False)
+        self.play.toggled.connect(self._play_clicked)
+        transport.addWidget(self.play)
+        self.frame = QSlider(Qt.Orientation.Horizontal)
+        self.frame.setRange(0, 0)
+        self.frame.setEnabled(False)
+        self.frame.setToolTip("Scrub: the frame of the track shown")
+        self.frame.valueChanged.connect(self._emit_frame)
+        transport.addWidget(self.frame, 1)
+        self.loop = QCheckBox("Loop")
+        self.loop.toggled.connect(self.loop_toggled)
+        transport.addWidget(self.loop)
+        grid.addLayout(transport)
+        times = QHBoxLayout()
+        self.time_label = QLabel("0.00 s")
+        times.addWidget(self.time_label, 1)
+        times.addWidget(QLabel("Length"))
+        self.length = QDoubleSpinBox()
+        self.length.setRange(0.1, 600.0)
+        self.length.setDecimals(2)
+        self.length.setSingleStep(0.5)
+        self.length.setSuffix(" s")
+        self.length.setValue(2.0)
+        self.length.setKeyboardTracking(False)
+        self.length.setToolTip("The track's duration (a new track for recording keys if none)")
+        self.length.valueChanged.connect(self._emit_length)
+        times.addWidget(self.length)
+        grid.addLayout(times)
+        self.track_message = QLabel("")
+        self.track_message.setWordWrap(True)
+        self.track_message.setStyleSheet("color: #b00020;")
+        self.track_message.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.track_message.hide()
+        grid.addWidget(self.track_message)
+        return box
 
     # ------------------------------------------------------------ reading
     def sex(self) -> str:
@@ -136,6 +247,31 @@ class AnimatePanel(QWidget):
     def _emit_jaw(self, value: int) -> None:
         if not self._quiet:
             self.jaw_changed.emit(value / 10.0)
+
+    def gaze(self) -> tuple[float, float]:
+        """(yaw, pitch) in degrees as the sliders show them."""
+        return float(self.gaze_yaw.value()), float(self.gaze_pitch.value())
+
+    def _emit_gaze(self) -> None:
+        if not self._quiet:
+            self.gaze_changed.emit(*self.gaze())
+
+    def _emit_lids(self, value: int) -> None:
+        if not self._quiet:
+            self.lids_changed.emit(value / 100.0)
+
+    def _emit_frame(self, value: int) -> None:
+        if not self._quiet:
+            self.frame_requested.emit(value)
+
+    def _emit_length(self, value: float) -> None:
+        if not self._quiet:
+            self.length_changed.emit(float(value))
+
+    def _play_clicked(self, on: bool) -> None:
+        self.play.setText("Pause" if on else "Play")
+        if not self._quiet:
+            self.play_toggled.emit(on)
 
     def _emit_muscle(self, code: str, value: int) -> None:
         if not self._quiet:
@@ -173,25 +309,88 @@ class AnimatePanel(QWidget):
             self.muscles[code] = slider
             self._muscle_values[code] = value
 
-    def show_state(self, contraction: Mapping[str, float], jaw_deg: float) -> None:
+    def show_state(
+        self,
+        contraction: Mapping[str, float],
+        jaw_deg: float,
+        gaze: tuple[float, float] | None = None,
+        lids: float | None = None,
+    ) -> None:
         """Set the sliders to the animator's values without emitting signals."""
         self._quiet = True  # the value labels follow, the signals do not fire
         try:
             for code, slider in self.muscles.items():
                 slider.setValue(round(100 * float(contraction.get(code, 0.0))))
             self.jaw.setValue(round(10 * min(max(jaw_deg, 0.0), JAW_MAX_DEG)))
+            if gaze is not None:
+                self.gaze_yaw.setValue(round(gaze[0]))
+                self.gaze_pitch.setValue(round(gaze[1]))
+            if lids is not None:
+                self.lids.setValue(round(100 * lids))
         finally:
             self._quiet = False
+
+    def show_timeline(
+        self,
+        n_frames: int,
+        frame: int,
+        fps: float,
+        *,
+        playing: bool | None = None,
+        computing_to: int | None = None,
+    ) -> None:
+        """The timeline at ``frame`` of ``n_frames`` (0: no track), without emitting signals.
+
+        ``computing_to``: the frame being simulated toward (scrubbed past what was computed).
+        """
+        self._quiet = True
+        try:
+            has = n_frames > 0
+            self.frame.setEnabled(has)
+            self.play.setEnabled(has)
+            self.save_track.setEnabled(has)
+            self.frame.setRange(0, max(n_frames - 1, 0))
+            if not self.frame.isSliderDown():
+                self.frame.setValue(max(frame, 0))
+            if playing is not None and self.play.isChecked() != playing:
+                self.play.setChecked(playing)
+            if has:
+                end = (n_frames - 1) / fps
+                text = f"{max(frame, 0) / fps:.2f} s / {end:.2f} s  (frame {max(frame, 0)} of {n_frames - 1})"
+                if computing_to is not None:
+                    text += f": simulating to frame {computing_to} …"
+                self.time_label.setText(text)
+            else:
+                self.time_label.setText("0.00 s")
+        finally:
+            self._quiet = False
+
+    def show_length(self, seconds: float) -> None:
+        """The track's duration in the Length box (no signal)."""
+        self._quiet = True
+        try:
+            self.length.setValue(seconds)
+        finally:
+            self._quiet = False
+
+    def show_track(self, text: str) -> None:
+        """What track is loaded (name, fps, keys, phonemes)."""
+        self.track_label.setText(text)
+
+    def show_track_message(self, text: str) -> None:
+        """A problem with the track (a file that cannot be read); empty hides it."""
+        self.track_message.setText(text)
+        self.track_message.setVisible(bool(text))
 
     def show_status(self, text: str) -> None:
         self.status.setText(text)
 
 
 def _slider(
-    maximum: int, value: int, *, unit: str = " %", scale: float = 1.0
+    maximum: int, value: int, *, unit: str = " %", scale: float = 1.0, minimum: int = 0
 ) -> tuple[QSlider, QLabel]:
     slider = QSlider(Qt.Orientation.Horizontal)
-    slider.setRange(0, maximum)
+    slider.setRange(minimum, maximum)
     slider.setValue(value)
     label = QLabel()
     label.setMinimumWidth(44)
