@@ -240,6 +240,13 @@ def test_scrubbing_a_track_gives_run_tracks_frames(animating, qtbot):
     _scrub(w, qtbot, 30)
     assert np.abs(tool.animator.skin().vertices - want[30]).max() < 1e-6
     assert tool.animator.gaze == pytest.approx(tuple(tool.frames.gaze[30]))
+    # while the slider is dragged the quick skin is drawn, the exact one on release
+    panel.frame.setSliderDown(True)
+    _scrub(w, qtbot, 9)
+    assert np.allclose(_drawn_skin(w), tool.animator.skin(exact=False).vertices)
+    panel.frame.setSliderDown(False)
+    assert np.allclose(_drawn_skin(w), tool.animator.skin().vertices)
+    assert np.abs(_drawn_skin(w) - want[9]).max() < 1e-6
 
 
 def test_play_advances_frames_and_loops(animating, qtbot):

@@ -170,6 +170,7 @@ class AnimateTool(QObject):
         panel.play_toggled.connect(lambda on: self.play() if on else self.pause())
         panel.loop_toggled.connect(self.set_loop)
         panel.length_changed.connect(self.set_length)
+        panel.frame.sliderReleased.connect(self._scrub_released)
         self._faces: dict[str, np.ndarray] = {}  # triangles of the drawn parts
         self._vf: dict[str, Any] = {}
         self._gaze_drawn = (0.0, 0.0)
@@ -623,17 +624,22 @@ class AnimateTool(QObject):
         self.host.status(f"Animate: {text}")
 
     def _at_frame(self) -> None:
-        """Stopped on a track frame: the exact skin, sliders and timeline shown."""
+        """Stopped on a track frame: the exact skin, sliders and timeline shown (while the
+        timeline's slider is being dragged the quick skin; the exact one on release)."""
         anim = self.animator
         if anim is None:
             return
-        self._move_skin(anim.skin().vertices)
+        self._move_skin(anim.skin(exact=not self.panel.frame.isSliderDown()).vertices)
         self._move_inner()
         self._show_state()
         self._show_timeline()
         self.scene.request_render()
         if self.frame is not None:
             self.frame_shown.emit(self.frame)
+
+    def _scrub_released(self) -> None:
+        if not self.playing and self._target is None and self.frame == self.position:
+            self._at_frame()
 
     def _one_toward(self, target: int) -> None:
         """Restore ``target``'s checkpoint, or the nearest earlier one, or simulate a frame."""
