@@ -146,8 +146,8 @@ def test_zip_layout(saved: Path, skull_obj: Path) -> None:
             np.load(io.BytesIO(data), allow_pickle=False)
     assert names[0] == "case.json"
     assert "audit.jsonl" in names
-    assert doc["@schema"] == "case-schema-v2"
-    assert doc["format_version"] == 2
+    assert doc["@schema"] == "case-schema-v3"
+    assert doc["format_version"] == 3
     assert doc["dowels"] == {
         "table": "stephan_2013",
         "sex": "female",
@@ -257,7 +257,7 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
     ),
     "class name in file": (
         lambda p: _set_doc(p, lambda d: d["specimen"].update({"@class": "os.system"})),
-        "case-schema-v2",
+        "case-schema-v3",
     ),
     "negative dowel depth": (
         lambda p: _set_doc(p, lambda d: d["dowels"]["overrides"].update(g=-2.0)),
@@ -479,7 +479,7 @@ def test_v0_file_is_migrated(v0_file: Path, tmp_path: Path) -> None:
     # saving writes the current format and keeps the evidence bytes
     new = save_case(case, tmp_path / "new.fcase")
     with zipfile.ZipFile(new) as archive:
-        assert json.loads(archive.read("case.json"))["format_version"] == 2
+        assert json.loads(archive.read("case.json"))["format_version"] == 3
     assert load_case(new).case.equals(case)
     assert evidence_bytes(new, "skull.stl") == evidence_bytes(v0_file, "skull.stl")
 
@@ -489,19 +489,20 @@ def test_migrate_is_pure_and_ordered(v0_file: Path) -> None:
         doc = json.loads(archive.read("case.json"))
     snapshot = json.dumps(doc, sort_keys=True)
     new, applied = migrate(doc)
-    assert applied == [0, 1]
-    assert new["format_version"] == 2
+    assert applied == [0, 1, 2]
+    assert new["format_version"] == 3
     assert json.dumps(doc, sort_keys=True) == snapshot
     assert migrate(new) == (new, [])
     steps = {
         0: lambda d: {**d, "format_version": 1, "seen": [0]},
         1: lambda d: {**d, "format_version": 2, "seen": [*d["seen"], 1]},
+        2: lambda d: {**d, "format_version": 3, "seen": [*d["seen"], 2]},
     }
-    assert migrate({"format_version": 0}, steps)[0]["seen"] == [0, 1]
+    assert migrate({"format_version": 0}, steps)[0]["seen"] == [0, 1, 2]
     with pytest.raises(MigrationError, match="no migration from format_version -1"):
         migrate({"format_version": -1})
     with pytest.raises(MigrationError, match="newer"):
-        migrate({"format_version": 3})
+        migrate({"format_version": 4})
     with pytest.raises(MigrationError, match="integer"):
         migrate({"format_version": "1"})
     with pytest.raises(MigrationError, match="cannot upgrade format_version 0"):
@@ -567,7 +568,7 @@ def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None
     with zipfile.ZipFile(path) as archive:
         doc = json.loads(archive.read("case.json"))
     assert doc["format_version"] == 1 and doc["@schema"] == "case-schema-v1"
-    assert migrate(doc)[1] == [1]
+    assert migrate(doc)[1] == [1, 2]
     loaded = load_case(path)
     case = loaded.case
     assert case.dowels == DowelSettings(
@@ -588,7 +589,7 @@ def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None
     # saved again: format 2, same case, evidence bytes untouched
     new = save_case(case, tmp_path / "v2.fcase")
     with zipfile.ZipFile(new) as archive:
-        assert json.loads(archive.read("case.json"))["format_version"] == 2
+        assert json.loads(archive.read("case.json"))["format_version"] == 3
     again = load_case(new).case
     assert again.equals(case) and again.dowels == case.dowels
     assert evidence_bytes(new, "skull.stl") == evidence_bytes(path, "skull.stl")

@@ -29,7 +29,7 @@ Format history
     ``excluded_landmarks`` ``[code]``, ``guides`` (list of guide dicts) and
     ``orientation`` ``{"anterior", "superior"[, "left"]}``.
 2
-    Current layout, see ``data_tables/schemas/case.schema.json``: those keys
+    Those keys
     became the typed parts ``dowels``, ``orientation`` and ``guides``
     (:mod:`workbench.model.reconstruction_setup`).  :func:`v1_to_v2` moves a
     key only if its value is valid for its part; an unusable old value (a
@@ -45,8 +45,8 @@ from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any
 
-CURRENT_VERSION = 2
-SCHEMA_ID = "case-schema-v2"
+CURRENT_VERSION = 3
+SCHEMA_ID = "case-schema-v3"
 
 Migration = Callable[[dict[str, Any]], dict[str, Any]]
 
@@ -256,8 +256,24 @@ def v1_to_v2(doc: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def v2_to_v3(doc: dict[str, Any]) -> dict[str, Any]:
+    """Format 2 → 3: the new part ``age_study``, ``null`` (format 2 kept no study)."""
+    if "age_study" in doc:
+        raise ValueError("a format-2 document has no age_study")
+    out = {k: v for k, v in doc.items() if k != "parameters"}
+    out.update(
+        {
+            "@schema": "case-schema-v3",
+            "format_version": 3,
+            "age_study": None,
+            "parameters": doc["parameters"],
+        }
+    )
+    return out
+
+
 #: ``{from_version: upgrade to from_version + 1}``.
-MIGRATIONS: Mapping[int, Migration] = MappingProxyType({0: v0_to_v1, 1: v1_to_v2})
+MIGRATIONS: Mapping[int, Migration] = MappingProxyType({0: v0_to_v1, 1: v1_to_v2, 2: v2_to_v3})
 
 
 def document_version(doc: Mapping[str, Any]) -> int:

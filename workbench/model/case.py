@@ -15,6 +15,8 @@ orientation :class:`~workbench.model.reconstruction_setup.Orientation` of the
             skull file, or ``None`` (found from the bone)
 guides      :class:`~workbench.model.reconstruction_setup.GuideList` set by the
             user, or ``None`` (computed from the skull)
+age_study   :class:`~workbench.model.age_study.AgeStudy` kept from the Age
+            progression dock, or ``None`` (no study)
 parameters  read-only ``{str: JSON value}``: other settings and provenance of
             results (template id and hash, depth group)
 =========== ==================================================================
@@ -60,6 +62,7 @@ from psygnal import Signal
 
 from workbench.core.errors import WorkbenchError
 from workbench.core.landmarks import LandmarkSet
+from workbench.model.age_study import AgeStudy, age_study_from_state, age_study_to_state
 from workbench.model.audit import AuditLog
 from workbench.model.evidence import (
     EvidenceFile,
@@ -143,6 +146,9 @@ PARTS: Mapping[str, PartCodec] = MappingProxyType(
         "guides": PartCodec(
             _check_optional(GuideList), optional_to_state, guides_from_state, lambda: None
         ),
+        "age_study": PartCodec(
+            _check_optional(AgeStudy), age_study_to_state, age_study_from_state, lambda: None
+        ),
         "parameters": PartCodec(
             lambda v: freeze_json(v, "parameters"),
             thaw_json,
@@ -168,7 +174,7 @@ class Case:
         Initial part values by name (see :data:`PARTS`); missing parts get
         their defaults (a fresh :class:`CaseMeta`, no evidence, empty
         specimen, empty landmark sets, default dowel settings, automatic
-        orientation, computed guides, no parameters).
+        orientation, computed guides, no age study, no parameters).
     """
 
     def __init__(self, **parts: Any) -> None:
@@ -214,6 +220,10 @@ class Case:
     @property
     def guides(self) -> GuideList | None:
         return self._parts["guides"]
+
+    @property
+    def age_study(self) -> AgeStudy | None:
+        return self._parts["age_study"]
 
     @property
     def parameters(self) -> Mapping[str, Any]:
