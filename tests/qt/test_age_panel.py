@@ -290,3 +290,100 @@ def test_gui_options_accept_the_age_tool():
     assert opts.tool == "age"
     assert opts.age == {"to_age": 8.0, "from_age": 17.0, "sex": "female", "view": "overlay"}
     assert gui_cmd.options_from(parser.parse_args(["gui"])).age is None
+
+
+# ------------------------------------------------------------------ the case's age study
+def _settings(panel):
+    return (
+        panel.source_key(),
+        panel.sex_value(),
+        panel.from_age_value(),
+        panel.target_age(),
+        panel.export_all.isChecked(),
+    )
+
+
+def test_keep_in_case_is_one_undo_step_and_undo_restores_the_dock(new_window, qtbot, tmp_path):
+    from workbench.io.case_file import save_case
+    from workbench.model.age_study import AgeStudy
+    from workbench.model.case import Case
+
+    w = new_window(1200, 800)
+    panel, tool, doc = w.age_panel, w.age, w.document
+    assert not panel.keep_button.isEnabled()  # no case open: nothing to keep it in
+    assert not tool.keep() and doc.case.age_study is None
+    assert "Open a case first" in w.status_text()
+    path = save_case(Case(), tmp_path / "c.fcase")
+    w.open_case(path)
+    qtbot.waitUntil(lambda: w.document.path == path, timeout=60_000)
+    assert panel.keep_button.isEnabled()
+    assert "keeps no age study" in panel.case_note.text()
+
+    panel.source.setCurrentText("Reference female")
+    panel.sex.setCurrentText("female")
+    panel.from_age.setValue(30.0)
+    panel.target.setValue(12)
+    first = _settings(panel)
+    panel.keep_button.click()
+    kept = doc.case.age_study
+    assert kept == AgeStudy(
+        source="reference:female", sex="female", from_age=30.0, target_ages=(12.0,)
+    )
+    assert doc.stack.can_undo and doc.stack.undo_text == "Keep the age study" and doc.is_dirty
+    assert "kept in the case (undo: Ctrl+Z)" in panel.case_note.text()
+    assert "kept in the case (undo: Ctrl+Z)" in w.status_text()
+    record = doc.case.audit.records[-1]
+    assert (
+        record["command"] == "SetAgeStudy" and record["parameters"]["age_study"]["sex"] == "female"
+    )
+
+    panel.source.setCurrentText("Reference male")
+    panel.sex.setCurrentText("male")
+    panel.from_age.setValue(18.0)
+    panel.target.setValue(6)
+    assert doc.case.age_study == kept  # the dock alone does not change the case
+    panel.keep_button.click()
+    assert doc.case.age_study.target_ages == (6.0,) and len(doc.stack) == 2
+    assert not tool.keep()  # the same settings again: no second step
+    assert len(doc.stack) == 2
+
+    w.undo()  # Edit ▸ Undo: the case and the dock go back to the first study
+    assert doc.case.age_study == kept
+    assert _settings(panel) == first
+    w.redo()
+    assert _settings(panel) == ("reference:male", "male", 18.0, 6, False)
+    w.undo()
+    w.undo()
+    assert doc.case.age_study is None and not doc.stack.can_undo
+    assert "keeps no age study" in panel.case_note.text()
+
+
+def test_a_case_with_a_study_opens_with_its_settings_and_ages_them(
+    head_male, new_window, qtbot, tmp_path
+):
+    from workbench.io.case_file import save_case
+    from workbench.model.age_study import AgeStudy
+    from workbench.model.case import Case
+
+    study = AgeStudy(
+        source="reference:male",
+        sex="female",
+        from_age=25.0,
+        target_ages=(9.0, 11.0),
+        ethnicity="European",
+    )
+    path = save_case(Case(age_study=study), tmp_path / "study.fcase")
+    w = new_window(1200, 800)
+    w.age.prefetch_years = 0
+    w.open_case(path)
+    qtbot.waitUntil(lambda: w.document.path == path, timeout=60_000)
+    panel = w.age_panel
+    assert _settings(panel) == ("reference:male", "female", 25.0, 9, True)
+    assert "keeps an age study" in panel.case_note.text()
+    w.show_age()
+    qtbot.waitUntil(lambda: w.age.shown_age == 9, timeout=STEP_MS)
+    # the head's load did not put back its own sex: the study's is used
+    assert panel.sex_value() == "female" and panel.ethnicity_value() == "European"
+    assert w.age.settings().sex == "female" and w.age.settings().from_age == 25.0
+    assert w.age.current_study() == study.replaced(target_ages=(9.0,))  # 11 y not computed yet
+    assert not w.document.stack.can_undo  # opening shows the study, it does not edit it

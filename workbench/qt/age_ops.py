@@ -41,11 +41,16 @@ not :data:`workbench.qt.scene.LAYERS`.
 
 The case
 --------
-The case has no part holding a head (its parts: specimen, landmarks,
-dowels, orientation, guides, parameters; a reconstructed face is a derived
-result of the window's session), so there is no "Apply": nothing here edits
-the case or goes on its undo stack; Export… writes the aged head as a
-template pack (which reconstructs, animates and ages again) with its report.
+The case keeps the dock's *settings*, not its heads: "Keep in case" pushes
+:class:`~workbench.commands.age_study.SetAgeStudy` with the dock's
+:class:`~workbench.model.age_study.AgeStudy` (source, sex, ages, norms) on
+the window's one undo stack, so Edit ▸ Undo takes it back and it is in the
+audit log and the saved file.  When a case with a study is opened, or the
+study changes by undo/redo, the dock shows its settings again (and ages the
+head anew).  The case has no part holding a head (a reconstructed face is a
+derived result of the window's session), so there is no "Apply": the heads
+stay view only; Export… writes the aged head as a template pack (which
+reconstructs, animates and ages again) with its report.
 
 :func:`load_source`, :func:`age_step` and :func:`export_ages` are the
 worker side (plain data, no Qt, no VTK); :class:`AgeTool` is the GUI side.
@@ -67,9 +72,13 @@ from workbench.core.errors import InputError, WorkbenchError
 from workbench.qt import relay
 from workbench.core.mesh import Mesh
 from workbench.model.template import TemplateHead
+from workbench.qt.panels.age_panel import SOURCES as PANEL_SOURCES
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
+
+    from workbench.model.age_study import AgeStudy
+    from workbench.qt.document import Document
 
     from workbench.qt.panels.age_panel import AgePanel
     from workbench.qt.scene import SceneView
@@ -337,6 +346,10 @@ class AgeTool(QObject):
         The case's reconstructed head (head frame, mm) or None.
     case_sex : callable
         The case's sex (its dowel settings), used with the reconstructed head.
+    document : Document, optional
+        The window's open case (default: ``host.document`` if the host has
+        one): "Keep in case" pushes the age study on its stack, and the dock
+        follows the study it keeps.  Without one the dock is view only.
 
     Signals
     -------
@@ -359,6 +372,7 @@ class AgeTool(QObject):
         *,
         fitted_head: Callable[[], TemplateHead | None] = lambda: None,
         case_sex: Callable[[], str] = lambda: "male",
+        document: Document | None = None,
         parent: QObject | None = None,
     ) -> None:
         super().__init__(parent)
@@ -390,11 +404,25 @@ class AgeTool(QObject):
         panel.mode_changed.connect(self._mode_changed)
         panel.export_requested.connect(self.ask_export)
         runner.progress_changed.connect(self._on_progress)
+        #: norms table and arc increase of the settings (the dock has no field for them:
+        #: a kept study's are used as they are)
+        self.norms_id = "facial_norms"
+        self.arc_increase = 0.0
+        #: a study being shown whose sex, population and target apply when the head loads
+        self._pending: AgeStudy | None = None
+        self.document = document if document is not None else getattr(host, "document", None)
+        panel.keep_requested.connect(self.keep)
+        if self.document is not None:
+            self.document.case_replaced.connect(self._case_replaced)
+            self.document.part_changed.connect(self._part_changed)
+            self._case_replaced()
 
     # ------------------------------------------------------------ state
     def settings(self) -> AgeSettings:
         p = self.panel
-        return AgeSettings(p.sex_value(), p.from_age_value(), p.ethnicity_value())
+        return AgeSettings(
+            p.sex_value(), p.from_age_value(), p.ethnicity_value(), self.norms_id, self.arc_increase
+        )
 
     @property
     def step(self) -> AgeStep | None:
@@ -483,10 +511,17 @@ class AgeTool(QObject):
                 panel.ethnicity.addItems(list(source.norms.ethnicities))
                 if "European" in source.norms.ethnicities:
                     panel.ethnicity.setCurrentText("European")
+            pending, self._pending = self._pending, None
+            if pending is not None:  # a kept study: its sex and population, not the head's
+                panel.sex.setCurrentText(pending.sex)
+                if pending.ethnicity is not None:
+                    panel.ethnicity.setCurrentText(pending.ethnicity)
         finally:
             for w, b in zip((panel.sex, panel.ethnicity), blocked, strict=True):
                 w.blockSignals(b)
         self._reset_results()
+        if pending is not None:
+            self._set_slider(round(pending.target_ages[0]))
         self.draw()
         self.reset_camera()
         self.loaded.emit()
@@ -529,6 +564,140 @@ class AgeTool(QObject):
             finally:
                 slider.blockSignals(blocked)
             self.panel.target_value.setText(f"{slider.value()} y")
+
+    # ------------------------------------------------------------ the case's age study
+    def case_open(self) -> bool:
+        """A case is open (a skull or a case file), so "Keep in case" has a case to keep it in."""
+        doc = self.document
+        return doc is not None and (doc.path is not None or doc.has_specimen)
+
+    def current_study(self) -> AgeStudy:
+        """The dock's settings as an :class:`~workbench.model.age_study.AgeStudy` (years).
+
+        The target ages: the slider's first, then (with "every computed age")
+        the other computed ones.  Raises ``AgeStudyError`` for a bad value.
+        """
+        from workbench.model.age_study import AgeStudy
+
+        p, s = self.panel, self.settings()
+        key = p.source_key()
+        ages = [float(p.target_age())]
+        if p.export_all.isChecked():
+            ages += [float(a) for a in sorted(self.cache) if a != p.target_age()]
+        return AgeStudy(
+            source="reconstruction" if key == "fit" else key,
+            sex=s.sex,
+            from_age=s.from_age,
+            target_ages=tuple(ages),
+            norms=s.norms,
+            ethnicity=s.ethnicity,
+            arc_increase=s.arc_increase,
+        )
+
+    def keep(self) -> bool:
+        """ "Keep in case": push the dock's settings as the case's study (one undo step)."""
+        from workbench.commands.age_study import SetAgeStudy
+        from workbench.model.age_study import AgeStudyError
+
+        doc = self.document
+        if doc is None or not self.case_open():
+            self.host.status("Open a case first: the age study is kept in a case.")
+            return False
+        try:
+            study = self.current_study()
+        except AgeStudyError as exc:
+            self.panel.show_error(f"Not kept: {exc}")
+            return False
+        if doc.case.age_study == study:
+            self.host.status("The case already keeps these age-study settings.")
+            return False
+        if not doc.push(SetAgeStudy(study)):
+            return False
+        text = f"Age study kept in the case (undo: Ctrl+Z): {study_text(study)}."
+        self.panel.show_case_note(text)
+        self.host.status(text)
+        return True
+
+    def _case_replaced(self) -> None:
+        open_ = self.case_open()
+        self.panel.set_keep_enabled(open_, "Open a skull or a case first.")
+        self.norms_id, self.arc_increase = "facial_norms", 0.0
+        study = self.document.case.age_study if self.document is not None else None
+        if study is None:
+            self.panel.show_case_note("" if not open_ else "The case keeps no age study.")
+            return
+        self.show_study(study)
+        self.panel.show_case_note(f"The case keeps an age study: {study_text(study)}.")
+
+    def _part_changed(self, part: str) -> None:
+        if part != "age_study" or self.document is None:
+            return
+        study = self.document.case.age_study
+        if study is None:
+            self.panel.show_case_note("The case keeps no age study (undone).")
+            return
+        if study != self._study_or_none():
+            self.show_study(study)
+        self.panel.show_case_note(
+            f"Age study kept in the case (undo: Ctrl+Z): {study_text(study)}."
+        )
+
+    def _study_or_none(self) -> AgeStudy | None:
+        from workbench.model.age_study import AgeStudyError
+
+        try:
+            return self.current_study()
+        except AgeStudyError:
+            return None
+
+    def show_study(self, study: AgeStudy) -> None:
+        """Set the dock to ``study``'s settings and age the head with them.
+
+        A reconstruction source needs the case's reconstructed face (the dock
+        says so when there is none); the norms population and sex apply when
+        the head loads if it is not loaded yet.
+        """
+        p = self.panel
+        before = self.settings() if self.source is not None else None
+        key = "fit" if study.source == "reconstruction" else study.source
+        title = next(t for t, k in PANEL_SOURCES.items() if k == key)
+        widgets = (p.source, p.sex, p.from_age, p.ethnicity, p.target, p.export_all)
+        blocked = [w.blockSignals(True) for w in widgets]
+        try:
+            p.source.setCurrentText(title)
+            p.sex.setCurrentText(study.sex)
+            p.from_age.setValue(study.from_age)
+            if study.ethnicity is not None and p.ethnicity.findText(study.ethnicity) >= 0:
+                p.ethnicity.setCurrentText(study.ethnicity)
+            p.export_all.setChecked(len(study.target_ages) > 1)
+            self.norms_id, self.arc_increase = study.norms, study.arc_increase
+        finally:
+            for w, b in zip(widgets, blocked, strict=True):
+                w.blockSignals(b)
+        target = round(study.target_ages[0])
+        self._set_slider(target)
+        if self.source is None or self.source.key != key:
+            self._pending = study
+            if self._loading == key:
+                return  # the head is loading: the study applies when it is there
+            if self.source is not None or self.active or self._loading:
+                self._loading = ""  # a different head: load it even if another is loading
+                self.load(key)
+            return
+        if self.settings() != before:
+            self._reset_results()
+            self.draw()
+        self.request(target)
+
+    def _set_slider(self, age: int) -> None:
+        slider = self.panel.target
+        blocked = slider.blockSignals(True)
+        try:
+            slider.setValue(age)
+        finally:
+            slider.blockSignals(blocked)
+        self.target = int(slider.value())
+        self.panel.target_value.setText(f"{slider.value()} y")
 
     # ------------------------------------------------------------ the slider
     def request(self, age: float) -> None:
@@ -896,6 +1065,22 @@ def in_dock(exc: BaseException) -> BaseException:
             hint = hint.split(", or ")[0]
         return InputError(FIELDS[exc.source], exc.problem, hint)
     return exc
+
+
+def study_text(study: AgeStudy) -> str:
+    """One line describing a study: head, sex, ages (years), population."""
+    head = (
+        "reconstructed head"
+        if study.source == "reconstruction"
+        else study.source.replace("reference:", "reference ")
+    )
+    ages = ", ".join(f"{a:g}" for a in study.target_ages)
+    text = f"{head}, {study.sex}, {study.from_age:g} y → {ages} y"
+    if study.ethnicity:
+        text += f", norms of {study.ethnicity}"
+    if study.arc_increase:
+        text += f", arc increase {study.arc_increase * 100:g} %"
+    return text
 
 
 def figures_html(result: AgeResult) -> str:

@@ -159,6 +159,7 @@ class AgePanel(QWidget):
     target_changed(int)      the slider moved (years; emitted while dragging too)
     mode_changed(str)        "side" or "overlay"
     export_requested()
+    keep_requested()         "Keep in case": record these settings as the case's age study
     """
 
     source_changed = Signal(str)
@@ -166,13 +167,15 @@ class AgePanel(QWidget):
     target_changed = Signal(int)
     mode_changed = Signal(str)
     export_requested = Signal()
+    keep_requested = Signal()
 
     def __init__(self, ethnicities: Sequence[str] = (), parent: QWidget | None = None) -> None:
         super().__init__(parent)
         layout = QVBoxLayout(self)
         intro = QLabel(
             "A head at another age: measurements with norms keep their z-scores, the head "
-            "follows the head-circumference chart. View only (the case has no slot for a "
+            "follows the head-circumference chart. Keep in case records these settings in "
+            "the case (undoable); the heads stay view only (the case has no slot for a "
             "head): Export… writes the aged head."
         )
         intro.setWordWrap(True)
@@ -288,7 +291,19 @@ class AgePanel(QWidget):
         buttons.addWidget(self.export_button)
         buttons.addWidget(self.export_all)
         buttons.addStretch(1)
+        self.keep_button = QPushButton("Keep in case")
+        self.keep_button.setToolTip(
+            "Record these settings (head, sex, ages, norms) as the case's age study: one "
+            "step on the undo stack (Edit ▸ Undo), saved with the case and shown again when "
+            "it is reopened. The heads are not stored"
+        )
+        self.keep_button.setEnabled(False)
+        self.keep_button.clicked.connect(self.keep_requested.emit)
+        buttons.addWidget(self.keep_button)
         layout.addLayout(buttons)
+        self.case_note = QLabel("")
+        self.case_note.setWordWrap(True)
+        layout.addWidget(self.case_note)
 
     # ------------------------------------------------------------ reading
     def source_key(self) -> str:
@@ -334,6 +349,17 @@ class AgePanel(QWidget):
     def set_age_range(self, lo: float, hi: float) -> None:
         """The slider's range: whole years the norms cover."""
         self.target.setRange(int(math.ceil(lo)), int(math.floor(hi)))
+
+    def set_keep_enabled(self, on: bool, why: str = "") -> None:
+        """Enable "Keep in case" (a case is open), or disable it saying ``why``."""
+        self.keep_button.setEnabled(bool(on))
+        self.keep_button.setToolTip(
+            self.keep_button.toolTip().split("\n\n")[0] + (f"\n\n{why}" if why and not on else "")
+        )
+
+    def show_case_note(self, text: str) -> None:
+        """What the case keeps of this dock (its age study), under the buttons."""
+        self.case_note.setText(text)
 
     def show_status(self, text: str) -> None:
         self.status.setText(text)
