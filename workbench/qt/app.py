@@ -53,6 +53,11 @@ def ensure_app(argv: Sequence[str] | None = None):
     if app is None:
         app = QApplication(list(argv or sys.argv[:1]))
         app.setApplicationName("Forensic workbench")
+        icon = Path(__file__).resolve().parent.parent / "resources" / "forensic-workbench.png"
+        if icon.is_file():
+            from qtpy.QtGui import QIcon
+
+            app.setWindowIcon(QIcon(str(icon)))
         app.setOrganizationName("workbench")
     return app
 
