@@ -85,6 +85,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="intensity of the --expression (default 1)",
     )
     p.add_argument(
+        "--track",
+        type=Path,
+        default=None,
+        metavar="FILE.json",
+        help="Animate tool: open this keyframe/phoneme track on the timeline (the format of "
+        "workbench animate --track; implies --tool animate)",
+    )
+    p.add_argument(
+        "--frame",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --track: the frame shown (simulated up to it)",
+    )
+    p.add_argument(
         "--age-to",
         type=float,
         default=None,
@@ -156,6 +171,12 @@ def options_from(args: argparse.Namespace):
         if not 0.0 <= args.intensity <= 1.0:
             raise InputError("--intensity", f"must be between 0 and 1, got {args.intensity}")
         tool = "animate"
+    if args.track is not None:
+        if not args.track.is_file():
+            raise InputError(args.track, "does not exist (a track .json was expected)")
+        if args.frame < 0:
+            raise InputError("--frame", f"must be 0 or more, got {args.frame}")
+        tool = "animate"
     age_asked = any(v is not None for v in (args.age_to, args.age_from, args.sex, args.age_view))
     if age_asked:
         tool = "age"
@@ -175,6 +196,8 @@ def options_from(args: argparse.Namespace):
         tool=tool,
         expression=args.expression,
         intensity=args.intensity,
+        track=args.track,
+        track_frame=args.frame,
         age=(
             {
                 "to_age": args.age_to,

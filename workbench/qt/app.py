@@ -39,6 +39,9 @@ class LaunchOptions:
     #: the Animate tool's preset and its intensity (0..1); the tool is "animate" then
     expression: str | None = None
     intensity: float = 1.0
+    #: a keyframe/phoneme track for the Animate tool's timeline, and the frame to show
+    track: Path | None = None
+    track_frame: int = 0
     #: the Age progression tool's ``{"to_age", "from_age", "sex", "view"}`` (None: not asked)
     age: dict | None = None
     screenshot: Path | None = None
@@ -88,10 +91,13 @@ def prepare(window, options: LaunchOptions) -> list[str]:
             window.fit_scan()
             window.wait_idle(timeout_s=600.0)
     tool = options.tool.replace("-", "_")  # "fit-scan" → the "fit_scan" dock
-    if tool == "animate" or options.expression is not None:
+    if tool == "animate" or options.expression is not None or options.track is not None:
         window.show_animate(options.expression, options.intensity)
         window.wait_idle()  # the head loads in the worker
-        if options.screenshot is not None:  # the face moved to its pose before the picture
+        if options.track is not None:
+            if window.animate.open_track(options.track):
+                window.animate.show_frame_now(options.track_frame)
+        elif options.screenshot is not None:  # the face moved to its pose before the picture
             window.animate.settle_now()
     elif tool == "age":
         age = options.age or {}
