@@ -532,8 +532,9 @@ class AgeTool(QObject):
             else f"the reference {source.key.partition(':')[2]} head"
         )
         self.host.status(
-            f"Age progression: {what} ({n:,} skin vertices; view only, the case is not "
-            "changed; its layers are hidden while this dock is in front)."
+            f"Age progression: {what} ({n:,} skin vertices; the heads are view only, Keep in "
+            "case records the settings; the case's layers are hidden while this dock is in "
+            "front)."
         )
         self.request(self.panel.target_age())
 

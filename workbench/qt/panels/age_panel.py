@@ -229,6 +229,22 @@ class AgePanel(QWidget):
         form.addRow("Target age", row)
         layout.addLayout(form)
 
+        # the settings above, kept in the case: next to them, not below the table
+        keep = QHBoxLayout()
+        self.keep_button = QPushButton("Keep in case")
+        self.keep_button.setToolTip(
+            "Record these settings (head, sex, ages, norms) as the case's age study: one "
+            "step on the undo stack (Edit ▸ Undo), saved with the case and shown again when "
+            "it is reopened. The heads are not stored"
+        )
+        self.keep_button.setEnabled(False)
+        self.keep_button.clicked.connect(self.keep_requested.emit)
+        self.case_note = QLabel("")
+        self.case_note.setWordWrap(True)
+        keep.addWidget(self.keep_button, 0, Qt.AlignmentFlag.AlignTop)
+        keep.addWidget(self.case_note, 1)
+        layout.addLayout(keep)
+
         modes = QHBoxLayout()
         self.mode_group = QButtonGroup(self)
         self.mode_buttons: dict[str, QRadioButton] = {}
@@ -291,19 +307,7 @@ class AgePanel(QWidget):
         buttons.addWidget(self.export_button)
         buttons.addWidget(self.export_all)
         buttons.addStretch(1)
-        self.keep_button = QPushButton("Keep in case")
-        self.keep_button.setToolTip(
-            "Record these settings (head, sex, ages, norms) as the case's age study: one "
-            "step on the undo stack (Edit ▸ Undo), saved with the case and shown again when "
-            "it is reopened. The heads are not stored"
-        )
-        self.keep_button.setEnabled(False)
-        self.keep_button.clicked.connect(self.keep_requested.emit)
-        buttons.addWidget(self.keep_button)
         layout.addLayout(buttons)
-        self.case_note = QLabel("")
-        self.case_note.setWordWrap(True)
-        layout.addWidget(self.case_note)
 
     # ------------------------------------------------------------ reading
     def source_key(self) -> str:
