@@ -222,3 +222,26 @@ def test_a_head_stored_mirrored_animates_like_the_head(head_male, smiled) -> Non
     assert np.array_equal(out.faces, stored.skin.faces)  # the stored winding comes back
     back = apply_transform(np.linalg.inv(m), out.vertices)
     assert np.abs(back - smiled).max() < 0.05
+
+
+def test_lids_close_without_the_cornea_showing_through(head_male) -> None:
+    from scipy.spatial import cKDTree
+
+    lm = head_male.skin_landmarks.as_dict()
+    tree = cKDTree(head_male.skin.vertices)
+    ps, pi = (int(tree.query(lm[c])[1]) for c in ("ps_l", "pi_l"))
+    rest_gap = np.linalg.norm(head_male.skin.vertices[ps] - head_male.skin.vertices[pi])
+    anim = Animator(head_male)
+    anim.set_lids(1.0)
+    anim.settle()
+    x = anim.skin_in_head_frame()
+    assert np.linalg.norm(x[ps] - x[pi]) < 0.2 * rest_gap  # closed to a slit
+    assert x[ps, 1] > x[pi, 1]  # the upper margin stays above the lower one
+    eyes = anim.meshes()["eyes"].vertices
+    centre = head_male.eye_centres[0]
+    apex = np.linalg.norm(eyes - centre, axis=1)
+    apex = apex[np.linalg.norm(eyes - centre, axis=1) < 20].max()
+    lid = np.asarray(head_male.regions["eyelid_upper_l"])
+    r = np.linalg.norm(x[lid] - centre, axis=1)
+    ahead = (x[lid] - centre)[:, 2] / r > np.cos(np.deg2rad(35.0))
+    assert (r[ahead] > apex).all()  # no lid skin inside the cornea
