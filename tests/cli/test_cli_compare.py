@@ -124,3 +124,21 @@ def test_truth_units_and_template_pack(meshes, capsys: pytest.CaptureFixture[str
         == 2
     )
     assert "not a template pack" in capsys.readouterr().err
+
+
+def test_a_truth_made_from_a_credited_ct_carries_its_credit(
+    meshes, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A skin extracted from the Visible Human CT (PLY ``comment credit: ...``) is credited."""
+    from workbench.io.mesh_formats import ply
+    from workbench.io.meshes import read_mesh
+    from workbench.io.samples import credit_comment
+
+    credit = "Courtesy of the U.S. National Library of Medicine."
+    truth = tmp_path / "vhp_skin.ply"
+    ply.write(truth, read_mesh(meshes["truth"]).mesh, comments=[credit_comment(credit)])
+    assert main(["compare", str(meshes["recon"]), str(truth)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["credits"] == [credit]
+    assert main(["compare", str(meshes["recon"]), str(meshes["truth"])]) == 0
+    assert "credits" not in json.loads(capsys.readouterr().out)

@@ -171,6 +171,11 @@ def run(args: argparse.Namespace) -> int:
         **result.to_json(),
     }
     data["notes"] = [*recon_read.messages, *truth_read.messages, *data["notes"]]
+    from workbench.io.samples import credits_for
+
+    credits = credits_for([recon_read.source_path, truth_read.source_path])
+    if credits:  # a truth skin from the Visible Human CTs carries NLM's credit line
+        data["credits"] = credits
     if args.out is not None:
         from workbench.render.heatmap import render_heatmap
 

@@ -131,6 +131,7 @@ def _write_pdf(folder: Path, result: Any, scan_name: str) -> list[Path]:
         pictures, notes = {}, [f"no pictures ({exc})"]
     for note in notes:
         print(f"  note: {note}")
+    notes = [*notes, *(f"Data credit: {c}" for c in result.figures.get("credits", []))]
     pdf = write_fit_scan_pdf(
         fit_scan_summary(result, scan_name),
         folder / "fit_report.pdf",

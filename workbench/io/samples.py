@@ -41,6 +41,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -308,6 +309,34 @@ def credit_for_mesh_file(path: str | os.PathLike[str]) -> str | None:
     ]
     credits = [c for c in credits if c]
     return " ".join(credits) if credits else None
+
+
+def credits_for(
+    paths: Iterable[str | os.PathLike[str] | None], sha256s: Iterable[str] = ()
+) -> list[str]:
+    """The distinct credit lines the inputs ``paths`` (and files with ``sha256s``) ask for.
+
+    A path's credit comes from the sample registry (:func:`credit_for`) or from
+    the mesh file's own header (:func:`credit_for_mesh_file`, a mesh extracted
+    from a credited CT); a SHA-256 matches any registered credited file.  Reports
+    that used such data show these lines (the NLM Visible Human credit).
+    """
+    out: list[str] = []
+    table = _credited_files() if any(s.credit for s in registry().values()) else {}
+    for sha in sha256s:
+        found = table.get(sha)
+        if found and found not in out:
+            out.append(found)
+    for p in paths:
+        if p is None:
+            continue
+        try:
+            found = credit_for(p) or credit_for_mesh_file(p)
+        except (OSError, ValueError, WorkbenchError):
+            found = None
+        if found and found not in out:
+            out.append(found)
+    return out
 
 
 def credit_comment(credit: str) -> str:

@@ -232,6 +232,8 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
     _title(pdf, report)
     if report.get("warnings"):
         pdf.box("Warnings", report["warnings"])
+    if report.get("credits"):
+        pdf.box("Data credits", report["credits"])
     _inputs(pdf, report["inputs"])
     _table(pdf, report["table"])
     _landmarks(pdf, report["landmarks"])

@@ -418,6 +418,15 @@ def build_report(
         "pictures": {},
         "warnings": warnings,
     }
+    # data that must carry a credit line (the Visible Human CTs, and meshes made from them)
+    from workbench.io.samples import credits_for
+
+    credits = credits_for(
+        [ev.original_path for ev in case.evidence if getattr(ev, "original_path", "")],
+        [ev.sha256 for ev in case.evidence],
+    )
+    if credits:
+        report["credits"] = credits
     if fit.references is not None:
         between = fit.references["spread"]
         report["references"] = {

@@ -732,6 +732,12 @@ def fit_scan_pack(
         progress=progress,
     )
 
+    from workbench.io.samples import credits_for
+
+    credits = credits_for([path, bone_path])
+    if credits:  # a CT's skin from the Visible Human data carries NLM's credit line
+        result.figures["credits"] = credits
+
     def write(folder: Path) -> list[Path]:
         files = export_template(result.head, folder)
         if colours is not None and result.scan is not None:
