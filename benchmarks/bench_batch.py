@@ -5,8 +5,11 @@ with ``../shared/data`` beside the checkout (or WORKBENCH_SAMPLE_MIRRORS set).
 
 The jobs are ``workbench demo``'s built-in case: the female reference skull
 reconstructed with the male reference head (``--sex male``, head frame
-orientation, ``--truth`` the female reference skin, no pictures), the same
-row ``--jobs`` times.  Prints (no budgets, no assertions):
+orientation, ``--truth`` the female reference skin, no pictures), ``--jobs``
+rows, each skull a copy with its own 1e-6 mm vertex noise: identical files
+would let the one-process run reuse the first job's content-keyed caches
+(4 identical rows: 12.6 s, then 3.7 s a job), which a real study of
+different skulls does not get.  Prints (no budgets, no assertions):
 
 * seconds for all jobs one after another in this process (``--workers 0``),
   and on a Dask LocalCluster of 2 worker processes x 1 thread (cluster start
@@ -41,21 +44,34 @@ from workbench.services.batch import dask_client, run_batch, run_row_task  # noq
 TRIVIAL = ["samples", "list"]
 
 
-def _case(folder: Path) -> tuple[Path, Path]:
-    """The built-in demo case: the female reference skull and skin (mm, head frame)."""
+def _case(folder: Path, jobs: int) -> tuple[list[Path], Path]:
+    """The built-in demo case: the female reference skull (one copy per job, each with its own
+    1e-6 mm vertex noise so no job reuses another's content-keyed caches) and skin (mm)."""
+    import numpy as np
+
+    from workbench.core.mesh import Mesh
     from workbench.io.meshes import write_mesh
     from workbench.services.reference_parts import skull_surface
     from workbench.services.template_cache import reference_head
 
     female = reference_head("female")
     reference_head("male")  # built and cached before any timing
-    skull = write_mesh(folder / "skull.ply", skull_surface(female))
+    bone = skull_surface(female)
+    skulls = []
+    for i in range(jobs):
+        noise = np.random.default_rng(i).normal(0.0, 1e-6, bone.vertices.shape)
+        skulls.append(
+            write_mesh(folder / f"skull{i + 1}.ply", Mesh(bone.vertices + noise, bone.faces))
+        )
     truth = write_mesh(folder / "truth_skin.ply", female.skin)
-    return skull, truth
+    return skulls, truth
 
 
-def _manifest(folder: Path, skull: Path, truth: Path, jobs: int) -> Path:
-    rows = [f'r{i + 1},reconstruct,{skull},male,"0,0,1","0,1,0",{truth},true' for i in range(jobs)]
+def _manifest(folder: Path, skulls: list[Path], truth: Path) -> Path:
+    rows = [
+        f'r{i + 1},reconstruct,{skull},male,"0,0,1","0,1,0",{truth},true'
+        for i, skull in enumerate(skulls)
+    ]
     path = folder / "manifest.csv"
     path.write_text(
         "id,job,input,sex,anterior,superior,truth,no-pictures\n" + "\n".join(rows) + "\n",
@@ -108,8 +124,8 @@ def main_bench() -> None:
     )
     with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
         folder = Path(tmp)
-        skull, truth = _case(folder)
-        manifest = _manifest(folder, skull, truth, args.jobs)
+        skulls, truth = _case(folder, args.jobs)
+        manifest = _manifest(folder, skulls, truth)
         print(f"{args.jobs} reconstructions one after another in this process:")
         serial, res0 = _batch(manifest, folder / "serial", 0)
         print(f"{args.jobs} reconstructions on a LocalCluster of 2 workers:")
