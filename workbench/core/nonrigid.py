@@ -57,6 +57,7 @@ from scipy import sparse
 from scipy.sparse.linalg import cg, splu
 from scipy.spatial import cKDTree
 
+from workbench.core.threads import worker_count
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
 from workbench.core.spatial import MeshIndex
@@ -275,7 +276,7 @@ def soft_match(
     Returns ``(matched points (n, 3), agreement (n,) in [0, 1], distance (n,),
     blend (n, k) weights over the returned neighbour ids (n, k))``.
     """
-    d, j = tree.query(points, k=k + 1, workers=-1)
+    d, j = tree.query(points, k=k + 1, workers=worker_count())
     d, j = d.reshape(len(points), k + 1), j.reshape(len(points), k + 1)
     # a neighbour's weight fades to zero as it reaches the first one left out, so the set
     # of k neighbours can change (ties) without the match jumping

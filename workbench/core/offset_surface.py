@@ -19,6 +19,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from workbench.core.threads import worker_count
 from workbench.core.mesh import Mesh
 
 
@@ -52,7 +53,7 @@ def uniform_offset(bone: Mesh, depth_mm: float = 6.0, spacing_mm: float = 1.5) -
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     cap = depth_mm + 2 * spacing_mm
     tree = cKDTree(_surface_points(bone, spacing_mm / 4))
-    dist, _ = tree.query(grid, distance_upper_bound=cap, workers=-1)
+    dist, _ = tree.query(grid, distance_upper_bound=cap, workers=worker_count())
     field = np.minimum(dist, cap).reshape(shape)
     solid = field < depth_mm
     labels, n = ndimage.label(solid)

@@ -30,7 +30,6 @@ consistently wound meshes: positive outside, negative inside.
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
@@ -38,6 +37,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core.threads import worker_count
 from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
 from workbench.core.normals import _normalise, angle_weighted_vertex_normals
@@ -178,7 +178,7 @@ class MeshIndex:
             tree = self._tree
             order = _morton_order(pts)
             sorted_pts = np.ascontiguousarray(pts[order])
-            _, near = tree.centre_tree.query(sorted_pts, workers=-1)
+            _, near = tree.centre_tree.query(sorted_pts, workers=worker_count())
             first = tree.centre_leaf[near]
             blocks = [slice(s, min(s + self.chunk, n)) for s in range(0, n, self.chunk)]
 
@@ -191,7 +191,7 @@ class MeshIndex:
                 cp[rows], bary[rows] = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
 
             if workers is None:
-                workers = os.cpu_count() or 1
+                workers = worker_count()
             if workers > 1 and len(blocks) > 1:
                 with ThreadPoolExecutor(max_workers=min(workers, len(blocks))) as pool:
                     list(pool.map(run, blocks))

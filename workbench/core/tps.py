@@ -49,7 +49,6 @@ in a small thread pool (numpy releases the GIL in the heavy kernels).
 from __future__ import annotations
 
 import contextlib
-import os
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -57,6 +56,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 from scipy.spatial.distance import cdist
+
+from workbench.core.threads import worker_count
 
 _DEFAULT_CHUNK = 131_072  # kernel values per chunk: 1 MB of float64 stays in L2 cache
 
@@ -236,7 +237,7 @@ class LandmarkWarp:
                 out[start:stop] = y + self.offset
 
         if workers is None:
-            workers = os.cpu_count() or 1
+            workers = worker_count()
         workers = max(1, min(int(workers), len(pts) // (4 * step) or 1))
         bounds = np.linspace(0, len(pts), workers + 1).astype(int)
         blocks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]

@@ -33,6 +33,7 @@ from scipy import ndimage
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
+from workbench.core.threads import worker_count
 from workbench.core.isosurface import (
     _compact,
     decimate,
@@ -270,7 +271,7 @@ class Sweep(Primitive):
             ],
             axis=1,
         )
-        _, k = self.tree.query(p, workers=-1)
+        _, k = self.tree.query(p, workers=worker_count())
         d = p - self.c[k]
         u = np.einsum("ij,ij->i", d, self.n[k])
         v = np.einsum("ij,ij->i", d, self.b[k])
