@@ -158,6 +158,23 @@ class AgeResult:
     landmarks_after: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
+def _missing_row(
+    measurement_id: str, name: str, kind: str, a: str, b: str, index: Mapping[str, int]
+) -> MeasurementRow:
+    """The row of a measurement the head's landmarks do not allow (named in its note)."""
+    gone = " and ".join(c for c in (a, b) if c not in index)
+    return MeasurementRow(
+        measurement_id,
+        name,
+        kind,
+        a,
+        b,
+        "unconstrained",
+        float("nan"),
+        note=f"landmark {gone} missing on the head",
+    )
+
+
 def _r(value: float, digits: int = 2) -> float | None:
     return None if not np.isfinite(value) else round(float(value), digits)
 
@@ -333,20 +350,7 @@ def age_head(
         lo, hi = table.age_range(m.measurement_id, sex, eth)
         usable_ages.append((lo, hi))
         if m.a not in index or m.b not in index:
-            rows.append(
-                MeasurementRow(
-                    m.measurement_id,
-                    m.name,
-                    m.kind,
-                    m.a,
-                    m.b,
-                    "unconstrained",
-                    float("nan"),
-                    note="landmark "
-                    + " and ".join(c for c in (m.a, m.b) if c not in index)
-                    + " missing on the head",
-                )
-            )
+            rows.append(_missing_row(m.measurement_id, m.name, m.kind, m.a, m.b, index))
             continue
         d_c = float(np.linalg.norm(p[index[m.a]] - p[index[m.b]]))
         if not (lo <= a0 <= hi and lo <= a1 <= hi):
@@ -423,20 +427,7 @@ def age_head(
     arcs = []
     for t in load_table82():
         if t.a not in index or t.b not in index:
-            rows.append(
-                MeasurementRow(
-                    t.measurement,
-                    t.measurement,
-                    t.kind,
-                    t.a,
-                    t.b,
-                    "unconstrained",
-                    float("nan"),
-                    note="landmark "
-                    + " and ".join(c for c in (t.a, t.b) if c not in index)
-                    + " missing on the head",
-                )
-            )
+            rows.append(_missing_row(t.measurement, t.measurement, t.kind, t.a, t.b, index))
             continue
         ia, ib = index[t.a], index[t.b]
         if t.kind == "arc":

@@ -27,11 +27,11 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
 from workbench.services.age import AgeResult, Progress, age_head, in_frankfort_frame
+from workbench.services.scan_fit import _json_default
 
 #: most ages one request may ask for
 MAX_AGES = 40
@@ -235,11 +235,3 @@ def age_to_folder(
         return files
 
     return results, write_folder(out, write, force=force, inputs=list(input_paths))
-
-
-def _json_default(value: object) -> object:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
