@@ -249,8 +249,10 @@ def test_parameter_file_matches_the_cliniface_rows(shared_data):
 
 def test_whole_head_is_plausible(both):
     for sex, (lo_len, hi_len), (lo_b, hi_b), (lo_v, hi_v) in (
+        # the targets of skin_parameters.json "head" (female: Howells 1973 GOL / XCB plus
+        # the soft tissue over them), kept through the facial fit by the vault anchors
         ("male", (188, 198), (147, 157), (124, 132)),
-        ("female", (178, 188), (140, 150), (118, 126)),
+        ("female", (186, 192), (146, 154), (118, 126)),
     ):
         s = both[sex]
         lm = s.landmarks.as_dict()

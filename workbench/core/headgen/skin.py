@@ -17,7 +17,9 @@ Pipeline of :func:`build_skin` (Kähler 2003, ch. 5.1 and 8.3-8.5)
    parameter file (Weinberg et al. 2016 adult means) is a strong constraint,
    nearby landmarks are softly tied, porion and orbitale keep y = 0;
 5. the landmark warp of :mod:`workbench.core.tps` (phi(r) = r) moves the
-   surface onto those targets; the result is symmetrised exactly.
+   surface onto those targets, with the neck cut and the scalp away from the
+   face held (so the head's size survives the facial fit); the result is
+   symmetrised exactly.
 
 Units and frame: millimetres, head frame of :mod:`workbench.core.frame`
 (x to the subject's left, x = 0 the midsagittal plane, y up, z forward,
@@ -353,6 +355,31 @@ def solve_landmark_targets(
     return {c: pick(c) @ p for c in points if c != "sto"}
 
 
+VAULT_ANCHOR_CLEARANCE_MM = 40.0  # scalp anchors this far from every landmark
+VAULT_ANCHOR_SPACING_MM = 20.0
+
+
+def _vault_anchors(v: np.ndarray, scalp: np.ndarray, pts: dict[str, np.ndarray]) -> np.ndarray:
+    """Scalp vertices that hold the head-scale result during the facial warp (ids).
+
+    Vertices of the ``scalp`` region farther than ``VAULT_ANCHOR_CLEARANCE_MM``
+    from every landmark, thinned greedily to ``VAULT_ANCHOR_SPACING_MM`` apart
+    (left half + midline chosen, mirrored, so the set is symmetric).
+    """
+    lm = np.array(list(pts.values()))
+    cand = np.asarray(scalp)[cKDTree(lm).query(v[scalp])[0] > VAULT_ANCHOR_CLEARANCE_MM]
+    cand = cand[v[cand, 0] >= -1e-9]
+    cand = cand[np.lexsort((v[cand, 2], v[cand, 1], v[cand, 0]))]  # deterministic order
+    chosen: list[int] = []
+    for i in cand:
+        if chosen and np.linalg.norm(v[chosen] - v[i], axis=1).min() < VAULT_ANCHOR_SPACING_MM:
+            continue
+        chosen.append(int(i))
+    tree = cKDTree(v)
+    mirrors = tree.query(v[chosen] * MIRROR)[1] if chosen else np.zeros(0, int)
+    return np.unique(np.concatenate([np.asarray(chosen, int), mirrors]))
+
+
 def _closest_on_midline_edges(p: np.ndarray, v: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Closest point to ``p`` on the midline edges (both ends at x = 0) of ``faces``."""
     best, best_d = None, np.inf
@@ -425,8 +452,15 @@ def build_skin(
     # facial measurements -> landmark targets -> warp
     targets = solve_landmark_targets(pts, params["measurements"], sex, params["solver"])
     codes = sorted(targets)
-    # the neck stump's cut stays put (anchors with zero displacement)
-    anchors = np.unique(np.concatenate([cm.rings["neck_n3"], mp[cm.rings["neck_n3"]]]))
+    # the neck stump's cut stays put (anchors with zero displacement), and so does the
+    # vault away from the face: without these the warp's global part carries the
+    # face's changes (bifrontal width, temples) over the whole cranium, and the head
+    # came out ~6 mm narrower than its breadth target (tape around it ~20 mm short)
+    anchors = np.unique(
+        np.concatenate(
+            [cm.rings["neck_n3"], mp[cm.rings["neck_n3"]], _vault_anchors(v, regions["scalp"], pts)]
+        )
+    )
     src = np.vstack([np.array([pts[c] for c in codes]), v[anchors]])
     dst = np.vstack([np.array([targets[c] for c in codes]), v[anchors]])
     warp = fit_warp(src, dst)
