@@ -144,7 +144,9 @@ def test_report_pdf_has_every_measurement_with_its_z_scores(
     for r in normed:
         assert r.name in flat
         line = next(ln for ln in text.splitlines() if ln.startswith(r.name + " "))
-        assert f"{r.z_before:+.2f}" in line and f"{r.z_after:+.2f}" in line
+        # the report writes a z that rounds to zero as +0.00, never -0.00
+        z0, z1 = (f"{z:+.2f}".replace("-0.00", "+0.00") for z in (r.z_before, r.z_after))
+        assert z0 in line and z1 in line
         assert f"{r.mean_from:.1f} ± {r.sd_from:.1f}" in line
     # summary figures, the chart, references, credit, note, the pictures embedded
     fig = aged.figures

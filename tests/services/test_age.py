@@ -165,3 +165,14 @@ def test_no_skin_inside_the_skull_even_where_the_source_had_some(head_female) ->
     assert f["face_skin_inside_skull_vertices"]["before"] > 0  # the female reference's orbits
     assert f["face_skin_inside_skull_vertices"]["after"] == 0
     assert f["skin_vertices_moved_out_of_skull"] > 0
+
+
+@pytest.mark.parametrize("sex", ["male", "female"])
+def test_reference_heads_have_a_plausible_head_circumference(sex, request) -> None:
+    # issue 15: the aged head's circumference within +-2 SD of the chart for its age and
+    # sex; the heads keep their z-score, so the reference heads must start inside
+    head = request.getfixturevalue(f"head_{sex}")
+    r = age_head(head, sex=sex, from_age=18, to_age=8)
+    hc = r.figures["head_circumference_mm"]
+    assert abs(hc["z_before"]) < 2.0 and abs(hc["z_after"]) < 2.0
+    assert abs(hc["after"] - hc["target"]) < 0.005 * hc["target"]

@@ -503,7 +503,9 @@ def age_head(
     # 5. deform the whole head
     say("warping the head ...")
     aged = _deform(head, warp)
-    aged, pushed = _skin_out_of_skull(aged)
+    aged, pushed = _skin_out_of_skull(
+        aged, head.skin.face_normals, keep=head.skin.face_areas < SLIVER_MM2
+    )
     seconds = time.perf_counter() - t0
 
     # the report: measure the aged head as it came out
@@ -617,23 +619,61 @@ def age_head(
 SKULL_CLEARANCE_MM = 0.5
 
 
-def _skin_out_of_skull(head: TemplateHead) -> tuple[TemplateHead, int]:
+def _skin_out_of_skull(
+    head: TemplateHead, rest_normals: np.ndarray, keep: np.ndarray | None = None
+) -> tuple[TemplateHead, int]:
     """Skin vertices inside the cranium or mandible moved to just outside (mm; how many).
 
     The warps keep the source's tissue depths at the paired landmarks, but
     between them thin skin (the orbit rims, where the reference heads already
-    have a few vertices a fraction of a mm inside the bone) can end inside.
+    have a few vertices a fraction of a mm inside the bone; the nasal dorsum of
+    a small child) can end inside.  The push is spread over the neighbourhood
+    (pushed vertices held, the others relaxed to their neighbours' mean push),
+    triangles it turned over (against ``rest_normals``; ``keep`` as in
+    :func:`unfold`) are relaxed, and this repeats while skin is inside.
     """
     skull = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
-    v = head.skin.vertices
-    bad = np.flatnonzero(skull.signed_distance(v) < 0)
-    if not len(bad):
+    skin = head.skin
+    adj, degree = _adjacency(skin)
+    first = 0
+    for round_ in range(PUSH_ROUNDS):
+        v = skin.vertices
+        bad = np.flatnonzero(skull.signed_distance(v) < 0)
+        if round_ == 0:
+            first = len(bad)
+        if not len(bad):
+            break
+        cl = skull.closest_points(v[bad])
+        normal = skull.pseudo_normals(cl.face_ids, cl.barycentric)
+        push = np.zeros_like(v)
+        push[bad] = cl.points + SKULL_CLEARANCE_MM * normal - v[bad]
+        held = np.zeros(len(v), bool)
+        held[bad] = True
+        for _ in range(PUSH_SPREAD_PASSES):
+            mean = (adj @ push) / np.maximum(degree, 1)[:, None]
+            push[~held] = mean[~held]
+        skin = unfold(skin.with_vertices(v + push), rest_normals, keep=keep)
+    if skin is head.skin:
         return head, 0
-    cl = skull.closest_points(v[bad])
-    normal = skull.pseudo_normals(cl.face_ids, cl.barycentric)
-    moved = v.copy()
-    moved[bad] = cl.points + SKULL_CLEARANCE_MM * normal
-    return replace(head, meshes={**head.meshes, "skin": head.skin.with_vertices(moved)}), len(bad)
+    return replace(head, meshes={**head.meshes, "skin": skin}), first
+
+
+#: rounds of push (and unfold) while skin is inside the skull
+PUSH_ROUNDS = 3
+#: Jacobi passes that spread the out-of-skull push over the skin around the pushed vertices
+PUSH_SPREAD_PASSES = 20
+
+
+def _adjacency(skin: Mesh) -> tuple[Any, np.ndarray]:
+    """Vertex adjacency of ``skin`` (sparse 0/1 matrix) and each vertex's degree."""
+    from scipy import sparse
+
+    f = skin.faces
+    n = skin.n_vertices
+    e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    adj = ((adj + adj.T) > 0).astype(float)
+    return adj, np.asarray(adj.sum(axis=1)).ravel()
 
 
 _INSIDE: dict[str, int] = {}
@@ -682,14 +722,9 @@ def unfold(skin: Mesh, rest_normals: np.ndarray, keep: np.ndarray | None = None)
     mean), so the landmarks (stored as points) and the rest of the skin stay;
     ``keep`` lists triangles not to look at (the reference's own slivers).
     """
-    from scipy import sparse
-
     f = skin.faces
     n = skin.n_vertices
-    e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-    adj = ((adj + adj.T) > 0).astype(float)
-    degree = np.asarray(adj.sum(axis=1)).ravel()
+    adj, degree = _adjacency(skin)
     # rims (neck, eye and mouth openings) stay: relaxing them would shrink the openings
     rim = np.zeros(n, bool)
     rim[skin.edges_unique[skin.edge_face_counts == 1].ravel()] = True
