@@ -387,3 +387,31 @@ def test_a_case_with_a_study_opens_with_its_settings_and_ages_them(
     assert w.age.settings().sex == "female" and w.age.settings().from_age == 25.0
     assert w.age.current_study() == study.replaced(target_ages=(9.0,))  # 11 y not computed yet
     assert not w.document.stack.can_undo  # opening shows the study, it does not edit it
+
+
+def test_the_arc_increase_field_is_part_of_the_settings_and_the_study(
+    head_female, new_window, qtbot, tmp_path
+):
+    from workbench.io.case_file import save_case
+    from workbench.model.age_study import AgeStudy
+    from workbench.model.case import Case
+
+    study = AgeStudy(
+        source="reference:female",
+        sex="female",
+        from_age=20.0,
+        target_ages=(4.0,),
+        arc_increase=0.05,
+    )
+    path = save_case(Case(age_study=study), tmp_path / "arc.fcase")
+    w = new_window(1200, 800)
+    w.age.prefetch_years = 0
+    w.open_case(path)
+    qtbot.waitUntil(lambda: w.document.path == path, timeout=60_000)
+    panel = w.age_panel
+    assert panel.arc_increase.value() == pytest.approx(5.0)  # the kept study's, shown
+    assert w.age.settings().arc_increase == pytest.approx(0.05)
+    panel.arc_increase.setValue(8.0)
+    assert w.age.settings().arc_increase == pytest.approx(0.08)
+    assert w.age.current_study().arc_increase == pytest.approx(0.08)
+    assert panel.arc_increase.maximum() == pytest.approx(10.0)  # the 10 % at most

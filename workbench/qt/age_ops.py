@@ -404,10 +404,9 @@ class AgeTool(QObject):
         panel.mode_changed.connect(self._mode_changed)
         panel.export_requested.connect(self.ask_export)
         runner.progress_changed.connect(self._on_progress)
-        #: norms table and arc increase of the settings (the dock has no field for them:
-        #: a kept study's are used as they are)
+        #: norms table of the settings (the dock has no field for it: a kept study's is
+        #: used as it is); the arc increase is the dock's field
         self.norms_id = "facial_norms"
-        self.arc_increase = 0.0
         #: a study being shown whose sex, population and target apply when the head loads
         self._pending: AgeStudy | None = None
         self.document = document if document is not None else getattr(host, "document", None)
@@ -421,7 +420,11 @@ class AgeTool(QObject):
     def settings(self) -> AgeSettings:
         p = self.panel
         return AgeSettings(
-            p.sex_value(), p.from_age_value(), p.ethnicity_value(), self.norms_id, self.arc_increase
+            p.sex_value(),
+            p.from_age_value(),
+            p.ethnicity_value(),
+            self.norms_id,
+            p.arc_increase_value(),
         )
 
     @property
@@ -622,7 +625,8 @@ class AgeTool(QObject):
     def _case_replaced(self) -> None:
         open_ = self.case_open()
         self.panel.set_keep_enabled(open_, "Open a skull or a case first.")
-        self.norms_id, self.arc_increase = "facial_norms", 0.0
+        self.norms_id = "facial_norms"
+        self.panel.set_arc_increase(0.0)
         study = self.document.case.age_study if self.document is not None else None
         if study is None:
             self.panel.show_case_note("" if not open_ else "The case keeps no age study.")
@@ -671,7 +675,8 @@ class AgeTool(QObject):
             if study.ethnicity is not None and p.ethnicity.findText(study.ethnicity) >= 0:
                 p.ethnicity.setCurrentText(study.ethnicity)
             p.export_all.setChecked(len(study.target_ages) > 1)
-            self.norms_id, self.arc_increase = study.norms, study.arc_increase
+            self.norms_id = study.norms
+            p.set_arc_increase(study.arc_increase)
         finally:
             for w, b in zip(widgets, blocked, strict=True):
                 w.blockSignals(b)

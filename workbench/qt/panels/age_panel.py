@@ -210,6 +210,18 @@ class AgePanel(QWidget):
         self.ethnicity.setToolTip("Population of the facial norms (Cliniface tables)")
         self.ethnicity.currentTextChanged.connect(lambda _t: self.settings_changed.emit())
         form.addRow("Norms of", self.ethnicity)
+        self.arc_increase = QDoubleSpinBox()
+        self.arc_increase.setRange(0.0, 10.0)
+        self.arc_increase.setDecimals(0)
+        self.arc_increase.setSingleStep(1.0)
+        self.arc_increase.setSuffix(" %")
+        self.arc_increase.setKeyboardTracking(False)
+        self.arc_increase.setToolTip(
+            "Young-child option (Kähler §8.5.4): arc lengths over the face grow this much more "
+            "than the head scale (0-10 %)"
+        )
+        self.arc_increase.valueChanged.connect(lambda _v: self.settings_changed.emit())
+        form.addRow("Arc increase", self.arc_increase)
         self.target = QSlider(Qt.Orientation.Horizontal)
         self.target.setRange(0, 40)
         self.target.setValue(DEFAULT_TARGET_AGE)
@@ -321,6 +333,18 @@ class AgePanel(QWidget):
 
     def ethnicity_value(self) -> str | None:
         return self.ethnicity.currentText() or None
+
+    def arc_increase_value(self) -> float:
+        """The arc increase as a fraction (0-0.10)."""
+        return float(self.arc_increase.value()) / 100.0
+
+    def set_arc_increase(self, fraction: float) -> None:
+        """Show ``fraction`` (0-0.10) without emitting ``settings_changed``."""
+        blocked = self.arc_increase.blockSignals(True)
+        try:
+            self.arc_increase.setValue(100.0 * float(fraction))
+        finally:
+            self.arc_increase.blockSignals(blocked)
 
     def target_age(self) -> int:
         return int(self.target.value())
