@@ -659,7 +659,7 @@ def _skin_out_of_skull(
 
 
 #: rounds of push (and unfold) while skin is inside the skull
-PUSH_ROUNDS = 3
+PUSH_ROUNDS = 6
 #: Jacobi passes that spread the out-of-skull push over the skin around the pushed vertices
 PUSH_SPREAD_PASSES = 20
 
