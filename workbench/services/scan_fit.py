@@ -63,7 +63,6 @@ from workbench.core.tps import fit_warp
 from workbench.core.visibility import field_of_view_caps, seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.model.template import TemplateHead
-from workbench.services.template import bone_under_skin
 
 Progress = Callable[[str], None]
 
@@ -448,7 +447,7 @@ def fit_scan(
     warp = fit_warp(src, targets, smoothing=INNER_SMOOTHING)
     warped = warp_head(rest, warp)
     meshes = dict(warped.meshes)
-    meshes.update(bone_under_skin(meshes, skin, np.asarray(rest.regions["face"])))
+    meshes.update(_bone_under_skin(meshes, skin, np.asarray(rest.regions["face"])))
     meshes["skin"] = skin
     eye_shift = eyes_behind_lids(warped, skin.vertices, on_scan)
     head = move_eyes(replace(warped, meshes=meshes, skin_landmarks=skin_lms), eye_shift)
@@ -600,6 +599,49 @@ def fit_scan(
     }
     head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
     return ScanFit(head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance)
+
+
+#: bone that reaches through the fitted face skin is moved back under it to this depth (mm)
+BONE_CLEARANCE_MM = 0.5
+#: ... with a Gaussian falloff of this radius around each skin vertex it reached (mm)
+BONE_PUSH_RADIUS_MM = 5.0
+
+
+def _bone_under_skin(
+    meshes: Mapping[str, Mesh], skin: Mesh, face: np.ndarray, rounds: int = 6
+) -> dict[str, Mesh]:
+    """Cranium and mandible moved back under ``face`` skin vertices they reach through (mm).
+
+    The skin is the scan's and the skull only an estimate placed by a smooth
+    warp at the paired landmarks, so between the pairs (the thin skin of the
+    lateral orbit rims, the nasal dorsum) bone can come through: there
+    the bone is pushed in along the skin's normal, with a Gaussian falloff
+    (:data:`BONE_PUSH_RADIUS_MM`), until the skin is at least
+    :data:`BONE_CLEARANCE_MM` outside it.  Returns the moved parts.
+    """
+    parts = {p: meshes[p] for p in ("cranium", "mandible") if p in meshes}
+    if len(parts) < 2:
+        return {}
+    normals = skin.vertex_normals
+    for _ in range(rounds):
+        bone = MeshIndex(concatenate(list(parts.values())))
+        signed = bone.signed_distance(skin.vertices[face])
+        hit = signed < 0
+        if not hit.any():
+            break
+        where = skin.vertices[face[hit]]
+        need = BONE_CLEARANCE_MM - signed[hit]
+        push = need[:, None] * normals[face[hit]]
+        tree = cKDTree(where)
+        for name, mesh in parts.items():
+            v = mesh.vertices
+            dist, j = tree.query(v, distance_upper_bound=3.0 * BONE_PUSH_RADIUS_MM)
+            near = np.isfinite(dist)
+            w = np.exp(-((dist[near] / BONE_PUSH_RADIUS_MM) ** 2))
+            moved = v.copy()
+            moved[near] -= w[:, None] * push[j[near]]
+            parts[name] = mesh.with_vertices(moved)
+    return parts
 
 
 def _scan_support(

@@ -27,14 +27,13 @@ intersects the skull away from its openings.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.landmarks import Landmark, LandmarkSet
-from workbench.core.mesh import Mesh, concatenate
+from workbench.core.mesh import Mesh
 from workbench.core.normals import normals_within_radius
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
@@ -443,52 +442,6 @@ def _update_clearance(
     return c_src, c_off, added, grown
 
 
-#: bone that reaches through the face skin is moved back under it to this depth (mm)
-BONE_CLEARANCE_MM = 0.5
-#: ... with a Gaussian falloff of this radius around each skin vertex it reached (mm)
-BONE_PUSH_RADIUS_MM = 5.0
-
-
-def bone_under_skin(
-    meshes: Mapping[str, Mesh], skin: Mesh, face: np.ndarray, rounds: int = 6
-) -> dict[str, Mesh]:
-    """Cranium and mandible moved back under ``face`` skin vertices they reach through (mm).
-
-    The skull is placed by a smooth warp at the paired landmarks (under a
-    scan's fitted skin; under the reference skin, whose clearance constraints
-    stay away from the eye openings), so between the pairs (the thin skin of
-    the lateral orbit rims, the nasal dorsum) bone can come through: there
-    the bone is pushed in along the skin's normal, with a Gaussian falloff
-    (:data:`BONE_PUSH_RADIUS_MM`), until the skin is at least
-    :data:`BONE_CLEARANCE_MM` outside it.  Returns the moved parts.
-    """
-    from scipy.spatial import cKDTree
-
-    parts = {p: meshes[p] for p in ("cranium", "mandible") if p in meshes}
-    if len(parts) < 2:
-        return {}
-    normals = skin.vertex_normals
-    for _ in range(rounds):
-        bone = MeshIndex(concatenate(list(parts.values())))
-        signed = bone.signed_distance(skin.vertices[face])
-        hit = signed < 0
-        if not hit.any():
-            break
-        where = skin.vertices[face[hit]]
-        need = BONE_CLEARANCE_MM - signed[hit]
-        push = need[:, None] * normals[face[hit]]
-        tree = cKDTree(where)
-        for name, mesh in parts.items():
-            v = mesh.vertices
-            dist, j = tree.query(v, distance_upper_bound=3.0 * BONE_PUSH_RADIUS_MM)
-            near = np.isfinite(dist)
-            w = np.exp(-((dist[near] / BONE_PUSH_RADIUS_MM) ** 2))
-            moved = v.copy()
-            moved[near] -= w[:, None] * push[j[near]]
-            parts[name] = mesh.with_vertices(moved)
-    return parts
-
-
 def build_reference_head(sex: str = "male", table_id: str = DEFAULT_DEPTH_TABLE) -> TemplateHead:
     """The reference head for ``sex``: authored skin, procedural skull fitted under it."""
     from workbench.core.headgen.skin import build_skin
@@ -513,7 +466,6 @@ def build_reference_head(sex: str = "male", table_id: str = DEFAULT_DEPTH_TABLE)
         extra_points=extra,
         openings=skin.mesh.vertices[np.concatenate(list(skin.openings.values()))],
     )
-    bones.update(bone_under_skin(bones, skin.mesh, np.asarray(skin.regions["face"])))
     eye_centres = np.vstack([skin.eyeballs["l"][0], skin.eyeballs["r"][0]])
     eye_radius = float(skin.eyeballs["l"][1])
     meshes = {
