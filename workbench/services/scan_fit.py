@@ -617,7 +617,8 @@ def _bone_under_skin(
     lateral orbit rims, the nasal dorsum) bone can come through: there
     the bone is pushed in along the skin's normal, with a Gaussian falloff
     (:data:`BONE_PUSH_RADIUS_MM`), until the skin is at least
-    :data:`BONE_CLEARANCE_MM` outside it.  Returns the moved parts.
+    :data:`BONE_CLEARANCE_MM` outside it.  Returns the moved parts; the skull
+    landmarks are not moved.
     """
     parts = {p: meshes[p] for p in ("cranium", "mandible") if p in meshes}
     if len(parts) < 2:
