@@ -6,8 +6,8 @@ aged 18 → 3, 18 → 8, 18 → 15, then the 3-year-old back to 18 and the
 8-year-old to 15 (so 3 → 18 and 8 → 15 start from a child head); each
 reconstruction folder given (e.g. ``demo_out/headsq/`` from ``workbench
 demo``: a face reconstructed over the headsq CT's bone) aged 18 → 3 and
-18 → 8 with the male norms.  Last, a 10-age sequence (3..12 y) of the male
-head.
+18 → 8 with the male norms, then 3 → 18 and 8 → 15 from those.  Last, a
+10-age sequence (3..12 y) of the male head.
 
 Prints per case: hard constraints met (median / max residual, mm), the
 largest change of a z-score, the head circumference before / after with its
@@ -81,9 +81,16 @@ def main(argv: list[str]) -> int:
         from workbench.cli.animate_cmd import load_head
 
         head, _, _ = load_head(folder)
+        young = {}
         for a1 in (3, 8):
             r, s = _timed(head, "male", 18, a1)
+            young[a1] = r.head
             rows.append(_line(f"{Path(folder).name} 18->{a1}", r, s))
+            steps.append(s)
+            solves.append(r.figures["solve"]["seconds"])
+        for a0, a1 in ((3, 18), (8, 15)):
+            r, s = _timed(young[a0], "male", a0, a1)
+            rows.append(_line(f"{Path(folder).name} 18->{a0}->{a1}", r, s))
             steps.append(s)
             solves.append(r.figures["solve"]["seconds"])
     head = reference_head("male")

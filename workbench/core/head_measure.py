@@ -24,9 +24,7 @@ def plane_section_points(mesh: Mesh, point: np.ndarray, normal: np.ndarray) -> n
     n = np.asarray(normal, float)
     n = n / np.linalg.norm(n)
     side = (v - np.asarray(point, float)) @ n
-    f = mesh.faces
-    edges = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    edges = np.unique(np.sort(edges, axis=1), axis=0)
+    edges = mesh.edges_unique
     sa, sb = side[edges[:, 0]], side[edges[:, 1]]
     cross = (sa * sb < 0) | ((sa == 0) & (sb != 0))
     e = edges[cross]

@@ -503,7 +503,7 @@ def age_head(
     # 5. deform the whole head
     say("warping the head ...")
     aged = _deform(head, warp)
-    aged, pushed = _skin_out_of_skull(
+    aged, pushed, skull = _skin_out_of_skull(
         aged, head.skin.face_normals, keep=head.skin.face_areas < SLIVER_MM2
     )
     seconds = time.perf_counter() - t0
@@ -526,10 +526,15 @@ def age_head(
             value = float(np.linalg.norm(a - b))
         target = row.target_mm if row.constraint == "norms" else scale * row.before_mm
         out_rows.append(replace(row, after_mm=value, target_mm=target))
-    aged_index = MeshIndex(aged.skin) if arc_rows else None
-    for t, arc_c, arc_t in arc_rows:
-        assert aged_index is not None
-        mid_new, normal = _arc_middle(aged.skin, aged_index, after[t.a], after[t.b])
+    if arc_rows:
+        mids_new, normals_new = _arc_middles(
+            aged.skin,
+            MeshIndex(aged.skin),
+            np.array([after[t.a] for t, _, _ in arc_rows]),
+            np.array([after[t.b] for t, _, _ in arc_rows]),
+        )
+    for k, (t, arc_c, arc_t) in enumerate(arc_rows):
+        mid_new, normal = mids_new[k], normals_new[k]
         chord = float(np.linalg.norm(after[t.a] - after[t.b]))
         h = max(0.0, float((mid_new - (after[t.a] + after[t.b]) / 2) @ normal))
         out_rows.append(
@@ -552,7 +557,6 @@ def age_head(
     normed = [r for r in out_rows if r.constraint == "norms"]
     res = np.array([abs(r.residual_mm) for r in normed])
     dz = np.array([abs(r.z_after - r.z_before) for r in normed])
-    skull = MeshIndex(_concat([aged.meshes["cranium"], aged.meshes["mandible"]]))
     face = np.unique(np.concatenate([np.asarray(v) for k, v in aged.regions.items()]))
     inside = int((skull.signed_distance(aged.skin.vertices[face]) < 0).sum())
     inside0 = _inside_before(head, face)
@@ -621,8 +625,9 @@ SKULL_CLEARANCE_MM = 0.5
 
 def _skin_out_of_skull(
     head: TemplateHead, rest_normals: np.ndarray, keep: np.ndarray | None = None
-) -> tuple[TemplateHead, int]:
-    """Skin vertices inside the cranium or mandible moved to just outside (mm; how many).
+) -> tuple[TemplateHead, int, MeshIndex]:
+    """Skin vertices inside the cranium or mandible moved to just outside (mm; how many, and
+    the index of the skull, which this leaves as it is).
 
     The warps keep the source's tissue depths at the paired landmarks, but
     between them thin skin (the orbit rims, where the reference heads already
@@ -634,7 +639,7 @@ def _skin_out_of_skull(
     """
     skull = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
     skin = head.skin
-    adj, degree = _adjacency(skin)
+    adjacency = None
     first = 0
     for round_ in range(PUSH_ROUNDS):
         v = skin.vertices
@@ -649,13 +654,14 @@ def _skin_out_of_skull(
         push[bad] = cl.points + SKULL_CLEARANCE_MM * normal - v[bad]
         held = np.zeros(len(v), bool)
         held[bad] = True
+        adj, degree = adjacency = adjacency or _adjacency(skin)
         for _ in range(PUSH_SPREAD_PASSES):
             mean = (adj @ push) / np.maximum(degree, 1)[:, None]
             push[~held] = mean[~held]
-        skin = unfold(skin.with_vertices(v + push), rest_normals, keep=keep)
+        skin = unfold(skin.with_vertices(v + push), rest_normals, keep=keep, adjacency=adjacency)
     if skin is head.skin:
-        return head, 0
-    return replace(head, meshes={**head.meshes, "skin": skin}), first
+        return head, 0, skull
+    return replace(head, meshes={**head.meshes, "skin": skin}), first, skull
 
 
 #: rounds of push (and unfold) while skin is inside the skull
@@ -694,14 +700,17 @@ def _concat(meshes: Sequence[Mesh]) -> Mesh:
     return concatenate(list(meshes))
 
 
-def _arc_middle(
+def _arc_middles(
     skin: Mesh, index: MeshIndex, a: np.ndarray, b: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The skin point over the middle of chord a–b and the outward normal there (mm)."""
-    middle = (a + b) / 2
-    hit = index.closest_points(middle[None]).points[0]
-    normal = normals_within_radius(skin, hit[None], NORMAL_RADIUS_MM)[0]
-    normal = normal / max(float(np.linalg.norm(normal)), 1e-12)
+    """The skin points over the middles of chords a_i–b_i and the outward unit normals
+    there, ``(k, 3)`` each (mm; one query for all arcs)."""
+    middle = (np.reshape(a, (-1, 3)) + np.reshape(b, (-1, 3))) / 2
+    if not len(middle):
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    hit = index.closest_points(middle).points
+    normal = normals_within_radius(skin, hit, NORMAL_RADIUS_MM)
+    normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     return hit, normal
 
 
@@ -712,7 +721,12 @@ UNFOLD_ROUNDS = 30
 SLIVER_MM2 = 0.05
 
 
-def unfold(skin: Mesh, rest_normals: np.ndarray, keep: np.ndarray | None = None) -> Mesh:
+def unfold(
+    skin: Mesh,
+    rest_normals: np.ndarray,
+    keep: np.ndarray | None = None,
+    adjacency: tuple[Any, np.ndarray] | None = None,
+) -> Mesh:
     """``skin`` with triangles that turned over (against ``rest_normals``) relaxed flat again.
 
     A thin-plate spline driven by landmarks that move unevenly (the chin
@@ -720,11 +734,12 @@ def unfold(skin: Mesh, rest_normals: np.ndarray, keep: np.ndarray | None = None)
     triangles over between landmarks.  Only the vertices of turned triangles
     and their one-ring move (umbrella relaxation toward their neighbours'
     mean), so the landmarks (stored as points) and the rest of the skin stay;
-    ``keep`` lists triangles not to look at (the reference's own slivers).
+    ``keep`` lists triangles not to look at (the reference's own slivers);
+    ``adjacency`` is :func:`_adjacency` of ``skin`` when the caller has it.
     """
     f = skin.faces
     n = skin.n_vertices
-    adj, degree = _adjacency(skin)
+    adj, degree = adjacency or _adjacency(skin)
     # rims (neck, eye and mouth openings) stay: relaxing them would shrink the openings
     rim = np.zeros(n, bool)
     rim[skin.edges_unique[skin.edge_face_counts == 1].ravel()] = True
@@ -781,10 +796,13 @@ def _warp_points(
     src_pts = [p]
     dst_pts = [q]
     arc_rows = []
-    for t in arcs:
-        ia, ib = index[t.a], index[t.b]
+    if arcs:
         assert skin_index is not None
-        mid, normal = _arc_middle(head.skin, skin_index, p[ia], p[ib])
+        ends = np.array([(index[t.a], index[t.b]) for t in arcs])
+        mids, normals = _arc_middles(head.skin, skin_index, p[ends[:, 0]], p[ends[:, 1]])
+    for k, t in enumerate(arcs):
+        ia, ib = index[t.a], index[t.b]
+        mid, normal = mids[k], normals[k]
         chord_c = float(np.linalg.norm(p[ia] - p[ib]))
         h_c = max(0.0, float((mid - (p[ia] + p[ib]) / 2) @ normal))
         arc_c = arc_length(chord_c, h_c)
