@@ -234,14 +234,13 @@ def fit_skull_to_skin(
     mirror = np.array([-1.0, 1.0, 1.0])
 
     def expand(src: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        lateral = np.abs(src[:, 0]) > 0.5 * CLEARANCE_SPACING_MM
+        near_midline = np.abs(src[:, 0]) <= 0.5 * CLEARANCE_SPACING_MM
         off = off.copy()
-        src = src.copy()
-        # points near the midline are put on it (and stay there): one left of it without
-        # its mirror image made the fitted skull lopsided (dacryon 0.9 mm off its mirror)
-        off[~lateral, 0] = 0.0
-        src[~lateral, 0] = 0.0
-        return (np.vstack([src, src[lateral] * mirror]), np.vstack([off, off[lateral] * mirror]))
+        off[near_midline, 0] = 0.0  # points near the midline move parallel to it
+        # every point off the midline gets its mirror image, those near it too: one left
+        # of it without its image made the fitted skull lopsided (dacryon 0.9 mm off)
+        side = np.abs(src[:, 0]) > 1e-6
+        return (np.vstack([src, src[side] * mirror]), np.vstack([off, off[side] * mirror]))
 
     def solve(n: np.ndarray):
         lm_dst = np.vstack([p_skin - d[:, None] * n, fh_dst])
