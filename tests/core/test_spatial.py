@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
 from workbench.core.raycast import RayCaster
-from workbench.core.spatial import MeshIndex, closest_on_triangles
+from workbench.core import spatial
+from workbench.core.spatial import FIN_STRENGTH, MeshIndex, closest_on_triangles, winding_numbers
 from workbench.io.meshes import read_mesh
 
 
@@ -134,6 +135,53 @@ def test_signed_distance_of_a_closed_sphere():
     # magnitude: distance to the polyhedron lies within the faceting error of |r - R|
     assert np.abs(np.abs(sd) - np.abs(r - radius)).max() < 0.2
     np.testing.assert_array_equal(index.contains(pts), r < radius)
+
+
+def test_winding_numbers_of_a_closed_sphere_compiled_and_numpy(monkeypatch):
+    mesh = sphere_mesh(50.0, 24)
+    rng = np.random.default_rng(8)
+    u = rng.normal(size=(300, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    r = rng.uniform(0.0, 100.0, 300)
+    r = r[np.abs(r - 50.0) > 2.0]
+    pts = u[: len(r)] * r[:, None]
+    w = winding_numbers(mesh, pts)
+    np.testing.assert_allclose(w, (r < 50.0).astype(float), atol=1e-6)
+    monkeypatch.setattr(spatial, "_winding_jit", None)
+    np.testing.assert_allclose(winding_numbers(mesh, pts, block=10_000), w, atol=1e-9)
+
+
+def knife_prism(half_angle_deg: float, length: float = 40.0, depth: float = 20.0) -> Mesh:
+    """A closed triangular prism along z whose cross-section ends in a knife edge at x = 0."""
+    h = length * np.tan(np.radians(half_angle_deg))
+    section = np.array([[0.0, 0.0], [length, -h], [length, h]])  # counter-clockwise
+    v = np.array([[x, y, z] for z in (0.0, depth) for x, y in section])
+    faces = [[0, 2, 1], [3, 4, 5]]  # caps: -z, +z
+    for i in range(3):
+        j = (i + 1) % 3
+        faces += [[i, j, j + 3], [i, j + 3, i + 3]]
+    return Mesh(v, np.array(faces))
+
+
+def test_a_knife_edge_is_doubted_and_signed_right():
+    """A 4° wedge: the edge's two face normals are 176° apart, so the sign there comes
+    from the winding number; it must agree with the geometry on both sides."""
+    mesh = knife_prism(2.0)
+    index = MeshIndex(mesh)
+    rng = np.random.default_rng(9)
+    # around the knife edge (x = 0, y = 0, 0 < z < 20): beyond it, above, below, and inside
+    pts = np.column_stack(
+        [rng.uniform(-3.0, 3.0, 2000), rng.uniform(-1.5, 1.5, 2000), rng.uniform(2, 18, 2000)]
+    )
+    h = pts[:, 0] * np.tan(np.radians(2.0))
+    inside = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < h)
+    margin = np.abs(np.abs(pts[:, 1]) - h) > 1e-6
+    cl = index.closest_points(pts)
+    strength = index.feature_strength(cl.face_ids, cl.barycentric)
+    on_edge = (cl.barycentric <= 1e-9).any(axis=1)
+    assert (strength[~on_edge] == 1.0).all()
+    assert (strength[on_edge] < FIN_STRENGTH).sum() > 100
+    np.testing.assert_array_equal((index.signed_distance(pts) < 0)[margin], inside[margin])
 
 
 def ray_parity_inside(

@@ -109,31 +109,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from workbench.core.compiled import numba
 from workbench.core.spatial import MeshIndex
 
 
-def _numba_cache_dir() -> None:
-    """Compiled kernels go to the platform's cache folder (``.../forensic-workbench/numba``),
-    not beside the installed sources (numba's default when site-packages is writable);
-    a ``NUMBA_CACHE_DIR`` the user set wins."""
-    import os
-
-    if "NUMBA_CACHE_DIR" not in os.environ:
-        try:
-            import platformdirs
-
-            base = platformdirs.user_cache_dir("forensic-workbench")
-        except ImportError:  # pragma: no cover - platformdirs is a dependency
-            return
-        os.environ["NUMBA_CACHE_DIR"] = os.path.join(base, "numba")
-
-
-_numba_cache_dir()
-_numba: ModuleType | None
-try:  # numba is optional: without it the same step runs as vectorised numpy/scipy
-    import numba as _numba
-except ImportError:  # pragma: no cover - numba is a dependency, this is the fallback
-    _numba = None
+_numba: ModuleType | None = numba
 
 NONE, SKULL, JAW = 0, 1, 2
 

@@ -25,7 +25,17 @@ Signed distance
 ---------------
 The sign comes from the angle-weighted pseudo-normal of the closest feature
 (face, edge or vertex; Bærentzen & Aanæs 2005), which is exact for closed,
-consistently wound meshes: positive outside, negative inside.
+consistently wound meshes: positive outside, negative inside.  A warped
+mesh can fold a thin wall over itself (a fin: two triangles almost back to
+back, as a fitted skull's lateral orbit rim can); there the pseudo-normal of
+the shared edge is the small difference of two opposite normals and can
+point either way (a point 11 mm outside a fitted skull was reported 11 mm
+inside).  So where the closest feature is an edge or a vertex and the
+closest face's own plane disagrees with the pseudo-normal, the sign is
+settled by the generalised winding number of the whole mesh at that point
+(Jacobson, Kavan & Sorkine-Hornung 2013), which is right for closed meshes
+with folds too.  Only such nearly cancelling features (:data:`FIN_STRENGTH`)
+are checked, so only a handful of points pay for the O(faces) sum.
 """
 
 from __future__ import annotations
@@ -37,6 +47,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core.compiled import numba
 from workbench.core.threads import worker_count
 from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
@@ -59,6 +70,82 @@ class ClosestPoints:
     distances: np.ndarray
     face_ids: np.ndarray
     barycentric: np.ndarray
+
+
+#: a closest edge or vertex whose normals cancel below this (:meth:`MeshIndex.feature_strength`;
+#: 0.2 = two faces' normals more than 157° apart) is a fold, and the sign there is settled by
+#: the winding number.  The fitted skull's orbit-rim fin measured 0.07; on the headsq CT bone
+#: 26 of 10⁵ queries within a few mm fall below 0.2, none of them wrongly signed.
+FIN_STRENGTH = 0.2
+
+
+def _winding_kernel(tri, pts, out):
+    """Sum of signed solid angles / 4π of every triangle at every point (plain loops)."""
+    for k in range(pts.shape[0]):
+        px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
+        total = 0.0
+        for f in range(tri.shape[0]):
+            ax, ay, az = tri[f, 0, 0] - px, tri[f, 0, 1] - py, tri[f, 0, 2] - pz
+            bx, by, bz = tri[f, 1, 0] - px, tri[f, 1, 1] - py, tri[f, 1, 2] - pz
+            cx, cy, cz = tri[f, 2, 0] - px, tri[f, 2, 1] - py, tri[f, 2, 2] - pz
+            la = (ax * ax + ay * ay + az * az) ** 0.5
+            lb = (bx * bx + by * by + bz * bz) ** 0.5
+            lc = (cx * cx + cy * cy + cz * cz) ** 0.5
+            det = ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
+            den = (
+                la * lb * lc
+                + (ax * bx + ay * by + az * bz) * lc
+                + (bx * cx + by * cy + bz * cz) * la
+                + (cx * ax + cy * ay + cz * az) * lb
+            )
+            total += np.arctan2(det, den)
+        out[k] = total / (2.0 * np.pi)
+
+
+_winding_jit = None if numba is None else numba.njit(cache=True, nogil=True)(_winding_kernel)
+
+
+def winding_numbers(mesh: Mesh, points: np.ndarray, *, block: int = 2_000_000) -> np.ndarray:
+    """Generalised winding number of ``mesh`` at each of ``points`` ``(k, 3)``.
+
+    About 1 inside a closed outward-wound surface, 0 outside, fractions near
+    holes.  Each triangle adds its signed solid angle over 4π (the closed form
+    of Van Oosterom & Strackee 1983); O(faces) per point: compiled by numba
+    (about 30 ns per point-triangle pair and core), else numpy in blocks of about
+    ``block`` pairs.
+    """
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    tri = np.ascontiguousarray(mesh.vertices[mesh.faces], dtype=np.float64)
+    out = np.zeros(len(pts))
+    if _winding_jit is not None:
+        kernel = _winding_jit
+        parts = np.array_split(np.arange(len(pts)), max(1, min(worker_count(), len(pts) // 8)))
+
+        def run(rows: np.ndarray) -> None:
+            res = np.zeros(len(rows))
+            kernel(tri, pts[rows], res)
+            out[rows] = res
+
+        if len(parts) > 1:
+            with ThreadPoolExecutor(max_workers=len(parts)) as pool:
+                list(pool.map(run, parts))
+        else:
+            run(parts[0])
+        return out
+    step = max(1, block // max(len(tri), 1))
+    for s in range(0, len(pts), step):
+        d = tri[None, :, :, :] - pts[s : s + step, None, None, :]
+        a, b, c = d[:, :, 0], d[:, :, 1], d[:, :, 2]
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        det = np.einsum("kfi,kfi->kf", a, np.cross(b, c))
+        den = (
+            la * lb * lc
+            + np.einsum("kfi,kfi->kf", a, b) * lc
+            + np.einsum("kfi,kfi->kf", b, c) * la
+            + np.einsum("kfi,kfi->kf", c, a) * lb
+        )
+        out[s : s + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+    return out
 
 
 def closest_on_triangles(
@@ -234,6 +321,12 @@ class MeshIndex:
     @cached_property
     def _edge_normals(self) -> tuple[np.ndarray, np.ndarray]:
         """Pseudo-normal per unique edge (sum of adjacent face normals) and lookup keys."""
+        acc, inverse = self._edge_sums
+        return _normalise(acc), inverse
+
+    @cached_property
+    def _edge_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sum of adjacent face normals per unique edge and the half-edge lookup keys."""
         mesh = self.mesh
         edges, inverse, _ = mesh._unique_edges
         m = mesh.n_faces
@@ -242,11 +335,55 @@ class MeshIndex:
         for axis in range(3):
             acc[:, axis] = np.bincount(inverse, weights=fn[:, axis], minlength=len(edges))
         # half-edge h = corner-pair (0,1),(1,2),(2,0) of face h % m
-        return _normalise(acc), inverse.reshape(3, m)
+        return acc, inverse.reshape(3, m)
 
     @cached_property
     def _vertex_normals(self) -> np.ndarray:
         return angle_weighted_vertex_normals(self.mesh)
+
+    @cached_property
+    def _vertex_strength(self) -> np.ndarray:
+        """Length of each vertex's angle-weighted normal sum over its total angle (0..1)."""
+        t, normals = self.mesh.triangles, self.mesh.face_normals
+        acc = np.zeros((self.mesh.n_vertices, 3))
+        total = np.zeros(self.mesh.n_vertices)
+        for corner in range(3):
+            a = t[:, (corner + 1) % 3] - t[:, corner]
+            b = t[:, (corner + 2) % 3] - t[:, corner]
+            cos = np.einsum("ij,ij->i", a, b) / np.maximum(
+                np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
+            )
+            angle = np.arccos(np.clip(cos, -1.0, 1.0))
+            ids = self.mesh.faces[:, corner]
+            total += np.bincount(ids, weights=angle, minlength=len(total))
+            for axis in range(3):
+                acc[:, axis] += np.bincount(
+                    ids, weights=normals[:, axis] * angle, minlength=len(total)
+                )
+        return np.linalg.norm(acc, axis=1) / np.maximum(total, 1e-300)
+
+    def feature_strength(self, face_ids: np.ndarray, barycentric: np.ndarray) -> np.ndarray:
+        """How well defined the closest feature's pseudo-normal is, ``(k,)`` in 0..1.
+
+        1 on a face; on an edge half the length of its two normals' sum (0 when
+        they are opposite: a fin); on a vertex the same ratio over its corner
+        angles.
+        """
+        face_ids = np.asarray(face_ids)
+        zero = barycentric <= 1e-9
+        n_zero = zero.sum(axis=1)
+        out = np.ones(len(face_ids))
+        on_edge = n_zero == 1
+        if on_edge.any():
+            half = (zero[on_edge].argmax(axis=1) + 1) % 3
+            acc, lookup = self._edge_sums
+            out[on_edge] = 0.5 * np.linalg.norm(acc[lookup[half, face_ids[on_edge]]], axis=1)
+        on_vertex = n_zero >= 2
+        if on_vertex.any():
+            corner = (~zero[on_vertex]).argmax(axis=1)
+            vid = self.mesh.faces[face_ids[on_vertex], corner]
+            out[on_vertex] = self._vertex_strength[vid]
+        return out
 
     def pseudo_normals(
         self, face_ids: np.ndarray, barycentric: np.ndarray, tol: float = 1e-9
@@ -275,8 +412,18 @@ class MeshIndex:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         cl = self.closest_points(pts)
         normals = self.pseudo_normals(cl.face_ids, cl.barycentric)
-        side = np.einsum("ij,ij->i", pts - cl.points, normals)
-        return np.where(side < 0, -cl.distances, cl.distances)
+        offset = pts - cl.points
+        side = np.einsum("ij,ij->i", offset, normals)
+        inside = side < 0
+        plane = np.einsum("ij,ij->i", offset, self.mesh.face_normals[cl.face_ids])
+        doubt = ((plane < 0) != inside) & (cl.distances > 1e-9)
+        if doubt.any():
+            doubt[doubt] = (
+                self.feature_strength(cl.face_ids[doubt], cl.barycentric[doubt]) < FIN_STRENGTH
+            )
+        if doubt.any():
+            inside[doubt] = np.abs(winding_numbers(self.mesh, pts[doubt])) > 0.5
+        return np.where(inside, -cl.distances, cl.distances)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """``(k,)`` bool: inside the closed surface."""
