@@ -124,20 +124,52 @@ def _mask(n: int, groups: Sequence) -> np.ndarray:
     return m
 
 
-def _push_out(skin: np.ndarray, skull: Mesh, exclude: np.ndarray) -> tuple[np.ndarray, int, float]:
-    """Skin vertices closer than :data:`MIN_TISSUE_MM` to ``skull`` moved out to it."""
+def _push_out(skin: Mesh, skull: Mesh, exclude: np.ndarray) -> tuple[np.ndarray, int, float]:
+    """Skin vertices closer than :data:`MIN_TISSUE_MM` to ``skull`` moved out to it (mm).
+
+    Returns the new vertices, how many were too close and the smallest tissue
+    before.  One push from the closest point is not enough where the bone is
+    concave (a lateral orbit rim: a vertex put 1 mm off one face can end
+    0.07 mm from the next), so this repeats for :data:`PUSH_ROUNDS`, each push
+    spread over the neighbouring skin (pushed and ``exclude`` vertices held),
+    so a vertex that sat deep in the bone does not become a spike.
+    """
+    from workbench.core.thickness import adjacency
+
     index = MeshIndex(skull)
-    v = skin.copy()
-    cp = index.closest_points(v)
-    signed = index.signed_distance(v)
-    thin = (signed < MIN_TISSUE_MM) & ~exclude & (cp.distances < 30.0)
-    if thin.any():
+    adj = adjacency(skin)
+    degree = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)[:, None]
+    v = skin.vertices.copy()
+    too_close = np.zeros(len(v), bool)
+    before = 0.0
+    for round_ in range(PUSH_ROUNDS):
+        cp = index.closest_points(v)
+        signed = index.signed_distance(v)
+        if round_ == 0:
+            before = float(signed[~exclude].min())
+        thin = (signed < MIN_TISSUE_MM) & ~exclude & (cp.distances < 30.0)
+        if not thin.any():
+            break
+        too_close |= thin
         normals = index.pseudo_normals(cp.face_ids[thin], cp.barycentric[thin])
         out = v[thin] - cp.points[thin]
         out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-9)
         out = np.where(signed[thin, None] > 0.05, out, normals)
-        v[thin] = cp.points[thin] + MIN_TISSUE_MM * out
-    return v, int(thin.sum()), float(signed[~exclude].min())
+        push = np.zeros_like(v)
+        # a hair more than the minimum, so a vertex at it is not pushed again for rounding
+        push[thin] = cp.points[thin] + (MIN_TISSUE_MM + 0.01) * out - v[thin]
+        held = thin | exclude
+        for _ in range(PUSH_SPREAD_PASSES):
+            mean = (adj @ push) / degree
+            push[~held] = mean[~held]
+        v += push
+    return v, int(too_close.sum()), before
+
+
+#: rounds of push-out while skin is closer than MIN_TISSUE_MM to the skull
+PUSH_ROUNDS = 8
+#: Jacobi passes spreading each push over the skin around the pushed vertices
+PUSH_SPREAD_PASSES = 10
 
 
 def skin_target_weights(skin_h: Mesh, head_skin: Mesh) -> tuple[np.ndarray, float]:
@@ -388,7 +420,7 @@ def build_template(
         meshes["mandible"] = reg.meshes["mandible"]
     keep = [base.regions[r] for r in NO_CLEARANCE_REGIONS if r in base.regions]
     skin_v, pushed, min_tissue = _push_out(
-        sreg.vertices,
+        carried.skin.with_vertices(sreg.vertices),
         concatenate([meshes[p] for p in SKULL_PARTS]),
         _mask(n_skin, keep + list(base.openings.values())),
     )
