@@ -106,3 +106,53 @@ def test_handedness_from_labelled_landmarks(head_female):
     flip = np.diag([-1.0, 1.0, 1.0, 1.0])
     assert mirror_from_landmarks(lms.transformed(flip)) == "yes"
     assert mirror_from_landmarks(None) == "auto"
+
+
+def _searched(winner_matrix: np.ndarray, alternatives: tuple) -> object:
+    from workbench.core.rigid_search import PoseResult
+
+    return PoseResult(
+        winner_matrix, 1.0, False, 0.30, 0.5, "assumed", float("nan"), "search", alternatives
+    )
+
+
+def _turned_about_vertical(centre: np.ndarray) -> np.ndarray:
+    """Half a turn about the superior (y) axis through ``centre``: face where the occiput was."""
+    m = np.diag([-1.0, 1.0, -1.0, 1.0])
+    m[:3, 3] = centre - m[:3, :3] @ centre
+    return m
+
+
+def test_a_wrong_bone_only_pose_that_finds_no_mandible_yields_to_the_next(
+    head_female, head_male, monkeypatch
+):
+    """Oriented from the bone alone, a winner under which no mandible is found is replaced by
+    the next-best pose that finds one and scores nearly as well, and the user is told."""
+    import workbench.services.skull_registration as sr
+    from workbench.core.rigid_search import PoseResult
+
+    skull = skull_surface(head_female)
+    right = PoseResult(np.eye(4), 1.0, False, 0.32, 0.5, "assumed", float("nan"), "search")
+    wrong = _turned_about_vertical(skull.vertices.mean(axis=0))
+    monkeypatch.setattr(sr, "_CACHE", {})  # no result from (or for) another test
+    monkeypatch.setattr(sr, "search_pose", lambda *a, **k: _searched(wrong, (right,)))
+    reg = register_skull(skull, head_male)
+    assert reg.pose is right
+    assert reg.part("mandible").present
+    assert any("best-scoring pose found no mandible" in w for w in reg.warnings)
+    found, truth = reg.landmarks.as_dict(), head_female.skull_landmarks.as_dict()
+    assert np.median([np.linalg.norm(found[c] - truth[c]) for c in ("g", "n", "pg")]) < 3.0
+
+
+def test_a_bone_only_pose_without_a_mandible_says_the_orientation_may_be_wrong(
+    head_female, head_male, monkeypatch
+):
+    import workbench.services.skull_registration as sr
+
+    skull = skull_surface(head_female)
+    wrong = _turned_about_vertical(skull.vertices.mean(axis=0))
+    monkeypatch.setattr(sr, "_CACHE", {})
+    monkeypatch.setattr(sr, "search_pose", lambda *a, **k: _searched(wrong, ()))
+    reg = register_skull(skull, head_male)
+    assert not reg.part("mandible").present
+    assert any("orientation is wrong" in w for w in reg.warnings)

@@ -69,6 +69,8 @@ TURN_STEP_DEG = 5.0
 PLANE_SHIFTS_MM = tuple(np.arange(-40.0, 40.1, 10.0))
 #: poses of the scan refined by ICP, and what counts as another basin
 REFINED = 8
+#: next-best distinct poses a search returns beside its winner
+ALTERNATIVES = 2
 DISTINCT_DEG = 20.0
 GRID_MM = 4.0
 #: reference samples in front of this (head frame z, mm) make up its facial skeleton
@@ -100,6 +102,12 @@ class PoseResult:
         NaN when only one handedness was tried.
     method : str
         ``"search"``, ``"hint"`` or ``"seeds"``.
+    alternatives : tuple of PoseResult
+        A search's next-best distinct poses (same handedness, more than
+        :data:`DISTINCT_DEG` or 20 mm from this one and from each other, best
+        first; up to :data:`ALTERNATIVES`), for a caller whose later evidence
+        (a mandible found or not) can tell a wrong winner.  Empty for hints
+        and seeds.
     """
 
     matrix: np.ndarray
@@ -110,6 +118,7 @@ class PoseResult:
     handedness: str
     mirror_ratio: float
     method: str
+    alternatives: tuple[PoseResult, ...] = ()
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         return apply_transform(self.matrix, points)
@@ -551,6 +560,7 @@ def search_pose(
             raise RuntimeError("search_pose: the pose search needs the distance grids")
         planes = symmetry_planes(cloud, own)
     best: dict[bool, tuple[float, np.ndarray, np.ndarray]] = {}
+    refined: dict[bool, list[tuple[float, np.ndarray, np.ndarray]]] = {h: [] for h in handedness}
     for flipped in handedness:
         f = FLIP if flipped else np.eye(3)
         if method == "hint":
@@ -583,6 +593,7 @@ def search_pose(
             lin, tt, c = _icp(scorer, cloud, lin, tt, rounds=15)
             if method == "search":
                 c += _face_coverage_loss(ref, everything, lin, tt)
+                refined[flipped].append((c, lin, tt))
             if flipped not in best or c < best[flipped][0]:
                 best[flipped] = (c, lin, tt)
     ratio = float("nan")
@@ -595,10 +606,27 @@ def search_pose(
         choose = handedness[0]
         handed_by = handed_by or "assumed"
     cost, lin, t = best[choose]
-    if fit_scale:
-        lin, t = _fit_scale(scorer, cloud, lin, t)
-        lin, t, cost = _icp(scorer, cloud, lin, t, rounds=10)
-    return _result(scorer, cloud, lin, t, choose, handed_by, ratio, method)
+
+    def finish(lin: np.ndarray, t: np.ndarray, others: tuple[PoseResult, ...] = ()) -> PoseResult:
+        if fit_scale:
+            lin, t = _fit_scale(scorer, cloud, lin, t)
+            lin, t, _ = _icp(scorer, cloud, lin, t, rounds=10)
+        return _result(scorer, cloud, lin, t, choose, handed_by, ratio, method, others)
+
+    others: tuple[PoseResult, ...] = ()
+    if method == "search":
+        ranked = sorted(refined[choose], key=lambda x: x[0])
+        picked = [(cost, lin, t)]
+        for cand in ranked:
+            if len(picked) > ALTERNATIVES:
+                break
+            if all(
+                _angle_deg(cand[1], r2) > DISTINCT_DEG or np.linalg.norm(cand[2] - t2) > 20.0
+                for _, r2, t2 in picked
+            ):
+                picked.append(cand)
+        others = tuple(finish(r, tt) for _, r, tt in picked[1:])
+    return finish(lin, t, others)
 
 
 def _from_seeds(
@@ -644,6 +672,7 @@ def _result(
     handed_by: str,
     ratio: float,
     method: str,
+    alternatives: tuple[PoseResult, ...] = (),
 ) -> PoseResult:
     pts = cloud.points @ lin.T + t
     nrm = _rotate_normals(lin, cloud.normals)
@@ -659,4 +688,5 @@ def _result(
         handed_by,
         ratio,
         method,
+        alternatives,
     )

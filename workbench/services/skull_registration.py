@@ -426,6 +426,79 @@ def register_skull(
     return result
 
 
+#: a search's next-best pose is tried when the best one finds no mandible and it costs at
+#: most this many times the best
+ALTERNATIVE_COST_RATIO = 1.15
+
+
+@dataclass(frozen=True)
+class _Placed:
+    """The target in the reference's frame under one pose, with the mandible posed on it."""
+
+    rigid: np.ndarray
+    mirrored: bool
+    k: float
+    target_h: Mesh
+    parts: dict[str, Mesh]
+    layout: dict[str, Mesh]
+    weights: np.ndarray
+    tfig: dict
+    target: Target
+    jaw_fraction: float
+
+
+def _orient_and_pose_jaw(skull: Mesh, head: TemplateHead, pose: PoseResult) -> _Placed:
+    """``skull`` mapped by ``pose`` (rigid part; the reference scaled by 1/scale), its
+    weights, and the reference mandible posed on it (moved only when found)."""
+    lin = pose.matrix[:3, :3]
+    s = pose.scale
+    rigid = np.eye(4)
+    rigid[:3, :3] = lin / s
+    rigid[:3, 3] = pose.matrix[:3, 3] / s
+    mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
+    k = 1.0 / s  # the reference is scaled instead of the target
+    target_h = Mesh(
+        _apply(rigid, skull.vertices), skull.faces[:, ::-1] if mirrored else skull.faces
+    )
+    if target_h.volume < 0:
+        target_h = Mesh(target_h.vertices, target_h.faces[:, ::-1])
+    parts = _registration_parts(head, k)
+    layout = dict(parts)  # the scaled reference before the jaw pose: what the field maps from
+    weights, tfig = target_weights(target_h, concatenate(list(parts.values())))
+    if not (weights > 0.05).any():
+        raise InputError(
+            "skull",
+            "no part of the surface lies near the reference skull after orientation",
+            hint="check the units and that the file holds a skull",
+        )
+    target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 6000))
+    tree = cKDTree(target_h.vertices)
+    jaw, jaw_fraction = _pose_mandible(
+        parts["mandible"],
+        parts["lower_teeth"],
+        concatenate([parts["cranium"], parts["upper_teeth"]]),
+        head,
+        k,
+        target,
+        tree,
+    )
+    if jaw_fraction >= PRESENT_FRACTION:
+        for name in ("mandible", "lower_teeth"):
+            parts[name] = Mesh(_apply(jaw, parts[name].vertices), parts[name].faces)
+    return _Placed(
+        rigid,
+        mirrored,
+        k,
+        target_h,
+        parts,
+        layout,
+        weights,
+        tfig,
+        target,
+        jaw_fraction,
+    )
+
+
 def _register(
     skull: Mesh,
     head: TemplateHead,
@@ -455,55 +528,53 @@ def _register(
     say("orienting the skull ...")
     pose = search_pose(skull, ref_full, hint=hint, seeds=seed_pairs, mirror=mirror)
     seconds["orientation"] = time.perf_counter() - t0
-    lin = pose.matrix[:3, :3]
-    s = pose.scale
-    rigid = np.eye(4)
-    rigid[:3, :3] = lin / s
-    rigid[:3, 3] = pose.matrix[:3, 3] / s
-    mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
-    k = 1.0 / s  # the reference is scaled instead of the target
-    target_h = Mesh(
-        _apply(rigid, skull.vertices), skull.faces[:, ::-1] if mirrored else skull.faces
-    )
-    if target_h.volume < 0:
-        target_h = Mesh(target_h.vertices, target_h.faces[:, ::-1])
-
-    t = time.perf_counter()
-    parts = _registration_parts(head, k)
-    layout = dict(parts)  # the scaled reference before the jaw pose: what the field maps from
-    weights, tfig = target_weights(target_h, concatenate(list(parts.values())))
-    if not (weights > 0.05).any():
-        raise InputError(
-            "skull",
-            "no part of the surface lies near the reference skull after orientation",
-            hint="check the units and that the file holds a skull",
-        )
-    target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 6000))
-    tree = cKDTree(target_h.vertices)
-    seconds["target"] = time.perf_counter() - t
-
-    t = time.perf_counter()
     say("posing the mandible ...")
-    jaw, jaw_fraction = _pose_mandible(
-        parts["mandible"],
-        parts["lower_teeth"],
-        concatenate([parts["cranium"], parts["upper_teeth"]]),
-        head,
-        k,
-        target,
-        tree,
+    t = time.perf_counter()
+    placed_jaw = _orient_and_pose_jaw(skull, head, pose)
+    if pose.method == "search" and placed_jaw.jaw_fraction < PRESENT_FRACTION:
+        # the bone alone can rank a wrong pose first by a hair (a rotated cranium matching
+        # its own surface); a next-best pose under which a mandible is found and that
+        # scores nearly as well is taken instead
+        for alt in pose.alternatives:
+            if alt.cost > ALTERNATIVE_COST_RATIO * pose.cost:
+                continue
+            trial = _orient_and_pose_jaw(skull, head, alt)
+            if trial.jaw_fraction >= PRESENT_FRACTION:
+                warnings.append(
+                    "orientation from the bone alone: the best-scoring pose found no "
+                    f"mandible; the next (cost {alt.cost:.3f} against {pose.cost:.3f}, "
+                    f"{100 * trial.jaw_fraction:.0f} % of the mandible on bone) was used - "
+                    "check it, or give an orientation"
+                )
+                pose, placed_jaw = alt, trial
+                break
+    seconds["mandible"] = time.perf_counter() - t
+    rigid, mirrored, k, target_h = (
+        placed_jaw.rigid,
+        placed_jaw.mirrored,
+        placed_jaw.k,
+        placed_jaw.target_h,
     )
+    parts, layout, weights, tfig = (
+        placed_jaw.parts,
+        placed_jaw.layout,
+        placed_jaw.weights,
+        placed_jaw.tfig,
+    )
+    target, jaw_fraction = placed_jaw.target, placed_jaw.jaw_fraction
     mandible_present = jaw_fraction >= PRESENT_FRACTION
-    if mandible_present:
-        for name in ("mandible", "lower_teeth"):
-            parts[name] = Mesh(_apply(jaw, parts[name].vertices), parts[name].faces)
-    else:
+    if not mandible_present:
         warnings.append(
             f"no mandible found (only {100 * jaw_fraction:.0f} % of the reference "
             "mandible finds bone): it follows the cranium and the lower face is "
             "inferred from the reference"
+            + (
+                "; the skull was oriented from the bone alone, so if it has a mandible "
+                "the orientation is wrong: give one"
+                if pose.method == "search"
+                else ""
+            )
         )
-    seconds["mandible"] = time.perf_counter() - t
 
     names = list(PART_OF)
     src = concatenate([parts[p] for p in names])
@@ -606,6 +677,8 @@ def _register(
             "handedness": pose.handedness,
             "mirrored": mirrored,
             "reference_scale": round(k, 4),
+            # a search's next-best distinct poses: how close the call was
+            "alternative_costs": [round(a.cost, 4) for a in pose.alternatives],
         },
         "mandible_pose_fraction": round(jaw_fraction, 4),
         "observed_fraction": {r.name: r.observed_fraction for r in reports},
