@@ -35,6 +35,12 @@ _SOURCE_GLOBS = (
     "model/muscles.py",
     "core/tps.py",
     "core/normals.py",
+    # the geometry the build queries (closest points and signs, rays, iso-surfaces)
+    "core/mesh.py",
+    "core/spatial.py",
+    "core/bvh.py",
+    "core/raycast.py",
+    "core/isosurface.py",
 )
 _TABLE_GLOBS = (
     "template/*",
