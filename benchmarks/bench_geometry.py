@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from workbench.core.mesh import Mesh  # noqa: E402
 from workbench.core.raycast import RayCaster  # noqa: E402
-from workbench.core.spatial import MeshIndex  # noqa: E402
+from workbench.core.spatial import MeshIndex, winding_numbers  # noqa: E402
 from workbench.core.tps import fit_warp  # noqa: E402
 
 DATA = Path(os.environ.get("WORKBENCH_SHARED_DATA", ROOT.parent / "shared" / "data"))
@@ -204,6 +204,16 @@ def main() -> None:
                 best_of(lambda q=q: index.closest_points(q), rep),
                 budget,
             )
+        near = queries["near (N(0, 2 mm))"][0]
+        row(
+            f"signed distance: 10^5 near (closest + sign), {name}",
+            best_of(lambda: index.signed_distance(near), rep),
+        )
+        winding_numbers(mesh, near[:1])  # compile / load the kernel outside the timing
+        row(
+            f"winding number: 100 points (fold fallback), {name}",
+            best_of(lambda: winding_numbers(mesh, near[:100]), rep),
+        )
 
     print()
     print(f"{'figure':<54s} {'wall s':>8s} {'cpu s':>7s} {'budget':>7s} {'ratio':>6s}")
