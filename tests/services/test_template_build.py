@@ -151,3 +151,33 @@ def test_eyeballs_sit_behind_the_scanned_lids(built, head_male):
         assert abs(gap - ref_gap) < 2.0
     shifts = built["result"].figures["eye_shift_mm"]
     assert len(shifts) == 2 and all(2.0 < v < 15 for v in shifts.values())
+
+
+def test_push_out_reaches_the_minimum_tissue_in_a_concave_dimple():
+    """Skin 0.3 mm over a bone with a concave dimple, 3 mm elsewhere, one vertex 8 mm inside:
+    after the push every free vertex has MIN_TISSUE_MM, and only those too close moved (the
+    others lie on the person's CT skin)."""
+    from tests.core._shapes import subdivided_octahedron
+    from workbench.core.normals import vertex_normals
+    from workbench.services.template_build import _push_out
+
+    sphere = subdivided_octahedron(4)
+    v = 50.0 * sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
+    cos = v[:, 2] / 50.0
+    v *= (1.0 - 0.25 * np.clip((cos - 0.8) / 0.2, 0, 1) ** 2)[:, None]  # a 12 mm dimple at +z
+    bone = Mesh(v, sphere.faces)
+    assert bone.volume > 0
+    normals = vertex_normals(bone)
+    skin_v = v + np.where(cos > 0.75, 0.3, 3.0)[:, None] * normals
+    deep = int(np.argmin(np.abs(cos - 0.5)))
+    skin_v[deep] -= 11.0 * normals[deep]
+    exclude = np.zeros(len(v), bool)
+    exclude[cos < -0.9] = True
+    skin = Mesh(skin_v, sphere.faces)
+    out, pushed, before = _push_out(skin, bone, exclude)
+    assert before == pytest.approx(-8.0, abs=0.3)
+    thin = MeshIndex(bone).signed_distance(skin_v) < MIN_TISSUE_MM
+    assert pushed == int(thin.sum())
+    tissue = MeshIndex(bone).signed_distance(out)
+    assert tissue[~exclude].min() >= MIN_TISSUE_MM - 1e-6
+    np.testing.assert_array_equal(out[~thin], skin_v[~thin])

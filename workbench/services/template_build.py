@@ -129,16 +129,11 @@ def _push_out(skin: Mesh, skull: Mesh, exclude: np.ndarray) -> tuple[np.ndarray,
 
     Returns the new vertices, how many were too close and the smallest tissue
     before.  One push from the closest point is not enough where the bone is
-    concave (a lateral orbit rim: a vertex put 1 mm off one face can end
-    0.07 mm from the next), so this repeats for :data:`PUSH_ROUNDS`, each push
-    spread over the neighbouring skin (pushed and ``exclude`` vertices held),
-    so a vertex that sat deep in the bone does not become a spike.
+    concave (a vertex put 1 mm off one face can end closer to the next), so
+    this repeats for :data:`PUSH_ROUNDS`.  Only the vertices too close move:
+    their neighbours lie on the person's own CT skin and stay there.
     """
-    from workbench.core.thickness import adjacency
-
     index = MeshIndex(skull)
-    adj = adjacency(skin)
-    degree = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)[:, None]
     v = skin.vertices.copy()
     too_close = np.zeros(len(v), bool)
     before = 0.0
@@ -155,21 +150,13 @@ def _push_out(skin: Mesh, skull: Mesh, exclude: np.ndarray) -> tuple[np.ndarray,
         out = v[thin] - cp.points[thin]
         out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-9)
         out = np.where(signed[thin, None] > 0.05, out, normals)
-        push = np.zeros_like(v)
         # a hair more than the minimum, so a vertex at it is not pushed again for rounding
-        push[thin] = cp.points[thin] + (MIN_TISSUE_MM + 0.01) * out - v[thin]
-        held = thin | exclude
-        for _ in range(PUSH_SPREAD_PASSES):
-            mean = (adj @ push) / degree
-            push[~held] = mean[~held]
-        v += push
+        v[thin] = cp.points[thin] + (MIN_TISSUE_MM + 0.01) * out
     return v, int(too_close.sum()), before
 
 
 #: rounds of push-out while skin is closer than MIN_TISSUE_MM to the skull
 PUSH_ROUNDS = 8
-#: Jacobi passes spreading each push over the skin around the pushed vertices
-PUSH_SPREAD_PASSES = 10
 
 
 def skin_target_weights(skin_h: Mesh, head_skin: Mesh) -> tuple[np.ndarray, float]:
