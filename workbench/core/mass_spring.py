@@ -102,18 +102,15 @@ does the exact test with a :class:`~workbench.core.spatial.MeshIndex`
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import ModuleType
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from workbench.core.compiled import numba
+from workbench.core.compiled import numba as _numba
 from workbench.core.spatial import MeshIndex
 
-
-_numba: ModuleType | None = numba
 
 NONE, SKULL, JAW = 0, 1, 2
 

@@ -41,9 +41,16 @@ def angle_weighted_vertex_normals(mesh: Mesh) -> np.ndarray:
     These are the pseudo-normals of Bærentzen & Aanæs (2005) that make the
     sign of a closest-point distance exact on closed meshes.
     """
+    return _normalise(angle_weighted_sums(mesh)[0])
+
+
+def angle_weighted_sums(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Per vertex: the sum of its faces' normals times their corner angle ``(n, 3)``, and the
+    sum of those corner angles ``(n,)`` (radians)."""
     t = mesh.triangles
     normals = mesh.face_normals
     acc = np.zeros((mesh.n_vertices, 3))
+    total = np.zeros(mesh.n_vertices)
     for corner in range(3):
         a = t[:, (corner + 1) % 3] - t[:, corner]
         b = t[:, (corner + 2) % 3] - t[:, corner]
@@ -51,12 +58,12 @@ def angle_weighted_vertex_normals(mesh: Mesh) -> np.ndarray:
             np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
         )
         angle = np.arccos(np.clip(cos, -1.0, 1.0))
+        ids = mesh.faces[:, corner]
+        total += np.bincount(ids, weights=angle, minlength=mesh.n_vertices)
         weighted = normals * angle[:, None]
         for axis in range(3):
-            acc[:, axis] += np.bincount(
-                mesh.faces[:, corner], weights=weighted[:, axis], minlength=mesh.n_vertices
-            )
-    return _normalise(acc)
+            acc[:, axis] += np.bincount(ids, weights=weighted[:, axis], minlength=mesh.n_vertices)
+    return acc, total
 
 
 def normals_within_radius(

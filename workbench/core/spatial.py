@@ -51,7 +51,7 @@ from workbench.core.compiled import numba
 from workbench.core.threads import worker_count
 from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
-from workbench.core.normals import _normalise, angle_weighted_vertex_normals
+from workbench.core.normals import _normalise, angle_weighted_sums
 
 
 @dataclass(frozen=True)
@@ -319,10 +319,9 @@ class MeshIndex:
 
     # ------------------------------------------------------------- sign
     @cached_property
-    def _edge_normals(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pseudo-normal per unique edge (sum of adjacent face normals) and lookup keys."""
-        acc, inverse = self._edge_sums
-        return _normalise(acc), inverse
+    def _edge_normals(self) -> np.ndarray:
+        """Pseudo-normal per unique edge (normalised sum of the adjacent face normals)."""
+        return _normalise(self._edge_sums[0])
 
     @cached_property
     def _edge_sums(self) -> tuple[np.ndarray, np.ndarray]:
@@ -338,29 +337,34 @@ class MeshIndex:
         return acc, inverse.reshape(3, m)
 
     @cached_property
+    def _vertex_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        return angle_weighted_sums(self.mesh)
+
+    @cached_property
     def _vertex_normals(self) -> np.ndarray:
-        return angle_weighted_vertex_normals(self.mesh)
+        return _normalise(self._vertex_sums[0])
 
     @cached_property
     def _vertex_strength(self) -> np.ndarray:
         """Length of each vertex's angle-weighted normal sum over its total angle (0..1)."""
-        t, normals = self.mesh.triangles, self.mesh.face_normals
-        acc = np.zeros((self.mesh.n_vertices, 3))
-        total = np.zeros(self.mesh.n_vertices)
-        for corner in range(3):
-            a = t[:, (corner + 1) % 3] - t[:, corner]
-            b = t[:, (corner + 2) % 3] - t[:, corner]
-            cos = np.einsum("ij,ij->i", a, b) / np.maximum(
-                np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
-            )
-            angle = np.arccos(np.clip(cos, -1.0, 1.0))
-            ids = self.mesh.faces[:, corner]
-            total += np.bincount(ids, weights=angle, minlength=len(total))
-            for axis in range(3):
-                acc[:, axis] += np.bincount(
-                    ids, weights=normals[:, axis] * angle, minlength=len(total)
-                )
+        acc, total = self._vertex_sums
         return np.linalg.norm(acc, axis=1) / np.maximum(total, 1e-300)
+
+    def _closest_feature(
+        self, face_ids: np.ndarray, barycentric: np.ndarray, tol: float = 1e-9
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Which closest points lie on an edge (mask, unique-edge ids) or a vertex (mask, ids)."""
+        zero = barycentric <= tol
+        n_zero = zero.sum(axis=1)
+        on_edge = n_zero == 1
+        # the edge is opposite the corner with weight 0: corner pair (1,2)->h1, (2,0)->h2, (0,1)->h0
+        edges = np.zeros(0, np.int64)
+        if on_edge.any():
+            half = (zero[on_edge].argmax(axis=1) + 1) % 3
+            edges = self._edge_sums[1][half, face_ids[on_edge]]
+        on_vertex = n_zero >= 2
+        corner = (~zero[on_vertex]).argmax(axis=1)
+        return on_edge, edges, on_vertex, self.mesh.faces[face_ids[on_vertex], corner]
 
     def feature_strength(self, face_ids: np.ndarray, barycentric: np.ndarray) -> np.ndarray:
         """How well defined the closest feature's pseudo-normal is, ``(k,)`` in 0..1.
@@ -370,19 +374,12 @@ class MeshIndex:
         angles.
         """
         face_ids = np.asarray(face_ids)
-        zero = barycentric <= 1e-9
-        n_zero = zero.sum(axis=1)
+        on_edge, edges, on_vertex, vertices = self._closest_feature(face_ids, barycentric)
         out = np.ones(len(face_ids))
-        on_edge = n_zero == 1
         if on_edge.any():
-            half = (zero[on_edge].argmax(axis=1) + 1) % 3
-            acc, lookup = self._edge_sums
-            out[on_edge] = 0.5 * np.linalg.norm(acc[lookup[half, face_ids[on_edge]]], axis=1)
-        on_vertex = n_zero >= 2
+            out[on_edge] = 0.5 * np.linalg.norm(self._edge_sums[0][edges], axis=1)
         if on_vertex.any():
-            corner = (~zero[on_vertex]).argmax(axis=1)
-            vid = self.mesh.faces[face_ids[on_vertex], corner]
-            out[on_vertex] = self._vertex_strength[vid]
+            out[on_vertex] = self._vertex_strength[vertices]
         return out
 
     def pseudo_normals(
@@ -390,25 +387,20 @@ class MeshIndex:
     ) -> np.ndarray:
         """Pseudo-normal of the closest feature (face, edge or vertex) ``(k, 3)``."""
         face_ids = np.asarray(face_ids)
-        zero = barycentric <= tol
-        n_zero = zero.sum(axis=1)
+        on_edge, edges, on_vertex, vertices = self._closest_feature(face_ids, barycentric, tol)
         normals = self.mesh.face_normals[face_ids].copy()
-        # on an edge: exactly one zero weight; the edge is opposite that corner
-        on_edge = n_zero == 1
         if on_edge.any():
-            opposite = zero[on_edge].argmax(axis=1)  # corner with weight 0
-            half = (opposite + 1) % 3  # corner pair (1,2)->h1, (2,0)->h2, (0,1)->h0
-            edge_n, lookup = self._edge_normals
-            normals[on_edge] = edge_n[lookup[half, face_ids[on_edge]]]
-        on_vertex = n_zero >= 2
+            normals[on_edge] = self._edge_normals[edges]
         if on_vertex.any():
-            corner = (~zero[on_vertex]).argmax(axis=1)
-            vid = self.mesh.faces[face_ids[on_vertex], corner]
-            normals[on_vertex] = self._vertex_normals[vid]
+            normals[on_vertex] = self._vertex_normals[vertices]
         return normals
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """``(k,)`` signed distance in mm: positive outside, negative inside."""
+        return self.signed_closest_points(points)[1]
+
+    def signed_closest_points(self, points: np.ndarray) -> tuple[ClosestPoints, np.ndarray]:
+        """:meth:`closest_points` and :meth:`signed_distance` from one closest-point query."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         cl = self.closest_points(pts)
         normals = self.pseudo_normals(cl.face_ids, cl.barycentric)
@@ -423,7 +415,7 @@ class MeshIndex:
             )
         if doubt.any():
             inside[doubt] = np.abs(winding_numbers(self.mesh, pts[doubt])) > 0.5
-        return np.where(inside, -cl.distances, cl.distances)
+        return cl, np.where(inside, -cl.distances, cl.distances)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """``(k,)`` bool: inside the closed surface."""

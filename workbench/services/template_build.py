@@ -138,8 +138,7 @@ def _push_out(skin: Mesh, skull: Mesh, exclude: np.ndarray) -> tuple[np.ndarray,
     too_close = np.zeros(len(v), bool)
     before = 0.0
     for round_ in range(PUSH_ROUNDS):
-        cp = index.closest_points(v)
-        signed = index.signed_distance(v)
+        cp, signed = index.signed_closest_points(v)
         if round_ == 0:
             before = float(signed[~exclude].min())
         thin = (signed < MIN_TISSUE_MM) & ~exclude & (cp.distances < 30.0)
