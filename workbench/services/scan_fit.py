@@ -12,8 +12,13 @@ writes:
    or more skin landmarks the user placed (input frame; their handedness
    decides a mirrored scan), or by the multi-start search.  The search scores
    scan samples against the reference robustly (a missing part costs nothing,
-   shoulders and hair saturate), so the face region decides.  The head frame
-   keeps the person's size: the reference is scaled, not the scan.
+   shoulders and hair saturate).  On a bust most of the scan is not a face
+   (a crown, shoulders, a plinth), so without landmarks the reference *face*
+   is then laid on the scan from that pose
+   (:func:`workbench.core.face_pose.place_face`: face → scan, exact closest
+   points), and a scan on which it finds too little of its shape is refused.
+   The head frame keeps the person's size: the reference is scaled, not the
+   scan.
 2. **Skin** (:func:`workbench.services.template_build.fit_skin`): the scaled
    reference skin registered onto the scan, per-part affine stage then coarse
    to fine (:data:`SCAN_LEVELS`); hole and field-of-view rims fade out, skin
@@ -52,6 +57,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import InputError, WorkbenchError
+from workbench.core.face_pose import place_face
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
@@ -99,6 +105,9 @@ ON_SCAN_COS = 0.0
 SECOND_PIECE = (0.4, 150.0)
 #: below this fraction of the reference face supported by the scan, it is not a face
 MIN_FACE_SUPPORT = 0.6
+#: ... nor below this fraction of the rigidly placed reference face within 5 mm of it
+#: (:func:`workbench.core.face_pose.place_face`)
+MIN_PLACED_FACE = 0.5
 #: texture atlas side (texels) of a coloured scan's fitted skin: each texel samples the
 #: scan (2048 took ~21-28 s on a 300k-triangle scan, 1024 ~4 s)
 COLOUR_ATLAS_SIZE = 1024
@@ -363,6 +372,33 @@ def fit_scan(
     say("orienting the scan ...")
     seeds = _seed_pairs(landmarks, base)
     pose = search_pose(scan, base.skin, hint=orientation, seeds=seeds, mirror="auto")
+    face_ids = np.concatenate(list(face_regions(base).values()))
+    placement = None
+    if seeds is None:
+        # the search scores the whole scan; on a bust the crown, hair and shoulders
+        # outweigh the face: lay the reference face itself on the scan from there
+        placement = place_face(
+            MeshIndex(scan),
+            base.skin.vertices[face_ids],
+            base.skin.vertex_normals[face_ids],
+            pose.matrix,
+            scale_range=SCALE_RANGE,
+        )
+        if placement.loss < placement.start_loss:
+            pose = replace(pose, matrix=placement.matrix, scale=placement.scale)
+        if placement.near_fraction < MIN_PLACED_FACE:
+            # a ball or a hand: convex enough for forehead and cheeks, but nose, orbits
+            # and mouth find nothing of their shape (a ball gave 42 %, the real scans
+            # 67-99 %: headsq with its cut vault the least)
+            raise InputError(
+                source,
+                "does not look like a face: laid on it as well as it goes, only "
+                f"{100 * placement.near_fraction:.0f} % of the reference face finds scan "
+                f"surface of its shape within 5 mm (a face scan gives over "
+                f"{100 * MIN_PLACED_FACE:.0f} %)",
+                "is this a scan of a face? check the orientation (--anterior/--superior or "
+                "3+ --landmarks) and the units",
+            )
     s = pose.scale
     rigid = pose.matrix.copy()
     rigid[:3] /= s
@@ -410,7 +446,6 @@ def fit_scan(
         fit.registration.vertices, rest.skin.faces, scan_h, fit.target_weights, scan_index
     )
     on_scan = facing & (to_scan <= ON_SCAN_MM)
-    face_ids = np.concatenate(list(face_regions(base).values()))
     face = _mask(rest.skin.n_vertices, [face_ids])
     support = float(on_scan[face].mean())
     if support < MIN_FACE_SUPPORT:
@@ -568,6 +603,14 @@ def fit_scan(
         "matched_fraction": round(pose.matched_fraction, 3),
         "cost": round(pose.cost, 4),
     }
+    if placement is not None:
+        fig["orientation"]["face_placement"] = {
+            "loss_before": round(placement.start_loss, 4),
+            "loss_after": round(min(placement.loss, placement.start_loss), 4),
+            "moved": bool(placement.loss < placement.start_loss),
+            "face_within_2_5mm_fraction": round(placement.matched_fraction, 3),
+            "face_within_5mm_fraction": round(placement.near_fraction, 3),
+        }
     fig["scan_not_head_area_fraction"] = round(fit.not_head, 4)
     if bone is not None:
         fig["skull_vs_bone"] = _skull_vs_bone(head, bone, to_head, face)
