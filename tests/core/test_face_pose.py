@@ -1,4 +1,4 @@
-"""The reference face laid on a bust by the face alone (a crown and a plinth around it)."""
+"""The reference face laid on a bust by the face alone (a crown wider than the head above it)."""
 
 from __future__ import annotations
 
@@ -6,49 +6,15 @@ import numpy as np
 import pytest
 
 from workbench.core.face_pose import place_face
-from workbench.core.mesh import Mesh, concatenate
 from workbench.core.rigid_search import SCALE_RANGE
 from workbench.core.spatial import MeshIndex
+from tests.services._scans import crowned_bust
 from workbench.services.compare import face_regions
-
-
-def _cylinder(centre_xz, radius: float, y0: float, y1: float, n: int = 72, rings: int = 16) -> Mesh:
-    """A closed upright cylinder, wound outward (side normals radial, caps up and down), mm."""
-    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    ys = np.linspace(y0, y1, rings)
-    ring = np.stack([radius * np.sin(a), np.zeros(n), radius * np.cos(a)], axis=1)
-    v = [ring + (centre_xz[0], y, centre_xz[1]) for y in ys]
-    v = np.vstack(v + [[(centre_xz[0], y0, centre_xz[1]), (centre_xz[0], y1, centre_xz[1])]])
-    faces = []
-    for r in range(rings - 1):
-        for i in range(n):
-            j = (i + 1) % n
-            a0, a1, b0, b1 = r * n + i, r * n + j, (r + 1) * n + i, (r + 1) * n + j
-            faces += [(a0, a1, b1), (a0, b1, b0)]
-    bottom, top = len(v) - 2, len(v) - 1
-    for i in range(n):
-        j = (i + 1) % n
-        faces.append((bottom, j, i))
-        faces.append((top, (rings - 1) * n + i, (rings - 1) * n + j))
-    return Mesh(v, np.array(faces))
 
 
 @pytest.fixture(scope="module")
 def bust(head_female):
-    """The female skin below the brow under a tall crown wider than the head, on a plinth."""
-    skin = head_female.skin
-    at = head_female.skin_landmarks.as_dict()
-    brow = at["g"][1] + 8.0
-    centres = skin.vertices[skin.faces].mean(axis=1)
-    keep = (centres[:, 1] < brow) & (centres[:, 1] > at["gn"][1] - 60.0)
-    face = Mesh(skin.vertices, skin.faces[keep])
-    head_z = float(np.median(skin.vertices[:, 2]))
-    half_width = float(np.ptp(skin.vertices[:, 0])) / 2
-    crown = _cylinder((0.0, head_z - 15.0), 1.3 * half_width, brow - 4.0, brow + 170.0)
-    plinth = _cylinder(
-        (0.0, head_z - 10.0), 2.2 * half_width, at["gn"][1] - 160.0, at["gn"][1] - 60.0
-    )
-    return concatenate([face, crown, plinth]), at
+    return crowned_bust(head_female)
 
 
 def test_a_face_shifted_and_resized_is_found_again(bust, head_male):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from workbench.core.landmarks import LandmarkSet
-from workbench.core.mesh import Mesh
+from workbench.core.mesh import Mesh, concatenate
 from workbench.model.template import TemplateHead
 
 #: holes punched into the skin: (skin landmark at the centre, radius mm)
@@ -40,3 +40,41 @@ def damaged_skin(
         faces = faces[:, ::-1]
     v = skin.vertices @ m[:3, :3].T + m[:3, 3]
     return Mesh(v, faces), head.skin_landmarks.transformed(m)
+
+
+def _cylinder(centre_xz, radius: float, y0: float, y1: float, n: int = 72, rings: int = 16) -> Mesh:
+    """A closed upright cylinder, wound outward (side normals radial, caps up and down), mm."""
+    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    ys = np.linspace(y0, y1, rings)
+    ring = np.stack([radius * np.sin(a), np.zeros(n), radius * np.cos(a)], axis=1)
+    v = [ring + (centre_xz[0], y, centre_xz[1]) for y in ys]
+    v = np.vstack(v + [[(centre_xz[0], y0, centre_xz[1]), (centre_xz[0], y1, centre_xz[1])]])
+    faces = []
+    for r in range(rings - 1):
+        for i in range(n):
+            j = (i + 1) % n
+            a0, a1, b0, b1 = r * n + i, r * n + j, (r + 1) * n + i, (r + 1) * n + j
+            faces += [(a0, a1, b1), (a0, b1, b0)]
+    bottom, top = len(v) - 2, len(v) - 1
+    for i in range(n):
+        j = (i + 1) % n
+        faces.append((bottom, j, i))
+        faces.append((top, (rings - 1) * n + i, (rings - 1) * n + j))
+    return Mesh(v, np.array(faces))
+
+
+def crowned_bust(head: TemplateHead) -> tuple[Mesh, dict]:
+    """``head``'s skin below the brow under a tall crown wider than the head (like the
+    Nefertiti bust: most of the surface is not a face); head frame, mm.  (One crown: a
+    second piece of similar size far away would be refused as a second body.)
+    Returns the mesh and the skin landmarks ``{code: position}``."""
+    skin = head.skin
+    at = head.skin_landmarks.as_dict()
+    brow = at["g"][1] + 8.0
+    centres = skin.vertices[skin.faces].mean(axis=1)
+    keep = (centres[:, 1] < brow) & (centres[:, 1] > at["gn"][1] - 60.0)
+    face = Mesh(skin.vertices, skin.faces[keep])
+    head_z = float(np.median(skin.vertices[:, 2]))
+    half_width = float(np.ptp(skin.vertices[:, 0])) / 2
+    crown = _cylinder((0.0, head_z - 15.0), 1.3 * half_width, brow - 4.0, brow + 120.0)
+    return concatenate([face, crown]), at

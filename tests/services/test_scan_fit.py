@@ -186,3 +186,26 @@ def test_size_search_at_its_limit_is_said(head_male, head_female):
         assert "does not look like a face" in str(e)
         return
     assert any("size search stopped at its limit" in w for w in fit.warnings)
+
+
+def test_a_bust_under_a_crown_gets_its_face(head_female, head_male):
+    """Most of a bust is not a face (crown, plinth): the fitted face must still be the
+    bust's, its landmarks where the bust's are (not the reference's scalp on the crown)."""
+    from tests.services._scans import crowned_bust, scan_pose
+
+    bust, truth = crowned_bust(head_female)
+    pose = scan_pose()
+    scan = bust.transformed(pose)
+    fit = fit_scan(
+        scan,
+        base=head_male,
+        sex="female",
+        orientation=(pose[:3, 2], pose[:3, 1]),
+        source="bust.ply",
+    )
+    got = fit.head.skin_landmarks.as_dict()
+    for code in ("prn", "sn", "ls", "pg", "n", "ex_l", "ex_r"):
+        want = pose[:3, :3] @ truth[code] + pose[:3, 3]
+        assert np.linalg.norm(fit.to_input(got[code])[0] - want) < 3.0, code
+    assert fit.figures["face_within_2_5mm_fraction"] > 0.97
+    assert fit.figures["orientation"]["face_placement"]["face_within_5mm_fraction"] > 0.8
