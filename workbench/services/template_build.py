@@ -228,13 +228,16 @@ def fit_skin(
     hint: str | None = None,
     belief: np.ndarray | None = None,
     hard: tuple[np.ndarray, np.ndarray] | None = None,
+    ears: bool = False,
 ) -> SkinFit:
     """Register ``skin`` (the reference skin placed in the head frame) onto ``scan_h``.
 
     Both in the head frame, mm.  Hole and field-of-view rims of the scan and
     everything far from ``skin`` fade out (:func:`skin_target_weights`), the
     ears (:data:`UNPROJECTED_REGIONS` of ``regions``) do not look for the
-    scan, and skin over no scan keeps the reference's shape (membrane).
+    scan unless ``ears`` (a CT's ears are often pressed flat by the head
+    holder, a range scan's are usually whole), and skin over no scan keeps
+    the reference's shape (membrane).
 
     ``belief`` (per scan vertex, 0..1) multiplies the scan's weights, e.g.
     0 for walls of a cavity no scanner sees (:mod:`workbench.core.visibility`).
@@ -257,10 +260,11 @@ def fit_skin(
             f"{100 * not_head:.0f} % of the skin scan is not the head (shoulders, "
             "head holder, gel, table) and was ignored"
         )
-    ears = _mask(skin.n_vertices, [regions[r] for r in UNPROJECTED_REGIONS if r in regions])
+    unprojected = () if ears else UNPROJECTED_REGIONS
+    passive = _mask(skin.n_vertices, [regions[r] for r in unprojected if r in regions])
     target = Target(scan_h, weights, pull_stride=max(1, int((weights > 0.05).sum()) // 8000))
     sreg = register(
-        skin, target, levels=levels, active=~ears, affine_rounds=affine_rounds, hard=hard
+        skin, target, levels=levels, active=~passive, affine_rounds=affine_rounds, hard=hard
     )
     return SkinFit(sreg, sreg.weights > ON_SCAN_WEIGHT, weights, not_head, tuple(warnings))
 
