@@ -250,3 +250,27 @@ def test_pdf_without_pictures_says_why(fake_fit, tmp_path):
     text = " ".join(page.extract_text() for page in reader.pages)
     assert "no OpenGL" in text
     assert sum(len(p.images) for p in reader.pages) == 0
+
+
+def test_summary_says_where_the_face_was_laid(fake_fit):
+    placed = SimpleNamespace(**vars(fake_fit))
+    placed.figures = _figures(100, bone=False, user=False)
+    placed.figures["orientation"] = {
+        "method": "hint + face placement",
+        "handedness": "assumed",
+        "reference_scale": 0.9,
+        "matched_fraction": 0.58,
+        "cost": 0.26,
+        "face_placement": {"moved": True, "face_within_5mm_fraction": 0.81},
+    }
+    rows = {r["figure"]: r for r in fit_scan_summary(placed, "bust.obj")["rows"]}
+    laid = rows["Reference face laid on the scan"]
+    assert (
+        laid["value"]
+        == "81.0 % of its vertices within 5 mm of the scan (moved from the search's pose)"
+    )
+    assert laid["met"] is True
+    assert rows["Orientation"]["value"].startswith("hint + face placement")
+    # a fit from landmarks has no placement row
+    rows = {r["figure"] for r in fit_scan_summary(fake_fit, "face.ply")["rows"]}
+    assert "Reference face laid on the scan" not in rows

@@ -179,6 +179,16 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
         f"{orient.get('method', '–')}, {orient.get('handedness', '–')}; reference scaled "
         f"{orient.get('reference_scale', '–')}; matched {_pct(orient.get('matched_fraction'))}",
     )
+    placed = orient.get("face_placement")
+    if placed:
+        near = placed.get("face_within_5mm_fraction")
+        row(
+            "Reference face laid on the scan",
+            f"{_pct(near)} of its vertices within 5 mm of the scan"
+            + (" (moved from the search's pose)" if placed.get("moved") else ""),
+            "> 50 %",
+            near is not None and float(near) > 0.5,
+        )
     row("Mirrored input", "yes" if result.mirrored_input else "no")
     secs = dict(fig.get("seconds") or {})
     total = secs.pop("total", None)
