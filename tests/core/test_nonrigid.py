@@ -106,3 +106,16 @@ def test_soft_match_prefers_the_surface_that_faces_the_same_way():
         q, np.array([[0, 0, 1.0]]), cKDTree(cloud), cloud, normals, k=30
     )
     assert p[0, 2] > 1.5 and quality[0] > 0.9
+
+
+def test_a_target_adopts_an_index_built_on_its_own_mesh_only():
+    import pytest
+
+    tgt = subdivided_octahedron(2)
+    target = Target(tgt, np.ones(tgt.n_vertices))
+    own = MeshIndex(tgt)
+    target.use_index(own)
+    assert target.index is own
+    other = Target(tgt.with_vertices(tgt.vertices * 2.0), np.ones(tgt.n_vertices))
+    with pytest.raises(ValueError, match="own mesh"):
+        other.use_index(own)

@@ -133,6 +133,12 @@ class Target:
         object.__setattr__(self, "weights", w)
         object.__setattr__(self, "normals", vertex_normals(self.mesh))
 
+    def use_index(self, index: MeshIndex) -> None:
+        """Adopt an index the caller already built on :attr:`mesh` (saves building one)."""
+        if index.mesh is not self.mesh:
+            raise ValueError("the index must be built on the target's own mesh")
+        object.__setattr__(self, "_index", index)
+
     @property
     def index(self) -> MeshIndex:
         """Exact closest-point index of the target (built on first use)."""
