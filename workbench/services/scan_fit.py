@@ -66,6 +66,7 @@ from workbench.core.normals import normals_within_radius
 from workbench.core.self_intersection import self_intersections
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
+from workbench.core.untangle import untangle
 from workbench.core.visibility import field_of_view_caps, seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.model.template import TemplateHead
@@ -437,6 +438,7 @@ def fit_scan(
     t = time.perf_counter()
     say("registering the reference skin onto the scan ...")
     scan_index = MeshIndex(scan_h)  # ~1 s for 300k triangles: built once, used four times
+    hard = _user_constraints(landmarks, rest, rigid)
     fit = fit_skin(
         rest.skin,
         scan_h,
@@ -447,7 +449,7 @@ def fit_scan(
         near="the reference head placed on it",
         hint="check the orientation (--anterior/--superior or 3+ --landmarks) and the units",
         belief=belief,
-        hard=_user_constraints(landmarks, rest, rigid),
+        hard=hard,
         # the ears look for the scan's too: held passive they stay the reference's, a few
         # mm to a centimetre beside the scan's, whose vertices then counted as misses of the
         # cheek; following, 1 mm figures rise 0.3-4 points on every case, no fold-over added
@@ -455,8 +457,18 @@ def fit_scan(
         index=scan_index,
     )
     warnings += list(fit.warnings)
+    # the reference skin's own crossings (sliver triangles of the lips' seam at the mouth
+    # corners) are its design; any other the fit made is smoothed away where it is
+    ref_cross = self_intersections(rest.skin)
+    untangled = untangle(
+        rest.skin.with_vertices(fit.registration.vertices),
+        reference=rest.skin,
+        allowed=map(tuple, ref_cross.pairs.tolist()),
+        fixed=None if hard is None else _mask(rest.skin.n_vertices, [hard[0]]),
+    )
+    skin = untangled.mesh
     facing, to_scan = _scan_support(
-        fit.registration.vertices, rest.skin.faces, scan_h, fit.target_weights, scan_index
+        skin.vertices, rest.skin.faces, scan_h, fit.target_weights, scan_index
     )
     on_scan = facing & (to_scan <= ON_SCAN_MM)
     face = _mask(rest.skin.n_vertices, [face_ids])
@@ -472,7 +484,6 @@ def fit_scan(
             "is this a scan of a face? check the orientation (--anterior/--superior or 3+ "
             "--landmarks) and the units",
         )
-    skin = rest.skin.with_vertices(fit.registration.vertices)
     skin_lms, absent_skin = carry_skin_landmarks(rest.skin, skin, rest.skin_landmarks, on_scan)
     skin_lms = _with_confidences(skin_lms, absent_skin, scan_index, landmarks)
     seconds["skin"] = time.perf_counter() - t
@@ -556,10 +567,15 @@ def fit_scan(
     # the reference skin itself has a few crossing sliver triangles at the mouth corners
     # (the lips' seam, 0.02-0.07 mm², ≤ 0.6 mm deep): they turn over easily; the fit must
     # add no fold-over or crossing elsewhere
-    ref_cross = self_intersections(rest.skin)
     seam = np.zeros(fitted.n_faces, bool)
     seam[ref_cross.faces] = True
     fig["fold_overs_outside_mouth_corner_seam"] = int((folded & ~seam).sum())
+    fig["untangled"] = {
+        "vertices_moved": int(untangled.moved.sum()),
+        "rounds": untangled.rounds,
+        "crossings_before": untangled.crossings_before,
+        "fold_overs_before": untangled.folds_before,
+    }
     fitted_x = self_intersections(fitted).pairs
     ref_x = {tuple(p) for p in ref_cross.pairs.tolist()}
     fig["self_intersections"] = {
