@@ -24,9 +24,10 @@ Cases (units mm, each fitted with the built-in male reference head):
   skin landmarks.
 
 Prints per case: face-region vertices and the fractions within 1 / 2.5 mm,
-mean distance, skin landmarks' distance to the scan, fold-overs, the
-skin–skull distances at the paired landmarks vs the table, skull vs bone
-(headsq), seconds; then all figures as JSON.
+mean distance, skin landmarks' distance to the scan, fold-overs, new crossings
+(and how many the untangling removed), the skin–skull distances at the paired
+landmarks vs the table, skull vs bone (headsq), seconds; then all figures as
+JSON.
 """
 
 from __future__ import annotations
@@ -149,6 +150,8 @@ def main() -> int:
             f"skin->scan <=2.5mm {100 * f['face_skin_to_scan_mm']['within_2_5mm_fraction']:.1f}% "
             f"p95 {f['face_skin_to_scan_mm']['p95']:.2f} mm  lm->scan {lm['mean']:.2f} mm "
             f"(n {lm['n']}, absent {len(lm['absent'])})  folds {f['fold_overs']} ({f['fold_overs_outside_mouth_corner_seam']} off the seam)  "
+            f"new crossings {f['self_intersections']['new_pairs']} "
+            f"(untangled {f['untangled']['crossings_before']}, {f['untangled']['vertices_moved']} vertices)  "
             f"depth |diff| {td['mean_abs_diff_mm']:.2f} mm ({td['pairs']} pairs)  "
             f"mirrored {fit.mirrored_input}  {wall:.1f} s"
         )
