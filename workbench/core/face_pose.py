@@ -22,7 +22,8 @@ distance to the scan (1 where the normals disagree or nothing is near).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -67,6 +68,8 @@ class FacePlacement:
     matched_fraction, near_fraction : float
         Face vertices with agreeing scan surface within 2.5 mm and 5 mm
         (reference size) at ``matrix``.
+    near_by_group : dict
+        ``near_fraction`` of each group of face vertices the caller named.
     """
 
     matrix: np.ndarray
@@ -74,6 +77,7 @@ class FacePlacement:
     start_loss: float
     matched_fraction: float
     near_fraction: float
+    near_by_group: dict[str, float] = field(default_factory=dict)
 
     @property
     def scale(self) -> float:
@@ -168,10 +172,10 @@ class _Face:
         loss = np.where(cos > MIN_COS, 1.0 - np.exp(-0.5 * (d / LOSS_SCALE_MM) ** 2), 1.0)
         return loss.mean(axis=1)
 
-    def near(self, g: np.ndarray, ids: np.ndarray) -> float:
-        """Fraction of face vertices with agreeing scan surface within 5 mm under ``g``."""
+    def near(self, g: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Per face vertex: agreeing scan surface within 5 mm under ``g``."""
         _, d, cos = self.match(g, ids)
-        return float(((cos > MIN_COS) & (d <= 5.0)).mean())
+        return (cos > MIN_COS) & (d <= 5.0)
 
     def refine(
         self,
@@ -204,6 +208,7 @@ def place_face(
     start: np.ndarray,
     *,
     scale_range: tuple[float, float],
+    groups: Mapping[str, np.ndarray] | None = None,
 ) -> FacePlacement:
     """The pose (scan → reference) that lays the reference face best on ``scan``.
 
@@ -217,6 +222,8 @@ def place_face(
         A pose scan → reference (e.g. from ``search_pose``).
     scale_range : (lo, hi)
         Allowed scan → reference scales (as ``SCALE_RANGE``).
+    groups : {name: indices into face_points}, optional
+        Parts (the nose ...) whose near fractions are reported on their own.
     """
     face = _Face(face_points, face_normals, scan)
     n = len(face.points)
@@ -251,6 +258,8 @@ def place_face(
         loss, matched = face.loss(g, every)
         if loss < best_loss:
             best_g, best_loss, best_match = g, loss, matched
+    near = face.near(best_g, every)
+    by_group = {k: float(near[np.asarray(ids)].mean()) for k, ids in (groups or {}).items()}
     return FacePlacement(
-        np.linalg.inv(best_g), best_loss, start_loss, best_match, face.near(best_g, every)
+        np.linalg.inv(best_g), best_loss, start_loss, best_match, float(near.mean()), by_group
     )
