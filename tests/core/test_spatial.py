@@ -302,3 +302,33 @@ def test_random_triangle_soups_match_brute_force(n_faces, seed, spread):
     got = index.closest_points(pts)
     dist, _ = brute_force(mesh, pts)
     np.testing.assert_allclose(got.distances, dist, rtol=0, atol=1e-12 * spread * 10)
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_a_rigid_copy_borrows_the_shared_index_and_answers_the_same(skull, mirror):
+    from scipy.spatial.transform import Rotation
+
+    m = np.eye(4)
+    m[:3, :3] = Rotation.from_euler("xyz", (20.0, -35.0, 50.0), degrees=True).as_matrix()
+    if mirror:
+        m[:3, :3] = m[:3, :3] @ np.diag([-1.0, 1.0, 1.0])
+    m[:3, 3] = (15.0, -200.0, 40.0)
+    copy = skull.transformed(m)
+    shared = MeshIndex.shared(copy)
+    assert shared._base is MeshIndex.shared(skull)  # no tree of its own was built
+    assert MeshIndex.shared(copy) is shared
+    rng = np.random.default_rng(5)
+    lo, hi = copy.bounds
+    pts = rng.uniform(lo - 10.0, hi + 10.0, (3000, 3))
+    got, want = shared.closest_points(pts), MeshIndex(copy).closest_points(pts)
+    np.testing.assert_allclose(got.distances, want.distances, atol=1e-9)
+    np.testing.assert_allclose(got.points, want.points, atol=1e-8)
+    np.testing.assert_allclose(got.barycentric.sum(axis=1), 1.0, atol=1e-12)
+    # (face ids may differ at exact ties: a closest vertex or edge shared by several faces)
+    tri = copy.triangles[got.face_ids]
+    on_face = (got.barycentric[:, :, None] * tri).sum(axis=1)
+    np.testing.assert_allclose(on_face, got.points, atol=1e-8)
+    np.testing.assert_array_equal(shared.contains(pts), MeshIndex(copy).contains(pts))
+    # a copy that is not rigid (scaled) gets its own index
+    scaled = skull.transformed(np.diag([1.1, 1.1, 1.1, 1.0]))
+    assert MeshIndex.shared(scaled)._base is None

@@ -40,6 +40,7 @@ are checked, so only a handful of points pay for the O(faces) sum.
 
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
@@ -228,6 +229,9 @@ def _morton_order(points: np.ndarray) -> np.ndarray:
     return np.argsort(code, kind="stable")
 
 
+_SHARED_LOCK = threading.RLock()
+
+
 class MeshIndex:
     """Spatial index over one mesh for closest-point and signed-distance queries.
 
@@ -246,6 +250,39 @@ class MeshIndex:
         self._tree = LeafTree(mesh)
         scale = float(np.abs(mesh.bounds).max()) + float(mesh.extent.max()) + 1.0
         self._abs_tol2 = (1e-9 * scale) ** 2
+        # set on an index borrowing another's tree (a rigid copy's, see shared)
+        self._base: MeshIndex | None = None
+        self._to_base: np.ndarray | None = None
+
+    @staticmethod
+    def shared(mesh: Mesh) -> MeshIndex:
+        """The one index of ``mesh`` (built on first use, kept with the mesh; thread-safe).
+
+        A rigid copy (:meth:`Mesh.transformed`: same faces in the same order)
+        borrows its original's tree: queries are mapped into the original's
+        frame, answered there, and the closest points re-measured on the
+        copy's own triangles (a rigid map keeps lengths, so face ids and
+        distances carry over).  Building the index of a 300k-triangle scan
+        takes ~0.8 s; a scan fit needs it in the file's frame and in the head
+        frame.
+        """
+        with _SHARED_LOCK:
+            return MeshIndex._shared_locked(mesh)
+
+    @staticmethod
+    def _shared_locked(mesh: Mesh) -> MeshIndex:
+        index = mesh.__dict__.get("_shared_mesh_index")
+        if index is None:
+            source = mesh.rigid_source
+            if source is None:
+                index = MeshIndex(mesh)
+            else:
+                base = MeshIndex._shared_locked(source[0])
+                index = object.__new__(MeshIndex)
+                index.mesh, index._tree, index._abs_tol2 = mesh, base._tree, base._abs_tol2
+                index._base, index._to_base = base, np.asarray(source[1], dtype=np.float64)
+            mesh.__dict__["_shared_mesh_index"] = index
+        return index
 
     @cached_property
     def centroid_tree(self) -> cKDTree:
@@ -258,6 +295,14 @@ class MeshIndex:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if not np.isfinite(pts).all():
             raise ValueError("query points must be finite")
+        if self._base is not None and self._to_base is not None:
+            m = self._to_base
+            there = self._base.closest_points(pts @ m[:3, :3].T + m[:3, 3], workers=workers)
+            tri = self.mesh.triangles[there.face_ids]
+            cp_here, bary_here = closest_on_triangles(pts, tri[:, 0], tri[:, 1], tri[:, 2])
+            return ClosestPoints(
+                cp_here, np.linalg.norm(cp_here - pts, axis=1), there.face_ids, bary_here
+            )
         n = len(pts)
         face = np.zeros(n, np.int64)
         cp, bary = np.zeros((n, 3)), np.zeros((n, 3))

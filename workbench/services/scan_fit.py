@@ -342,7 +342,7 @@ def _place_face(
     groups = {
         k: np.arange(a, b) for k, a, b in zip(regions, offsets[:-1], offsets[1:], strict=True)
     }
-    index = MeshIndex(scan)
+    index = MeshIndex.shared(scan)  # the head-frame copy of the scan borrows it
     placements = [
         place_face(
             index,
@@ -481,7 +481,7 @@ def fit_scan(
     # 2. skin
     t = time.perf_counter()
     say("registering the reference skin onto the scan ...")
-    scan_index = MeshIndex(scan_h)  # ~1 s for 300k triangles: built once, used four times
+    scan_index = MeshIndex.shared(scan_h)  # the file-frame scan's, when the placement built it
     hard = _user_constraints(landmarks, rest, rigid)
     fit = fit_skin(
         rest.skin,
@@ -563,7 +563,7 @@ def fit_scan(
         settle = np.eye(4)
     head = head_transformed(head, settle)
     to_head = settle @ rigid
-    scan_h = scan_h.with_vertices(apply_transform(settle, scan_h.vertices))
+    scan_h = scan_h.transformed(settle)  # rigid: keeps borrowing the scan's index
     ref_settled = head_transformed(rest, settle)
 
     # figures
@@ -909,7 +909,7 @@ def fit_scan_pack(
         if colours is not None and result.scan is not None:
             say = progress or (lambda _m: None)
             say("carrying the scan's colour onto the fitted skin ...")
-            index = MeshIndex(result.scan)
+            index = MeshIndex.shared(result.scan)
             skin_rgb = transfer_colours(result.head.skin, result.scan, colours, index=index)
             files += write_coloured_skin(
                 folder,

@@ -210,10 +210,13 @@ class SkinFit:
 
 
 def scan_in_frame(scan: Mesh, to_head: np.ndarray, mirrored: bool) -> Mesh:
-    """``scan`` mapped by ``to_head`` (input → head frame, mm), wound outward."""
-    return outward(
-        Mesh(_apply(to_head, scan.vertices), scan.faces[:, ::-1] if mirrored else scan.faces)
-    )
+    """``scan`` mapped by ``to_head`` (input → head frame, mm, rigid, a reflection when
+    ``mirrored``), wound outward; a rigid copy (:meth:`Mesh.transformed`), so search
+    structures built on ``scan`` serve it too."""
+    moved = scan.transformed(to_head)  # (winding flipped when to_head reflects)
+    if bool(np.linalg.det(np.asarray(to_head, float)[:3, :3]) < 0) != mirrored:
+        moved = Mesh(moved.vertices, moved.faces[:, ::-1])
+    return outward(moved)
 
 
 def fit_skin(
