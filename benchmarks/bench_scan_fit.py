@@ -18,6 +18,10 @@ Cases (units mm, each fitted with the built-in male reference head):
   bust (``../shared/data/head_bust_scans``, CC BY 4.0 ryanfb; units not
   stated, read at 180 mm per unit, which makes the bust 485 mm tall and
   the face life-sized; +z anterior, +y up);
+* ``vhp_female_300k``: the skin surface of the Visible Human female head CT
+  (``sample:vhp_female``; courtesy of the U.S. National Library of Medicine's
+  Visible Human Project) at 300k triangles, the speed target's size, and its
+  bone for the estimated skull vs the true bone;
 * ``female_damaged``: the built-in female reference skin rotated, with two
   discs of triangles removed (cheek, glabella);
 * ``female_damaged_mirrored_landmarks``: the same mirrored, oriented by six
@@ -84,6 +88,17 @@ def _cases():
             lambda: {
                 "scan": read_mesh(busts, scale=180.0, kind="face").mesh,
                 "orientation": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+            },
+        )
+    if (SHARED / "vhp_female_head_ct").exists():
+        vhp = fetch("vhp_female")
+        yield (
+            "vhp_female_300k",
+            lambda: {
+                "scan": mesh_from_ct(vhp, "skin", target_triangles=300_000).mesh,
+                "bone": mesh_from_ct(vhp, "bone").mesh,
+                "orientation": hint("vhp_female"),
+                "sex": "female",
             },
         )
     female = reference_head("female")
@@ -186,6 +201,10 @@ def main() -> int:
                 f"\n{'':36s} first guess (not placed) vs true: mean {gap.mean():.2f}, "
                 f"median {np.median(gap):.2f}, max {gap.max():.2f} mm ({len(others)} landmarks)"
             )
+        if name.startswith("vhp_"):
+            from workbench.io.samples import registry
+
+            line += f"\n{'':36s} {registry()['vhp_female'].credit}"
         print(line, flush=True)
         out[name] = {k: v for k, v in f.items() if k != "tissue_depths"} | {
             "tissue_depths": {k: v for k, v in td.items() if k != "per_landmark"},
