@@ -23,8 +23,11 @@ writes:
    reference skin registered onto the scan, per-part affine stage then coarse
    to fine (:data:`SCAN_LEVELS`); hole and field-of-view rims fade out, skin
    over no scan keeps the reference's shape (membrane, no jumps), the ears
-   follow the scan's.  Skin landmarks ride on the skin (same triangle,
-   same barycentric weights); those over no scan are marked absent.
+   follow the scan's; crossings and fold-overs the fit leaves are smoothed
+   away locally toward the reference's shape
+   (:func:`workbench.core.untangle.untangle`).  Skin landmarks ride on the
+   skin (same triangle, same barycentric weights); those over no scan are
+   marked absent.
 3. **The inside follows** (Kähler §8.3.2): at each paired skin/skull landmark
    of the depth table (chosen sex and build) the skull landmark's target is
    the fitted skin landmark moved *inward* along the skin normal by the
