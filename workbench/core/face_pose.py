@@ -3,7 +3,7 @@
 Units mm.  :func:`workbench.core.rigid_search.search_pose` scores *scan*
 samples against the reference, which is right for skulls with missing parts,
 but on a bust most of the scan is not a face: Nefertiti's crown and
-shoulders are ~80 % of the surface, so the best-scoring pose laid the
+shoulders are ~75 % of the surface, so the best-scoring pose laid the
 reference's scalp over the crown, its nose on the brow (the skin fit then
 gave a face with two noses).  Here the direction is reversed: the
 reference's *face* vertices look for the scan's surface, exactly
@@ -12,11 +12,14 @@ agree.  A face the scan does not show cannot be where the scan is not, and
 a crown, hair, shoulders or a plinth cost nothing because the face never
 looks at them.
 
-:func:`place_face` starts from a pose, tries a small sweep of sizes and
-shifts around it, refines each start by a robust (Welsch) similarity ICP
-of the face onto the scan, and returns the pose with the lowest face
-loss – the mean over face vertices of ``1 − exp(−d²/2τ²)`` with ``d`` the
-distance to the scan (1 where the normals disagree or nothing is near).
+:func:`place_face` starts from a pose and sweeps sizes and shifts (up,
+forward) around it: every start is scored once on scan samples, the best
+are refined by a robust (Welsch) similarity ICP of the face onto the samples,
+the best of those again onto the exact surface, and the pose with the lowest
+face loss is returned – the mean over face vertices of ``1 − exp(−d²/2τ²)``
+with ``d`` the distance to the scan (1 where the normals disagree or nothing
+is near).  Rotation is only refined, not swept: a start turned by more than
+~15° needs another start (the search's next-best poses).
 """
 
 from __future__ import annotations
