@@ -114,6 +114,9 @@ MIN_FACE_SUPPORT = 0.6
 #: (:func:`workbench.core.face_pose.place_face`), or of its nose
 MIN_PLACED_FACE = 0.5
 MIN_PLACED_NOSE = 0.45
+#: a placed face with a loss below this sits well (the test skins 0.02-0.13; real scans
+#: 0.25-0.45, a wrong pose's 0.45-0.65): the search's runners-up are then not tried
+CLEAR_FACE_LOSS = 0.2
 #: texture atlas side (texels) of a coloured scan's fitted skin: each texel samples the
 #: scan (2048 took ~21-28 s on a 300k-triangle scan, 1024 ~4 s)
 COLOUR_ATLAS_SIZE = 1024
@@ -346,17 +349,20 @@ def _place_face(
         k: np.arange(a, b) for k, a, b in zip(regions, offsets[:-1], offsets[1:], strict=True)
     }
     index = MeshIndex.shared(scan)  # the head-frame copy of the scan borrows it
-    placements = [
-        place_face(
-            index,
-            base.skin.vertices[face_ids],
-            base.skin.vertex_normals[face_ids],
-            start.matrix,
-            scale_range=SCALE_RANGE,
-            groups=groups,
+    placements: list[FacePlacement] = []
+    for start in (pose, *pose.alternatives):
+        if placements and placements[0].loss < CLEAR_FACE_LOSS:
+            break  # the winner's face sits well: the runners-up need not be tried
+        placements.append(
+            place_face(
+                index,
+                base.skin.vertices[face_ids],
+                base.skin.vertex_normals[face_ids],
+                start.matrix,
+                scale_range=SCALE_RANGE,
+                groups=groups,
+            )
         )
-        for start in (pose, *pose.alternatives)
-    ]
     placement = min(placements, key=lambda p: p.loss)
     placement = replace(placement, start_loss=placements[0].start_loss)
     if placement.loss < placement.start_loss:
