@@ -220,3 +220,23 @@ def test_a_million_points_in_bounded_memory():
         reference_warp(warp.centres + warp.offset, warp(warp.centres + warp.offset), x[sample]),
         atol=1e-7,
     )
+
+
+def test_weighted_similarity_ignores_a_zero_weight_outlier():
+    rng = np.random.default_rng(3)
+    src = rng.normal(0.0, 30.0, (40, 3))
+    true = similarity_transform(src, src)  # identity to start from
+    true[:3, :3] = 1.2 * np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    if np.linalg.det(true[:3, :3]) < 0:
+        true[:3, :3] *= -1.0
+    true[:3, 3] = (5.0, -7.0, 11.0)
+    dst = src @ true[:3, :3].T + true[:3, 3]
+    dst[0] += 80.0  # one wild pair
+    w = np.ones(40)
+    np.testing.assert_allclose(
+        similarity_transform(src, dst, w), similarity_transform(src, dst), atol=1e-9
+    )
+    w[0] = 0.0
+    np.testing.assert_allclose(similarity_transform(src, dst, w), true, atol=1e-9)
+    with pytest.raises(ValueError, match="weights"):
+        similarity_transform(src, dst, np.zeros(40))

@@ -31,7 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core.rigid_search import surface_samples
 from workbench.core.spatial import MeshIndex
+from workbench.core.tps import similarity_transform
 
 #: robust scale of the face loss (mm, in the reference's size)
 LOSS_SCALE_MM = 4.0
@@ -87,24 +89,6 @@ class FacePlacement:
         return float(abs(np.linalg.det(self.matrix[:3, :3])) ** (1 / 3))
 
 
-def _weighted_similarity(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Weighted least-squares proper similarity ``dst ≈ s R src + t`` (Umeyama 1991)."""
-    ws = w / w.sum()
-    cs, cd = ws @ src, ws @ dst
-    a, b = src - cs, dst - cd
-    h = (a * ws[:, None]).T @ b
-    u, sv, vt = np.linalg.svd(h)
-    d = np.ones(3)
-    d[2] = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    r = vt.T @ np.diag(d) @ u.T
-    var = float((ws * (a**2).sum(axis=1)).sum())
-    s = float((sv * d).sum() / max(var, 1e-12))
-    m = np.eye(4)
-    m[:3, :3] = s * r
-    m[:3, 3] = cd - s * r @ cs
-    return m
-
-
 class _Face:
     """Reference face vertices and normals, and the scan they look for.
 
@@ -118,18 +102,8 @@ class _Face:
         self.normals = np.asarray(normals, float)
         self.scan = scan
         self.scan_normals = scan.mesh.face_normals
-        mesh = scan.mesh
-        areas = mesh.face_areas
-        rng = np.random.default_rng(0)
-        f = rng.choice(len(areas), size=SCAN_SAMPLES, p=areas / areas.sum())
-        r = rng.random((SCAN_SAMPLES, 2))
-        flip = r.sum(axis=1) > 1.0
-        r[flip] = 1.0 - r[flip]
-        tri = mesh.vertices[mesh.faces[f]]
-        self.samples = (
-            tri[:, 0] + r[:, :1] * (tri[:, 1] - tri[:, 0]) + r[:, 1:] * (tri[:, 2] - tri[:, 0])
-        )
-        self.sample_normals = self.scan_normals[f]
+        cloud = surface_samples(scan.mesh, SCAN_SAMPLES, np.random.default_rng(0))
+        self.samples, self.sample_normals = cloud.points, cloud.normals
         self.tree = cKDTree(self.samples)
 
     def match(
@@ -196,7 +170,7 @@ class _Face:
             w = np.where(cos > MIN_COS, np.exp(-0.5 * (d / tau) ** 2), 0.0)
             if (w > 1e-3).sum() < 12:
                 break
-            m = _weighted_similarity(src, cp, w)
+            m = similarity_transform(src, cp, w)
             size = abs(np.linalg.det(m[:3, :3])) ** (1 / 3)
             m[:3, :3] *= np.clip(size, *size_range) / size
             g = m.copy()

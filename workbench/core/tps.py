@@ -71,13 +71,17 @@ def _as_points(x: np.ndarray, name: str) -> np.ndarray:
     return a
 
 
-def similarity_transform(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+def similarity_transform(
+    source: np.ndarray, target: np.ndarray, weights: np.ndarray | None = None
+) -> np.ndarray:
     """Least-squares similarity (no reflection) mapping ``source`` onto ``target``.
 
     Parameters
     ----------
     source, target : (n, 3) float64
         Corresponding points in mm.
+    weights : (n,) float64, optional
+        Non-negative weight of each pair (weighted Umeyama); equal when omitted.
 
     Returns
     -------
@@ -90,16 +94,27 @@ def similarity_transform(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     m = np.eye(4)
     if n == 0:
         return m
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    if weights is None:
+        mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    else:
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (n,) or not (w >= 0).all() or not w.sum() > 0:
+            raise ValueError("weights must be n non-negative numbers, not all zero")
+        w = w / w.sum()
+        mu_s, mu_d = w @ src, w @ dst
     if n == 1:
         m[:3, 3] = mu_d - mu_s
         return m
     a, b = src - mu_s, dst - mu_d
-    var_s = (a**2).sum() / n
+    if weights is None:
+        var_s = (a**2).sum() / n
+        cov = b.T @ a / n
+    else:
+        var_s = float(w @ (a**2).sum(axis=1))
+        cov = (b * w[:, None]).T @ a
     if var_s == 0.0:
         m[:3, 3] = mu_d - mu_s
         return m
-    cov = b.T @ a / n
     u, sig, vt = np.linalg.svd(cov)
     d = np.ones(3)
     if np.linalg.det(u) * np.linalg.det(vt) < 0:
