@@ -111,9 +111,11 @@ SECOND_PIECE = (0.4, 150.0)
 #: below this fraction of the reference face supported by the scan, it is not a face
 MIN_FACE_SUPPORT = 0.6
 #: ... nor below this fraction of the rigidly placed reference face within 5 mm of it
-#: (:func:`workbench.core.face_pose.place_face`), or of its nose
+#: (:func:`workbench.core.face_pose.place_face`), or of its nose while the face's is weak
 MIN_PLACED_FACE = 0.5
 MIN_PLACED_NOSE = 0.45
+#: ... the nose's share decides only while the face's is below this
+NOSE_DOUBT_FACE = 0.6
 #: a placed face with a loss below this sits well (the test skins 0.02-0.13; real scans
 #: 0.25-0.45, a wrong pose's 0.45-0.65): the search's runners-up are then not tried
 CLEAR_FACE_LOSS = 0.2
@@ -376,11 +378,13 @@ def _place_face(
             matched_fraction=placement.matched_fraction,
         )
     nose = placement.near_by_group.get("nose", 1.0)
-    if placement.near_fraction < MIN_PLACED_FACE or nose < MIN_PLACED_NOSE:
+    weak_nose = nose < MIN_PLACED_NOSE and placement.near_fraction < NOSE_DOUBT_FACE
+    if placement.near_fraction < MIN_PLACED_FACE or weak_nose:
         # a ball, a hand, a smooth crown: convex enough for forehead and cheeks, but the
         # nose finds nothing of its shape (ball 42 % of the face / 29 % of the nose, a
         # cylinder 54 / 32 %; real scans 64-99 / 61-100 %: the VHP female's nose tip is
-        # cut off by the CT's field of view)
+        # cut off by the CT's field of view).  A face placed well but turned ~10° (Nefertiti
+        # with its axes searched: 72 / 37 %) misses with its nose alone: not refused
         raise InputError(
             source,
             "does not look like a face: laid on it as well as it goes, "
