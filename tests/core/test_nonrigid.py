@@ -6,7 +6,7 @@ import numpy as np
 
 from tests.core._shapes import subdivided_octahedron
 from workbench.core.mesh import Mesh, concatenate
-from workbench.core.nonrigid import Level, Target, register, soft_match
+from workbench.core.nonrigid import Level, Target, folding_normals, register, soft_match
 from workbench.core.spatial import MeshIndex
 
 LEVELS = (Level(30.0, 1.0, 10.0, 6), Level(15.0, 0.5, 6.0, 6), Level(8.0, 0.4, 4.0, 6))
@@ -89,6 +89,39 @@ def test_tiny_changes_of_the_target_change_little():
     assert np.abs(a - b).max() < 1e-4
     again = register(src, Target(tgt, np.ones(tgt.n_vertices)), levels=LEVELS).vertices
     np.testing.assert_array_equal(a, again)
+
+
+def _folded_sheet(centre, size: float = 24.0, n: int = 7) -> Mesh:
+    """A flat square wound both ways on the same vertices: its vertex normals cancel."""
+    g = np.linspace(-size / 2, size / 2, n)
+    xx, yy = np.meshgrid(g, g)
+    v = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(n * n)]) + np.asarray(centre, float)
+    f = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1
+            f += [(a, b, d), (a, d, c)]
+    f = np.array(f)
+    return Mesh(v, np.vstack([f, f[:, ::-1]]))
+
+
+def test_folding_normals_fade_where_faces_fold_back():
+    sheet = _folded_sheet((0.0, 0.0, 0.0))
+    assert np.abs(np.linalg.norm(folding_normals(sheet), axis=1)).max() < 1e-12
+    ball = _ellipsoid((50, 50, 50))
+    length = np.linalg.norm(folding_normals(ball), axis=1)
+    assert length.min() > 0.98 and length.max() <= 1.0 + 1e-12
+
+
+def test_noise_on_a_folded_sheet_of_the_target_changes_little():
+    """Back-to-back faces (a CT bone's thin sheets) must not flip their normals with noise."""
+    src = _ellipsoid((50, 50, 50))
+    tgt = concatenate([_ellipsoid((56, 47, 62), levels=5), _folded_sheet((0.0, 0.0, 63.0))])
+    a = register(src, Target(tgt, np.ones(tgt.n_vertices)), levels=LEVELS).vertices
+    rng = np.random.default_rng(1)
+    moved = Mesh(tgt.vertices + 1e-9 * rng.standard_normal(tgt.vertices.shape), tgt.faces)
+    b = register(src, Target(moved, np.ones(tgt.n_vertices)), levels=LEVELS).vertices
+    assert np.abs(a - b).max() < 1e-4
 
 
 def test_soft_match_prefers_the_surface_that_faces_the_same_way():
