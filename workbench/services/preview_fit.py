@@ -54,6 +54,7 @@ class PreviewFit:
     input_to_head: np.ndarray  # (4, 4)
     dowels: dict[str, tuple[float, np.ndarray]]  # skull code → (depth mm, unit direction)
     _rows: dict[str, np.ndarray] = field(default_factory=dict)
+    smoothing: np.ndarray | None = None  # (k,) λ per correspondence (mm); None = SMOOTHING
 
     @classmethod
     def from_fit(cls, recon: Reconstruction, reference: TemplateHead) -> PreviewFit:
@@ -78,6 +79,7 @@ class PreviewFit:
             np.array(recon.input_to_head, float),
             dowels,
             {k: np.array(v, dtype=np.int64) for k, v in rows.items()},
+            None if recon.smoothing is None else np.array(recon.smoothing, float),
         )
 
     # ------------------------------------------------------------ edits
@@ -104,6 +106,8 @@ class PreviewFit:
         if drop.any():
             keep = ~drop
             self.sources, self.targets = self.sources[keep], self.targets[keep]
+            if self.smoothing is not None:
+                self.smoothing = self.smoothing[keep]
             self.labels = tuple(lab for lab, k in zip(self.labels, keep, strict=True) if k)
             rows: dict[str, list[int]] = {}
             for i, label in enumerate(self.labels):
@@ -132,7 +136,8 @@ class PreviewFit:
     # ------------------------------------------------------------ result
     def skin_head(self) -> np.ndarray:
         """The previewed skin vertices in the head frame (mm)."""
-        warp = fit_warp(self.sources, self.targets, smoothing=SMOOTHING)
+        lam = SMOOTHING if self.smoothing is None else self.smoothing
+        warp = fit_warp(self.sources, self.targets, smoothing=lam)
         return warp(self.skin_vertices, workers=1)
 
     def to_input(self, points_head: np.ndarray) -> np.ndarray:

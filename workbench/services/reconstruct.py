@@ -70,6 +70,16 @@ ANCHOR_SPACING_MM = 9.0
 #: ... and none this close to a point the warp moves (mm); the interactive preview drops
 #: the anchors this close to a dragged dowel, so the skin around it follows the drag
 ANCHOR_CLEARANCE_MM = 12.0
+#: an anchor's hold fades in over this distance beyond the clearance (mm), and a point
+#: counts fully as moving from this displacement on (mm): no anchor appears or vanishes
+#: when a point crosses a threshold, so 1e-9 mm of noise on the skull cannot switch one
+ANCHOR_TAPER_MM = 8.0
+MOVING_MM = 0.1
+#: anchors holding less than this (their regulariser λ / weight) are left out
+ANCHOR_MIN_WEIGHT = 0.01
+#: skin within this much of the minimum tissue also gets a clearance point once any is
+#: too thin, pushed out by what it lacks of min + band (zero at the band's edge)
+CLEARANCE_BAND_MM = 0.5
 #: spacing of the non-penetration correspondences (mm)
 CLEARANCE_SPACING_MM = 6.0
 #: skin vertices farther than this from the target bone are not checked (bone missing there)
@@ -131,6 +141,9 @@ class Reconstruction:
         The skull landmarks used (input frame).
     registration : SkullRegistration or None
     tissue : TissueField or None
+    smoothing : (k,) or None
+        The warp regulariser λ (mm) per correspondence (anchors near moving
+        points hold loosely); None = :data:`SMOOTHING` for all.
     figures, warnings, guide_targets
     """
 
@@ -150,6 +163,7 @@ class Reconstruction:
     landmarks: LandmarkSet | None = None
     registration: SkullRegistration | None = None
     tissue: TissueField | None = None
+    smoothing: np.ndarray | None = None
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         return apply_transform(np.linalg.inv(self.input_to_head), points)
@@ -387,15 +401,24 @@ def fit_head(
     depths: np.ndarray | None = None,
     landmarks_h: LandmarkSet | None = None,
 ) -> tuple[
-    TemplateHead, dict, np.ndarray, np.ndarray, dict, tuple[str, ...], np.ndarray, dict[str, float]
+    TemplateHead,
+    dict,
+    np.ndarray,
+    np.ndarray,
+    dict,
+    tuple[str, ...],
+    np.ndarray,
+    dict[str, float],
+    np.ndarray,
 ]:
     """Carry ``head`` with the registration, model the tissue, warp to dowels and guides.
 
     ``landmarks_h`` (the skull landmarks, head frame) place the eyeballs
     (:func:`eye_moves`); the lids follow their globe in the final warp.
     Returns the fitted head (head frame), figures, the final warp's
-    correspondences and labels, the guide targets used, the base skin and
-    the depth each dowel correspondence holds.
+    correspondences and labels, the guide targets used, the base skin,
+    the depth each dowel correspondence holds and the warp's λ per
+    correspondence.
     """
     from workbench.services.skull_registration import carry_head
 
@@ -452,25 +475,19 @@ def fit_head(
     for i, side in _eye_sides(carried):
         if i in moves and np.linalg.norm(moves[i]) > 0.05:  # the lids go with their eyeball
             lids = _lid_vertices(carried, i, side)
-            lids = lids[_spread(base.vertices[lids], LID_SPACING_MM)]
+            # cells of the reference's own lid (the carried one moves with the skull: noise
+            # on it must not change which vertices are picked)
+            lids = lids[_spread(head.skin.vertices[lids], LID_SPACING_MM)]
             src += list(base.vertices[lids])
             dst += list(base.vertices[lids] + moves[i])
             labels += [f"eye:{side}"] * len(lids)
-    moving = [
-        np.asarray(a)
-        for a, b in zip(src, dst, strict=True)
-        if np.linalg.norm(np.asarray(b) - np.asarray(a)) > 0.05
-    ]
-    anchors = _spread(base.vertices, ANCHOR_SPACING_MM)
-    if moving:
-        near = cKDTree(np.array(moving)).query(base.vertices[anchors])[0]
-        anchors = anchors[near > ANCHOR_CLEARANCE_MM]
-    if src:  # nor on a point held in place (a guide already where it wants its landmark)
-        anchors = anchors[cKDTree(np.array(src)).query(base.vertices[anchors])[0] > 0.5]
+    anchors, hold = _anchors(head.skin.vertices, base.vertices, src, dst)
     src += list(base.vertices[anchors])
     dst += list(base.vertices[anchors])
     labels += ["anchor"] * len(anchors)
     src_a, dst_a = np.array(src), np.array(dst)
+    lam = np.full(len(src_a), SMOOTHING)
+    lam[len(src_a) - len(anchors) :] = SMOOTHING / hold
 
     # no skin inside (or too close to) the target bone: clearance correspondences
     index = MeshIndex(reg.target_h)
@@ -481,23 +498,25 @@ def fit_head(
     refits = 0
     extra = 0
     for refits in range(settings.max_refits + 1):
-        warp = fit_warp(src_a, dst_a, smoothing=SMOOTHING)
+        warp = fit_warp(src_a, dst_a, smoothing=lam)
         moved = warp(base.vertices)
         thin, signed, bone_pt, normal, checked = _thin_spots(
             moved, index, t_weight, settings.min_tissue_mm, exempt
         )
         if not thin.any() or refits == settings.max_refits:
             break
-        ids = np.flatnonzero(thin)
+        band = checked & (signed < settings.min_tissue_mm + CLEARANCE_BAND_MM)
+        ids = np.flatnonzero(band)
         ids = ids[np.argsort(signed[ids])]
         pick = ids[_spread(moved[ids], CLEARANCE_SPACING_MM)]
-        goal = bone_pt[pick] + (settings.min_tissue_mm + 0.5) * normal[pick]
+        goal = bone_pt[pick] + (settings.min_tissue_mm + CLEARANCE_BAND_MM) * normal[pick]
         # a clearance point lands where the skin is: hold its base vertex to the goal
         keep = cKDTree(src_a).query(base.vertices[pick])[0] > 1.5
         if not keep.any():
             break
         src_a = np.vstack([src_a, base.vertices[pick][keep]])
         dst_a = np.vstack([dst_a, goal[keep]])
+        lam = np.concatenate([lam, np.full(int(keep.sum()), SMOOTHING)])
         labels += ["clearance"] * int(keep.sum())
         extra += int(keep.sum())
     meshes = {**carried.meshes, "skin": base.with_vertices(moved), "cranium": reg.meshes["cranium"]}
@@ -528,7 +547,38 @@ def fit_head(
         "eye_notes": eye_notes,
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    return (fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held)
+    return (fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held, lam)
+
+
+def _anchors(
+    reference: np.ndarray, base: np.ndarray, src: list, dst: list
+) -> tuple[np.ndarray, np.ndarray]:
+    """Skin vertices held in place by the final warp, and how firmly (0-1].
+
+    One per :data:`ANCHOR_SPACING_MM` cell of the *reference* skin (a choice
+    the target cannot change).  Near a point the warp moves, an anchor's
+    hold fades: none within :data:`ANCHOR_CLEARANCE_MM`, full beyond
+    another :data:`ANCHOR_TAPER_MM`, and a point counts as moving in
+    proportion to its displacement up to :data:`MOVING_MM` (mm, head frame).
+    """
+    anchors = _spread(reference, ANCHOR_SPACING_MM)
+    hold = np.ones(len(anchors))
+    if src:
+        s, d = np.asarray(src, float), np.asarray(dst, float)
+        strength = np.clip(np.linalg.norm(d - s, axis=1) / MOVING_MM, 0.0, 1.0)
+        mv = strength > 0
+        if mv.any():
+            reach = ANCHOR_CLEARANCE_MM + ANCHOR_TAPER_MM
+            near = cKDTree(base[anchors]).sparse_distance_matrix(
+                cKDTree(s[mv]), reach, output_type="coo_matrix"
+            )
+            t = np.clip((near.data - ANCHOR_CLEARANCE_MM) / ANCHOR_TAPER_MM, 0.0, 1.0)
+            fade = 1.0 - strength[mv][near.col] * (1.0 - t * t * (3.0 - 2.0 * t))
+            np.minimum.at(hold, near.row, fade)
+        # nor on a point held in place (a guide already where it wants its landmark)
+        hold[cKDTree(s).query(base[anchors])[0] <= 0.5] = 0.0
+    keep = hold >= ANCHOR_MIN_WEIGHT
+    return anchors[keep], hold[keep]
 
 
 def _thin_spots(
@@ -606,7 +656,7 @@ def reconstruct(
     skull_h = reg.target_h
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
-    fitted, figures, src, dst, used, labels, base, held = fit_head(
+    fitted, figures, src, dst, used, labels, base, held, lam = fit_head(
         head,
         reg,
         plan,
@@ -657,6 +707,7 @@ def reconstruct(
         lms,
         reg,
         tissue_field(head, settings.depth, settings.tissue),
+        lam,
     )
 
 
