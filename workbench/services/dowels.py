@@ -15,7 +15,8 @@ switched off one by one: Kähler (2003, §8.6.8) had to exclude the cheek
 landmarks spm2 and sbm2 (our ectomolare codes ``ecm2s_*`` / ``ecm2i_*``, see
 :data:`KAEHLER_CHEEK_EXCLUSIONS`) because their Rhine depths gave hollow
 cheeks.  Interpolated dowels on the vault and the mandibular body
-(§8.6.5) take the weighted depths of their parent landmarks.
+(§8.6.5), and ours on the temples, take the weighted depths of their parent
+landmarks.
 
 Nothing is dropped silently: landmarks that are absent, not placed, off the
 bone or without a depth value, and interpolated sites that cannot be placed,
