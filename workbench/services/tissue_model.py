@@ -106,8 +106,8 @@ class TissueSettings:
         ``interpolated_sites`` off (default on): no table landmark lies over the temporal
         fossa, and there the built-in reference's own thickness is 3.5-4 mm
         more than on the real CTs (with them, forehead within 2.5 mm on
-        headsq 82.6 → 97.8 %, VHP female 50.9 → 61.1 % and male 40.6 →
-        48.6 % at mean + 2 SD).
+        headsq 82.6 → 97.8 % at the table's means, VHP female 50.9 → 61.1 %
+        and male 40.6 → 48.6 % at mean + 2 SD).
     eyes : "auto" | "stephan2009" | "reference"
         Depth of the eyeballs, and of the lids over them (see
         :data:`EYE_PLACEMENTS`).  The built-in reference's corneal apex lies
