@@ -18,8 +18,11 @@ back; :func:`validate` reports problems and the explicit repair functions in
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any, TypeVar
 
 import numpy as np
 from scipy import sparse
@@ -29,6 +32,9 @@ from scipy.sparse.csgraph import connected_components
 def _frozen(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
     return array
+
+
+_T = TypeVar("_T")
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,6 +119,33 @@ class Mesh:
         :meth:`transformed` (same faces in the same order; winding flipped with a
         mirror, so outward normals stay outward), else None."""
         return self.__dict__.get("_rigid_source")
+
+    def shared(
+        self,
+        key: str,
+        lock: AbstractContextManager[Any],
+        build: Callable[[Mesh], _T],
+        borrow: Callable[[Mesh, _T, np.ndarray], _T],
+    ) -> _T:
+        """One ``build(mesh)`` per mesh, kept with it under ``key`` (``lock`` held).
+
+        A rigid copy (:attr:`rigid_source`) gets ``borrow(copy, the
+        original's shared object, copy → original 4x4)`` instead, so a search
+        structure is built once for a mesh and all its rigid copies.
+        """
+        with lock:
+            obj: _T | None = self.__dict__.get(key)
+            if obj is None:
+                source = self.rigid_source  # chains to the first mesh: no deeper recursion
+                if source is None:
+                    obj = build(self)
+                else:
+                    base: _T | None = source[0].__dict__.get(key)
+                    if base is None:
+                        base = source[0].__dict__[key] = build(source[0])
+                    obj = borrow(self, base, source[1])
+                self.__dict__[key] = obj
+            return obj
 
     def scaled(self, factor: float) -> Mesh:
         return Mesh(self.vertices * float(factor), self.faces)

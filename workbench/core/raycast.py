@@ -115,21 +115,7 @@ class RayCaster:
         against the same mesh object again and again share one.  The caster
         lives as long as the mesh (kept in the mesh's attribute dictionary).
         """
-        with _SHARED_LOCK:
-            return RayCaster._shared_locked(mesh)
-
-    @staticmethod
-    def _shared_locked(mesh: Mesh) -> RayCaster:
-        caster = mesh.__dict__.get("_shared_ray_caster")
-        if caster is None:
-            source = mesh.rigid_source  # a rigid copy borrows the original's scenes
-            caster = (
-                RayCaster(mesh)
-                if source is None
-                else RayCaster._borrowed(mesh, RayCaster._shared_locked(source[0]), source[1])
-            )
-            mesh.__dict__["_shared_ray_caster"] = caster
-        return caster
+        return mesh.shared("_shared_ray_caster", _SHARED_LOCK, RayCaster, RayCaster._borrowed)
 
     @staticmethod
     def _borrowed(mesh: Mesh, base: RayCaster, to_base: np.ndarray) -> RayCaster:

@@ -229,7 +229,7 @@ def _morton_order(points: np.ndarray) -> np.ndarray:
     return np.argsort(code, kind="stable")
 
 
-_SHARED_LOCK = threading.RLock()
+_SHARED_LOCK = threading.Lock()
 
 
 class MeshIndex:
@@ -266,22 +266,14 @@ class MeshIndex:
         takes ~0.8 s; a scan fit needs it in the file's frame and in the head
         frame.
         """
-        with _SHARED_LOCK:
-            return MeshIndex._shared_locked(mesh)
+        return mesh.shared("_shared_mesh_index", _SHARED_LOCK, MeshIndex, MeshIndex._borrowed)
 
     @staticmethod
-    def _shared_locked(mesh: Mesh) -> MeshIndex:
-        index = mesh.__dict__.get("_shared_mesh_index")
-        if index is None:
-            source = mesh.rigid_source
-            if source is None:
-                index = MeshIndex(mesh)
-            else:
-                base = MeshIndex._shared_locked(source[0])
-                index = object.__new__(MeshIndex)
-                index.mesh, index._tree, index._abs_tol2 = mesh, base._tree, base._abs_tol2
-                index._base, index._to_base = base, np.asarray(source[1], dtype=np.float64)
-            mesh.__dict__["_shared_mesh_index"] = index
+    def _borrowed(mesh: Mesh, base: MeshIndex, to_base: np.ndarray) -> MeshIndex:
+        """An index of the rigid copy ``mesh`` that queries ``base``'s tree."""
+        index = object.__new__(MeshIndex)
+        index.mesh, index._tree, index._abs_tol2 = mesh, base._tree, base._abs_tol2
+        index._base, index._to_base = base, np.asarray(to_base, dtype=np.float64)
         return index
 
     @cached_property
