@@ -10,6 +10,7 @@ from workbench.core.mesh import Mesh, concatenate
 from workbench.core.self_intersection import (
     SelfIntersections,
     count_self_intersections,
+    pairs_cross,
     self_intersections,
 )
 
@@ -248,6 +249,43 @@ def test_random_triangle_soup_matches_brute_force(seed: int) -> None:
 def test_empty_and_single_face() -> None:
     assert self_intersections(Mesh(np.zeros((0, 3)))).count == 0
     assert self_intersections(Mesh(np.eye(3), np.array([[0, 1, 2]]))).count == 0
+
+
+@pytest.mark.parametrize("share", [0.02, 0.3, 0.8])
+def test_among_equals_the_full_search_filtered(share: float) -> None:
+    """``among`` keeps exactly the pairs with one such face (with and without the
+    near-face prefilter, which runs below half the faces)."""
+    sphere = subdivided_octahedron(4)
+    offset = np.array([0.9, 0.13, 0.07])
+    mesh = concatenate([sphere, Mesh(sphere.vertices + offset, sphere.faces)])
+    full = self_intersections(mesh).pairs
+    rng = np.random.default_rng(int(share * 100))
+    among = rng.random(mesh.n_faces) < share
+    # and a patch: the first sphere's faces near one point of the overlap curve
+    among |= (
+        np.linalg.norm(
+            mesh.triangles.mean(axis=1) - mesh.triangles[full[0, 0]].mean(axis=0), axis=1
+        )
+        < 0.2
+    )
+    part = self_intersections(mesh, among=among).pairs
+    expected = full[among[full[:, 0]] | among[full[:, 1]]]
+    assert len(expected) > 0
+    np.testing.assert_array_equal(part, expected)
+    # nothing among: nothing found
+    assert self_intersections(mesh, among=np.zeros(mesh.n_faces, bool)).count == 0
+
+
+def test_pairs_cross_is_the_exact_test() -> None:
+    sphere = subdivided_octahedron(3)
+    offset = np.array([0.9, 0.13, 0.07])
+    mesh = concatenate([sphere, Mesh(sphere.vertices + offset, sphere.faces)])
+    found = self_intersections(mesh).pairs
+    assert pairs_cross(mesh, found).all()
+    # the same pairs on the spheres pulled apart do not cross
+    apart = concatenate([sphere, Mesh(sphere.vertices + 3 * offset, sphere.faces)])
+    assert not pairs_cross(apart, found).any()
+    assert pairs_cross(mesh, np.zeros((0, 2), int)).shape == (0,)
 
 
 # ---------------------------------------------------------------- reference head

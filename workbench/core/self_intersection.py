@@ -85,17 +85,31 @@ def count_self_intersections(mesh: Mesh, *, tol_mm: float = 1e-6) -> int:
     return self_intersections(mesh, tol_mm=tol_mm).count
 
 
-def self_intersections(mesh: Mesh, *, tol_mm: float = 1e-6) -> SelfIntersections:
-    """Face pairs of ``mesh`` that cross each other (module docstring: what counts)."""
+def self_intersections(
+    mesh: Mesh, *, tol_mm: float = 1e-6, among: np.ndarray | None = None
+) -> SelfIntersections:
+    """Face pairs of ``mesh`` that cross each other (module docstring: what counts).
+
+    ``among`` (per face, bool) limits the test to pairs with at least one such face
+    (the faces a deformation moved: pairs of unmoved faces cross as they did before).
+    """
     tol = float(tol_mm)
     if not tol >= 0.0:
         raise ValueError(f"tol_mm must be >= 0, got {tol_mm}")
     faces = np.asarray(mesh.faces, np.int64)
     tri = np.asarray(mesh.triangles, np.float64)
+    mask = None if among is None else np.asarray(among, bool)
+    keep = None
+    if mask is not None and mask.sum() < 0.5 * len(faces):
+        # only faces whose bounding spheres can reach one of ``among``'s take part
+        keep = _near_faces(tri, mask, tol)
+        tri, faces, mask = tri[keep], faces[keep], mask[keep]
     normal, good = _unit_normals(tri)
     found: list[np.ndarray] = []
     n_candidates = 0
     for cand in _candidate_pairs(tri, faces, tol):
+        if mask is not None:
+            cand = cand[mask[cand[:, 0]] | mask[cand[:, 1]]]
         n_candidates += len(cand)
         for start in range(0, len(cand), CHUNK_PAIRS):
             chunk = cand[start : start + CHUNK_PAIRS]
@@ -103,12 +117,47 @@ def self_intersections(mesh: Mesh, *, tol_mm: float = 1e-6) -> SelfIntersections
             if hit.any():
                 found.append(chunk[hit])
     pairs = np.concatenate(found) if found else np.zeros((0, 2), np.int64)
+    if keep is not None and len(pairs):
+        pairs = np.sort(np.flatnonzero(keep)[pairs], axis=1)
     if len(pairs):
         pairs = np.unique(pairs, axis=0)
     return SelfIntersections(
         pairs=pairs.astype(np.int64),
         faces=np.unique(pairs).astype(np.int64),
         candidates=n_candidates,
+    )
+
+
+def _near_faces(tri: np.ndarray, among: np.ndarray, tol: float) -> np.ndarray:
+    """``(m,)`` bool: ``among`` and every face whose bounding sphere can touch one of them."""
+    centre = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
+    keep = among.copy()
+    if not among.any():
+        return keep
+    ok = np.isfinite(radius) & np.isfinite(centre).all(axis=1)
+    reach = float(radius[among & ok].max(initial=0.0) + radius[ok].max(initial=0.0)) + 2 * tol
+    gap, _ = cKDTree(centre[among & ok]).query(
+        np.where(ok[:, None], centre, 0.0), distance_upper_bound=reach
+    )
+    return keep | (ok & np.isfinite(gap))
+
+
+def pairs_cross(mesh: Mesh, pairs: np.ndarray, *, tol_mm: float = 1e-6) -> np.ndarray:
+    """``(k,)`` bool: which of the face ``pairs`` of ``mesh`` cross (the exact test of
+    :func:`self_intersections` without the search), e.g. whether pairs found crossing in a
+    deformed copy already crossed in the original."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    if not len(pairs):
+        return np.zeros(0, bool)
+    tri = np.asarray(mesh.triangles, np.float64)
+    normal, good = _unit_normals(tri)
+    faces = np.asarray(mesh.faces, np.int64)
+    return np.concatenate(
+        [
+            _pairs_intersect(tri, normal, good, faces, pairs[s : s + CHUNK_PAIRS], float(tol_mm))
+            for s in range(0, len(pairs), CHUNK_PAIRS)
+        ]
     )
 
 
