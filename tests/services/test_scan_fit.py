@@ -34,6 +34,43 @@ def test_female_skin_fitted_with_the_male_reference(female_fit, head_male):
     assert "chk_l" in fig["skin_landmark_to_scan_mm"]["absent"]
 
 
+def test_the_detail_layer_follows_a_ridge_the_skin_cannot(head_male, head_female):
+    """A damaged scan, twice as fine as the skin, with a scar-like ridge on the right cheek
+    (2.5 mm high, 1.5 mm wide, 24 mm long): the animatable skin's ~4 mm edges round it off,
+    the detail layer over the subdivided skin follows it, without folds or crossings."""
+    from workbench.core.headgen.subdivision import loop_subdivide
+    from workbench.core.normals import vertex_normals
+    from workbench.core.spatial import MeshIndex
+
+    scan, _ = damaged_skin(head_female, pose=np.eye(4))
+    sub = loop_subdivide(scan.faces, scan.n_vertices, 1)
+    fine = Mesh(np.asarray(sub.matrix @ scan.vertices), sub.faces)
+    cheek = head_female.skin_landmarks.as_dict()["chk_r"]
+    a, b = cheek + [0.0, 12.0, 0.0], cheek - [0.0, 12.0, 0.0]
+    t = np.clip((fine.vertices - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+    gap = np.linalg.norm(fine.vertices - (a + t[:, None] * (b - a)), axis=1)
+    height = 2.5 * np.exp(-(gap**2) / (2 * 1.5**2))
+    ridged = fine.with_vertices(fine.vertices + height[:, None] * vertex_normals(fine))
+    fit = fit_scan(ridged, base=head_male, sex="female")
+    fig, detail = fit.figures, fit.figures["detail"]
+    assert fit.detail is not None
+    assert detail["fine_vertices"] == fit.detail.matrix.shape[0] > 15 * head_male.skin.n_vertices
+    assert detail["fold_overs"] == 0 and detail["new_crossings"] == 0
+    assert detail["face_within_1mm_fraction"] >= fig["face_within_1mm_fraction"]
+    assert detail["face_mean_distance_mm"] < 0.5 * fig["face_mean_distance_mm"]
+    crest = fit.scan.vertices[height > 1.0]
+    assert len(crest) >= 15
+    coarse_d = MeshIndex(fit.head.skin).closest_points(crest).distances
+    detailed = fit.detail.apply(fit.head.skin.vertices)
+    detail_d = MeshIndex(detailed).closest_points(crest).distances
+    assert coarse_d.mean() > 0.6
+    assert detail_d.mean() < 0.2 and detail_d.max() < 0.4
+    # the holes (cheek, glabella) have no scan: the layer is not observed there
+    glabella = fit.head.skin_landmarks.as_dict()["g"]
+    hole = np.linalg.norm(detailed.vertices - glabella, axis=1) < 5.0
+    assert hole.any() and not fit.detail.observed[hole].any()
+
+
 def test_inner_parts_sit_at_the_table_depths(female_fit, head_male):
     fit, _ = female_fit
     depths = fit.figures["tissue_depths"]
@@ -150,6 +187,7 @@ def test_scan_colour_is_carried_onto_the_fitted_skin(tmp_path, head_female):
     result, files = fit_scan_pack(path, tmp_path / "pack", units="mm", sex="female")
     names = {f.name for f in files}
     assert {"skin_colour.ply", "skin_textured.obj", "skin_texture.png"} <= names
+    assert {"skin_detailed.ply", "skin_detail.npz"} <= names
     assert result.figures["colour"]["observed_fraction"] > 0.8
     coloured = read_mesh(tmp_path / "pack" / "skin_colour.ply", units="mm")
     out = tmp_path / "pack" / "skin_colour.ply"

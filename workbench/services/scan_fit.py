@@ -73,6 +73,8 @@ from workbench.core.tps import fit_warp
 from workbench.core.untangle import untangle
 from workbench.core.visibility import field_of_view_caps, seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
+from workbench.core.detail_layer import DetailLayer, build_detail
+from workbench.core.raycast import RayCaster
 from workbench.model.template import TemplateHead
 
 Progress = Callable[[str], None]
@@ -124,7 +126,8 @@ CLEAR_FACE_LOSS = 0.2
 COLOUR_ATLAS_SIZE = 1024
 INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue", "eyes")
 BONE_PARTS = ("cranium", "mandible")
-FIT_VERSION = 1
+#: recorded in the provenance; 2: the fine detail layer over the subdivided skin
+FIT_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,10 @@ class ScanFit:
         Each scan vertex's distance to the fitted skin (mm); NaN where it is
         not counted in the face-region figures (outside the face, near a
         hole or field-of-view rim, or not the head).
+    detail : DetailLayer, optional
+        The scan's fine detail over the Loop-subdivided fitted skin
+        (:mod:`workbench.core.detail_layer`); ``detail.apply(head.skin.vertices)``
+        is the detailed skin, and re-details an animated or aged skin too.
     """
 
     head: TemplateHead
@@ -157,6 +164,7 @@ class ScanFit:
     warnings: tuple[str, ...] = ()
     scan: Mesh | None = None
     scan_distance: np.ndarray | None = None
+    detail: DetailLayer | None = None
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         """Head-frame points back in the scan's coordinates."""
@@ -579,6 +587,20 @@ def fit_scan(
     scan_h = scan_h.transformed(settle)  # rigid: keeps borrowing the scan's index
     ref_settled = head_transformed(rest, settle)
 
+    # 5. the scan's fine detail over the subdivided skin (the animatable skin keeps the
+    # reference's 4 890 vertices; its ~4 mm edges cannot hold lid creases or lip borders)
+    t = time.perf_counter()
+    say("carrying the scan's fine detail onto the subdivided skin ...")
+    believed = fit.target_weights * seen
+    # not the ears: their helix, antihelix and concha fold within millimetres of each other
+    # at every angle, and a displacement there crosses a neighbouring fold (the headsq fit
+    # gained ~110 new crossings at the ears, none elsewhere after the limits below)
+    ears = _mask(
+        skin.n_vertices, [base.regions[r] for r in ("ear_l", "ear_r") if r in base.regions]
+    )
+    detail = build_detail(head.skin, scan_h, believed, caster=RayCaster.shared(scan_h), fixed=ears)
+    seconds["detail"] = time.perf_counter() - t
+
     # figures
     say("measuring the fit ...")
     fig: dict = {}
@@ -640,6 +662,7 @@ def fit_scan(
         "reference_pairs": len(ref_x),
         "new_pairs": sum(tuple(p) not in ref_x for p in fitted_x.tolist()),
     }
+    fig["detail"] = _detail_figures(detail, fitted, scan_h.vertices[counted], face)
     present = [c for c in skin_lms.as_dict() if c not in absent_skin]
     # before the settling move (rigid: same distances), with the index built above
     lm_d = scan_index.closest_points(skin_lms.positions_of(present)).distances
@@ -732,7 +755,42 @@ def fit_scan(
         "fit_version": FIT_VERSION,
     }
     head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
-    return ScanFit(head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance)
+    return ScanFit(
+        head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance, detail
+    )
+
+
+def _detail_figures(
+    detail: DetailLayer, fitted: Mesh, counted: np.ndarray, face: np.ndarray
+) -> dict:
+    """The detail layer's figures: the same scan vertices' distances to the detailed skin,
+    turned triangles and crossings it added to the undisplaced subdivided skin."""
+    smooth = detail.smooth_surface(fitted.vertices)
+    detailed = detail.apply(fitted.vertices)
+    d = MeshIndex(detailed).closest_points(counted).distances
+    turned = (detailed.face_normals * smooth.face_normals).sum(axis=1) <= 0.0
+    # the fine vertices over the face: the descendants of the coarse face vertices
+    # (a fine vertex's row in the subdivision matrix has its largest weight on them)
+    parent = np.asarray(detail.matrix.argmax(axis=1)).ravel()
+    on_face = face[parent]
+    disp = np.abs(detail.displacement[on_face])
+    return {
+        "levels": detail.levels,
+        "fine_vertices": int(detailed.n_vertices),
+        "fine_triangles": int(detailed.n_faces),
+        "face_within_1mm_fraction": float((d <= 1.0).mean()) if len(d) else 0.0,
+        "face_within_2_5mm_fraction": float((d <= 2.5).mean()) if len(d) else 0.0,
+        "face_mean_distance_mm": float(d.mean()) if len(d) else None,
+        "face_observed_fraction": float(detail.observed[on_face].mean()),
+        "face_displacement_mm": {
+            "mean_abs": float(disp.mean()),
+            "p95_abs": float(np.percentile(disp, 95)),
+            "max_abs": float(disp.max()),
+        },
+        "fold_overs": int(turned.sum()),
+        # checked on the whole detailed skin by build_detail's last round
+        "new_crossings": detail.new_crossings,
+    }
 
 
 #: bone that reaches through the fitted face skin is moved back under it to this depth (mm)
@@ -851,6 +909,9 @@ def fit_scan_pack(
     reflectance image): ``skin_colour.ply`` (vertex colours) and
     ``skin_textured.obj`` + ``.mtl`` + ``skin_texture.png`` (an atlas) in
     the pack; skin away from the scan gets colour diffused from around.
+    The scan's fine detail over the subdivided skin is written as
+    ``skin_detailed.ply`` (the mesh) and ``skin_detail.npz`` (the layer, to
+    re-detail an animated or aged skin: :mod:`workbench.io.skin_detail_export`).
     ``extra(folder, result)`` writes further files into the staged pack (the
     CLI's PDF report, which needs the render layer) and returns their paths.
     """
@@ -862,6 +923,7 @@ def fit_scan_pack(
     from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.scan_colours import read_scan_colours
     from workbench.io.skin_colour_export import write_coloured_skin
+    from workbench.io.skin_detail_export import write_skin_detail
     from workbench.io.template_pack import export_template
     from workbench.model.evidence import file_sha256
 
@@ -919,6 +981,8 @@ def fit_scan_pack(
 
     def write(folder: Path) -> list[Path]:
         files = export_template(result.head, folder)
+        if result.detail is not None:
+            files += write_skin_detail(folder, result.detail, result.head.skin)
         if colours is not None and result.scan is not None:
             say = progress or (lambda _m: None)
             say("carrying the scan's colour onto the fitted skin ...")
