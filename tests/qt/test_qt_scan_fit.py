@@ -75,7 +75,20 @@ def test_open_fit_place_undo_and_fit_again_with_seeds(qtbot, window, scan_case):
     assert tool.actors("skin")[0].GetVisibility() and not tool.actors("skin")[1].GetVisibility()
     panel.layer_checks["scan"].setChecked(False)  # no scan: the whole fitted skin
     assert tool.actors("skin")[1].GetVisibility() and not scan_actor.GetVisibility()
+    assert not window.plotter.scalar_bars[DISTANCE_TITLE].GetVisibility()  # nor its key
+    # the fine detail instead of the animatable skin: 16 fine triangles per skin triangle
+    coarse_tris = sum(a.GetMapper().GetInput().n_cells for a in tool.actors("skin"))
+    camera = window.plotter.renderer.GetActiveCamera().GetPosition()
+    panel.detail_check.setChecked(True)
+    assert window.plotter.renderer.GetActiveCamera().GetPosition() == camera  # view kept
+    assert len(tool.actors("skin")) == 2 and tool.actors("skin")[1].GetVisibility()
+    fine_tris = sum(a.GetMapper().GetInput().n_cells for a in tool.actors("skin"))
+    assert fine_tris == 16 * coarse_tris == 16 * view.fit.head.skin.n_faces
+    assert "Fine detail" in panel.figures.text()
+    panel.detail_check.setChecked(False)
+    assert sum(a.GetMapper().GetInput().n_cells for a in tool.actors("skin")) == coarse_tris
     panel.layer_checks["scan"].setChecked(True)
+    assert window.plotter.scalar_bars[DISTANCE_TITLE].GetVisibility()
     states = tool.landmark_states()
     assert states["chk_l"] == "over hole"  # the landmark at a hole of the scan
     assert list(states.values()).count("guess") > 40

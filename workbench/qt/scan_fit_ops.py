@@ -146,6 +146,9 @@ class FitView:
         The fitted head's face and up directions in the scan's frame (camera).
     face_bounds : (6,)
         ``xmin, xmax, ymin, ymax, zmin, zmax`` of the fitted face (camera).
+    detail_parts : (Mesh, Mesh), optional
+        The same two parts of the detailed skin (the fit's detail layer over
+        the subdivided skin), when the fit has one.
     seeds : int
         Placed landmarks the fit was given.
     confidence : dict
@@ -165,6 +168,7 @@ class FitView:
     face_bounds: np.ndarray
     seeds: int = 0
     confidence: dict[str, float] = field(default_factory=dict)
+    detail_parts: tuple[Mesh, Mesh] | None = None
 
 
 def read_scan(path: str | Path, units: str = "auto", scale: float | None = None) -> OpenedScan:
@@ -224,6 +228,17 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
     parts = (Mesh(skin.vertices, skin.faces[~on]), Mesh(skin.vertices, skin.faces[on]))
     for part in parts:
         part.__dict__["vertex_normals"] = skin.vertex_normals  # shading of the whole skin
+    detail_parts = None
+    if fit.detail is not None:
+        fine = fit.detail.apply(fit.head.skin.vertices).transformed(back)
+        # the children of coarse triangle f are fine triangles 4**levels * f ...
+        fine_on = np.repeat(on, 4**fit.detail.levels)
+        detail_parts = (
+            Mesh(fine.vertices, fine.faces[~fine_on]),
+            Mesh(fine.vertices, fine.faces[fine_on]),
+        )
+        for part in detail_parts:
+            part.__dict__["vertex_normals"] = fine.vertex_normals
     lms = fit.head.skin_landmarks.defined()
     codes = list(lms.codes)
     guess_pts = fit.to_input(lms.positions_of(codes)) if codes else np.zeros((0, 3))
@@ -252,6 +267,7 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
         np.column_stack([lo, hi]).ravel(),
         seeds,
         {c: float(lms[c].confidence) for c in codes},
+        detail_parts,
     )
 
 
@@ -471,6 +487,7 @@ class ScanFitTool(QObject):
         p.selection_changed.connect(lambda _code: self.draw_landmarks())
         p.visibility_changed.connect(self.set_visible)
         p.opacity_changed.connect(lambda v: self._set_opacity("skin", v))
+        p.detail_toggled.connect(lambda _on: self.draw_skin())
         runner.progress_changed.connect(self._on_progress)
         runner.cancelled.connect(lambda ch: self._on_cancelled() if ch == CHANNEL else None)
 
@@ -834,6 +851,8 @@ class ScanFitTool(QObject):
     def set_visible(self, layer: str, on: bool) -> None:
         for actor in self._actors.get(layer, []):
             actor.SetVisibility(bool(on))
+        if layer == "scan":  # the scan's colour key goes with the scan
+            self._show_scan_key()
         if self._on_scan_skin is not None:  # the fitted skin on the scan: instead of the scan
             self._on_scan_skin.SetVisibility(
                 self.panel.layer_visible("skin") and not self._scan_shown()
@@ -870,6 +889,7 @@ class ScanFitTool(QObject):
         )
         self._scan_poly = poly
         self._add("scan", actor)
+        self._show_scan_key()
         self.scene.request_render()
 
     def draw_skin(self) -> None:
@@ -879,7 +899,10 @@ class ScanFitTool(QObject):
         self._clear("skin")
         if self.view is None:
             return
-        for i, part in enumerate(self.view.skin_parts):
+        parts = self.view.skin_parts
+        if self.panel.detail_shown() and self.view.detail_parts is not None:
+            parts = self.view.detail_parts
+        for i, part in enumerate(parts):
             if not part.n_faces:
                 continue
             actor = self.plotter.add_mesh(
@@ -888,6 +911,7 @@ class ScanFitTool(QObject):
                 **SMOOTH,
                 pickable=False,
                 render=False,
+                reset_camera=False,  # redrawn on the detail toggle: keep the user's view
                 name=f"scan_fit_skin_{'on' if i else 'off'}_scan",
             )
             actor.GetProperty().BackfaceCullingOn()  # translucent over the scan (no sorting)
@@ -896,6 +920,11 @@ class ScanFitTool(QObject):
                 self._on_scan_skin = actor
                 actor.SetVisibility(self.panel.layer_visible("skin") and not self._scan_shown())
         self.scene.request_render()
+
+    def _show_scan_key(self) -> None:
+        bars = self.plotter.scalar_bars
+        if DISTANCE_TITLE in bars:
+            bars[DISTANCE_TITLE].SetVisibility(self.panel.layer_visible("scan"))
 
     def _scan_shown(self) -> bool:
         return self.panel.layer_visible("scan") and self.scan is not None

@@ -62,6 +62,9 @@ class ScanFitPanel(QWidget):
         ``("scan" | "skin" | "landmarks", visible)``.
     opacity_changed(float)
         The fitted skin's opacity, 0..1.
+    detail_toggled(bool)
+        Draw the fitted skin with the scan's fine detail (the subdivided,
+        displaced skin) instead of the animatable skin itself.
     """
 
     open_requested = Signal()
@@ -77,6 +80,7 @@ class ScanFitPanel(QWidget):
     selection_changed = Signal(str)
     visibility_changed = Signal(str, bool)
     opacity_changed = Signal(float)
+    detail_toggled = Signal(bool)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -161,6 +165,13 @@ class ScanFitPanel(QWidget):
         self.opacity.valueChanged.connect(lambda v: self.opacity_changed.emit(v / 100.0))
         shown.addWidget(QLabel("Fitted skin opacity"), 1, 0)
         shown.addWidget(self.opacity, 1, 1, 1, 2)
+        self.detail_check = QCheckBox("Fine detail")
+        self.detail_check.setToolTip(
+            "Show the fitted skin with the scan's fine detail (lid creases, lip borders, "
+            "nostrils) carried onto the subdivided skin; the animatable skin is unchanged"
+        )
+        self.detail_check.toggled.connect(self.detail_toggled.emit)
+        shown.addWidget(self.detail_check, 2, 0, 1, 3)
 
         self.place_check = QCheckBox("Place and drag landmarks on the scan")
         self.place_check.setToolTip(
@@ -246,6 +257,9 @@ class ScanFitPanel(QWidget):
     def layer_visible(self, layer: str) -> bool:
         check = self.layer_checks.get(layer)
         return True if check is None else check.isChecked()
+
+    def detail_shown(self) -> bool:
+        return self.detail_check.isChecked()
 
     def skin_opacity(self) -> float:
         return self.opacity.value() / 100.0
@@ -374,6 +388,16 @@ def figures_html(view: FitView) -> str:
             + (", mirrored scan" if orient.get("mirrored") else ""),
         ),
     ]
+    detail = fig.get("detail")
+    if isinstance(detail, dict):
+        rows.insert(
+            4,
+            (
+                "Fine detail",
+                f"{_pct(detail.get('face_within_1mm_fraction'))} within 1 mm, "
+                f"{_pct(detail.get('face_within_2_5mm_fraction'))} within 2.5 mm",
+            ),
+        )
     user = fig.get("skin_landmark_to_user_mm")
     if isinstance(user, dict):
         rows.append(("To placed landmarks", f"mean {_mm(user.get('mean'))}"))
