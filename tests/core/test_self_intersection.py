@@ -246,6 +246,35 @@ def test_random_triangle_soup_matches_brute_force(seed: int) -> None:
     assert _found(result) == expected
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_and_numpy_tests_agree(seed: int, monkeypatch) -> None:
+    """The numba kernels and the numpy fallback find the same pairs from the same
+    candidates: a soup with shared corners, coplanar and touching faces, and two
+    crossing spheres."""
+    import workbench.core.self_intersection as si
+
+    if si._pairs_jit is None:
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(seed)
+    n = 120
+    v = (rng.uniform(0, 20, (n, 1, 3)) + 3.0 * rng.normal(size=(n, 3, 3))).reshape(-1, 3)
+    v[-30:, 2] = 5.0  # 10 faces in one plane: coplanar overlaps
+    faces = np.arange(3 * n).reshape(n, 3)
+    faces[1::5, 0] = faces[0::5, 0][: len(faces[1::5])]
+    sphere = subdivided_octahedron(3)
+    meshes = [
+        Mesh(v, faces),
+        concatenate([sphere, Mesh(sphere.vertices + [0.9, 0.13, 0.07], sphere.faces)]),
+    ]
+    compiled = [self_intersections(m) for m in meshes]
+    monkeypatch.setattr(si, "_pairs_jit", None)
+    monkeypatch.setattr(si, "_prefilter_jit", None)
+    for mesh, fast in zip(meshes, compiled, strict=True):
+        slow = self_intersections(mesh)
+        assert fast.count > 5 and fast.candidates == slow.candidates
+        np.testing.assert_array_equal(fast.pairs, slow.pairs)
+
+
 def test_empty_and_single_face() -> None:
     assert self_intersections(Mesh(np.zeros((0, 3)))).count == 0
     assert self_intersections(Mesh(np.eye(3), np.array([[0, 1, 2]]))).count == 0

@@ -41,6 +41,10 @@ kept only when their exact spheres and their axis-aligned boxes (widened by
 ``tol_mm``) overlap and they share fewer than two vertices; those
 *candidates* are tested exactly in chunks of :data:`CHUNK_PAIRS`, so the
 memory stays bounded whatever the mesh size.
+
+The prefilter and the edge-through-face test run as numba kernels (one pass
+per pair, no temporaries; the same arithmetic as the numpy code beside them,
+which runs when numba is missing); the rare coplanar pairs go to numpy.
 """
 
 from __future__ import annotations
@@ -51,6 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core.compiled import numba
 from workbench.core.mesh import Mesh
 
 CHUNK_PAIRS = 200_000  # candidate pairs tested at once (~100 MB of temporaries)
@@ -214,6 +219,10 @@ def _prefilter(
     tol: float,
 ) -> np.ndarray:
     """Pairs whose bounding spheres and boxes overlap and that share < 2 vertices."""
+    if _prefilter_jit is not None:
+        keep = np.empty(len(pair), np.bool_)
+        _prefilter_jit(pair, centre, radius, lo, hi, faces, tol, keep)
+        return pair[keep]
     i, j = pair[:, 0], pair[:, 1]
     gap = centre[i] - centre[j]
     reach = radius[i] + radius[j] + 2.0 * tol
@@ -241,6 +250,23 @@ def _pairs_intersect(
 
     ``normal`` and ``good`` are the faces' unit normals and non-degeneracy flags.
     """
+    if _pairs_jit is not None:
+        hit = np.empty(len(pair), np.bool_)
+        flat_mask = np.empty(len(pair), np.bool_)
+        _pairs_jit(tri, normal, good, faces, pair, tol, hit, flat_mask)
+        flat = np.flatnonzero(flat_mask)
+        if len(flat):
+            i, j = pair[flat, 0], pair[flat, 1]
+            fa, fb = faces[i], faces[j]
+            hit[flat] = _coplanar_overlap(
+                tri[i],
+                tri[j],
+                normal[j],
+                (fa[:, :, None] == fb[:, None, :]).any(axis=2),
+                (fb[:, :, None] == fa[:, None, :]).any(axis=2),
+                tol,
+            )
+        return hit
     i, j = pair[:, 0], pair[:, 1]
     ta, tb = tri[i], tri[j]
     fa, fb = faces[i], faces[j]
@@ -371,3 +397,93 @@ def _coplanar_overlap(
     hit |= (strictly_inside(pts_a, b2) & own_a).any(axis=1)
     hit |= (strictly_inside(pts_b, a2) & own_b).any(axis=1)
     return hit
+
+
+# ---------------------------------------------------------------- compiled kernels
+def _prefilter_kernel(pair, centre, radius, lo, hi, faces, tol, keep):  # pragma: no cover
+    """:func:`_prefilter`'s tests, one pair at a time (numba)."""
+    for k in range(pair.shape[0]):
+        i = pair[k, 0]
+        j = pair[k, 1]
+        reach = radius[i] + radius[j] + 2.0 * tol
+        g0 = centre[i, 0] - centre[j, 0]
+        g1 = centre[i, 1] - centre[j, 1]
+        g2 = centre[i, 2] - centre[j, 2]
+        ok = g0 * g0 + g1 * g1 + g2 * g2 <= reach * reach
+        for c in range(3):
+            ok = ok and lo[i, c] <= hi[j, c] and lo[j, c] <= hi[i, c]
+        if ok:
+            shared = 0
+            for a in range(3):
+                for b in range(3):
+                    if faces[i, a] == faces[j, b]:
+                        shared += 1
+            ok = shared < 2
+        keep[k] = ok
+
+
+def _edges_through_one(tri, normal, good, faces, a, b, tol):  # pragma: no cover
+    """:func:`_edges_through` for one pair (A = face ``a``, B = face ``b``): (hit, coplanar)."""
+    if not good[b]:
+        return False, False
+    n0, n1, n2 = normal[b, 0], normal[b, 1], normal[b, 2]
+    d = np.empty(3)
+    shared = np.zeros(3, np.bool_)
+    flat = True
+    for v in range(3):
+        d[v] = (
+            (tri[a, v, 0] - tri[b, 0, 0]) * n0
+            + (tri[a, v, 1] - tri[b, 0, 1]) * n1
+            + (tri[a, v, 2] - tri[b, 0, 2]) * n2
+        )
+        flat = flat and abs(d[v]) <= tol
+        for w in range(3):
+            if faces[a, v] == faces[b, w]:
+                shared[v] = True
+    hit = False
+    for e in range(3):
+        f = (e + 1) % 3
+        if shared[e] or shared[f]:
+            continue
+        dp, dq = d[e], d[f]
+        if not (dp * dq < 0.0 and abs(dp) > tol and abs(dq) > tol):
+            continue
+        t = dp / (dp - dq)
+        x0 = tri[a, e, 0] + t * (tri[a, f, 0] - tri[a, e, 0])
+        x1 = tri[a, e, 1] + t * (tri[a, f, 1] - tri[a, e, 1])
+        x2 = tri[a, e, 2] + t * (tri[a, f, 2] - tri[a, e, 2])
+        inside = True
+        for s in range(3):
+            r = (s + 1) % 3
+            e0 = tri[b, r, 0] - tri[b, s, 0]
+            e1 = tri[b, r, 1] - tri[b, s, 1]
+            e2 = tri[b, r, 2] - tri[b, s, 2]
+            w0, w1, w2 = x0 - tri[b, s, 0], x1 - tri[b, s, 1], x2 - tri[b, s, 2]
+            side = (e1 * w2 - e2 * w1) * n0 + (e2 * w0 - e0 * w2) * n1 + (e0 * w1 - e1 * w0) * n2
+            if not side >= -tol * np.sqrt(e0 * e0 + e1 * e1 + e2 * e2):  # NaN: outside
+                inside = False
+                break
+        if inside:
+            hit = True
+            break
+    return hit, flat
+
+
+def _pairs_kernel(tri, normal, good, faces, pair, tol, hit, flat):  # pragma: no cover
+    """:func:`_pairs_intersect` without the coplanar test: ``hit`` and ``flat`` per pair."""
+    for k in range(pair.shape[0]):
+        i = pair[k, 0]
+        j = pair[k, 1]
+        h_ab, c_ab = _edges_through_one(tri, normal, good, faces, i, j, tol)
+        h_ba, c_ba = _edges_through_one(tri, normal, good, faces, j, i, tol)
+        hit[k] = h_ab or h_ba
+        flat[k] = (c_ab or c_ba) and not hit[k]
+
+
+if numba is not None:
+    _edges_through_one = numba.njit(cache=True, nogil=True)(_edges_through_one)
+    _prefilter_jit = numba.njit(cache=True, nogil=True)(_prefilter_kernel)
+    _pairs_jit = numba.njit(cache=True, nogil=True)(_pairs_kernel)
+else:  # pragma: no cover - numba is a dependency
+    _prefilter_jit = None
+    _pairs_jit = None
