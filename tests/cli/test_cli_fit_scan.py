@@ -42,6 +42,16 @@ def test_fit_scan_writes_a_pack_and_its_report(fitted, head_male):
     assert head.provenance["built_from"][0]["file"] == "face_cm.ply"
     # the person's size in mm (the female skin, not the male reference, not cm)
     assert 150 < float(np.ptp(head.skin.vertices[:, 1])) < 320
+    # the fine detail over the subdivided skin, in the same frame
+    assert report["detail"]["new_crossings"] == 0 and report["detail"]["fold_overs"] == 0
+    from workbench.io.meshes import read_mesh
+    from workbench.io.skin_detail_export import read_skin_detail
+
+    detailed = read_mesh(out / "skin_detailed.ply", units="mm").mesh
+    layer = read_skin_detail(out / "skin_detail.npz", head.skin)
+    np.testing.assert_allclose(
+        detailed.vertices, layer.apply(head.skin.vertices).vertices, atol=1e-3
+    )
 
 
 def test_existing_pack_is_refused_without_force(fitted, scan_cm, capsys):
@@ -99,8 +109,10 @@ def test_fit_scan_pdf_without_opengl_has_no_pictures(scan_cm, monkeypatch, capsy
 
     monkeypatch.setattr(scan_fit_pictures, "render_distance_views", no_gl)
     out = scan_cm.parent / "pack_no_gl"
-    code = main(["fit-scan", str(scan_cm), "--units", "cm", "--out", str(out)])
+    code = main(["fit-scan", str(scan_cm), "--units", "cm", "--no-detail", "--out", str(out)])
     assert code == 0
+    assert not (out / "skin_detailed.ply").exists()  # --no-detail
+    assert "detail" not in json.loads((out / "fit_report.json").read_text())
     printed = capsys.readouterr().out
     assert "no distance picture (no OpenGL context)" in printed
     assert f"wrote {out / 'fit_report.pdf'}" in printed

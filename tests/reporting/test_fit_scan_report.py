@@ -65,6 +65,18 @@ def _figures(n_counted: int, *, bone: bool, user: bool) -> dict:
             "cost": 0.1,
         },
         "seconds": {"orientation": 2.4, "skin": 1.6, "inside": 0.1, "total": 4.2},
+        "detail": {
+            "levels": 2,
+            "fine_vertices": 77358,
+            "fine_triangles": 154112,
+            "face_within_1mm_fraction": 0.991,
+            "face_within_2_5mm_fraction": 0.996,
+            "face_mean_distance_mm": 0.12,
+            "face_observed_fraction": 0.93,
+            "face_displacement_mm": {"mean_abs": 0.2, "p95_abs": 0.7, "max_abs": 3.1},
+            "fold_overs": 0,
+            "new_crossings": 2,
+        },
     }
     if bone:
         fig["skull_vs_bone"] = {
@@ -125,6 +137,9 @@ def test_summary_maps_the_figures_beside_the_targets(fake_fit):
     assert "2.75 mm" in rows["Skin landmarks → user-placed"]["value"]
     assert "ttable_2023" in rows["Tissue depths vs the table"]["value"]
     assert rows["Mirrored input"]["value"] == "yes"
+    fine = rows["Fine detail (skin_detailed.ply): within 1 / 2.5 mm"]
+    assert fine["value"].startswith("99.1 % / 99.6 %") and fine["met"] is True
+    assert rows["… fold-overs / crossings it added"]["met"] is False  # 2 crossings
     assert rows["Seconds"]["value"].startswith("4.2")
     assert s["inputs"] == [{"role": "scan", "file": "face.ply", "sha256": SHA}]
     assert s["template_id"] == "ref/scan/abc123"

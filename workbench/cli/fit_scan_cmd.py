@@ -62,6 +62,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the texture image the scan's UVs refer to (instead of its OBJ material); "
         "vertex colours or a texture are carried onto the fitted skin",
     )
+    p.add_argument(
+        "--no-detail",
+        dest="detail",
+        action="store_false",
+        help="skip the fine detail layer (skin_detailed.ply, skin_detail.npz: the scan's "
+        "creases and borders over the subdivided skin; ~2-3 s)",
+    )
     add_orientation_options(p)
     p.add_argument("--out", type=Path, required=True, metavar="PACK")
     add_force_option(p, folder=True)
@@ -89,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
         force=args.force,
         progress=lambda m: print(f"  {m}"),
         extra=lambda folder, fit: _write_pdf(folder, fit, Path(args.scan).name),
+        detail=args.detail,
     )
     for path in files:
         print(f"wrote {path}")
@@ -112,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
             },
             "tissue_depth_mean_abs_diff_mm": fig["tissue_depths"]["mean_abs_diff_mm"],
             **({"skull_vs_bone": fig["skull_vs_bone"]} if "skull_vs_bone" in fig else {}),
+            **({"detail": fig["detail"]} if "detail" in fig else {}),
         },
         None,
     )

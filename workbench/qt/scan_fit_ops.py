@@ -73,7 +73,13 @@ STATE_COLOURS = {
 SELECTED = (1.0, 0.95, 0.1)
 MARKER_PX = 10.0
 #: fraction of the fit done when the service reports a step (by the step's first word)
-STEP_FRACTIONS = {"orienting": 0.03, "registering": 0.12, "placing": 0.85, "measuring": 0.92}
+STEP_FRACTIONS = {
+    "orienting": 0.03,
+    "registering": 0.12,
+    "placing": 0.7,
+    "carrying": 0.75,
+    "measuring": 0.95,
+}
 #: the placed landmarks in a saved pack (scan frame, mm)
 PLACED_FILE = "landmarks_on_scan.mrk.json"
 

@@ -136,6 +136,24 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
             "0",
             new == 0,
         )
+    detail = fig.get("detail")
+    if detail:
+        d1, d25 = detail["face_within_1mm_fraction"], detail["face_within_2_5mm_fraction"]
+        row(
+            "Fine detail (skin_detailed.ply): within 1 / 2.5 mm",
+            f"{_pct(d1)} / {_pct(d25)}, mean {_mm(detail.get('face_mean_distance_mm'))} "
+            f"({detail['fine_vertices']} vertices, {detail['levels']} Loop steps over the "
+            f"fitted skin; {_pct(detail.get('face_observed_fraction'))} of its face saw the scan)",
+            f"≥ {_pct(TARGET_WITHIN_1MM)} / {_pct(TARGET_WITHIN_2_5MM)}",
+            d1 >= TARGET_WITHIN_1MM and d25 >= TARGET_WITHIN_2_5MM,
+        )
+        bad = int(detail["fold_overs"]) + int(detail["new_crossings"])
+        row(
+            "… fold-overs / crossings it added",
+            f"{detail['fold_overs']} / {detail['new_crossings']}",
+            "0",
+            bad == 0,
+        )
     if fig.get("face_region_hidden_vertices"):
         row(
             "Scan left out: cavity walls no scanner sees",

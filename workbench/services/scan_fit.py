@@ -419,6 +419,7 @@ def fit_scan(
     source: str = "scan",
     inputs: Sequence[Mapping] = (),
     progress: Progress | None = None,
+    detail: bool = True,
 ) -> ScanFit:
     """Adapt the reference head of ``sex`` (or ``base``) to ``scan`` (input frame, mm).
 
@@ -436,6 +437,10 @@ def fit_scan(
         is compared with it in the report.
     source : str
         Name of the scan in error messages (its file).
+    detail : bool
+        Also carry the scan's fine detail onto the subdivided skin
+        (:attr:`ScanFit.detail`, ``figures["detail"]``; ~2-3 s); False for
+        batches that need only the animatable head.
     """
     from workbench.core.rigid_search import SCALE_RANGE, search_pose
     from workbench.services.compare import face_regions
@@ -589,17 +594,22 @@ def fit_scan(
 
     # 5. the scan's fine detail over the subdivided skin (the animatable skin keeps the
     # reference's 4 890 vertices; its ~4 mm edges cannot hold lid creases or lip borders)
-    t = time.perf_counter()
-    say("carrying the scan's fine detail onto the subdivided skin ...")
-    believed = fit.target_weights * seen
-    # not the ears: their helix, antihelix and concha fold within millimetres of each other
-    # at every angle, and a displacement there crosses a neighbouring fold (the headsq fit
-    # gained ~110 new crossings at the ears, none elsewhere after the limits below)
-    ears = _mask(
-        skin.n_vertices, [base.regions[r] for r in ("ear_l", "ear_r") if r in base.regions]
-    )
-    detail = build_detail(head.skin, scan_h, believed, caster=RayCaster.shared(scan_h), fixed=ears)
-    seconds["detail"] = time.perf_counter() - t
+    layer = None
+    if detail:
+        t = time.perf_counter()
+        say("carrying the scan's fine detail onto the subdivided skin ...")
+        believed = fit.target_weights * seen
+        # not the ears: their helix, antihelix and concha fold within millimetres of each
+        # other at every angle, and a displacement there crosses a neighbouring fold (the
+        # headsq fit gained ~110 new crossings at the ears, none elsewhere after the limits
+        # of build_detail)
+        ears = _mask(
+            skin.n_vertices, [base.regions[r] for r in ("ear_l", "ear_r") if r in base.regions]
+        )
+        layer = build_detail(
+            head.skin, scan_h, believed, caster=RayCaster.shared(scan_h), fixed=ears
+        )
+        seconds["detail"] = time.perf_counter() - t
 
     # figures
     say("measuring the fit ...")
@@ -662,7 +672,8 @@ def fit_scan(
         "reference_pairs": len(ref_x),
         "new_pairs": sum(tuple(p) not in ref_x for p in fitted_x.tolist()),
     }
-    fig["detail"] = _detail_figures(detail, fitted, scan_h.vertices[counted], face)
+    if layer is not None:
+        fig["detail"] = _detail_figures(layer, fitted, scan_h.vertices[counted], face)
     present = [c for c in skin_lms.as_dict() if c not in absent_skin]
     # before the settling move (rigid: same distances), with the index built above
     lm_d = scan_index.closest_points(skin_lms.positions_of(present)).distances
@@ -756,7 +767,7 @@ def fit_scan(
     }
     head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
     return ScanFit(
-        head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance, detail
+        head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance, layer
     )
 
 
@@ -895,6 +906,7 @@ def fit_scan_pack(
     force: bool = False,
     progress: Progress | None = None,
     extra: Callable[[Path, ScanFit], list[Path]] | None = None,
+    detail: bool = True,
 ) -> tuple[ScanFit, list[Path]]:
     """Read the scan (and landmarks, bone), :func:`fit_scan`, write the pack and
     ``fit_report.json`` to ``out``.
@@ -911,7 +923,8 @@ def fit_scan_pack(
     the pack; skin away from the scan gets colour diffused from around.
     The scan's fine detail over the subdivided skin is written as
     ``skin_detailed.ply`` (the mesh) and ``skin_detail.npz`` (the layer, to
-    re-detail an animated or aged skin: :mod:`workbench.io.skin_detail_export`).
+    re-detail an animated or aged skin: :mod:`workbench.io.skin_detail_export`),
+    unless ``detail`` is False.
     ``extra(folder, result)`` writes further files into the staged pack (the
     CLI's PDF report, which needs the render layer) and returns their paths.
     """
@@ -971,6 +984,7 @@ def fit_scan_pack(
         source=str(path),
         inputs=inputs,
         progress=progress,
+        detail=detail,
     )
 
     from workbench.io.samples import credits_for
