@@ -30,8 +30,9 @@ Cases (units mm, each fitted with the built-in male reference head):
 Prints per case: face-region vertices and the fractions within 1 / 2.5 mm,
 mean distance, skin landmarks' distance to the scan, fold-overs, new crossings
 (and how many the untangling removed), the skin–skull distances at the paired
-landmarks vs the table, skull vs bone (headsq), seconds; then all figures as
-JSON.
+landmarks vs the table, the same face-region figures for the detail layer
+over the subdivided skin, skull vs bone (CT cases), seconds; then all figures
+as JSON.
 """
 
 from __future__ import annotations
@@ -170,6 +171,20 @@ def main() -> int:
             f"depth |diff| {td['mean_abs_diff_mm']:.2f} mm ({td['pairs']} pairs)  "
             f"mirrored {fit.mirrored_input}  {wall:.1f} s"
         )
+        check = f["seconds"].get("skull_vs_bone")
+        if check is not None:  # the comparison with the true bone is not part of the fit
+            line += f" (fit {wall - check:.1f} s + {check:.1f} s skull vs bone check)"
+        if "detail" in f:
+            d = f["detail"]
+            line += (
+                f"\n{'':36s} detail layer ({d['fine_vertices']} vertices): "
+                f"<=1mm {100 * d['face_within_1mm_fraction']:5.1f}%  "
+                f"<=2.5mm {100 * d['face_within_2_5mm_fraction']:5.1f}%  "
+                f"mean {d['face_mean_distance_mm']:.2f} mm  "
+                f"|displacement| p95 {d['face_displacement_mm']['p95_abs']:.2f} mm  "
+                f"folds {d['fold_overs']}  new crossings {d['new_crossings']}  "
+                f"({f['seconds'].get('detail', float('nan')):.1f} s)"
+            )
         if "skull_vs_bone" in f:
             b = f["skull_vs_bone"]
             line += (

@@ -49,6 +49,7 @@ from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
 from workbench.core.raycast import RayCaster
 from workbench.core.self_intersection import pairs_cross, self_intersections
+from workbench.core.threads import worker_count
 
 #: Loop steps of the detail layer over the reference skin (4 890 → 77 358 vertices,
 #: ~1 mm edges)
@@ -180,7 +181,9 @@ def _clearance(fine: Mesh, normals: np.ndarray, reach: float) -> np.ndarray:
     """
     a = OPPOSITE_WEIGHT_MM
     tree = cKDTree(np.hstack([fine.vertices, a * normals]))
-    _, idx = tree.query(np.hstack([fine.vertices, -a * normals]), k=OPPOSITE_K)
+    _, idx = tree.query(
+        np.hstack([fine.vertices, -a * normals]), k=OPPOSITE_K, workers=worker_count()
+    )
     # distance to the facing vertex's tangent plane: the facing sheet's triangles can pass
     # closer than its vertices (lips in contact are offset by up to an edge)
     gap = np.abs(
@@ -191,13 +194,10 @@ def _clearance(fine: Mesh, normals: np.ndarray, reach: float) -> np.ndarray:
     return np.minimum(CLEARANCE_SHARE * gap, reach)
 
 
-def _focal_bounds(
-    fine: Mesh, normals: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def _focal_bounds(fine: Mesh, normals: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per fine vertex, the displacement range that keeps it short of the centres of
     curvature of its edges (normal curvature of edge i→j: 2 n_i·(p_i − p_j) / |p_i − p_j|²,
-    positive where the surface bends away from the normal)."""
-    e = _edges(faces)
+    positive where the surface bends away from the normal); ``e`` its edges."""
     i, j = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
     v = fine.vertices[i] - fine.vertices[j]
     k = 2.0 * np.einsum("ij,ij->i", normals[i], v) / np.maximum(np.einsum("ij,ij->i", v, v), 1e-12)
@@ -242,7 +242,9 @@ def _unturn(fine: Mesh, normals: np.ndarray, d: np.ndarray) -> np.ndarray:
     return d
 
 
-def _uncross(fine: Mesh, normals: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, int]:
+def _uncross(
+    fine: Mesh, normals: np.ndarray, d: np.ndarray, e: np.ndarray
+) -> tuple[np.ndarray, int]:
     """Fade the displacement out around fine triangles it made cross others.
 
     Returns the displacement and how many crossing pairs it still adds (0 unless
@@ -251,7 +253,6 @@ def _uncross(fine: Mesh, normals: np.ndarray, d: np.ndarray) -> tuple[np.ndarray
     surface.
     """
     d = d.copy()
-    e = _edges(fine.faces)
     n = fine.n_vertices
     adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     adj = (adj + adj.T).tocsr()
@@ -306,15 +307,16 @@ def build_detail(
     w_scan = np.clip(np.asarray(weights, float), 0.0, 1.0)
     target, belief = _hits(fine, normals, caster, w_scan, reach)
     room = _clearance(fine, normals, reach)
-    low, high = _focal_bounds(fine, normals, faces)
+    edges = _edges(faces)
+    low, high = _focal_bounds(fine, normals, edges)
     low, high = np.maximum(low, -room), np.minimum(high, room)
     if fixed is not None:
         keep = np.asarray(matrix @ np.asarray(fixed, float)).ravel() < 0.5
         low, high = np.where(keep, low, 0.0), np.where(keep, high, 0.0)
         belief = np.where(keep, belief, 0.0)
     target = np.clip(target, low, high)
-    d = _solve(target, belief, _edges(faces), fine.n_vertices)
+    d = _solve(target, belief, edges, fine.n_vertices)
     d = np.clip(d, low, high)
     d = _unturn(fine, normals, d)
-    d, crossings = _uncross(fine, normals, d)
+    d, crossings = _uncross(fine, normals, d, edges)
     return DetailLayer(levels, matrix, faces, d, belief > 0.0, crossings)
