@@ -22,6 +22,8 @@ Cases (units mm, each fitted with the built-in male reference head):
   (``sample:vhp_female``; courtesy of the U.S. National Library of Medicine's
   Visible Human Project) at 300k triangles, the speed target's size, and its
   bone for the estimated skull vs the true bone;
+* ``vhp_male_300k``: the same for the Visible Human male head CT
+  (``sample:vhp_male``, same credit), not used to tune the detail layer;
 * ``female_damaged``: the built-in female reference skin rotated, with two
   discs of triangles removed (cheek, glabella);
 * ``female_damaged_mirrored_landmarks``: the same mirrored, oriented by six
@@ -100,6 +102,17 @@ def _cases():
                 "bone": mesh_from_ct(vhp, "bone").mesh,
                 "orientation": hint("vhp_female"),
                 "sex": "female",
+            },
+        )
+    if (SHARED / "vhp_male_head_ct").exists():
+        vhm = fetch("vhp_male")
+        yield (
+            "vhp_male_300k",
+            lambda: {
+                "scan": mesh_from_ct(vhm, "skin", target_triangles=300_000).mesh,
+                "bone": mesh_from_ct(vhm, "bone").mesh,
+                "orientation": hint("vhp_male"),
+                "sex": "male",
             },
         )
     female = reference_head("female")
@@ -219,7 +232,7 @@ def main() -> int:
         if name.startswith("vhp_"):
             from workbench.io.samples import registry
 
-            line += f"\n{'':36s} {registry()['vhp_female'].credit}"
+            line += f"\n{'':36s} {registry()[name.rsplit('_', 1)[0]].credit}"
         print(line, flush=True)
         out[name] = {k: v for k, v in f.items() if k != "tissue_depths"} | {
             "tissue_depths": {k: v for k, v in td.items() if k != "per_landmark"},
