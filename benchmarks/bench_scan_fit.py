@@ -194,6 +194,8 @@ def main() -> int:
                 f"<=1mm {100 * d['face_within_1mm_fraction']:5.1f}%  "
                 f"<=2.5mm {100 * d['face_within_2_5mm_fraction']:5.1f}%  "
                 f"mean {d['face_mean_distance_mm']:.2f} mm  "
+                f"(<=2.5mm {100 * d['face_within_2_5mm_fraction_off_openings']:5.1f}% without the "
+                f"{d['face_over_skin_openings_vertices']} over the skin's openings)  "
                 f"|displacement| p95 {d['face_displacement_mm']['p95_abs']:.2f} mm  "
                 f"folds {d['fold_overs']}  new crossings {d['new_crossings']}  "
                 f"({f['seconds'].get('detail', float('nan')):.1f} s)"

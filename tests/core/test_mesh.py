@@ -196,3 +196,12 @@ def test_empty_mesh_validates():
     r = validate(Mesh(np.zeros((0, 3))))
     assert r.n_faces == 0 and r.n_components == 0
     assert "no triangles" in r.problems()[0]
+
+
+def test_open_face_edges_mark_the_boundary() -> None:
+    """A square of two triangles: the diagonal is shared, the four sides are open."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    m = Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]))
+    # face 0: (0,1) open, (1,2) open, (2,0) the diagonal; face 1: (0,2) diagonal, (2,3), (3,0)
+    np.testing.assert_array_equal(m.open_face_edges, [[True, True, False], [False, True, True]])
+    assert not subdivided_octahedron(2).open_face_edges.any()

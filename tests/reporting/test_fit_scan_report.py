@@ -73,6 +73,8 @@ def _figures(n_counted: int, *, bone: bool, user: bool) -> dict:
             "face_within_2_5mm_fraction": 0.996,
             "face_mean_distance_mm": 0.12,
             "face_observed_fraction": 0.93,
+            "face_over_skin_openings_vertices": 40,
+            "face_within_2_5mm_fraction_off_openings": 0.998,
             "face_displacement_mm": {"mean_abs": 0.2, "p95_abs": 0.7, "max_abs": 3.1},
             "fold_overs": 0,
             "new_crossings": 2,
@@ -140,6 +142,7 @@ def test_summary_maps_the_figures_beside_the_targets(fake_fit):
     fine = rows["Fine detail (skin_detailed.ply): within 1 / 2.5 mm"]
     assert fine["value"].startswith("99.1 % / 99.6 %") and fine["met"] is True
     assert rows["… fold-overs / crossings it added"]["met"] is False  # 2 crossings
+    assert "99.8 %" in rows["… scan over the skin's eye, mouth, nostril openings"]["value"]
     assert rows["Seconds"]["value"].startswith("4.2")
     assert s["inputs"] == [{"role": "scan", "file": "face.ply", "sha256": SHA}]
     assert s["template_id"] == "ref/scan/abc123"

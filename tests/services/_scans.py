@@ -78,3 +78,47 @@ def crowned_bust(head: TemplateHead) -> tuple[Mesh, dict]:
     half_width = float(np.ptp(skin.vertices[:, 0])) / 2
     crown = _cylinder((0.0, head_z - 15.0), 1.3 * half_width, brow - 4.0, brow + 120.0)
     return concatenate([face, crown]), at
+
+
+def closed_eyes(head: TemplateHead, rings: int = 4) -> Mesh:
+    """``head``'s skin with its palpebral openings closed by a lid-like cap each (rings
+    toward the opening's centre, bulged 1.5 mm forward), wound like the skin (head frame)."""
+    from workbench.core.mesh import boundary_loops
+
+    skin = head.skin
+    at = head.skin_landmarks.as_dict()
+    vertices, faces = [skin.vertices], [skin.faces]
+    n = skin.n_vertices
+    for side in ("l", "r"):
+        eye = 0.5 * (at[f"en_{side}"] + at[f"ex_{side}"])
+        loop = min(
+            boundary_loops(skin), key=lambda lp: np.linalg.norm(skin.vertices[lp].mean(0) - eye)
+        )
+        rim = skin.vertices[loop]
+        centre = rim.mean(axis=0)
+        ids = [np.asarray(loop)]
+        for k in range(1, rings):
+            r = 1.0 - k / rings
+            ring = centre + r * (rim - centre) + [0.0, 0.0, 1.5 * (1 - r * r)]
+            ids.append(np.arange(n, n + len(loop)))
+            vertices.append(ring)
+            n += len(loop)
+        vertices.append((centre + [0.0, 0.0, 1.5])[None])
+        tip = n
+        n += 1
+        m = len(loop)
+        cap = []
+        for a, b in zip(ids[:-1], ids[1:], strict=True):
+            for i in range(m):
+                j = (i + 1) % m
+                cap += [(a[i], a[j], b[j]), (a[i], b[j], b[i])]
+        last = ids[-1]
+        cap += [(last[i], last[(i + 1) % m], tip) for i in range(m)]
+        cap = np.asarray(cap)
+        # wind the cap like the skin: its normals face forward (+z) like the lids
+        tri = np.vstack(vertices)[cap]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        if normal[:, 2].sum() < 0:
+            cap = cap[:, ::-1]
+        faces.append(cap)
+    return Mesh(np.vstack(vertices), np.vstack(faces))

@@ -58,6 +58,9 @@ def test_the_detail_layer_follows_a_ridge_the_skin_cannot(head_male, head_female
     assert detail["fold_overs"] == 0 and detail["new_crossings"] == 0
     assert detail["face_within_1mm_fraction"] >= fig["face_within_1mm_fraction"]
     assert detail["face_mean_distance_mm"] < 0.5 * fig["face_mean_distance_mm"]
+    # a scan of open eyes and mouth: nothing lies over the skin's openings, no note
+    assert detail["face_over_skin_openings_vertices"] < 10
+    assert not any("openings" in w for w in fit.warnings)
     crest = fit.scan.vertices[height > 1.0]
     assert len(crest) >= 15
     coarse_d = MeshIndex(fit.head.skin).closest_points(crest).distances
@@ -69,6 +72,18 @@ def test_the_detail_layer_follows_a_ridge_the_skin_cannot(head_male, head_female
     glabella = fit.head.skin_landmarks.as_dict()["g"]
     hole = np.linalg.norm(detailed.vertices - glabella, axis=1) < 5.0
     assert hole.any() and not fit.detail.observed[hole].any()
+
+
+def test_closed_eyes_on_the_scan_are_said(head_male, head_female):
+    """A scan whose eyes are closed (every CT): the scan's lids over the skin's open
+    palpebral fissures have no skin to meet; they are counted apart and noted."""
+    from tests.services._scans import closed_eyes
+
+    fit = fit_scan(closed_eyes(head_female), base=head_male, sex="female")
+    detail = fit.figures["detail"]
+    assert detail["face_over_skin_openings_vertices"] > 30
+    assert detail["face_within_2_5mm_fraction_off_openings"] >= detail["face_within_2_5mm_fraction"]
+    assert any("openings" in w and "closed eyes" in w for w in fit.warnings)
 
 
 def test_inner_parts_sit_at_the_table_depths(female_fit, head_male):

@@ -237,6 +237,13 @@ class Mesh:
         """``(k, 2)`` unique undirected edges."""
         return self._unique_edges[0]
 
+    @cached_property
+    def open_face_edges(self) -> np.ndarray:
+        """``(m, 3)`` bool: corner pair h of face f (h = 0: (0,1), 1: (1,2), 2: (2,0)) is a
+        boundary edge (no other face uses it)."""
+        _, inverse, counts = self._unique_edges
+        return _frozen(np.ascontiguousarray((counts[inverse] == 1).reshape(3, -1).T))
+
     @property
     def edge_face_counts(self) -> np.ndarray:
         """``(k,)`` number of faces using each unique edge."""

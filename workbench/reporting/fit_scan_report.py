@@ -147,6 +147,13 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
             f"≥ {_pct(TARGET_WITHIN_1MM)} / {_pct(TARGET_WITHIN_2_5MM)}",
             d1 >= TARGET_WITHIN_1MM and d25 >= TARGET_WITHIN_2_5MM,
         )
+        beyond = detail.get("face_over_skin_openings_vertices")
+        if beyond:
+            row(
+                "… scan over the skin's eye, mouth, nostril openings",
+                f"{beyond} vertices (closed eyes or mouth on the scan); within 2.5 mm "
+                f"without them {_pct(detail.get('face_within_2_5mm_fraction_off_openings'))}",
+            )
         bad = int(detail["fold_overs"]) + int(detail["new_crossings"])
         row(
             "… fold-overs / crossings it added",

@@ -135,6 +135,8 @@ INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue", "e
 BONE_PARTS = ("cranium", "mandible")
 #: recorded in the provenance; 2: the fine detail layer over the subdivided skin
 FIT_VERSION = 2
+#: a note when this share of the counted face scan vertices lies over the skin's openings
+OPENINGS_WARN_SHARE = 0.004
 
 
 @dataclass(frozen=True)
@@ -682,6 +684,13 @@ def fit_scan(
     }
     if layer is not None:
         fig["detail"] = _detail_figures(layer, fitted, scan_h.vertices[counted], face)
+        beyond = fig["detail"]["face_over_skin_openings_vertices"]
+        if beyond > OPENINGS_WARN_SHARE * max(int(counted.sum()), 1):
+            warnings.append(
+                f"{beyond} face scan vertices lie over the fitted skin's eye, mouth or nostril "
+                "openings, more than 1 mm from it (closed eyes or mouth on the scan: the "
+                "reference's lids and lips stay parted)"
+            )
     present = [c for c in skin_lms.as_dict() if c not in absent_skin]
     # before the settling move (rigid: same distances), with the index built above
     lm_d = scan_index.closest_points(skin_lms.positions_of(present)).distances
@@ -789,7 +798,9 @@ def _detail_figures(
     turned triangles and crossings it added to the undisplaced subdivided skin."""
     smooth = detail.smooth_surface(fitted.vertices)
     detailed = detail.apply(fitted.vertices)
-    d = MeshIndex(detailed).closest_points(counted).distances
+    closest = MeshIndex(detailed).closest_points(counted)
+    d = closest.distances
+    beyond = _beyond_rim(detailed, closest.face_ids, closest.barycentric) & (d > 1.0)
     turned = (detailed.face_normals * smooth.face_normals).sum(axis=1) <= 0.0
     # the fine vertices over the face: most of their subdivision weight on coarse face
     # vertices (one sparse product; a row-wise argmax took ~0.35 s)
@@ -802,6 +813,13 @@ def _detail_figures(
         "face_within_1mm_fraction": float((d <= 1.0).mean()) if len(d) else 0.0,
         "face_within_2_5mm_fraction": float((d <= 2.5).mean()) if len(d) else 0.0,
         "face_mean_distance_mm": float(d.mean()) if len(d) else None,
+        # scan vertices over the skin's own openings (the palpebral fissures, the mouth
+        # slit, nostrils): closed eyes on a CT have no skin to meet, and the figures
+        # without them say how well the skin there is fitted
+        "face_over_skin_openings_vertices": int(beyond.sum()),
+        "face_within_2_5mm_fraction_off_openings": (
+            float((d[~beyond] <= 2.5).mean()) if (~beyond).any() else 0.0
+        ),
         "face_observed_fraction": float(detail.observed[on_face].mean()),
         "face_displacement_mm": {
             "mean_abs": float(disp.mean()),
@@ -812,6 +830,15 @@ def _detail_figures(
         # checked on the whole detailed skin by build_detail's last round
         "new_crossings": detail.new_crossings,
     }
+
+
+def _beyond_rim(mesh: Mesh, face_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Closest points (face, barycentric) that lie on a boundary edge of ``mesh``: the
+    query point is beyond the rim of one of its openings, not over its surface."""
+    # edge h of a face (0: corners 0-1, 1: 1-2, 2: 2-0) holds the points whose weight on
+    # the opposite corner is zero
+    on_edge = np.asarray(bary)[:, [2, 0, 1]] < 1e-6
+    return (mesh.open_face_edges[face_ids] & on_edge).any(axis=1)
 
 
 #: bone that reaches through the fitted face skin is moved back under it to this depth (mm)
