@@ -83,7 +83,7 @@ def test_closed_eyes_on_the_scan_are_said(head_male, head_female):
     detail = fit.figures["detail"]
     assert detail["face_over_skin_openings_vertices"] > 30
     assert detail["face_within_2_5mm_fraction_off_openings"] >= detail["face_within_2_5mm_fraction"]
-    assert any("openings" in w and "closed eyes" in w for w in fit.warnings)
+    assert any("openings" in w and "closed eyes" in w for w in fit.warnings), fit.warnings
 
 
 def test_inner_parts_sit_at_the_table_depths(female_fit, head_male):

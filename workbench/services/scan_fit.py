@@ -688,8 +688,8 @@ def fit_scan(
         if beyond > OPENINGS_WARN_SHARE * max(int(counted.sum()), 1):
             warnings.append(
                 f"{beyond} face scan vertices lie over the fitted skin's eye, mouth or nostril "
-                "openings, more than 1 mm from it (closed eyes or mouth on the scan: the "
-                "reference's lids and lips stay parted)"
+                "openings, more than 1 mm from it: the scan has a surface there (closed eyes "
+                "or lips, a bust's carved eyes) where the reference's lids and lips stay parted"
             )
     present = [c for c in skin_lms.as_dict() if c not in absent_skin]
     # before the settling move (rigid: same distances), with the index built above
