@@ -67,7 +67,13 @@ def test_local_cluster_rows_equal_single_runs(tmp_path, skull_obj, head_male, ca
         encoding="utf-8",
     )
     out = tmp_path / "out"
+    import os
+
+    threads_before = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
     assert main(["batch", str(m), "--out", str(out), "--workers", "2"]) == 2
+    # the workers' one-thread environment stays theirs (distributed's nanny writes it into
+    # the parent's os.environ: this process's own loops would drop to one thread)
+    assert {k: os.environ.get(k) for k in threads_before} == threads_before
     err = capsys.readouterr().err
     assert "4/4" in err and "smile (animate): ok" in err and "absurd (animate): failed" in err
     rows = _rows(out / "summary.csv")

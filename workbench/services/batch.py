@@ -322,18 +322,36 @@ def dask_client(
         # a row whose worker died (memory limit) is recorded as failed, not run again
         "distributed.scheduler.allowed-failures": 0,
     }
-    with dask.config.set(config):
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            memory_limit=memory_limit,
-            host="127.0.0.1",
-            dashboard_address=None,
-            env=dict(THREAD_ENV),
-        )
-        with cluster, Client(cluster) as client:
-            yield client
+    # distributed's nanny writes the workers' pre-spawn environment (OMP_NUM_THREADS=1 ...)
+    # into this process's os.environ and leaves it there: every later parallel loop of a
+    # window or script that ran a batch would run on one thread (and a reference head
+    # built afterwards would differ in the last bits).  Put the environment back.
+    saved = dict(os.environ)
+    try:
+        with dask.config.set(config):
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                memory_limit=memory_limit,
+                host="127.0.0.1",
+                dashboard_address=None,
+                env=dict(THREAD_ENV),
+            )
+            _restore_environ(saved)
+            with cluster, Client(cluster) as client:
+                yield client
+    finally:
+        _restore_environ(saved)
+
+
+def _restore_environ(saved: Mapping[str, str]) -> None:
+    """Make ``os.environ`` equal to ``saved`` again."""
+    for name in set(os.environ) - set(saved):
+        del os.environ[name]
+    for name, value in saved.items():
+        if os.environ.get(name) != value:
+            os.environ[name] = value
 
 
 def _run_dask(
