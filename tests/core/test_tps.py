@@ -185,6 +185,18 @@ def test_chunked_threaded_apply_equals_dense_reference(chunk, workers):
     np.testing.assert_allclose(got, reference_warp(src, dst, x), rtol=0, atol=1e-9)
 
 
+def test_thread_count_does_not_change_a_single_bit():
+    """The chunks are fixed, the threads only share them out: a head built on any number
+    of cores gets the same content hash."""
+    rng = np.random.default_rng(5)
+    src = spread_points(80, rng)
+    warp = fit_warp(src, src + smooth_displacement(src, rng))
+    x = rng.uniform(-80, 80, (40_000, 3))
+    one = warp(x, chunk_elements=20_000, workers=1)
+    for workers in (2, 3, 7):
+        assert np.array_equal(warp(x, chunk_elements=20_000, workers=workers), one)
+
+
 @settings(max_examples=15, deadline=None)
 @given(case=st.tuples(st.integers(4, 120), st.integers(0, 2**32 - 1)))
 def test_same_function_as_scipy_linear_rbf(case):

@@ -242,9 +242,9 @@ class LandmarkWarp:
         gram = np.vstack([-2.0 * self.centres.T, c2[None], np.ones((1, len(c2)))])
         c2max = float(c2.max(initial=0.0))
 
-        def run(block: slice) -> None:
-            for start in range(block.start, block.stop, step):
-                stop = min(start + step, block.stop)
+        def run(starts: np.ndarray) -> None:
+            for start in starts.tolist():
+                stop = min(start + step, len(pts))
                 x = pts[start:stop] - self.offset
                 y = x @ self.affine[:3] + self.affine[3]
                 if self.n_landmarks:
@@ -254,8 +254,10 @@ class LandmarkWarp:
         if workers is None:
             workers = worker_count()
         workers = max(1, min(int(workers), len(pts) // (4 * step) or 1))
-        bounds = np.linspace(0, len(pts), workers + 1).astype(int)
-        blocks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        # the chunks are the same whatever the number of threads (each thread takes a run
+        # of them), so the result is too, to the last bit: a head built on a 2-core and a
+        # 16-core machine has one content hash
+        blocks = np.array_split(np.arange(0, len(pts), step), workers)
         # our threads split the work; BLAS threads inside each small GEMM
         # would only contend with them (up to 10x slower with OpenBLAS)
         with single_threaded_blas():
