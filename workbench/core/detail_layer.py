@@ -99,7 +99,8 @@ class DetailLayer:
         Fine positions = ``matrix @ coarse positions`` (control vertex ``i`` is
         fine vertex ``i``).
     faces : (m_fine, 3) int64
-        Fine triangles (children of coarse face ``f`` are rows ``4**levels * f`` ...).
+        Fine triangles (children of coarse face ``f`` are rows ``4**levels * f`` ...;
+        :attr:`parent_faces`).
     displacement : (n_fine,) float64
         mm along each fine vertex's unit normal (outward positive).
     observed : (n_fine,) bool
@@ -118,12 +119,17 @@ class DetailLayer:
 
     def apply(self, coarse_vertices: np.ndarray) -> Mesh:
         """The detailed skin over a coarse skin of the control topology (same frame, mm)."""
-        fine = Mesh(np.asarray(self.matrix @ np.asarray(coarse_vertices, float)), self.faces)
+        fine = self.smooth_surface(coarse_vertices)
         return fine.with_vertices(fine.vertices + self.displacement[:, None] * vertex_normals(fine))
 
     def smooth_surface(self, coarse_vertices: np.ndarray) -> Mesh:
         """The subdivided coarse skin without the displacement."""
         return Mesh(np.asarray(self.matrix @ np.asarray(coarse_vertices, float)), self.faces)
+
+    @property
+    def parent_faces(self) -> np.ndarray:
+        """``(m_fine,)`` the coarse triangle each fine triangle descends from."""
+        return np.arange(len(self.faces)) // 4**self.levels
 
 
 def subdivision_of(
@@ -135,12 +141,10 @@ def subdivision_of(
     return sub.matrix.tocsr(), sub.faces
 
 
-def _edges(faces: np.ndarray) -> np.ndarray:
-    """``(k, 2)`` unique undirected edges, sorted pairs."""
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    n = int(faces.max()) + 1
-    code = np.unique(e[:, 0].astype(np.int64) * n + e[:, 1])
-    return np.stack([code // n, code % n], axis=1)
+def _adjacency(edges: np.ndarray, n: int) -> sparse.csr_matrix:
+    """``(n, n)`` symmetric 0/1 vertex adjacency of ``edges``."""
+    adj = sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    return (adj + adj.T).tocsr()
 
 
 def _hits(
@@ -213,12 +217,9 @@ def _focal_bounds(fine: Mesh, normals: np.ndarray, e: np.ndarray) -> tuple[np.nd
     return low, high
 
 
-def _solve(target: np.ndarray, weight: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
-    """argmin_d  Σ w (d - t)² + MEMBRANE Σ_edges (d_i - d_j)² + TO_ZERO Σ d²."""
-    i, j = edges[:, 0], edges[:, 1]
-    ones = np.ones(len(edges))
-    adj = sparse.coo_matrix((ones, (i, j)), shape=(n, n))
-    adj = (adj + adj.T).tocsr()
+def _solve(target: np.ndarray, weight: np.ndarray, adj: sparse.csr_matrix) -> np.ndarray:
+    """argmin_d  Σ w (d - t)² + MEMBRANE Σ_edges (d_i - d_j)² + TO_ZERO Σ d² (``adj``: the
+    fine vertices' adjacency, one entry per edge each way)."""
     lap = sparse.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
     a = (sparse.diags(weight + TO_ZERO) + MEMBRANE * lap).tocsr()
     b = weight * target
@@ -243,7 +244,7 @@ def _unturn(fine: Mesh, normals: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 
 def _uncross(
-    fine: Mesh, normals: np.ndarray, d: np.ndarray, e: np.ndarray
+    fine: Mesh, normals: np.ndarray, d: np.ndarray, adj: sparse.csr_matrix
 ) -> tuple[np.ndarray, int]:
     """Fade the displacement out around fine triangles it made cross others.
 
@@ -254,8 +255,6 @@ def _uncross(
     """
     d = d.copy()
     n = fine.n_vertices
-    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    adj = (adj + adj.T).tocsr()
     # pairs of triangles the displacement leaves where they were cross as they did; after a
     # round, only pairs with a triangle that round changed can have changed
     changed = np.abs(d[fine.faces]).max(axis=1) > 0.0
@@ -289,25 +288,25 @@ def build_detail(
     *,
     levels: int = DETAIL_LEVELS,
     reach: float = REACH_MM,
-    caster: RayCaster | None = None,
     fixed: np.ndarray | None = None,
 ) -> DetailLayer:
     """The detail layer that carries ``scan``'s surface onto the subdivided ``coarse`` skin.
 
     ``coarse`` (the fitted skin) and ``scan`` (wound outward) in one frame, mm;
     ``weights`` per scan vertex, 0..1 (how much that part of the scan is
-    believed to be the head's skin).  ``caster`` is ``scan``'s, when the
-    caller has one.  ``fixed`` (per coarse vertex, bool) marks skin that keeps
-    no detail (the layer fades to zero over it).
+    believed to be the head's skin).  ``fixed`` (per coarse vertex, bool)
+    marks skin that keeps no detail (the layer fades to zero over it).  Rays
+    use the scan's shared caster (:meth:`RayCaster.shared`).
     """
     matrix, faces = subdivision_of(coarse, levels)
     fine = Mesh(np.asarray(matrix @ coarse.vertices), faces)
     normals = vertex_normals(fine)
-    caster = caster or RayCaster.shared(scan)
+    caster = RayCaster.shared(scan)
     w_scan = np.clip(np.asarray(weights, float), 0.0, 1.0)
     target, belief = _hits(fine, normals, caster, w_scan, reach)
     room = _clearance(fine, normals, reach)
-    edges = _edges(faces)
+    edges = fine.edges_unique
+    adj = _adjacency(edges, fine.n_vertices)
     low, high = _focal_bounds(fine, normals, edges)
     low, high = np.maximum(low, -room), np.minimum(high, room)
     if fixed is not None:
@@ -315,8 +314,8 @@ def build_detail(
         low, high = np.where(keep, low, 0.0), np.where(keep, high, 0.0)
         belief = np.where(keep, belief, 0.0)
     target = np.clip(target, low, high)
-    d = _solve(target, belief, edges, fine.n_vertices)
+    d = _solve(target, belief, adj)
     d = np.clip(d, low, high)
     d = _unturn(fine, normals, d)
-    d, crossings = _uncross(fine, normals, d, edges)
+    d, crossings = _uncross(fine, normals, d, adj)
     return DetailLayer(levels, matrix, faces, d, belief > 0.0, crossings)

@@ -34,6 +34,10 @@ from workbench.core.spatial import MeshIndex
 from workbench.io.mesh_formats import ply
 
 PLY_NAME = "skin_colour.ply"
+#: the PLY header line that names the frame of a fitted skin
+HEAD_FRAME_COMMENT = (
+    "frame: head (x to the subject's left, x=0 midsagittal, y up, z toward the face)"
+)
 OBJ_NAME = "skin_textured.obj"
 MTL_NAME = "skin_textured.mtl"
 PNG_NAME = "skin_texture.png"
@@ -230,7 +234,7 @@ def write_coloured_skin(
             np.asarray(skin.faces),
             binary=True,
             comments=[
-                "frame: head (x to the subject's left, x=0 midsagittal, y up, z toward the face)",
+                HEAD_FRAME_COMMENT,
                 f"colours: {colours.kind} colours of the scan, "
                 f"{int(colours.observed.sum())} of {skin.n_vertices} vertices observed, "
                 "the rest filled",

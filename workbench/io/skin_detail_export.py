@@ -29,6 +29,7 @@ from workbench.core.detail_layer import DetailLayer, subdivision_of
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.io.mesh_formats import ply
+from workbench.io.skin_colour_export import HEAD_FRAME_COMMENT
 
 PLY_NAME = "skin_detailed.ply"
 NPZ_NAME = "skin_detail.npz"
@@ -46,7 +47,7 @@ def write_skin_detail(folder: str | PathLike[str], detail: DetailLayer, skin: Me
             np.asarray(detailed.faces),
             binary=True,
             comments=[
-                "frame: head (x to the subject's left, x=0 midsagittal, y up, z toward the face)",
+                HEAD_FRAME_COMMENT,
                 f"detail: skin.ply after {detail.levels} Loop steps, displaced onto the scan "
                 f"({int(detail.observed.sum())} of {detailed.n_vertices} vertices observed)",
             ],

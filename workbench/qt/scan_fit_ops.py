@@ -237,8 +237,7 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
     detail_parts = None
     if fit.detail is not None:
         fine = fit.detail.apply(fit.head.skin.vertices).transformed(back)
-        # the children of coarse triangle f are fine triangles 4**levels * f ...
-        fine_on = np.repeat(on, 4**fit.detail.levels)
+        fine_on = on[fit.detail.parent_faces]
         detail_parts = (
             Mesh(fine.vertices, fine.faces[~fine_on]),
             Mesh(fine.vertices, fine.faces[fine_on]),

@@ -81,7 +81,6 @@ from workbench.core.untangle import untangle
 from workbench.core.visibility import field_of_view_caps, seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.detail_layer import DetailLayer, build_detail
-from workbench.core.raycast import RayCaster
 from workbench.model.template import TemplateHead
 
 Progress = Callable[[str], None]
@@ -615,9 +614,7 @@ def fit_scan(
         ears = _mask(
             skin.n_vertices, [base.regions[r] for r in ("ear_l", "ear_r") if r in base.regions]
         )
-        layer = build_detail(
-            head.skin, scan_h, believed, caster=RayCaster.shared(scan_h), fixed=ears
-        )
+        layer = build_detail(head.skin, scan_h, believed, fixed=ears)
         seconds["detail"] = time.perf_counter() - t
 
     # figures
