@@ -332,3 +332,66 @@ def test_a_rigid_copy_borrows_the_shared_index_and_answers_the_same(skull, mirro
     # a copy that is not rigid (scaled) gets its own index
     scaled = skull.transformed(np.diag([1.1, 1.1, 1.1, 1.0]))
     assert MeshIndex.shared(scaled)._base is None
+
+
+def _check_median_splits(points: np.ndarray, leaves: np.ndarray) -> None:
+    """Every pair of sibling groups, at every level, is split at a median of its widest axis."""
+    flat = leaves.ravel()
+    assert sorted(flat[flat >= 0].tolist()) == list(range(len(points)))
+    coords = np.full((len(flat), 3), np.inf)
+    coords[flat >= 0] = points[flat[flat >= 0]]
+    seg = len(flat)
+    while seg > leaves.shape[1]:
+        for start in range(0, len(flat), seg):
+            group = coords[start : start + seg]
+            real = np.isfinite(group[:, 0])
+            if not real.any():
+                continue
+            axis = np.argmax(group[real].max(axis=0) - group[real].min(axis=0))
+            low, high = group[: seg // 2, axis], group[seg // 2 :, axis]
+            assert low.max() <= high.min()
+        seg //= 2
+
+
+@pytest.mark.parametrize("n_faces", [1, 7, 500, 4_099])
+def test_compiled_tree_build_agrees_with_the_numpy_build(n_faces):
+    """The numba build (bvh_build) and the numpy build give valid median splits, equal face
+    frames, boxes that hold their leaves' corners, and the same closest points."""
+    rng = np.random.default_rng(n_faces)
+    v = rng.normal(size=(n_faces + 2, 3)) * 30.0
+    v[rng.random(len(v)) < 0.1] = v[0]  # degenerate faces too
+    mesh = Mesh(v, rng.integers(0, len(v), (n_faces, 3)))
+    fast, slow = LeafTree(mesh), LeafTree(mesh, compiled=False)
+    centroids = mesh.triangles.mean(axis=1)
+    from workbench.core.bvh import _face_frames, _split_compiled, split_leaves
+
+    _check_median_splits(centroids, _split_compiled(centroids))
+    _check_median_splits(centroids, split_leaves(centroids))
+    assert fast.leaf_faces.shape == slow.leaf_faces.shape
+    want = _face_frames(mesh.triangles)[:, fast.leaf_faces]
+    finite = np.isfinite(want)
+    np.testing.assert_array_equal(np.isfinite(fast.table), finite)
+    # the inverse squared edge lengths of slivers carry cancellation: relative tolerance
+    np.testing.assert_allclose(fast.table[finite], want[finite], rtol=1e-6, atol=1e-9)
+    for tree in (fast, slow):
+        box = tree.obb32.astype(float)
+        corners = mesh.triangles[tree.leaf_faces].reshape(tree.n_leaves, -1, 3) - tree.origin
+        axes = box[:, 3:12].reshape(-1, 3, 3)
+        np.testing.assert_allclose(
+            axes @ np.swapaxes(axes, 1, 2), np.broadcast_to(np.eye(3), axes.shape), atol=1e-6
+        )
+        local = np.einsum("lkj,lcj->lck", axes, corners - box[:, None, :3])
+        assert (np.abs(local) <= box[:, None, 12:] + 1e-5 * (1.0 + np.abs(corners).max())).all()
+        # the leaves' axis-aligned boxes are their corners' (ties at a median, from the
+        # repeated corners, may put faces in other leaves in the two builds)
+        n = tree.n_leaves
+        lo, hi = corners.min(axis=1) + tree.origin, corners.max(axis=1) + tree.origin
+        assert (tree.aabb_lo[n:] <= lo).all() and (tree.aabb_hi[n:] >= hi).all()
+        np.testing.assert_allclose(tree.aabb_lo[n:], lo, atol=1e-6)
+        np.testing.assert_allclose(tree.aabb_hi[n:], hi, atol=1e-6)
+    pts = rng.normal(size=(300, 3)) * 60.0
+    a, b = MeshIndex(mesh), MeshIndex(mesh)
+    b._tree = slow
+    np.testing.assert_allclose(
+        a.closest_points(pts).distances, b.closest_points(pts).distances, atol=1e-10
+    )

@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core import bvh_build
 from workbench.core.mesh import Mesh
 
 _COLUMNS = 19  # a(3) u(3) v(3) n(3) bx cx cy ex iac ibc ylo
@@ -66,6 +67,18 @@ def split_leaves(points: np.ndarray, target_leaf: int = 8) -> np.ndarray:
         order = np.argpartition(key, seg.shape[1] // 2 - 1, axis=1)
         perm = np.take_along_axis(seg, order, axis=1).ravel()
         coords = np.take_along_axis(c, order[None], axis=2).reshape(3, -1)
+    return perm.reshape(1 << depth, leaf_size)
+
+
+def _split_compiled(points: np.ndarray, target_leaf: int = 8) -> np.ndarray:
+    """:func:`split_leaves` by the compiled loops of :mod:`workbench.core.bvh_build`."""
+    n = len(points)
+    depth = max(0, int(round(np.log2(max(1.0, n / target_leaf)))))
+    leaf_size = max(1, -(-n // (1 << depth)))
+    perm = np.full(leaf_size << depth, -1, np.int64)
+    perm[:n] = np.arange(n)
+    assert bvh_build.split_jit is not None  # the caller checked
+    bvh_build.split_jit(np.ascontiguousarray(points, dtype=np.float64), depth, leaf_size, perm)
     return perm.reshape(1 << depth, leaf_size)
 
 
@@ -200,23 +213,35 @@ class LeafTree:
         ray casting.
     """
 
-    def __init__(self, mesh: Mesh, target_leaf: int = 8):
+    def __init__(self, mesh: Mesh, target_leaf: int = 8, *, compiled: bool = True):
         tri = mesh.triangles
-        slots = split_leaves(tri.mean(axis=1), target_leaf)
+        use_jit = compiled and bvh_build.leaves_jit is not None
+        slots = (_split_compiled if use_jit else split_leaves)(tri.mean(axis=1), target_leaf)
         real = slots >= 0
         faces = np.where(real, slots, slots.ravel()[real.ravel()][-1])
         self.leaf_faces = faces
-        self.n_leaves, self.leaf_size = n, _ = faces.shape
+        self.n_leaves, self.leaf_size = n, size = faces.shape
         self.depth = int(np.log2(n))
-        self.table = np.ascontiguousarray(_face_frames(tri)[:, faces])  # (C, leaves, L)
         lo, hi = mesh.bounds
         self.origin = 0.5 * (lo + hi)
         self.size = float(np.abs(hi - lo).max()) + 1e-300
         # empty leaves (all padding) hold the filler face: harmless duplicates
-        corners = tri[faces].reshape(n, -1, 3) - self.origin
-        self.obb32 = oriented_boxes(corners).astype(np.float32)
         box_lo, box_hi = np.zeros((2 * n, 3)), np.zeros((2 * n, 3))
-        box_lo[n:], box_hi[n:] = corners.min(axis=1), corners.max(axis=1)
+        if use_jit:
+            self.table = np.empty((_COLUMNS, n, size))  # (C, leaves, L)
+            obb = np.empty((n, 15))
+            leaf_lo, leaf_hi = np.empty((n, 3)), np.empty((n, 3))
+            assert bvh_build.leaves_jit is not None  # use_jit
+            bvh_build.leaves_jit(
+                np.ascontiguousarray(tri), faces, self.origin, self.table, obb, leaf_lo, leaf_hi
+            )
+            self.obb32 = obb.astype(np.float32)
+            box_lo[n:], box_hi[n:] = leaf_lo, leaf_hi
+        else:
+            self.table = np.ascontiguousarray(_face_frames(tri)[:, faces])
+            corners = tri[faces].reshape(n, -1, 3) - self.origin
+            self.obb32 = oriented_boxes(corners).astype(np.float32)
+            box_lo[n:], box_hi[n:] = corners.min(axis=1), corners.max(axis=1)
         for level in range(self.depth - 1, -1, -1):
             a, b = 1 << level, 2 << level
             box_lo[a:b] = np.minimum(box_lo[2 * a : 2 * b : 2], box_lo[2 * a + 1 : 2 * b : 2])
