@@ -205,3 +205,33 @@ def test_open_face_edges_mark_the_boundary() -> None:
     # face 0: (0,1) open, (1,2) open, (2,0) the diagonal; face 1: (0,2) diagonal, (2,3), (3,0)
     np.testing.assert_array_equal(m.open_face_edges, [[True, True, False], [False, True, True]])
     assert not subdivided_octahedron(2).open_face_edges.any()
+
+
+@pytest.mark.parametrize("copy", ["rigid", "mirrored", "with_vertices", "reversed_winding"])
+def test_copies_take_over_the_connectivity_and_it_is_what_they_would_compute(copy) -> None:
+    """Copies with the same (or corner-reversed) faces carry the original's cached edges,
+    boundary and components instead of recomputing them; each equals a fresh computation."""
+    rng = np.random.default_rng(3)
+    base = subdivided_octahedron(2)
+    keep = rng.random(base.n_faces) > 0.15  # holes, so boundaries and several pieces
+    mesh = Mesh(base.vertices, base.faces[keep])
+    filled = (mesh.open_face_edges, mesh.face_components, mesh.vertex_faces_matrix)
+    assert all(x is not None for x in filled)  # the caches are filled
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
+    out = {
+        "rigid": lambda: mesh.transformed(
+            np.array([[0, -1, 0, 5], [1, 0, 0, 0], [0, 0, 1, 2], [0, 0, 0, 1.0]])
+        ),
+        "mirrored": lambda: mesh.transformed(mirror),
+        "with_vertices": lambda: mesh.with_vertices(mesh.vertices * 2.0),
+        "reversed_winding": mesh.reversed_winding,
+    }[copy]()
+    assert "_unique_edges" in out.__dict__ and "open_face_edges" in out.__dict__  # taken over
+    fresh = Mesh(out.vertices, out.faces)
+    np.testing.assert_array_equal(out.edges_sorted, fresh.edges_sorted)
+    for got, want in zip(out._unique_edges, fresh._unique_edges, strict=True):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(out.open_face_edges, fresh.open_face_edges)
+    np.testing.assert_array_equal(out.face_components, fresh.face_components)
+    assert (out.vertex_faces_matrix != fresh.vertex_faces_matrix).nnz == 0
+    assert [len(x) for x in boundary_loops(out)] == [len(x) for x in boundary_loops(fresh)]

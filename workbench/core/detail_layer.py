@@ -38,6 +38,7 @@ did not cross before) the displacement fades to zero over a few edges.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import sparse
@@ -124,7 +125,14 @@ class DetailLayer:
 
     def smooth_surface(self, coarse_vertices: np.ndarray) -> Mesh:
         """The subdivided coarse skin without the displacement."""
-        return Mesh(np.asarray(self.matrix @ np.asarray(coarse_vertices, float)), self.faces)
+        v = np.asarray(self.matrix @ np.asarray(coarse_vertices, float))
+        return self._fine_topology.with_vertices(v)
+
+    @cached_property
+    def _fine_topology(self) -> Mesh:
+        """A fine mesh whose cached connectivity (edges, boundary) every surface of this layer
+        takes over (:meth:`Mesh.with_vertices`): one edge search per layer, not per call."""
+        return Mesh(np.zeros((self.matrix.shape[0], 3)), self.faces)
 
     @property
     def parent_faces(self) -> np.ndarray:
@@ -318,4 +326,6 @@ def build_detail(
     d = np.clip(d, low, high)
     d = _unturn(fine, normals, d)
     d, crossings = _uncross(fine, normals, d, adj)
-    return DetailLayer(levels, matrix, faces, d, belief > 0.0, crossings)
+    layer = DetailLayer(levels, matrix, faces, d, belief > 0.0, crossings)
+    layer.__dict__["_fine_topology"] = fine  # its edges are found already
+    return layer

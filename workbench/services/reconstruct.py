@@ -211,7 +211,7 @@ def outward(mesh: Mesh) -> Mesh:
     """
     centres = mesh.triangles.mean(axis=1)
     agree = np.einsum("ij,ij->i", mesh.face_cross, centres - centres.mean(axis=0)).sum()
-    return mesh if agree >= 0 else Mesh(mesh.vertices, mesh.faces[:, ::-1])
+    return mesh if agree >= 0 else mesh.reversed_winding()
 
 
 def warp_head(

@@ -215,7 +215,7 @@ def scan_in_frame(scan: Mesh, to_head: np.ndarray, mirrored: bool) -> Mesh:
     structures built on ``scan`` serve it too."""
     moved = scan.transformed(to_head)  # (winding flipped when to_head reflects)
     if bool(np.linalg.det(np.asarray(to_head, float)[:3, :3]) < 0) != mirrored:
-        moved = Mesh(moved.vertices, moved.faces[:, ::-1])
+        moved = moved.reversed_winding()
     return outward(moved)
 
 
