@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import pyvista as pv
@@ -206,12 +208,21 @@ def test_a_rigid_copy_casts_on_the_originals_scene_with_the_same_hits(skull, mir
     assert (a.face_ids == b.face_ids).mean() > 0.99
 
 
-def test_embree_slabs_are_watertight_and_agree_with_one_scene(skull, casters, monkeypatch):
+@pytest.mark.parametrize("per_thread", [20_000, 100])
+def test_embree_slabs_are_watertight_and_agree_with_one_scene(
+    skull, casters, monkeypatch, per_thread
+):
     """Many small scenes (slabs) give the hits of one: no ray slips through a
-    seam between slabs, the nearest slab's hit wins, face ids are global."""
+    seam between slabs, the nearest slab's hit wins (each slab is asked only for
+    hits nearer than the last), face ids are global; also with the rays shared
+    out among threads (``per_thread`` 100) and within a ``max_distance``."""
     import workbench.core.raycast as rc
 
     monkeypatch.setattr(rc, "EMBREE_CHUNK", 7_000)
+    monkeypatch.setattr(rc, "EMBREE_RAYS_PER_THREAD", per_thread)
+    monkeypatch.setenv("WORKBENCH_THREADS", "2")
+    want = max(1, min(2, os.cpu_count() or 1, 4000 // per_thread))
+    assert len(rc._blocks(4000, per_thread)) == want
     sliced = RayCaster(skull, "embree")
     assert len(sliced._scene) == -(-skull.n_faces // 7_000)
     reference = casters[1]
@@ -232,3 +243,10 @@ def test_embree_slabs_are_watertight_and_agree_with_one_scene(skull, casters, mo
         assert differ[:3000].mean() < 0.01  # random rays: rare ties
         # rays aimed at vertices and edges: either face of the tie, same point
         np.testing.assert_allclose(a.points[differ & a.hit], b.points[differ & a.hit], atol=1e-5)
+    # (not near 20 mm, where all the aimed rays hit: float32 ties at the bound)
+    near = 0.8 * float(np.median(b.distance[:3000][b.hit[:3000]]))
+    a = sliced.first_hits(o, d, max_distance=near)
+    b = reference.first_hits(o, d, max_distance=near)
+    np.testing.assert_array_equal(a.hit, b.hit)
+    assert 0.02 < a.hit.mean() < 0.5  # the bound cuts many hits, not all
+    np.testing.assert_allclose(a.distance[a.hit], b.distance[b.hit], atol=1e-5)

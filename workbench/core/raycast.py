@@ -26,6 +26,7 @@ surface it starts behind (Kähler 2003, §8.4.3).
 from __future__ import annotations
 
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +34,7 @@ import numpy as np
 
 from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
+from workbench.core.threads import worker_count
 
 
 @dataclass(frozen=True)
@@ -103,7 +105,6 @@ class RayCaster:
         self.backend = backend
         self._scene = _build_embree(mesh) if backend == "embree" else None
         self._tree = LeafTree(mesh) if backend == "numpy" else None
-        self._lock = threading.Lock()  # one embree query at a time on a shared caster
         self._to_base: np.ndarray | None = None  # set on casters borrowing another's scene
 
     @staticmethod
@@ -131,7 +132,7 @@ class RayCaster:
         """
         caster = object.__new__(RayCaster)
         caster.mesh, caster.backend = mesh, base.backend
-        caster._scene, caster._tree, caster._lock = base._scene, base._tree, base._lock
+        caster._scene, caster._tree = base._scene, base._tree
         caster._to_base = np.asarray(to_base, dtype=np.float64)
         return caster
 
@@ -157,7 +158,9 @@ class RayCaster:
         start = np.zeros(len(o))
         todo = np.arange(len(o))
         for _ in range(max_skips + 1):
-            f_new, t_new = self._cast(o[todo] + start[todo, None] * d[todo], d[todo])
+            # (a hit farther than max_distance from its ray's own origin is no hit)
+            limit = max_distance - float(start[todo].min())
+            f_new, t_new = self._cast(o[todo] + start[todo, None] * d[todo], d[todo], limit)
             t_new = t_new + start[todo]
             face[todo], t[todo] = f_new, t_new
             if not cull_backfaces:
@@ -179,30 +182,49 @@ class RayCaster:
         face = np.where(hit, face, -1)
         return self._finish(o, d, face, np.where(hit, t, np.inf))
 
-    def _cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _cast(
+        self, o: np.ndarray, d: np.ndarray, limit: float = np.inf
+    ) -> tuple[np.ndarray, np.ndarray]:
         if self._to_base is not None:
             rot = self._to_base[:3, :3]
             o, d = o @ rot.T + self._to_base[:3, 3], d @ rot.T
         if self.backend == "embree":
-            return self._embree(o, d)
+            return self._embree(o, d, limit)
         if self._tree is None:
             raise RuntimeError("numpy ray-casting backend without its leaf tree")
         return _tree_cast(self._tree, o, d)
 
-    def _embree(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        o32, d32 = o.astype(np.float32), d.astype(np.float32)
-        face = np.full(len(o), -1, np.int64)
-        t = np.full(len(o), np.inf)
+    def _embree(
+        self, o: np.ndarray, d: np.ndarray, limit: float = np.inf
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest hit over all slabs: each slab is asked only for hits nearer than the
+        best so far (Embree's ``tfar``, also capped at ``limit``), so a ray stops early in
+        the slabs behind its hit; many rays are split among the worker threads (Embree
+        casts with the GIL released; the scenes were committed when built)."""
         if self._scene is None:
             raise RuntimeError("embree ray-casting backend without its scenes")
-        with self._lock:
-            for scene, ids in self._scene:
-                res = scene.run(o32, d32, output=1)
+        o32, d32 = np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
+        # float32 rounds the limit up, never down: no hit within it is lost
+        far = np.float32(np.inf) if not np.isfinite(limit) else np.float32(limit)
+        far = np.nextafter(far, np.float32(np.inf)) if np.isfinite(far) else far
+        face = np.full(len(o), -1, np.int64)
+        tfar = np.full(len(o), far, np.float32)
+        scenes = self._scene
+
+        def cast(lo: int, hi: int) -> None:
+            tf = tfar[lo:hi]  # a view: each slab's run lowers it where it hits
+            for scene, ids in scenes:
+                res = scene.run(o32[lo:hi], d32[lo:hi], dists=tf, output=1)
                 hit = res["geomID"] >= 0
-                tc = np.where(hit, res["tfar"].astype(np.float64), np.inf)
-                nearer = tc < t
-                t[nearer] = tc[nearer]
-                face[nearer] = ids[res["primID"][nearer]]
+                face[lo:hi][hit] = ids[res["primID"][hit]]
+
+        blocks = _blocks(len(o), EMBREE_RAYS_PER_THREAD)
+        if len(blocks) == 1:
+            cast(*blocks[0])
+        else:
+            with ThreadPoolExecutor(max_workers=len(blocks)) as pool:
+                list(pool.map(lambda b: cast(*b), blocks))
+        t = np.where(face >= 0, tfar.astype(np.float64), np.inf)
         return face, t
 
     def _finish(self, o: np.ndarray, d: np.ndarray, face: np.ndarray, t: np.ndarray) -> RayHits:
@@ -312,6 +334,17 @@ def _embree_available() -> bool:
     except ImportError:
         return False
     return True
+
+
+#: rays per thread below which one cast is not shared out among threads
+EMBREE_RAYS_PER_THREAD = 20_000
+
+
+def _blocks(n: int, least: int) -> list[tuple[int, int]]:
+    """``[(start, stop)]`` of ``n`` rays in one block per worker thread, each ≥ ``least``."""
+    parts = max(1, min(worker_count(), n // max(least, 1)))
+    edges = np.linspace(0, n, parts + 1).astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
 #: triangles per Embree scene (see :func:`_build_embree`)
