@@ -117,7 +117,7 @@ def field_of_view_caps(mesh: Mesh) -> np.ndarray:
     if mesh.n_faces == 0:
         return caps
     corners = mesh.vertices[mesh.faces]  # (m, 3, 3)
-    used = mesh.vertices[np.unique(mesh.faces)]
+    used = mesh.vertices[np.bincount(mesh.faces.ravel(), minlength=mesh.n_vertices) > 0]
     lo, hi = used.min(axis=0), used.max(axis=0)
     fn, area = mesh.face_normals, mesh.face_areas
     for axis in range(3):

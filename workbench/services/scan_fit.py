@@ -198,7 +198,7 @@ def check_scan_mesh(mesh: Mesh, source: str | PathLike[str]) -> None:
     bad = int((~np.isfinite(mesh.vertices)).any(axis=1).sum())
     if bad:
         raise InputError(source, f"{bad} vertices have NaN or infinite coordinates")
-    used = mesh.vertices[np.unique(mesh.faces)]
+    used = mesh.vertices[np.bincount(mesh.faces.ravel(), minlength=mesh.n_vertices) > 0]
     extent = used.max(axis=0) - used.min(axis=0)
     lo, hi = SCAN_EXTENT_MM
     largest = float(extent.max())

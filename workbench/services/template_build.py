@@ -49,6 +49,7 @@ from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import Level, Registration, Target, register, smoothstep
 from workbench.core.spatial import MeshIndex
+from workbench.core.threads import worker_count
 from workbench.model.evidence import file_sha256
 from workbench.model.template import TemplateHead
 from workbench.services.reconstruct import move_eyes, outward
@@ -169,7 +170,17 @@ def skin_target_weights(skin_h: Mesh, head_skin: Mesh) -> tuple[np.ndarray, floa
         rim = np.concatenate(loops)
         d, _ = cKDTree(skin_h.vertices[rim]).query(skin_h.vertices)
         w *= smoothstep(d / SKIN_RIM_MM)
-    d = MeshIndex(head_skin).closest_points(skin_h.vertices).distances
+    # the exact distance matters only between the two bounds: the nearest skin vertex is
+    # an upper bound of it, that less the longest skin edge a lower one (a point of a
+    # triangle lies within its longest edge of a corner); the same weights, ~0.5 s less
+    # on a 300k-vertex scan
+    corners = head_skin.vertices[np.unique(head_skin.faces)]
+    d, _ = cKDTree(corners).query(skin_h.vertices, workers=worker_count())
+    ends = head_skin.vertices[head_skin.edges_unique]
+    longest = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+    middle = np.flatnonzero((d > SKIN_EXTRA_MM[0]) & (d - longest < SKIN_EXTRA_MM[1]))
+    if len(middle):
+        d[middle] = MeshIndex(head_skin).closest_points(skin_h.vertices[middle]).distances
     extra = 1.0 - smoothstep((d - SKIN_EXTRA_MM[0]) / (SKIN_EXTRA_MM[1] - SKIN_EXTRA_MM[0]))
     areas = np.zeros(skin_h.n_vertices)
     np.add.at(areas, skin_h.faces.ravel(), np.repeat(skin_h.face_areas / 3.0, 3))
