@@ -73,3 +73,26 @@ def test_a_mirrored_start_keeps_its_handedness(bust, head_male):
     )
     assert np.linalg.det(placed.matrix[:3, :3]) < 0
     assert placed.loss < 0.3
+
+
+def test_matches_at_a_closest_vertex_do_not_depend_on_which_face_the_tree_returns():
+    """At a closest vertex (a tie between its faces) the cosine is the vertex's pseudo-normal
+    against the query normal, whichever face the search returned; the numpy-built and the
+    compiled tree lay their leaves out differently and must give the same matches."""
+    from workbench.core.bvh import LeafTree
+    from workbench.core.face_pose import _Face
+    from workbench.core.mesh import Mesh
+
+    # a pyramid: its apex is shared by four faces of very different normals
+    v = np.array([[0, 0, 10.0], [-10, -10, 0], [10, -10, 0], [10, 10, 0], [-10, 10, 0]])
+    f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [1, 4, 3], [1, 3, 2]])
+    mesh = Mesh(v, f)
+    points = np.array([[0.0, 0.0, 15.0], [0.1, -0.1, 14.0]])  # closest point: the apex
+    normals = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    fast, slow = MeshIndex(mesh), MeshIndex(mesh)
+    slow._tree = LeafTree(mesh, compiled=False)
+    got = [_Face(points, normals, index).match(np.eye(4), np.arange(2)) for index in (fast, slow)]
+    np.testing.assert_allclose(got[0][0], [v[0], v[0]], atol=1e-12)
+    np.testing.assert_allclose(got[0][2], got[1][2], atol=1e-12)
+    # the apex's angle-weighted normal is +z by symmetry: cos 1 (a side face's is ~0.7)
+    np.testing.assert_allclose(got[0][2], 1.0, atol=1e-9)

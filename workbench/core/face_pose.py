@@ -101,7 +101,6 @@ class _Face:
         self.points = np.asarray(points, float)
         self.normals = np.asarray(normals, float)
         self.scan = scan
-        self.scan_normals = scan.mesh.face_normals
         cloud = surface_samples(scan.mesh, SCAN_SAMPLES, np.random.default_rng(0))
         self.samples, self.sample_normals = cloud.points, cloud.normals
         self.tree = cKDTree(self.samples)
@@ -118,7 +117,10 @@ class _Face:
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         if exact:
             cp = self.scan.closest_points(pts)
-            cos = (self.scan_normals[cp.face_ids] * n).sum(axis=1)
+            # the normal of the closest feature, not of the face that holds it: at a closest
+            # vertex or edge any of its faces may be returned (a tie the tree breaks), and
+            # their normals differ; the fit then depended on the tree's layout
+            cos = (self.scan.pseudo_normals(cp.face_ids, cp.barycentric) * n).sum(axis=1)
             return cp.points, cp.distances / size, cos
         d, j = self.tree.query(pts)
         return self.samples[j], d / size, (self.sample_normals[j] * n).sum(axis=1)

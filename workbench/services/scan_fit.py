@@ -901,7 +901,8 @@ def _scan_support(
     cp = index.closest_points(skin_v)
     w = np.einsum("ij,ij->i", cp.barycentric, scan_weights[scan_h.faces[cp.face_ids]])
     n = vertex_normals(Mesh(skin_v, faces))
-    cos = np.einsum("ij,ij->i", n, scan_h.face_normals[cp.face_ids])
+    # (the closest feature's normal: a face's would depend on which face a tie returned)
+    cos = np.einsum("ij,ij->i", n, index.pseudo_normals(cp.face_ids, cp.barycentric))
     return (w > HEAD_WEIGHT) & (cos > ON_SCAN_COS), cp.distances
 
 
