@@ -342,3 +342,30 @@ def test_reference_skin(head_male) -> None:
     left, right = cen[cen[:, 0] > 0], cen[cen[:, 0] < 0] * [-1, 1, 1]
     assert len(left) == len(right)
     assert np.linalg.norm(left[:, None] - right[None], axis=2).min(axis=1).max() < 1e-6
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_grid_and_tree_candidate_searches_agree(seed: int, monkeypatch) -> None:
+    """The grid search (numba) and the k-d tree search give the same candidates and pairs:
+    small faces, a few huge ones spanning many cells (swept apart), ``among``."""
+    import workbench.core.self_intersection as si
+
+    if si._grid_jit is None:
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(seed)
+    sphere = subdivided_octahedron(3)
+    pair = concatenate([sphere, Mesh(sphere.vertices + [0.9, 0.13, 0.07], sphere.faces)])
+    n = 300
+    v = (rng.uniform(0, 20, (n, 1, 3)) + 0.5 * rng.normal(size=(n, 3, 3))).reshape(-1, 3)
+    v[:6] = rng.uniform(-5, 25, (6, 3))  # two huge triangles across the soup
+    soup = Mesh(v, np.arange(3 * n).reshape(n, 3))
+    for mesh in (pair, soup):
+        among = rng.random(mesh.n_faces) < 0.6
+        fast = [self_intersections(mesh), self_intersections(mesh, among=among)]
+        with monkeypatch.context() as m:
+            m.setattr(si, "_grid_jit", None)
+            slow = [self_intersections(mesh), self_intersections(mesh, among=among)]
+        for a, b in zip(fast, slow, strict=True):
+            assert a.candidates == b.candidates > 0
+            np.testing.assert_array_equal(a.pairs, b.pairs)
+        assert fast[0].count > 0

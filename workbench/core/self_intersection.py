@@ -33,14 +33,19 @@ the tolerance excludes.
 
 Candidate pairs
 ---------------
-Each face is bounded by the sphere about its centroid through its farthest
-corner.  Faces are grouped by that radius in classes a factor √2 apart; for
-every pair of classes a k-d tree over the centroids returns the face pairs
-whose centres are within the two classes' largest radii.  The pairs are then
-kept only when their exact spheres and their axis-aligned boxes (widened by
-``tol_mm``) overlap and they share fewer than two vertices; those
-*candidates* are tested exactly in chunks of :data:`CHUNK_PAIRS`, so the
-memory stays bounded whatever the mesh size.
+Each face is bounded by its axis-aligned box (widened by ``tol_mm``) and by
+the sphere about its centroid through its farthest corner.  The boxes go
+into a uniform grid (cell side twice the median box size; the few boxes
+spanning more than :data:`GRID_MAX_CELLS` cells are compared with all faces)
+and every pair of overlapping boxes sharing a cell is listed once, in the
+cell holding the low corner of the overlap (a numba kernel).  Without numba,
+faces are grouped by sphere radius in classes a factor √2 apart and a k-d
+tree over the centroids of every pair of classes returns the face pairs
+whose centres are within the two classes' largest radii.  Either way the
+pairs are kept only when their exact spheres and boxes overlap and they
+share fewer than two vertices; those *candidates* (the same set from both
+searches) are tested exactly in chunks of :data:`CHUNK_PAIRS`.  On the
+154k-triangle detail skin the grid takes 0.32 s where the trees took 0.85 s.
 
 The prefilter and the edge-through-face test run as numba kernels (one pass
 per pair, no temporaries; the same arithmetic as the numpy code beside them,
@@ -112,7 +117,7 @@ def self_intersections(
     normal, good = _unit_normals(tri)
     found: list[np.ndarray] = []
     n_candidates = 0
-    for cand in _candidate_pairs(tri, faces, tol):
+    for cand in _candidate_pairs(tri, faces, tol, mask):
         if mask is not None:
             cand = cand[mask[cand[:, 0]] | mask[cand[:, 1]]]
         n_candidates += len(cand)
@@ -167,8 +172,11 @@ def pairs_cross(mesh: Mesh, pairs: np.ndarray, *, tol_mm: float = 1e-6) -> np.nd
 
 
 # ---------------------------------------------------------------- candidates
-def _candidate_pairs(tri: np.ndarray, faces: np.ndarray, tol: float) -> Iterator[np.ndarray]:
-    """Yield ``(k, 2)`` int64 arrays of face pairs ``i < j`` worth testing exactly."""
+def _candidate_pairs(
+    tri: np.ndarray, faces: np.ndarray, tol: float, among: np.ndarray | None = None
+) -> Iterator[np.ndarray]:
+    """Yield ``(k, 2)`` int64 arrays of face pairs ``i < j`` worth testing exactly
+    (with ``among``: pairs with at least one such face; the caller filters again)."""
     m = len(tri)
     if m < 2:
         return
@@ -178,6 +186,15 @@ def _candidate_pairs(tri: np.ndarray, faces: np.ndarray, tol: float) -> Iterator
     hi = tri.max(axis=1) + tol
     live = np.flatnonzero(np.isfinite(radius) & np.isfinite(centre).all(axis=1))
     if len(live) < 2:
+        return
+    if _grid_jit is not None:
+        pair = _grid_pairs(lo, hi, live, among)
+        for start in range(0, len(pair), 4 * CHUNK_PAIRS):
+            kept = _prefilter(
+                pair[start : start + 4 * CHUNK_PAIRS], centre, radius, lo, hi, faces, tol
+            )
+            if len(kept):
+                yield kept
         return
     # radius classes a factor sqrt(2) apart (tiny faces all in the lowest class)
     r_live = radius[live]
@@ -235,6 +252,131 @@ def _prefilter(
         for b in range(3):
             shared += fi[:, a] == fj[:, b]
     return pair[shared < 2]
+
+
+#: a face whose box spans more grid cells than this is paired by a sweep over all faces
+GRID_MAX_CELLS = 27
+
+
+def _grid_pairs(
+    lo: np.ndarray, hi: np.ndarray, live: np.ndarray, among: np.ndarray | None
+) -> np.ndarray:
+    """``(k, 2)`` pairs ``i < j`` of ``live`` faces whose boxes ``lo``/``hi`` overlap.
+
+    Boxes go into the cells of a uniform grid they overlap (cell side twice the
+    median box extent, so most boxes touch 1-8 cells); a pair is tested in
+    each cell the two share and kept only in the cell holding the low corner
+    of their overlap, so once.  Boxes spanning more than :data:`GRID_MAX_CELLS`
+    cells (a few large triangles) are compared with every face instead.
+    """
+    assert _grid_jit is not None and _sweep_jit is not None  # the caller checked
+    box_lo, box_hi = lo[live], hi[live]
+    extent = (box_hi - box_lo).max(axis=1)
+    cell = max(2.0 * float(np.median(extent)), 1e-9 * float(np.abs(box_lo).max() + 1.0), 1e-300)
+    origin = box_lo.min(axis=0)
+    c_lo = np.floor((box_lo - origin) / cell).astype(np.int64)
+    c_hi = np.floor((box_hi - origin) / cell).astype(np.int64)
+    span = c_hi - c_lo + 1
+    count = span.prod(axis=1)
+    big = count > GRID_MAX_CELLS
+    dims = c_hi.max(axis=0) + 1
+    use = np.ones(len(lo), bool) if among is None else np.asarray(among, bool)
+    small = np.flatnonzero(~big)
+    sizes = count[small]
+    keys = np.empty(int(sizes.sum()), np.int64)
+    owner = np.empty(len(keys), np.int64)
+    _fill_cells_jit(c_lo[small], c_hi[small], dims, np.cumsum(sizes) - sizes, keys, owner)
+    order = np.argsort(keys, kind="stable")
+    keys, owner = keys[order], live[small][owner[order]]
+    cell_lo = np.zeros((len(lo), 3), np.int64)
+    cell_lo[live] = c_lo
+    pairs = [_grid_jit(keys, owner, lo, hi, use, dims, cell_lo)]
+    if big.any():
+        is_big = np.zeros(len(lo), bool)
+        is_big[live[big]] = True
+        pairs.append(_sweep_jit(live[big], live, lo, hi, use, is_big))
+    return np.concatenate(pairs)
+
+
+def _fill_cells_kernel(c_lo, c_hi, dims, start, keys, owner):  # pragma: no cover
+    """Every (cell key, box) entry: box ``b``'s cells from ``start[b]`` on."""
+    for b in range(c_lo.shape[0]):
+        k = start[b]
+        for x in range(c_lo[b, 0], c_hi[b, 0] + 1):
+            for y in range(c_lo[b, 1], c_hi[b, 1] + 1):
+                for z in range(c_lo[b, 2], c_hi[b, 2] + 1):
+                    keys[k] = (x * dims[1] + y) * dims[2] + z
+                    owner[k] = b
+                    k += 1
+
+
+def _grid_kernel(keys, owner, lo, hi, use, dims, cell_lo):  # pragma: no cover
+    """Overlapping box pairs within each cell, each reported in one cell only."""
+    n = keys.shape[0]
+    out = np.empty((max(1024, n), 2), np.int64)
+    found = 0
+    start = 0
+    while start < n:
+        stop = start + 1
+        while stop < n and keys[stop] == keys[start]:
+            stop += 1
+        key = keys[start]
+        cz = key % dims[2]
+        cy = (key // dims[2]) % dims[1]
+        cx = key // (dims[2] * dims[1])
+        for p in range(start, stop):
+            a = owner[p]
+            for q in range(p + 1, stop):
+                b = owner[q]
+                if not (use[a] or use[b]):
+                    continue
+                ok = True
+                for c in range(3):
+                    if lo[a, c] > hi[b, c] or lo[b, c] > hi[a, c]:
+                        ok = False
+                        break
+                # the low corner of the overlap (its cell: the larger of the two boxes'
+                # low cells, floor being monotonic) lies in this cell: report here only
+                if (
+                    not ok
+                    or max(cell_lo[a, 0], cell_lo[b, 0]) != cx
+                    or max(cell_lo[a, 1], cell_lo[b, 1]) != cy
+                    or max(cell_lo[a, 2], cell_lo[b, 2]) != cz
+                ):
+                    continue
+                if found == out.shape[0]:
+                    grown = np.empty((2 * found, 2), np.int64)
+                    grown[:found] = out[:found]
+                    out = grown
+                out[found, 0] = min(a, b)
+                out[found, 1] = max(a, b)
+                found += 1
+        start = stop
+    return out[:found].copy()
+
+
+def _sweep_kernel(big, live, lo, hi, use, is_big):  # pragma: no cover
+    """Pairs of each large box with every live box it overlaps (large pairs once)."""
+    out = np.empty((0, 2), np.int64)
+    for stage in range(2):
+        found = 0
+        for a in big:
+            for b in live:
+                if b == a or (is_big[b] and b < a) or not (use[a] or use[b]):
+                    continue
+                ok = True
+                for c in range(3):
+                    if lo[a, c] > hi[b, c] or lo[b, c] > hi[a, c]:
+                        ok = False
+                        break
+                if ok:
+                    if stage == 1:
+                        out[found, 0] = min(a, b)
+                        out[found, 1] = max(a, b)
+                    found += 1
+        if stage == 0:
+            out = np.empty((found, 2), np.int64)
+    return out
 
 
 # ---------------------------------------------------------------- exact test
@@ -484,6 +626,11 @@ if numba is not None:
     _edges_through_one = numba.njit(cache=True, nogil=True)(_edges_through_one)
     _prefilter_jit = numba.njit(cache=True, nogil=True)(_prefilter_kernel)
     _pairs_jit = numba.njit(cache=True, nogil=True)(_pairs_kernel)
+    _fill_cells_jit = numba.njit(cache=True, nogil=True)(_fill_cells_kernel)
+    _grid_jit = numba.njit(cache=True, nogil=True)(_grid_kernel)
+    _sweep_jit = numba.njit(cache=True, nogil=True)(_sweep_kernel)
 else:  # pragma: no cover - numba is a dependency
     _prefilter_jit = None
     _pairs_jit = None
+    _grid_jit = None
+    _sweep_jit = None
