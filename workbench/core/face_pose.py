@@ -34,6 +34,7 @@ from scipy.spatial import cKDTree
 from workbench.core.rigid_search import surface_samples
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import similarity_transform
+from workbench.core.threads import worker_count
 
 #: robust scale of the face loss (mm, in the reference's size)
 LOSS_SCALE_MM = 4.0
@@ -122,7 +123,7 @@ class _Face:
             # their normals differ; the fit then depended on the tree's layout
             cos = (self.scan.pseudo_normals(cp.face_ids, cp.barycentric) * n).sum(axis=1)
             return cp.points, cp.distances / size, cos
-        d, j = self.tree.query(pts)
+        d, j = self.tree.query(pts, workers=worker_count())
         return self.samples[j], d / size, (self.sample_normals[j] * n).sum(axis=1)
 
     def loss(self, g: np.ndarray, ids: np.ndarray, exact: bool = True) -> tuple[float, float]:
@@ -142,7 +143,9 @@ class _Face:
         # beyond 4 τ the loss is 1 anyway; a bounded query is ~10 times faster for the
         # many far-off starts
         bound = 4.0 * LOSS_SCALE_MM * float(size.max())
-        d, j = self.tree.query(pts.reshape(-1, 3), distance_upper_bound=bound)
+        d, j = self.tree.query(
+            pts.reshape(-1, 3), distance_upper_bound=bound, workers=worker_count()
+        )
         far = ~np.isfinite(d)
         j[far] = 0
         d = d.reshape(len(gs), -1) / size[:, None]

@@ -52,6 +52,7 @@ from scipy.spatial import cKDTree
 
 from workbench.core.frame import apply_transform
 from workbench.core.mesh import Mesh
+from workbench.core.threads import worker_count
 
 MIN_COS = 0.3
 #: σ of the robust loss of the score (mm)
@@ -389,7 +390,7 @@ class _Scorer:
         Returns ``(distance, index, ok)``; ``ok`` is False where none of the
         ``k`` nearest samples agrees (distance is then the plain nearest).
         """
-        d, j = self.tree.query(pts, k=k)
+        d, j = self.tree.query(pts, k=k, workers=worker_count())
         cos = np.einsum("ikj,ij->ik", self.ref.normals[j], nrm)
         good = cos > MIN_COS
         first = np.where(good.any(axis=1), good.argmax(axis=1), 0)

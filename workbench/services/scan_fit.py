@@ -81,6 +81,7 @@ from workbench.core.untangle import untangle
 from workbench.core.visibility import field_of_view_caps, seen_from_outside
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.detail_layer import DetailLayer, build_detail
+from workbench.core.threads import worker_count
 from workbench.model.template import TemplateHead
 
 Progress = Callable[[str], None]
@@ -508,7 +509,7 @@ def fit_scan(
     caps = field_of_view_caps(scan)
     cap_d = np.full(scan.n_vertices, np.inf)
     if caps.any():
-        cap_d, _ = cKDTree(scan_h.vertices[caps]).query(scan_h.vertices)
+        cap_d, _ = cKDTree(scan_h.vertices[caps]).query(scan_h.vertices, workers=worker_count())
     belief = seen * smoothstep(cap_d / RIM_EXCLUDE_MM)
     seconds["orientation"] = time.perf_counter() - t0
 
@@ -622,11 +623,13 @@ def fit_scan(
     t = time.perf_counter()
     fig: dict = {}
     fitted = head.skin
-    _, nearest = cKDTree(fitted.vertices).query(scan_h.vertices)
+    _, nearest = cKDTree(fitted.vertices).query(scan_h.vertices, workers=worker_count())
     rim_d = np.full(scan_h.n_vertices, np.inf)
     loops = boundary_loops(scan_h)
     if loops:
-        rim_d, _ = cKDTree(scan_h.vertices[np.concatenate(loops)]).query(scan_h.vertices)
+        rim_d, _ = cKDTree(scan_h.vertices[np.concatenate(loops)]).query(
+            scan_h.vertices, workers=worker_count()
+        )
     rim_d = np.minimum(rim_d, cap_d)
     in_face = face[nearest] & (rim_d > RIM_EXCLUDE_MM)
     counted = in_face & (fit.target_weights > HEAD_WEIGHT)

@@ -168,7 +168,7 @@ def skin_target_weights(skin_h: Mesh, head_skin: Mesh) -> tuple[np.ndarray, floa
     loops = boundary_loops(skin_h)
     if loops:
         rim = np.concatenate(loops)
-        d, _ = cKDTree(skin_h.vertices[rim]).query(skin_h.vertices)
+        d, _ = cKDTree(skin_h.vertices[rim]).query(skin_h.vertices, workers=worker_count())
         w *= smoothstep(d / SKIN_RIM_MM)
     # the exact distance matters only between the two bounds: the nearest skin vertex is
     # an upper bound of it, that less the longest skin edge a lower one (a point of a
