@@ -71,3 +71,24 @@ def test_field_of_view_caps_are_the_flat_lids_on_the_box():
     inner = lid & (np.hypot(v[:, 0], v[:, 1]) < 35.0)  # away from the lid's rim
     assert caps[inner].all()
     assert not caps[v[:, 2] > -29.0].any()  # the round surface is skin, even at its poles
+
+
+def test_what_is_seen_does_not_depend_on_the_axes_or_the_winding():
+    """A rotated, mirrored or rewound copy sees the same vertices: the cone of rays turns
+    with the surface (toward a neighbour), not with the file's axes."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(4)
+    base = _sphere(40.0, n=20)
+    # deep bumps and pits: many vertices are seen along only some rays of their cone
+    bumpy = base.with_vertices(base.vertices * rng.uniform(0.6, 1.4, (base.n_vertices, 1)))
+    seen = seen_from_outside(bumpy, min_free=4)
+    assert 0.05 < 1.0 - seen.mean() < 0.95  # the cone decides for many vertices
+    rot = np.eye(4)
+    rot[:3, :3] = Rotation.from_euler("xyz", (30.0, 40.0, 50.0), degrees=True).as_matrix()
+    mirror = rot @ np.diag([-1.0, 1.0, 1.0, 1.0])
+    for copy in (bumpy.transformed(rot), bumpy.transformed(mirror)):
+        assert (seen_from_outside(copy, min_free=4) != seen).sum() <= 2  # float32 grazes
+    rewound = bumpy.reversed_winding()
+    normals = -rewound.vertex_normals  # outward, as the caller says
+    assert (seen_from_outside(rewound, normals=normals, min_free=4) != seen).sum() <= 2
