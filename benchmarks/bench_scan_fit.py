@@ -205,7 +205,10 @@ def main() -> int:
             line += (
                 f"\n{'':36s} skull vs bone: mean |d| {b['mean_abs_mm']:.2f} mm, "
                 f"<=2.5mm {100 * b['within_2_5mm_fraction']:.1f}% "
-                f"({b['face_skull_vertices']} face-region skull vertices)"
+                f"({b['face_skull_vertices']} face-region skull vertices); uniform "
+                f"{b['uniform_offset_baseline']['depth_mm']:g} mm offset baseline: mean |d| "
+                f"{b['uniform_offset_baseline']['mean_abs_mm']:.2f} mm, <=2.5mm "
+                f"{100 * b['uniform_offset_baseline']['within_2_5mm_fraction']:.1f}%"
             )
         if "skin_landmark_to_user_mm" in f:
             u = f["skin_landmark_to_user_mm"]

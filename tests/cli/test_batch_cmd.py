@@ -181,3 +181,24 @@ def _same(a, b) -> bool:
     if isinstance(a, float) or isinstance(b, float):
         return abs(float(a) - float(b)) < 1e-9
     return a == b
+
+
+def test_fit_scan_row_figures_take_the_skull_and_baseline_scalars(tmp_path):
+    """A fit-scan case's row: its report's scalars, skull vs bone and the uniform baseline."""
+    import json
+
+    from workbench.services.batch_figures import fit_scan_figures
+
+    report = {
+        "face_within_1mm_fraction": 0.97,
+        "skull_vs_bone": {
+            "mean_abs_mm": 6.6,
+            "within_2_5mm_fraction": 0.275,
+            "uniform_offset_baseline": {"depth_mm": 6.0, "mean_abs_mm": 11.8},
+        },
+    }
+    (tmp_path / "fit_report.json").write_text(json.dumps(report), encoding="utf-8")
+    row = fit_scan_figures(tmp_path)
+    assert row["skull_vs_bone_mean_abs_mm"] == 6.6
+    assert row["skull_vs_bone_baseline_mean_abs_mm"] == 11.8
+    assert row["skull_vs_bone_baseline_depth_mm"] == 6.0

@@ -86,6 +86,12 @@ def _figures(n_counted: int, *, bone: bool, user: bool) -> dict:
             "mean_abs_mm": 4.1,
             "median_abs_mm": 3.0,
             "within_2_5mm_fraction": 0.41,
+            "uniform_offset_baseline": {
+                "depth_mm": 6.0,
+                "face_skin_vertices": 1800,
+                "mean_abs_mm": 5.7,
+                "within_2_5mm_fraction": 0.397,
+            },
         }
     if user:
         fig["skin_landmark_to_user_mm"] = {
@@ -135,6 +141,9 @@ def test_summary_maps_the_figures_beside_the_targets(fake_fit):
     assert rows["Fold-overs (triangles turned over)"]["met"] is True
     assert "4.10 mm" in rows["Estimated skull vs true bone (face region)"]["value"]
     assert "41.0 %" in rows["Estimated skull vs true bone (face region)"]["value"]
+    baseline = rows["Baseline: face skin 6 mm inward vs true bone"]
+    assert "5.70 mm" in baseline["value"] and "39.7 %" in baseline["value"]
+    assert baseline["met"] is True  # 41.0 % beats 39.7 %
     assert "chk_l" in rows["Skin landmarks → scan"]["value"]
     assert "2.75 mm" in rows["Skin landmarks → user-placed"]["value"]
     assert "ttable_2023" in rows["Tissue depths vs the table"]["value"]

@@ -307,3 +307,26 @@ def test_the_nefertiti_bust_in_unknown_axes_gets_its_face(shared_data, head_male
     tip = m[:3, :3] @ np.array([3.6, -8.1, 181.2])
     got = fit.to_input(fit.head.skin_landmarks.as_dict()["prn"])[0]
     assert np.linalg.norm(got - tip) < 12.0
+
+
+def test_skull_vs_bone_and_its_uniform_offset_baseline(head_female):
+    """A head's own skull as the "true bone" scores 0 mm; the face skin moved 6 mm inward
+    scores as far as the face's real tissue depths differ from 6 mm; a bone 4 mm forward
+    scores between (the surfaces slide past each other where they are not frontal)."""
+    from workbench.services.compare import face_regions
+    from workbench.services.scan_fit import BONE_PARTS, _skull_vs_bone
+
+    face = np.zeros(head_female.skin.n_vertices, bool)
+    face[np.concatenate(list(face_regions(head_female).values()))] = True
+    bone = concatenate([head_female.meshes[p] for p in BONE_PARTS])
+    same = _skull_vs_bone(head_female, bone, np.eye(4), face)
+    assert same["face_skull_vertices"] > 500
+    assert same["mean_abs_mm"] < 1e-6 and same["within_2_5mm_fraction"] == 1.0
+    base = same["uniform_offset_baseline"]
+    assert base["depth_mm"] == 6.0 and base["face_skin_vertices"] == int(face.sum())
+    assert 1.0 < base["mean_abs_mm"] < 10.0 and base["within_2_5mm_fraction"] < 0.9
+    shift = np.eye(4)
+    shift[2, 3] = 4.0  # the bone 4 mm forward
+    off = _skull_vs_bone(head_female, bone, shift, face)
+    assert 0.5 < off["mean_abs_mm"] <= 4.0 + 1e-9
+    assert off["within_2_5mm_fraction"] < same["within_2_5mm_fraction"]

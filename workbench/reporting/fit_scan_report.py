@@ -198,6 +198,15 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
         if bone
         else "no bone given",
     )
+    base = (bone or {}).get("uniform_offset_baseline")
+    if bone and base:
+        row(
+            f"Baseline: face skin {base['depth_mm']:g} mm inward vs true bone",
+            f"mean |d| {_mm(base.get('mean_abs_mm'))}, {_pct(base.get('within_2_5mm_fraction'))} "
+            f"within 2.5 mm (n = {base.get('face_skin_vertices', '–')})",
+            "the estimated skull beats it",
+            bone.get("within_2_5mm_fraction", 0.0) > base.get("within_2_5mm_fraction", 1.0),
+        )
     orient = fig.get("orientation") or {}
     row(
         "Orientation",

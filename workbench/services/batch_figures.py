@@ -136,7 +136,11 @@ def fit_scan_figures(folder: Path) -> Figures:
     tissue = report.get("tissue_depths")
     if isinstance(tissue, dict):
         out.update(_scalars(tissue, ("mean_abs_diff_mm",), "tissue_depth_"))
-    out.update(_scalars(report.get("skull_vs_bone"), None, "skull_vs_bone_"))
+    bone = report.get("skull_vs_bone")
+    out.update(_scalars(bone, None, "skull_vs_bone_"))
+    if isinstance(bone, dict):
+        base = bone.get("uniform_offset_baseline")
+        out.update(_scalars(base, None, "skull_vs_bone_baseline_"))
     return out
 
 
