@@ -204,9 +204,8 @@ class RayCaster:
         if self._scene is None:
             raise RuntimeError("embree ray-casting backend without its scenes")
         o32, d32 = np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
-        # float32 rounds the limit up, never down: no hit within it is lost
-        far = np.float32(np.inf) if not np.isfinite(limit) else np.float32(limit)
-        far = np.nextafter(far, np.float32(np.inf)) if np.isfinite(far) else far
+        # the limit in float32 one step up: rounding never loses a hit within it
+        far = np.nextafter(np.float32(min(limit, 3e38)), np.float32(np.inf))
         face = np.full(len(o), -1, np.int64)
         tfar = np.full(len(o), far, np.float32)
         scenes = self._scene

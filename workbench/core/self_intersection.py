@@ -188,13 +188,9 @@ def _candidate_pairs(
     if len(live) < 2:
         return
     if _grid_jit is not None:
-        pair = _grid_pairs(lo, hi, live, among)
-        for start in range(0, len(pair), 4 * CHUNK_PAIRS):
-            kept = _prefilter(
-                pair[start : start + 4 * CHUNK_PAIRS], centre, radius, lo, hi, faces, tol
-            )
-            if len(kept):
-                yield kept
+        yield from _prefiltered(
+            _grid_pairs(lo, hi, live, among), centre, radius, lo, hi, faces, tol
+        )
         return
     # radius classes a factor sqrt(2) apart (tiny faces all in the lowest class)
     r_live = radius[live]
@@ -218,12 +214,23 @@ def _candidate_pairs(
                     continue
                 i, j = ids_a[sdm["i"]], ids_b[sdm["j"]]
             pair = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1).astype(np.int64)
-            for start in range(0, len(pair), 4 * CHUNK_PAIRS):
-                kept = _prefilter(
-                    pair[start : start + 4 * CHUNK_PAIRS], centre, radius, lo, hi, faces, tol
-                )
-                if len(kept):
-                    yield kept
+            yield from _prefiltered(pair, centre, radius, lo, hi, faces, tol)
+
+
+def _prefiltered(
+    pair: np.ndarray,
+    centre: np.ndarray,
+    radius: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    faces: np.ndarray,
+    tol: float,
+) -> Iterator[np.ndarray]:
+    """:func:`_prefilter` over ``pair`` in chunks, the non-empty results."""
+    for start in range(0, len(pair), 4 * CHUNK_PAIRS):
+        kept = _prefilter(pair[start : start + 4 * CHUNK_PAIRS], centre, radius, lo, hi, faces, tol)
+        if len(kept):
+            yield kept
 
 
 def _prefilter(
@@ -310,6 +317,25 @@ def _fill_cells_kernel(c_lo, c_hi, dims, start, keys, owner):  # pragma: no cove
                     k += 1
 
 
+def _overlap(lo, hi, a, b):  # pragma: no cover
+    """Boxes ``a`` and ``b`` overlap (numba)."""
+    for c in range(3):
+        if lo[a, c] > hi[b, c] or lo[b, c] > hi[a, c]:
+            return False
+    return True
+
+
+def _push(out, found, a, b):  # pragma: no cover
+    """``out`` with the pair ``(min, max)`` at row ``found`` (grown when full) (numba)."""
+    if found == out.shape[0]:
+        grown = np.empty((2 * found, 2), np.int64)
+        grown[:found] = out[:found]
+        out = grown
+    out[found, 0] = min(a, b)
+    out[found, 1] = max(a, b)
+    return out
+
+
 def _grid_kernel(keys, owner, lo, hi, use, dims, cell_lo):  # pragma: no cover
     """Overlapping box pairs within each cell, each reported in one cell only."""
     n = keys.shape[0]
@@ -328,55 +354,33 @@ def _grid_kernel(keys, owner, lo, hi, use, dims, cell_lo):  # pragma: no cover
             a = owner[p]
             for q in range(p + 1, stop):
                 b = owner[q]
-                if not (use[a] or use[b]):
-                    continue
-                ok = True
-                for c in range(3):
-                    if lo[a, c] > hi[b, c] or lo[b, c] > hi[a, c]:
-                        ok = False
-                        break
                 # the low corner of the overlap (its cell: the larger of the two boxes'
                 # low cells, floor being monotonic) lies in this cell: report here only
                 if (
-                    not ok
-                    or max(cell_lo[a, 0], cell_lo[b, 0]) != cx
-                    or max(cell_lo[a, 1], cell_lo[b, 1]) != cy
-                    or max(cell_lo[a, 2], cell_lo[b, 2]) != cz
+                    (use[a] or use[b])
+                    and _overlap(lo, hi, a, b)
+                    and max(cell_lo[a, 0], cell_lo[b, 0]) == cx
+                    and max(cell_lo[a, 1], cell_lo[b, 1]) == cy
+                    and max(cell_lo[a, 2], cell_lo[b, 2]) == cz
                 ):
-                    continue
-                if found == out.shape[0]:
-                    grown = np.empty((2 * found, 2), np.int64)
-                    grown[:found] = out[:found]
-                    out = grown
-                out[found, 0] = min(a, b)
-                out[found, 1] = max(a, b)
-                found += 1
+                    out = _push(out, found, a, b)
+                    found += 1
         start = stop
     return out[:found].copy()
 
 
 def _sweep_kernel(big, live, lo, hi, use, is_big):  # pragma: no cover
     """Pairs of each large box with every live box it overlaps (large pairs once)."""
-    out = np.empty((0, 2), np.int64)
-    for stage in range(2):
-        found = 0
-        for a in big:
-            for b in live:
-                if b == a or (is_big[b] and b < a) or not (use[a] or use[b]):
-                    continue
-                ok = True
-                for c in range(3):
-                    if lo[a, c] > hi[b, c] or lo[b, c] > hi[a, c]:
-                        ok = False
-                        break
-                if ok:
-                    if stage == 1:
-                        out[found, 0] = min(a, b)
-                        out[found, 1] = max(a, b)
-                    found += 1
-        if stage == 0:
-            out = np.empty((found, 2), np.int64)
-    return out
+    out = np.empty((1024, 2), np.int64)
+    found = 0
+    for a in big:
+        for b in live:
+            if b == a or (is_big[b] and b < a) or not (use[a] or use[b]):
+                continue
+            if _overlap(lo, hi, a, b):
+                out = _push(out, found, a, b)
+                found += 1
+    return out[:found].copy()
 
 
 # ---------------------------------------------------------------- exact test
@@ -626,6 +630,8 @@ if numba is not None:
     _edges_through_one = numba.njit(cache=True, nogil=True)(_edges_through_one)
     _prefilter_jit = numba.njit(cache=True, nogil=True)(_prefilter_kernel)
     _pairs_jit = numba.njit(cache=True, nogil=True)(_pairs_kernel)
+    _overlap = numba.njit(cache=True, nogil=True)(_overlap)
+    _push = numba.njit(cache=True, nogil=True)(_push)
     _fill_cells_jit = numba.njit(cache=True, nogil=True)(_fill_cells_kernel)
     _grid_jit = numba.njit(cache=True, nogil=True)(_grid_kernel)
     _sweep_jit = numba.njit(cache=True, nogil=True)(_sweep_kernel)
