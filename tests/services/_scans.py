@@ -122,3 +122,36 @@ def closed_eyes(head: TemplateHead, rings: int = 4) -> Mesh:
             cap = cap[:, ::-1]
         faces.append(cap)
     return Mesh(np.vstack(vertices), np.vstack(faces))
+
+
+def tube(path: np.ndarray, radius: float, n: int = 12) -> Mesh:
+    """A closed tube of ``radius`` along the polyline ``path`` ``(k, 3)``, its ends capped,
+    wound outward (mm, the path's frame): a cord or strap lying over a face."""
+    path = np.asarray(path, float)
+    along = np.gradient(path, axis=0)
+    along /= np.linalg.norm(along, axis=1, keepdims=True)
+    helper = np.where(np.abs(along[:, [1]]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    u = np.cross(along, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(along, u)
+    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    rings = path[:, None] + radius * (
+        np.cos(a)[None, :, None] * u[:, None] + np.sin(a)[None, :, None] * w[:, None]
+    )
+    k = len(path)
+    v = np.vstack([rings.reshape(-1, 3), path[[0, -1]]])
+    faces = []
+    for r in range(k - 1):
+        for i in range(n):
+            j = (i + 1) % n
+            a0, a1, b0, b1 = r * n + i, r * n + j, (r + 1) * n + i, (r + 1) * n + j
+            faces += [(a0, b0, b1), (a0, b1, a1)]
+    first, last = k * n, k * n + 1
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [(first, i, j), (last, (k - 1) * n + j, (k - 1) * n + i)]
+    mesh = Mesh(v, np.array(faces))
+    # (wound outward whichever way u, w turn: the volume's sign)
+    tri = mesh.vertices[mesh.faces]
+    volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()
+    return mesh if volume > 0 else mesh.reversed_winding()

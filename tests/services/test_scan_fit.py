@@ -180,6 +180,76 @@ def test_cavity_walls_are_not_counted(head_male, head_female):
     assert fig["face_skin_to_scan_mm"]["within_2_5mm_fraction"] >= 0.98
 
 
+def test_thin_sheets_over_the_skin_are_told():
+    """Before the fit: a cord 3 mm above a ball is a sheet over more of the scan, unless
+    the reference is thin there itself (an ala over its nostril); a cord 15 mm up has
+    nothing beneath it.  After the fit: a cord wholly outside the skin is a sheet, a slab
+    reaching under the skin (a lip at its slit) is not, nor a block thicker than
+    SHEET_MAX_MM."""
+    from tests.services._scans import tube
+    from workbench.core.spatial import MeshIndex
+    from workbench.services.scan_fit import SHEET_MAX_MM, _sheets_outside, _sheets_over_scan
+
+    ball = _ball(60.0)
+
+    def cord(y: float, z: float, r: float = 1.5) -> Mesh:
+        return tube(np.array([[x, y, z] for x in np.linspace(-10, 10, 21)]), r)
+
+    def parts_of(*meshes: Mesh) -> list[np.ndarray]:
+        got = np.cumsum([0] + [m.n_vertices for m in meshes])
+        return [np.arange(a, b) for a, b in zip(got[:-1], got[1:], strict=True)]
+
+    # before the fit
+    low, high, over_thin = cord(0.0, 64.5), cord(20.0, 58.0 + 15.0), cord(-30.0, 55.0)
+    scan = concatenate([ball, low, high, over_thin])
+    thin = np.linalg.norm(ball.vertices - (0.0, -30.0, 52.0), axis=1) < 15.0
+    got = _sheets_over_scan(scan, np.ones(scan.n_vertices, bool), ball, thin)
+    on_ball, on_low, on_high, on_thin = (got[i] for i in parts_of(ball, low, high, over_thin))
+    assert not on_ball.any() and not on_high.any() and not on_thin.any()
+    assert on_low.mean() > 0.3  # its upper side (the lower one looks at the ball)
+    # after the fit
+    top = np.sqrt(60.0**2 - 20.0**2)
+    lip = cord(20.0, top)
+    block = tube(np.array([[x, -25.0, 62.0 + SHEET_MAX_MM] for x in np.linspace(-6, 6, 13)]), 6.0)
+    scan = concatenate([ball, low, lip, block])
+    got = _sheets_outside(scan, np.arange(scan.n_vertices), MeshIndex(ball))
+    on_ball, on_low, on_lip, on_block = (got[i] for i in parts_of(ball, low, lip, block))
+    assert not on_ball.any() and not on_lip.any() and not on_block.any()
+    assert on_low.mean() > 0.3
+
+
+def test_a_cord_over_the_forehead_is_not_counted(head_male, head_female):
+    """A cord 5 mm thick, 3 mm off the forehead from temple to temple (the VHP CTs have
+    one): the skin is fitted beneath it, not onto it; its vertices are left out of the
+    figures and said, and the face keeps its targets."""
+    from tests.services._scans import tube
+    from workbench.core.frame import apply_transform
+    from workbench.core.raycast import RayCaster
+    from workbench.core.spatial import MeshIndex
+
+    scan, _ = damaged_skin(head_female, pose=np.eye(4))
+    g = head_female.skin_landmarks.as_dict()["g"]
+    a = np.radians(np.linspace(-50, 50, 51))
+    rays = np.column_stack([np.sin(a), np.zeros_like(a), np.cos(a)])
+    centre = np.array([[0.0, g[1] + 35.0, g[2] - 90.0]])
+    brow = RayCaster(head_female.skin).first_hits(centre, rays).points
+    index = MeshIndex(head_female.skin)
+    cp = index.closest_points(brow)
+    cord = tube(brow + (3.0 + 2.5) * index.pseudo_normals(cp.face_ids, cp.barycentric), 2.5)
+    fit = fit_scan(concatenate([scan, cord]), base=head_male, sex="female")
+    fig = fit.figures
+    on_cord = np.isfinite(fit.scan_distance[scan.n_vertices :])
+    assert fig["face_region_sheet_vertices"] > 0.5 * cord.n_vertices
+    assert on_cord.mean() < 0.05, on_cord.mean()
+    assert any("thin sheets" in w for w in fit.warnings), fit.warnings
+    assert fig["face_within_1mm_fraction"] >= 0.95
+    assert fig["face_within_2_5mm_fraction"] >= 0.99
+    # the skin lies on the forehead beneath, not on the cord (the male reference fitted
+    # to the female skin meets it to ~0.01 mm where nothing covers it)
+    gap = MeshIndex(fit.head.skin).closest_points(apply_transform(fit.input_to_head, brow))
+    assert gap.distances.max() < 0.5, gap.distances.max()
+
+
 def _ball(radius: float, centre=(0.0, 0.0, 0.0)) -> Mesh:
     from tests.core.test_visibility import _sphere
 

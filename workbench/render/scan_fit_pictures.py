@@ -18,7 +18,8 @@ Pictures (PNG):
 
 Grey on the scan marks vertices *not counted* (NaN in ``ScanFit.scan_distance``):
 outside the face region, near a hole or field-of-view rim, hidden cavity walls,
-or not the head (shoulders, a head holder).
+not the head (shoulders, a head holder), or thin sheets over the skin (a cord or
+strap over the face, hair).
 """
 
 from __future__ import annotations

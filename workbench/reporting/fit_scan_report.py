@@ -30,15 +30,16 @@ FRAME: Final = (
 )
 COUNTED: Final = (
     "Counted: scan vertices whose nearest fitted-skin vertex lies in the face region, more "
-    "than 4 mm from a hole or scan rim, seen from outside and believed to be the head; for "
-    "each, the distance to the fitted skin surface."
+    "than 4 mm from a hole or scan rim, seen from outside, believed to be the head and not "
+    "on a thin sheet over the skin (a cord or strap over the face, hair); for each, the distance to the fitted skin surface."
 )
 #: captions and legends of the pictures (keys of :func:`render_scan_fit_pictures`)
 PICTURES: Final = {
     "distance": (
         "Distance of each scan vertex to the fitted skin (mm), front, left and right",
         "Pale yellow: on the fitted skin; darkest red: 2.5 mm or more. Grey: not counted "
-        "(outside the face region, near a hole or scan rim, a cavity wall, not the head). "
+        "(outside the face region, near a hole or scan rim, a cavity wall, not the head, a "
+        "thin sheet over the skin). "
         "White through the scan: a hole.",
     ),
     "signed": (
@@ -82,8 +83,15 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
         row("Scan", f"{fig['scan_vertices']} vertices, {fig.get('scan_triangles', '–')} triangles")
     hidden = fig.get("face_region_hidden_vertices")
     not_head = fig.get("face_region_not_head_vertices")
+    sheets = fig.get("face_region_sheet_vertices")
     left_out = [
-        f"{n} {what}" for n, what in ((hidden, "cavity walls"), (not_head, "not the head")) if n
+        f"{n} {what}"
+        for n, what in (
+            (hidden, "cavity walls"),
+            (not_head, "not the head"),
+            (sheets, "thin sheets over the skin"),
+        )
+        if n
     ]
     row(
         "Face-region scan vertices counted",

@@ -76,6 +76,7 @@ from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import AFFINE_ROUNDS, Level, smoothstep
 from workbench.core.normals import normals_within_radius
+from workbench.core.raycast import RayCaster
 from workbench.core.self_intersection import self_intersections
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
@@ -139,6 +140,32 @@ BONE_PARTS = ("cranium", "mandible")
 FIT_VERSION = 2
 #: a note when this share of the counted face scan vertices lies over the skin's openings
 OPENINGS_WARN_SHARE = 0.004
+#: a scan sheet at most this thick (mm, along its inward normal to where the ray leaves
+#: it) is not the face's skin (a cord or strap over the face, a hair strand, a segmentation
+#: fin; the VHP female and male CTs have a ~5 mm cord around the face, lifted up to 8 mm
+#: off the forehead) when, before the fit, more of the scan lies beneath it within
+#: SHEET_GAP_MM (the skin under the cord; not where the reference has its own thin
+#: parts over air: SHEET_PARTS), or when, after it, it lies wholly SHEET_OUTSIDE_MM
+#: outside the fitted skin (at both of its sides: a fin).  Chosen on the VHP female skin,
+#: judged on the other cases
+SHEET_MAX_MM = 6.0
+SHEET_GAP_MM = 12.0
+SHEET_OUTSIDE_MM = 1.0
+#: the reference's regions whose skin is a thin sheet over air (the alae over the
+#: nostrils, the lips at their slit, the lids, the ears' folds)
+SHEET_PARTS = (
+    "nose",
+    "upper_lip",
+    "lower_lip",
+    "eyelid_upper_l",
+    "eyelid_upper_r",
+    "eyelid_lower_l",
+    "eyelid_lower_r",
+    "ear_l",
+    "ear_r",
+)
+#: a note when this share of the face scan vertices are such sheets
+SHEET_WARN_SHARE = 0.002
 
 
 @dataclass(frozen=True)
@@ -552,7 +579,11 @@ def fit_scan(
     cap_d = np.full(scan.n_vertices, np.inf)
     if caps.any():
         cap_d, _ = cKDTree(scan_h.vertices[caps]).query(scan_h.vertices, workers=worker_count())
-    belief = seen * smoothstep(cap_d / RIM_EXCLUDE_MM)
+    # sheets over more of the scan (a cord, a strap, hair): no correspondence there, the
+    # skin beneath them is fitted like a hole's
+    thin = _mask(rest.skin.n_vertices, [rest.regions[r] for r in SHEET_PARTS if r in rest.regions])
+    layered = _sheets_over_scan(scan_h, seen > 0, rest.skin, thin)
+    belief = seen * smoothstep(cap_d / RIM_EXCLUDE_MM) * ~layered
     seconds["orientation"] = time.perf_counter() - t0
 
     # 2. skin
@@ -677,14 +708,27 @@ def fit_scan(
     counted = in_face & (fit.target_weights > HEAD_WEIGHT)
     hidden = in_face & ~seen
     counted &= seen
-    d = MeshIndex(fitted).closest_points(scan_h.vertices[counted]).distances
+    fitted_index = MeshIndex(fitted)
+    sheet = in_face & seen & layered
+    ids = np.flatnonzero(counted & ~sheet)
+    sheet[ids[_sheets_outside(scan_h, ids, fitted_index)]] = True
+    counted &= ~sheet
+    d = fitted_index.closest_points(scan_h.vertices[counted]).distances
     scan_distance = np.full(scan_h.n_vertices, np.nan)
     scan_distance[counted] = d
     fig["scan_vertices"] = int(scan_h.n_vertices)
     fig["scan_triangles"] = int(scan_h.n_faces)
     fig["face_region_vertices"] = int(counted.sum())
-    fig["face_region_not_head_vertices"] = int((in_face & ~hidden & ~counted).sum())
+    fig["face_region_not_head_vertices"] = int((in_face & ~hidden & ~counted & ~sheet).sum())
     fig["face_region_hidden_vertices"] = int(hidden.sum())
+    # (thin sheets wholly outside the fitted skin: a cord, a strap, hair; not counted)
+    fig["face_region_sheet_vertices"] = int(sheet.sum())
+    if sheet.sum() > SHEET_WARN_SHARE * max(int(counted.sum()), 1):
+        warnings.append(
+            f"{int(sheet.sum())} face scan vertices belong to thin sheets over the skin (a "
+            "cord or strap over the face, hair, a segmentation fin): the skin was fitted "
+            "beneath them and they are not counted in the figures"
+        )
     fig["field_of_view_cap_vertices"] = int(caps.sum())
     fig["face_within_1mm_fraction"] = float((d <= 1.0).mean()) if len(d) else 0.0
     fig["face_within_2_5mm_fraction"] = float((d <= 2.5).mean()) if len(d) else 0.0
@@ -949,6 +993,95 @@ def _scan_support(
     # (the closest feature's normal: a face's would depend on which face a tie returned)
     cos = np.einsum("ij,ij->i", n, index.pseudo_normals(cp.face_ids, cp.barycentric))
     return (w > HEAD_WEIGHT) & (cos > ON_SCAN_COS), cp.distances
+
+
+def _leave_inward(scan_h: Mesh, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of scan vertices ``rows``, those whose ray along the inward normal leaves the scan's
+    inside (meets a back-facing triangle) within :data:`SHEET_MAX_MM`: a thin sheet.
+    Returns their places in ``rows``, their inward directions and the exit points (head
+    frame, mm; the scan wound outward)."""
+    from workbench.core.normals import vertex_normals
+
+    normals = vertex_normals(scan_h)[rows]
+    # (a vertex of no triangle, or of degenerate ones only, has no normal to follow)
+    places = np.flatnonzero(np.abs(normals).sum(axis=1) > 0.5)
+    inward = -normals[places]
+    if not len(places):
+        return places, inward, np.empty((0, 3))
+    # (started a hair past the surface, so a ray does not meet the triangles it left)
+    hits = RayCaster.shared(scan_h).first_hits(
+        scan_h.vertices[rows[places]] + 0.05 * inward, inward, max_distance=SHEET_MAX_MM
+    )
+    facing = np.einsum("ij,ij->i", scan_h.face_normals[np.maximum(hits.face_ids, 0)], inward)
+    leaves = hits.hit & (facing > 0)
+    return places[leaves], inward[leaves], hits.points[leaves]
+
+
+def _sheets_over_scan(
+    scan_h: Mesh, candidates: np.ndarray, reference: Mesh, thin: np.ndarray
+) -> np.ndarray:
+    """Per scan vertex: does it lie on a thin sheet with more of the scan beneath it (head
+    frame, mm; the scan wound outward, the ``reference`` skin placed on it)?
+
+    Seeds: a ray from the vertex along its inward normal leaves the scan's inside
+    within :data:`SHEET_MAX_MM` (:func:`_leave_inward`) and then enters it again
+    within :data:`SHEET_GAP_MM`: a cord, strap or strand of hair over the skin.
+    The whole sheet then goes with its seeds: every thin vertex joined to one by
+    thin vertices (the cord's sides, whose rays run across it with nothing
+    beneath).  Only among ``candidates``, and not where the nearest reference
+    vertex is ``thin`` (its own thin parts, the alae over the nostrils:
+    :data:`SHEET_PARTS`).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    out = np.zeros(scan_h.n_vertices, bool)
+    rows = np.flatnonzero(candidates)
+    places, inward, exits = _leave_inward(scan_h, rows)
+    rows = rows[places]
+    if len(rows) and thin.any():
+        _, nearest = cKDTree(reference.vertices).query(scan_h.vertices[rows])
+        keep = ~thin[nearest]
+        rows, inward, exits = rows[keep], inward[keep], exits[keep]
+    if not len(rows):
+        return out
+    hits = RayCaster.shared(scan_h).first_hits(
+        exits + 0.05 * inward, inward, max_distance=SHEET_GAP_MM
+    )
+    facing = np.einsum("ij,ij->i", scan_h.face_normals[np.maximum(hits.face_ids, 0)], inward)
+    seeds = hits.hit & (facing < 0)
+    if not seeds.any():
+        return out
+    # the thin vertices' own graph: its pieces holding a seed
+    slot = np.full(scan_h.n_vertices, -1)
+    slot[rows] = np.arange(len(rows))
+    e = slot[scan_h.edges_unique]
+    e = e[(e >= 0).all(axis=1)]
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(rows), len(rows)))
+    _, piece = connected_components(graph, directed=False)
+    out[rows[np.isin(piece, piece[seeds])]] = True
+    return out
+
+
+def _sheets_outside(scan_h: Mesh, ids: np.ndarray, skin: MeshIndex) -> np.ndarray:
+    """Per scan vertex ``ids``: does it lie on a thin sheet of the scan wholly outside the
+    fitted skin (head frame, mm; the scan wound outward)?
+
+    The vertex's inward ray leaves the scan within :data:`SHEET_MAX_MM`
+    (:func:`_leave_inward`), and both the vertex and that exit point lie more
+    than :data:`SHEET_OUTSIDE_MM` outside the fitted skin (signed by the
+    closest feature's pseudo-normal): a fin, or a cord with nothing beneath
+    it.  The alae and the lips at their slit are thin too, but their inner side
+    lies inside the fitted skin.
+    """
+    out = np.zeros(len(ids), bool)
+    if not len(ids):
+        return out
+    outside = np.flatnonzero(skin.signed_distance(scan_h.vertices[ids]) > SHEET_OUTSIDE_MM)
+    places, _, exits = _leave_inward(scan_h, ids[outside])
+    if len(places):
+        out[outside[places]] = skin.signed_distance(exits) > SHEET_OUTSIDE_MM
+    return out
 
 
 #: the uniform tissue depth of the baseline the estimated skull must beat (VALIDATION.md: 6 mm)
