@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 import numpy as np
 
 from workbench.core.mesh import Mesh
+from workbench.core.normals import vertex_normals
 from workbench.core.spatial import MeshIndex
 from workbench.render.snapshots import _prefer_headless_gl, to_polydata
 
@@ -116,6 +117,9 @@ def render_distance_views(
     path.parent.mkdir(parents=True, exist_ok=True)
     poly = to_polydata(scan)
     poly.point_data["distance_mm"] = values
+    # the scan's own vertex normals, once: pyvista's smooth shading would run VTK's normals
+    # filter on every panel (~0.13 s each on a 300k-triangle scan)
+    poly.point_data.active_normals = vertex_normals(scan)
     bounds = _frame_bounds(scan, values, skin)
     centre = bounds.mean(axis=0)
     half_height = 0.5 * float(np.max(bounds[1] - bounds[0])) * 1.08
@@ -151,7 +155,8 @@ def render_distance_views(
                 cmap=SIGNED_CMAP if signed else UNSIGNED_CMAP,
                 clim=clim,
                 nan_color=NAN_COLOUR,
-                smooth_shading=True,
+                smooth_shading=False,
+                interpolation="gouraud",
                 specular=0.1,
                 culling=culling,
                 show_scalar_bar=last,
