@@ -29,7 +29,9 @@ Cases (units mm, each fitted with the built-in male reference head):
 * ``female_damaged_mirrored_landmarks``: the same mirrored, oriented by six
   skin landmarks.
 
-Prints per case: face-region vertices and the fractions within 1 / 2.5 mm,
+Prints per case: face-region vertices and the fractions within 1 / 2.5 mm (the
+vertices left out as cavity walls no scanner sees, "hidden", and as thin sheets
+over the skin, "sheets": the cords around the VHP faces, the band over headsq's chin),
 mean distance, skin landmarks' distance to the scan, fold-overs, new crossings
 (and how many the untangling removed), the skin–skull distances at the paired
 landmarks vs the table, the same face-region figures for the detail layer
@@ -176,6 +178,7 @@ def main() -> int:
             f"<=1mm {100 * f['face_within_1mm_fraction']:5.1f}%  "
             f"<=2.5mm {100 * f['face_within_2_5mm_fraction']:5.1f}%  "
             f"mean {f['face_mean_distance_mm']:.2f} mm  hidden {f['face_region_hidden_vertices']}  "
+            f"sheets {f['face_region_sheet_vertices']}  "
             f"skin->scan <=2.5mm {100 * f['face_skin_to_scan_mm']['within_2_5mm_fraction']:.1f}% "
             f"p95 {f['face_skin_to_scan_mm']['p95']:.2f} mm  lm->scan {lm['mean']:.2f} mm "
             f"(n {lm['n']}, absent {len(lm['absent'])})  folds {f['fold_overs']} ({f['fold_overs_outside_mouth_corner_seam']} off the seam)  "

@@ -711,9 +711,12 @@ def fit_scan(
     fitted_index = MeshIndex(fitted)
     sheet = in_face & seen & layered
     ids = np.flatnonzero(counted & ~sheet)
-    sheet[ids[_sheets_outside(scan_h, ids, fitted_index)]] = True
+    d = fitted_index.closest_points(scan_h.vertices[ids]).distances
+    # (only a vertex farther than SHEET_OUTSIDE_MM can lie that far outside)
+    far = ids[d > SHEET_OUTSIDE_MM]
+    sheet[far[_sheets_outside(scan_h, far, fitted_index)]] = True
+    d = d[~sheet[ids]]
     counted &= ~sheet
-    d = fitted_index.closest_points(scan_h.vertices[counted]).distances
     scan_distance = np.full(scan_h.n_vertices, np.nan)
     scan_distance[counted] = d
     fig["scan_vertices"] = int(scan_h.n_vertices)
@@ -1000,9 +1003,7 @@ def _leave_inward(scan_h: Mesh, rows: np.ndarray) -> tuple[np.ndarray, np.ndarra
     inside (meets a back-facing triangle) within :data:`SHEET_MAX_MM`: a thin sheet.
     Returns their places in ``rows``, their inward directions and the exit points (head
     frame, mm; the scan wound outward)."""
-    from workbench.core.normals import vertex_normals
-
-    normals = vertex_normals(scan_h)[rows]
+    normals = scan_h.vertex_normals[rows]
     # (a vertex of no triangle, or of degenerate ones only, has no normal to follow)
     places = np.flatnonzero(np.abs(normals).sum(axis=1) > 0.5)
     inward = -normals[places]
