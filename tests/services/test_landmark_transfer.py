@@ -116,3 +116,18 @@ def test_seeds_on_a_mirrored_scan(head_male, skull):
     assert np.linalg.det(res.alignment.matrix[:3, :3]) < 0
     truth = lms.transformed(flip).positions
     assert np.median(np.linalg.norm(res.landmarks.positions - truth, axis=1)) < 1.0
+
+
+def test_normals_at_landmarks_do_not_depend_on_the_order_of_the_triangles(skull):
+    """A landmark on a vertex (every reference landmark that was snapped) or an edge has
+    several faces at the same distance; which one the tree returns depends on the order
+    of the triangles.  The normal used is the closest feature's, the same either way."""
+    from workbench.services.landmark_transfer import _normals_at
+
+    order = np.random.default_rng(3).permutation(skull.n_faces)
+    shuffled = Mesh(skull.vertices, skull.faces[order])
+    edges = skull.vertices[skull.edges_unique[:2000]].mean(axis=1)
+    points = np.vstack([skull.vertices[:2000], edges])
+    a, b = _normals_at(skull, points), _normals_at(shuffled, points)
+    assert np.abs(a - b).max() < 1e-9
+    assert np.allclose(np.linalg.norm(a, axis=1), 1.0)

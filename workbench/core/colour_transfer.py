@@ -197,10 +197,14 @@ def scan_colour_at(
     return np.einsum("kc,kcj->kj", bary, rgb)
 
 
-def _observed(points: np.ndarray, scan: Mesh, near: ClosestPoints, max_d: float) -> np.ndarray:
+def _observed(
+    points: np.ndarray, index: MeshIndex, near: ClosestPoints, max_d: float
+) -> np.ndarray:
     """Close enough, and not reaching sideways off a rim."""
     offset = points - near.points
-    along = np.abs(np.einsum("ij,ij->i", offset, scan.face_normals[near.face_ids]))
+    # (the closest feature's normal: a face's would depend on which face a tie returned)
+    normals = index.pseudo_normals(near.face_ids, near.barycentric)
+    along = np.abs(np.einsum("ij,ij->i", offset, normals))
     d = near.distances
     return (d <= max_d) & ((d <= SIDEWAYS_FREE_MM) | (along >= MIN_NORMAL_COSINE * d))
 
@@ -280,7 +284,7 @@ def transfer_colours(
     index = MeshIndex(scan) if index is None else index
     near = index.closest_points(skin.vertices)
     sampled = scan_colour_at(scan, colours, near.face_ids, near.barycentric)
-    observed = _observed(skin.vertices, scan, near, max_distance_mm)
+    observed = _observed(skin.vertices, index, near, max_distance_mm)
     observed &= np.isfinite(sampled).all(axis=1)
     filled = fill_colours(skin, np.where(observed[:, None], sampled, 0.0), observed)
     rgb = np.clip(np.rint(filled), 0, 255).astype(np.uint8)

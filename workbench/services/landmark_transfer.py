@@ -112,14 +112,14 @@ def rim_faces(mesh: Mesh) -> np.ndarray:
 def _match(
     index: MeshIndex,
     rim: np.ndarray,
-    tnormals: np.ndarray,
     pts: np.ndarray,
     normals: np.ndarray,
     radius: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     cp = index.closest_points(pts)
     d = np.linalg.norm(cp.points - pts, axis=1)
-    dot = np.abs(np.einsum("ij,ij->i", tnormals[cp.face_ids], normals))
+    # (the closest feature's normal: a face's would depend on which face a tie returned)
+    dot = np.abs(np.einsum("ij,ij->i", index.pseudo_normals(cp.face_ids, cp.barycentric), normals))
     ok = (d <= radius) & (dot >= MIN_NORMAL_DOT) & ~rim[cp.face_ids]
     if ok.sum() > 10:  # drop outliers of this round (median + 3 MAD)
         med = np.median(d[ok])
@@ -172,7 +172,6 @@ def transfer_landmarks(
     # target in head-frame coordinates (the reference does not move)
     tmesh = target.with_vertices(alignment.apply(target.vertices))
     index = MeshIndex(tmesh)
-    tnormals = tmesh.face_normals
     rim = rim_faces(tmesh)
 
     rv = reference.vertices
@@ -188,7 +187,7 @@ def transfer_landmarks(
     resid = float("nan")
     for radius, smoothing in ROUNDS:
         moved = src if warp is None else warp(src)
-        ok, matched, d = _match(index, rim, tnormals, moved, srcn, radius)
+        ok, matched, d = _match(index, rim, moved, srcn, radius)
         if ok.sum() < 12:
             warnings.append(
                 f"only {int(ok.sum())} surface matches within {radius:g} mm; "
@@ -207,7 +206,7 @@ def transfer_landmarks(
     lm_normals = _normals_at(reference, pts)
     cp = index.closest_points(moved)
     dist = np.linalg.norm(cp.points - moved, axis=1)
-    dot = np.einsum("ij,ij->i", tnormals[cp.face_ids], lm_normals)
+    dot = np.einsum("ij,ij->i", index.pseudo_normals(cp.face_ids, cp.barycentric), lm_normals)
     support = (
         np.min(np.linalg.norm(moved[:, None] - matched[ok][None], axis=2), axis=1)
         if ok.any()
@@ -261,5 +260,8 @@ def transfer_landmarks(
 
 
 def _normals_at(mesh: Mesh, points: np.ndarray) -> np.ndarray:
-    cp = MeshIndex(mesh).closest_points(points)
-    return mesh.face_normals[cp.face_ids]
+    """The surface normal at ``points``' closest features (a landmark on a vertex gets the
+    vertex's pseudo-normal, whichever of its faces the tree returns)."""
+    index = MeshIndex(mesh)
+    cp = index.closest_points(points)
+    return index.pseudo_normals(cp.face_ids, cp.barycentric)
