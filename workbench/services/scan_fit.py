@@ -21,8 +21,10 @@ writes:
    scan.
 2. **Skin** (:func:`workbench.services.template_build.fit_skin`): the scaled
    reference skin registered onto the scan, per-part affine stage then coarse
-   to fine (:data:`SCAN_LEVELS`); hole and field-of-view rims fade out, skin
-   over no scan keeps the reference's shape (membrane, no jumps), the ears
+   to fine (:data:`SCAN_LEVELS`); hole and field-of-view rims fade out, thin
+   sheets lying over more of the scan (a cord or strap over the face, hair:
+   :func:`_sheets_over_scan`) are not matched, skin over no scan keeps the
+   reference's shape (membrane, no jumps), the ears
    follow the scan's; crossings and fold-overs the fit leaves are smoothed
    away locally toward the reference's shape
    (:func:`workbench.core.untangle.untangle`).  Skin landmarks ride on the
@@ -724,7 +726,8 @@ def fit_scan(
     fig["face_region_vertices"] = int(counted.sum())
     fig["face_region_not_head_vertices"] = int((in_face & ~hidden & ~counted & ~sheet).sum())
     fig["face_region_hidden_vertices"] = int(hidden.sum())
-    # (thin sheets wholly outside the fitted skin: a cord, a strap, hair; not counted)
+    # (thin sheets over the skin, found before the fit, or wholly outside the fitted skin,
+    # found now: a cord, a strap, hair, a fin; not counted)
     fig["face_region_sheet_vertices"] = int(sheet.sum())
     if sheet.sum() > SHEET_WARN_SHARE * max(int(counted.sum()), 1):
         warnings.append(
