@@ -144,12 +144,12 @@ FIT_VERSION = 2
 OPENINGS_WARN_SHARE = 0.004
 #: a scan sheet at most this thick (mm, along its inward normal to where the ray leaves
 #: it) is not the face's skin (a cord or strap over the face, a hair strand, a segmentation
-#: fin; the VHP female and male CTs have a ~5 mm cord around the face, lifted up to 8 mm
-#: off the forehead) when, before the fit, more of the scan lies beneath it within
-#: SHEET_GAP_MM (the skin under the cord; not where the reference has its own thin
-#: parts over air: SHEET_PARTS), or when, after it, it lies wholly SHEET_OUTSIDE_MM
-#: outside the fitted skin (at both of its sides: a fin).  Chosen on the VHP female skin,
-#: judged on the other cases
+#: fin; the VHP female and male CTs have a ~5 mm cord around the face, lifted ~4 mm off
+#: the female's forehead, its top ~9 mm out) when, before the fit, more of the scan lies
+#: beneath it within SHEET_GAP_MM (the skin under the cord; not where the reference has
+#: its own thin parts over air: SHEET_PARTS), or when, after it, it lies wholly
+#: SHEET_OUTSIDE_MM outside the fitted skin (at both of its sides: a fin).  Chosen on the
+#: VHP female skin, judged on the other cases
 SHEET_MAX_MM = 6.0
 SHEET_GAP_MM = 12.0
 SHEET_OUTSIDE_MM = 1.0
