@@ -250,6 +250,38 @@ def test_a_cord_over_the_forehead_is_not_counted(head_male, head_female):
     assert gap.distances.max() < 0.5, gap.distances.max()
 
 
+def test_the_band_over_the_headsq_chin_is_a_sheet(headsq_surfaces, headsq_orientation, head_male):
+    """The headsq CT's skin has a band across the chin with skin beneath it (a holder): it
+    is found as a sheet, not fitted, and left out of the figures (166 face vertices); the
+    face itself is not taken for one."""
+    import workbench.services.scan_fit as scan_fit
+
+    found: list[np.ndarray] = []
+
+    def spy(scan_h, candidates, reference, thin):
+        out = over_scan(scan_h, candidates, reference, thin)
+        found.append(out)
+        return out
+
+    over_scan = scan_fit._sheets_over_scan
+    try:
+        scan_fit._sheets_over_scan = spy
+        fit = fit_scan(headsq_surfaces["skin"], base=head_male, orientation=headsq_orientation)
+    finally:
+        scan_fit._sheets_over_scan = over_scan
+    fig = fit.figures
+    assert 100 <= fig["face_region_sheet_vertices"] <= 0.03 * fig["face_region_vertices"]
+    assert any("thin sheets" in w for w in fit.warnings), fit.warnings
+    assert fig["face_within_2_5mm_fraction"] >= 0.98
+    # the band lies below the lower lip, near the midline (the fitted head's frame; the
+    # scan kept in the result has the same vertices)
+    at = fit.head.skin_landmarks.as_dict()
+    band = fit.scan.vertices[found[0]]
+    face_band = band[np.abs(band[:, 0]) < 60.0]
+    assert len(face_band) > 50
+    assert np.median(face_band[:, 1]) < at["li"][1]
+
+
 def _ball(radius: float, centre=(0.0, 0.0, 0.0)) -> Mesh:
     from tests.core.test_visibility import _sphere
 
