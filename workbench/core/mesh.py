@@ -97,6 +97,19 @@ class Mesh:
         out._share_topology(self, reversed_winding=True)
         return out
 
+    def outward(self) -> Mesh:
+        """This mesh, or its :meth:`reversed_winding`, whichever has normals pointing away
+        from its centre.
+
+        Judged by the area-weighted agreement of the face normals with the
+        direction from the centroid of the face centres, which also decides an
+        open or many-piece surface (a CT bone, a scan); scanner and CT meshes,
+        and mirrored files, come wound either way.
+        """
+        centres = self.triangles.mean(axis=1)
+        agree = np.einsum("ij,ij->i", self.face_cross, centres - centres.mean(axis=0)).sum()
+        return self if agree >= 0 else self.reversed_winding()
+
     def _share_topology(self, source: Mesh, *, reversed_winding: bool = False) -> None:
         """Take over ``source``'s cached connectivity (it depends on the faces only).
 

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core.compiled import numba
 from workbench.core.frame import apply_transform
 from workbench.core.mesh import Mesh
 from workbench.core.threads import worker_count
@@ -222,15 +223,69 @@ class _Grid:
         self.shape = np.array(shape)
 
     def loss(self, pts: np.ndarray, nrm: np.ndarray) -> np.ndarray:
-        """Mean robust loss over the last-but-one axis of ``pts`` ``(..., n, 3)``."""
-        c = np.rint((pts - self.lo) / self.spacing).astype(np.int64)
-        inside = ((c >= 0) & (c < self.shape)).all(axis=-1)
-        c = np.clip(c, 0, self.shape - 1)
-        d = self.dist[c[..., 0], c[..., 1], c[..., 2]]
-        cos = np.einsum("...j,...j->...", self.normal[c[..., 0], c[..., 1], c[..., 2]], nrm)
-        sigma = 2.0 * SCORE_SIGMA_MM
-        loss = np.where(inside & (cos > MIN_COS), 1.0 - np.exp(-0.5 * (d / sigma) ** 2), 1.0)
-        return loss.mean(axis=-1)
+        """Mean robust loss over the last-but-one axis of ``pts`` ``(..., n, 3)``.
+
+        ``nrm`` has the shape of ``pts`` or broadcasts to it along the leading
+        axes (one set of normals for every pose).
+        """
+        pts = np.asarray(pts, np.float64)
+        nrm = np.asarray(nrm, np.float64)
+        lead = pts.shape[:-2]
+        p = np.ascontiguousarray(pts.reshape(-1, *pts.shape[-2:]))
+        if nrm.ndim == 2 or int(np.prod(nrm.shape[:-2])) == 1 or nrm.strides[0] == 0:
+            # one set of normals for every pose (a broadcast view): pass it once
+            n = np.ascontiguousarray(nrm.reshape(-1, *nrm.shape[-2:])[:1])
+        else:
+            n = np.ascontiguousarray(np.broadcast_to(nrm, pts.shape).reshape(p.shape))
+        out = _grid_loss(
+            self.dist, self.normal, self.lo, float(self.spacing), p, n, 2.0 * SCORE_SIGMA_MM
+        )
+        return out.reshape(lead)
+
+
+def _grid_loss_kernel(
+    dist: np.ndarray,
+    normal: np.ndarray,
+    lo: np.ndarray,
+    spacing: float,
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    sigma: float,
+) -> np.ndarray:
+    """Per pose (first axis of ``pts``) the mean robust loss of its points on the grid: the
+    nearest grid node's distance, 1 outside the grid or where the normals disagree."""
+    n_pose, n = pts.shape[0], pts.shape[1]
+    shared = nrm.shape[0] == 1
+    out = np.empty(n_pose)
+    nx, ny, nz = dist.shape
+    for p in range(n_pose):
+        q = 0 if shared else p
+        total = 0.0
+        for i in range(n):
+            c0 = int(np.rint((pts[p, i, 0] - lo[0]) / spacing))
+            c1 = int(np.rint((pts[p, i, 1] - lo[1]) / spacing))
+            c2 = int(np.rint((pts[p, i, 2] - lo[2]) / spacing))
+            if c0 < 0 or c1 < 0 or c2 < 0 or c0 >= nx or c1 >= ny or c2 >= nz:
+                total += 1.0
+                continue
+            cos = (
+                normal[c0, c1, c2, 0] * nrm[q, i, 0]
+                + normal[c0, c1, c2, 1] * nrm[q, i, 1]
+                + normal[c0, c1, c2, 2] * nrm[q, i, 2]
+            )
+            if cos > MIN_COS:
+                d = dist[c0, c1, c2] / sigma
+                total += 1.0 - np.exp(-0.5 * d * d)
+            else:
+                total += 1.0
+        out[p] = total / n
+    return out
+
+
+if numba is not None:
+    _grid_loss = numba.njit(cache=True, nogil=True)(_grid_loss_kernel)
+else:  # pragma: no cover - numba is a dependency
+    _grid_loss = _grid_loss_kernel
 
 
 def _fibonacci_hemisphere(n: int) -> np.ndarray:

@@ -23,3 +23,13 @@ def worker_count() -> int:
             except ValueError:
                 continue
     return cores
+
+
+#: a k-d query of fewer points than this runs on the calling thread: scipy starts its
+#: worker threads anew on every call, which costs more than the query below this size
+SMALL_QUERY = 20_000
+
+
+def query_workers(n_points: int) -> int:
+    """Threads for one k-d tree query of ``n_points`` points (1 for small queries)."""
+    return 1 if n_points < SMALL_QUERY else worker_count()
