@@ -108,11 +108,15 @@ def test_handedness_from_labelled_landmarks(head_female):
     assert mirror_from_landmarks(None) == "auto"
 
 
-def _searched(winner_matrix: np.ndarray, alternatives: tuple) -> object:
-    from workbench.core.rigid_search import PoseResult
+def _searched(*matrices: np.ndarray) -> object:
+    """A bone-only search result whose candidates are ``matrices``, best first."""
+    from workbench.core.skull_pose import Candidate, SkullPoseResult
 
-    return PoseResult(
-        winner_matrix, 1.0, False, 0.30, 0.5, "assumed", float("nan"), "search", alternatives
+    return SkullPoseResult(
+        tuple(Candidate(m, 0.5 + 0.01 * i, 0.5, 0.5) for i, m in enumerate(matrices)),
+        False,
+        symmetry_normal=np.array([1.0, 0.0, 0.0]),
+        symmetry_loss=0.1,
     )
 
 
@@ -123,36 +127,78 @@ def _turned_about_vertical(centre: np.ndarray) -> np.ndarray:
     return m
 
 
-def test_a_wrong_bone_only_pose_that_finds_no_mandible_yields_to_the_next(
+def test_a_wrong_bone_only_pose_is_doubted_and_a_runner_up_that_passes_is_taken(
     head_female, head_male, monkeypatch
 ):
-    """Oriented from the bone alone, a winner under which no mandible is found is replaced by
-    the next-best pose that finds one and scores nearly as well, and the user is told."""
+    """Oriented from the bone alone, a winner whose registration leaves the reference's face
+    skeleton off the bone is registered again from the search's runner-up, which passes the
+    self-check and is used; the user is told."""
+    import workbench.core.skull_pose as sp
     import workbench.services.skull_registration as sr
-    from workbench.core.rigid_search import PoseResult
 
     skull = skull_surface(head_female)
-    right = PoseResult(np.eye(4), 1.0, False, 0.32, 0.5, "assumed", float("nan"), "search")
     wrong = _turned_about_vertical(skull.vertices.mean(axis=0))
     monkeypatch.setattr(sr, "_CACHE", {})  # no result from (or for) another test
-    monkeypatch.setattr(sr, "search_pose", lambda *a, **k: _searched(wrong, (right,)))
+    monkeypatch.setattr(sp, "search_skull_pose", lambda *a, **k: _searched(wrong, np.eye(4)))
     reg = register_skull(skull, head_male)
-    assert reg.pose is right
+    assert np.allclose(reg.pose.matrix, np.eye(4))
+    assert reg.figures["self_check"]["outcome"] == "confident"
     assert reg.part("mandible").present
-    assert any("best-scoring pose found no mandible" in w for w in reg.warnings)
+    assert any("did not pass the self-check" in w for w in reg.warnings)
     found, truth = reg.landmarks.as_dict(), head_female.skull_landmarks.as_dict()
     assert np.median([np.linalg.norm(found[c] - truth[c]) for c in ("g", "n", "pg")]) < 3.0
 
 
-def test_a_bone_only_pose_without_a_mandible_says_the_orientation_may_be_wrong(
+def test_a_wrong_bone_only_pose_with_no_better_runner_up_is_refused(
     head_female, head_male, monkeypatch
 ):
+    """No face with a wrong orientation leaves as a result: the registration raises, naming
+    what to give."""
+    import workbench.core.skull_pose as sp
     import workbench.services.skull_registration as sr
+    from workbench.services.skull_check import OrientationRefused
 
     skull = skull_surface(head_female)
     wrong = _turned_about_vertical(skull.vertices.mean(axis=0))
     monkeypatch.setattr(sr, "_CACHE", {})
-    monkeypatch.setattr(sr, "search_pose", lambda *a, **k: _searched(wrong, ()))
-    reg = register_skull(skull, head_male)
-    assert not reg.part("mandible").present
-    assert any("orientation is wrong" in w for w in reg.warnings)
+    search = sp.search_skull_pose
+    monkeypatch.setattr(sp, "search_skull_pose", lambda *a, **k: _searched(wrong))
+    with pytest.raises(OrientationRefused) as err:
+        register_skull(skull, head_male)
+    assert "--anterior" in str(err.value) and "landmarks" in str(err.value)
+    assert "facial skeleton" in str(err.value)
+    # with the orientation given, the same skull registers (and is never refused)
+    monkeypatch.setattr(sp, "search_skull_pose", search)
+    reg = register_skull(skull, head_male, hint=HINT)
+    assert reg.figures["self_check"]["outcome"] == "confident"
+
+
+def test_an_open_jaw_is_articulated_into_occlusion(head_female, head_male):
+    """The female skull with her jaw opened 20° (a CT with the mouth open): articulated,
+    the jaw's bone lies back where her closed jaw is, the registered mandible and its
+    landmarks with it, and the opening found in the scan is reported."""
+    from workbench.services.jaw import axis_rotation
+    from workbench.services.skull_registration import articulate
+
+    jaw = concatenate([head_female.meshes["mandible"], head_female.meshes["lower_teeth"]])
+    cranium = concatenate([head_female.meshes["cranium"], head_female.meshes["upper_teeth"]])
+    point, direction = head_female.tmj_axis
+    opened = jaw.transformed(axis_rotation(point, direction, np.radians(20.0)))
+    reg = register_skull(concatenate([cranium, opened]), head_male, hint=HINT)
+    assert reg.jaw is not None and reg.jaw.present and reg.occlusion is None
+    art = articulate(reg, head_male)
+    assert art.occlusion is not None and art.jaw_bone is not None
+    occ = art.figures["jaw"]["occlusion"]
+    assert occ["opening_in_ct_deg"] > 12.0  # the female jaw on the male reference
+    # the jaw's bone, articulated, lies on her closed jaw (head frame)
+    closed = MeshIndex(jaw.transformed(reg.input_to_head))
+    moved = art.target_h.vertices[art.jaw_bone]
+    assert np.median(closed.closest_points(moved).distances) < 2.0
+    before = np.median(closed.closest_points(reg.target_h.vertices[art.jaw_bone]).distances)
+    assert before > 5.0
+    # the mandible's landmarks moved with it (input frame), the cranium's did not
+    a, b = reg.landmarks.as_dict(), art.landmarks.as_dict()
+    truth = head_female.skull_landmarks.as_dict()
+    assert np.linalg.norm(b["pg"] - truth["pg"]) < np.linalg.norm(a["pg"] - truth["pg"]) - 5.0
+    assert np.allclose(a["n"], b["n"])
+    assert articulate(register_skull(cranium, head_male, hint=HINT), head_male).occlusion is None

@@ -658,7 +658,13 @@ class MainWindow(QMainWindow):
 
     def _show_fit(self, fit: jobs.FitResult) -> None:
         self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
-        self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
+        reg = fit.recon.registration
+        check = {} if reg is None else reg.figures.get("self_check") or {}
+        if check.get("outcome") == "check":
+            # the self-check's doubt first (issue 28): the user confirms before using the face
+            self.status(f"CHECK: {check['reasons'][0]} (face fitted; confirm the orientation)")
+        else:
+            self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
             # the first fit opens the guide view.  Both views then repaint
             # in one pass (the main view narrows, the new one appears), so

@@ -230,6 +230,14 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
     pdf.add_page()
     pictures = picture_groups(dict(report.get("pictures") or {}), base)
     _title(pdf, report)
+    check = report.get("self_check") or {}
+    if check.get("outcome") == "check":
+        # the self-check's doubt heads the first page, apart from the notes (issue 28)
+        pdf.box(
+            "CHECK THIS RECONSTRUCTION: the registration's self-check",
+            [*check["reasons"], "Confirm the orientation and the skull landmarks before use."],
+            fill=(255, 205, 205),
+        )
     if report.get("warnings"):
         pdf.box("Warnings", report["warnings"])
     if report.get("credits"):

@@ -23,7 +23,7 @@ Steps:
 3. **Mandible pose**: open or shifted jaws are normal, so the mandible
    gets its own rigid pose (starts rotated about the jaw axis), and is
    declared **missing** when too little of it finds bone
-   (:data:`PRESENT_FRACTION`); a missing mandible follows the cranium and is
+   (:mod:`workbench.core.jaw_pose`); a missing mandible follows the cranium and is
    marked inferred.
 4. **Non-rigid** (:func:`workbench.core.nonrigid.register`): coarse to fine,
    both parts at once, independently; user-placed landmarks are hard
@@ -42,17 +42,18 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import InputError
 from workbench.core.frame import apply_transform
+from workbench.core.jaw_pose import JawPose, Occlusion, occlusion, pose_jaw
+from workbench.core.skull_pose import SkullPoseResult
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
-from workbench.core.nonrigid import Registration, Target, register, smoothstep, soft_match
-from workbench.core.normals import vertex_normals
+from workbench.core.nonrigid import Registration, Target, register, smoothstep
 from workbench.core.rigid_search import PoseResult, search_pose
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import LandmarkWarp, fit_warp
@@ -64,19 +65,10 @@ RIM_MM = 5.0
 #: target vertices farther than EXTRA_MM[0] from the posed reference skull start to fade,
 #: beyond EXTRA_MM[1] they are ignored (mm)
 EXTRA_MM = (10.0, 20.0)
-#: a part is present when at least this fraction of it finds bone of its own after its pose
-PRESENT_FRACTION = 0.25
-#: bone this far from the reference cranium can belong to a mandible (mm)
-EXCLUSIVE_MM = 5.0
-#: a mandible pose opens the jaw at most this much and moves the joint at most this far
-MAX_JAW_DEG = 45.0
-MAX_JOINT_SHIFT_MM = 20.0
 #: a vertex is "observed" when its final match weight exceeds this
 OBSERVED_WEIGHT = 0.3
 #: teeth are decimated to about this many triangles for the registration
 TEETH_TRIANGLES = 3000
-#: jaw openings tried as starts of the mandible pose (degrees about the jaw axis)
-JAW_STARTS_DEG = (-6.0, 4.0, 14.0, 26.0)
 FH_CODES = ("po_l", "po_r", "or_l", "or_r")
 
 PART_OF = {"cranium": 0, "upper_teeth": 0, "mandible": 1, "lower_teeth": 1}
@@ -132,6 +124,17 @@ class SkullRegistration:
         own Frankfort frame (the last step of ``input_to_head``).
     figures : dict
     warnings : tuple of str
+    jaw : JawPose or None
+        The mandible's pose found on the bone (head frame; ``jaw.present``
+        False when none was found); None for registrations made without it.
+    jaw_axis : (2, 3)
+        The condylar axis (point, unit direction) of the rest layout, head frame.
+    occlusion : Occlusion or None
+        Set by :func:`articulate`: how the jaw was brought into occlusion
+        (``meshes``, ``target_h``, ``inferred`` and ``landmarks`` then show the
+        jaw closed); None: the jaw as scanned.
+    jaw_bone : (n_target_vertices,) bool or None
+        Set by :func:`articulate`: the target vertices that belong to the jaw.
     """
 
     input_to_head: np.ndarray
@@ -149,6 +152,10 @@ class SkullRegistration:
     settle: np.ndarray = field(default_factory=lambda: np.eye(4))
     figures: dict = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    jaw: JawPose | None = None
+    jaw_axis: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0, 0], [1.0, 0, 0]]))
+    occlusion: Occlusion | None = None
+    jaw_bone: np.ndarray | None = None
 
     def part(self, name: str) -> PartReport:
         return next(p for p in self.parts if p.name == name)
@@ -181,8 +188,8 @@ def _registration_parts(head: TemplateHead, scale: float) -> dict[str, Mesh]:
     return out
 
 
-def target_weights(target_h: Mesh, reference: Mesh) -> tuple[np.ndarray, dict]:
-    """Per target vertex belief 0..1: hole rims and extra anatomy fade out."""
+def target_weights(target_h: Mesh, reference: Mesh | None) -> tuple[np.ndarray, dict]:
+    """Per target vertex belief 0..1: hole rims and (with a ``reference``) extra anatomy fade out."""
     w = np.ones(target_h.n_vertices)
     loops = boundary_loops(target_h)
     rim_fraction = 0.0
@@ -192,9 +199,11 @@ def target_weights(target_h: Mesh, reference: Mesh) -> tuple[np.ndarray, dict]:
         fade = smoothstep(d / RIM_MM)
         rim_fraction = float(np.mean(fade < 0.5))
         w *= fade
-    d, _ = cKDTree(reference.vertices).query(target_h.vertices)
-    extra = 1.0 - smoothstep((d - EXTRA_MM[0]) / (EXTRA_MM[1] - EXTRA_MM[0]))
-    w *= extra
+    extra = np.ones(target_h.n_vertices)
+    if reference is not None:
+        d, _ = cKDTree(reference.vertices).query(target_h.vertices)
+        extra = 1.0 - smoothstep((d - EXTRA_MM[0]) / (EXTRA_MM[1] - EXTRA_MM[0]))
+        w *= extra
     areas = np.zeros(target_h.n_vertices)
     np.add.at(areas, target_h.faces.ravel(), np.repeat(target_h.face_areas / 3.0, 3))
     figures = {
@@ -214,75 +223,6 @@ def _rotation_about(axis_point: np.ndarray, axis_dir: np.ndarray, deg: float) ->
     m[:3, :3] = r
     m[:3, 3] = axis_point - r @ axis_point
     return m
-
-
-def _rigid_fit(
-    points: np.ndarray, normals: np.ndarray, target: Target, tree: cKDTree, rounds: int = 9
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Robust rigid ICP of a point set onto the target.
-
-    Returns the 4x4 map and, at the end, each point's match weight and matched point.
-    """
-    from workbench.core.rigid_search import _rigid_update
-
-    m = np.eye(4)
-    tp, tn, tw = target.mesh.vertices, target.normals, target.weights
-    w = np.zeros(len(points))
-    q = points
-    for i, sigma in enumerate(np.geomspace(8.0, 3.0, rounds)):
-        p = _apply(m, points)
-        n = normals @ m[:3, :3].T
-        q, agree, dist, blend, j = soft_match(p, n, tree, tp, tn)
-        w = (blend * tw[j]).sum(axis=1) * agree * np.exp(-0.5 * (dist / sigma) ** 2)
-        if w.sum() < 1e-6 or i == rounds - 1:
-            break
-        r, t = _rigid_update(p, q, w)
-        step = np.eye(4)
-        step[:3, :3], step[:3, 3] = r, t
-        m = step @ m
-    return m, w, q
-
-
-def _pose_mandible(
-    mandible: Mesh,
-    teeth: Mesh,
-    cranium: Mesh,
-    head: TemplateHead,
-    scale: float,
-    target: Target,
-    tree: cKDTree,
-) -> tuple[np.ndarray, float]:
-    """Best rigid pose of the mandible (with its teeth) over several jaw openings.
-
-    Returns the pose and the fraction of mandible points that found bone of
-    their own: matched (weight > 0.5) to target bone farther than
-    :data:`EXCLUSIVE_MM` from the reference cranium — a mandible that slid
-    onto the maxilla or the skull base has matched the cranium, not a jaw.
-    Poses that open the jaw more than :data:`MAX_JAW_DEG` or move the jaw
-    joint more than :data:`MAX_JOINT_SHIFT_MM` are not a mandible either.
-    """
-    pts = np.vstack([mandible.vertices, teeth.vertices])
-    nrm = np.vstack([vertex_normals(mandible), vertex_normals(teeth)])
-    axis_point = scale * head.tmj_axis[0]
-    # opening turns the chin down and back: a positive turn about +x (the subject's left)
-    axis = head.tmj_axis[1] * (1.0 if head.tmj_axis[1][0] >= 0 else -1.0)
-    cranium_tree = cKDTree(cranium.vertices)
-    best = (np.eye(4), 0.0)
-    for deg in JAW_STARTS_DEG:
-        start = _rotation_about(axis_point, axis, deg)
-        p0 = _apply(start, pts)
-        n0 = nrm @ start[:3, :3].T
-        m, w, q = _rigid_fit(p0, n0, target, tree)
-        pose = m @ start
-        angle = np.degrees(np.arccos(np.clip((np.trace(pose[:3, :3]) - 1) / 2, -1.0, 1.0)))
-        shift = np.linalg.norm(_apply(pose, axis_point[None])[0] - axis_point)
-        if angle > MAX_JAW_DEG or shift > MAX_JOINT_SHIFT_MM:
-            continue
-        own = cranium_tree.query(q)[0] > EXCLUSIVE_MM
-        frac = float(np.mean((w > 0.5) & own))
-        if frac > best[1]:
-            best = (pose, frac)
-    return best
 
 
 def _carry_landmarks(
@@ -357,6 +297,89 @@ def carry_head(head: TemplateHead, reg: SkullRegistration) -> TemplateHead:
     return warp_head(reference_in_frame(head, reg), skull_field(reg))
 
 
+#: a target vertex belongs to the jaw when the registered mandible (with its teeth) is nearer
+#: to it than the registered cranium, and within this distance (mm)
+JAW_BONE_MM = 8.0
+#: target tooth points: bone this close to the registered teeth (mm), used when at least
+#: TEETH_OBSERVED of the registered teeth's vertices were observed on bone
+TEETH_MM = 6.0
+TEETH_OBSERVED = 0.25
+
+
+def articulate(reg: SkullRegistration, head: TemplateHead) -> SkullRegistration:
+    """``reg`` with the jaw brought into occlusion (teeth together, condyles in the fossae).
+
+    Practitioners articulate the mandible before they reconstruct; a CT comes
+    with the mouth open, or the jaw pushed.  The jaw's bone (target vertices
+    nearer the registered mandible than the cranium) and the registered
+    mandible with its teeth are turned by
+    :func:`workbench.core.jaw_pose.occlusion`: back through the jaw's found
+    pose to the reference's closed relation, then about the condylar axis
+    until the lower teeth meet the upper ones; a skull without teeth keeps the
+    reference head's vertical dimension (its teeth in occlusion).  Triangles
+    joining the jaw to the cranium (the joints, touching teeth) are left out
+    of the articulated bone.  The mandible's landmarks move with it.
+    Returns ``reg`` itself when no mandible was found.
+    """
+    if reg.jaw is None or not reg.jaw.present:
+        return reg
+    target = reg.target_h
+    jaw_parts = ("mandible", "lower_teeth")
+    lower_ref = concatenate([reg.meshes[p] for p in jaw_parts]).vertices
+    upper_ref = concatenate([reg.meshes[p] for p in ("cranium", "upper_teeth")]).vertices
+    d_jaw = cKDTree(lower_ref).query(target.vertices)[0]
+    d_cranium = cKDTree(upper_ref).query(target.vertices)[0]
+    bone = (d_jaw < d_cranium) & (d_jaw < JAW_BONE_MM)
+    teeth = [
+        float(np.mean(reg.observed[p] > OBSERVED_WEIGHT)) for p in ("lower_teeth", "upper_teeth")
+    ]
+    lower = upper = None
+    if min(teeth) >= TEETH_OBSERVED:
+        near_lower = cKDTree(reg.meshes["lower_teeth"].vertices).query(target.vertices)[0]
+        near_upper = cKDTree(reg.meshes["upper_teeth"].vertices).query(target.vertices)[0]
+        lower = target.vertices[bone & (near_lower < TEETH_MM)]
+        upper = target.vertices[~bone & (near_upper < TEETH_MM)]
+    occ = occlusion(reg.jaw, reg.jaw_axis, lower, upper)
+    m = occ.matrix
+    moved_v = target.vertices.copy()
+    moved_v[bone] = _apply(m, moved_v[bone])
+    labels = bone[target.faces]
+    whole = labels.all(axis=1) | ~labels.any(axis=1)
+    target_a = Mesh(moved_v, target.faces[whole])
+    meshes = dict(reg.meshes)
+    for p in jaw_parts:
+        meshes[p] = reg.meshes[p].with_vertices(_apply(m, reg.meshes[p].vertices))
+    on_jaw = {c for c, part in head.skull_landmark_part.items() if part == "mandible"}
+    inferred = {c: (_apply(m, p)[0] if c in on_jaw else p) for c, p in reg.inferred.items()}
+    to_input = np.linalg.inv(reg.input_to_head) @ m @ reg.input_to_head
+    lms = tuple(
+        lm.moved(_apply(to_input, lm.position)[0], lm.status)
+        if lm.code in on_jaw and lm.is_defined
+        else lm
+        for lm in reg.landmarks
+    )
+    figures = dict(reg.figures)
+    figures["jaw"] = {
+        **dict(figures.get("jaw", {})),
+        "occlusion": {
+            **occ.figures(),
+            "opening_in_ct_deg": round(reg.jaw.opening_deg, 2),
+            "jaw_bone_vertices": int(bone.sum()),
+            "joining_triangles_left_out": int((~whole).sum()),
+        },
+    }
+    return replace(
+        reg,
+        meshes=meshes,
+        target_h=target_a,
+        inferred=inferred,
+        landmarks=LandmarkSet(reg.landmarks.surface, lms),
+        figures=figures,
+        occlusion=occ,
+        jaw_bone=bone,
+    )
+
+
 def mirror_from_landmarks(landmarks: LandmarkSet | None) -> str:
     """``"yes"``/``"no"`` when labelled landmarks tell the file's handedness, else ``"auto"``.
 
@@ -426,11 +449,6 @@ def register_skull(
     return result
 
 
-#: a search's next-best pose is tried when the best one finds no mandible and it costs at
-#: most this many times the best
-ALTERNATIVE_COST_RATIO = 1.15
-
-
 @dataclass(frozen=True)
 class _Placed:
     """The target in the reference's frame under one pose, with the mandible posed on it."""
@@ -444,7 +462,7 @@ class _Placed:
     weights: np.ndarray
     tfig: dict
     target: Target
-    jaw_fraction: float
+    jaw: JawPose
 
 
 def _orient_and_pose_jaw(skull: Mesh, head: TemplateHead, pose: PoseResult) -> _Placed:
@@ -464,6 +482,19 @@ def _orient_and_pose_jaw(skull: Mesh, head: TemplateHead, pose: PoseResult) -> _
         target_h = Mesh(target_h.vertices, target_h.faces[:, ::-1])
     parts = _registration_parts(head, k)
     layout = dict(parts)  # the scaled reference before the jaw pose: what the field maps from
+    # the jaw is posed on the bone with only the rims faded (an open jaw lies far from the
+    # reference's closed one); the far-anatomy fade follows, with the jaw where it was found
+    rims, _ = target_weights(target_h, None)
+    jaw = pose_jaw(
+        concatenate([parts["mandible"], parts["lower_teeth"]]),
+        concatenate([parts["cranium"], parts["upper_teeth"]]),
+        np.vstack([k * head.tmj_axis[0], head.tmj_axis[1]]),
+        target_h,
+        rims,
+    )
+    if jaw.present:
+        for name in ("mandible", "lower_teeth"):
+            parts[name] = Mesh(_apply(jaw.matrix, parts[name].vertices), parts[name].faces)
     weights, tfig = target_weights(target_h, concatenate(list(parts.values())))
     if not (weights > 0.05).any():
         raise InputError(
@@ -472,19 +503,6 @@ def _orient_and_pose_jaw(skull: Mesh, head: TemplateHead, pose: PoseResult) -> _
             hint="check the units and that the file holds a skull",
         )
     target = Target(target_h, weights, pull_stride=max(1, int(np.sum(weights > 0.05)) // 6000))
-    tree = cKDTree(target_h.vertices)
-    jaw, jaw_fraction = _pose_mandible(
-        parts["mandible"],
-        parts["lower_teeth"],
-        concatenate([parts["cranium"], parts["upper_teeth"]]),
-        head,
-        k,
-        target,
-        tree,
-    )
-    if jaw_fraction >= PRESENT_FRACTION:
-        for name in ("mandible", "lower_teeth"):
-            parts[name] = Mesh(_apply(jaw, parts[name].vertices), parts[name].faces)
     return _Placed(
         rigid,
         mirrored,
@@ -495,8 +513,52 @@ def _orient_and_pose_jaw(skull: Mesh, head: TemplateHead, pose: PoseResult) -> _
         weights,
         tfig,
         target,
-        jaw_fraction,
+        jaw,
     )
+
+
+#: bilateral landmark pairs compared by the self-check (beside the Frankfort points)
+BILATERAL = ("zy", "ec", "fe", "mso", "ms", "go", "ecm2s", "mr", "ol", "sgl", "lo", "im")
+
+
+def _check_measures(
+    head: TemplateHead,
+    found: SkullPoseResult | None,
+    input_to_head: np.ndarray,
+    settle: np.ndarray,
+    carried: Mapping[str, np.ndarray],
+    support: Mapping[str, float],
+    observed: Mapping[str, np.ndarray],
+    jaw: JawPose,
+    k: float,
+) -> dict:
+    """Figures the self-check judges a registration by (head frame, mm, degrees)."""
+    from workbench.core.skull_pose import face_mask
+
+    out: dict = {"scale": round(k, 4)}
+    if found is not None:
+        out["margin"] = round(found.margin, 4) if np.isfinite(found.margin) else None
+        normal = input_to_head[:3, :3] @ found.symmetry_normal
+        normal /= np.linalg.norm(normal)
+        out["symmetry_deg"] = round(float(np.degrees(np.arccos(min(1.0, abs(normal[0]))))), 2)
+        out["symmetry_loss"] = round(found.symmetry_loss, 4)
+        out["face_cover"] = round(1.0 - found.best.backward, 4)
+    out["settle_deg"] = round(
+        float(np.degrees(np.arccos(np.clip((np.trace(settle[:3, :3]) - 1) / 2, -1.0, 1.0)))), 2
+    )
+    face = face_mask(head.meshes["cranium"].vertices)
+    out["face_observed"] = round(float(np.mean(observed["cranium"][face] > OBSERVED_WEIGHT)), 4)
+    gaps = []
+    for code in BILATERAL + ("po", "or"):
+        left, right = carried.get(f"{code}_l"), carried.get(f"{code}_r")
+        if left is None or right is None:
+            continue
+        if min(support.get(f"{code}_l", 0.0), support.get(f"{code}_r", 0.0)) < OBSERVED_WEIGHT:
+            continue
+        gaps.append(float(np.linalg.norm(left - right * np.array([-1.0, 1.0, 1.0]))))
+    out["asymmetry_mm"] = round(float(np.median(gaps)), 2) if gaps else None
+    out["jaw_shift_mm"] = round(float(np.linalg.norm(jaw.shift_mm)), 2) if jaw.present else None
+    return out
 
 
 def _register(
@@ -507,14 +569,20 @@ def _register(
     seeds: LandmarkSet | None = None,
     mirror: str = "auto",
     progress: Progress | None = None,
+    candidate: int | None = None,
 ) -> SkullRegistration:
+    """Orientation, then the registration from its best pose; see :func:`register_skull`.
+
+    From the bone alone, a registration whose orientation the self-check
+    doubts is done again from the search's runner-up poses (at most
+    :data:`SECOND_OPINIONS` of them), and the best-judged one is kept: two
+    independent starts that agree, or a runner-up that explains the face far
+    better, decide.  ``candidate`` (calibration only) forces one pose.
+    """
     say = progress or (lambda _m: None)
     t0 = time.perf_counter()
-    seconds: dict[str, float] = {}
-    warnings: list[str] = []
     if skull.n_faces < 100:
         raise InputError("skull", f"has only {skull.n_faces} triangles; a skull surface is needed")
-    ref_full = concatenate([head.meshes[p] for p in PART_OF])
     ref_lms = head.skull_landmarks.as_dict()
     seed_pairs = None
     placed = (
@@ -526,28 +594,93 @@ def _register(
         codes = sorted(placed)
         seed_pairs = (np.array([placed[c] for c in codes]), np.array([ref_lms[c] for c in codes]))
     say("orienting the skull ...")
-    pose = search_pose(skull, ref_full, hint=hint, seeds=seed_pairs, mirror=mirror)
-    seconds["orientation"] = time.perf_counter() - t0
+    found: SkullPoseResult | None = None
+    if seed_pairs is None:
+        from workbench.core.skull_pose import as_pose_result, search_skull_pose
+
+        found = search_skull_pose(
+            skull,
+            concatenate([head.meshes["cranium"], head.meshes["upper_teeth"]]),
+            concatenate([head.meshes["mandible"], head.meshes["lower_teeth"]]),
+            head.tmj_axis,
+            hint=hint,
+            mirror="yes" if mirror == "yes" else "no",
+        )
+        if candidate is not None:  # calibration of the self-check: a runner-up on purpose
+            found = replace(found, candidates=found.candidates[candidate:])
+        pose = as_pose_result(found, "search" if hint is None else "hint")
+    else:
+        ref_full = concatenate([head.meshes[p] for p in PART_OF])
+        pose = search_pose(skull, ref_full, hint=hint, seeds=seed_pairs, mirror=mirror)
+    oriented = time.perf_counter() - t0
+    first = _register_from_pose(skull, head, pose, found, placed, seeds, say)
+    if pose.method != "search" or candidate is not None or not _doubted(first):
+        return _finish(first, oriented, t0)
+    tried = [first]
+    for i, alt in enumerate(pose.alternatives[:SECOND_OPINIONS], start=1):
+        say(f"second opinion: the search's runner-up pose {i} ...")
+        other = replace(found, candidates=found.candidates[i:]) if found is not None else None
+        tried.append(_register_from_pose(skull, head, alt, other, placed, seeds, say))
+    best = min(
+        tried, key=lambda r: (_doubted(r), _rank(r), -r.figures["check_measures"]["face_observed"])
+    )
+    if best is not first:
+        note = (
+            "orientation from the bone alone: the best-scoring pose did not pass the "
+            f"self-check ({first.figures['self_check']['reasons'][0]}); a runner-up pose did "
+            "better and was used"
+        )
+        best = replace(best, warnings=(note, *best.warnings))
+    return _finish(best, oriented, t0)
+
+
+#: runner-up poses registered when the best one is not judged confident
+SECOND_OPINIONS = 2
+
+
+def _doubted(reg: SkullRegistration) -> bool:
+    return bool(reg.figures["self_check"].get("orientation_doubt"))
+
+
+def _rank(reg: SkullRegistration) -> int:
+    from workbench.services.skull_check import OUTCOMES
+
+    return OUTCOMES.index(reg.figures["self_check"]["outcome"])
+
+
+def _finish(reg: SkullRegistration, oriented: float, t0: float) -> SkullRegistration:
+    """Times into the figures; a refused registration raises (the self-check's message)."""
+    from workbench.services.skull_check import SelfCheck, refusal
+
+    seconds = dict(reg.figures["seconds"])
+    seconds["orientation"] = round(oriented, 3)
+    seconds["total"] = round(time.perf_counter() - t0, 3)
+    figures = {**reg.figures, "seconds": seconds}
+    check = reg.figures["self_check"]
+    if check["outcome"] == "refused":
+        raise refusal(SelfCheck(check["outcome"], tuple(check["reasons"])), "skull")
+    return replace(reg, figures=figures)
+
+
+def _register_from_pose(
+    skull: Mesh,
+    head: TemplateHead,
+    pose: PoseResult,
+    found: SkullPoseResult | None,
+    placed: Mapping[str, np.ndarray],
+    seeds: LandmarkSet | None,
+    say: Progress,
+) -> SkullRegistration:
+    """The registration of ``head``'s skull onto ``skull`` from one orientation ``pose``."""
+    from workbench.services.skull_check import judge
+
+    t0 = time.perf_counter()
+    seconds: dict[str, float] = {}
+    warnings: list[str] = []
+    ref_lms = head.skull_landmarks.as_dict()
     say("posing the mandible ...")
     t = time.perf_counter()
     placed_jaw = _orient_and_pose_jaw(skull, head, pose)
-    if pose.method == "search" and placed_jaw.jaw_fraction < PRESENT_FRACTION:
-        # the bone alone can rank a wrong pose first by a hair (a rotated cranium matching
-        # its own surface); a next-best pose under which a mandible is found and that
-        # scores nearly as well is taken instead
-        for alt in pose.alternatives:
-            if alt.cost > ALTERNATIVE_COST_RATIO * pose.cost:
-                continue
-            trial = _orient_and_pose_jaw(skull, head, alt)
-            if trial.jaw_fraction >= PRESENT_FRACTION:
-                warnings.append(
-                    "orientation from the bone alone: the best-scoring pose found no "
-                    f"mandible; the next (cost {alt.cost:.3f} against {pose.cost:.3f}, "
-                    f"{100 * trial.jaw_fraction:.0f} % of the mandible on bone) was used - "
-                    "check it, or give an orientation"
-                )
-                pose, placed_jaw = alt, trial
-                break
     seconds["mandible"] = time.perf_counter() - t
     rigid, mirrored, k, target_h = (
         placed_jaw.rigid,
@@ -561,11 +694,11 @@ def _register(
         placed_jaw.weights,
         placed_jaw.tfig,
     )
-    target, jaw_fraction = placed_jaw.target, placed_jaw.jaw_fraction
-    mandible_present = jaw_fraction >= PRESENT_FRACTION
+    target, jaw = placed_jaw.target, placed_jaw.jaw
+    mandible_present = jaw.present
     if not mandible_present:
         warnings.append(
-            f"no mandible found (only {100 * jaw_fraction:.0f} % of the reference "
+            f"no mandible found (only {100 * jaw.support:.0f} % of the reference "
             "mandible finds bone): it follows the cranium and the lower face is "
             "inferred from the reference"
             + (
@@ -668,6 +801,11 @@ def _register(
                 )
             )
     landmarks = LandmarkSet("skull", tuple(lms))
+    axis = np.vstack([k * head.tmj_axis[0], head.tmj_axis[1]])
+    measures = _check_measures(
+        head, found, input_to_head, settle, carried, support, observed, jaw, k
+    )
+    check = judge(measures, pose.method, jaw.figures())
     seconds["total"] = time.perf_counter() - t0
     figures = {
         "orientation": {
@@ -680,7 +818,10 @@ def _register(
             # a search's next-best distinct poses: how close the call was
             "alternative_costs": [round(a.cost, 4) for a in pose.alternatives],
         },
-        "mandible_pose_fraction": round(jaw_fraction, 4),
+        "mandible_pose_fraction": round(jaw.support, 4),
+        "jaw": jaw.figures(),
+        "check_measures": measures,
+        "self_check": check.to_dict(),
         "observed_fraction": {r.name: r.observed_fraction for r in reports},
         "median_observed_distance_mm": round(
             float(np.median(reg.distances[reg.weights > OBSERVED_WEIGHT]))
@@ -724,4 +865,6 @@ def _register(
         settle,
         figures,
         tuple(warnings),
+        jaw.transformed(settle),
+        np.vstack([_apply(settle, axis[0])[0], settle[:3, :3] @ axis[1]]),
     )
