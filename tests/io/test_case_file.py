@@ -156,6 +156,7 @@ def test_zip_layout(saved: Path, skull_obj: Path) -> None:
         "excluded": ["ecm2s_l"],
         "tissue_model": "table",
         "region_factors": {},
+        "jaw": "occlusion",
     }
     assert doc["orientation"] == {"anterior": [0, 0, 1], "superior": [0, 1, 0], "left": None}
     assert doc["guides"][0]["id"] == "nose_tip"

@@ -41,7 +41,17 @@ def test_dowel_defaults() -> None:
         "excluded": [],
         "tissue_model": "table",
         "region_factors": {},
+        "jaw": "occlusion",
     }
+
+
+def test_the_jaw_position_is_checked_and_older_cases_without_it_close_the_jaw() -> None:
+    assert DowelSettings(jaw="as-scanned").to_state()["jaw"] == "as-scanned"
+    with pytest.raises(SetupError, match="jaw"):
+        DowelSettings(jaw="open")
+    state = DowelSettings().to_state()
+    del state["jaw"]  # a case saved before the setting existed
+    assert DowelSettings.from_state(state).jaw == "occlusion"
 
 
 def test_dowels_normalise_and_compare_by_value() -> None:

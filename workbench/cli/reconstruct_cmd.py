@@ -182,6 +182,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         "built from a real CT)",
     )
     p.add_argument(
+        "--jaw",
+        choices=["occlusion", "as-scanned"],
+        default="occlusion",
+        help="occlusion: the mandible brought into occlusion for the face, teeth together and "
+        "condyles in the fossae (default; a toothless jaw keeps the reference's vertical "
+        "dimension), the articulated skull written as skull_articulated.ply; as-scanned: "
+        "the jaw where the scan has it",
+    )
+    p.add_argument(
         "--truth",
         default=None,
         metavar="SKIN_MESH",
@@ -241,6 +250,7 @@ def run(args: argparse.Namespace) -> int:
         excluded=frozenset(args.exclude),
         overrides=_overrides(args.override),
         examiner=args.examiner,
+        jaw=args.jaw,
     )
     truth = None if args.truth is None else resolve_input(args.truth)
     execute(
@@ -292,6 +302,12 @@ def execute(
     report["_seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
     if quiet:
         return report
+    check = report.get("self_check") or {}
+    if check.get("outcome") == "check":
+        # the self-check's doubt comes first, apart from the notes (issue 28)
+        print(f"CHECK: {check['reasons'][0]}")
+        for reason in check["reasons"][1:]:
+            print(f"CHECK: {reason}")
     for name, path in files.items():
         print(f"wrote {name}: {path}")
     fit = report["fit"]
@@ -307,6 +323,8 @@ def execute(
         )
     }
     summary["seconds"] = report["_seconds"]
+    if check:
+        summary["self_check"] = check.get("outcome")
     if report["ensemble"]:
         summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
     if report["validation"]:
@@ -381,11 +399,15 @@ def _pictures(out: Path, result) -> dict[str, str]:
 
     from workbench.render.reconstruction import render_reconstruction
 
+    from workbench.services.reconstruct import articulated_skull
+
     recon = result.recon
     active = recon.plan.active()
     origins = recon.to_input(np.array([d.origin for d in active]))
     tips = recon.to_input(np.array([d.tip for d in active]))
     skull = result.opened.case.specimen.mesh
+    if recon.registration is not None and recon.registration.occlusion is not None:
+        skull = articulated_skull(recon.registration)  # the skull the face was fitted over
     try:
         paths = render_reconstruction(
             skull,

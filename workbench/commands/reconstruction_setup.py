@@ -32,6 +32,7 @@ _FIELD_LABELS = {
     "excluded": "excluded dowels",
     "tissue_model": "tissue model",
     "region_factors": "region factors",
+    "jaw": "jaw position",
 }
 
 
@@ -52,6 +53,7 @@ class SetDowelSettings(ReplacePartCommand):
     excluded: Sequence[str] | None = None
     tissue_model: str | None = None
     region_factors: Mapping[str, float] | None = None
+    jaw: str | None = None
 
     def __post_init__(self) -> None:
         if not self.changes():

@@ -49,6 +49,8 @@ SEXES = ("female", "male")
 BUILDS = ("slender", "normal", "obese")
 #: soft-tissue models (:mod:`workbench.services.tissue_model`, ``MODELS``)
 TISSUE_MODELS = ("table", "reference")
+#: where the mandible is for the face (see DowelSettings.jaw)
+JAW_MODES = ("occlusion", "as-scanned")
 #: face regions a thickness factor can be set for (``tissue_model.REGIONS``)
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 #: plausible region factors (``tissue_model.FACTOR_RANGE``)
@@ -161,6 +163,10 @@ class DowelSettings:
         The reference's thickness calibrated to the table, or kept as it is.
     region_factors : {region: factor}
         Thickness factors per face region (:data:`REGIONS`, :data:`FACTOR_RANGE`).
+    jaw : "occlusion" | "as-scanned"
+        Where the mandible is for the face: brought into occlusion (teeth
+        together, condyles in the fossae; what practitioners do before they
+        reconstruct) or left where the scan has it.
     """
 
     table: str = DEFAULT_TABLE
@@ -170,6 +176,7 @@ class DowelSettings:
     excluded: tuple[str, ...] = ()
     tissue_model: str = "table"
     region_factors: Mapping[str, float] = field(default_factory=dict)
+    jaw: str = "occlusion"
 
     def __post_init__(self) -> None:
         if not isinstance(self.table, str) or not self.table.strip():
@@ -181,6 +188,10 @@ class DowelSettings:
                 "tissue model",
                 f"unknown tissue model {self.tissue_model!r}",
                 f"use {' or '.join(TISSUE_MODELS)}",
+            )
+        if self.jaw not in JAW_MODES:
+            raise SetupError(
+                "jaw", f"unknown jaw position {self.jaw!r}", f"use {' or '.join(JAW_MODES)}"
             )
         overrides = _mapping(self.overrides, "depth overrides")
         depths = {_code(c, "depth override"): _depth(str(c), v) for c, v in overrides.items()}
@@ -238,6 +249,7 @@ class DowelSettings:
             "excluded": list(self.excluded),
             "tissue_model": self.tissue_model,
             "region_factors": dict(self.region_factors),
+            "jaw": self.jaw,
         }
 
     @classmethod

@@ -105,6 +105,9 @@ class FitSettings:
     min_confidence: float = 0.3
     #: move the registration's landmarks to the features their definitions name
     snap_landmarks: bool = True
+    #: "occlusion": the jaw brought into occlusion for the face
+    #: (:func:`~workbench.services.skull_registration.articulate`); "as-scanned": left as found
+    jaw: str = "occlusion"
 
     @property
     def min_tissue_mm(self) -> float:
@@ -138,7 +141,8 @@ class Reconstruction:
         0..1 per skin vertex: how much real bone the registration found under
         it (below :data:`OBSERVED_LEVEL`: inferred from the reference).
     landmarks : LandmarkSet
-        The skull landmarks used (input frame).
+        The skull landmarks used (input frame; those on the mandible where the
+        scan has the jaw, also when the face was fitted with it in occlusion).
     registration : SkullRegistration or None
     tissue : TissueField or None
     smoothing : (k,) or None
@@ -204,14 +208,9 @@ def input_frame(landmarks: LandmarkSet) -> tuple[np.ndarray, bool]:
 
 
 def outward(mesh: Mesh) -> Mesh:
-    """``mesh`` with its triangles wound so normals point away from its centre.
-
-    Judged by the area-weighted agreement of face normals with the direction
-    from the centroid (scanner and CT meshes, and mirrored files, come either way).
-    """
-    centres = mesh.triangles.mean(axis=1)
-    agree = np.einsum("ij,ij->i", mesh.face_cross, centres - centres.mean(axis=0)).sum()
-    return mesh if agree >= 0 else mesh.reversed_winding()
+    """``mesh`` with its triangles wound so normals point away from its centre
+    (:meth:`workbench.core.mesh.Mesh.outward`)."""
+    return mesh.outward()
 
 
 def warp_head(
@@ -624,7 +623,11 @@ def reconstruct(
     :func:`~workbench.services.skull_registration.register_skull` result
     of the same skull (a refit after an edit).
     """
-    from workbench.services.skull_registration import mirror_from_landmarks, register_skull
+    from workbench.services.skull_registration import (
+        articulate,
+        mirror_from_landmarks,
+        register_skull,
+    )
 
     t0 = time.perf_counter()
     reg = registration or register_skull(
@@ -636,12 +639,20 @@ def reconstruct(
         progress=progress,
     )
     to_head, mirrored = reg.input_to_head, reg.mirrored
+    bone = skull
+    if settings.jaw == "occlusion" and reg.occlusion is None:
+        reg = articulate(reg, head)
+    if reg.occlusion is not None:
+        # the face is fitted over the articulated skull: the user's landmarks on the jaw
+        # move with it, and landmarks snap to the articulated bone
+        landmarks = _with_jaw_moved(landmarks, reg, head)
+        bone = articulated_skull(reg)
     lms = _merge_landmarks(reg.landmarks, landmarks)
     snapped: list[str] = []
     if settings.snap_landmarks:
         from workbench.services.landmark_snap import snap_suggested
 
-        lms, snapped = snap_suggested(skull, lms)
+        lms, snapped = snap_suggested(bone, lms)
     lms_h = lms.transformed(to_head)
     doubtful = [
         lm.code
@@ -704,10 +715,38 @@ def reconstruct(
         base,
         held,
         observed,
-        lms,
+        _with_jaw_moved(lms, reg, head, back=True),
         reg,
         tissue_field(head, settings.depth, settings.tissue),
         lam,
+    )
+
+
+def articulated_skull(reg: SkullRegistration) -> Mesh:
+    """The registration's bone in the skull file's frame (mm): with the jaw in occlusion when
+    :func:`~workbench.services.skull_registration.articulate` moved it."""
+    return reg.target_h.transformed(np.linalg.inv(reg.input_to_head))
+
+
+def _with_jaw_moved(
+    given: LandmarkSet | None, reg: SkullRegistration, head: TemplateHead, *, back: bool = False
+) -> LandmarkSet | None:
+    """Landmarks (input frame) with those on the mandible moved into occlusion, or with
+    ``back`` from occlusion to where the scan has the jaw (the case keeps its landmarks on
+    the evidence)."""
+    if given is None or reg.occlusion is None:
+        return given
+    on_jaw = {c for c, part in head.skull_landmark_part.items() if part == "mandible"}
+    occ = reg.occlusion.matrix
+    m = np.linalg.inv(reg.input_to_head) @ (np.linalg.inv(occ) if back else occ) @ reg.input_to_head
+    return LandmarkSet(
+        given.surface,
+        tuple(
+            lm.moved(apply_transform(m, lm.position[None])[0], lm.status)
+            if lm.code in on_jaw and lm.is_defined
+            else lm
+            for lm in given
+        ),
     )
 
 

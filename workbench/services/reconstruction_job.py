@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
@@ -47,7 +47,7 @@ from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.fit_guides import MAX_GUIDE_SHIFT_MM, plausible_guides
 from workbench.services.guides import guides_from_json, guides_to_json
 from workbench.services.landmark_transfer import TransferResult
-from workbench.services.reconstruct import FitSettings, Reconstruction
+from workbench.services.reconstruct import FitSettings, Reconstruction, articulated_skull
 from workbench.services.reconstruction_service import (
     MAX_WORKING_TRIANGLES,
     WORKING_TRIANGLES,
@@ -100,6 +100,8 @@ class JobSettings:
     #: ``model`` and ``region_factors`` become the case's dowel settings; the
     #: other fields are fit internals passed on as they are
     tissue: TissueSettings = field(default_factory=TissueSettings)
+    #: "occlusion" (the jaw closed for the face) or "as-scanned"
+    jaw: str = "occlusion"
 
     @property
     def guides_file(self) -> Path | None:
@@ -148,6 +150,7 @@ def record_settings(opened: OpenedCase, settings: JobSettings) -> None:
             excluded=tuple(settings.excluded),
             tissue_model=settings.tissue.model,
             region_factors=dict(settings.tissue.region_factors),
+            jaw=settings.jaw,
             label="Dowel settings of the job",
         )
     )
@@ -395,6 +398,7 @@ def build_report(
         ],
         "fit": figures,
         "registration": registration,
+        "self_check": None if reg is None else self_check_record(reg.figures),
         "tissue": None if recon.tissue is None else recon.tissue.to_json(),
         "inferred": None
         if recon.observed is None
@@ -438,6 +442,14 @@ def build_report(
             },
         }
     return report
+
+
+def self_check_record(figures: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The registration's self-check as the report records it (None when it has none)."""
+    check = figures.get("self_check")
+    if check is None:
+        return None
+    return {**check, "measures": dict(figures.get("check_measures") or {})}
 
 
 def _run_parameters(inputs: FitInputs) -> dict[str, Any]:
@@ -564,6 +576,21 @@ def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
         }
     if k != 1.0:
         files["face_mm"] = write_mesh(out / "face_mm.ply", face)
+    reg = result.recon.registration
+    if reg is not None and reg.occlusion is not None:
+        # the face was fitted over the skull with its jaw in occlusion: that skull beside it
+        # (the working skull, in the skull file's frame and units)
+        files["skull_articulated"] = ply.write(
+            out / "skull_articulated.ply",
+            articulated_skull(reg).scaled(k),
+            units=result.file_units_label,
+            comments=[
+                "the skull with its mandible brought into occlusion for the face "
+                f"({reg.occlusion.method}; opened {reg.jaw.opening_deg:.1f} deg in the scan)"
+                if reg.jaw is not None
+                else "the skull with its mandible brought into occlusion for the face"
+            ],
+        )
     head_in = head_in_input_frame(result.recon)
     export_template(head_in, out / "head", frame=FITTED_HEAD_FRAME_TEXT)
     files["head"] = out / "head"

@@ -185,7 +185,9 @@ class FitInputs:
     @property
     def fit_settings(self) -> FitSettings:
         return FitSettings(
-            depth=depth_settings(self.dowels), tissue=tissue_settings(self.dowels, self.tissue)
+            depth=depth_settings(self.dowels),
+            tissue=tissue_settings(self.dowels, self.tissue),
+            jaw=self.dowels.jaw,
         )
 
     @property
@@ -315,7 +317,11 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     if len(inputs.templates) > 1:
         recon, references = library_consensus(recon, work, inputs, say)
     check_face_fits_skull(recon.face, inputs.skull)  # never a garbage face as a result
-    skull_h = outward(work.transformed(recon.input_to_head))
+    reg = recon.registration
+    if reg is not None and reg.occlusion is not None:
+        skull_h = reg.target_h  # the skull with its jaw in occlusion, as the face was fitted
+    else:
+        skull_h = outward(work.transformed(recon.input_to_head))
     if recon.landmarks is None:  # reconstruct() always records the landmarks it used
         raise RuntimeError("the reconstruction carries no skull landmarks")
     lms_h = recon.landmarks.transformed(recon.input_to_head)
