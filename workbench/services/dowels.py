@@ -179,18 +179,7 @@ def plan_dowels(
     rows = {
         c: i for i, (c, g) in enumerate(zip(table.codes, table.groups, strict=True)) if g == group
     }
-    site_codes = {r.code for r in SITE_PATTERN}
-    overrides = {
-        _code(c, catalogue, site_codes, "overrides"): _depth(c, v)
-        for c, v in settings.overrides.items()
-    }
-    excluded = {
-        c for label_ in settings.excluded for c in _codes(label_, catalogue, site_codes, "excluded")
-    }
-    user_dirs = {
-        _code(c, catalogue, site_codes, "directions"): _unit(c, v)
-        for c, v in settings.directions.items()
-    }
+    overrides, excluded, user_dirs = setting_codes(settings, catalogue)
 
     index = MeshIndex(skull)
     status = {lm.code: lm.status for lm in landmarks}
@@ -309,6 +298,31 @@ def depth_samples(plan: DowelPlan, rng: np.random.Generator) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- settings codes
+def setting_codes(
+    settings: DepthSettings, catalogue: LandmarkCatalogue | None = None
+) -> tuple[dict[str, float], set[str], dict[str, np.ndarray]]:
+    """The settings' depth overrides (mm), exclusions and dowel directions by catalogue code.
+
+    Raises :class:`InputError` for a code the catalogue does not know (a
+    side-less bilateral label stands for both sides), a non-positive depth or
+    a zero direction: cheap, so a job checks them before any long work.
+    """
+    catalogue = catalogue or load_catalogue()
+    site_codes = {r.code for r in SITE_PATTERN}
+    overrides = {
+        _code(c, catalogue, site_codes, "overrides"): _depth(c, v)
+        for c, v in settings.overrides.items()
+    }
+    excluded = {
+        c for label_ in settings.excluded for c in _codes(label_, catalogue, site_codes, "excluded")
+    }
+    user_dirs = {
+        _code(c, catalogue, site_codes, "directions"): _unit(c, v)
+        for c, v in settings.directions.items()
+    }
+    return overrides, excluded, user_dirs
+
+
 def _codes(label: str, catalogue: LandmarkCatalogue, sites: set[str], what: str) -> list[str]:
     """Catalogue codes for a settings label; a side-less bilateral label gives both sides."""
     if label in sites or label.startswith("i:"):

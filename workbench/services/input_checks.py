@@ -180,7 +180,8 @@ def check_landmarks_on_skull(mesh: Mesh, landmarks: LandmarkSet, source: Source)
 
 def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> None:
     """The depth table (loaded and checked), its group for sex and build, the ensemble
-    size and the published rule ids (``--rule``).
+    size, the published rule ids (``--rule``) and the landmark codes of the depth
+    overrides and exclusions.
 
     ``dowels`` is a :class:`~workbench.model.reconstruction_setup.DowelSettings`.
     """
@@ -197,7 +198,7 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
                 f"known rules: {', '.join(known)}",
             )
     from workbench.io.tables import load_depth_table
-    from workbench.services.dowels import choose_depth_group
+    from workbench.services.dowels import DepthSettings, choose_depth_group, setting_codes
 
     check_count(
         ensemble,
@@ -210,6 +211,10 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
         check_build_sd(dowels.build)
     table = load_depth_table(dowels.table)  # refuses depths and SDs out of bounds
     choose_depth_group(table, None, dowels.sex, dowels.build)
+    # unknown codes in the overrides and exclusions, before the registration
+    setting_codes(
+        DepthSettings(overrides=dict(dowels.overrides), excluded=frozenset(dowels.excluded))
+    )
 
 
 def check_face_fits_skull(face: Mesh, skull: Mesh, source: str = "reconstruction") -> None:
