@@ -41,6 +41,10 @@ model ``reference`` (the references' own, real tissue) — the case scored is
 never among its references.  ``identity`` adds the identity test: the
 subject's own pack, tissue model ``reference``, no guides (it isolates the
 registration from the tissue model).
+
+The faces scored keep the jaw where the scan has it (``jaw`` ``as-scanned``):
+the true skin is the scanned face, mouth open or not, so a face fitted over
+the articulated skull would be scored against another pose of the chin.
 """
 
 from __future__ import annotations
@@ -400,6 +404,8 @@ def run_case(
             orientation=case.orientation if case.orient == "hint" else None,
             tissue=TissueSettings(model=tissue or case.tissue),
             guides=guides,
+            # the true skin has the jaw where the scan has it: so does the face scored on it
+            jaw="as-scanned",
         )
         faces, first = [], None
         t = time.perf_counter()
@@ -478,7 +484,12 @@ def build_references(
 ) -> dict[str, Path | str]:
     """A reference pack per subject from its first case's skin and bone (cached).
 
-    Returns subject → pack folder, or the reason there is none.
+    The pack is oriented the way the cases that use it are: with the
+    manifest's directions for ``orient = hint`` cases, from the bone alone for
+    ``orient = auto`` ones (a mirrored file read in its own handedness, as the
+    automatic reconstruction reads it; a pack built with the hint's reflection
+    would be the subject's mirror image there).  Returns :func:`pack_key` →
+    pack folder, or the reason there is none.
     """
     from workbench.services.template_build import BUILD_VERSION, build_template_pack
 
@@ -486,7 +497,7 @@ def build_references(
     packs: dict[str, Path | str] = {}
     first_of: dict[str, ValidationCase] = {}
     for case in cases:
-        first_of.setdefault(case.who, case)
+        first_of.setdefault(pack_key(case), case)
     for who, case in first_of.items():
         folder = out / who
         stamp = folder / "built_from.json"
@@ -497,6 +508,7 @@ def build_references(
                 "skull": _digest(bone),
                 "sex": case.sex,
                 "build_version": BUILD_VERSION,
+                "orient": case.orient,
             }
             if stamp.is_file() and json.loads(stamp.read_text("utf-8")) == key:
                 packs[who] = folder
@@ -514,7 +526,7 @@ def build_references(
                 tmp,
                 sex=case.sex,
                 units=units,
-                orientation=case.orientation,
+                orientation=case.orientation if case.orient == "hint" else None,
                 staged=True,
             )
             (tmp / "built_from.json").write_text(json.dumps(key), "utf-8")
@@ -527,6 +539,11 @@ def build_references(
         except WorkbenchError as exc:
             packs[who] = f"no reference pack: {exc}"
     return packs
+
+
+def pack_key(case: ValidationCase) -> str:
+    """The reference pack a case uses: its subject's, oriented the way the case is."""
+    return case.who if case.orient == "hint" else f"{case.who}@auto"
 
 
 def validation_inputs(cases: Sequence[ValidationCase]) -> list[Path]:
@@ -627,9 +644,19 @@ def _run_validation(
         done(res, job, "reconstruction")
     if leave_one_out or identity:
         packs = build_references(cases, out / "references", progress=progress)
+        first_case: dict[str, ValidationCase] = {}
+        for c in cases:
+            first_case.setdefault(pack_key(c), c)
         for case in cases:
+            mine = pack_key(case)
             if leave_one_out:
-                others = [p for who, p in packs.items() if who != case.who and isinstance(p, Path)]
+                others = [
+                    p
+                    for key, p in packs.items()
+                    if isinstance(p, Path)
+                    and key != mine
+                    and first_case[key].orient == case.orient
+                ]
                 if others:
                     # the references are real people: their own tissue, not the table's
                     res, job = run_case(
@@ -645,7 +672,7 @@ def _run_validation(
                     res = CaseResult(case.case_id, "failed", "no other reference pack")
                     job = None
                 done(res, job, "library_loo")
-            own = packs.get(case.who)
+            own = packs.get(mine)
             if identity:
                 if isinstance(own, Path):
                     # the identity test isolates the registration: no tissue model, no guides
