@@ -56,6 +56,7 @@ from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import Registration, Target, register, smoothstep
 from workbench.core.rigid_search import PoseResult, search_pose
 from workbench.core.spatial import MeshIndex
+from workbench.core.threads import query_workers
 from workbench.core.tps import LandmarkWarp, fit_warp
 from workbench.model.template import TemplateHead
 from workbench.services.frame import head_frame_from_landmarks
@@ -327,18 +328,25 @@ def articulate(reg: SkullRegistration, head: TemplateHead) -> SkullRegistration:
     jaw_parts = ("mandible", "lower_teeth")
     lower_ref = concatenate([reg.meshes[p] for p in jaw_parts]).vertices
     upper_ref = concatenate([reg.meshes[p] for p in ("cranium", "upper_teeth")]).vertices
-    d_jaw = cKDTree(lower_ref).query(target.vertices)[0]
-    d_cranium = cKDTree(upper_ref).query(target.vertices)[0]
-    bone = (d_jaw < d_cranium) & (d_jaw < JAW_BONE_MM)
+    # only bone within reach of the registered jaw can be the jaw's
+    lo, hi = lower_ref.min(axis=0) - JAW_BONE_MM, lower_ref.max(axis=0) + JAW_BONE_MM
+    near = np.flatnonzero(((target.vertices >= lo) & (target.vertices <= hi)).all(axis=1))
+    pts = target.vertices[near]
+    workers = query_workers(len(pts))
+    d_jaw = cKDTree(lower_ref).query(pts, workers=workers)[0]
+    d_cranium = cKDTree(upper_ref).query(pts, workers=workers)[0]
+    on_jaw_bone = (d_jaw < d_cranium) & (d_jaw < JAW_BONE_MM)
+    bone = np.zeros(target.n_vertices, bool)
+    bone[near[on_jaw_bone]] = True
     teeth = [
         float(np.mean(reg.observed[p] > OBSERVED_WEIGHT)) for p in ("lower_teeth", "upper_teeth")
     ]
     lower = upper = None
     if min(teeth) >= TEETH_OBSERVED:
-        near_lower = cKDTree(reg.meshes["lower_teeth"].vertices).query(target.vertices)[0]
-        near_upper = cKDTree(reg.meshes["upper_teeth"].vertices).query(target.vertices)[0]
-        lower = target.vertices[bone & (near_lower < TEETH_MM)]
-        upper = target.vertices[~bone & (near_upper < TEETH_MM)]
+        near_lower = cKDTree(reg.meshes["lower_teeth"].vertices).query(pts, workers=workers)[0]
+        near_upper = cKDTree(reg.meshes["upper_teeth"].vertices).query(pts, workers=workers)[0]
+        lower = pts[on_jaw_bone & (near_lower < TEETH_MM)]
+        upper = pts[~on_jaw_bone & (near_upper < TEETH_MM)]
     occ = occlusion(reg.jaw, reg.jaw_axis, lower, upper)
     m = occ.matrix
     moved_v = target.vertices.copy()
