@@ -7,7 +7,13 @@ import pytest
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import InputError
-from workbench.core.isosurface import choose_iso, extract_isosurface, taubin_smooth
+from workbench.core.isosurface import (
+    choose_iso,
+    extract_isosurface,
+    looks_like_hu,
+    taubin_smooth,
+    thin_bone_loss,
+)
 from workbench.core.mesh import validate
 from workbench.core.volume import Volume
 from workbench.io.volumes import read_volume
@@ -193,3 +199,29 @@ def test_bad_levels_and_progress(headsq):
     fractions = [f for _, f in calls]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert {"crop", "marching cubes", "smoothing", "decimation"} <= {s for s, _ in calls}
+
+
+def test_unstated_units_that_look_like_hounsfield_get_the_hu_presets():
+    """A CT NIfTI rarely states HU: air at -1024, soft tissue near 40 and bone above 1000
+    read as HU (300 HU for bone), not as three anonymous classes."""
+    data = np.full((20, 20, 20), -1024, np.int16)
+    data[4:16, 4:16, 4:16] = 40
+    data[8:12, 8:12, 8:12] = 1400
+    vol = Volume(data, (1, 1, 1))
+    assert vol.units != "HU" and looks_like_hu(vol)
+    bone = choose_iso(vol, "bone")
+    assert bone.iso == 300.0 and "look like Hounsfield" in bone.rule
+    # the same shapes shifted to 0..2400 (CT numbers, not HU) are not taken for HU
+    assert not looks_like_hu(Volume((data.astype(np.int32) + 1024).astype(np.int16), (1, 1, 1)))
+
+
+def test_a_high_bone_level_reports_the_thin_bone_it_leaves_out():
+    data = np.full((30, 30, 30), -1000, np.int16)
+    data[5:25, 5:25, 5:15] = 1200  # a thick block
+    data[5:25, 5:25, 20] = 450  # a one-voxel plate, partial volume lowers it
+    vol = Volume(data, (1, 1, 1), units="HU")
+    loss = thin_bone_loss(vol, 600.0, 300.0)
+    assert loss is not None and loss["thin_lost"] > 0.95
+    plate = 20 * 20
+    assert loss["lost"] == pytest.approx(plate / (plate + 20 * 20 * 10), abs=1e-6)
+    assert thin_bone_loss(vol, 300.0, 300.0) is None

@@ -106,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
             )
     if not args.quiet:
         print(f"{args.tissue} surface at iso {result.iso:g} ({result.rule})")
+        if result.iso_note:
+            print(f"  note: {result.iso_note}")
         print(f"  {result.summary}")
         lo, hi = result.mesh.bounds
         print(f"  extent {(hi - lo).round(1).tolist()} mm in the volume's {result.frame} frame")

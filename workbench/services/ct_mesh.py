@@ -72,6 +72,9 @@ class CTMeshResult:
         Credit line the source data require wherever they (or meshes made
         from them) are shown, e.g. "Courtesy of the U.S. National Library of
         Medicine. ..." for the Visible Human CTs; None for other data.
+    iso_note : str or None
+        For a bone level above the usual 300 HU: what it leaves out of the
+        bone seen at 300 HU (thin bone first), and the alternative.
     """
 
     mesh: Mesh
@@ -86,6 +89,7 @@ class CTMeshResult:
     source: str = ""
     warnings: tuple[str, ...] = ()
     credit: str | None = None
+    iso_note: str | None = None
 
     @property
     def summary(self) -> str:
@@ -109,6 +113,7 @@ class CTMeshResult:
             "stats": {k: v for k, v in self.stats.items() if k != "timings_s"},
             "warnings": list(self.warnings),
             "credit": self.credit,
+            "iso_note": self.iso_note,
         }
 
 
@@ -192,6 +197,7 @@ def mesh_from_ct(
     t0 = perf_counter()
     report_ = validate(result.mesh)
     timings["validate"] = round(perf_counter() - t0, 4)
+    note = _iso_note(volume, tissue, choice.iso) if tissue == "bone" else None
     timings["total"] = round(perf_counter() - start, 4)
     report("done", 1.0)
     return CTMeshResult(
@@ -207,6 +213,26 @@ def mesh_from_ct(
         source=str(path_or_volume) if not isinstance(path_or_volume, Volume) else volume.source,
         warnings=tuple(volume.metadata.get("warnings", ())),
         credit=_credit(path_or_volume),
+        iso_note=note,
+    )
+
+
+def _iso_note(volume: Volume, tissue: str, iso: float) -> str | None:
+    """What a bone level above the usual 300 HU leaves out (HU data, stated or evident)."""
+    from workbench.core.isosurface import HU_PRESETS, looks_like_hu, thin_bone_loss
+
+    if volume.units != "HU" and not looks_like_hu(volume):
+        return None
+    usual = HU_PRESETS[tissue]
+    loss = thin_bone_loss(volume, iso, usual)
+    if loss is None:
+        return None
+    return (
+        f"at {iso:g} HU, {100 * loss['thin_lost']:.0f} % of the thin bone and "
+        f"{100 * loss['lost']:.0f} % of all the bone seen at {usual:g} HU are left out (thin "
+        "plates go first: the orbital walls, nasal bones, sinus walls and ethmoid, where a "
+        "reconstruction needs them); the usual bone level is "
+        f"{usual:g} HU (--iso {usual:g})"
     )
 
 
