@@ -7,6 +7,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 from workbench.core.errors import WorkbenchError
@@ -159,3 +160,11 @@ def progress_printer(enabled: bool = True):
             last["step"] = step
 
     return report
+
+
+def print_self_check(check: Mapping[str, Any] | None) -> None:
+    """The registration's self-check, when it asks for a check: one ``CHECK:`` line per
+    reason, worst first, before the command's other results (issue 28)."""
+    if check and check.get("outcome") == "check":
+        for reason in check.get("reasons", ()):
+            print(f"CHECK: {reason}")

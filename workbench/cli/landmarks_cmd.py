@@ -11,6 +11,7 @@ from workbench.cli.common import (
     input_paths,
     load_mesh,
     output_path,
+    print_self_check,
     write_json,
 )
 from workbench.core.errors import LandmarkError
@@ -309,6 +310,7 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
         seeds=seeds,
         mirror=mirror_from_landmarks(seeds),
     )
+    print_self_check(reg.figures.get("self_check"))
     lms = reg.landmarks
     if read.scale_applied != 1.0:  # back to the file's units
         m = np.eye(4)
@@ -340,6 +342,7 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
                 "scale": round(1.0 / o["reference_scale"], 4),
             },
             "median_bone_distance_mm": reg.figures["median_observed_distance_mm"],
+            "self_check": (reg.figures.get("self_check") or {}).get("outcome"),
         },
         None,
     )

@@ -11,7 +11,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from workbench.cli.common import add_force_option, add_units_options, write_json
+from workbench.cli.common import (
+    add_force_option,
+    add_units_options,
+    print_self_check,
+    write_json,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -171,6 +176,7 @@ def run_build(args: argparse.Namespace) -> int:
         progress=lambda m: print(f"  {m}"),
         force=args.force,
     )
+    print_self_check(result.registration.figures.get("self_check"))
     for path in files:
         print(f"wrote {path}")
     for w in result.warnings:

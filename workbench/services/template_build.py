@@ -486,7 +486,14 @@ def build_template(
         "scan_not_head_area_fraction": round(not_head, 4),
         "skull_registration": {
             k: reg.figures[k]
-            for k in ("orientation", "observed_fraction", "median_observed_distance_mm")
+            for k in (
+                "orientation",
+                "observed_fraction",
+                "median_observed_distance_mm",
+                "jaw",
+                "self_check",
+            )
+            if k in reg.figures
         },
     }
     seconds["total"] = time.perf_counter() - t0
