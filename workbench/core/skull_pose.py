@@ -458,16 +458,19 @@ def search_skull_pose(
         refined.append((0.5 * (fwd + bwd), fwd, bwd, lin, t))
     refined.sort(key=lambda x: x[0])
     kept: list[Candidate] = []
+    canon_inv = np.linalg.inv(canon)
     for cost, fwd, bwd, lin, t in refined:
-        m = np.eye(4)
-        m[:3, :3], m[:3, 3] = lin, t
-        m = m @ canon  # input → canonical → reference
+        # two poses differ by their turn, or by where they put the bone's centre (the
+        # canonical origin): compared as matrices of input coordinates, a turn of a degree
+        # would move the shift of a file placed far from its origin by tens of mm
+        seen = [k.matrix @ canon_inv for k in kept]
         if all(
-            _angle_deg(m[:3, :3], k.matrix[:3, :3]) > DISTINCT_DEG
-            or np.linalg.norm(m[:3, 3] - k.matrix[:3, 3]) > DISTINCT_MM
-            for k in kept
+            _angle_deg(lin, k[:3, :3]) > DISTINCT_DEG or np.linalg.norm(t - k[:3, 3]) > DISTINCT_MM
+            for k in seen
         ):
-            kept.append(Candidate(m, cost, fwd, bwd))
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = lin, t
+            kept.append(Candidate(m @ canon, cost, fwd, bwd))  # input → canonical → reference
         if len(kept) == KEPT:
             break
     handed = hint is not None and len(hint) > 2 and hint[2] is not None
