@@ -105,6 +105,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rebuild", action="store_true", help="rebuild the variant meshes")
     parser.add_argument("--build-only", action="store_true", help="build the corpus and stop")
     parser.add_argument(
+        "--control",
+        action="store_true",
+        help="also register each mesh with the orientation hint: the automatic result is then "
+        "judged against the hinted one on the same surface too",
+    )
+    parser.add_argument(
         "--code",
         default="",
         help="measure this workbench: a git revision (e.g. HEAD) or a folder holding one "
@@ -128,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"corpus ready in {time.perf_counter() - t0:.0f} s")
     if args.build_only:
         return 0
-    summary = evaluate(entries, args.label, jobs=args.jobs, force=args.force)
+    summary = evaluate(entries, args.label, jobs=args.jobs, force=args.force, control=args.control)
     print(markdown(summary, f"Robustness corpus: run '{args.label}'"))
     print(f"total {time.perf_counter() - t0:.0f} s")
     return 0

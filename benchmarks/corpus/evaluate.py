@@ -73,8 +73,16 @@ def shift_bin(translation) -> str:
 
 
 # ---------------------------------------------------------------- one variant
-def run_variant(entry: dict[str, Any], root: Path | None = None) -> dict[str, Any]:
-    """The automatic registration of one variant; raw outputs (file frame, mm)."""
+def run_variant(
+    entry: dict[str, Any], root: Path | None = None, control: bool = False
+) -> dict[str, Any]:
+    """The automatic registration of one variant; raw outputs (file frame, mm).
+
+    With ``control`` the same mesh is also registered with the base's orientation hint
+    carried through the file's transform (``control_landmarks``): how far the automatic
+    result lies from the hinted one *on the same surface* separates a wrong orientation
+    from landmarks that move with the surface (another iso, smoothing, decimation).
+    """
     from workbench.core.errors import WorkbenchError
     from workbench.io.meshes import read_mesh
     from workbench.services.reconstruction_service import working_skull
@@ -111,9 +119,25 @@ def run_variant(entry: dict[str, Any], root: Path | None = None) -> dict[str, An
     point_h, _ = condylar_axis_h(reg, head)
     pose = jaw_pose(reg, point_h)
     self_check = reg.figures.get("self_check", {}) or {}
+    if control:
+        from benchmarks.corpus.bases import BASES
+
+        x = np.asarray(entry["truth"]["file_transform"], np.float64)
+        r = x[:3, :3] / abs(np.linalg.det(x[:3, :3])) ** (1 / 3)
+        hint = tuple(
+            tuple(r @ np.asarray(h, np.float64)) for h in BASES[entry["spec"]["base"]].hint
+        )
+        try:
+            hinted = register_skull(work, head, hint=hint)
+            hb = np.linalg.inv(hinted.input_to_head)
+            out["control_landmarks"] = {c: apply(hb, hinted.inferred[c]) for c in SIX}
+            out["control_mirrored"] = bool(hinted.mirrored)
+        except WorkbenchError as exc:
+            out["control_error"] = str(exc)
     out.update(
         outcome=self_check.get("outcome", "confident"),
         self_check=self_check,
+        check_measures=reg.figures.get("check_measures"),
         warnings=list(reg.warnings),
         landmarks={c: apply(back, reg.inferred[c]) for c in SIX},
         mirrored=bool(reg.mirrored),
@@ -132,9 +156,9 @@ def run_variant(entry: dict[str, Any], root: Path | None = None) -> dict[str, An
     return jsonable(out, 6)
 
 
-def _worker(args: tuple[dict[str, Any], str | None]) -> dict[str, Any]:
-    entry, root = args
-    return run_variant(entry, Path(root) if root else None)
+def _worker(args: tuple[dict[str, Any], str | None, bool]) -> dict[str, Any]:
+    entry, root, control = args
+    return run_variant(entry, Path(root) if root else None, control)
 
 
 # ---------------------------------------------------------------- scoring
@@ -193,6 +217,12 @@ def score(raw: dict[str, Any], entry: dict[str, Any], base_truth: dict[str, Any]
     ok_direct = direct <= LANDMARK_TOLERANCE_MM
     ok_swapped = swapped <= LANDMARK_TOLERANCE_MM
     orientation_ok = ok_direct or (row["mirrored_file"] and ok_swapped)
+    control = raw.get("control_landmarks")
+    if control is not None:
+        swap = bool(raw.get("control_mirrored")) != bool(raw.get("mirrored"))
+        row["max_error_vs_hinted_same_mesh_mm"] = _max_error(
+            found, control, SWAPPED if swap else None
+        )
     e_direct, e_swapped = _max_error(found, own), _max_error(found, own, SWAPPED)
     row["max_error_own_sex_reference_mm"] = (
         min(e_direct, e_swapped) if row["mirrored_file"] else e_direct
@@ -250,6 +280,15 @@ def stats(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "orientation_right": ok,
         "orientation_right_pct": _pct(ok, n),
         "orientation_right_vs_own_sex_reference_pct": _pct(own_ref_ok, n),
+        "orientation_right_vs_hinted_same_mesh_pct": _pct(
+            sum(
+                1
+                for r in ran
+                if r.get("max_error_vs_hinted_same_mesh_mm") is not None
+                and r["max_error_vs_hinted_same_mesh_mm"] <= LANDMARK_TOLERANCE_MM
+            ),
+            sum(1 for r in ran if r.get("max_error_vs_hinted_same_mesh_mm") is not None),
+        ),
         "with_mandible": len(has),
         "mandible_found": len(found),
         "mandible_found_pct": _pct(len(found), len(has)),
@@ -297,6 +336,7 @@ _COLUMNS = (
     ("n", "n"),
     ("orientation right %", "orientation_right_pct"),
     ("(vs own-sex-reference truth) %", "orientation_right_vs_own_sex_reference_pct"),
+    ("vs hinted, same mesh %", "orientation_right_vs_hinted_same_mesh_pct"),
     ("mandible found %", "mandible_found_pct"),
     ("opening ≤3° %", "opening_within_3deg_pct"),
     ("median |opening err| °", "opening_abs_error_median_deg"),
@@ -365,6 +405,7 @@ CSV_FIELDS = (
     "max_error_mm",
     "max_error_direct_mm",
     "max_error_own_sex_reference_mm",
+    "max_error_vs_hinted_same_mesh_mm",
     "mirrored_file",
     "swapped",
     "has_mandible",
@@ -403,8 +444,10 @@ def evaluate(
     force: bool = False,
     root: Path | None = None,
     say: Callable[[str], None] = print,
+    control: bool = False,
 ) -> dict[str, Any]:
-    """Register every variant (resuming), score, and write the run's files.
+    """Register every variant (resuming), score, and write the run's files (``control``:
+    also the hinted registration of each mesh, see :func:`run_variant`).
 
     Returns the summary (also written as ``summary.json``/``summary.md`` with
     ``results.csv`` in ``run_<label>/``).
@@ -431,7 +474,7 @@ def evaluate(
             "are scored again (use another --label to keep both)"
         )
     say(f"{len(entries)} variants: {len(raws)} already scored with code {code}, {len(todo)} to run")
-    for i, raw in enumerate(_runs(todo, jobs, root)):
+    for i, raw in enumerate(_runs(todo, jobs, root, control)):
         write_json(raw_dir / f"{raw['id']}.json", raw)
         raws[raw["id"]] = raw
         say(
@@ -463,16 +506,18 @@ def evaluate(
     return summary
 
 
-def _runs(todo: list[dict[str, Any]], jobs: int, root: Path | None) -> Iterable[dict[str, Any]]:
+def _runs(
+    todo: list[dict[str, Any]], jobs: int, root: Path | None, control: bool = False
+) -> Iterable[dict[str, Any]]:
     if jobs <= 1:
         for entry in todo:
-            yield run_variant(entry, root)
+            yield run_variant(entry, root, control)
         return
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures = [pool.submit(_worker, (e, str(root) if root else None)) for e in todo]
+        futures = [pool.submit(_worker, (e, str(root) if root else None, control)) for e in todo]
         for future in as_completed(futures):
             yield future.result()
