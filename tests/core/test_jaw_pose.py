@@ -96,5 +96,5 @@ def test_occlusion_closes_to_contact_and_keeps_the_vertical_dimension_without_te
     back = lower_ct @ closed.matrix[:3, :3].T + closed.matrix[:3, 3]
     assert np.median(np.linalg.norm(back - lower, axis=1)) < 3.0
     toothless = occlusion(Found(), head_male.tmj_axis, None, None)  # type: ignore[arg-type]
-    assert toothless.method == "reference vertical dimension"
+    assert toothless.method == "reference vertical dimension, no teeth"
     assert np.allclose(toothless.matrix, np.linalg.inv(opened))

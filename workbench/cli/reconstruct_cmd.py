@@ -14,7 +14,12 @@ import os
 from pathlib import Path
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
-from workbench.cli.common import add_force_option, add_units_options, write_json
+from workbench.cli.common import (
+    add_force_option,
+    add_units_options,
+    print_self_check,
+    write_json,
+)
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check_tissue_depth
 
@@ -303,11 +308,7 @@ def execute(
     if quiet:
         return report
     check = report.get("self_check") or {}
-    if check.get("outcome") == "check":
-        # the self-check's doubt comes first, apart from the notes (issue 28)
-        print(f"CHECK: {check['reasons'][0]}")
-        for reason in check["reasons"][1:]:
-            print(f"CHECK: {reason}")
+    print_self_check(check)  # the self-check's doubt first, apart from the notes
     for name, path in files.items():
         print(f"wrote {name}: {path}")
     fit = report["fit"]
@@ -325,6 +326,13 @@ def execute(
     summary["seconds"] = report["_seconds"]
     if check:
         summary["self_check"] = check.get("outcome")
+    jaw = (report.get("registration") or {}).get("jaw") or {}
+    if jaw.get("present"):
+        occ = jaw.get("occlusion")
+        summary["jaw"] = {
+            "opening_in_scan_deg": jaw.get("opening_deg"),
+            "for_the_face": f"occlusion ({occ['method']})" if occ else "as scanned",
+        }
     if report["ensemble"]:
         summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
     if report["validation"]:

@@ -181,9 +181,11 @@ class Occlusion:
         Rigid map of the jaw as found (CT pose) into occlusion.
     method : str
         ``"teeth in contact"`` (closed about the condylar axis until the
-        lower teeth meet the upper ones) or ``"reference vertical dimension"``
-        (no teeth to meet: the jaw takes the reference head's closed relation
-        to the cranium, i.e. its teeth's vertical dimension).
+        lower teeth meet the upper ones), ``"reference vertical dimension, no
+        teeth"`` (the jaw takes the reference head's closed relation to the
+        cranium, i.e. its teeth's vertical dimension) or ``"reference vertical
+        dimension, the teeth did not meet"`` (teeth or ridges were seen but
+        never came together on closing: a toothless jaw's ridges, broken teeth).
     contact_turn_deg : float
         Turn about the axis from the reference's occlusion to the contact
         (positive: more open than the reference).
@@ -215,7 +217,7 @@ def occlusion(
     """
     back = np.linalg.inv(pose.matrix)
     if lower is None or upper is None or len(lower) < 10 or len(upper) < 10:
-        return Occlusion(back, "reference vertical dimension")
+        return Occlusion(back, "reference vertical dimension, no teeth")
     point = np.asarray(axis[0], float)
     direction = np.asarray(axis[1], float)
     direction = direction / np.linalg.norm(direction) * (1.0 if direction[0] >= 0 else -1.0)
@@ -228,7 +230,7 @@ def occlusion(
             if i == 0:  # touching even wide open: these are not two rows of teeth
                 break
             return Occlusion(m @ back, "teeth in contact", deg)
-    return Occlusion(back, "reference vertical dimension (the teeth were not found to meet)")
+    return Occlusion(back, "reference vertical dimension, the teeth did not meet")
 
 
 def _samples(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

@@ -260,6 +260,8 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         )
     if report.get("fit"):
         _fit(pdf, report["fit"])
+    if report.get("registration"):
+        _registration(pdf, report["registration"], report.get("self_check"))
     shown = [title for _, title in GROUPS if title in pictures]
     if shown:
         pdf.heading("Pictures", min_space=100)
@@ -426,6 +428,49 @@ def _fit(pdf: ReportPDF, fit: dict[str, Any]) -> None:
         label = key.removesuffix("_mm").replace("_", " ")
         rows.append((label, f"{num(value, 2)} {unit}".strip()))
     pdf.grid((), rows, (70, 40), aligns=("L", "R"), size=8.5)
+
+
+def _registration(pdf: ReportPDF, reg: dict[str, Any], check: dict[str, Any] | None) -> None:
+    """How the skull was oriented, judged and articulated (issue 28)."""
+    pdf.heading("Skull registration")
+    orientation = reg.get("orientation") or {}
+    how = str(orientation.get("method", "–"))
+    method = {
+        "search": "found from the bone alone",
+        "hint": "from the directions given",
+        "seeds": "from the landmarks placed",
+    }.get(how, how)
+    rows = [("orientation", method)]
+    if check:
+        rows.append(("self-check", check.get("outcome", "–")))
+        measures = check.get("measures") or {}
+        if measures.get("face_observed") is not None:
+            rows.append(
+                ("facial skeleton on bone", f"{100 * float(measures['face_observed']):.0f} %")
+            )
+        if measures.get("symmetry_deg") is not None:
+            rows.append(("symmetry plane off the midline", f"{num(measures['symmetry_deg'])}°"))
+    jaw = reg.get("jaw") or {}
+    if jaw:
+        if not jaw.get("present"):
+            rows.append(("mandible", "not found (the lower face is inferred)"))
+        else:
+            shift = jaw.get("shift_mm") or [0.0, 0.0, 0.0]
+            rows.append(
+                (
+                    "mandible in the scan",
+                    f"opened {num(jaw.get('opening_deg'))}°, joint moved "
+                    f"{num(float(np.linalg.norm(shift)))} mm",
+                )
+            )
+            occ = jaw.get("occlusion")
+            rows.append(
+                (
+                    "jaw for the face",
+                    f"in occlusion: {occ['method']}" if occ else "as scanned",
+                )
+            )
+    pdf.grid((), rows, (70, 110), aligns=("L", "L"), size=8.5)
 
 
 def _ensemble(pdf: ReportPDF, ensemble: dict[str, Any], pictures: list[tuple[str, Path]]) -> None:

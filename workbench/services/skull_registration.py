@@ -592,10 +592,11 @@ def _register(
     """Orientation, then the registration from its best pose; see :func:`register_skull`.
 
     From the bone alone, a registration whose orientation the self-check
-    doubts is done again from the search's runner-up poses (at most
-    :data:`SECOND_OPINIONS` of them), and the best-judged one is kept: two
-    independent starts that agree, or a runner-up that explains the face far
-    better, decide.  ``candidate`` (calibration only) forces one pose.
+    doubts is done again from the search's runner-up poses that scored nearly
+    as well (at most :data:`SECOND_OPINIONS`, within
+    :data:`SECOND_OPINION_COST`); a runner-up replaces it only when it is
+    judged better (not doubted, or no longer refused).  ``candidate``
+    (calibration only) forces one pose.
     """
     say = progress or (lambda _m: None)
     t0 = time.perf_counter()
@@ -658,9 +659,9 @@ def _register(
         tried.append(
             _register_from_pose(skull, head, alt, other, placed, seeds, say, not_bone, notes)
         )
-    best = min(
-        tried, key=lambda r: (_doubted(r), _rank(r), -r.figures["check_measures"]["face_observed"])
-    )
+    # a runner-up replaces the best-scoring pose only when it is judged better: not doubted,
+    # or refused no longer; between equals the search's own order stands
+    best = min(tried, key=lambda r: (_doubted(r), _rank(r)))
     if best is not first:
         note = (
             "orientation from the bone alone: the best-scoring pose did not pass the "

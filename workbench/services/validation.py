@@ -653,9 +653,7 @@ def _run_validation(
                 others = [
                     p
                     for key, p in packs.items()
-                    if isinstance(p, Path)
-                    and key != mine
-                    and first_case[key].orient == case.orient
+                    if isinstance(p, Path) and key != mine and first_case[key].orient == case.orient
                 ]
                 if others:
                     # the references are real people: their own tissue, not the table's
