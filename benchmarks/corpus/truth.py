@@ -23,7 +23,7 @@ From that registration:
   a run may use, because it is measured against that reference's rest jaw.
 
 The truth is cached per base, keyed by a hash of the registration code
-(:data:`benchmarks.corpus.common.REGISTRATION_FILES`) and the reference head,
+(:func:`benchmarks.corpus.common.registration_hash`) and the reference head,
 so it is recomputed when that code changes.  The **anchor** — the first such
 registration, kept with its registered reference surfaces — is frozen
 (keyed only by :data:`ANCHOR_VERSION`): the voxel labels and every variant's
@@ -171,6 +171,8 @@ def _truth_record(base: Base, reg: SkullRegistration, head: TemplateHead) -> dic
             "protrusion_mm": pose.protrusion_mm,
             "lateral_mm": pose.lateral_mm,
             "shift_h": pose.shift_h,
+            # the opening the registration reports (its jaw pose about the condylar axis)
+            "reported_opening_deg": (reg.figures.get("jaw") or {}).get("opening_deg"),
         },
         "mandible_present": bool(reg.part("mandible").present),
         "parts": {
