@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.core._shapes import subdivided_octahedron
 from workbench.core.bone_pieces import apparatus_faces, judge_pieces
 from workbench.core.mesh import Mesh, concatenate
 
