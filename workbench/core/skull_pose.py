@@ -51,6 +51,7 @@ from workbench.core.rigid_search import (
     FLIP,
     MIN_COS,
     PLANE_SHIFTS_MM,
+    SCALE_RANGE,
     TURN_STEP_DEG,
     PoseResult,
     _angle_deg,
@@ -308,6 +309,19 @@ def _rigid_step(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.nda
     return r, cd - r @ cs
 
 
+def _scale_step(
+    src: np.ndarray, dst: np.ndarray, w: np.ndarray, current: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted uniform scale and shift ``dst ≈ s src + t`` (the total scale ``current · s``
+    kept within ``SCALE_RANGE``), as a (3, 3) linear part and a shift."""
+    ws = w / w.sum()
+    cs, cd = ws @ src, ws @ dst
+    a, b = src - cs, dst - cd
+    k = float(ws @ (a * b).sum(axis=1)) / max(float(ws @ (a * a).sum(axis=1)), 1e-12)
+    k = float(np.clip(current * k, *SCALE_RANGE)) / current
+    return k * np.eye(3), cd - k * cs
+
+
 def two_way_icp(
     match: _TwoWay,
     lin: np.ndarray,
@@ -315,8 +329,12 @@ def two_way_icp(
     *,
     sigmas: tuple[float, ...] = ICP_SIGMAS_MM,
     rounds: int = ICP_ROUNDS,
+    scale_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Robust rigid ICP on pairs in both directions (keeps ``lin``'s scale and handedness).
+
+    ``scale_only``: the turn is held and a uniform scale (about the pairs' centre,
+    within ``SCALE_RANGE`` overall) and a shift are fitted instead.
 
     Each round takes every target sample's nearest agreeing reference sample
     and every backward reference sample's nearest agreeing target sample,
@@ -343,9 +361,15 @@ def two_way_icp(
             wb = wb / max(wb.sum(), 1e-9)
             src = np.vstack([pts, pts[bj]])
             dst = np.vstack([match.ref.points[fj], match.back.points])
-            r, tr = _rigid_step(src, dst, np.concatenate([wf, wb]))
+            w = np.concatenate([wf, wb])
+            if scale_only:
+                r, tr = _scale_step(src, dst, w, abs(np.linalg.det(lin)) ** (1 / 3))
+            else:
+                r, tr = _rigid_step(src, dst, w)
             lin, t = r @ lin, r @ t + tr
             turn = float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
+            if scale_only:
+                turn = 100.0 * abs(r[0, 0] - 1.0)  # the scale's change, in %
             shift = float(np.linalg.norm((r - np.eye(3)) @ pts.mean(axis=0) + tr))
             if turn < CONVERGED and shift < CONVERGED:
                 break
@@ -448,6 +472,9 @@ def search_skull_pose(
     refined = []
     for _, lin, t in _distinct_poses(coarse, FINISHED):
         lin, t = two_way_icp(match, lin, t, sigmas=ICP_SIGMAS_MM[COARSE_WIDTHS:])
+        # the turn found at the widths' scale, then the size and place polished with the
+        # turn held (a scale free during the turn's ICP slides with the pose)
+        lin, t = two_way_icp(match, lin, t, sigmas=ICP_SIGMAS_MM[-2:], scale_only=True)
         fwd, bwd = match.scores(lin, t, RANK_SIGMA_MM)
         refined.append((0.5 * (fwd + bwd), fwd, bwd, lin, t))
     refined.sort(key=lambda x: x[0])
