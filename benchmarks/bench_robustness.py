@@ -30,28 +30,36 @@ ROOT = Path(__file__).resolve().parents[1]
 BASES = ("headsq", "vhp_female", "vhp_male")
 
 
-def use_code(code: str) -> Path:
-    """Make ``workbench`` import from ``code``: a folder holding a ``workbench`` package, or
-    a git revision of this checkout exported (``git archive``: workbench/ and data_tables/)
-    into ``benchmarks/results/corpus/code/<commit>/``, so a run can measure the committed
-    code while someone edits the working tree.  Must run before anything imports it."""
+def export_revision(code: str) -> Path:
+    """A folder holding a ``workbench`` package: ``code`` itself when it is one, else the
+    git revision ``code`` of this checkout exported (``git archive``: workbench/ and
+    data_tables/) into ``benchmarks/results/corpus/code/<commit>/`` (kept for reuse)."""
     folder = Path(code)
+    if (folder / "workbench" / "__init__.py").is_file():
+        return folder
+    sha = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--verify", f"{code}^{{commit}}"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
+    folder = ROOT / "benchmarks" / "results" / "corpus" / "code" / sha[:12]
     if not (folder / "workbench" / "__init__.py").is_file():
-        sha = subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "--verify", f"{code}^{{commit}}"],
+        folder.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(
+            ["git", "-C", str(ROOT), "archive", sha, "workbench", "data_tables"],
             check=True,
             capture_output=True,
-            text=True,
-        ).stdout.strip()
-        folder = ROOT / "benchmarks" / "results" / "corpus" / "code" / sha[:12]
-        if not (folder / "workbench" / "__init__.py").is_file():
-            folder.mkdir(parents=True, exist_ok=True)
-            archive = subprocess.run(
-                ["git", "-C", str(ROOT), "archive", sha, "workbench", "data_tables"],
-                check=True,
-                capture_output=True,
-            ).stdout
-            subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
+
+
+def use_code(code: str) -> Path:
+    """Make ``workbench`` import from ``code`` (:func:`export_revision`), so a run can
+    measure the committed code while someone edits the working tree.  Must run before
+    anything imports it."""
+    folder = export_revision(code)
     if "workbench" in sys.modules:
         raise RuntimeError("workbench was imported before --code could take effect")
     sys.path.insert(0, str(folder.resolve()))
