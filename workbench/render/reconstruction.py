@@ -134,72 +134,74 @@ def render_reconstruction(
             p.add_mesh(eyes_pd, color=EYE, smooth_shading=True, specular=0.4)
 
     written: dict[str, Path] = {}
-    for view in views:
-        written[f"skull_dowels_{view}"] = _shoot(
-            pv,
-            out / f"{prefix}_skull_dowels_{view}.png",
-            size,
-            [(cameras[view], view)],
-            lambda p, _v: draw_skull(p, True),
-        )
-        if face_pd is None:
-            continue
-        written[f"face_skull_{view}"] = _shoot(
-            pv,
-            out / f"{prefix}_face_skull_{view}.png",
-            size,
-            [(cameras[view], view)],
-            over,
-            peel=True,
-        )
-        written[f"face_{view}"] = _shoot(
-            pv, out / f"{prefix}_face_{view}.png", size, [(cameras[view], view)], alone
-        )
-    if spread is not None and face_pd is not None:
-        spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
-
-        def coloured(p, v) -> None:
-            actor = p.add_mesh(
-                face_pd,
-                scalars="spread_mm",
-                cmap=SPREAD_CMAP,
-                clim=spread_range[:2],
-                smooth_shading=True,
-                show_scalar_bar=False,
+    studio = _Studio(pv, size)
+    try:
+        for view in views:
+            written[f"skull_dowels_{view}"] = _shoot(
+                studio,
+                out / f"{prefix}_skull_dowels_{view}.png",
+                [(cameras[view], view)],
+                lambda p, _v: draw_skull(p, True),
             )
-            if eyes_pd is not None:
-                p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
-            if v == views[len(views) // 2]:
-                _scalar_bar(p, actor, "spread (mm)", spread_range, size)
-
-        written["spread"] = _shoot(
-            pv, out / f"{prefix}_spread.png", size, [(cameras[v], v) for v in views], coloured
-        )
-    if inferred is not None and face_pd is not None and np.any(inferred):
-
-        def marked(p, v) -> None:
-            p.add_mesh(
-                face_pd,
-                scalars="inferred",
-                cmap=[SKIN, INFERRED],
-                clim=(0.0, 1.0),
-                smooth_shading=True,
-                show_scalar_bar=False,
-                specular=0.1,
+            if face_pd is None:
+                continue
+            written[f"face_skull_{view}"] = _shoot(
+                studio,
+                out / f"{prefix}_face_skull_{view}.png",
+                [(cameras[view], view)],
+                over,
+                peel=True,
             )
-            if eyes_pd is not None:
-                p.add_mesh(eyes_pd, color=EYE, smooth_shading=True)
-            if v == views[0]:
-                p.add_text(
-                    "blue-grey: no bone under the skin (inferred from the reference)",
-                    position="lower_left",
-                    font_size=9,
-                    color="#333333",
+            written[f"face_{view}"] = _shoot(
+                studio, out / f"{prefix}_face_{view}.png", [(cameras[view], view)], alone
+            )
+        if spread is not None and face_pd is not None:
+            spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
+
+            def coloured(p, v) -> None:
+                actor = p.add_mesh(
+                    face_pd,
+                    scalars="spread_mm",
+                    cmap=SPREAD_CMAP,
+                    clim=spread_range[:2],
+                    smooth_shading=True,
+                    show_scalar_bar=False,
                 )
+                if eyes_pd is not None:
+                    p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
+                if v == views[len(views) // 2]:
+                    _scalar_bar(p, actor, "spread (mm)", spread_range, size)
 
-        written["inferred"] = _shoot(
-            pv, out / f"{prefix}_inferred.png", size, [(cameras[v], v) for v in views], marked
-        )
+            written["spread"] = _shoot(
+                studio, out / f"{prefix}_spread.png", [(cameras[v], v) for v in views], coloured
+            )
+        if inferred is not None and face_pd is not None and np.any(inferred):
+
+            def marked(p, v) -> None:
+                p.add_mesh(
+                    face_pd,
+                    scalars="inferred",
+                    cmap=[SKIN, INFERRED],
+                    clim=(0.0, 1.0),
+                    smooth_shading=True,
+                    show_scalar_bar=False,
+                    specular=0.1,
+                )
+                if eyes_pd is not None:
+                    p.add_mesh(eyes_pd, color=EYE, smooth_shading=True)
+                if v == views[0]:
+                    p.add_text(
+                        "blue-grey: no bone under the skin (inferred from the reference)",
+                        position="lower_left",
+                        font_size=9,
+                        color="#333333",
+                    )
+
+            written["inferred"] = _shoot(
+                studio, out / f"{prefix}_inferred.png", [(cameras[v], v) for v in views], marked
+            )
+    finally:
+        studio.close()
     return written
 
 
@@ -335,41 +337,57 @@ def _scalar_bar(
     bar.SetTextPositionToPrecedeScalarBar()  # labels under the bar, title above
 
 
+class _Studio:
+    """One off-screen window of one panel's size, reused for every picture of a call.
+
+    llvmpipe compiles its shaders once per window: a window per picture cost ~0.2 s
+    each.  A picture of several panels is rendered panel by panel and put side by
+    side, which gives the same image as one window split into viewports.
+    """
+
+    def __init__(self, pv, size: tuple[int, int]) -> None:
+        self.pv, self.size = pv, size
+        self.plotter = pv.Plotter(off_screen=True, border=False, window_size=size)
+        self.plotter.set_background(BACKGROUND)
+        self.plotter.enable_anti_aliasing("ssaa")
+
+    def close(self) -> None:
+        self.plotter.close()
+
+
 def _shoot(
-    pv,
+    studio: _Studio,
     path: Path,
-    size: tuple[int, int],
     panels: Sequence[tuple[dict, str]],
     draw,
     *,
     peel: bool = False,
 ) -> Path:
     """One picture with one panel per ``(camera, view)``; ``draw(plotter, view)`` adds the actors."""
-    plotter = pv.Plotter(
-        off_screen=True,
-        shape=(1, len(panels)),
-        border=False,
-        window_size=(size[0] * len(panels), size[1]),
-    )
-    try:
-        for col, (cam, view) in enumerate(panels):
-            plotter.subplot(0, col)
-            plotter.set_background(BACKGROUND)
-            if peel:
-                plotter.enable_depth_peeling(number_of_peels=8)
-            draw(plotter, view)
-            _scale_bar(pv, plotter, cam, size)
-            camera = plotter.camera
-            camera.focal_point = cam["centre"]
-            camera.position = cam["centre"] + cam["direction"] * cam["reach"]
-            camera.up = cam["up"]
-            plotter.enable_parallel_projection()
-            camera.parallel_scale = cam["scale"]
-            camera.clipping_range = (1.0, 2.0 * cam["reach"] + 400.0)
-        plotter.enable_anti_aliasing("ssaa")
-        plotter.screenshot(str(path))
-    finally:
-        plotter.close()
+    from PIL import Image
+
+    plotter, images = studio.plotter, []
+    for cam, view in panels:
+        plotter.suppress_rendering = True  # not a render per added actor
+        plotter.clear()  # actors, scalar bars and lights
+        plotter.enable_lightkit()
+        if peel:
+            plotter.enable_depth_peeling(number_of_peels=8)
+        else:
+            plotter.disable_depth_peeling()
+        draw(plotter, view)
+        _scale_bar(studio.pv, plotter, cam, studio.size)
+        camera = plotter.camera
+        camera.focal_point = cam["centre"]
+        camera.position = cam["centre"] + cam["direction"] * cam["reach"]
+        camera.up = cam["up"]
+        plotter.enable_parallel_projection()
+        camera.parallel_scale = cam["scale"]
+        camera.clipping_range = (1.0, 2.0 * cam["reach"] + 400.0)
+        plotter.suppress_rendering = False
+        plotter.render()  # a screenshot of a window shown before keeps its last frame
+        images.append(np.asarray(plotter.screenshot(return_img=True))[..., :3])
+    Image.fromarray(np.hstack(images)).save(path, compress_level=4)
     return path
 
 
