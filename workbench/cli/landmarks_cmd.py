@@ -12,6 +12,7 @@ from workbench.cli.common import (
     load_mesh,
     output_path,
     print_self_check,
+    self_check_status,
     write_json,
 )
 from workbench.core.errors import LandmarkError
@@ -346,7 +347,7 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
         },
         None,
     )
-    return 0
+    return self_check_status("landmarks suggest", reg.figures.get("self_check"))
 
 
 def run_snap(args: argparse.Namespace) -> int:

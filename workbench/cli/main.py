@@ -4,7 +4,9 @@ Every sub-command is a thin wrapper over a service or an io function, so the
 same work can be scripted from Python.  Errors a user can act on
 (:class:`~workbench.core.errors.WorkbenchError`) are printed as one clear
 line and exit with status 2; anything unexpected prints a short message
-(``--debug`` shows the traceback) and exits with status 1.
+(``--debug`` shows the traceback) and exits with status 1.  A command whose
+skull registration asks for a check (``reconstruct``, ``landmarks suggest``,
+``template build``) writes its outputs, says why first, and exits with status 3.
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ from workbench.cli.common import (
     add_force_option,
     add_units_options,
     print_self_check,
+    self_check_status,
     write_json,
 )
 from workbench.core.errors import InputError
@@ -258,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
         jaw=args.jaw,
     )
     truth = None if args.truth is None else resolve_input(args.truth)
-    execute(
+    report = execute(
         resolve_input(args.skull),
         settings,
         args.out,
@@ -266,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
         pictures=not args.no_pictures,
         force=args.force,
     )
-    return 0
+    return self_check_status("reconstruct", report.get("self_check"))
 
 
 def execute(

@@ -15,6 +15,7 @@ from workbench.cli.common import (
     add_force_option,
     add_units_options,
     print_self_check,
+    self_check_status,
     write_json,
 )
 
@@ -192,4 +193,4 @@ def run_build(args: argparse.Namespace) -> int:
         },
         None,
     )
-    return 0
+    return self_check_status("template build", result.registration.figures.get("self_check"))
