@@ -25,8 +25,9 @@ Scores of one variant (:func:`score`):
 * outcome: "refused" when a :class:`~workbench.core.errors.WorkbenchError` is
   raised, else ``reg.figures["self_check"]["outcome"]`` ("confident" when the
   registration has no self-check); "error" for any other exception (a crash);
-* "wrong face with exit 0": orientation wrong and the outcome neither refused
-  nor a crash.
+* "wrong face with exit 0": orientation wrong and the outcome "confident" (a
+  "check" exits with status 3 and a refusal with 2, see ``workbench.cli.main``;
+  a crash is counted apart).
 """
 
 from __future__ import annotations
@@ -264,7 +265,8 @@ def score(raw: dict[str, Any], entry: dict[str, Any], base_truth: dict[str, Any]
         flip = -1.0 if row["swapped"] or (raw["mirrored"] != row["mirrored_file"]) else 1.0
         row["protrusion_error_mm"] = raw["jaw"]["protrusion_mm"] - expected["protrusion_mm"]
         row["lateral_error_mm"] = flip * raw["jaw"]["lateral_mm"] - expected["lateral_mm"]
-    row["wrong_not_refused"] = bool(not orientation_ok)
+    # a "check" leaves with exit status 3 and its reason first: not a plain success
+    row["wrong_not_refused"] = bool(not orientation_ok and raw["outcome"] == "confident")
     return row
 
 
@@ -402,7 +404,7 @@ def markdown(summary: dict[str, Any], title: str) -> str:
         "Orientation right: g, n, po_l, po_r, or_l, or_r all within "
         f"{LANDMARK_TOLERANCE_MM:g} mm of the truth (mirrored files: either labelling). "
         "Opening ≤3°: of the variants with a mandible. 'wrong, exit 0': orientation wrong "
-        f"and not refused (crashes counted apart); '>{GROSS_MM:g} mm': the largest landmark "
+        f"and confident (a check exits 3, a refusal 2; crashes counted apart); '>{GROSS_MM:g} mm': the largest landmark "
         "error beyond that (a wrong pose, not a near miss).",
         "",
     ]
