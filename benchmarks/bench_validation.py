@@ -21,6 +21,13 @@ Cases (the metric and the masks of ``VALIDATION.md``):
 * ``*_auto``: headsq and VHP female again, oriented from the bone alone
   (no axes given to the reconstruction).
 
+``--unseen`` runs only the fully automatic cases of ``VALIDATION.md``'s
+"unseen inputs": each CT's bone made outside the project (VTK's flying edges
+at 300 HU, or 1150 for headsq, the largest piece, nothing else), no
+orientation, no landmarks, scored beside the uniform 6 mm offset, with the
+identity test (the pack built from the CT's own skin and bone, also from the
+bone alone).
+
 Each case runs with the built-in reference head at the table's means
 (normal build); with ``--builds`` the two Visible Human cadavers also run at
 heavier builds (mean + k SD, k in :data:`BUILD_GRID`), and each is scored at
@@ -211,6 +218,73 @@ def builds(base_manifest: Path, out: Path) -> str:
     return text
 
 
+#: the CTs of ``--unseen``: (id, sample, bone level in the volume's values, mask, anterior,
+#: superior, left (for the metric only), sex, subject)
+UNSEEN = (
+    ("headsq_plain", "headsq", 1150.0, "none", "0,-1,0", "0,0,-1", "1,0,0", "male", "headsq"),
+    ("vhp_female_plain", "vhp_female", 300.0, "clip_patch:10", "0,1,0", "0,0,1", "-1,0,0",
+     "female", "vhp_female"),
+    ("vhp_male_plain", "vhp_male", 300.0, "behind_clip:3", "0,1,0", "0,0,1", "-1,0,0",
+     "male", "vhp_male"),
+)  # fmt: skip
+
+
+def plain_bone(volume_path: Path, iso: float, out: Path) -> Path:
+    """The bone as 3D Slicer or InVesalius export it: VTK's flying edges at ``iso`` on the
+    volume as it is (no cropping, smoothing or decimation), the largest connected piece,
+    in the volume's physical frame (mm)."""
+    import numpy as np
+    import pyvista as pv
+    import vtk
+
+    from workbench.core.isosurface import face_component_labels
+    from workbench.core.mesh import Mesh
+    from workbench.io.meshes import write_mesh
+    from workbench.io.volumes import read_volume
+
+    if out.is_file():
+        return out
+    vol = read_volume(volume_path)
+    image = pv.ImageData(dimensions=vol.shape_ijk)
+    image.point_data["v"] = np.asarray(vol.data, np.float32).ravel(order="C")
+    edges = vtk.vtkFlyingEdges3D()
+    edges.SetInputData(image)
+    edges.SetValue(0, iso)
+    edges.ComputeNormalsOff()
+    edges.Update()
+    surface = pv.wrap(edges.GetOutput()).triangulate().clean()
+    ijk = np.asarray(surface.points, np.float64)
+    points = ijk @ vol.affine[:3, :3].T + vol.affine[:3, 3]
+    faces = np.asarray(surface.faces).reshape(-1, 4)[:, 1:]
+    labels = face_component_labels(faces, len(points))
+    faces = faces[labels == np.argmax(np.bincount(labels))]
+    used, faces = np.unique(faces, return_inverse=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return write_mesh(out, Mesh(points[used], faces.reshape(-1, 3)).outward())
+
+
+def unseen(out: Path) -> int:
+    """Fully automatic from bones made outside the project (``VALIDATION.md``, unseen
+    inputs): no orientation, no landmarks; the identity test from automatic registration."""
+    from workbench.cli.main import main as workbench
+    from workbench.io.samples import fetch
+
+    rows = []
+    for cid, sample, iso, mask, ant, sup, left, sex, who in UNSEEN:
+        path = fetch(sample)
+        volume = path / "quarter.nhdr" if path.is_dir() else path
+        bone = plain_bone(volume, iso, out.parent / "plain_bones" / f"{cid}.ply")
+        rows.append(
+            f'{cid},{bone},sample:{sample},mm,{mask},"{ant}","{sup}","{left}",auto,{sex},normal,'
+            f",,{who}"
+        )
+    path = out.parent / f"{out.name}_manifest.csv"
+    path.write_text(HEADER + "\n".join(rows) + "\n", encoding="utf-8")
+    code = workbench(["validate", str(path), "--identity", "--out", str(out), "--force"])
+    print((out / "results.md").read_text(encoding="utf-8"))
+    return code
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="headsq and VHP female only")
@@ -224,8 +298,16 @@ def main() -> int:
         action="store_true",
         help="also the cadavers at heavier builds, k chosen leave-one-subject-out",
     )
+    parser.add_argument(
+        "--unseen",
+        action="store_true",
+        help="only the fully automatic runs on plain marching-cubes bones (VTK flying edges, "
+        "largest piece, as other programs export them) with the identity test",
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "validation")
     args = parser.parse_args()
+    if args.unseen:
+        return unseen(args.out.with_name(args.out.name + "_unseen"))
     from workbench.cli.main import main as workbench
 
     m = manifest(args.out, args.quick)
