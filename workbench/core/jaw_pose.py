@@ -38,6 +38,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.mesh import Mesh
+from workbench.core.rigid_search import nearest_agreeing, rigid_motion
 from workbench.core.threads import query_workers
 
 #: bone farther than this from the posed reference cranium can belong to the jaw (mm)
@@ -76,7 +77,6 @@ PRESENT_AREA = 0.25
 #: mostly (this share) in the jaw's reach
 PIECE_SHARE = 0.6
 PIECE_INSIDE = 0.8
-MIN_COS = 0.3
 SAMPLES = 1500
 
 
@@ -243,27 +243,10 @@ def _samples(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, 
     return pts, mesh.face_normals[faces]
 
 
-def _match(
-    tree: cKDTree, normals: np.ndarray, pts: np.ndarray, nrm: np.ndarray, k: int = 6
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Distance to and index of the nearest agreeing point; ``ok`` False where none agrees."""
-    d, j = tree.query(pts, k=k, workers=query_workers(len(pts)))
-    cos = np.einsum("ikj,ij->ik", normals[j], nrm)
-    good = cos > MIN_COS
-    first = np.where(good.any(axis=1), good.argmax(axis=1), 0)
-    rows = np.arange(len(pts))
-    return d[rows, first], j[rows, first], good.any(axis=1)
-
-
 def _rigid(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> np.ndarray:
-    ws = w / w.sum()
-    cs, cd = ws @ src, ws @ dst
-    h = (src - cs).T @ ((dst - cd) * ws[:, None])
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    """:func:`~workbench.core.rigid_search.rigid_motion` as a 4×4 matrix."""
     m = np.eye(4)
-    m[:3, :3], m[:3, 3] = r, cd - r @ cs
+    m[:3, :3], m[:3, 3] = rigid_motion(src, dst, w)
     return m
 
 
@@ -332,7 +315,7 @@ def pose_jaw(
     # every pose's samples in one query
     q = np.stack([m_pts[sub] @ p[:3, :3].T + p[:3, 3] for p in poses])
     qn = np.stack([m_nrm[sub] @ p[:3, :3].T for p in poses])
-    d, _, ok = _match(tree, jn, q.reshape(-1, 3), qn.reshape(-1, 3), k=4)
+    d, _, ok = nearest_agreeing(tree, jn, q.reshape(-1, 3), qn.reshape(-1, 3), k=4)
     losses = np.where(ok, 1.0 - np.exp(-0.5 * (d / SEARCH_SIGMA_MM) ** 2), 1.0)
     losses = losses.reshape(len(poses), -1).mean(axis=1)
     scored = [
@@ -359,7 +342,7 @@ def pose_jaw(
         if np.linalg.norm(shift) > MAX_JOINT_SHIFT_MM:
             continue
         q = m_pts @ p[:3, :3].T + p[:3, 3]
-        d, _, ok = _match(tree, jn, q, m_nrm @ p[:3, :3].T)
+        d, _, ok = nearest_agreeing(tree, jn, q, m_nrm @ p[:3, :3].T)
         support = float(np.mean(ok & (d < SUPPORT_MM)))
         if support > best_support:
             best_pose, best_support = p, support
@@ -397,11 +380,11 @@ def _refine(
     for sigma in np.geomspace(*ICP_SIGMA_MM, ICP_ROUNDS):
         q = m_pts @ pose[:3, :3].T + pose[:3, 3]
         qn = m_nrm @ pose[:3, :3].T
-        d, j, ok = _match(tree, jn, q, qn)
+        d, j, ok = nearest_agreeing(tree, jn, q, qn)
         wf = np.where(ok, np.exp(-0.5 * (d / sigma) ** 2), 0.0)
         # the jaw's bone looks for the posed mandible too (a spread subset of it; bone far
         # from the mandible gets no weight from the kernel)
-        bd, bj, bok = _match(cKDTree(q), qn, back, back_n)
+        bd, bj, bok = nearest_agreeing(cKDTree(q), qn, back, back_n)
         wb = np.where(bok, np.exp(-0.5 * (bd / sigma) ** 2), 0.0)
         if wf.sum() < 1e-6:
             break

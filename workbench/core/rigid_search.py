@@ -45,6 +45,7 @@ plain linear algebra.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,7 +54,7 @@ from scipy.spatial import cKDTree
 from workbench.core.compiled import numba
 from workbench.core.frame import apply_transform
 from workbench.core.mesh import Mesh
-from workbench.core.threads import worker_count
+from workbench.core.threads import query_workers, worker_count
 
 MIN_COS = 0.3
 #: σ of the robust loss of the score (mm)
@@ -365,15 +366,15 @@ def _width_scale(ref: _Cloud, cloud: _Cloud, left: np.ndarray) -> float:
     return float(np.clip((rhi - rlo) / max(hi - lo, 1e-6), *SCALE_RANGE))
 
 
-def _plane_poses(
-    grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray, scale: float = 1.0
-) -> list[tuple[float, np.ndarray, np.ndarray]]:
-    """Poses putting the plane ``u · x = d`` on x = 0: both sides, every turn about it.
+def plane_placements(
+    small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray, scale: float = 1.0
+) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Every pose putting the plane ``u · x = d`` on x = 0, both sides and every turn about
+    it (:data:`TURN_STEP_DEG`), with a grid of in-plane shifts (:data:`PLANE_SHIFTS_MM`).
 
-    Scored by the reference fit over a grid of in-plane translations;
-    returns one best translation per (side, turn).
+    Yields ``(side, r, ts, p, n)``: the side (±1), the linear part (3, 3) at ``scale``, the
+    shifts (k, 3), and ``small``'s points and unit normals turned by ``r`` (not shifted).
     """
-    out = []
     b0 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
     b0 /= np.linalg.norm(b0)
     offs = np.array(list(itertools.product(PLANE_SHIFTS_MM, repeat=2)))
@@ -388,10 +389,22 @@ def _plane_poses(
             ts = np.column_stack(
                 [np.full(len(offs), -side * d * scale), t0[1] + offs[:, 0], t0[2] + offs[:, 1]]
             )
-            n = small.normals @ r.T / scale
-            loss = grid.loss(p[None] + ts[:, None], np.broadcast_to(n, (len(ts),) + n.shape))
-            k = int(np.argmin(loss))
-            out.append((float(loss[k]), r, ts[k]))
+            yield side, r, ts, p, small.normals @ r.T / scale
+
+
+def _plane_poses(
+    grid: _Grid, small: _Cloud, u: np.ndarray, d: float, centre: np.ndarray, scale: float = 1.0
+) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """Poses putting the plane ``u · x = d`` on x = 0: both sides, every turn about it.
+
+    Scored by the reference fit over a grid of in-plane translations;
+    returns one best translation per (side, turn).
+    """
+    out = []
+    for _, r, ts, p, n in plane_placements(small, u, d, centre, scale):
+        loss = grid.loss(p[None] + ts[:, None], np.broadcast_to(n, (len(ts),) + n.shape))
+        k = int(np.argmin(loss))
+        out.append((float(loss[k]), r, ts[k]))
     out.sort(key=lambda x: x[0])
     return out
 
@@ -481,8 +494,8 @@ def _face_coverage_loss(ref: _Cloud, target: _Cloud, lin: np.ndarray, t: np.ndar
     return float(loss.mean())
 
 
-def _rigid_update(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted proper rigid motion (R, t) with dst ≈ R src + t."""
+def rigid_motion(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted proper rigid motion (R, t) with dst ≈ R src + t (Kabsch)."""
     ws = w / w.sum()
     cs, cd = ws @ src, ws @ dst
     h = (src - cs).T @ ((dst - cd) * ws[:, None])
@@ -490,6 +503,20 @@ def _rigid_update(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.n
     d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
     return r, cd - r @ cs
+
+
+def nearest_agreeing(
+    tree: cKDTree, normals: np.ndarray, pts: np.ndarray, nrm: np.ndarray, k: int = 6
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each of ``pts`` (unit normals ``nrm``), the nearest of the ``k`` nearest points of
+    ``tree`` whose normal (``normals``) agrees (cos > :data:`MIN_COS`): its distance, its
+    index, and whether any agreed (where none did, the nearest's distance and index)."""
+    d, j = tree.query(pts, k=k, workers=query_workers(len(pts)))
+    cos = np.einsum("ikj,ij->ik", normals[j], nrm)
+    good = cos > MIN_COS
+    first = np.where(good.any(axis=1), good.argmax(axis=1), 0)
+    rows = np.arange(len(pts))
+    return d[rows, first], j[rows, first], good.any(axis=1)
 
 
 def _icp(
@@ -520,7 +547,7 @@ def _icp(
             sp = seeds[0] @ lin.T + t
             src, dst = np.vstack([src, sp]), np.vstack([dst, seeds[1]])
             w = np.concatenate([w, np.full(len(sp), 0.2 * w.sum() / max(len(sp), 1))])
-        r, tr = _rigid_update(src, dst, w)
+        r, tr = rigid_motion(src, dst, w)
         lin, t = r @ lin, r @ t + tr
     lin = lin * (scale / abs(np.linalg.det(lin)) ** (1 / 3))
     pts = cloud.points @ lin.T + t

@@ -49,10 +49,7 @@ from scipy.spatial import cKDTree
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.rigid_search import (
     FLIP,
-    MIN_COS,
-    PLANE_SHIFTS_MM,
     SCALE_RANGE,
-    TURN_STEP_DEG,
     PoseResult,
     _angle_deg,
     _Cloud,
@@ -61,10 +58,12 @@ from workbench.core.rigid_search import (
     _rotate_normals,
     _width_scale,
     hint_rotation,
+    nearest_agreeing,
+    rigid_motion,
+    plane_placements,
     surface_samples,
     symmetry_planes,
 )
-from workbench.core.threads import query_workers
 
 #: σ of the robust loss that ranks the refined poses (mm): wide enough that a real skull
 #: whose shape differs from the reference's by a few mm still counts as matched
@@ -190,29 +189,15 @@ def _scan_plane(
     """Poses putting the plane ``u · x = d`` on x = 0, both sides and every turn, scored both
     ways on the distance grids; one best in-plane shift per (side, turn)."""
     out = []
-    b0 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
-    b0 /= np.linalg.norm(b0)
-    offs = np.array(list(itertools.product(PLANE_SHIFTS_MM, repeat=2)))
-    for side in (1.0, -1.0):
-        a = side * u
-        c0 = np.cross(a, b0)
-        for th in np.radians(np.arange(0.0, 360.0, TURN_STEP_DEG)):
-            b = np.cos(th) * b0 + np.sin(th) * c0
-            r = scale * np.vstack([a, b, np.cross(a, b)])
-            p = small.points @ r.T
-            t0 = centre - p.mean(axis=0)
-            ts = np.column_stack(
-                [np.full(len(offs), -side * d * scale), t0[1] + offs[:, 0], t0[2] + offs[:, 1]]
-            )
-            n = small.normals @ r.T / scale
-            fwd = ref_grid.loss(p[None] + ts[:, None], np.broadcast_to(n, (len(ts),) + n.shape))
-            # backward: the reference samples mapped into the target's frame (r⁻¹ = rᵀ/s²)
-            q = (ref_small.points[None] - ts[:, None]) @ r / scale**2
-            qn = ref_small.normals @ r / scale
-            bwd = own_grid.loss(q, np.broadcast_to(qn, q.shape))
-            cost = 0.5 * (fwd + bwd)
-            k = int(np.argmin(cost))
-            out.append((float(cost[k]), r, ts[k]))
+    for _, r, ts, p, n in plane_placements(small, u, d, centre, scale):
+        fwd = ref_grid.loss(p[None] + ts[:, None], np.broadcast_to(n, (len(ts),) + n.shape))
+        # backward: the reference samples mapped into the target's frame (r⁻¹ = rᵀ/s²)
+        q = (ref_small.points[None] - ts[:, None]) @ r / scale**2
+        qn = ref_small.normals @ r / scale
+        bwd = own_grid.loss(q, np.broadcast_to(qn, q.shape))
+        cost = 0.5 * (fwd + bwd)
+        k = int(np.argmin(cost))
+        out.append((float(cost[k]), r, ts[k]))
     out.sort(key=lambda x: x[0])
     return out
 
@@ -274,39 +259,17 @@ class _TwoWay:
         self.target = target
         self.ref_tree = cKDTree(ref.points)
 
-    @staticmethod
-    def _nearest_agreeing(
-        tree: cKDTree, normals: np.ndarray, pts: np.ndarray, nrm: np.ndarray, k: int = 6
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        d, j = tree.query(pts, k=k, workers=query_workers(len(pts)))
-        cos = np.einsum("ikj,ij->ik", normals[j], nrm)
-        good = cos > MIN_COS
-        first = np.where(good.any(axis=1), good.argmax(axis=1), 0)
-        rows = np.arange(len(pts))
-        return d[rows, first], j[rows, first], good.any(axis=1)
-
     def pairs(self, lin: np.ndarray, t: np.ndarray) -> tuple:
         """Forward and backward matches of the target posed by ``(lin, t)``."""
         pts = self.target.points @ lin.T + t
         nrm = _rotate_normals(lin, self.target.normals)
-        fd, fj, fok = self._nearest_agreeing(self.ref_tree, self.ref.normals, pts, nrm)
-        bd, bj, bok = self._nearest_agreeing(cKDTree(pts), nrm, self.back.points, self.back.normals)
+        fd, fj, fok = nearest_agreeing(self.ref_tree, self.ref.normals, pts, nrm)
+        bd, bj, bok = nearest_agreeing(cKDTree(pts), nrm, self.back.points, self.back.normals)
         return pts, (fd, fj, fok), (bd, bj, bok)
 
     def scores(self, lin: np.ndarray, t: np.ndarray, sigma: float) -> tuple[float, float]:
         _, (fd, _, fok), (bd, _, bok) = self.pairs(lin, t)
         return float(_robust(fd, fok, sigma).mean()), float(_robust(bd, bok, sigma).mean())
-
-
-def _rigid_step(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted proper rigid motion ``dst ≈ R src + t`` (Kabsch)."""
-    ws = w / w.sum()
-    cs, cd = ws @ src, ws @ dst
-    h = (src - cs).T @ ((dst - cd) * ws[:, None])
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return r, cd - r @ cs
 
 
 def _scale_step(
@@ -365,7 +328,7 @@ def two_way_icp(
             if scale_only:
                 r, tr = _scale_step(src, dst, w, abs(np.linalg.det(lin)) ** (1 / 3))
             else:
-                r, tr = _rigid_step(src, dst, w)
+                r, tr = rigid_motion(src, dst, w)
             lin, t = r @ lin, r @ t + tr
             turn = float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
             if scale_only:
