@@ -111,8 +111,18 @@ class ReconstructPanel(QWidget):
         self.predictions.setWordWrap(True)
         self.figures = QLabel("Not fitted yet.")
         self.figures.setWordWrap(True)
+        # the registration's self-check (issue 28): a doubted face says so above everything
+        # for as long as it is the face shown, not only in the status line a later action
+        # overwrites
+        self.check_banner = QLabel("")
+        self.check_banner.setWordWrap(True)
+        self.check_banner.setStyleSheet(
+            "QLabel { color: white; background: #b3261e; padding: 6px; font-weight: bold; }"
+        )
+        self.check_banner.setVisible(False)
 
         layout = QVBoxLayout(self)
+        layout.addWidget(self.check_banner)
         layout.addLayout(form)
         layout.addWidget(QLabel("<b>Guides</b> (head frame, mm)"))
         layout.addWidget(self.guide_table, 1)
@@ -177,6 +187,7 @@ class ReconstructPanel(QWidget):
         self._refreshing = True
         try:
             self._show_guides(list(fit.guides) if fit is not None else [])
+            self._show_check(fit)
             if fit is None:
                 self.figures.setText("Not fitted yet.")
                 self.predictions.setText("")
@@ -199,6 +210,19 @@ class ReconstructPanel(QWidget):
             self._refreshing = False
 
     # ------------------------------------------------------------ widgets → commands
+    def _show_check(self, fit: FitResult | None) -> None:
+        """The red CHECK banner when the fit's registration asks for a check, else none."""
+        reg = None if fit is None else fit.recon.registration
+        check = {} if reg is None else reg.figures.get("self_check") or {}
+        reasons = list(check.get("reasons", ()))
+        doubted = check.get("outcome") == "check"
+        self.check_banner.setText(
+            "CHECK before use: " + "; ".join(reasons or ["the registration's self-check"])
+            if doubted
+            else ""
+        )
+        self.check_banner.setVisible(doubted)
+
     def _on_guide_edited(self, item: QTableWidgetItem) -> None:
         if self._refreshing or not self.guides:
             return
