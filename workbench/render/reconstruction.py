@@ -104,11 +104,20 @@ def render_reconstruction(
     cameras = {v: _camera(np.vstack(framed), v, anterior, superior, size) for v in views}
     peg = _pegs(pv, origins, tips) if len(origins) else None
     depth_range = _nice_range(np.linalg.norm(tips - origins, axis=1))
-    skull_pd = to_polydata(skull)
+    # the skull's cached vertex normals: VTK's normals filter on a 200k-triangle skull for
+    # every picture it is in cost ~0.1 s each
+    skull_pd = to_polydata(skull, normals=True)
     eyes_pd = to_polydata(eyes) if eyes is not None and eyes.n_faces else None
 
     def draw_skull(p, bar: bool) -> None:
-        p.add_mesh(skull_pd, color=BONE, smooth_shading=True, specular=0.15, diffuse=0.85)
+        p.add_mesh(
+            skull_pd,
+            color=BONE,
+            smooth_shading=False,
+            interpolation="phong",
+            specular=0.15,
+            diffuse=0.85,
+        )
         if peg is not None:
             actors = [
                 p.add_mesh(
