@@ -234,3 +234,29 @@ def test_a_library_of_reference_packs_gives_their_median_face(inputs, tmp_path, 
     # two identical references: the median is either fit, and they agree
     assert report["references"]["spread_between_mm"]["p90"] < 1e-6
     assert report["tissue"]["model"] == "reference"
+
+
+def test_a_doubted_registration_exits_3_after_writing(inputs, tmp_path, monkeypatch, capsys):
+    """A self-check asking for a check: the outputs are written, CHECK comes first on
+    stdout, one line on stderr, exit status 3 (not a plain success); confident: 0."""
+    import workbench.cli.reconstruct_cmd as cmd
+
+    reason = "the symmetry plane lies 14° off the midline (the orientation may be wrong)"
+    check = {"outcome": "check", "reasons": [reason]}
+    seen: list[Path] = []
+
+    def fake_execute(skull, settings, out, **_kw):
+        seen.append(out)
+        cmd.print_self_check(check)
+        return {"self_check": dict(check)}
+
+    monkeypatch.setattr(cmd, "execute", fake_execute)
+    args = ["reconstruct", str(inputs["skull"]), "--out", str(tmp_path / "r")]
+    assert main(args) == 3
+    captured = capsys.readouterr()
+    assert captured.out.splitlines()[0] == f"CHECK: {reason}"
+    assert "exit 3" in captured.err and reason in captured.err
+    check["outcome"] = "confident"
+    assert main(args) == 0
+    assert "exit 3" not in capsys.readouterr().err
+    assert seen == [tmp_path / "r"] * 2
