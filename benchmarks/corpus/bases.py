@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage as ndi
 
-from benchmarks.corpus.common import apply, data_root, results_dir, write_json
+from benchmarks.corpus.common import apply, data_root
 
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
@@ -308,32 +308,6 @@ def _find_mandible(base: Base, volume: Volume, box: tuple[slice, ...]) -> np.nda
     except RuntimeError:
         return None
     return mask[box]
-
-
-def labels_path(name: str, root: Path | None = None) -> Path:
-    return results_dir("bases", root=root) / f"{name}_labels_v{SEGMENTATION_VERSION}.npz"
-
-
-def load_segmentation(name: str, root: Path | None = None) -> Segmentation:
-    """The cached label volume of base ``name`` (made when missing; needs the anchor)."""
-    import json
-
-    path = labels_path(name, root)
-    if path.is_file():
-        with np.load(path) as z:
-            return Segmentation(z["labels"], json.loads(str(z["report"])))
-    from benchmarks.corpus.truth import load_anchor
-
-    base = BASES[name]
-    volume = load_volume(name)
-    anchor = load_anchor(name, root)
-    seg = segment(base, volume, anchor.input_to_head, anchor.cranium_h, anchor.mandible_h)
-    tmp = path.with_name(f".{path.stem}.tmp.npz")
-    np.savez_compressed(tmp, labels=seg.labels, report=json.dumps(seg.report))
-    tmp.replace(path)
-    write_json(path.with_suffix(".json"), seg.report)
-    label_picture(volume, seg.labels, anchor.input_to_head, path.with_suffix(".png"), name)
-    return seg
 
 
 # ---------------------------------------------------------------- check image

@@ -40,7 +40,15 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.corpus.bases import BASES, Base, load_volume
+from benchmarks.corpus.bases import (
+    BASES,
+    SEGMENTATION_VERSION,
+    Base,
+    Segmentation,
+    label_picture,
+    load_volume,
+    segment,
+)
 from benchmarks.corpus.common import (
     CREDIT,
     CREDIT_NOTE,
@@ -366,3 +374,28 @@ def truth_picture(base: Base, reg: SkullRegistration, path: Path, half_mm: float
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
+
+
+# ---------------------------------------------------------------- segmentation
+def labels_path(name: str, root: Path | None = None) -> Path:
+    return results_dir("bases", root=root) / f"{name}_labels_v{SEGMENTATION_VERSION}.npz"
+
+
+def load_segmentation(name: str, root: Path | None = None) -> Segmentation:
+    """The cached label volume of base ``name`` (made when missing; needs the anchor)."""
+    import json
+
+    path = labels_path(name, root)
+    if path.is_file():
+        with np.load(path) as z:
+            return Segmentation(z["labels"], json.loads(str(z["report"])))
+    base = BASES[name]
+    volume = load_volume(name)
+    anchor = load_anchor(name, root)
+    seg = segment(base, volume, anchor.input_to_head, anchor.cranium_h, anchor.mandible_h)
+    tmp = path.with_name(f".{path.stem}.tmp.npz")
+    np.savez_compressed(tmp, labels=seg.labels, report=json.dumps(seg.report))
+    tmp.replace(path)
+    write_json(path.with_suffix(".json"), seg.report)
+    label_picture(volume, seg.labels, anchor.input_to_head, path.with_suffix(".png"), name)
+    return seg

@@ -64,7 +64,6 @@ from benchmarks.corpus.bases import (
     OTHER,
     Base,
     index_matrix,
-    load_segmentation,
     load_volume,
     voxel_points,
     with_data,
@@ -81,7 +80,14 @@ from benchmarks.corpus.common import (
     unit,
     write_json,
 )
-from benchmarks.corpus.truth import EVAL_SEX, SIX, Anchor, load_anchor, load_truth
+from benchmarks.corpus.truth import (
+    EVAL_SEX,
+    SIX,
+    Anchor,
+    load_anchor,
+    load_segmentation,
+    load_truth,
+)
 
 from workbench.core.mesh import Mesh
 from workbench.core.volume import Volume
