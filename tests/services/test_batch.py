@@ -257,3 +257,40 @@ def test_age_rows_give_growth_figures_and_curves(tmp_path, parsers, head_male):
     assert {"head_circumference_mm_target_8y", "z_change_max_16y"} <= set(f)
     written = write_summary([summary_record(grow), summary_record(old)], out, {"manifest": "m"})
     assert out / "plots" / "age_growth.png" in written
+
+
+def test_a_row_whose_registration_asks_for_a_check_is_done_but_flagged(
+    tmp_path, parsers, monkeypatch
+):
+    """Exit status 3 (outputs written, the skull registration in doubt): the row is "check",
+    its CHECK reason is its message, a resumed batch does not run it again, the summary
+    lists it apart from failures and the batch command exits 3 (issue 28)."""
+    import workbench.cli.reconstruct_cmd as cmd
+    from workbench.reporting.batch_report import counts, markdown
+    from workbench.services.batch import summary_record
+
+    reason = "only 62 % of the reference's facial skeleton lies on bone"
+    ran: list[Path] = []
+
+    def fake_execute(skull, settings, out, **_kw):
+        ran.append(out)
+        out.mkdir(parents=True, exist_ok=True)
+        cmd.print_self_check({"outcome": "check", "reasons": [reason]})
+        return {"self_check": {"outcome": "check", "reasons": [reason]}}
+
+    monkeypatch.setattr(cmd, "execute", fake_execute)
+    skull = _write(tmp_path / "skull.ply", "not read: execute is replaced\n")
+    m = _write(tmp_path / "m.csv", f"id,job,input,units\ndoubt,reconstruct,{skull},mm\n")
+    out = tmp_path / "out"
+    (row,) = _run(m, out, parsers)
+    assert row.status == "check" and row.exit_status == 3
+    assert row.message == f"CHECK: {reason}"
+    assert read_marker(out / "doubt")["status"] == "check"
+    (again,) = _run(m, out, parsers, resume=True)
+    assert again.resumed and again.status == "check" and len(ran) == 1
+    records = [summary_record(row)]
+    assert counts(records) == {"rows": 1, "ok": 0, "check": 1, "failed": 0, "resumed": 0}
+    text = markdown(records, {"manifest": str(m)})
+    assert "1 to check" in text and "## Rows to check" in text and "## Failed rows" not in text
+    code = main(["batch", str(m), "--out", str(tmp_path / "out2"), "--workers", "0"])
+    assert code == 3 and len(ran) == 2

@@ -115,12 +115,15 @@ def run(args: argparse.Namespace) -> int:
     info = {"manifest": str(args.manifest), "output folder": str(args.out), "engine": engine}
     records = [summary_record(r) for r in results]
     written = write_summary(records, Path(args.out), info, software=f"workbench {__version__}")
-    failed = [r for r in results if r.status != "ok"]
+    failed = [r for r in results if r.status not in ("ok", "check")]
+    checks = [r for r in results if r.status == "check"]
+    to_check = f", {len(checks)} to check (see summary.md)" if checks else ""
     print(
-        f"{len(results) - len(failed)} of {len(results)} jobs ok; wrote "
-        + ", ".join(str(p) for p in written[:4])
+        f"{len(results) - len(failed) - len(checks)} of {len(results)} jobs ok{to_check}; "
+        "wrote " + ", ".join(str(p) for p in written[:4])
     )
-    return 2 if failed else 0
+    # a row to check is not a plain success either (issue 28): exit 3 unless one failed
+    return 2 if failed else 3 if checks else 0
 
 
 def _check_memory(text: str) -> None:

@@ -162,14 +162,11 @@ def progress_printer(enabled: bool = True):
     return report
 
 
-#: exit status of a command whose outputs were written but whose registration asks for a
-#: check (issue 28): scripts and batch jobs must not take such a face as a plain success
-EXIT_CHECK = 3
-
-
 def self_check_status(command: str, check: Mapping[str, Any] | None) -> int:
     """``EXIT_CHECK`` (with one line on stderr saying why) when the registration's
     self-check asks for a check, else 0."""
+    from workbench.services.skull_check import EXIT_CHECK
+
     if not (check and check.get("outcome") == "check"):
         return 0
     reasons = list(check.get("reasons", ())) or ["the registration's self-check"]

@@ -3,7 +3,7 @@
 Input is plain data, one *record* per manifest row (built by
 ``workbench.services.batch.summary_record``)::
 
-    {"id", "job", "line", "status" ("ok" | "failed"), "resumed", "exit_status",
+    {"id", "job", "line", "status" ("ok" | "check" | "failed"), "resumed", "exit_status",
      "seconds", "message", "folder", "figures": {name: number},
      "cases": [results.csv rows of a validate row]}
 
@@ -30,6 +30,8 @@ BASE_COLUMNS = ("id", "job", "line", "status", "resumed", "exit_status", "second
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 TOLERANCES = ((1.0, "pct_within_1mm"), (2.5, "pct_within_2_5mm"), (5.0, "pct_within_5mm"))
 OK_COLOUR, FAILED_COLOUR = "#2f6f9f", "#b8412c"
+#: a row whose outputs were written but whose skull registration asks for a check
+CHECK_COLOUR = "#d08a12"
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2")
 
 
@@ -90,8 +92,24 @@ def _by_job(records: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str,
 
 def counts(records: Sequence[Mapping[str, Any]]) -> dict[str, int]:
     ok = sum(1 for r in records if r["status"] == "ok")
+    check = sum(1 for r in records if r["status"] == "check")
     resumed = sum(1 for r in records if r.get("resumed"))
-    return {"rows": len(records), "ok": ok, "failed": len(records) - ok, "resumed": resumed}
+    return {
+        "rows": len(records),
+        "ok": ok,
+        "check": check,
+        "failed": len(records) - ok - check,
+        "resumed": resumed,
+    }
+
+
+def _colour(status: str) -> str:
+    return {"ok": OK_COLOUR, "check": CHECK_COLOUR}.get(status, FAILED_COLOUR)
+
+
+def _rows_line(n: Mapping[str, int]) -> str:
+    to_check = f", {n['check']} to check" if n["check"] else ""
+    return f"{n['ok']} ok{to_check}, {n['failed']} failed, {n['resumed']} resumed"
 
 
 def markdown(
@@ -102,8 +120,7 @@ def markdown(
     lines = [f"# Batch study: {info.get('manifest', '')}", ""]
     lines += [f"- {k}: {v}" for k, v in info.items()]
     lines += [
-        f"- rows: {n['rows']} ({n['ok']} ok, {n['failed']} failed, {n['resumed']} resumed "
-        "from an earlier run)",
+        f"- rows: {n['rows']} ({_rows_line(n)} from an earlier run)",
         "",
     ]
     for job, group in _by_job(records).items():
@@ -119,7 +136,12 @@ def markdown(
             cells += [_fmt(r.get("figures", {}).get(k)) for k in keys]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
-    failed = [r for r in records if r["status"] != "ok"]
+    checks = [r for r in records if r["status"] == "check"]
+    if checks:  # before the failures: these wrote a face that may be wrong
+        lines += ["## Rows to check (outputs written; the skull registration is in doubt)", ""]
+        lines += [f"- line {r['line']}, {r['id']} ({r['job']}): {r['message']}" for r in checks]
+        lines.append("")
+    failed = [r for r in records if r["status"] not in ("ok", "check")]
     if failed:
         lines += ["## Failed rows", ""]
         lines += [f"- line {r['line']}, {r['id']} ({r['job']}): {r['message']}" for r in failed]
@@ -160,10 +182,10 @@ def plot_seconds(records: Sequence[Mapping[str, Any]], path: Path) -> Path | Non
     ax.barh(
         y,
         [_float(r["seconds"]) or 0.0 for r in done],
-        color=[OK_COLOUR if r["status"] == "ok" else FAILED_COLOUR for r in done],
+        color=[_colour(r["status"]) for r in done],
     )
     ax.set_yticks(y, [f"{r['id']} ({r['job']})" + (" *" if r.get("resumed") else "") for r in done])
-    ax.set_xlabel("seconds per job (red: failed; *: from an earlier run)")
+    ax.set_xlabel("seconds per job (red: failed; amber: to check; *: from an earlier run)")
     ax.tick_params(axis="y", labelsize=7)
     fig.tight_layout()
     return _save(fig, path)
@@ -330,11 +352,15 @@ def write_pdf(
     n = counts(records)
     pairs = [(str(k), str(v)) for k, v in info.items()]
     pairs += [("Created (UTC)", created), ("Software", software)]
-    pairs.append(
-        ("Rows", f"{n['rows']}: {n['ok']} ok, {n['failed']} failed, {n['resumed']} resumed")
-    )
+    pairs.append(("Rows", f"{n['rows']}: {_rows_line(n)}"))
     pdf.key_values(pairs, key_width=34)
-    failed = [r for r in records if r["status"] != "ok"]
+    checks = [r for r in records if r["status"] == "check"]
+    if checks:
+        pdf.box(
+            "Rows to check (outputs written; the skull registration is in doubt)",
+            [f"line {r['line']}, {r['id']} ({r['job']}): {r['message']}" for r in checks],
+        )
+    failed = [r for r in records if r["status"] not in ("ok", "check")]
     if failed:
         pdf.box(
             "Failed rows",

@@ -46,6 +46,7 @@ from typing import Any
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.services.batch_figures import Figures, row_figures
 from workbench.services.batch_manifest import BatchRow, read_batch_manifest
+from workbench.services.skull_check import EXIT_CHECK
 
 MARKER = "batch_row.json"
 MARKER_FORMAT = 1
@@ -57,6 +58,9 @@ THREAD_ENV = {
     "NUMBA_NUM_THREADS": "1",
 }
 DEFAULT_MEMORY_LIMIT = "4GiB"
+#: row statuses whose outputs are complete (a resumed batch does not run them again);
+#: "check": written, but the registration asks for a check (exit status 3)
+DONE = ("ok", "check")
 Entry = Callable[[list[str]], int]
 Notify = Callable[[str], None]
 
@@ -206,7 +210,7 @@ def plan(
                 f"(no {MARKER}); the batch never writes over it"
             )
         elif (
-            marker.get("status") == "ok"
+            marker.get("status") in DONE
             and marker.get("argv") == row.argv
             and (marker.get("inputs_sha256") == digests)
         ):
@@ -223,7 +227,7 @@ def plan(
 def _from_marker(row: BatchRow, marker: dict[str, Any]) -> RowResult:
     return RowResult(
         row,
-        "ok",
+        str(marker.get("status")),
         marker.get("exit_status"),
         marker.get("seconds"),
         marker.get("message", ""),
@@ -458,6 +462,11 @@ def _record(
     elif code == 0:
         figures = row_figures(row.job, row.argv, stdout)
         result = RowResult(row, "ok", 0, outcome.get("seconds"), "", figures, digests)
+    elif code == EXIT_CHECK:  # written, but the registration asks for a check (issue 28)
+        figures = row_figures(row.job, row.argv, stdout)
+        reasons = [ln[len("CHECK: ") :] for ln in stdout.splitlines() if ln.startswith("CHECK: ")]
+        message = "CHECK: " + ("; ".join(reasons) or error_line(stderr, code, stdout))
+        result = RowResult(row, "check", code, outcome.get("seconds"), message, figures, digests)
     else:
         message = error_line(stderr, code or 0, stdout)
         result = RowResult(row, "failed", code, outcome.get("seconds"), message, inputs=digests)

@@ -58,6 +58,10 @@ JAW_SHIFT_CHECK_MM = 8.0
 JAW_BONE_CHECK = 0.9
 
 OUTCOMES = ("confident", "check", "refused")
+#: exit status of a command whose outputs were written but whose registration asks for a
+#: check: scripts and batch jobs must not take such a face as a plain success (a refusal
+#: is a ``WorkbenchError``: exit 2)
+EXIT_CHECK = 3
 
 WHAT_TO_GIVE = (
     "give the orientation (--anterior X,Y,Z --superior X,Y,Z in the file's axes; in the "
