@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from pathlib import Path
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
@@ -292,7 +293,8 @@ def execute(
     from workbench.io.outputs import check_output_folder, relocate, staged_folder
     from workbench.services.reconstruction_job import job_inputs, run_reconstruction
 
-    say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}"))
+    # progress on stderr: stdout opens with the self-check's CHECK lines, then the results
+    say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}", file=sys.stderr))
     inputs = job_inputs(skull_path, settings, truth)
     if not staged:
         check_output_folder(out, inputs, force)  # before the fit, which takes a while

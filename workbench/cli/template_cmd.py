@@ -9,6 +9,7 @@ take a pack too.  Units mm, head frame (Frankfort Horizontal).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from workbench.cli.common import (
@@ -174,7 +175,7 @@ def run_build(args: argparse.Namespace) -> int:
         skin_landmarks=args.landmarks_skin,
         skull_landmarks=args.landmarks_skull,
         orientation=orientation,
-        progress=lambda m: print(f"  {m}"),
+        progress=lambda m: print(f"  {m}", file=sys.stderr),  # stdout opens with CHECK lines
         force=args.force,
     )
     print_self_check(result.registration.figures.get("self_check"))
