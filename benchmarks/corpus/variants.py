@@ -278,6 +278,35 @@ def _apparatus_params(base: Base, apparatus: str, rng: np.random.Generator) -> d
     return {}
 
 
+def plain_spec(base: str, **changes: Any) -> VariantSpec:
+    """A variant of ``base`` with nothing done to it but ``changes``, for tests and one-off
+    checks: 300 HU, every piece, no smoothing or decimation, the jaw as scanned, the C-spine
+    kept, no apparatus and no cut, the file axes of the corpus's first plain variant of that
+    base.  An apparatus without ``params`` gets them drawn from ``index`` (default 900)."""
+    first = next(s for s in generate_specs() if s.base == base and s.group == "plain")
+    spec: dict[str, Any] = dict(
+        index=900,
+        iso="300",
+        components="all",
+        smooth="none",
+        smooth_iterations=0,
+        triangles=0,
+        mandible="as_scanned",
+        opening_deg=0.0,
+        forward_mm=0.0,
+        lateral_mm=0.0,
+        cspine="kept",
+        apparatus="none",
+        cut="none",
+        params={},
+    )
+    spec |= changes
+    if "params" not in changes:
+        rng = np.random.default_rng(int(spec["index"]))
+        spec["params"] = _apparatus_params(BASES[base], str(spec["apparatus"]), rng)
+    return dataclasses.replace(first, **spec)
+
+
 def generate_specs(seed: int = SEED) -> list[VariantSpec]:
     """The corpus: :data:`COUNTS` variants per base, every dimension value covered per base."""
     specs: list[VariantSpec] = []

@@ -12,7 +12,6 @@ the real CT, never committed.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -40,29 +39,9 @@ def corpus_root(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> 
 
 
 def _spec(index: int, **changes) -> variants.VariantSpec:
-    first = next(s for s in variants.generate_specs() if s.base == "headsq" and s.group == "plain")
-    plain = dict(
-        index=index,
-        iso="otsu",
-        components="all",
-        smooth="none",
-        smooth_iterations=0,
-        triangles=0,
-        mandible="as_scanned",
-        opening_deg=0.0,
-        forward_mm=0.0,
-        lateral_mm=0.0,
-        cspine="kept",
-        apparatus="none",
-        cut="none",
-        params={},
-        mirror_axis=-1,
-        units="mm",
-    )
-    spec = plain | changes
-    rng = np.random.default_rng(index)
-    spec["params"] = variants._apparatus_params(BASES["headsq"], str(spec["apparatus"]), rng)
-    return dataclasses.replace(first, **spec)
+    """headsq at its multi-Otsu level, every piece, in mm, unmirrored, but for ``changes``."""
+    plain = dict(iso="otsu", mirror_axis=-1, units="mm")
+    return variants.plain_spec("headsq", index=index, **(plain | changes))
 
 
 def _axes(seed: int) -> dict:

@@ -9,7 +9,6 @@ each file's own frame).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -151,24 +150,7 @@ def corpus_root(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> 
 
 
 def _headsq_spec(**changes) -> variants.VariantSpec:
-    first = next(s for s in variants.generate_specs() if s.base == "headsq" and s.group == "plain")
-    base = dict(
-        index=900,
-        iso="300",
-        components="all",
-        smooth="none",
-        smooth_iterations=0,
-        triangles=0,
-        mandible="as_scanned",
-        opening_deg=0.0,
-        forward_mm=0.0,
-        lateral_mm=0.0,
-        cspine="kept",
-        apparatus="none",
-        cut="none",
-        params={},
-    )
-    return dataclasses.replace(first, **(base | changes))
+    return variants.plain_spec("headsq", **changes)
 
 
 @pytest.mark.slow
