@@ -23,19 +23,8 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from benchmarks.corpus import common, evaluate, truth, variants  # noqa: E402
-from benchmarks.corpus.bases import BASES  # noqa: E402
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module")
-def corpus_root(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = shared_data / BASES["headsq"].relpath
-    if not path.is_file():
-        pytest.fail(f"real test data not found: {path}", pytrace=False)
-    root = tmp_path_factory.mktemp("corpus_registration")
-    truth.load_truth("headsq", root)
-    return root
 
 
 def _spec(index: int, **changes) -> variants.VariantSpec:

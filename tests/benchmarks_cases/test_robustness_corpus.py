@@ -138,15 +138,6 @@ def test_jaw_pose_reports_a_forward_push() -> None:
 
 
 # ---------------------------------------------------------------- (b) a headsq variant
-@pytest.fixture(scope="module")
-def corpus_root(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A temporary corpus folder with the headsq truth, anchor and labels."""
-    path = shared_data / BASES["headsq"].relpath
-    if not path.is_file():
-        pytest.fail(f"real test data not found: {path}", pytrace=False)
-    root = tmp_path_factory.mktemp("corpus")
-    truth.load_truth("headsq", root)
-    return root
 
 
 def _headsq_spec(**changes) -> variants.VariantSpec:
