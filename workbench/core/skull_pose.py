@@ -308,7 +308,8 @@ def two_way_icp(
     (degrees, mm) or ``rounds`` rounds: the wide widths decide the basin, the
     narrow ones the detail.  (One round per width left starts 5° apart on a
     CT with the vault cut off, whose objective is flat.)  The scale is the
-    start's (the skull widths, :func:`~workbench.core.rigid_search._width_scale`):
+    start's (the skull widths, :func:`~workbench.core.rigid_search._width_scale`) unless
+    ``scale_only``:
     fitted in the ICP, it slid with the pose on such a CT — two hinted runs on
     headsq's bone at 126 and 300 HU ended 12° and 6 % apart, with the scale
     held 2° — and the dense registration's affine stage takes up the size.
@@ -330,9 +331,11 @@ def two_way_icp(
             else:
                 r, tr = rigid_motion(src, dst, w)
             lin, t = r @ lin, r @ t + tr
-            turn = float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
-            if scale_only:
-                turn = 100.0 * abs(r[0, 0] - 1.0)  # the scale's change, in %
+            turn = (  # a polish's step changes the scale (in %), a rigid one turns (degrees)
+                100.0 * abs(r[0, 0] - 1.0)
+                if scale_only
+                else float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
+            )
             shift = float(np.linalg.norm((r - np.eye(3)) @ pts.mean(axis=0) + tr))
             if turn < CONVERGED and shift < CONVERGED:
                 break

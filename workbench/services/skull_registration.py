@@ -616,9 +616,9 @@ def _register(
     # pieces that are not bone (a CT table, a head holder) take no part
     pieces = judge_pieces(skull)
     gone = apparatus_faces(skull, pieces)
-    bone = Mesh(skull.vertices, skull.faces[~gone]) if gone.any() else skull
-    not_bone = None
+    bone, not_bone = skull, None
     if gone.any():
+        bone = Mesh(skull.vertices, skull.faces[~gone])
         not_bone = np.ones(skull.n_vertices, bool)
         not_bone[skull.faces[~gone].ravel()] = False
     found: SkullPoseResult | None = None
