@@ -468,7 +468,8 @@ def test_folder_commands_refuse_a_folder_holding_an_input(
         "an input of this command",
     )
     manifest = tmp_path / "manifest.csv"
-    manifest.write_text(f"id,skull,truth,units\nc1,{ball},{ball},mm\n")
+    skin = write_mesh(tmp_path / "skin.ply", icosphere(2).scaled(90.0))  # not the skull itself
+    manifest.write_text(f"id,skull,truth,units\nc1,{ball},{skin},mm\n")
     _refused(
         ["validate", str(manifest), "--out", str(tmp_path), "--force"],
         capsys,

@@ -5,6 +5,11 @@ signed-distance pictures on the true skin) and a folder per case with the
 reconstruction (the same files ``workbench reconstruct`` writes) and the
 extracted surfaces.  See :mod:`workbench.services.validation` for the
 manifest columns and the method.
+
+Text from the manifest reaches the tables guarded: every CSV cell through
+:func:`workbench.core.table_cells.csv_cell` (no spreadsheet formulas), every
+Markdown cell through :func:`workbench.core.table_cells.md_cell`, both applied by the
+writers of :mod:`workbench.reporting.validation_report`.
 """
 
 from __future__ import annotations
@@ -83,6 +88,8 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     from workbench.services.compare import REGION_NAMES
     from workbench.services.validation import run_validation
 
+    from workbench.core.safe_names import child_path
+
     pictures: dict[tuple[str, str], list[tuple[str, Path]]] = {}
 
     def on_case(res: Any, job: Any, label: str) -> None:
@@ -97,7 +104,7 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
                 f"(n = {f['n']})"
             )
         if not args.no_pictures:
-            pictures[(res.case_id, label)] = _pictures(res, out / res.case_id, label)
+            pictures[(res.case_id, label)] = _pictures(res, child_path(out, res.case_id), label)
 
     results = run_validation(
         cases,

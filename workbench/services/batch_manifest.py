@@ -1,7 +1,9 @@
 """The manifest of ``workbench batch``: one row per job, each row turned into a command line.
 
 A manifest is a CSV file with a header.  Required columns: ``id`` (the row's
-output folder name), ``job`` (a sub-command: ``reconstruct``, ``validate``,
+output folder name: letters A-Z a-z, digits, ``-``, ``_``, ``.`` and spaces,
+starting with a letter or digit, unique also without letter case; see
+:mod:`workbench.core.safe_names`), ``job`` (a sub-command: ``reconstruct``, ``validate``,
 ``fit-scan``, ``age`` or ``animate``) and ``input`` (that sub-command's
 positional input: a mesh, a CT, a validation manifest, a template pack,
 ``sample:NAME``, ``reference:male`` ...).  Every other column is one long
@@ -42,6 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from workbench.core.errors import InputError
+from workbench.core.safe_names import RULE, name_key, name_problem
 
 #: the sub-commands a batch row may run
 JOBS = ("reconstruct", "validate", "fit-scan", "age", "animate")
@@ -51,7 +54,6 @@ FILE_OUTPUT = {"animate": "skin.ply"}
 RESERVED = ("logs", "plots", "summary.csv", "summary.md", "summary.pdf")
 #: options the batch sets or that make no sense per row
 NOT_COLUMNS = ("out", "force", "help", "debug", "list")
-ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 TRUE, FALSE = ("true", "yes", "1"), ("false", "no", "0")
 
 
@@ -119,8 +121,11 @@ def _row_argv(
             continue
         name = column.replace("_", "-")
         if name == "out" and out_name is not None:
-            if Path(value).name != value or value.startswith("."):
-                problems.append(f"{where}: column out must be a bare file name, not {value!r}")
+            problem = name_problem(value)
+            if problem is not None:
+                problems.append(
+                    f"{where}: column out must be a bare file name, not {value!r} ({problem})"
+                )
             out_name = value
             continue
         if name in NOT_COLUMNS:
@@ -198,7 +203,7 @@ def read_batch_manifest(
         and not h.startswith("#")
         and h.replace("_", "-") not in known
     ]
-    seen: dict[str, int] = {}
+    seen: dict[str, tuple[int, str]] = {}
     line = reader.line_num
     for cells in reader:
         start, line = line + 1, reader.line_num
@@ -214,16 +219,29 @@ def read_batch_manifest(
             if c.strip() and not h.startswith("#")  # a "#notes" column is the user's own
         }
         row_id, job = values.get("id", ""), values.get("job", "")
-        if not ID_PATTERN.match(row_id) or row_id in RESERVED or ".partial" in row_id:
+        problem = name_problem(row_id, RESERVED)
+        if problem is None and ".partial" in row_id:
+            problem = "'.partial' marks the workbench's unfinished folders"
+        if problem is not None:
             problems.append(
-                f"{where}: id {row_id!r} is not a usable folder name (letters, digits, . _ -; "
+                f"{where}: id {row_id!r} is not a usable folder name: {problem} ({RULE}; "
                 f"not {', '.join(RESERVED)})"
             )
             continue
-        if row_id in seen:
-            problems.append(f"{where}: id {row_id} is used twice (first on line {seen[row_id]})")
+        key = name_key(row_id)
+        if key in seen:
+            first_line, first_id = seen[key]
+            problems.append(
+                f"{where}: id {row_id} is used twice (first on line {first_line}"
+                + (
+                    ""
+                    if first_id == row_id
+                    else f" as {first_id}; ids differing only in letter case are one folder"
+                )
+                + ")"
+            )
             continue
-        seen[row_id] = start
+        seen[key] = (start, row_id)
         if job not in JOBS:
             problems.append(f"{where}: job {job!r} is not one of {', '.join(JOBS)}")
             continue

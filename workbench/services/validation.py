@@ -13,7 +13,10 @@ may be ``sample:NAME``):
 ========== ============================================================
 column     meaning
 ========== ============================================================
-id         case id (required, unique)
+id         case id (required, unique also without letter case): the name of
+           the case's folder in DIR, so letters A-Z a-z, digits, ``-``,
+           ``_``, ``.`` and spaces only, starting with a letter or digit
+           (:mod:`workbench.core.safe_names`)
 skull      skull mesh, or a CT volume (DICOM folder, NIfTI, NRRD, MetaImage)
 truth      true skin mesh, or a CT volume (often the same CT as ``skull``)
 units      units of mesh files (``mm``, ``cm``, ``m``, ``auto``); default auto
@@ -30,7 +33,8 @@ template   a template pack instead of the built-in head
 bone_iso   CT level of the bone surface (default: the preset for the data)
 skin_iso   CT level of the skin surface
 subject    who the case is (default: its id); cases of one subject (a skull
-           and a cut copy of it) never serve as each other's references
+           and a cut copy of it) never serve as each other's references;
+           it names the subject's reference pack folder (the id's rules)
 ========== ============================================================
 
 With ``leave_one_out`` a reference pack is built from every subject's skin
@@ -45,6 +49,11 @@ registration from the tissue model).
 The faces scored keep the jaw where the scan has it (``jaw`` ``as-scanned``):
 the true skin is the scanned face, mouth open or not, so a face fitted over
 the articulated skull would be scored against another pose of the chin.
+
+A truth that is the skull itself (the same mesh file, a file with the same
+bytes, or a surface lying within :data:`TRUTH_ON_BONE_MM` of the bone
+almost everywhere) would score a reconstruction against bone: the
+manifest is refused (same file or bytes) or the case fails (geometry).
 """
 
 from __future__ import annotations
@@ -70,6 +79,7 @@ from workbench.core.face_metric import (
     unit,
 )
 from workbench.core.mesh import Mesh
+from workbench.core.safe_names import child_path, name_problem, safe_id
 
 Progress = Callable[[str], None]
 COLUMNS = (
@@ -92,6 +102,12 @@ COLUMNS = (
 )
 VOLUME_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mhd", ".mha", ".dcm")
 OFFSET_MM = 6.0
+#: names ``validate`` writes in DIR itself (no case id may take them)
+RESERVED = ("references", "results.csv", "results.md", "results.pdf")
+#: a truth surface with this share of its vertices within TRUTH_ON_BONE_MM of the bone is
+#: the bone, not a skin (real soft tissue is 2 mm or more nearly everywhere)
+TRUTH_ON_BONE_MM = 1.0
+TRUTH_ON_BONE_SHARE = 0.95
 
 
 @dataclass(frozen=True)
@@ -168,15 +184,22 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
     rows = list(reader)
     if not rows:
         raise InputError(path, "has no cases (a header row and one row per case are needed)")
-    cases, seen = [], set()
+    cases: list[ValidationCase] = []
+    seen: dict[str, str] = {}
     for i, row in enumerate(rows, start=2):
         where = f"{path.name} row {i}"
         cid = (row.get("id") or "").strip()
         if not cid:
             raise InputError(where, "has no id")
-        if cid in seen:
-            raise InputError(where, f"id {cid!r} is used twice")
-        seen.add(cid)
+        cid = safe_id(cid, path, i, seen=seen, reserved=RESERVED)
+        subject = (row.get("subject") or "").strip()
+        problem = name_problem(subject) if subject else None
+        if problem is not None:
+            raise InputError(
+                f"{where} column subject",
+                f"{subject!r} cannot name the subject's reference folder: {problem}",
+                "a subject follows the rules of an id",
+            )
         vec = {
             k: _vector(row.get(k) or "", f"{where} column {k}")
             for k in ("anterior", "superior", "left")
@@ -210,11 +233,14 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
         orient = (row.get("orient") or "hint").strip() or "hint"
         if orient not in ("hint", "auto"):
             raise InputError(f"{where} column orient", f"{orient!r} is not hint or auto")
+        skull = _resolve(row["skull"], path.parent, f"{where} column skull")
+        truth = _resolve(row["truth"], path.parent, f"{where} column truth")
+        _refuse_truth_is_skull(skull, truth, f"{where} column truth")
         cases.append(
             ValidationCase(
                 cid,
-                _resolve(row["skull"], path.parent, f"{where} column skull"),
-                _resolve(row["truth"], path.parent, f"{where} column truth"),
+                skull,
+                truth,
                 (row.get("units") or "auto").strip() or "auto",
                 mask,
                 orientation,
@@ -224,11 +250,47 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
                 _resolve(template, path.parent, f"{where} column template") if template else None,
                 isos["bone_iso"],
                 isos["skin_iso"],
-                (row.get("subject") or "").strip(),
+                subject,
                 orient,
             )
         )
     return cases
+
+
+def _refuse_truth_is_skull(skull: Path, truth: Path, where: str) -> None:
+    """Refuse a truth mesh that is the skull's file, or a file with the skull's bytes.
+
+    A CT volume may be both (its bone and skin levels give the two surfaces).
+    """
+    from workbench.io.outputs import same_file
+
+    if is_volume(skull) or is_volume(truth):
+        return
+    same = same_file(skull, truth)
+    if not same:
+        try:
+            same = skull.stat().st_size == truth.stat().st_size and _digest(skull) == _digest(truth)
+        except OSError:
+            same = False
+    if same:
+        raise InputError(
+            where,
+            f"the true skin {truth.name} is the skull {skull.name} itself (the same "
+            + ("file" if same_file(skull, truth) else "bytes")
+            + "); a reconstruction scored against bone measures nothing",
+            "give the case's skin surface as its truth",
+        )
+
+
+def truth_on_bone(truth: Mesh, bone: Mesh, sample: int = 5000) -> float:
+    """Share (0-1) of the true skin's vertices within TRUTH_ON_BONE_MM of the bone (mm)."""
+    from workbench.core.spatial import MeshIndex
+
+    points = truth.vertices
+    if len(points) > sample:
+        points = points[np.linspace(0, len(points) - 1, sample).astype(int)]
+    distances = MeshIndex.shared(bone).closest_points(points).distances
+    return float(np.mean(distances <= TRUTH_ON_BONE_MM))
 
 
 def is_volume(path: Path) -> bool:
@@ -395,6 +457,13 @@ def run_case(
         units = "mm" if is_volume(case.skull) else case.units
         bone = _load(bone_path, units)
         truth = _load(truth_path, "mm" if is_volume(case.truth) else case.units)
+        on_bone = truth_on_bone(truth, bone)
+        if on_bone >= TRUTH_ON_BONE_SHARE:
+            raise WorkbenchError(
+                f"the true skin ({case.truth.name}) lies on the skull: {100 * on_bone:.0f} % of "
+                f"its points are within {TRUTH_ON_BONE_MM:g} mm of the bone, so it is the bone "
+                "surface, not a skin (check the truth column, or skin_iso for a CT)"
+            )
         res.seconds["surfaces"] = time.perf_counter() - t0
         packs: list[Path | None] = [*templates] or [case.template or None]
         settings = JobSettings(
@@ -416,7 +485,7 @@ def run_case(
                 + " ..."
             )
             job = run_reconstruction(bone_path, replace(settings, template=pack))
-            folder = out / (label if len(packs) == 1 else f"{label}-ref{i + 1}")
+            folder = child_path(out, label if len(packs) == 1 else f"{label}-ref{i + 1}")
             write_outputs(job, folder)
             faces.append(job.recon.face)  # mm, the skull file's frame
             first = first or job
@@ -498,11 +567,12 @@ def build_references(
     first_of: dict[str, ValidationCase] = {}
     for case in cases:
         first_of.setdefault(pack_key(case), case)
+    out.mkdir(parents=True, exist_ok=True)
     for who, case in first_of.items():
-        folder = out / who
+        folder = child_path(out, who)
         stamp = folder / "built_from.json"
         try:
-            bone, skin = case_surfaces(case, out.parent / case.case_id / "inputs", say)
+            bone, skin = case_surfaces(case, child_path(out.parent, case.case_id) / "inputs", say)
             key = {
                 "skin": _digest(skin),
                 "skull": _digest(bone),
@@ -514,7 +584,7 @@ def build_references(
                 packs[who] = folder
                 continue
             say(f"{who}: building a reference head from its own skin and bone ...")
-            tmp = out / f".{who}.part"
+            tmp = child_path(out, f".{who}.part")
             if tmp.exists():  # left by an interrupted run: this cache is ours to rebuild
                 import shutil
 
@@ -639,8 +709,9 @@ def _run_validation(
         if on_case is not None:
             on_case(res, job, label)
 
+    folders = {c.case_id: child_path(out, c.case_id) for c in cases}
     for case in cases:
-        res, job = run_case(case, out / case.case_id, progress=progress)
+        res, job = run_case(case, folders[case.case_id], progress=progress)
         done(res, job, "reconstruction")
     if leave_one_out or identity:
         packs = build_references(cases, out / "references", progress=progress)
@@ -659,7 +730,7 @@ def _run_validation(
                     # the references are real people: their own tissue, not the table's
                     res, job = run_case(
                         case,
-                        out / case.case_id,
+                        folders[case.case_id],
                         templates=others,
                         tissue="reference",
                         label="library_loo",
@@ -676,7 +747,7 @@ def _run_validation(
                     # the identity test isolates the registration: no tissue model, no guides
                     res, job = run_case(
                         case,
-                        out / case.case_id,
+                        folders[case.case_id],
                         templates=[own],
                         tissue="reference",
                         guides="none",
