@@ -1,9 +1,17 @@
-"""The one reader of the project's CSV tables: rows with their line numbers, errors naming the file.
+"""The one reader of the project's CSV tables, and the cell guards of the tables it writes.
 
-Used by the tissue-depth tables (:mod:`workbench.io.tables`) and the guide
-constants and rules (:mod:`workbench.services.guide_measure`).  Lines whose
-first non-blank character is ``#`` are comments; a UTF-8 byte-order mark is
+:func:`read_csv_rows` reads the tissue-depth tables (:mod:`workbench.io.tables`)
+and the guide constants and rules (:mod:`workbench.services.guide_measure`):
+rows with their line numbers, errors naming the file.  Lines whose first
+non-blank character is ``#`` are comments; a UTF-8 byte-order mark is
 accepted; header names and values are stripped of surrounding blanks.
+
+:func:`csv_cell` / :func:`csv_row` guard every cell of a CSV file the
+workbench writes from user text (case ids, file names, messages) against
+formula injection: a spreadsheet runs a cell that starts with ``=``, ``+``,
+``-``, ``@``, a tab or a carriage return as a formula, so such text gets a
+leading apostrophe (OWASP's advice); numbers stay numbers, also negative
+ones.  :func:`md_cell` makes text safe inside a Markdown table cell.
 """
 
 from __future__ import annotations
@@ -14,8 +22,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from workbench.core.errors import InputError
+from workbench.core.table_cells import FORMULA_STARTS, csv_cell, csv_row, md_cell
 
 Row = dict[str, str | None]
+
+__all__ = ["FORMULA_STARTS", "Row", "csv_cell", "csv_row", "md_cell", "read_csv_rows"]
 
 
 def read_csv_rows(

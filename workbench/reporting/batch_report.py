@@ -26,6 +26,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from workbench.core.table_cells import csv_row, md_cell
+
 BASE_COLUMNS = ("id", "job", "line", "status", "resumed", "exit_status", "seconds", "message")
 REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
 TOLERANCES = ((1.0, "pct_within_1mm"), (2.5, "pct_within_2_5mm"), (5.0, "pct_within_5mm"))
@@ -70,7 +72,7 @@ def write_csv(records: Sequence[Mapping[str, Any]], path: Path) -> Path:
     with tmp.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=columns)
         w.writeheader()
-        w.writerows(rows)
+        w.writerows(csv_row(r) for r in rows)  # ids and messages: no spreadsheet formulas
     tmp.replace(path)
     return path
 
@@ -80,7 +82,12 @@ def _fmt(value: Any) -> str:
         return "–"
     if isinstance(value, float):
         return f"{value:.3g}" if abs(value) < 100 else f"{value:.1f}"
-    return str(value).replace("|", "\\|")
+    return md_cell(value)
+
+
+def _list_item(r: Mapping[str, Any]) -> str:
+    """One Markdown list line for a row to check or a failed row (user text on one line)."""
+    return f"- line {r['line']}, {md_cell(r['id'])} ({r['job']}): {md_cell(r['message'])}"
 
 
 def _by_job(records: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
@@ -132,19 +139,19 @@ def markdown(
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for r in group:
             status = r["status"] + (" (resumed)" if r.get("resumed") else "")
-            cells = [r["id"], status, _fmt(r.get("seconds"))]
+            cells = [md_cell(r["id"]), status, _fmt(r.get("seconds"))]
             cells += [_fmt(r.get("figures", {}).get(k)) for k in keys]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     checks = [r for r in records if r["status"] == "check"]
     if checks:  # before the failures: these wrote a face that may be wrong
         lines += ["## Rows to check (outputs written; the skull registration is in doubt)", ""]
-        lines += [f"- line {r['line']}, {r['id']} ({r['job']}): {r['message']}" for r in checks]
+        lines += [_list_item(r) for r in checks]
         lines.append("")
     failed = [r for r in records if r["status"] not in ("ok", "check")]
     if failed:
         lines += ["## Failed rows", ""]
-        lines += [f"- line {r['line']}, {r['id']} ({r['job']}): {r['message']}" for r in failed]
+        lines += [_list_item(r) for r in failed]
         lines.append("")
     if plots:
         lines += ["## Plots", ""] + [f"![{p.stem}](plots/{p.name})" for p in plots] + [""]

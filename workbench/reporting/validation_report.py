@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.core.face_metric import TOLERANCES_MM, _pct_key
+from workbench.core.table_cells import csv_row, md_cell
 
 FIGURES = (
     "n",
@@ -64,8 +65,8 @@ def write_csv(table: list[dict[str, Any]], path: Path) -> Path:
     with tmp.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
-        for r in table:
-            w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
+        for r in table:  # user text (case ids, errors) guarded against spreadsheet formulas
+            w.writerow(csv_row({k: ("" if r.get(k) is None else r.get(k)) for k in keys}))
     tmp.replace(path)
     return path
 
@@ -97,12 +98,14 @@ def markdown(
     ]
     for res, label in results:
         if res.status != "ok":
-            lines.append(f"| {res.case_id} | {label} | failed: {res.error} | | | | | | | |")
+            lines.append(
+                f"| {md_cell(res.case_id)} | {label} | failed: {md_cell(res.error)} | | | | | | | |"
+            )
             continue
         for s in res.scores:
             f = s.figures
             lines.append(
-                f"| {res.case_id} | {s.name} | {f['n']} | {_fmt(f['mean_abs_mm'], 2)} | "
+                f"| {md_cell(res.case_id)} | {s.name} | {f['n']} | {_fmt(f['mean_abs_mm'], 2)} | "
                 f"{_fmt(f['signed_mean_mm'], 2)} ± {_fmt(f['signed_sd_mm'], 2)} | "
                 f"{_fmt(f[_pct_key(1.0)])} | **{_fmt(f[_pct_key(2.5)])}** | "
                 f"{_fmt(f[_pct_key(5.0)])} | {_fmt(f['p95_mm'])} | "
@@ -113,7 +116,7 @@ def markdown(
         if res.status != "ok":
             continue
         lines += [
-            f"## {res.case_id} — {label}: % within 2.5 mm (mean |d| mm) per face region",
+            f"## {md_cell(res.case_id)} — {label}: % within 2.5 mm (mean |d| mm) per face region",
             "",
             "| method | " + " | ".join(region_names) + " |",
             "|---|" + "---|" * len(region_names),
@@ -130,7 +133,7 @@ def markdown(
             lines.append(f"| {s.name} | " + " | ".join(cells) + " |")
         notes = {k: v for k, v in res.notes.items() if v is not None}
         if notes:
-            lines += ["", "notes: " + "; ".join(f"{k}: {v}" for k, v in notes.items())]
+            lines += ["", "notes: " + "; ".join(f"{k}: {md_cell(v)}" for k, v in notes.items())]
         lines.append("")
     if credits:
         lines += ["## Data credits", ""] + [f"- {c}" for c in credits] + [""]
