@@ -19,6 +19,12 @@ Every ``workbench`` command that writes goes through this module:
   as it was.  A partial folder left by a killed process is removed by the
   next run into the same place.
 
+Outputs go only into folders and regular files (or names that do not exist
+yet): a device node (``/dev/null``), a FIFO, a socket, or a symbolic link to
+one of them is refused by :func:`check_output_location`, with or without
+``force``, and :func:`backup_existing` never renames anything but a regular
+file or a folder.
+
 Refusals are :class:`~workbench.core.errors.InputError`, so the command
 line prints one clear line and exits with status 2.
 """
@@ -29,6 +35,7 @@ import contextlib
 import errno
 import os
 import shutil
+import stat
 from collections.abc import Callable, Iterable, Iterator
 from os import PathLike
 from pathlib import Path
@@ -50,6 +57,7 @@ __all__ = [
     "backup_name",
     "check_output_file",
     "check_output_folder",
+    "check_not_special",
     "output_file",
     "relocate",
     "same_file",
@@ -131,6 +139,7 @@ def backup_existing(path: PathArg, *, keep: bool = False) -> Path:
     path = Path(path)
     if not os.path.lexists(path):
         raise InputError(path, "does not exist; nothing to back up")
+    check_not_special(path)
     is_dir = path.is_dir() and not path.is_symlink()
     if keep and is_dir:
         raise ValueError("keep=True is for files only")
@@ -183,20 +192,64 @@ def _force_hint(path: Path) -> str:
     return f"use --force to replace it (the old one is kept as {backup_name(path).name})"
 
 
+# ------------------------------------------------------------------ special files
+_KINDS = (
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def _special_kind(path: PathArg) -> str | None:
+    """What ``path`` is when it exists and is neither a regular file nor a folder (links followed)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None  # absent, or a dangling link: nothing is there to be harmed
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = next((name for test, name in _KINDS if test(mode)), "not a regular file or folder")
+    if os.path.islink(path):
+        kind = f"a link to {kind}"
+    return kind
+
+
+def check_not_special(path: PathArg, option: str = "--out") -> None:
+    """Refuse ``path`` when it is a device, FIFO, socket or a link to one (never with --force).
+
+    Writing there would feed a device or block on a pipe, and replacing it
+    (``--force``) would rename a system file: the workbench writes only
+    regular files and folders.
+    """
+    kind = _special_kind(path)
+    if kind is not None:
+        raise InputError(
+            path,
+            f"is {kind}, not a regular file or folder; the workbench writes its outputs only "
+            "into folders and regular files, and never replaces anything else",
+            f"choose another {option}",
+        )
+
+
 # ------------------------------------------------------------------ single files
 def check_output_location(path: PathArg, option: str = "--out") -> Path:
-    """Refuse an output path whose nearest existing parent is a file or not writable.
+    """Refuse an output path that is a device or pipe, or whose nearest existing parent is a
+    file or not writable.
 
     Called by :func:`check_output_file` and :func:`check_output_folder`, so every
     command learns this before its work, not from the first write.
     """
     path = Path(path)
+    check_not_special(path, option)
     parent = path.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if parent.exists() and not parent.is_dir():
         raise InputError(
-            path, f"cannot be created: {parent} is a file, not a folder", f"choose another {option}"
+            path,
+            f"cannot be created: {parent} is {_special_kind(parent) or 'a file'}, not a folder",
+            f"choose another {option}",
         )
     if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(
