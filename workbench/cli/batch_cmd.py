@@ -6,15 +6,27 @@ sub-command it names through this CLI's ``main``, in a Dask worker
 (:mod:`workbench.services.batch`), into ``DIR/<id>/``.  Afterwards
 ``DIR/summary.csv``, ``summary.md``, ``plots/`` and ``summary.pdf``
 (:mod:`workbench.reporting.batch_report`); each row's output in
-``DIR/logs/<id>.log``.  Exit status 0 when every row is ok, 2 otherwise.
+``DIR/logs/<id>.log``.  Exit status 0 when every row is ok, 3 when a row
+asks for a check, 2 when one failed.
+
+- Ctrl-C: the batch stops, says ``interrupted: N of M rows done; rerun with
+  --resume`` and exits with status 130; the finished rows keep their
+  markers, so ``--resume`` runs only the rest.
+- A closed stdout or stderr (``workbench batch ... 2>&1 | head -2``) does not
+  stop the batch: it stops printing to that stream, runs every row, writes
+  the summary files and exits with the status of the rows.
+- One batch at a time per ``--out`` (``DIR/.batch.lock``, held until the
+  summary is written): a second one is refused naming the other's pid.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
 from pathlib import Path
+from typing import TextIO
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,7 +88,62 @@ def commands() -> dict[str, argparse.ArgumentParser]:
     return dict(sub.choices)
 
 
+class _Stream:
+    """Prints to a stream until its reader goes away, then quietly drops what follows.
+
+    A closed pipe (``| head``) must not stop the batch half-way: the rows go
+    on and the summary files are still written.  The stream's descriptor is
+    pointed at the null device, so the interpreter's last flush does not
+    fail either.
+    """
+
+    def __init__(self, stream: TextIO):
+        self.stream, self.closed = stream, False
+
+    def __call__(self, text: str) -> None:
+        if self.closed:
+            return
+        try:
+            print(text, file=self.stream, flush=True)
+        except (BrokenPipeError, ValueError):
+            self._close()
+        except OSError as exc:
+            if exc.errno != errno.EPIPE:
+                raise
+            self._close()
+
+    def _close(self) -> None:
+        self.closed = True
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self.stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError):
+            pass
+
+
 def run(args: argparse.Namespace) -> int:
+    from workbench.services.batch import BatchInterrupted, batch_lock
+
+    err = _Stream(sys.stderr)
+    try:
+        with batch_lock(args.out):
+            return _run(args, _Stream(sys.stdout), err)
+    except BatchInterrupted as exc:
+        err(f"workbench batch: {exc}")
+        # a local cluster stopped while it started fails Dask's own exit hook: this process
+        # ends now, and its one line above says all there is to say
+        sys.unraisablehook = lambda _unraisable: None
+        return 130
+    except KeyboardInterrupt:  # after the rows: while the summary was written
+        err(
+            "workbench batch: interrupted while writing the summary; every row is done: "
+            "rerun with --resume to write it"
+        )
+        return 130
+
+
+def _run(args: argparse.Namespace, say: _Stream, notify: _Stream) -> int:
     from workbench import __version__
     from workbench.cli.main import main
     from workbench.core.errors import InputError
@@ -103,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         resume=args.resume,
         memory_limit=memory,
-        notify=lambda m: print(m, file=sys.stderr, flush=True),
+        notify=notify,
     )
     engine = (
         f"Dask scheduler {args.scheduler}"
@@ -118,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
     failed = [r for r in results if r.status not in ("ok", "check")]
     checks = [r for r in results if r.status == "check"]
     to_check = f", {len(checks)} to check (see summary.md)" if checks else ""
-    print(
+    say(
         f"{len(results) - len(failed) - len(checks)} of {len(results)} jobs ok{to_check}; "
         "wrote " + ", ".join(str(p) for p in written[:4])
     )
