@@ -160,7 +160,7 @@ def test_bad_tracks_name_the_file_and_entry(tmp_path: Path, data, message) -> No
 def test_unreadable_track(tmp_path: Path) -> None:
     path = tmp_path / "t.json"
     path.write_text("{keys: [", "utf-8")
-    with pytest.raises(InputError, match="is not JSON"):
+    with pytest.raises(InputError, match="is not valid JSON"):
         load_track(path)
     with pytest.raises(InputError, match="cannot be read"):
         load_track(tmp_path / "missing.json")

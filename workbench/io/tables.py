@@ -11,7 +11,6 @@ missing citations are reported by name.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from os import PathLike
@@ -22,12 +21,15 @@ import numpy as np
 
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
+from workbench.core.json_limits import read_json
 from workbench.core.limits import MAX_TISSUE_DEPTH_MM, MAX_TISSUE_SD_MM
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 from workbench.io.csv_rows import read_csv_rows
 
 COLUMNS = ("landmark_code", "skin_code", "group", "sex", "build", "mean_mm", "sd_mm", "n", "source")
 REQUIRED = ("landmark_code", "group", "mean_mm", "source")
+#: largest table metadata file read (citations and a description: a few KB)
+MAX_META_BYTES = 1024 * 1024
 
 
 def tables_dir() -> Path:
@@ -112,10 +114,10 @@ def list_tables() -> list[str]:
 def _read_meta(path: Path) -> dict[str, Any]:
     if not path.exists():
         return {}
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(path, f"table metadata is not valid JSON ({exc})") from None
+    meta = read_json(path, max_bytes=MAX_META_BYTES, what="table metadata")
+    if not isinstance(meta, dict):
+        raise InputError(path, "the table metadata is not a JSON object")
+    return meta
 
 
 def load_depth_table(

@@ -20,11 +20,15 @@ from typing import Any
 import numpy as np
 
 from workbench.core.errors import InputError
+from workbench.core.json_limits import read_json
 from workbench.core.mesh import Mesh, concatenate
 from workbench.io.markups import read_mrk_json, write_mrk_json
 from workbench.io.meshes import read_mesh, write_mesh
 from workbench.model.muscles import MuscleGrid
 from workbench.model.template import PARTS, TemplateHead
+
+#: largest template.json / muscles.json read: a pack's are ~60-80 KB
+MAX_PACK_JSON_BYTES = 16 * 1024 * 1024
 
 FILES = {
     "skin.ply": ("skin",),
@@ -173,11 +177,12 @@ def load_template_pack(folder: str | PathLike[str]) -> TemplateHead:
             "is not a template pack (no template.json)",
             hint="write one with 'workbench template export' or 'workbench template build'",
         )
-    try:
-        info = json.loads(info_path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(info_path, f"is not valid JSON ({exc})") from None
-    if info.get("@schema") != "template-pack-v1" or "part_sizes" not in info:
+    info = read_json(info_path, max_bytes=MAX_PACK_JSON_BYTES, what="template description")
+    if (
+        not isinstance(info, dict)
+        or info.get("@schema") != "template-pack-v1"
+        or "part_sizes" not in info
+    ):
         raise InputError(
             info_path,
             "is not a template-pack-v1 description (or predates part sizes)",
@@ -195,7 +200,9 @@ def load_template_pack(folder: str | PathLike[str]) -> TemplateHead:
         s: read_mrk_json(root / f"{s}.mrk.json", s, allow_undefined=True).landmarks
         for s in ("skin", "skull")
     }
-    muscles_doc = json.loads((root / "muscles.json").read_text(encoding="utf-8"))
+    muscles_doc = read_json(
+        root / "muscles.json", max_bytes=MAX_PACK_JSON_BYTES, what="muscle description"
+    )
     head = TemplateHead(
         template_id=str(info["template_id"]),
         sex=str(info["sex"]),

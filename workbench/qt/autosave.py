@@ -61,6 +61,7 @@ from PySide6.QtWidgets import QMessageBox, QWidget
 
 from workbench.commands.stack import Command, CommandStack
 from workbench.core.errors import InputError, WorkbenchError
+from workbench.core.json_limits import read_json
 from workbench.io.case_file import (
     detached_copy,
     load_case,
@@ -80,6 +81,8 @@ DEFAULT_INTERVAL_S = 60.0
 PREFIX = "autosave-"
 SIDECAR_FORMAT = "workbench-autosave"
 SIDECAR_VERSION = 1
+#: largest description (sidecar) file read; the workbench writes a few hundred bytes
+MAX_SIDECAR_BYTES = 1024 * 1024
 #: a snapshot written on another computer is only offered once it is this old (s)
 FOREIGN_STALE_S = 24 * 3600.0
 #: how long a Save / Discard / close waits for a snapshot being written (s)
@@ -274,11 +277,10 @@ def _problem_text(exc: BaseException) -> str:
 def _read_sidecar(path: Path) -> dict[str, Any]:
     """The sidecar as a dict; ValueError naming what is wrong."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as error:
-        raise ValueError(f"cannot read its description file ({error.strerror})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise ValueError(f"its description file is not valid JSON ({error})") from None
+        doc = read_json(path, max_bytes=MAX_SIDECAR_BYTES, what="description file")
+    except InputError as error:  # unreadable, too large, too deep, not UTF-8 or not JSON
+        problem = error.problem.replace("the description file", "its description file", 1)
+        raise ValueError(problem) from None
     if not isinstance(doc, dict) or doc.get("format") != SIDECAR_FORMAT:
         raise ValueError("its description file is not a workbench autosave description")
     if doc.get("version") != SIDECAR_VERSION:

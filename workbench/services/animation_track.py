@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from workbench.core.errors import InputError
+from workbench.core.json_limits import read_json
 from workbench.services.animation import (
     EXPRESSIONS,
     GAZE_RANGE_DEG,
@@ -98,6 +99,8 @@ FPS_RANGE = (1.0, 240.0)
 TAIL_S = 0.3
 #: longest track (seconds)
 MAX_DURATION_S = 600.0
+#: largest track file read (bytes): ten minutes at 60 fps with 60 channels is ~30 MB
+MAX_TRACK_BYTES = 32 * 1024 * 1024
 _TRACK_FIELDS = ("fps", "keys", "phonemes", "duration")
 _KEY_FIELDS = ("t", "expression", "weight", "expressions", "muscles", "jaw_deg", "gaze", "lids")
 _PHONEME_FIELDS = ("p", "start", "end")
@@ -296,16 +299,17 @@ def parse_track(
 
 
 def load_track(path: str | PathLike[str]) -> Track:
-    """Read and validate a track JSON file."""
+    """Read and validate a track JSON file.
+
+    Read with :func:`workbench.core.json_limits.read_json`: a track over
+    :data:`MAX_TRACK_BYTES` or nested deeper than the JSON limit is refused
+    before it is decoded.
+    """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(p, f"cannot be read ({exc.strerror or exc})") from None
-    try:
-        data = json.loads(text)
-    except ValueError as exc:
-        raise InputError(p, f"is not JSON ({exc})") from None
+    if not p.is_file():
+        reason = "is a folder, not a track file" if p.is_dir() else "does not exist"
+        raise InputError(p, f"cannot be read ({reason})")
+    data = read_json(p, max_bytes=MAX_TRACK_BYTES, what="track file")
     return parse_track(data, p)
 
 
