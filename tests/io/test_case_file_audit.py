@@ -16,8 +16,20 @@ from workbench.commands.landmarks import PlaceLandmark
 from workbench.commands.reconstruction_setup import SetDowelSettings
 from workbench.commands.stack import CommandStack
 from workbench.core.mesh import Mesh
-from workbench.io.case_file import CaseFileError, load_case, save_case, write_case_snapshot
-from workbench.model.audit import encode_record, make_record, parse_records, record_hash
+from workbench.io.case_file import (
+    CaseFileError,
+    detached_copy,
+    load_case,
+    save_case,
+    write_case_snapshot,
+)
+from workbench.model.audit import (
+    content_digest,
+    encode_record,
+    make_record,
+    parse_records,
+    record_hash,
+)
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
 from workbench.services.case_setup import describe_case
@@ -228,3 +240,23 @@ def test_case_info_of_nested_parameters_is_json(
     info = json.loads(capsys.readouterr().out)
     assert info["parameters"]["provenance"] == {"pack": {"id": "male", "sizes": [1, 2]}}
     assert info["audit_chain"]["status"] == "verified (11 records)"
+
+
+def test_every_write_seals_case_json(saved: Path, tmp_path: Path) -> None:
+    """A save and a snapshot seal case.json in their last record; both open verified."""
+    records = _records(saved)
+    doc = json.loads(_members(saved)["case.json"])
+    assert records[-1]["content_sha256"] == content_digest(doc)
+    assert all("content_sha256" not in r for r in records[:4] + records[5:-1])
+    loaded = load_case(saved)
+    assert loaded.content_seal.state == "verified" and loaded.evidence_status["case.json"] == "ok"
+    assert describe_case(saved)["audit_chain"]["content"]["sealed_at"] == records[-1]["time"]
+    CommandStack(loaded.case).push(SetParameter("note", "z"))
+    snap = write_case_snapshot(detached_copy(loaded.case), tmp_path / "snap.fcase")
+    assert load_case(snap).content_seal.state == "verified"
+    assert _records(snap)[-1]["operation"] == "Set note" and "content_sha256" in _records(snap)[-1]
+
+
+def test_indentation_alone_is_not_an_edit(saved: Path) -> None:
+    _rewrite(saved, doc=lambda d: None)  # same content, written with another layout
+    assert load_case(saved).content_seal.state == "verified"

@@ -10,12 +10,14 @@ import pytest
 from workbench.model.audit import (
     AuditLog,
     chain_anchor,
+    content_digest,
     encode_record,
     genesis,
     make_record,
     parse_records,
     record_hash,
     verify_chain,
+    verify_content,
 )
 
 CASE_ID = str(uuid.UUID(int=7))
@@ -161,3 +163,60 @@ def test_chain_fields_given_by_a_caller_are_replaced() -> None:
     assert json.loads(json.dumps(log.records[0])) == log.records[0]
     with pytest.raises(ValueError, match="JSON compliant"):
         log.append({"x": float("nan")})
+
+
+# ---------------------------------------------------------------- content seal
+def test_content_digest_ignores_the_anchor_and_the_layout_only() -> None:
+    doc = {"meta": {"examiner": "A. Examiner"}, "landmarks": [1.5, 2.0], "audit_chain": {"x": 1}}
+    digest = content_digest(doc)
+    assert content_digest({**doc, "audit_chain": {"head": "other"}}) == digest
+    assert content_digest(json.loads(json.dumps(doc, indent=4))) == digest
+    assert content_digest({**doc, "meta": {"examiner": "B. Examiner"}}) != digest
+    assert content_digest({**doc, "landmarks": [11.5, 2.0]}) != digest
+    with pytest.raises(ValueError, match="NaN|not JSON compliant"):
+        content_digest({"x": float("nan")})
+
+
+def test_encode_seals_only_the_last_new_record() -> None:
+    log = _log(3)
+    records = parse_records(log.encode(content="c" * 64))
+    assert [r.get("content_sha256") for r in records] == [None, None, "c" * 64]
+    assert all("content_sha256" not in r for r in log.records)  # not part of the record
+    log.mark_persisted(log.encode(content="c" * 64))
+    assert log.encode(content="d" * 64) == log.persisted_bytes  # nothing new to seal
+    log.append(make_record("do", "Later", "A. Examiner"))
+    later = parse_records(log.encode(content="d" * 64))
+    assert [r.get("content_sha256") for r in later[-2:]] == ["c" * 64, "d" * 64]
+    assert verify_chain(later, CASE_ID, chain_anchor(later)).state == "verified"
+
+
+def test_verify_content_states() -> None:
+    records = parse_records(_log(2).encode(content="a" * 64))
+    assert verify_content(records, "a" * 64).state == "verified"
+    assert verify_content(records, "b" * 64, "a" * 64).state == "verified"  # as migrated
+    changed = verify_content(records, "b" * 64)
+    assert changed.state == "changed" and not changed.ok
+    assert changed.problem.startswith(
+        "case.json was changed outside the workbench after the workbench last wrote it"
+    )
+    unsealed = verify_content(_chained(2), "b" * 64)
+    assert unsealed.ok and unsealed.summary() == "content not sealed (written by an older version)"
+    assert verify_content([], "b" * 64).state == "unsealed"
+
+
+def test_copy_keeps_pending_records_pending() -> None:
+    log = _log(2)
+    log.mark_persisted(log.encode())
+    log.append(make_record("do", "Pending", "A. Examiner"))
+    log.content_problem = "edited"
+    copy = log.copy()
+    assert copy.encode(content="e" * 64) == log.encode(content="e" * 64)
+    assert copy.pending == log.pending and copy.content_problem == "edited"
+    copy.append(make_record("do", "Only in the copy", "A. Examiner"))
+    assert len(copy) == len(log) + 1
+
+
+def test_a_deep_audit_line_is_a_damaged_log_not_a_recursion_error() -> None:
+    deep = b"[" * 100_000 + b"]" * 100_000 + b"\n"
+    with pytest.raises(ValueError, match="audit line 2 nests more than 64 levels deep"):
+        parse_records(_log(1).encode() + deep)

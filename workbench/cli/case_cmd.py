@@ -39,14 +39,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="summary, evidence check and audit log (JSON)",
         description="audit_chain.status is 'verified (N records)', "
         "'NOT VERIFIED: ...' naming the first bad record, or "
-        "'audit log predates the hash chain (not verifiable)'",
+        "'audit log predates the hash chain (not verifiable)'.  "
+        "audit_chain.content.status says whether case.json is as the workbench "
+        "last wrote it: 'verified (...)', 'NOT VERIFIED: case.json was changed "
+        "outside the workbench after ...', or 'content not sealed (written by an "
+        "older version)'.  A case file that is damaged, padded (a member over its "
+        "size or compression-ratio limit), encrypted or lists a member twice is "
+        "refused, with or without --allow-tampered.",
     )
     info.add_argument("case", type=Path)
     info.add_argument(
         "--allow-tampered",
         action="store_true",
-        help="report a case whose evidence no longer matches its hashes, or "
-        "whose audit log was edited, instead of refusing it",
+        help="report a case whose evidence no longer matches its hashes, whose "
+        "audit log was edited or whose case.json was changed outside the "
+        "workbench, instead of refusing it",
     )
     info.set_defaults(handler=run_info)
 

@@ -35,25 +35,45 @@ Guarantees
   ``audit_chain``.  A log written before the chain existed loads as
   ``audit_chain.state == "unchained"`` (not verifiable, not an error); the
   next save chains the new records onto it.
+- Every write seals ``case.json``: the last audit record written carries the
+  :func:`~workbench.model.audit.content_digest` of the document (all of it
+  but the ``audit_chain`` anchor, which pins that record).  Loading
+  recomputes the digest of the document as stored and as migrated to the
+  current format (the same case in an older layout still verifies); a
+  mismatch (``case.json`` edited by hand, a landmark moved, the examiner
+  renamed) is reported under ``case.json`` in ``evidence_status`` and in
+  ``audit_chain.content``, and refused unless ``allow_tampered=True``.  A
+  case loaded that way is never sealed again: :func:`save_case` and
+  :func:`write_case_snapshot` refuse it.  A file whose last record has no
+  seal (written by an older version) loads as "content not sealed".
+- Members are read through :mod:`workbench.io.zip_limits`: the archive's
+  directory is checked before any member is read (duplicate names, unsafe
+  names, encryption, compression method, size per kind of member,
+  compression ratio) and no member is decompressed past its limit, whatever
+  its header says.  ``case.json`` and ``audit.jsonl`` then go through the
+  JSON size and depth limits of :mod:`workbench.core.json_limits`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import json
+import math
 import os
+import struct
 import time
 import uuid
 import zipfile
 import zlib
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import lru_cache
 from os import PathLike
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Protocol
+from typing import IO, Any, Protocol
 
 import jsonschema
 import numpy as np
@@ -61,14 +81,28 @@ import numpy as np
 import workbench
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
+from workbench.core.json_limits import MAX_JSON_BYTES, loads_limited
 from workbench.io.migrations import CURRENT_VERSION, SCHEMA_ID, MigrationError, migrate
+from workbench.io.zip_limits import (
+    MEMBER_ERRORS,
+    MemberTooLarge,
+    ZipLimitError,
+    check_members,
+    open_archive,
+    open_member,
+    read_member,
+)
 from workbench.model.audit import (
+    ANCHOR_KEY,
     AuditLog,
     ChainStatus,
+    ContentSeal,
     chain_anchor,
+    content_digest,
     make_record,
     parse_records,
     verify_chain,
+    verify_content,
 )
 from workbench.model.case import PARTS, Case
 from workbench.model.evidence import (
@@ -85,6 +119,23 @@ CASE_JSON = "case.json"
 AUDIT = "audit.jsonl"
 OK = "ok"
 _ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError)
+#: what opening a zip's directory can raise for a damaged file, besides _ZIP_ERRORS
+_DIRECTORY_ERRORS = (*_ZIP_ERRORS, RuntimeError, struct.error, UnicodeDecodeError, ValueError)
+
+#: largest ``case.json`` read: 200 landmarks, guides and settings are well under 1 MiB
+MAX_CASE_JSON_BYTES = 16 * 1024 * 1024
+#: largest ``audit.jsonl`` read: ~150,000 records of ~400 bytes
+MAX_AUDIT_BYTES = MAX_JSON_BYTES
+#: largest ``arrays/*.npy`` member: a 45-million-vertex mesh; each array is also held
+#: to the size its reference in case.json gives (dtype x shape + header)
+MAX_ARRAY_BYTES = 2 * 1024**3
+#: largest ``evidence/*`` member (a CT volume in one file); evidence is hashed as it
+#: streams, never held in memory, and each member is also held to its recorded size
+MAX_EVIDENCE_BYTES = 8 * 1024**3
+#: anything else in the archive (never read; a case file writes nothing else)
+MAX_OTHER_BYTES = 64 * 1024 * 1024
+#: room for the ``.npy`` header in front of an array's data
+_NPY_HEADER_BYTES = 64 * 1024
 
 PathArg = str | PathLike[str]
 
@@ -119,6 +170,11 @@ class LoadedCase:
     def tampered(self) -> bool:
         return any(status != OK for status in self.evidence_status.values())
 
+    @property
+    def content_seal(self) -> ContentSeal:
+        """Whether ``case.json`` is as the workbench last wrote it (see the module docstring)."""
+        return self.audit_chain.content or ContentSeal("unsealed")
+
 
 # ---------------------------------------------------------------- schema
 def schema_dir() -> Path:
@@ -148,69 +204,148 @@ def validate_case_json(doc: Any, source: PathArg) -> None:
 
 
 # ---------------------------------------------------------------- reading
+def member_limit(name: str) -> int:
+    """The largest decompressed size accepted for the case-file member ``name`` (bytes)."""
+    if name == CASE_JSON:
+        return MAX_CASE_JSON_BYTES
+    if name == AUDIT:
+        return MAX_AUDIT_BYTES
+    if name.startswith("arrays/"):
+        return MAX_ARRAY_BYTES
+    if name.startswith("evidence/"):
+        return MAX_EVIDENCE_BYTES
+    return MAX_OTHER_BYTES
+
+
+@dataclass(frozen=True)
+class _Archive:
+    """An open case file whose directory passed :func:`check_members`."""
+
+    zip: zipfile.ZipFile
+    members: Mapping[str, zipfile.ZipInfo]
+    path: Path
+
+    def has(self, name: str) -> bool:
+        return name in self.members
+
+    def info(self, name: str) -> zipfile.ZipInfo:
+        try:
+            return self.members[name]
+        except KeyError:
+            raise CaseFileError(self.path, f"{name} is missing from the case file") from None
+
+    def read(self, name: str, limit: int | None = None) -> bytes:
+        """A member's bytes, never decompressing more than its limit plus one byte."""
+        cap = member_limit(name) if limit is None else min(limit, member_limit(name))
+        return read_member(self.zip, self.info(name), self.path, cap)
+
+    def open(self, name: str, limit: int) -> IO[bytes]:
+        """A stream over a member that stops past ``limit`` bytes (see :func:`open_member`)."""
+        return open_member(self.zip, self.info(name), self.path, min(limit, member_limit(name)))
+
+
+def _as_case_error(error: InputError) -> CaseFileError:
+    return CaseFileError(error.source, error.problem, error.hint)
+
+
 @contextlib.contextmanager
-def _open_zip(path: Path) -> Iterator[zipfile.ZipFile]:
+def _open_zip(path: Path) -> Iterator[_Archive]:
     if not path.is_file():
         raise CaseFileError(path, "no such case file")
+    with contextlib.ExitStack() as stack:
+        try:
+            archive = stack.enter_context(open_archive(path))
+            members = check_members(archive, path, member_limit)
+        except ZipLimitError as error:
+            raise _as_case_error(error) from None
+        except _DIRECTORY_ERRORS as error:
+            raise CaseFileError(
+                path, f"the file is damaged or truncated ({error})", "restore it from a backup"
+            ) from None
+        except OSError as error:
+            raise CaseFileError(path, f"cannot read the file ({error})") from None
+        try:
+            yield _Archive(archive, MappingProxyType(members), path)
+        except ZipLimitError as error:
+            raise _as_case_error(error) from None
+        except _ZIP_ERRORS as error:
+            raise CaseFileError(
+                path, f"the file is damaged or truncated ({error})", "restore it from a backup"
+            ) from None
+        except OSError as error:
+            raise CaseFileError(path, f"cannot read the file ({error})") from None
+
+
+def _read_stored(archive: _Archive) -> dict[str, Any]:
+    """``case.json`` as stored (decoded within the JSON limits, not migrated)."""
+    raw = archive.read(CASE_JSON)
     try:
-        with zipfile.ZipFile(path, "r") as archive:
-            yield archive
-    except _ZIP_ERRORS as error:
-        raise CaseFileError(
-            path, f"the file is damaged or truncated ({error})", "restore it from a backup"
-        ) from None
-    except OSError as error:
-        raise CaseFileError(path, f"cannot read the file ({error})") from None
-
-
-def _read_member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes:
-    try:
-        return archive.read(name)
-    except KeyError:
-        raise CaseFileError(path, f"{name} is missing from the case file") from None
-
-
-def _read_document(archive: zipfile.ZipFile, path: Path) -> dict[str, Any]:
-    """``case.json``, migrated to the current format and validated."""
-    raw = _read_member(archive, CASE_JSON, path)
-    try:
-        doc = json.loads(raw.decode("utf-8"), parse_constant=_reject_constant)
-    except (UnicodeDecodeError, ValueError) as error:
-        raise CaseFileError(path, f"case.json is not valid JSON ({error})") from None
+        doc = loads_limited(
+            raw, archive.path, max_bytes=MAX_CASE_JSON_BYTES, what="case.json member"
+        )
+    except InputError as error:
+        raise _as_case_error(error) from None
     if not isinstance(doc, dict):
-        raise CaseFileError(path, "case.json is not a JSON object")
+        raise CaseFileError(archive.path, "case.json is not a JSON object")
+    return doc
+
+
+def _current(stored: Mapping[str, Any], path: Path) -> dict[str, Any]:
+    """A stored ``case.json`` migrated to the current format and validated."""
     try:
-        doc, _ = migrate(doc)
+        doc, _ = migrate(stored)
     except MigrationError as error:
         raise CaseFileError(path, str(error)) from None
     validate_case_json(doc, path)
     return doc
 
 
-def _reject_constant(name: str) -> None:
-    raise ValueError(f"{name} is not allowed")
+def _read_document(archive: _Archive) -> dict[str, Any]:
+    """``case.json``, migrated to the current format and validated."""
+    return _current(_read_stored(archive), archive.path)
 
 
-def _load_array(
-    archive: zipfile.ZipFile, path: Path, status: dict[str, str], ref: Mapping[str, Any]
-) -> np.ndarray:
+def _array_limit(ref: Mapping[str, Any]) -> int:
+    """The size of the ``.npy`` member ``ref`` describes, plus room for its header."""
+    try:
+        itemsize = np.dtype(str(ref["dtype"])).itemsize
+        count = math.prod(int(n) for n in ref["shape"])
+    except (TypeError, ValueError, KeyError):
+        return MAX_ARRAY_BYTES
+    return min(MAX_ARRAY_BYTES, itemsize * max(count, 0) + _NPY_HEADER_BYTES)
+
+
+def _load_array(archive: _Archive, status: dict[str, str], ref: Mapping[str, Any]) -> np.ndarray:
     member = f"arrays/{ref[ARRAY_KEY]}.npy"
-    data = _read_member(archive, member, path)
+    limit = _array_limit(ref)
+    try:
+        data = archive.read(member, limit)
+    except MemberTooLarge:
+        raise CaseFileError(
+            archive.path,
+            f"{member}: holds more than {limit} bytes, case.json expects "
+            f"{ref['dtype']}{list(ref['shape'])}",
+        ) from None
     found = hashlib.sha256(data).hexdigest()
     status[member] = OK if found == ref[ARRAY_KEY] else f"sha256 mismatch (hashes to {found})"
     try:
         return array_from_npy(data, ref)
     except ValueError as error:
-        raise CaseFileError(path, f"{member}: {error}") from None
+        raise CaseFileError(archive.path, f"{member}: {error}") from None
 
 
-def _evidence_status(archive: zipfile.ZipFile, item: EvidenceFile) -> str:
-    try:
-        with archive.open(f"evidence/{item.name}") as stream:
-            sha, size = hash_chunks(read_chunks(stream))
-    except KeyError:
+def _evidence_status(archive: _Archive, item: EvidenceFile) -> str:
+    member = f"evidence/{item.name}"
+    if not archive.has(member):
         return "missing from the case file"
-    except _ZIP_ERRORS as error:
+    try:
+        with archive.open(member, item.size) as stream:
+            sha, size = hash_chunks(read_chunks(stream))
+    except MemberTooLarge:
+        return f"larger than its recorded {item.size} bytes"
+    except ZipLimitError as error:
+        return error.problem
+    except MEMBER_ERRORS as error:
         return f"unreadable ({error})"
     if (sha, size) != (item.sha256, item.size):
         return f"sha256 mismatch (recorded {item.sha256}, found {sha}, {size} bytes)"
@@ -240,41 +375,57 @@ def _build_case(
         raise CaseFileError(path, f"invalid case content: {error}") from None
 
 
+def _digest(stored: Mapping[str, Any], path: Path) -> str:
+    try:
+        return content_digest(stored)
+    except ValueError as error:
+        raise CaseFileError(path, str(error)) from None
+
+
 def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
     """Open a ``.fcase`` file (read-only; the file is never modified).
 
     Raises
     ------
     CaseFileError
-        Not a zip, truncated, invalid JSON, schema violation, missing member,
-        or (unless ``allow_tampered``) an array or evidence hash mismatch or a
-        broken audit chain (naming the first bad record).
+        Not a zip, truncated, over a size or ratio limit, a member listed
+        twice or encrypted, invalid JSON, schema violation, missing member,
+        or (unless ``allow_tampered``) an array or evidence hash mismatch, a
+        broken audit chain (naming the first bad record) or a ``case.json``
+        changed after its last write.
     """
     path = Path(path)
     status: dict[str, str] = {}
     with _open_zip(path) as archive:
-        doc = _read_document(archive, path)
+        stored = _read_stored(archive)
+        doc = _current(stored, path)
+        digests = (_digest(stored, path), _digest(doc, path))
         store = _evidence_store(doc, path)
-        case = _build_case(doc, lambda ref: _load_array(archive, path, status, ref), path)
+        case = _build_case(doc, lambda ref: _load_array(archive, status, ref), path)
         for item in store:
             status[f"evidence/{item.name}"] = _evidence_status(archive, item)
-        has_log = AUDIT in archive.namelist()
+        has_log = archive.has(AUDIT)
         audit_bytes = archive.read(AUDIT) if has_log else b""
-    chain, damaged = _check_chain(audit_bytes, case, doc.get("audit_chain"))
+    chain, damaged = _check_chain(audit_bytes, case, doc.get(ANCHOR_KEY), digests)
     if not chain.ok or (has_log and damaged is None):
         status[AUDIT] = OK if chain.ok else chain.problem
+    seal = chain.content
+    if seal is not None and seal.state != "unsealed":
+        status[CASE_JSON] = OK if seal.ok else seal.problem
     bad = {member: s for member, s in status.items() if s != OK}
     if bad and not allow_tampered:
         listing = "; ".join(f"{member}: {s}" for member, s in bad.items())
         raise CaseFileError(
             path,
             f"integrity check failed, refusing to open: {listing}",
-            "it was modified or damaged outside the workbench; "
-            "load with allow_tampered=True to inspect it",
+            "it was modified or damaged outside the workbench; inspect it with "
+            "'workbench case info --allow-tampered' (load_case(..., allow_tampered=True))",
         )
     if damaged is not None:
-        raise CaseFileError(path, f"the audit log is damaged ({damaged})")
+        raise CaseFileError(path, f"the audit log is damaged ({AUDIT}: {damaged})")
     case.audit = AuditLog(audit_bytes, case.meta.case_id)
+    if seal is not None and not seal.ok:
+        case.audit.content_problem = seal.problem
     for item in store:
         case.retain_evidence(item)
     case.source_path = path.resolve()
@@ -282,35 +433,66 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
 
 
 def _check_chain(
-    audit_bytes: bytes, case: Case, anchor: Mapping[str, Any] | None
+    audit_bytes: bytes,
+    case: Case,
+    anchor: Mapping[str, Any] | None,
+    digests: tuple[str, str],
 ) -> tuple[ChainStatus, ValueError | None]:
-    """The audit log's chain status, or the parse error of a log that is not JSON lines."""
+    """The audit log's chain and content-seal status, or the parse error of a damaged log.
+
+    ``digests``: the content digests of ``case.json`` as stored and as migrated.
+    """
     try:
         records = parse_records(audit_bytes)
     except ValueError as error:
         return ChainStatus("unchained", 0), error
-    return verify_chain(records, case.meta.case_id, anchor), None
+    chain = verify_chain(records, case.meta.case_id, anchor)
+    return dataclasses.replace(chain, content=verify_content(records, *digests)), None
 
 
 def evidence_bytes(path: PathArg, name: str, *, allow_tampered: bool = False) -> bytes:
-    """The original bytes of evidence file ``name``, checked against its recorded sha256."""
+    """The original bytes of evidence file ``name``, checked against its recorded sha256.
+
+    The recorded sha256 is trusted only if ``case.json`` still matches its
+    content seal (unless ``allow_tampered``).
+    """
     path = Path(path)
     with _open_zip(path) as archive:
-        store = {e.name: e for e in _evidence_store(_read_document(archive, path), path)}
+        stored = _read_stored(archive)
+        current = _current(stored, path)
+        store = {e.name: e for e in _evidence_store(current, path)}
         if name not in store:
             raise CaseFileError(path, f"the case has no evidence file named {name!r}")
-        data = _read_member(archive, f"evidence/{name}", path)
+        seal = ContentSeal("unsealed")
+        if archive.has(AUDIT):
+            digests = (_digest(stored, path), _digest(current, path))
+            with contextlib.suppress(ValueError):
+                seal = verify_content(parse_records(archive.read(AUDIT)), *digests)
+        if not seal.ok and not allow_tampered:
+            raise CaseFileError(
+                path,
+                f"{seal.problem}; its recorded sha256 of evidence/{name} cannot be trusted",
+                "inspect it with 'workbench case info --allow-tampered'",
+            )
+        item = store[name]
+        member = f"evidence/{name}"
+        try:
+            data = archive.read(member, item.size)
+        except MemberTooLarge:
+            if not allow_tampered:
+                raise CaseFileError(
+                    path, f"{member} is larger than its recorded {item.size} bytes"
+                ) from None
+            data = archive.read(member)
     found = hashlib.sha256(data).hexdigest()
-    if found != store[name].sha256 and not allow_tampered:
+    if found != item.sha256 and not allow_tampered:
         raise CaseFileError(path, f"evidence/{name} does not match its recorded sha256")
     return data
 
 
 # ---------------------------------------------------------------- writing
-def _encode(
-    case: Case, meta_state: dict[str, Any], audit: bytes
-) -> tuple[dict[str, Any], dict[str, bytes]]:
-    """``case.json`` document and ``{sha256: npy bytes}`` for ``case`` with log ``audit``."""
+def _encode(case: Case, meta_state: dict[str, Any]) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """``case.json`` document (no anchor yet) and ``{sha256: npy bytes}`` for ``case``."""
     doc: dict[str, Any] = {
         "@schema": SCHEMA_ID,
         "format_version": CURRENT_VERSION,
@@ -326,8 +508,36 @@ def _encode(
         doc[name] = state
         if name == "evidence":
             doc["evidence_store"] = [e.to_state() for e in case.retained_evidence.values()]
-    doc["audit_chain"] = chain_anchor(parse_records(audit))
     return doc, blobs
+
+
+def _case_text(doc: Mapping[str, Any]) -> bytes:
+    """The ``case.json`` bytes written for ``doc``."""
+    return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False).encode("utf-8")
+
+
+def _refuse_tampered(case: Case, path: Path) -> None:
+    """Refuse to write a case whose content failed its seal when it was opened."""
+    problem = case.audit.content_problem
+    if problem:
+        raise CaseFileError(
+            path,
+            f"not saved: this case was opened although {problem}; the workbench does not "
+            "seal content it did not write",
+            "start a new case from the original evidence, or restore the case file from a backup",
+        )
+
+
+def _seal(case: Case, doc: dict[str, Any], extra: list[dict[str, Any]]) -> bytes:
+    """The log's bytes with ``extra`` appended and ``doc`` sealed; anchors the log in ``doc``.
+
+    The last record written carries the :func:`content_digest` of ``doc`` as it
+    will be read back (the anchor, added here afterwards, is not part of it).
+    """
+    digest = content_digest(json.loads(_case_text(doc)))
+    audit = _bound_log(case).encode(extra, content=digest)
+    doc[ANCHOR_KEY] = chain_anchor(parse_records(audit))
+    return audit
 
 
 def _bound_log(case: Case) -> AuditLog:
@@ -336,26 +546,35 @@ def _bound_log(case: Case) -> AuditLog:
     return case.audit
 
 
-def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[zipfile.ZipFile]:
+def _open_source(candidate: Path, stack: contextlib.ExitStack) -> _Archive | None:
+    """A previous case file, opened with the reading limits; None if it cannot be used."""
+    with contextlib.suppress(OSError, ZipLimitError, *_DIRECTORY_ERRORS):
+        archive = stack.enter_context(open_archive(candidate))
+        return _Archive(archive, check_members(archive, candidate, member_limit), candidate)
+    return None
+
+
+def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[_Archive]:
     """Readable previous case files (target first, then where the case came from)."""
     found = []
     for candidate in dict.fromkeys(p for p in (path, case.source_path) if p is not None):
-        with contextlib.suppress(OSError, *_ZIP_ERRORS):
-            found.append(stack.enter_context(zipfile.ZipFile(candidate, "r")))
+        source = _open_source(Path(candidate), stack)
+        if source is not None:
+            found.append(source)
     return found
 
 
-def _check_audit_prefix(
-    path: Path, case: Case, sources: list[zipfile.ZipFile], new_audit: bytes
-) -> None:
+def _check_audit_prefix(path: Path, case: Case, sources: list[_Archive], new_audit: bytes) -> None:
     """Refuse to overwrite this case's file if its log is not a prefix of ``new_audit``."""
-    if not sources or Path(sources[0].filename or "") != path:
+    if not sources or sources[0].path != path:
         return  # nothing to overwrite
     try:
-        doc, _ = migrate(json.loads(sources[0].read(CASE_JSON)))
+        doc, _ = migrate(
+            loads_limited(sources[0].read(CASE_JSON), path, max_bytes=MAX_CASE_JSON_BYTES)
+        )
         same_case = doc["meta"]["case_id"] == case.meta.case_id
         old_audit = sources[0].read(AUDIT)
-    except (KeyError, ValueError, TypeError, *_ZIP_ERRORS):
+    except (KeyError, ValueError, TypeError, AttributeError, InputError, *MEMBER_ERRORS):
         return  # not a case file, or no log yet
     if same_case and not new_audit.startswith(old_audit):
         raise CaseFileError(
@@ -366,13 +585,13 @@ def _check_audit_prefix(
         )
 
 
-def _evidence_source(item: EvidenceFile, sources: list[zipfile.ZipFile]) -> Opener:
+def _evidence_source(item: EvidenceFile, sources: list[_Archive]) -> Opener:
     """An opener for a copy of ``item`` whose bytes hash to its recorded sha256."""
     member = f"evidence/{item.name}"
-    openers = [partial(a.open, member) for a in sources if member in a.namelist()]
+    openers: list[Opener] = [_member_opener(a, member, item.size) for a in sources if a.has(member)]
     if item.original_path:
-        openers.append(partial(open, item.original_path, "rb"))
-    found = find_verified_copy(item, openers, (OSError, *_ZIP_ERRORS))
+        openers.append(lambda: open(item.original_path, "rb"))
+    found = find_verified_copy(item, openers, (OSError, ZipLimitError, *MEMBER_ERRORS))
     if found is None:
         raise CaseFileError(
             item.original_path or item.name,
@@ -380,6 +599,11 @@ def _evidence_source(item: EvidenceFile, sources: list[zipfile.ZipFile]) -> Open
             "found in the previous case file or at its original path",
         )
     return found
+
+
+def _member_opener(archive: _Archive, member: str, size: int) -> Opener:
+    """Opens ``member`` of ``archive`` read at most ``size`` bytes (more is an error)."""
+    return lambda: archive.open(member, size)
 
 
 def _zip_info(name: str, compress: int, size: int = 0) -> zipfile.ZipInfo:
@@ -396,8 +620,7 @@ def _write_members(
     audit: bytes,
     openers: dict[EvidenceFile, Opener],
 ) -> None:
-    text = json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False)
-    archive.writestr(_zip_info(CASE_JSON, zipfile.ZIP_DEFLATED), text.encode("utf-8"))
+    archive.writestr(_zip_info(CASE_JSON, zipfile.ZIP_DEFLATED), _case_text(doc))
     for sha, data in blobs.items():
         # fastest deflate level: a 100k-triangle mesh's arrays compress in
         # ~55 ms instead of ~210 ms (the default, 6), 4% larger; the window
@@ -500,12 +723,13 @@ def save_case(case: Case, path: PathArg, stack: _Cleanable | None = None) -> Pat
         ``case.source_path`` becomes ``path``.
     """
     path = Path(path).resolve()
+    _refuse_tampered(case, path)
     meta = case.meta.touched()
     record = make_record(
         "save", "Save case", meta.examiner, {"file": path.name, "format_version": CURRENT_VERSION}
     )
-    audit = _bound_log(case).encode([record])
-    doc, blobs = _encode(case, meta.to_state(), audit)
+    doc, blobs = _encode(case, meta.to_state())
+    audit = _seal(case, doc, [record])
     validate_case_json(doc, path)
     _write_case(path, case, doc, blobs, audit, guard_audit=True)
     case.audit.mark_persisted(audit, [record])
@@ -522,15 +746,16 @@ def detached_copy(case: Case) -> Case:
 
     For writing a snapshot in a worker thread while the user goes on editing.
     Cheap: parts are immutable values and are shared (no array is copied);
-    the audit log is carried as its encoded bytes, with the retained evidence
-    and ``source_path``.  The copy has no listeners.
+    the audit log is copied with its records not yet saved still pending (a
+    snapshot seals the last of them), with the retained evidence and
+    ``source_path``.  The copy has no listeners.
     """
     copy = Case()
     for item in case.retained_evidence.values():
         copy.retain_evidence(item)
     for name in PARTS:
         copy.replace(name, case.part(name))
-    copy.audit = AuditLog(_bound_log(case).encode(), case.meta.case_id)
+    copy.audit = _bound_log(case).copy()
     copy.source_path = case.source_path
     return copy
 
@@ -554,8 +779,9 @@ def write_case_snapshot(case: Case, path: PathArg) -> Path:
         ``path``, resolved.
     """
     path = Path(path).resolve()
-    audit = _bound_log(case).encode()
-    doc, blobs = _encode(case, case.meta.to_state(), audit)
+    _refuse_tampered(case, path)
+    doc, blobs = _encode(case, case.meta.to_state())
+    audit = _seal(case, doc, [])
     validate_case_json(doc, path)
     _write_case(path, case, doc, blobs, audit, guard_audit=False)
     return path
@@ -573,4 +799,4 @@ def read_case_json(path: PathArg) -> dict[str, Any]:
     """
     path = Path(path)
     with _open_zip(path) as archive:
-        return _read_document(archive, path)
+        return _read_document(archive)

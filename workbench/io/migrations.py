@@ -35,6 +35,19 @@ Format history
     key only if its value is valid for its part; an unusable old value (a
     build word no table knows, a malformed guide list...) stays in
     ``parameters`` unchanged, so the file still opens and nothing is lost.
+3
+    The part ``age_study`` (:func:`v2_to_v3` adds it as ``null``).
+
+Content seal (no format change)
+    Later format-3 files seal ``case.json`` in the audit log: the last
+    record written carries ``content_sha256``
+    (:func:`workbench.model.audit.content_digest`).  ``case.json`` itself is
+    unchanged, so nothing here migrates; files written before (any format
+    up to 3) load as "content not sealed (written by an older version)" and
+    are sealed by their next save.  The loader accepts the seal for the
+    document as stored or as migrated by :func:`migrate`, so the same case
+    in an older layout still verifies, while any change to its content
+    does not.
 """
 
 from __future__ import annotations

@@ -47,6 +47,27 @@ record, record count, count of records that predate the chain) in
 ``case.json``; :func:`verify_chain` checks a log against it and names the
 first bad record.  The chain shows edits made without recomputing it; it is
 not a signature (whoever knows this scheme can rebuild a consistent log).
+
+Content seal
+------------
+The last record of every write (the ``save`` record of a save, the last new
+record of an autosave snapshot) also carries
+
+content_sha256 : str
+    :func:`content_digest` of the ``case.json`` written with it: SHA-256 of
+    the document's canonical JSON (keys sorted, no spaces, ASCII) without
+    its ``audit_chain`` anchor.  The anchor is the only part left out: it
+    holds the hash of this very record, so it cannot be inside it; it is
+    checked by the chain instead.  Nothing else in ``case.json`` changes
+    without a write, so everything else is sealed (``meta.modified`` and
+    ``software`` are set before the digest is taken).
+
+Because the seal is inside the chained record, and the anchor pins that
+record, editing ``case.json`` by hand (a landmark moved, the examiner
+renamed) shows at open (:func:`verify_content`) unless the editor also
+rewrites the record and the anchor.  Logs written before the seal existed
+end in a record without it: their content is "not sealed", which is not an
+integrity failure but is not "verified" either.
 """
 
 from __future__ import annotations
@@ -57,11 +78,17 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from workbench.core.json_limits import MAX_JSON_DEPTH, nesting_depth
 from workbench.model.meta import now_iso
 
 ACTIONS = ("do", "undo", "redo", "abort", "save")
-CHAIN_FIELDS = ("prev", "seq")
+SEAL_FIELD = "content_sha256"
+CHAIN_FIELDS = (SEAL_FIELD, "prev", "seq")
 GENESIS_TAG = b"forensic-workbench audit chain v1"
+#: the ``case.json`` key left out of :func:`content_digest` (it pins the sealing record)
+ANCHOR_KEY = "audit_chain"
+#: nesting accepted in one audit line (records are 3 deep; user parameters add some)
+MAX_RECORD_DEPTH = MAX_JSON_DEPTH
 
 
 def make_record(
@@ -105,9 +132,17 @@ def parse_records(data: bytes) -> list[dict[str, Any]]:
         raise ValueError("the last audit record is cut off (no final newline)")
     records = []
     for number, line in enumerate(data.splitlines(), start=1):
+        if (
+            line.count(b"[") + line.count(b"{") > MAX_RECORD_DEPTH
+            and nesting_depth(line) > MAX_RECORD_DEPTH
+        ):
+            raise ValueError(
+                f"audit line {number} nests more than {MAX_RECORD_DEPTH} levels deep "
+                "(no workbench record does)"
+            )
         try:
             record = json.loads(line.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
             raise ValueError(f"audit line {number} is not valid JSON: {error}") from None
         if not isinstance(record, dict):
             raise ValueError(f"audit line {number} is not a JSON object")
@@ -118,6 +153,109 @@ def parse_records(data: bytes) -> list[dict[str, Any]]:
 def record_hash(record: Mapping[str, Any]) -> str:
     """SHA-256 (hex) of ``record``'s canonical encoding (:func:`encode_record`)."""
     return hashlib.sha256(encode_record(record)).hexdigest()
+
+
+def content_digest(doc: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of a ``case.json`` document's canonical JSON, without its anchor.
+
+    Canonical: keys sorted, no whitespace, non-ASCII escaped, so the digest
+    depends on the content only, not on how the file was indented.  ``doc``
+    must be what :func:`json.loads` gives for the stored text (lists, not
+    tuples; string keys), before any migration.
+
+    Raises
+    ------
+    ValueError
+        ``doc`` holds NaN or infinity, or a value JSON cannot hold.
+    """
+    body = {key: value for key, value in doc.items() if key != ANCHOR_KEY}
+    try:
+        text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    except TypeError as error:
+        raise ValueError(f"case.json content is not plain JSON ({error})") from None
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+@dataclass(frozen=True)
+class ContentSeal:
+    """Result of :func:`verify_content`: does ``case.json`` hold what the workbench sealed?
+
+    Attributes
+    ----------
+    state : str
+        ``"verified"``, ``"unsealed"`` (written by a version without the seal)
+        or ``"changed"`` (edited outside the workbench after its last write).
+    sealed_at : str
+        Time of the record carrying the seal (``""`` when unsealed).
+    problem : str
+        What is wrong, one sentence (``"changed"`` only).
+    sealed, found : str
+        The sealed digest and the digest of the ``case.json`` found.
+    """
+
+    state: str
+    sealed_at: str = ""
+    problem: str = ""
+    sealed: str = ""
+    found: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """Not changed (unsealed content is unverifiable, not a failure)."""
+        return self.state != "changed"
+
+    def summary(self) -> str:
+        if self.state == "verified":
+            return f"verified (case.json is as the workbench wrote it at {self.sealed_at})"
+        if self.state == "unsealed":
+            return "content not sealed (written by an older version)"
+        return f"NOT VERIFIED: {self.problem}"
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "status": self.summary(),
+            "state": self.state,
+            "sealed_at": self.sealed_at or None,
+            "sealed_sha256": self.sealed or None,
+            "found_sha256": self.found or None,
+        }
+
+
+def _write_label(record: Mapping[str, Any]) -> str:
+    time = record.get("time", "an unknown time")
+    if record.get("action") == "save":
+        return f"the last recorded save at {time}"
+    what = " ".join(str(record.get(k)) for k in ("action", "operation") if record.get(k))
+    return f"the workbench last wrote it (autosave after '{what or 'an edit'}' at {time})"
+
+
+def verify_content(
+    records: Sequence[Mapping[str, Any]], digest: str, migrated: str = ""
+) -> ContentSeal:
+    """Check the :func:`content_digest` of a case's ``case.json`` against its log's seal.
+
+    ``records`` is the parsed ``audit.jsonl`` (chain fields included).  The
+    seal is the :data:`SEAL_FIELD` of the last record.  ``digest`` is the
+    digest of the document as stored; ``migrated`` (optional) that of the
+    document upgraded to the current format, which is accepted as well: a
+    document rewritten in an older layout whose upgrade gives exactly the
+    sealed content holds the same case (any other change shows in both).
+    """
+    if not records or SEAL_FIELD not in records[-1]:
+        return ContentSeal("unsealed", found=digest)
+    last = records[-1]
+    seal = last[SEAL_FIELD]
+    when = str(last.get("time", ""))
+    if isinstance(seal, str) and seal in (digest, migrated):
+        return ContentSeal("verified", when, sealed=seal, found=seal)
+    return ContentSeal(
+        "changed",
+        when,
+        f"case.json was changed outside the workbench after {_write_label(last)} "
+        f"(sealed sha256 {str(seal)[:12]}…, found {digest[:12]}…)",
+        sealed=str(seal),
+        found=digest,
+    )
 
 
 def genesis(case_id: str, older: Sequence[Mapping[str, Any]] = ()) -> str:
@@ -157,6 +295,9 @@ class ChainStatus:
         record missing at the end).
     problem : str
         What is wrong, one sentence (``"broken"`` only).
+    content : ContentSeal or None
+        The content seal's check (:func:`verify_content`), when the case file
+        made it; reported with the chain, not part of :meth:`summary`.
     """
 
     state: str
@@ -164,6 +305,7 @@ class ChainStatus:
     unchained: int = 0
     index: int | None = None
     problem: str = ""
+    content: ContentSeal | None = None
 
     @property
     def ok(self) -> bool:
@@ -183,13 +325,16 @@ class ChainStatus:
         return f"verified ({self.records} records{older})"
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "status": self.summary(),
             "state": self.state,
             "records": self.records,
             "unchained": self.unchained,
             "first_bad_record": self.index,
         }
+        if self.content is not None:
+            out["content"] = self.content.to_json()
+        return out
 
 
 def _name(records: Sequence[Mapping[str, Any]], index: int) -> str:
@@ -347,6 +492,12 @@ class AuditLog:
         The case the log belongs to; it sets the chain's :func:`genesis`.  The
         case file sets it before writing (a log with no chained record yet
         cannot be encoded for a file without it).
+
+    Attributes
+    ----------
+    content_problem : str
+        Why the case's content failed its seal when it was opened (empty if
+        it did not); the case file refuses to seal such a case again.
     """
 
     def __init__(self, persisted: bytes = b"", case_id: str | None = None) -> None:
@@ -354,6 +505,9 @@ class AuditLog:
         self._records = parse_records(self._persisted_bytes)
         self._n_persisted = len(self._records)
         self.case_id = case_id
+        #: set by the case file when the case's ``case.json`` failed its content seal
+        #: (:func:`verify_content`); a log carrying it is never sealed again
+        self.content_problem = ""
 
     def __len__(self) -> int:
         return len(self._records)
@@ -384,6 +538,18 @@ class AuditLog:
     def __call__(self, record: Mapping[str, Any]) -> None:
         self.append(record)
 
+    def copy(self) -> AuditLog:
+        """An independent log: the same saved bytes, pending records still pending.
+
+        Records are never changed in place, so they are shared, not copied.
+        """
+        other = AuditLog(case_id=self.case_id)
+        other._persisted_bytes = self._persisted_bytes
+        other._records = list(self._records)
+        other._n_persisted = self._n_persisted
+        other.content_problem = self.content_problem
+        return other
+
     def _last_link(self) -> str:
         """The ``prev`` of the next record written after the persisted ones."""
         persisted = self._records[: self._n_persisted]
@@ -391,16 +557,21 @@ class AuditLog:
             return record_hash(persisted[-1])
         return genesis(self.case_id or "", persisted)
 
-    def encode(self, extra: Sequence[Mapping[str, Any]] = ()) -> bytes:
+    def encode(self, extra: Sequence[Mapping[str, Any]] = (), content: str | None = None) -> bytes:
         """Persisted bytes + pending records + ``extra``, as ``audit.jsonl`` bytes.
 
         Pending and extra records are chained here (``seq`` and ``prev``, see
         the module docstring); the persisted bytes are kept as they are.
+        ``content`` (a :func:`content_digest`) seals the last new record; with
+        no new record the last persisted one keeps the seal it was written with.
         """
         link, lines = self._last_link(), []
         tail = [*self._records[self._n_persisted :], *extra]
+        last = self._n_persisted + len(tail) - 1
         for seq, record in enumerate(tail, start=self._n_persisted):
             chained = {k: v for k, v in record.items() if k not in CHAIN_FIELDS}
+            if content is not None and seq == last:
+                chained[SEAL_FIELD] = content
             line = encode_record({**chained, "prev": link, "seq": seq})
             link = hashlib.sha256(line).hexdigest()
             lines.append(line)
