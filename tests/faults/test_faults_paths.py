@@ -150,6 +150,20 @@ def truth_on_bone(tmp: Path) -> Case:
     return case
 
 
+def truth_other_frame(tmp: Path) -> Case:
+    """The truth skin tagged SPACE=LPS beside an RAS skull: read turned 180 degrees about z, it
+    no longer covers the skull, and the case fails naming the frames (not a garbage score)."""
+    case = _validate(tmp, "c1,bone.ply,lps_skin.ply,mm\n")
+    deep = case.inputs[0].parent
+    bone = skull_mesh()
+    centre = bone.vertices.mean(axis=0)
+    skin = Mesh(centre + 1.1 * (bone.vertices - centre), bone.faces)
+    write_mesh(deep / "lps_skin.ply", skin, space="LPS")  # numbers RAS, tag says LPS
+    case.inputs.append(deep / "lps_skin.ply")
+    case.words = ("c1 [reconstruction]: failed", "lps_skin.ply", "not in the same frame")
+    return case
+
+
 # ----------------------------------------------------------------------------- batch
 
 
@@ -398,6 +412,7 @@ ENTRIES = [
     ),
     pytest.param(truth_same_bytes, id="row1-truth-is-skull-bytes"),
     pytest.param(truth_on_bone, id="row1-truth-on-bone"),
+    pytest.param(truth_other_frame, id="slicer-truth-skin-in-other-frame"),
     pytest.param(batch_id("../../escaped", "path separator"), id="batch-row1-id-dotdot"),
     pytest.param(batch_id("a/b", "path separator"), id="batch-row1-id-slash"),
     pytest.param(batch_id("\"=cmd|' /C calc'!A0\"", "'='"), id="batch-row1-id-formula"),

@@ -94,8 +94,9 @@ def test_lps_file_stores_flipped_numbers(tmp_path, sample):
     assert mk["coordinateSystem"] == "LPS" and mk["type"] == "Fiducial"
     stored = {cp["label"]: cp for cp in mk["controlPoints"]}
     assert stored["ex_l"]["position"] == [-45.25, -61.0, 12.125]
-    assert stored["go_l"]["positionStatus"] == "undefined"
+    assert stored["go_l"]["positionStatus"] == "missing" and stored["go_l"]["position"] == ""
     assert stored["prn"]["description"].startswith("tip")
+    assert stored["prn"]["description"].endswith("[workbench: suggested; confidence 0.35]")
     fcsv = tmp_path / "p.fcsv"
     write_fcsv(fcsv, sample)
     lines = fcsv.read_text(encoding="utf-8").splitlines()

@@ -105,6 +105,7 @@ def test_ply_comments_round_trip(tmp_path: Path, binary: bool) -> None:
     parsed = ply.read(target, target.read_bytes())
     assert parsed.comments == [
         "units: mm",
+        "SPACE=RAS",
         "written by forensic-workbench",
         "credit: Courtesy of X",
         "case: 17",
@@ -120,7 +121,7 @@ def test_plain_ply_writing_is_unchanged(tmp_path: Path) -> None:
         mesh.vertices, mesh.faces, comments=()
     )
     target = write_mesh(tmp_path / "plain.ply", mesh)
-    assert ply.header_comments(target) == ["units: mm", "written by forensic-workbench"]
+    assert ply.header_comments(target) == ["units: mm", "SPACE=RAS", "written by forensic-workbench"]
     assert samples.credit_for_mesh_file(target) is None
 
 
@@ -230,4 +231,5 @@ def test_cli_mesh_from_ct_without_credit_writes_a_plain_ply(
         == 0
     )
     assert "credit" not in capsys.readouterr().out
-    assert ply.header_comments(out) == ["units: mm", "written by forensic-workbench"]
+    # headsq is an NRRD in LPS: the tag says so, so 3D Slicer lays the bone on the CT
+    assert ply.header_comments(out) == ["units: mm", "SPACE=LPS", "written by forensic-workbench"]

@@ -1,6 +1,7 @@
 """``workbench mesh-from-ct``: bone or skin surface of a CT volume.
 
-The mesh is written in the volume's physical frame (LPS or RAS) in mm.  When
+The mesh is written in the volume's physical frame (LPS or RAS) in mm, and the
+file's header says which (3D Slicer's ``SPACE=`` tag).  When
 the volume is registered sample data that must carry a credit line (the NLM
 Visible Human CTs), the credit is printed (also with ``--quiet``), goes into
 the JSON report, and into a PLY output's header as ``comment credit: ...``.
@@ -89,11 +90,15 @@ def run(args: argparse.Namespace) -> int:
         largest_component=not args.all_components,
         progress=progress_printer(not args.quiet),
     )
+    # the volume's own frame, tagged (SPACE=LPS or RAS) so 3D Slicer lays the mesh on the CT;
+    # the workbench reads an LPS-tagged mesh turned into RAS, as it reads LPS landmark files
     with output_path(args.out, args, source) as out:
         if result.credit and out.suffix.lower() == ".ply":
-            ply.write(out, result.mesh, comments=[credit_comment(result.credit)])
+            ply.write(
+                out, result.mesh, comments=[credit_comment(result.credit)], space=result.frame
+            )
         else:
-            write_mesh(out, result.mesh)
+            write_mesh(out, result.mesh, space=result.frame)
     if args.report:
         with output_path(args.report, args, source) as report:
             write_json(result.to_dict(), report)

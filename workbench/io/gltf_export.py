@@ -7,12 +7,17 @@ lower teeth, tongue, mandible, cranium ...).
 
 Units and axes
 --------------
-glTF is metres, right-handed, +Y up, +Z forward (the front of the asset),
-so +X is the asset's left.  The workbench head frame (x to the subject's
-left, y up, z toward the face, mm) has the same axes, so no rotation is
-needed; **the vertices are converted to metres** (× 0.001, stored as
-float32) and every node has the identity transform.  Blender's importer
-turns +Y up into its own +Z up by itself.
+glTF is metres.  The vertices are the caller's meshes in the caller's frame,
+**converted to metres** (× 0.001, float32), with no rotation and every node
+at the identity transform: a glTF position × 1000 is the mm coordinate of
+the same vertex in the workbench's PLY files of that head (same axes, same
+handedness, same origin).  The asset's ``extras`` say so (``units``,
+``mm_per_unit``, ``frame``).  For the head frame (x to the subject's left,
+y up, z toward the face) this is glTF's own convention (+Y up, +Z the
+asset's front); a head in a skull file's frame keeps that frame's axes.
+Blender's glTF importer turns glTF's +Y up into Blender's +Z up, its PLY
+importer turns nothing: import the PLY with Forward Axis -Z, Up Axis Y
+and Scale 0.001 and the two overlay.
 
 Morph targets
 -------------
@@ -188,6 +193,7 @@ def write_glb(
     names_arkit: Mapping[str, Mapping[str, float]] | None = None,
     skin_name: str = "skin",
     clip_name: str = "expression",
+    frame: str = "",
 ) -> Path:
     """Write a ``.glb``: the skin with morph targets, inner parts as nodes, an optional clip.
 
@@ -203,6 +209,7 @@ def write_glb(
     animation : ``[(time_s, {target name: weight}), ...]``: a clip animating the
         weights (LINEAR); targets not named in a keyframe have weight 0 there
     names_arkit : ``{ARKit name: {target name: weight}}``: extra targets made of the others
+    frame : what the meshes' frame is (the frame of the head's PLY files), for ``extras``
     """
     path = Path(path)
     extra_nodes = dict(extra_nodes or {})
@@ -215,6 +222,12 @@ def write_glb(
     default = [float((weights or {}).get(n, 0.0)) for n in names]
 
     b = _Builder()
+    b.gltf.asset.extras = {
+        "units": "m",
+        "mm_per_unit": 1000,
+        "frame": frame or "the frame of the meshes given (the head's PLY files), axes unchanged",
+        "note": "a position x 1000 is the vertex in mm in the head's PLY files",
+    }
     morphed: list[int] = []
     skin_node = b.node(skin_name, b.mesh(skin_name, skin, deltas, default))
     morphed.append(skin_node)

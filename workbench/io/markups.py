@@ -3,18 +3,36 @@
 Units and frames
 ----------------
 Positions are mm in the frame of the mesh the points sit on, taken to be 3D
-Slicer's RAS world frame (mesh and landmarks overlay in Slicer).  Slicer files
-may store LPS (x, y negated; Slicer 5's default): readers honour the file's
-system, writers use LPS unless ``coordinate_system="RAS"``.  The flip is exact
-and floats are written with ``repr``, so write → read is exact.  MeshLab
-``.pp`` and the CSV hold mesh coordinates as they are.
+Slicer's RAS world frame: the workbench's mesh writers tag their files
+``SPACE=RAS`` (:mod:`workbench.io.meshes`), so mesh and landmarks overlay when
+Slicer loads both.  Slicer files may store LPS (x, y negated; Slicer 5's
+default): readers honour the file's system, writers use LPS unless
+``coordinate_system="RAS"``.  The flip is exact and floats are written with
+``repr``, so write → read is exact.  MeshLab ``.pp`` and the CSV hold mesh
+coordinates as they are.
+
+Slicer 5 point states
+---------------------
+Slicer keeps a ``positionStatus`` per control point: undefined (0), preview
+(1), defined (2) or missing (3, "skip this point").  ``.mrk.json`` stores the
+name, ``.fcsv`` the number in the 15th field (after ``associatedNodeID``; the
+16th is ``autoCreated``; Slicer reads the fields by position and ignores the
+``# columns`` line).  Placed and suggested points are written as defined,
+absent and missing ones as missing (no position).  The workbench's own status
+and confidence travel in the point's description, after the user's text, as
+``[workbench: suggested; confidence 0.35]``: Slicer shows and keeps it.  On
+reading, Slicer's state decides whether a point has a position (a point the
+user placed in Slicer is "placed" even if the description still says
+"missing"); the description's status and confidence fill in the rest.
 
 Readers turn labels into catalogue codes (:meth:`LandmarkCatalogue.normalise`);
-unknown labels, repeated codes and undefined points (Slicer ``positionStatus``
-not ``"defined"``, MeshLab ``active="0"``, status ``absent``/``missing``) are
-skipped and reported by name, undefined ones kept without position when
+unknown labels, repeated codes and undefined points (Slicer state not defined,
+MeshLab ``active="0"``, status ``absent``/``missing``) are skipped and
+reported by name, undefined ones kept without position when
 ``allow_undefined=True``; ``strict=True`` raises :class:`LandmarkError`
-instead.  A file that cannot be parsed raises :class:`InputError` naming it.
+instead.  A file that cannot be parsed raises :class:`InputError` naming it;
+``.mrk.json`` goes through :func:`workbench.core.json_limits.read_json`
+(size and nesting limits).
 """
 
 from __future__ import annotations
@@ -24,6 +42,7 @@ import io
 import json
 import math
 import os
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -34,6 +53,7 @@ from typing import NamedTuple
 import numpy as np
 
 from workbench.core.errors import InputError, LandmarkError
+from workbench.core.json_limits import read_json
 from workbench.core.landmarks import DEFINED_STATUSES, STATUSES, Landmark, LandmarkSet
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 
@@ -41,7 +61,8 @@ MRK_SCHEMA = (
     "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/"
     "Resources/Schema/markups-schema-v1.0.3.json#"
 )
-FCSV_VERSION = "4.11"
+FCSV_VERSION = "5.6"  #: the Slicer version whose .fcsv layout is written
+#: Slicer's own ``.fcsv`` fields, in the order Slicer 5 reads them (by position)
 FCSV_COLUMNS = (
     "id",
     "x",
@@ -57,8 +78,15 @@ FCSV_COLUMNS = (
     "label",
     "desc",
     "associatedNodeID",
-    "status",
-    "confidence",
+    "positionStatus",
+    "autoCreated",
+)
+#: what Slicer 4 writes and Slicer 5 still writes on its ``# columns`` line
+_FCSV_LEGACY_COLUMNS = FCSV_COLUMNS[:14]
+#: Slicer's vtkMRMLMarkupsNode position states: .fcsv number -> .mrk.json name
+POSITION_STATES = {0: "undefined", 1: "preview", 2: "defined", 3: "missing"}
+_NOTE = re.compile(
+    r"(?:^| )\[workbench: (?P<status>[a-z]+); confidence (?P<conf>[^\]\s]+)\]\Z", re.DOTALL
 )
 CSV_COLUMNS = ("code", "x_mm", "y_mm", "z_mm", "status", "confidence", "description")
 KEY = (
@@ -277,6 +305,56 @@ def _coordinate_system(value: object, path: Path | None = None) -> str:
     return mapped
 
 
+def _with_note(description: str, status: str, confidence: float) -> str:
+    """The description Slicer shows: the user's text, then the workbench's status note."""
+    note = f"[workbench: {status}; confidence {float(confidence)!r}]"
+    return f"{description} {note}" if description else note
+
+
+def _split_note(description: str) -> tuple[str, str | None, float | None]:
+    """``(user's text, status, confidence)`` from a description :func:`_with_note` wrote.
+
+    A description without a (valid) note comes back whole, with None, None.
+    """
+    m = _NOTE.search(description)
+    if m is None or m["status"] not in STATUSES:
+        return description, None, None
+    try:
+        confidence = float(m["conf"])
+    except ValueError:
+        return description, None, None
+    if not math.isfinite(confidence):
+        return description, None, None
+    return description[: m.start()], m["status"], confidence
+
+
+def _slicer_point(
+    label: str,
+    position: np.ndarray | None,
+    state: str,
+    description: str,
+    status: str | None = None,
+    confidence: float | None = None,
+) -> _Point:
+    """A point from Slicer's state (a :data:`POSITION_STATES` name) and its description.
+
+    Slicer's state decides whether the point has a position: only "defined"
+    and "preview" points keep theirs (an undefined or missing point's numbers
+    are never used).  ``status``/``confidence`` (the workbench's own fields,
+    when the file kept them) win over the description's note.
+    """
+    text, note_status, note_conf = _split_note(description)
+    status = note_status if status is None else status
+    confidence = note_conf if confidence is None else confidence
+    if state in ("defined", "preview") and position is not None:
+        if status not in DEFINED_STATUSES:  # placed (or moved) in Slicer
+            status = "placed" if state == "defined" else "suggested"
+        return _Point(label, position, state == "defined", status, confidence, text)
+    if status not in ("absent", "missing"):
+        status = "missing"
+    return _Point(label, None, False, status, confidence, text)
+
+
 # ------------------------------------------------------------- .mrk.json
 def read_mrk_json(
     path: PathLike,
@@ -287,14 +365,11 @@ def read_mrk_json(
 ) -> LandmarkReadResult:
     """Read a 3D Slicer markups point list (``.mrk.json``) into mesh/RAS mm."""
     path = Path(path)
-    try:
-        doc = json.loads(_read_text(path))
-    except json.JSONDecodeError as exc:
+    if not path.is_file():
         raise InputError(
-            path,
-            f"not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})",
-            hint="the file may be truncated or not a Slicer markups file",
-        ) from None
+            path, "is a folder, not a landmark file" if path.is_dir() else "file not found"
+        )
+    doc = read_json(path, what="landmark file")
     if not isinstance(doc, dict) or not isinstance(doc.get("markups"), list):
         raise InputError(path, "not a 3D Slicer markups file (no 'markups' list)")
     lists = [m for m in doc["markups"] if isinstance(m, dict) and m.get("type") == "Fiducial"]
@@ -316,51 +391,58 @@ def read_mrk_json(
     points, cps = [], mk.get("controlPoints", [])
     if not isinstance(cps, list) or not all(isinstance(cp, dict) for cp in cps):
         raise InputError(path, "'controlPoints' must be a list of JSON objects")
+    names = tuple(POSITION_STATES.values())
     for i, cp in enumerate(cps, start=1):
         label, pos = str(cp.get("label") or f"<unnamed point {i}>"), cp.get("position")
-        if pos is not None and (not isinstance(pos, list) or len(pos) != 3):
-            raise InputError(path, f"point {label!r}: position must be 3 numbers")
-        position = (
-            None
-            if pos is None
-            else _FLIP[cs] * np.array([_number(path, f"point {label!r} position", v) for v in pos])
-        )
-        extra = cp.get(KEY) if isinstance(cp.get(KEY), dict) else {}
         state = cp.get("positionStatus", "defined")
-        status = _status(path, label, extra.get("status"))
-        if state == "preview" and status is None:
-            status = "suggested"
-        conf = _number(path, f"point {label!r} confidence", extra.get("confidence"), optional=True)
-        points.append(
-            _Point(
-                label, position, state == "defined", status, conf, str(cp.get("description") or "")
+        if state not in names:
+            raise InputError(
+                path,
+                f"point {label!r}: unknown positionStatus {state!r}",
+                hint=f"Slicer writes one of {', '.join(names)}",
             )
-        )
+        position = None
+        if state in ("defined", "preview") and pos not in (None, ""):  # Slicer writes "" for none
+            if not isinstance(pos, list) or len(pos) != 3:
+                raise InputError(path, f"point {label!r}: position must be 3 numbers")
+            xyz = [_number(path, f"point {label!r} position", v) for v in pos]
+            position = _FLIP[cs] * np.array(xyz)
+        extra = cp.get(KEY) if isinstance(cp.get(KEY), dict) else {}
+        status = _status(path, label, extra.get("status"))
+        conf = _number(path, f"point {label!r} confidence", extra.get("confidence"), optional=True)
+        text = str(cp.get("description") or "")
+        points.append(_slicer_point(label, position, state, text, status, conf))
     return _build(path, surface, points, catalogue, allow_undefined, strict, messages, cs)
 
 
 def write_mrk_json(
     path: PathLike, landmark_set: LandmarkSet, coordinate_system: str = "LPS"
 ) -> None:
-    """Write a Slicer 5 markups point list; undefined points get positionStatus ``"undefined"``."""
+    """Write a Slicer 5 markups point list.
+
+    Placed and suggested points are ``"defined"``; absent and missing ones
+    ``"missing"`` without a position (as Slicer writes them).  Status and
+    confidence go into each point's description (see the module doc) and
+    into the ``workbench`` key.
+    """
     cs = _coordinate_system(coordinate_system)
     flip = _FLIP[cs]
     orientation = [float(v) for v in np.diag(flip).ravel()]
     points = []
     for i, lm in enumerate(landmark_set, start=1):
-        pos = [float(v) for v in lm.position * flip] if lm.is_defined else [0.0, 0.0, 0.0]
+        pos = [float(v) for v in lm.position * flip] if lm.is_defined else ""
         points.append(
             {
                 "id": str(i),
                 "label": lm.code,
-                "description": lm.description,
+                "description": _with_note(lm.description, lm.status, lm.confidence),
                 "associatedNodeID": "",
                 "position": pos,
                 "orientation": orientation,
                 "selected": True,
                 "locked": False,
                 "visibility": lm.is_defined,
-                "positionStatus": "defined" if lm.is_defined else "undefined",
+                "positionStatus": "defined" if lm.is_defined else "missing",
                 KEY: {"status": lm.status, "confidence": lm.confidence},
             }
         )
@@ -389,7 +471,13 @@ def read_fcsv(
     allow_undefined: bool = False,
     strict: bool = False,
 ) -> LandmarkReadResult:
-    """Read a legacy Slicer fiducial list (``.fcsv``); ``CoordinateSystem`` 0/RAS or 1/LPS."""
+    """Read a Slicer fiducial list (``.fcsv``); ``CoordinateSystem`` 0/RAS or 1/LPS.
+
+    Slicer 5's ``positionStatus`` field (the 15th) decides which points have a
+    position; files without it (Slicer 4, the workbench's older files with
+    ``status``/``confidence`` columns) count every point with numbers as
+    defined, as Slicer does.
+    """
     path = Path(path)
     header, body = _split_header(_read_text(path))
     settings = {
@@ -401,7 +489,10 @@ def read_fcsv(
         if "CoordinateSystem" in settings
         else ["no CoordinateSystem line; assumed RAS as old Slicer versions do"]
     )
-    columns = [c.strip() for c in settings.get("columns", ",".join(FCSV_COLUMNS[:14])).split(",")]
+    columns = [c.strip() for c in settings.get("columns", ",".join(FCSV_COLUMNS)).split(",")]
+    if tuple(columns) == _FCSV_LEGACY_COLUMNS:
+        # Slicer 5 still names 14 columns but writes and reads 16 fields, by position
+        columns = list(FCSV_COLUMNS)
     missing = [c for c in ("x", "y", "z", "label") if c not in columns]
     if missing:
         raise InputError(path, f"columns line lacks {', '.join(missing)}")
@@ -409,33 +500,71 @@ def read_fcsv(
     for n, row in enumerate(_csv_rows(path, body), start=1):
         rec = dict(zip(columns, row, strict=False))
         label = rec.get("label") or f"<unnamed point {n}>"
+        state = _fcsv_state(path, label, rec.get("positionStatus"))
+        if state is None:  # no Slicer 5 state: the older layouts
+            text, note_status, note_conf = _split_note(rec.get("desc", ""))
+            points.append(
+                _text_point(
+                    path,
+                    label,
+                    [rec.get(c) for c in "xyz"],
+                    rec.get("status") or note_status,
+                    rec.get("confidence") or note_conf,
+                    text,
+                    flip=_FLIP[cs],
+                )
+            )
+            continue
+        position = None
+        if state in ("defined", "preview"):
+            xyz = [_number(path, f"point {label!r} coordinate", rec.get(c)) for c in "xyz"]
+            position = np.array(xyz) * _FLIP[cs]
         points.append(
-            _text_point(
-                path,
+            _slicer_point(
                 label,
-                [rec.get(c) for c in "xyz"],
-                rec.get("status"),
-                rec.get("confidence"),
+                position,
+                state,
                 rec.get("desc", ""),
-                flip=_FLIP[cs],
+                _status(path, label, rec.get("status")),
+                _number(path, f"point {label!r} confidence", rec.get("confidence"), optional=True),
             )
         )
     return _build(path, surface, points, catalogue, allow_undefined, strict, messages, cs)
 
 
+def _fcsv_state(path: Path, label: str, value: str | None) -> str | None:
+    """The :data:`POSITION_STATES` name of an ``.fcsv`` positionStatus field (None: no field)."""
+    if value is None or not value.strip():
+        return None
+    try:
+        return POSITION_STATES[int(value.strip())]
+    except (ValueError, KeyError):
+        states = ", ".join(f"{k} ({v})" for k, v in POSITION_STATES.items())
+        raise InputError(
+            path,
+            f"point {label!r}: positionStatus {value!r} is not a Slicer point state",
+            hint=f"Slicer 5 writes one of {states}",
+        ) from None
+
+
 def write_fcsv(path: PathLike, landmark_set: LandmarkSet, coordinate_system: str = "LPS") -> None:
-    """Write a Slicer 4.11-style ``.fcsv`` with two extra columns, ``status`` and ``confidence``."""
+    """Write a Slicer 5 ``.fcsv``: Slicer's 16 fields, positionStatus 2 (defined) or 3 (missing).
+
+    Status and confidence go into the ``desc`` field (see the module doc);
+    missing points are written at 0, 0, 0 with positionStatus 3, which tells
+    Slicer 5 (and :func:`read_fcsv`) that the numbers are not a position.
+    """
     cs = _coordinate_system(coordinate_system)
     lines = [
         f"# Markups fiducial file version = {FCSV_VERSION}\n# CoordinateSystem = {cs}\n"
         f"# columns = {','.join(FCSV_COLUMNS)}\n"
     ]
-    for i, lm in enumerate(landmark_set):
+    for i, lm in enumerate(landmark_set, start=1):
         xyz = lm.position * _FLIP[cs] if lm.is_defined else np.zeros(3)
         lines.append(
             _csv_line(
                 [
-                    f"vtkMRMLMarkupsFiducialNode_{i}",
+                    str(i),
                     *(repr(float(v)) for v in xyz),
                     0,
                     0,
@@ -445,10 +574,10 @@ def write_fcsv(path: PathLike, landmark_set: LandmarkSet, coordinate_system: str
                     1,
                     0,
                     lm.code,
-                    lm.description,
+                    _with_note(lm.description, lm.status, lm.confidence),
                     "",
-                    lm.status,
-                    repr(lm.confidence),
+                    2 if lm.is_defined else 3,
+                    0,
                 ]
             )
         )

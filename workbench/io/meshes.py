@@ -6,10 +6,17 @@ like millimetres.  Units are never changed silently: with ``units="auto"``
 the mesh is returned as stored and ``result.units.needs_confirmation`` tells
 the caller to ask; ``units="cm"`` (etc.) or ``scale=`` convert explicitly.
 
+Frame: the workbench's mesh coordinates are the frame its landmark files
+(``.mrk.json``, ``.fcsv``) call RAS.  Every writer puts 3D Slicer's
+``SPACE=RAS`` tag in the header (Slicer takes an untagged mesh as LPS and
+would show it turned 180 degrees about the z axis against the landmarks);
+a file tagged ``SPACE=LPS`` (Slicer's default when it saves) is read with x
+and y negated.  An untagged file is taken as it is.
+
 Writing is atomic: the file is written beside the target under a temporary
 name and moved into place with :func:`os.replace`, so a failed write never
 leaves a half-written or clobbered target.  Written files state
-``units: mm`` where the format has room for it.
+``units: mm`` and ``SPACE=RAS`` where the format has room for them.
 
 Every problem with an input file raises
 :class:`~workbench.core.errors.InputError` naming the file.
@@ -69,6 +76,11 @@ class MeshReadResult:
         Factor applied to the file's numbers (1.0 unless units/scale were given).
     format : str
         File extension that chose the reader, e.g. ".ply".
+    space : {"RAS", "LPS"}, optional
+        The coordinate system the file's header names with 3D Slicer's
+        ``SPACE=`` tag; None when it names none.  An LPS file's x and y are
+        negated on reading, so ``mesh`` is always in the RAS sense the
+        workbench's mesh frame and landmark files share.
     """
 
     mesh: Mesh
@@ -77,6 +89,7 @@ class MeshReadResult:
     messages: tuple[str, ...]
     scale_applied: float = 1.0
     format: str = ""
+    space: str | None = None
 
 
 def _format_for(path: Path, action: str) -> ModuleType:
@@ -170,11 +183,16 @@ def read_mesh(
     data = _load_bytes(path)
     with np.errstate(all="ignore"):  # damaged numbers (NaN, overflow) are reported, not warned
         parsed = module.read(path, data)
-    raw = Mesh(parsed.vertices, parsed.faces)
+    vertices = parsed.vertices
+    if parsed.space == "LPS":  # Slicer's tag: x and y negated into RAS (a rotation: same winding)
+        vertices = vertices * np.array([-1.0, -1.0, 1.0])
+    raw = Mesh(vertices, parsed.faces)
     if not allow_nonfinite:
         _refuse_nonfinite(path, raw)
     report = detect_units(raw, kind)
     messages = list(parsed.messages)
+    if parsed.space == "LPS":
+        messages.append("the file says SPACE=LPS (3D Slicer): x and y negated into RAS")
     if factor is None:
         factor = 1.0
         if report.needs_confirmation:
@@ -189,7 +207,9 @@ def read_mesh(
                 f"which is unusual for a {kind}; check the units"
             )
     mesh = raw if factor == 1.0 else raw.scaled(factor)
-    return MeshReadResult(mesh, report, path, tuple(messages), factor, path.suffix.lower())
+    return MeshReadResult(
+        mesh, report, path, tuple(messages), factor, path.suffix.lower(), parsed.space
+    )
 
 
 def _refuse_nonfinite(path: Path, mesh: Mesh) -> None:
@@ -236,7 +256,9 @@ def _atomic_write(path: Path, payload: bytes) -> None:
         raise
 
 
-def write_mesh(path: str | PathLike[str], mesh: Mesh, binary: bool = True) -> Path:
+def write_mesh(
+    path: str | PathLike[str], mesh: Mesh, binary: bool = True, *, space: str = "RAS"
+) -> Path:
     """Write a mesh (vertices in mm) atomically; the format follows the extension.
 
     Parameters
@@ -249,6 +271,10 @@ def write_mesh(path: str | PathLike[str], mesh: Mesh, binary: bool = True) -> Pa
         Binary encoding where the format has one (PLY little endian, STL,
         legacy VTK big endian, VTP appended raw); False gives ascii (VTP:
         inline base64).  OBJ is always text.
+    space : {"RAS", "LPS"}
+        The frame the header's ``SPACE=`` tag names for 3D Slicer: "RAS" (the
+        workbench's mesh frame, shared with its landmark files) unless the
+        vertices are LPS numbers (a CT surface in the volume's DICOM frame).
 
     Returns
     -------
@@ -268,7 +294,7 @@ def write_mesh(path: str | PathLike[str], mesh: Mesh, binary: bool = True) -> Pa
         raise InputError(path, "the folder does not exist", "create it first")
     if path.is_dir():
         raise InputError(path, "is a folder, cannot write a mesh file there")
-    payload = module.encode(mesh.vertices, np.asarray(mesh.faces), binary=binary)
+    payload = module.encode(mesh.vertices, np.asarray(mesh.faces), binary=binary, space=space)
     try:
         _atomic_write(path, payload)
     except OSError as exc:

@@ -4,10 +4,12 @@
 :class:`~workbench.services.animation.Animator` per expression, so no
 expression inherits another's residue) and returns the skin and the jaw
 parts in the Frankfort head frame (mm).  :func:`export_head_glb` writes them
-with :func:`workbench.io.gltf_export.write_glb` (vertices in metres, glTF
-+Y up / +Z forward = the head frame's axes); the rest skin and the inner
-parts are the head's own meshes in the head frame, so a glTF frame with
-weight 1 on one target is that expression's settled skin.
+with :func:`workbench.io.gltf_export.write_glb` **in the head's own frame**,
+the frame of its PLY files (a reconstruction's ``head/`` pack and
+``face.ply``: the skull file's frame, mirrored when that file is; the
+reference heads: the head frame), in metres: a glTF vertex × 1000 is the
+PLY's vertex in mm.  A glTF frame with weight 1 on one target is the skin
+``workbench animate --expression NAME --out FILE.ply`` writes.
 """
 
 from __future__ import annotations
@@ -42,13 +44,20 @@ __all__ = [
 
 @dataclass
 class ExpressionTargets:
-    """Rest meshes and per-expression positions, all in the head frame (mm)."""
+    """Rest meshes and per-expression positions in the Frankfort head frame (mm).
+
+    The ``stored_*`` fields hold the same in the head's own frame (the frame
+    its files are in, with their triangle winding), which the ``.glb`` uses.
+    """
 
     rest: dict[str, Mesh]  #: every part of the head at rest ("skin", "eyes", "mandible" ...)
     skin: dict[str, np.ndarray] = field(default_factory=dict)  #: name -> (n, 3) skin positions
     #: part -> name -> positions, for jaw parts of expressions that move the jaw
     parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     steps: dict[str, int] = field(default_factory=dict)
+    stored_rest: dict[str, Mesh] = field(default_factory=dict)
+    stored_skin: dict[str, np.ndarray] = field(default_factory=dict)
+    stored_parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
 def _check_names(names: Iterable[str] | None) -> list[str]:
@@ -88,10 +97,11 @@ def settle_poses(
     for name, pose in poses.items():
         anim = Animator(head)
         if out is None:
-            out = ExpressionTargets(rest=dict(anim.head.meshes))
+            out = ExpressionTargets(rest=dict(anim.head.meshes), stored_rest=dict(head.meshes))
         anim.set_expression(pose)
         out.steps[name] = anim.settle()
         out.skin[name] = anim.skin_in_head_frame()
+        out.stored_skin[name] = anim.skin().vertices  # as `animate --out FILE.ply` writes it
         if anim.jaw_deg != 0.0 or anim.protrusion_mm != 0.0:
             # Animator.meshes() is in the head's own frame: the same jaw pose in the head frame
             point, direction = anim.head.tmj_axis
@@ -101,6 +111,10 @@ def settle_poses(
                 if part in out.rest:
                     v = out.rest[part].vertices
                     out.parts.setdefault(part, {})[name] = v @ m[:3, :3].T + m[:3, 3]
+            posed = anim.meshes()  # the same jaw pose in the head's own frame
+            for part in JAW_PARTS:
+                if part in out.stored_rest:
+                    out.stored_parts.setdefault(part, {})[name] = posed[part].vertices
         if progress is not None:
             progress(name)
     assert out is not None
@@ -128,11 +142,13 @@ def export_head_glb(
     names_arkit: Mapping[str, Mapping[str, float]] | None = None,
     progress: Callable[[str], None] | None = None,
     poses: Mapping[str, Expression] | None = None,
+    frame: str = "",
 ) -> tuple[Path, ExpressionTargets, float]:
     """Write the head as ``.glb`` with the expressions as morph targets.
 
     Returns ``(path, the settled targets, seconds spent settling)``.  The rest
-    skin and the parts are the head's meshes in the Frankfort head frame;
+    skin and the parts are the head's meshes in its own frame (that of its
+    PLY files; ``frame`` describes it for the file's ``extras``), in metres;
     parts that follow the jaw get morph targets for the expressions that
     open or push the jaw.  ``names_arkit`` (see :func:`arkit_recipes`) adds
     targets that are weighted sums of the settled ones; the expressions they
@@ -150,17 +166,18 @@ def export_head_glb(
         head, {**{n: EXPRESSIONS[n] for n in chosen}, **dict(poses or {})}, progress
     )
     seconds = time.perf_counter() - t0
-    rest = settled.rest
+    rest = settled.stored_rest
     extra = {k: m for k, m in rest.items() if k != "skin"}
     out = write_glb(
         path,
         rest["skin"],
-        settled.skin,
+        settled.stored_skin,
         extra_nodes=extra,
-        node_targets=settled.parts,
+        node_targets=settled.stored_parts,
         weights=weights,
         animation=keyframes,
         names_arkit=names_arkit,
+        frame=frame or "the head's own frame, as in its PLY files",
     )
     return out, settled, seconds
 

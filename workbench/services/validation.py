@@ -108,6 +108,11 @@ RESERVED = ("references", "results.csv", "results.md", "results.pdf")
 #: the bone, not a skin (real soft tissue is 2 mm or more nearly everywhere)
 TRUTH_ON_BONE_MM = 1.0
 TRUTH_ON_BONE_SHARE = 0.95
+#: the skull's box must lie inside the true skin's box (grown by this margin, mm) for at
+#: least this share of its volume: a skull outside the skin is in another frame (an LPS
+#: file read beside an RAS one turns it 180 degrees about z) or another person's
+FRAME_MARGIN_MM = 10.0
+FRAME_OVERLAP_SHARE = 0.8
 
 
 @dataclass(frozen=True)
@@ -374,6 +379,15 @@ class CaseResult:
         return next((s for s in self.scores if s.name == name), None)
 
 
+def box_inside_share(inner: Mesh, outer: Mesh, margin_mm: float) -> float:
+    """The share of ``inner``'s bounding-box volume inside ``outer``'s box grown by ``margin_mm``."""
+    a_lo, a_hi = inner.vertices.min(axis=0), inner.vertices.max(axis=0)
+    b_lo, b_hi = outer.vertices.min(axis=0) - margin_mm, outer.vertices.max(axis=0) + margin_mm
+    common = np.clip(np.minimum(a_hi, b_hi) - np.maximum(a_lo, b_lo), 0.0, None)
+    own = np.maximum(a_hi - a_lo, 1e-9)
+    return float(np.prod(common / own))
+
+
 def _load(path: Path, units: str) -> Mesh:
     from workbench.io.meshes import read_mesh
 
@@ -457,6 +471,15 @@ def run_case(
         units = "mm" if is_volume(case.skull) else case.units
         bone = _load(bone_path, units)
         truth = _load(truth_path, "mm" if is_volume(case.truth) else case.units)
+        inside = box_inside_share(bone, truth, FRAME_MARGIN_MM)
+        if inside < FRAME_OVERLAP_SHARE:
+            raise WorkbenchError(
+                f"the skull ({case.skull.name}) and the true skin ({case.truth.name}) are not in "
+                f"the same frame: only {100 * inside:.0f} % of the skull's box lies inside the "
+                "skin's, so the skull is not under that skin (a mesh tagged SPACE=LPS, as 3D "
+                "Slicer and mesh-from-ct of a DICOM or NRRD CT write it, is read turned into "
+                "RAS: give both as CT volumes, or both as meshes tagged alike)"
+            )
         on_bone = truth_on_bone(truth, bone)
         if on_bone >= TRUTH_ON_BONE_SHARE:
             raise WorkbenchError(

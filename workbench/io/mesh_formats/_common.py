@@ -17,6 +17,38 @@ from workbench.core.errors import InputError
 
 UNITS_NOTE = "units: mm"
 WRITER_NAME = "forensic-workbench"
+#: 3D Slicer's coordinate-system token (``vtkMRMLModelStorageNode``): Slicer reads
+#: ``SPACE=RAS`` / ``SPACE=LPS`` from a mesh file's header and takes a file without
+#: one as LPS.  Files the workbench writes hold its mesh frame, which it shares with
+#: the landmark files as Slicer's RAS, so every writer puts this token in the header.
+SPACE_RAS = "SPACE=RAS"
+
+
+def space_tag(space: str) -> str:
+    """``"SPACE=RAS"`` or ``"SPACE=LPS"``: the tag a writer puts in a header.
+
+    ``space`` names the frame the coordinates are in; ValueError for anything
+    but "RAS" or "LPS".
+    """
+    if space not in ("RAS", "LPS"):
+        raise ValueError(f"space must be 'RAS' or 'LPS', got {space!r}")
+    return f"SPACE={space}"
+
+
+def space_in(text: str | bytes | None) -> str | None:
+    """``"RAS"`` / ``"LPS"`` when ``text`` holds Slicer's ``SPACE=RAS`` / ``SPACE=LPS``.
+
+    Checked as Slicer does (a substring anywhere in the header text, RAS first);
+    None when neither token is there.
+    """
+    if text is None:
+        return None
+    if isinstance(text, bytes):
+        text = text.decode("ascii", errors="replace")
+    for space in ("RAS", "LPS"):
+        if f"SPACE={space}" in text:
+            return space
+    return None
 
 
 @dataclass
@@ -44,6 +76,9 @@ class ParsedMesh:
     face_material : (m,) int64, optional
         Index into ``material_names`` per triangle, -1 for none; None when
         the file names no materials.
+    space : {"RAS", "LPS"}, optional
+        The coordinate system the header names with 3D Slicer's ``SPACE=``
+        token (see :func:`space_in`); None when it names none.
     """
 
     vertices: np.ndarray
@@ -54,6 +89,7 @@ class ParsedMesh:
     material_libraries: list[str] = field(default_factory=list, kw_only=True)
     material_names: list[str] = field(default_factory=list, kw_only=True)
     face_material: np.ndarray | None = field(default=None, kw_only=True)
+    space: str | None = field(default=None, kw_only=True)
 
 
 class Reader:

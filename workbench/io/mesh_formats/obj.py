@@ -3,7 +3,9 @@
 Face corners may be written ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``; indices
 are 1-based, negative indices count back from the latest vertex.  Polygons are
 split into triangle fans.  Normals, groups, objects, smoothing groups, lines
-and comments are ignored.
+and comments are ignored, except 3D Slicer's ``SPACE=RAS``/``SPACE=LPS`` tag in
+the comment block that opens the file (:attr:`ParsedMesh.space`), where the
+writer puts ``# SPACE=RAS``.
 
 Colour data are kept but never make a readable mesh unreadable: vertex
 colours written ``v x y z r g b`` (0..1, or 0..255) become
@@ -30,6 +32,8 @@ from workbench.io.mesh_formats._common import (
     colour_bytes,
     fan_triangulate,
     format_rows,
+    space_in,
+    space_tag,
 )
 
 _SLASH_SUFFIX = re.compile(r"/\S*")
@@ -203,14 +207,27 @@ def read(path: Path, data: bytes) -> ParsedMesh:
         libraries, names, face_material = _materials(lines, counts)
         parsed.material_libraries, parsed.material_names = libraries, names
         parsed.face_material = face_material if names else None
+    parsed.space = _header_space(lines)
     return parsed
 
 
-def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:
+def _header_space(lines: list[str]) -> str | None:
+    """Slicer's ``SPACE=`` tag in the comment block that opens the file (VTK's OBJ "comment")."""
+    block = []
+    for line in lines:
+        if line.strip() and not line.startswith("#"):
+            break
+        block.append(line)
+    return space_in("\n".join(block))
+
+
+def encode(
+    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, *, space: str = "RAS"
+) -> bytes:
     """OBJ text (``binary`` is ignored: OBJ is always text), exact doubles."""
     del binary
     head = (
-        f"# {UNITS_NOTE}\n# written by {WRITER_NAME}\n"
+        f"# {UNITS_NOTE}\n# {space_tag(space)}\n# written by {WRITER_NAME}\n"
         f"# {len(vertices)} vertices, {len(faces)} triangles\n"
     )
     body = format_rows("v %r %r %r\n", vertices)

@@ -8,7 +8,9 @@ uchar, ushort or float 0..1; alpha ignored), which are kept as
 :attr:`ParsedMesh.vertex_rgb` (uint8, aligned with the vertices).  Polygons
 are split into triangle fans.  Writes double-precision vertices (optionally
 ``uchar`` red/green/blue) and ``uchar int`` faces with a ``comment units: mm``
-line.
+line and a ``comment SPACE=RAS`` line (3D Slicer's coordinate-system tag: the
+workbench's mesh frame is the frame its landmark files call RAS); a file's own
+``SPACE=`` comment is returned in :attr:`ParsedMesh.space`.
 
 Header comments: :func:`encode` and :func:`write` take extra ``comments``
 (one header line each, e.g. ``credit: Courtesy of ...`` for data that must
@@ -36,6 +38,8 @@ from workbench.io.mesh_formats._common import (
     colour_bytes,
     fan_triangulate,
     format_rows,
+    space_in,
+    space_tag,
 )
 
 _TYPES = {
@@ -354,6 +358,8 @@ def read(path: Path, data: bytes) -> PlyMesh:
         parsed.messages,
         comments,
         vertex_rgb=parsed.vertex_rgb,
+        # the first comment naming a space, as Slicer's model reader takes it
+        space=next((s for s in map(space_in, comments) if s is not None), None),
     )
 
 
@@ -399,6 +405,7 @@ def encode(
     comments: Iterable[str] = (),
     units: str = "mm",
     vertex_rgb: np.ndarray | None = None,
+    space: str = "RAS",
 ) -> bytes:
     """PLY bytes: binary little endian (default) or ascii, double vertices.
 
@@ -409,12 +416,15 @@ def encode(
     the units and writer comments; each must be one line of ASCII text
     (ValueError otherwise).  ``units`` is what the ``comment units:`` line
     states: "mm" unless the caller writes the numbers in other units.
+    ``space`` is the frame the ``comment SPACE=`` line names for 3D Slicer:
+    "RAS" (the workbench's mesh frame) unless the numbers are LPS.
     """
     fmt = "binary_little_endian" if binary else "ascii"
     units_note = UNITS_NOTE if units == "mm" else f"units: {units}"
     _comment_lines([units_note])  # one line of ASCII text, like the other comments
     header = (
-        f"ply\nformat {fmt} 1.0\ncomment {units_note}\ncomment written by {WRITER_NAME}\n"
+        f"ply\nformat {fmt} 1.0\ncomment {units_note}\ncomment {space_tag(space)}\n"
+        f"comment written by {WRITER_NAME}\n"
         f"{_comment_lines(comments)}"
         f"element vertex {len(vertices)}\n"
         "property double x\nproperty double y\nproperty double z\n"
@@ -453,6 +463,7 @@ def write(
     binary: bool = True,
     comments: Iterable[str] = (),
     units: str = "mm",
+    space: str = "RAS",
 ) -> Path:
     """Write a PLY mesh (vertices in mm) atomically with extra header ``comments``.
 
@@ -472,7 +483,12 @@ def write(
     if path.is_dir():
         raise InputError(path, "is a folder, cannot write a mesh file there")
     payload = encode(
-        mesh.vertices, np.asarray(mesh.faces), binary=binary, comments=comments, units=units
+        mesh.vertices,
+        np.asarray(mesh.faces),
+        binary=binary,
+        comments=comments,
+        units=units,
+        space=space,
     )
     try:
         _atomic_write(path, payload)

@@ -3,7 +3,9 @@
 STL stores every triangle's corners separately; the reader merges corners
 with exactly equal coordinates so the result is an indexed mesh (vertex order
 = first appearance).  Binary STL is float32; ascii STL is written with full
-double precision.  The writer emits face normals computed from the triangles.
+double precision.  The writer emits face normals computed from the triangles
+and puts 3D Slicer's ``SPACE=RAS`` tag in the header (binary: the 80-byte
+header text; ascii: the solid's name), where Slicer looks for it.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from workbench.io.mesh_formats._common import (
     ParsedMesh,
     Reader,
     format_rows,
+    space_in,
+    space_tag,
 )
 
 _RECORD = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
@@ -75,7 +79,9 @@ def _read_binary(r: Reader) -> ParsedMesh:
         r.note(f"{len(r.data) - expected} extra bytes after the last STL triangle were ignored")
     records = np.frombuffer(r.data, _RECORD, n, 84)
     vertices, faces = merge_corners(records["corners"])
-    return r.finish(vertices, faces)
+    parsed = r.finish(vertices, faces)
+    parsed.space = space_in(r.data[:80])  # Slicer reads the tag from the 80-byte header
+    return parsed
 
 
 def _read_ascii(r: Reader) -> ParsedMesh:
@@ -101,7 +107,9 @@ def _read_ascii(r: Reader) -> ParsedMesh:
             "exactly 3 vertices (damaged file, or polygons instead of triangles)"
         )
     vertices, faces = merge_corners(corners.reshape(-1, 3, 3))
-    return r.finish(vertices, faces)
+    parsed = r.finish(vertices, faces)
+    parsed.space = space_in(r.data[: body_start - 1])  # the "solid NAME" line
+    return parsed
 
 
 def read(path: Path, data: bytes) -> ParsedMesh:
@@ -116,14 +124,16 @@ def read(path: Path, data: bytes) -> ParsedMesh:
     return _read_binary(r)
 
 
-def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:
+def encode(
+    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, *, space: str = "RAS"
+) -> bytes:
     """STL bytes (binary default, ascii option) with normals from the faces."""
     corners = np.asarray(vertices, np.float64)[faces]
     cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     norm = np.linalg.norm(cross, axis=1, keepdims=True)
     normals = np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0)
     if binary:
-        title = f"binary STL by {WRITER_NAME}, {UNITS_NOTE}".encode("ascii")
+        title = f"binary STL by {WRITER_NAME}, {UNITS_NOTE}, {space_tag(space)}".encode("ascii")
         header = title.ljust(80, b" ")[:80] + np.uint32(len(faces)).astype("<u4").tobytes()
         rec = np.zeros(len(faces), _RECORD)
         rec["normal"] = normals
@@ -135,6 +145,6 @@ def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> byte
         "   vertex %r %r %r\n   vertex %r %r %r\n   vertex %r %r %r\n"
         "  endloop\n endfacet\n"
     )
-    name = f"workbench_mesh ({UNITS_NOTE})"
+    name = f"workbench_mesh {space_tag(space)} ({UNITS_NOTE})"
     text = f"solid {name}\n" + format_rows(facet, table) + f"endsolid {name}\n"
     return text.encode("ascii")

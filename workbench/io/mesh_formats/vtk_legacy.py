@@ -5,8 +5,8 @@ ASCII and BINARY (big-endian) are read, with the classic cell layout
 VTK >= 9 layout (``OFFSETS`` + ``CONNECTIVITY``).  Polygons are fanned and
 triangle strips split into triangles; vertices and lines are ignored; point
 and cell data are skipped.  The writer uses file version 4.2 (classic layout,
-readable by every VTK) with double-precision points and ``units: mm`` in the
-title line.
+readable by every VTK) with double-precision points and ``units: mm`` and
+3D Slicer's ``SPACE=RAS`` tag in the title line (Slicer reads the tag there).
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from workbench.io.mesh_formats._common import (
     Reader,
     fan_triangulate,
     format_rows,
+    space_in,
+    space_tag,
 )
 
 _TYPES = {
@@ -264,14 +266,18 @@ def read(path: Path, data: bytes) -> ParsedMesh:
     if ignored:
         r.note(f"VTK {' and '.join(ignored)} cells were ignored")
     faces = np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
-    return r.finish(points, faces)
+    parsed = r.finish(points, faces)
+    parsed.space = space_in(lines[1])  # the title line, where Slicer writes and reads the tag
+    return parsed
 
 
-def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:
+def encode(
+    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, *, space: str = "RAS"
+) -> bytes:
     """Legacy VTK 4.2 polydata: BINARY (default, big-endian) or ASCII."""
     n, m = len(vertices), len(faces)
     head = (
-        f"# vtk DataFile Version 4.2\nmesh written by {WRITER_NAME}, {UNITS_NOTE}\n"
+        f"# vtk DataFile Version 4.2\nmesh written by {WRITER_NAME}, {UNITS_NOTE}, {space_tag(space)}\n"
         f"{'BINARY' if binary else 'ASCII'}\nDATASET POLYDATA\nPOINTS {n} double\n"
     ).encode("ascii")
     cells = np.empty((m, 4), np.int64)

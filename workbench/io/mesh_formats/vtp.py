@@ -5,7 +5,9 @@ and ``appended`` data (raw or base64), uncompressed or block-compressed with
 ``vtkZLibDataCompressor`` (or LZMA), ``header_type`` UInt32 or UInt64, either
 byte order, several pieces.  Polys are fanned, strips split; verts and lines
 are ignored.  The writer emits uncompressed appended raw data (``binary=True``)
-or inline base64 (``binary=False``) with Float64 points and Int64 cells.
+or inline base64 (``binary=False``) with Float64 points and Int64 cells, and
+3D Slicer's coordinate-system tag: a field-data string array ``SPACE`` holding
+``RAS``, where Slicer reads it (read back into :attr:`ParsedMesh.space`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from workbench.io.mesh_formats._common import (
     ParsedMesh,
     Reader,
     fan_triangulate,
+    space_in,
+    space_tag,
 )
 from workbench.io.mesh_formats.vtk_legacy import strips_to_triangles
 
@@ -237,14 +241,49 @@ def read(path: Path, data: bytes) -> ParsedMesh:
         base += n_pts
     if not all_points:
         raise r.fail("the file contains no points")
-    return r.finish(np.concatenate(all_points), np.concatenate(all_tris))
+    parsed = r.finish(np.concatenate(all_points), np.concatenate(all_tris))
+    parsed.space = _field_space(ctx, root)
+    return parsed
 
 
-def _xml(n: int, m: int, arrays: list[str], appended: bytes | None) -> bytes:
+def _field_space(ctx: _Context, root: ET.Element) -> str | None:
+    """3D Slicer's ``SPACE`` string array in the dataset's field data (None: not there).
+
+    VTK writes a string array as its characters' codes, each string ended by a 0
+    (ascii), or as those bytes (binary, appended, compressed).
+    """
+    for el in root.findall("PolyData/FieldData/*"):
+        if el.get("Name") != "SPACE" or el.get("type") != "String":
+            continue
+        if el.get("format", "ascii") == "ascii":
+            codes = ctx.r.to_int((el.text or "").split(), "the SPACE field")
+        else:
+            codes = ctx.array(_as_bytes(el), "the SPACE field")
+        if np.any((codes < 0) | (codes > 255)):
+            raise ctx.r.fail("the SPACE field holds values that are not characters")
+        first = bytes(codes.astype(np.uint8).tolist()).split(b"\0")[0]
+        return space_in(b"SPACE=" + first.strip())
+    return None
+
+
+def _as_bytes(el: ET.Element) -> ET.Element:
+    """A copy of a String array element read as raw UInt8 (the characters and 0 ends)."""
+    copy = ET.Element(el.tag, dict(el.attrib, type="UInt8"))
+    copy.text = el.text
+    return copy
+
+
+def _xml(n: int, m: int, arrays: list[str], appended: bytes | None, space: str) -> bytes:
+    tag = space_tag(space)
+    codes = " ".join(str(c) for c in space.encode("ascii"))  # "82 65 83" for RAS
     head = (
-        f'<?xml version="1.0"?>\n<!-- {UNITS_NOTE}; written by {WRITER_NAME} -->\n'
+        f'<?xml version="1.0"?>\n<!-- {UNITS_NOTE}; {tag}; written by {WRITER_NAME} -->\n'
         '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64">\n'
-        f'  <PolyData>\n    <Piece NumberOfPoints="{n}" NumberOfVerts="0" NumberOfLines="0"'
+        "  <PolyData>\n"
+        # 3D Slicer's coordinate-system tag: a string array SPACE (character codes, 0 ends it)
+        '    <FieldData>\n      <Array type="String" Name="SPACE" NumberOfTuples="1" '
+        f'format="ascii">{codes} 0</Array>\n    </FieldData>\n'
+        f'    <Piece NumberOfPoints="{n}" NumberOfVerts="0" NumberOfLines="0"'
         f' NumberOfStrips="0" NumberOfPolys="{m}">\n'
         f"      <Points>\n        {arrays[0]}\n      </Points>\n"
         f"      <Polys>\n        {arrays[1]}\n        {arrays[2]}\n      </Polys>\n"
@@ -256,7 +295,9 @@ def _xml(n: int, m: int, arrays: list[str], appended: bytes | None) -> bytes:
     return head + b'  <AppendedData encoding="raw">\n   _' + appended + tail
 
 
-def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> bytes:
+def encode(
+    vertices: np.ndarray, faces: np.ndarray, binary: bool = True, *, space: str = "RAS"
+) -> bytes:
     """VTP bytes: appended raw (``binary=True``) or inline base64, uncompressed."""
     blocks = [
         ("Float64", 'Name="Points" NumberOfComponents="3"', np.ascontiguousarray(vertices, "<f8")),
@@ -274,4 +315,4 @@ def encode(vertices: np.ndarray, faces: np.ndarray, binary: bool = True) -> byte
         else:
             text = (base64.b64encode(header) + base64.b64encode(payload)).decode("ascii")
             tags.append(f'<DataArray type="{typ}" {attrs} format="binary">{text}</DataArray>')
-    return _xml(len(vertices), len(faces), tags, b"".join(chunks) if binary else None)
+    return _xml(len(vertices), len(faces), tags, b"".join(chunks) if binary else None, space)
