@@ -76,7 +76,10 @@ def crowned_bust(head: TemplateHead) -> tuple[Mesh, dict]:
     face = Mesh(skin.vertices, skin.faces[keep])
     head_z = float(np.median(skin.vertices[:, 2]))
     half_width = float(np.ptp(skin.vertices[:, 0])) / 2
-    crown = _cylinder((0.0, head_z - 15.0), 1.3 * half_width, brow - 4.0, brow + 120.0)
+    # the crown starts just above the face's top edge: a crown cutting through the face would be
+    # a surface crossing itself, which fit-scan refuses as two bodies through each other
+    top = float(face.vertices[np.unique(face.faces)][:, 1].max())
+    crown = _cylinder((0.0, head_z - 15.0), 1.3 * half_width, top + 2.0, top + 126.0)
     return concatenate([face, crown]), at
 
 

@@ -5,6 +5,12 @@ teeth, eyes, tongue, muscles, skin and skull landmarks) is in the fitted
 person's Frankfort head frame, mm; ``fit_report.json`` beside it holds the
 figures of the fit, ``fit_report.pdf`` the same with the scan's distance maps
 (``pictures/``, see :mod:`workbench.render.scan_fit_pictures`).
+
+Skin over no scan (holes, the part of a partial face the scan does not show)
+keeps the reference's shape: it is the pack's region ``inferred`` and the
+command says how much of the face was fitted and how much inferred.  A fit
+whose skin came out folded or crossed (two heads through each other, a wrong
+pose) is written but exits 3 (check before use), like ``reconstruct``.
 """
 
 from __future__ import annotations
@@ -76,9 +82,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from workbench.cli.common import print_self_check, self_check_status
     from workbench.cli.reconstruct_cmd import orientation_of
     from workbench.io.samples import resolve_input
-    from workbench.services.scan_fit import fit_scan_pack
+    from workbench.services.scan_fit import fit_scan_pack, fitted_vs_inferred
 
     orientation = orientation_of(args, args.scan)
     result, files = fit_scan_pack(
@@ -98,11 +105,15 @@ def run(args: argparse.Namespace) -> int:
         extra=lambda folder, fit: _write_pdf(folder, fit, Path(args.scan).name),
         detail=args.detail,
     )
+    fig = result.figures
+    print_self_check(fig.get("self_check"))  # the fit's doubt first, apart from the notes
     for path in files:
         print(f"wrote {path}")
+    line = fitted_vs_inferred(fig)
+    if line:  # the inferred skin is the pack's region "inferred"
+        print(line)
     for w in result.warnings:
         print(f"  note: {w}")
-    fig = result.figures
     write_json(
         {
             "template_id": result.head.template_id,
@@ -119,12 +130,15 @@ def run(args: argparse.Namespace) -> int:
                 )
             },
             "tissue_depth_mean_abs_diff_mm": fig["tissue_depths"]["mean_abs_diff_mm"],
+            **({"inferred": fig["inferred"]} if "inferred" in fig else {}),
+            **({"self_check": fig["self_check"]} if "self_check" in fig else {}),
             **({"skull_vs_bone": fig["skull_vs_bone"]} if "skull_vs_bone" in fig else {}),
             **({"detail": fig["detail"]} if "detail" in fig else {}),
         },
         None,
     )
-    return 0
+    # written, but a fit that asks for a check is not a plain success (exit 3)
+    return self_check_status("fit-scan", fig.get("self_check"))
 
 
 def _write_pdf(folder: Path, result: Any, scan_name: str) -> list[Path]:

@@ -189,3 +189,56 @@ def check_face_fits_skull(
             "face",
             "check the skull landmarks, the orientation and the depth settings",
         )
+
+
+# ------------------------------------------------------------------ scan fitting (issue 29)
+#: a partial face scan (a CT that ends at the upper teeth, a scan without its chin) is
+#: fitted where it is and the rest inferred from the reference, when at least this share of
+#: the reference face lies over the scan (not beyond its rim): below it too little is seen
+#: to call the shape a face (the headsq CT cut at the upper teeth shows 61 % of it, cut at
+#: the subnasale 58 %)
+MIN_SCAN_FACE_COVERAGE = 0.3
+#: ... and at least this share of the reference nose: the nose with the orbits or the mouth
+#: around it is what fixes the pose of a part of a face
+MIN_SCAN_NOSE_COVERAGE = 0.5
+
+# ------------------------------------------------------------------ scans (fit-scan)
+#: scan vertices are welded on a grid of this fraction of the scan's bounding-box
+#: diagonal (0.3 µm on a 300 mm head): far below any scanner's resolution, so only copies
+#: of one point merge (a triangle soup, where each triangle has its own corners, or the
+#: seams a texture export splits)
+SCAN_WELD_FRACTION = 1e-6
+#: a scan triangle with less area than this fraction of the squared diagonal is a
+#: zero-area sliver (9e-6 mm² on a 300 mm head: 1 mm long and 20 nm wide); its normal is
+#: rounding noise, so it is dropped
+SCAN_SLIVER_AREA_FRACTION = 1e-10
+#: a scan with more triangles is simplified (quadric decimation) to this many before it is
+#: oriented and fitted: 300k triangles hold ~0.5 mm detail over a head, finer than the
+#: fitted skin's detail layer (~1 mm edges), and a fit on them takes about half a minute
+SCAN_WORK_TRIANGLES = 300_000
+#: a scan file with more triangles is refused: 20 M triangles take ~2 GB to read and weld
+#: before simplification, and no face scanner needs more (a 0.1 mm grid over a whole head
+#: is ~10 M)
+SCAN_MAX_TRIANGLES = 20_000_000
+#: a piece of the scan this far (mm, surface to surface) from the largest piece is not part
+#: of the head (a stray blob, a marker, a second object on the turntable): it is left out
+#: and said; nearer pieces (a loose ear, a head holder) stay
+SCAN_STRAY_PIECE_MM = 30.0
+#: texture images of one scan: at most this many files ...
+SCAN_TEXTURE_MAX_IMAGES = 64
+#: ... each at most this many pixels (16384 x 16384, the largest texture GPUs take) ...
+SCAN_TEXTURE_MAX_PIXELS = 16384 * 16384
+#: ... and at most this many pixels together (32 images of 8192 x 8192): each is decoded
+#: once, at ~100 M pixels/s, so the limit bounds the reading time to about 20 s
+SCAN_TEXTURE_MAX_TOTAL_PIXELS = 32 * 8192 * 8192
+#: the textures are kept as uint8 RGB, each shrunk by a whole factor so that together they
+#: hold at most this many pixels (48 MB): the fitted skin's colour atlas is 1024 x 1024,
+#: so a 4096 x 4096 equivalent over the whole scan leaves the face more texels than it uses
+SCAN_TEXTURE_WORK_PIXELS = 4096 * 4096
+#: skin landmarks (fit-scan --landmarks) farther than this (mm) from the scan's surface are
+#: not on it (a landmark over a hole of the scan lies within a few mm of its rim's surface)
+SCAN_LANDMARK_OFF_MM = 20.0
+#: length (s) of an animation clip (animate --clip-seconds): an expression ramps in well
+#: under a second, a whole spoken take lasts minutes; ten minutes is far beyond any clip,
+#: while 1e12 s (31,700 years) is a typing slip that players and editors choke on
+MAX_CLIP_SECONDS = 600.0

@@ -14,54 +14,164 @@ mm) or re-wound.  Geometry is not needed here; units do not matter.
 * Any format with ``texture=IMAGE``: that image replaces the material's
   (the file must have texture coordinates).
 
-Images are read with Pillow (PNG, JPEG, TIFF, BMP, ...) and converted to RGB.
+Images are read with Pillow (PNG, JPEG, TIFF, BMP, ...) and kept as uint8 RGB
+at a working resolution, within stated limits on their count and pixels
+(:func:`read_textures`; the limits in :mod:`workbench.core.limits`).  The fit
+works on a repaired, possibly simplified copy of the scan;
+:func:`colours_on_working_scan` carries the colours over to it.
 """
 
 from __future__ import annotations
 
+import math
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from workbench.core.colour_transfer import ScanColours
 from workbench.core.errors import InputError
+from workbench.core.mesh import Mesh
+from workbench.core.limits import (
+    SCAN_TEXTURE_MAX_IMAGES,
+    SCAN_TEXTURE_MAX_PIXELS,
+    SCAN_TEXTURE_MAX_TOTAL_PIXELS,
+    SCAN_TEXTURE_WORK_PIXELS,
+)
 from workbench.io.mesh_formats import obj, ply
 from workbench.io.mesh_formats._common import ParsedMesh
 
 #: texture images larger than this many pixels are refused (memory)
-MAX_IMAGE_PIXELS = 16384 * 16384
+MAX_IMAGE_PIXELS = SCAN_TEXTURE_MAX_PIXELS
+#: Pillow's guard is process-wide: one reader at a time changes it
+_GUARD = threading.Lock()
 
 
-def read_image(path: str | PathLike[str], role: str = "texture image") -> np.ndarray:
-    """An image file as ``(H, W, 3)`` uint8 RGB (first row at the top)."""
+@contextmanager
+def _opened(path: Path, role: str) -> Iterator[Any]:
+    """``PIL.Image.open(path)`` without Pillow's decompression-bomb guard: the callers check
+    the header's size against our own stated limit (:data:`MAX_IMAGE_PIXELS`) before
+    anything is decoded, and Pillow's default (~179 M pixels) would refuse a
+    16384 x 16384 texture the workbench says it takes.  Unreadable files become an :class:`InputError` naming ``path``."""
     from PIL import Image, UnidentifiedImageError
 
-    path = Path(path)
     if not path.is_file():
         why = "is a folder" if path.is_dir() else "not found"
         raise InputError(path, f"{role} {why}", "check the path and spelling")
-    try:
-        with Image.open(path) as img:
-            if img.width * img.height > MAX_IMAGE_PIXELS:
-                raise InputError(
-                    path,
-                    f"{role} is {img.width} x {img.height} pixels, larger than the "
-                    f"{MAX_IMAGE_PIXELS} pixels the workbench reads",
-                    "scale it down first",
-                )
-            rgb = np.asarray(img.convert("RGB"), dtype=np.uint8)
-    except InputError:
-        raise
-    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as exc:
+    with _GUARD:
+        before = Image.MAX_IMAGE_PIXELS
+        Image.MAX_IMAGE_PIXELS = None  # (the callers check the header's size first)
+        try:
+            with Image.open(path) as img:
+                yield img
+        except InputError:
+            raise
+        except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as exc:
+            raise InputError(
+                path,
+                f"{role} cannot be read ({exc})",
+                "use a PNG, JPEG, TIFF or BMP image",
+            ) from None
+        finally:
+            Image.MAX_IMAGE_PIXELS = before
+
+
+def _refuse_too_large(path: Path, role: str, size: tuple[int, int]) -> None:
+    width, height = size
+    if width * height > MAX_IMAGE_PIXELS:
         raise InputError(
             path,
-            f"{role} cannot be read ({exc})",
-            "use a PNG, JPEG, TIFF or BMP image",
-        ) from None
+            f"{role} is {width} x {height} pixels, larger than the {MAX_IMAGE_PIXELS:,} "
+            "pixels (16384 x 16384) the workbench reads",
+            "scale it down first (the fitted skin's colour atlas is 1024 x 1024 texels)",
+        )
+
+
+def image_size(path: str | PathLike[str], role: str = "texture image") -> tuple[int, int]:
+    """``(width, height)`` of an image file from its header (nothing decoded)."""
+    path = Path(path)
+    with _opened(path, role) as img:
+        return int(img.width), int(img.height)
+
+
+def read_image(
+    path: str | PathLike[str], role: str = "texture image", max_pixels: int | None = None
+) -> np.ndarray:
+    """An image file as ``(H, W, 3)`` uint8 RGB (first row at the top).
+
+    Larger than :data:`MAX_IMAGE_PIXELS` is refused from the header, before
+    decoding.  With ``max_pixels`` an image with more pixels is shrunk by the
+    smallest whole factor that brings it within (a box filter: each pixel the
+    mean of a block; a JPEG is decoded at the reduced scale where it can be).
+    """
+    from PIL import Image
+
+    path = Path(path)
+    with _opened(path, role) as img:
+        _refuse_too_large(path, role, img.size)
+        factor = 1
+        if max_pixels is not None and img.width * img.height > max_pixels:
+            factor = math.ceil(math.sqrt(img.width * img.height / max_pixels))
+        if factor > 1:
+            want = (max(1, img.width // factor), max(1, img.height // factor))
+            if img.format == "JPEG":
+                img.draft("RGB", want)  # decodes at 1/2, 1/4 or 1/8 scale, no smaller
+            rest = max(1, min(img.width // want[0], img.height // want[1]))
+            small: Image.Image = img.reduce(rest) if rest > 1 else img
+            if small.size != want:
+                small = small.resize(want, Image.Resampling.BOX)
+            rgb = np.asarray(small.convert("RGB"), dtype=np.uint8)
+        else:
+            rgb = np.asarray(img.convert("RGB"), dtype=np.uint8)
     if rgb.ndim != 3 or 0 in rgb.shape:
         raise InputError(path, f"{role} is empty")
     return np.ascontiguousarray(rgb)
+
+
+def read_textures(paths: Sequence[Path], role: str, owner: Path | None = None) -> list[np.ndarray]:
+    """The texture images of one scan as uint8 RGB at a working resolution.
+
+    Refused from their headers, before any is decoded: more than
+    :data:`~workbench.core.limits.SCAN_TEXTURE_MAX_IMAGES` images, one larger
+    than :data:`MAX_IMAGE_PIXELS`, or more than
+    :data:`~workbench.core.limits.SCAN_TEXTURE_MAX_TOTAL_PIXELS` together.
+    Each is then shrunk by a whole factor so that together they hold at most
+    :data:`~workbench.core.limits.SCAN_TEXTURE_WORK_PIXELS` (one decoded at a
+    time: the peak memory is one full image, not all of them).  The refusals of
+    the set name ``owner`` (the scan whose material lists them), else the first.
+    """
+    named = owner if owner is not None else paths[0]
+    if len(paths) > SCAN_TEXTURE_MAX_IMAGES:
+        raise InputError(
+            named,
+            f"the scan uses {len(paths)} texture images, more than the "
+            f"{SCAN_TEXTURE_MAX_IMAGES} the workbench reads for one scan",
+            "bake the textures into fewer images (a texture atlas) first",
+        )
+    sizes = [image_size(p, role) for p in paths]
+    for p, size in zip(paths, sizes, strict=True):
+        _refuse_too_large(p, role, size)
+    total = sum(w * h for w, h in sizes)
+    if total > SCAN_TEXTURE_MAX_TOTAL_PIXELS:
+        big = " + ".join(f"{w}x{h}" for w, h in sizes[:4]) + (" + ..." if len(sizes) > 4 else "")
+        raise InputError(
+            named,
+            f"the scan's {len(paths)} texture images hold {total / 1e6:,.0f} M pixels "
+            f"({big}), more than the {SCAN_TEXTURE_MAX_TOTAL_PIXELS / 1e6:,.0f} M pixels "
+            "(32 images of 8192 x 8192) the workbench reads for one scan",
+            "scale the textures down first (the fitted skin's colour atlas is "
+            "1024 x 1024 texels; 2048 x 2048 per image is plenty)",
+        )
+    # each its share of the working budget, by its size
+    budget = None if total <= SCAN_TEXTURE_WORK_PIXELS else SCAN_TEXTURE_WORK_PIXELS / total
+    return [
+        read_image(p, role, max_pixels=None if budget is None else max(1, int(w * h * budget)))
+        for p, (w, h) in zip(paths, sizes, strict=True)
+    ]
 
 
 def _material_textures(obj_path: Path, libraries: list[str]) -> dict[str, Path]:
@@ -126,7 +236,7 @@ def _obj_texture(
     files = sorted({p for p in per_material if p is not None}, key=str)
     if not files:
         return None, uv
-    images = [read_image(p, "texture image (map_Kd of the OBJ's material)") for p in files]
+    images = read_textures(files, "texture image (map_Kd of the OBJ's material)", owner=path)
     lookup = np.array([-1 if p is None else files.index(p) for p in per_material] + [-1])
     which = lookup[parsed.face_material]  # face_material -1 picks the trailing -1
     if len(images) == 1:
@@ -191,7 +301,7 @@ def read_scan_colours(
                 + (f" ({why[0]})" if why else ""),
                 "export the scan as OBJ with texture coordinates ('vt'), or leave out --texture",
             )
-        image = read_image(texture)
+        image = read_textures([Path(texture)], "texture image")[0]
     elif uv is not None and module is obj:
         image, uv = _obj_texture(path, parsed, uv)
     if image is None:
@@ -208,4 +318,70 @@ def read_scan_colours(
     )
 
 
-__all__ = ["MAX_IMAGE_PIXELS", "read_image", "read_scan_colours"]
+def colours_on_working_scan(
+    colours: ScanColours,
+    file_vertices: np.ndarray,
+    working: Mesh,
+    vertex_of: np.ndarray | None,
+    face_source: np.ndarray | None,
+) -> ScanColours:
+    """``colours`` (aligned with the file's mesh) aligned with ``working``, the scan the
+    fit uses (:func:`workbench.services.scan_fit.prepare_scan`).
+
+    With ``vertex_of`` (each file vertex's working vertex, -1: left out) and
+    ``face_source`` (each working triangle's file triangle), vertex colours
+    follow their vertices (a welded vertex takes one of its copies' colours)
+    and texture coordinates their triangles.  A simplified scan (both None) has
+    new vertices: each takes the colour of the file vertex nearest to it (its
+    vertex colour, or the texture at one of its corners' coordinates), as
+    vertex colours.
+    """
+    if vertex_of is not None and face_source is not None:
+        n = working.n_vertices
+        rgb = None
+        if colours.vertex_rgb is not None:
+            source = np.zeros(n, np.int64)
+            kept = np.flatnonzero(vertex_of >= 0)
+            source[vertex_of[kept]] = kept
+            rgb = colours.vertex_rgb[source]
+        uv = faces = None
+        if colours.corner_uv is not None:
+            uv = colours.corner_uv[face_source]
+            faces = vertex_of[colours.faces[face_source]]  # the file's corner order
+        return ScanColours(
+            source=colours.source,
+            n_vertices=n,
+            faces=working.faces if faces is None else faces,
+            vertex_rgb=rgb,
+            corner_uv=uv,
+            image=None if uv is None else colours.image,
+        )
+    from scipy.spatial import cKDTree
+
+    from workbench.core.colour_transfer import sample_image
+
+    used = np.unique(colours.faces)
+    _, j = cKDTree(file_vertices[used]).query(working.vertices, workers=-1)
+    nearest = used[j]
+    if colours.image is not None and colours.corner_uv is not None:
+        corner = np.full(colours.n_vertices, -1, np.int64)
+        corner[colours.faces.ravel()[::-1]] = np.arange(colours.faces.size)[::-1]
+        uv = colours.corner_uv.reshape(-1, 2)[corner[nearest]]
+        sampled = sample_image(colours.image, uv)
+        rgb = np.clip(np.rint(np.nan_to_num(sampled, nan=128.0)), 0, 255).astype(np.uint8)
+    else:
+        assert colours.vertex_rgb is not None
+        rgb = colours.vertex_rgb[nearest]
+    return ScanColours(
+        source=colours.source, n_vertices=working.n_vertices, faces=working.faces, vertex_rgb=rgb
+    )
+
+
+__all__ = [
+    "MAX_IMAGE_PIXELS",
+    "colours_on_working_scan",
+    "image_size",
+    "read_image",
+    "read_scan_colours",
+    "read_textures",
+]

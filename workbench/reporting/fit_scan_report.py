@@ -123,7 +123,17 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
             f"{_pct(back.get('within_2_5mm_fraction'))} within 2.5 mm (n = {back.get('n')})",
         )
     if "face_on_scan_fraction" in fig:
-        row("Face skin supported by the scan", _pct(fig["face_on_scan_fraction"]))
+        inferred = fig.get("inferred")
+        row(
+            "Face skin supported by the scan",
+            _pct(fig["face_on_scan_fraction"])
+            + (
+                f"; {_pct(inferred['face_inferred_fraction'])} inferred from the reference "
+                "head (the pack's region 'inferred')"
+                if inferred
+                else ""
+            ),
+        )
     folds = int(fig["fold_overs"])
     row("Fold-overs (triangles turned over)", str(folds), "0", folds == 0)
     if "fold_overs_outside_mouth_corner_seam" in fig:
@@ -144,6 +154,9 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
             "0",
             new == 0,
         )
+    check = fig.get("self_check")
+    if check and check.get("outcome") == "check":
+        row("Self-check", "check before use: " + "; ".join(check.get("reasons", ())), "", False)
     detail = fig.get("detail")
     if detail:
         d1, d25 = detail["face_within_1mm_fraction"], detail["face_within_2_5mm_fraction"]

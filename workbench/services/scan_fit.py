@@ -18,7 +18,15 @@ writes:
    (:func:`workbench.core.face_pose.place_face`: face → scan, exact closest
    points), and a scan on which it finds too little of its shape is refused.
    The head frame keeps the person's size: the reference is scaled, not the
-   scan.
+   scan.  A *partial* face (a CT that ends at the upper teeth) is laid with
+   the part the scan covers alone (the rest lies beyond its rim:
+   :func:`_uncovered`), and accepted when that part is at least
+   :data:`~workbench.core.limits.MIN_SCAN_FACE_COVERAGE` of the face with the
+   nose and its tip, matching well; the skin over no scan is inferred from
+   the reference and marked (the pack's region ``inferred``,
+   ``figures["inferred"]``).  A ``--bone`` away from the scan or on its skin,
+   and two surfaces through each other, are refused before the fit; a fit
+   with fold-overs asks for a check (``figures["self_check"]``, exit 3).
 2. **Skin** (:func:`workbench.services.template_build.fit_skin`): the scaled
    reference skin registered onto the scan, per-part affine stage then coarse
    to fine (:data:`SCAN_LEVELS`); hole and field-of-view rims fade out, thin
@@ -63,7 +71,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 from os import PathLike
 from pathlib import Path
 
@@ -75,6 +83,7 @@ from workbench.core.face_pose import FacePlacement, place_face
 from workbench.core.rigid_search import PoseResult
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
+from workbench.core.limits import MIN_SCAN_FACE_COVERAGE, MIN_SCAN_NOSE_COVERAGE
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import AFFINE_ROUNDS, Level, smoothstep
 from workbench.core.normals import normals_within_radius
@@ -130,6 +139,47 @@ MIN_PLACED_FACE = 0.5
 MIN_PLACED_NOSE = 0.45
 #: ... the nose's share decides only while the face's is below this
 NOSE_DOUBT_FACE = 0.6
+#: a reference face vertex whose closest scan point lies beyond the scan's rim (an open
+#: edge, a field-of-view lid) farther than this (mm) is not covered by the scan: part of a
+#: partial face the scan does not show, not a mismatch of its shape
+COVER_MM = 5.0
+#: a scan covering at least this share of the reference face is a whole face: the face
+#: placement's verdict on it stands (a ball, a hand: no rim to end the face at)
+WHOLE_FACE_COVERAGE = 0.9
+#: a partial face is laid on the scan from this many of the search's poses
+PARTIAL_STARTS = 3
+#: ... each scored by its face loss over the covered vertices and this cost for each
+#: uncovered one (below a mismatch's 1: a pose sliding the face off the scan gains nothing)
+UNCOVERED_COST = 0.5
+#: a fit with more fold-overs (outside the reference's mouth-corner seam) or new
+#: self-crossings than this asks for a check (exit 3); real scans give 0
+MAX_FOLD_OVERS = 4
+MAX_NEW_CROSSINGS = 4
+#: a partial face (WHOLE_FACE_COVERAGE) must match over more of the part it shows than a
+#: whole face over all of it (MIN_FACE_SUPPORT): less of it fixes the pose (the headsq
+#: skin cut below the nose or at the teeth 0.78-0.83; cut at the orbits, the face laid a
+#: nose lower, 0.64)
+MIN_PARTIAL_SUPPORT = 0.7
+#: the skin landmark a partial face must show
+NOSE_TIP = "prn"
+#: a partial face's inferred share is noted above this
+INFERRED_NOTE_SHARE = 0.05
+#: an ear with more than this share of its vertices beyond the scan's rim is cut by it,
+#: and held to the reference's shape instead of following the scan's
+EAR_REGIONS = ("ear_l", "ear_r")
+CUT_EAR_SHARE = 0.1
+#: the scan crossing itself in this many triangle pairs, spread over this length (mm), is
+#: two surfaces through each other (two heads, a head merged twice); real scans give 0
+SHELL_CROSSINGS = (40, 60.0)
+#: --bone must overlap the scan: at least this share of it within BONE_BOX_MARGIN_MM of the
+#: scan's bounding box (a partial face scan leaves the jaw's bone below it)
+BONE_IN_BOX = 0.25
+BONE_BOX_MARGIN_MM = 20.0
+#: ... and lie under the skin, not on it: a --bone with this share of its vertices within
+#: BONE_ON_SKIN_MM of the scan is the skin itself (real bone: the thinnest facial tissue
+#: is ~3 mm)
+BONE_ON_SKIN = 0.5
+BONE_ON_SKIN_MM = 1.0
 #: a placed face with a loss below this sits well (the test skins 0.02-0.13; real scans
 #: 0.25-0.45, a wrong pose's 0.45-0.65): the search's runners-up are then not tried
 CLEAR_FACE_LOSS = 0.2
@@ -211,8 +261,59 @@ class ScanFit:
         return apply_transform(np.linalg.inv(self.input_to_head), np.reshape(points, (-1, 3)))
 
 
+@dataclass(frozen=True)
+class PreparedScan:
+    """A scan file's mesh made ready to fit (:func:`prepare_scan`; the file's frame, mm).
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The working scan: coincident vertices welded, zero-area and repeated
+        triangles dropped, distant stray pieces left out, each piece wound
+        consistently and outward, simplified to at most
+        :data:`~workbench.core.limits.SCAN_WORK_TRIANGLES`.
+    vertex_of : (n_file_vertices,) int, optional
+        The working vertex of each vertex of the file's mesh (-1: left out);
+        None when the scan was simplified (its vertices are new).
+    face_source : (n_faces,) int, optional
+        The file's triangle of each working triangle (its corners possibly in
+        reverse order); None when simplified.
+    notes : tuple of str
+        What the user is told (pieces left out, simplification).
+    repairs : tuple of str
+        Harmless repairs made silently (for the report).
+    file_triangles : int
+        Triangles in the file's mesh.
+    """
+
+    mesh: Mesh
+    vertex_of: np.ndarray | None
+    face_source: np.ndarray | None
+    notes: tuple[str, ...]
+    repairs: tuple[str, ...]
+    file_triangles: int
+
+    @property
+    def figures(self) -> dict:
+        """The preparation for ``fit_report.json``."""
+        return {
+            "file_triangles": self.file_triangles,
+            "working_triangles": int(self.mesh.n_faces),
+            "simplified": self.vertex_of is None,
+            "repairs": list(self.repairs),
+            "notes": list(self.notes),
+        }
+
+
 def check_scan_mesh(mesh: Mesh, source: str | PathLike[str]) -> None:
-    """Refuse a point cloud, a few triangles, non-finite vertices or a size not a head's."""
+    """Refuse a point cloud, a few triangles, non-finite vertices, two bodies or a size not a
+    head's (:func:`prepare_scan`, its result not kept)."""
+    prepare_scan(mesh, source)
+
+
+def _refuse_not_a_scan(mesh: Mesh, source: str | PathLike[str]) -> None:
+    from workbench.core.limits import SCAN_MAX_TRIANGLES
+
     if mesh.n_faces == 0:
         raise InputError(
             source,
@@ -227,11 +328,104 @@ def check_scan_mesh(mesh: Mesh, source: str | PathLike[str]) -> None:
             f"(at least {MIN_SCAN_TRIANGLES})",
             "is this the right file?",
         )
+    if mesh.n_faces > SCAN_MAX_TRIANGLES:
+        raise InputError(
+            source,
+            f"has {mesh.n_faces:,} triangles, more than the {SCAN_MAX_TRIANGLES:,} the "
+            "workbench reads from a scan",
+            "simplify it first (e.g. 'workbench mesh decimate', or Quadric Edge Collapse "
+            "Decimation in MeshLab) to a few million triangles or fewer",
+        )
     bad = int((~np.isfinite(mesh.vertices)).any(axis=1).sum())
     if bad:
         raise InputError(source, f"{bad} vertices have NaN or infinite coordinates")
-    used = mesh.vertices[np.bincount(mesh.faces.ravel(), minlength=mesh.n_vertices) > 0]
-    extent = used.max(axis=0) - used.min(axis=0)
+
+
+def prepare_scan(
+    mesh: Mesh, source: str | PathLike[str], progress: Progress | None = None
+) -> PreparedScan:
+    """The scan made ready to fit, or an :class:`InputError` naming ``source``.
+
+    Refused: a point cloud, too few or too many triangles
+    (:data:`~workbench.core.limits.SCAN_MAX_TRIANGLES`), non-finite vertices,
+    two bodies (a second piece of similar size far away), or a size not a
+    head's (:data:`SCAN_EXTENT_MM`, measured on what is kept).  Repaired
+    silently (vectorised, no pairwise distances; a 5 M-triangle soup in a few
+    seconds):
+
+    * coincident vertices welded (:func:`~workbench.core.repair.weld_coincident_vertices`
+      on a grid of :data:`~workbench.core.limits.SCAN_WELD_FRACTION` of the
+      diagonal): a triangle soup becomes a surface again;
+    * triangles with a repeated corner, zero area
+      (:data:`~workbench.core.limits.SCAN_SLIVER_AREA_FRACTION`) or repeating
+      another's corners dropped: their normals are noise;
+    * each piece wound consistently and outward
+      (:func:`~workbench.core.repair.consistent_outward_winding`).
+
+    Said (``notes``): a scan with more than
+    :data:`~workbench.core.limits.SCAN_WORK_TRIANGLES` triangles is simplified
+    to that many (quadric decimation, ``fast_simplification``); pieces more
+    than :data:`~workbench.core.limits.SCAN_STRAY_PIECE_MM` from the largest are
+    left out.
+    """
+    from workbench.core.limits import (
+        SCAN_SLIVER_AREA_FRACTION,
+        SCAN_STRAY_PIECE_MM,
+        SCAN_WELD_FRACTION,
+        SCAN_WORK_TRIANGLES,
+    )
+    from workbench.core.mesh import degenerate_face_mask, duplicate_face_mask
+    from workbench.core.repair import consistent_outward_winding, weld_coincident_vertices
+
+    say = progress or (lambda _m: None)
+    _refuse_not_a_scan(mesh, source)
+    n_file = mesh.n_faces
+    if n_file > SCAN_WORK_TRIANGLES:
+        say(f"preparing the scan's {n_file:,} triangles ...")
+    used = np.bincount(mesh.faces.ravel(), minlength=mesh.n_vertices) > 0
+    diag = float(np.linalg.norm(np.ptp(mesh.vertices[used], axis=0)))
+    repairs: list[str] = []
+    notes: list[str] = []
+    welded, vertex_of_opt = weld_coincident_vertices(mesh, SCAN_WELD_FRACTION * max(diag, 1e-9))
+    vertex_of: np.ndarray | None = vertex_of_opt
+    work = welded.mesh
+    if welded.changed:
+        repairs.append(welded.message)
+    face_source: np.ndarray | None = np.arange(work.n_faces)
+    if work.n_faces > SCAN_WORK_TRIANGLES:
+        # (its slivers and repeats go with the simplification's own)
+        say(f"simplifying the scan from {work.n_faces:,} to {SCAN_WORK_TRIANGLES:,} triangles ...")
+        work = _simplified(work, SCAN_WORK_TRIANGLES, SCAN_SLIVER_AREA_FRACTION * diag**2)
+        vertex_of = face_source = None
+        notes.append(
+            f"the scan's {n_file:,} triangles were simplified to {work.n_faces:,} for the fit "
+            "(quadric decimation, ~{:.1f} mm edges)".format(_mean_edge(work))
+        )
+    else:
+        bad = degenerate_face_mask(work, SCAN_SLIVER_AREA_FRACTION * diag**2)
+        bad |= duplicate_face_mask(work)
+        if bad.any():
+            repairs.append(
+                f"dropped {int(bad.sum())} triangles of zero area, with a repeated corner or "
+                "repeating another's corners"
+            )
+            work, vertex_of, face_source = _keep_triangles(work, ~bad, vertex_of, face_source)
+    if work.n_faces < MIN_SCAN_TRIANGLES:
+        raise InputError(
+            source,
+            f"has only {work.n_faces} triangles of non-zero area; a face scan has thousands "
+            f"(at least {MIN_SCAN_TRIANGLES})",
+            "is this the right file?",
+        )
+    keep, said = _one_body(work, source, SCAN_STRAY_PIECE_MM)
+    if said:
+        notes.append(said)
+        work, vertex_of, face_source = _keep_triangles(work, keep, vertex_of, face_source)
+    wound, _ = consistent_outward_winding(work)
+    if wound.changed:
+        repairs.append(wound.message)
+        work = wound.mesh
+    extent = np.ptp(work.vertices, axis=0)
     lo, hi = SCAN_EXTENT_MM
     largest = float(extent.max())
     if not lo <= largest <= hi:
@@ -241,25 +435,296 @@ def check_scan_mesh(mesh: Mesh, source: str | PathLike[str]) -> None:
             f"a face, head or bust scan is {lo:.0f}-{hi:.0f} mm",
             "check --units / --scale: the file's numbers are not in the units given",
         )
-    _check_one_body(mesh, source)
+    return PreparedScan(work, vertex_of, face_source, tuple(notes), tuple(repairs), n_file)
 
 
-def _check_one_body(mesh: Mesh, source: str | PathLike[str]) -> None:
-    """Refuse a file holding two (or more) heads or bodies: large pieces far apart."""
+def _keep_triangles(
+    mesh: Mesh, keep: np.ndarray, vertex_of: np.ndarray | None, face_source: np.ndarray | None
+) -> tuple[Mesh, np.ndarray | None, np.ndarray | None]:
+    """``mesh`` with only the triangles ``keep`` and the vertices they use; the file maps
+    carried along."""
+    faces = mesh.faces[keep]
+    used = np.zeros(mesh.n_vertices, bool)
+    used[faces.ravel()] = True
+    new = np.cumsum(used) - 1
+    out = Mesh(mesh.vertices[used], new[faces])
+    if vertex_of is not None:
+        ok = vertex_of >= 0
+        ok[ok] = used[vertex_of[ok]]
+        vertex_of = np.where(ok, new[np.maximum(vertex_of, 0)], -1)
+    if face_source is not None:
+        face_source = face_source[keep]
+    return out, vertex_of, face_source
+
+
+def _simplified(mesh: Mesh, target: int, sliver_mm2: float) -> Mesh:
+    """``mesh`` decimated to about ``target`` triangles, without zero-area (below
+    ``sliver_mm2``) or repeated triangles.
+
+    Quadric decimation (``fast_simplification``) costs ~0.2 s per 100k input
+    triangles and more on millions, so a scan over :data:`_CLUSTER_ABOVE` times
+    ``target`` is first clustered on a grid (its vertices in one cell merged to
+    their mean: one ``np.unique``) to about that many, and decimated from there.
+    Triangles the simplification made cross others are dropped.
+    """
+    import fast_simplification
+
+    from workbench.core.mesh import degenerate_face_mask, duplicate_face_mask
+    from workbench.core.repair import weld_coincident_vertices
+
+    if mesh.n_faces > _CLUSTER_ABOVE * target:
+        # a grid cell of side h holds ~one vertex of a surface of area A meshed with
+        # A / h² vertices, ~2 A / h² triangles
+        cell = float(np.sqrt(2.0 * mesh.area / (_CLUSTER_ABOVE * target)))
+        clustered, vertex_of = weld_coincident_vertices(mesh, cell)
+        if clustered.changed:
+            count = np.bincount(vertex_of, minlength=clustered.mesh.n_vertices)[:, None]
+            mean = np.stack(
+                [np.bincount(vertex_of, mesh.vertices[:, i], len(count)) for i in range(3)], 1
+            )
+            mesh = Mesh(mean / np.maximum(count, 1), clustered.mesh.faces)
+    bad = degenerate_face_mask(mesh, sliver_mm2) | duplicate_face_mask(mesh)
+    if bad.any():
+        mesh = _keep_triangles(mesh, ~bad, None, None)[0]
+    if mesh.n_faces > target:
+        points, faces = fast_simplification.simplify(
+            mesh.vertices.astype(np.float32),
+            mesh.faces.astype(np.int32),
+            target_reduction=1.0 - target / mesh.n_faces,
+        )
+        mesh = Mesh(np.asarray(points, np.float64), np.asarray(faces, np.int64))
+    bad = degenerate_face_mask(mesh, sliver_mm2) | duplicate_face_mask(mesh)
+    mesh = _keep_triangles(mesh, ~bad, None, None)[0]
+    # the collapses can push a few triangles through others (VHF skin, 5.3 M → 300k: ~80
+    # crossing pairs, none in the file): they are dropped, small holes the fit skips, so
+    # the simplification's own crossings are not taken for two surfaces through each other
+    crossing = self_intersections(mesh).faces
+    if len(crossing):
+        keep = np.ones(mesh.n_faces, bool)
+        keep[crossing] = False
+        mesh = _keep_triangles(mesh, keep, None, None)[0]
+    return mesh
+
+
+#: a scan over this many times the working size is clustered on a grid before the
+#: quadric decimation (which took ~250 s for 5.3 M triangles, ~1 s for 0.6 M)
+_CLUSTER_ABOVE = 3
+
+
+def _mean_edge(mesh: Mesh) -> float:
+    e = mesh.edges_unique
+    return float(np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1).mean())
+
+
+def _one_body(mesh: Mesh, source: str | PathLike[str], stray_mm: float) -> tuple[np.ndarray, str]:
+    """The triangles to keep and what was left out: refuse a file holding two (or more)
+    heads or bodies (a piece of at least :data:`SECOND_PIECE` ``[0]`` of the largest's
+    area, its centre farther than ``SECOND_PIECE[1]`` from the largest's); pieces farther
+    than ``stray_mm`` from the largest piece's surface are left out (a stray blob, a marker:
+    kept, it would make the scan look like metres, not a head).  Per piece, vectorised; the
+    gaps from one KD-tree of the largest piece's vertices."""
     labels = mesh.face_components
-    areas = np.bincount(labels, weights=mesh.face_areas)
-    big = np.flatnonzero(areas >= SECOND_PIECE[0] * areas.max())
-    if len(big) < 2:
-        return
-    centres = mesh.vertices[mesh.faces].mean(axis=1)
-    cent = np.array([centres[labels == b].mean(axis=0) for b in big])
-    gap = float(np.linalg.norm(cent[:, None] - cent[None], axis=2).max())
-    if gap > SECOND_PIECE[1]:
+    keep = np.ones(mesh.n_faces, bool)
+    k = int(labels.max()) + 1
+    if k < 2:
+        return keep, ""
+    areas = np.bincount(labels, weights=mesh.face_areas, minlength=k)
+    main = int(areas.argmax())
+    # (each piece's centre: the mean of its triangles' centres)
+    centres = mesh.triangles.mean(axis=1)
+    sums = np.stack([np.bincount(labels, centres[:, i], k) for i in range(3)], axis=1)
+    cent = sums / np.bincount(labels, minlength=k)[:, None]
+    apart = np.linalg.norm(cent - cent[main], axis=1)
+    big = (areas >= SECOND_PIECE[0] * areas[main]) & (np.arange(k) != main)
+    second = big & (apart > SECOND_PIECE[1])
+    if second.any():
+        far = int(np.flatnonzero(second)[apart[second].argmax()])
         raise InputError(
             source,
-            f"holds {len(big)} separate surfaces of similar size {gap:.0f} mm apart "
-            "(two heads, or a head and another body, in one file)",
+            f"holds {int(second.sum()) + 1} separate surfaces of similar size "
+            f"{apart[far]:.0f} mm apart (a second piece of {areas[far]:.0f} mm², the largest "
+            f"{areas[main]:.0f} mm²: two heads, or a head and another body, in one file)",
             "keep one head in the file (e.g. delete the other pieces in MeshLab or Blender)",
+        )
+    # surface gap of every other piece to the largest: its corners' nearest largest-piece
+    # vertex, the smallest per piece
+    main_faces = labels == main
+    tree = cKDTree(mesh.vertices[np.unique(mesh.faces[main_faces])])
+    others = np.flatnonzero(~main_faces)
+    corner = mesh.faces[others].ravel()
+    ids, back = np.unique(corner, return_inverse=True)
+    d, _ = tree.query(mesh.vertices[ids], workers=worker_count())
+    gap = np.full(k, np.inf)
+    np.minimum.at(gap, np.repeat(labels[others], 3), d[back.ravel()])
+    gap[main] = 0.0
+    stray = gap > stray_mm
+    if not stray.any():
+        return keep, ""
+    keep = ~stray[labels]
+    n = int(stray.sum())
+    return keep, (
+        f"left out {n} piece{'s' if n > 1 else ''} of the scan lying "
+        f"{gap[stray].min():.0f}"
+        + (f"-{gap[stray].max():.0f}" if n > 1 else "")
+        + f" mm away from the head ({int((~keep).sum())} triangles, "
+        f"{100 * areas[stray].sum() / areas.sum():.1f} % of the surface): not part of it"
+    )
+
+
+def check_landmarks_on_scan(
+    landmarks: LandmarkSet,
+    scan: Mesh,
+    source: str | PathLike[str],
+    scan_name: str,
+    reference: Mapping[str, np.ndarray] | None = None,
+) -> None:
+    """Refuse a landmark file (``source``) that does not belong to ``scan`` (the file's
+    frame, mm), naming what is wrong: landmarks that coincide (within
+    :data:`~workbench.core.limits.COINCIDENT_MM`, where the ``reference`` skin
+    landmarks lie more than :data:`LANDMARKS_APART_MM` apart: the stomion points of
+    closed lips may coincide), or that lie off the scan's
+    surface (further than :data:`~workbench.core.limits.SCAN_LANDMARK_OFF_MM`), and then
+    whether they land on it in the other of the LPS and RAS frames (x and y negated) or
+    in other units.  A wrong landmark file otherwise misleads the orientation and the
+    refusal blames the scan."""
+    from workbench.core.limits import COINCIDENT_MM, SCAN_LANDMARK_OFF_MM
+
+    codes = [lm.code for lm in landmarks if lm.is_defined]
+    if not codes:
+        return
+    pts = landmarks.positions_of(codes)
+    pairs = cKDTree(pts).query_pairs(COINCIDENT_MM, output_type="ndarray")
+    ref = reference or {}
+    pairs = np.array(
+        [
+            (i, j)
+            for i, j in pairs.tolist()
+            if codes[i] in ref
+            and codes[j] in ref
+            and np.linalg.norm(ref[codes[i]] - ref[codes[j]]) > LANDMARKS_APART_MM
+        ],
+        dtype=np.int64,
+    ).reshape(-1, 2)
+    if len(pairs):
+        shown = ", ".join(f"{codes[i]} and {codes[j]}" for i, j in pairs[:4].tolist())
+        raise InputError(
+            source,
+            f"{len(pairs)} pair{'s' if len(pairs) > 1 else ''} of landmarks lie at the same "
+            f"point (closer than {COINCIDENT_MM:g} mm): {shown}"
+            + (" ..." if len(pairs) > 4 else ""),
+            "place each landmark at its own point on the scan (the file may repeat one "
+            "point, or hold unset landmarks at 0,0,0)",
+        )
+    index = MeshIndex.shared(scan)
+    d = index.closest_points(pts).distances
+    off = d > SCAN_LANDMARK_OFF_MM
+    if not off.any():
+        return
+    worst = np.argsort(-d)[:3]
+    shown = ", ".join(f"{codes[i]} {d[i]:.0f} mm" for i in worst if off[i])
+    where = (
+        f"{int(off.sum())} of {len(codes)} landmarks lie off the scan {scan_name} "
+        f"({shown}; a landmark on the scan is within {SCAN_LANDMARK_OFF_MM:g} mm of it)"
+    )
+    lps_ras = np.diag([-1.0, -1.0, 1.0])
+    if (index.closest_points(pts @ lps_ras).distances <= SCAN_LANDMARK_OFF_MM).all():
+        raise InputError(
+            source,
+            f"{where}, but all lie on it with x and y negated: the landmarks are in the "
+            "other frame (RAS vs LPS) than the scan",
+            "export the landmarks in the scan's frame (3D Slicer writes LPS or RAS as "
+            "chosen; the scan file's frame decides), or negate their x and y",
+        )
+    for factor in (1000.0, 100.0, 25.4, 10.0, 0.1, 0.01, 0.001):
+        if (index.closest_points(pts * factor).distances <= SCAN_LANDMARK_OFF_MM).all():
+            raise InputError(
+                source,
+                f"{where}, but all lie on it when multiplied by {factor:g}: the landmarks "
+                "are in other units than the scan",
+                "export the landmarks in the scan's units (--units / --scale apply to both)",
+            )
+    raise InputError(
+        source,
+        where,
+        "were they placed on this scan, in its frame and units? (a landmark over a hole "
+        "may float, but not this far)",
+    )
+
+
+#: two skin landmarks this far apart (mm) on the reference cannot share a point on a scan
+LANDMARKS_APART_MM = 5.0
+
+
+def _working_colours(
+    colours: ScanColours | None, file_mesh: Mesh, prepared: PreparedScan
+) -> ScanColours | None:
+    """The file's colours made to fit the working scan (:func:`prepare_scan`)."""
+    from workbench.io.scan_colours import colours_on_working_scan
+
+    if colours is None:
+        return None
+    return colours_on_working_scan(
+        colours, file_mesh.vertices, prepared.mesh, prepared.vertex_of, prepared.face_source
+    )
+
+
+if TYPE_CHECKING:
+    from workbench.core.colour_transfer import ScanColours
+
+
+def _check_one_shell(scan: Mesh, source: str | PathLike[str]) -> None:
+    """Refuse a scan that cuts through itself along a long curve: two surfaces through
+    each other (two overlapping heads, a head merged twice out of register), which
+    :func:`_check_one_body` does not see when they touch (:data:`SHELL_CROSSINGS`)."""
+    crossing = self_intersections(scan)
+    if crossing.count < SHELL_CROSSINGS[0]:
+        return
+    centres = scan.vertices[scan.faces[crossing.faces]].mean(axis=1)
+    spread = float(np.linalg.norm(centres.max(axis=0) - centres.min(axis=0)))
+    if spread >= SHELL_CROSSINGS[1]:
+        raise InputError(
+            source,
+            f"cuts through itself: {crossing.count} pairs of its triangles cross each other "
+            f"over {spread:.0f} mm (two heads through each other, or one head merged twice "
+            "out of register); one face cannot be fitted to two surfaces",
+            "keep one head in the file (delete the other surface in MeshLab or Blender), "
+            "or register the scans onto each other before merging them",
+        )
+
+
+def _check_bone(scan: Mesh, bone: Mesh, source: str) -> None:
+    """Refuse a ``--bone`` that is not the bone beneath this scan's skin (both in the scan's
+    frame, mm): one lying away from the scan (another frame or unit, another file) or one
+    lying on the skin (the skin surface given as the bone)."""
+    hint = (
+        "give the bone surface of the same CT as the scan, in the same frame and units "
+        "(workbench mesh-from-ct CT --tissue bone)"
+    )
+    if bone.n_faces == 0:
+        raise InputError(source, "(--bone) has no triangles: it is not a bone surface", hint)
+    used = bone.vertices[np.unique(bone.faces)]
+    on_scan = scan.vertices[np.unique(scan.faces)]
+    lo = on_scan.min(axis=0) - BONE_BOX_MARGIN_MM
+    hi = on_scan.max(axis=0) + BONE_BOX_MARGIN_MM
+    inside = float(((used >= lo) & (used <= hi)).all(axis=1).mean())
+    if inside < BONE_IN_BOX:
+        gap = float(np.linalg.norm(used.mean(axis=0) - on_scan.mean(axis=0)))
+        raise InputError(
+            source,
+            f"(--bone) does not lie under the scan: {100 * inside:.0f} % of it is within "
+            f"{BONE_BOX_MARGIN_MM:.0f} mm of the scan's bounding box (its centre is "
+            f"{gap:.0f} mm from the scan's); the bone of the scanned head lies inside it",
+            hint,
+        )
+    sample = used[:: max(1, len(used) // 5000)]
+    near = MeshIndex.shared(scan).closest_points(sample).distances <= BONE_ON_SKIN_MM
+    if near.mean() >= BONE_ON_SKIN:
+        raise InputError(
+            source,
+            f"(--bone) lies on the scan's skin: {100 * near.mean():.0f} % of it is within "
+            f"{BONE_ON_SKIN_MM:g} mm of the scan's surface, where bone lies millimetres "
+            "beneath the skin everywhere; is it the skin surface (or the scan) itself?",
+            hint,
         )
 
 
@@ -410,13 +875,72 @@ def _inward_normals(skin: Mesh, points: np.ndarray, codes: Sequence[str]) -> np.
     return -n
 
 
+def _uncovered(index: MeshIndex, caps: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Per point (the scan's frame, mm): does the scan end before it?
+
+    Its closest scan point lies on an open rim (the edge of a hole or of the
+    scanned field) or on a field-of-view lid (``caps``: per scan vertex), more
+    than :data:`COVER_MM` away: the scan does not show that part (a partial
+    face), which is not a mismatch of its shape.  A closed surface (a ball)
+    covers every point.
+    """
+    cp = index.closest_points(points)
+    scan = index.mesh
+    ended = _beyond_rim(scan, cp.face_ids, cp.barycentric)
+    if caps.any():
+        ended |= caps[scan.faces[cp.face_ids]].any(axis=1)
+    return ended & (cp.distances > COVER_MM)
+
+
+def _place_partial(
+    index: MeshIndex,
+    caps: np.ndarray,
+    base: TemplateHead,
+    face_ids: np.ndarray,
+    groups: Mapping[str, np.ndarray],
+    starts: Sequence[PoseResult],
+) -> tuple[FacePlacement, np.ndarray] | None:
+    """The reference face laid on a scan that shows only part of it, or None when the
+    scan covers (nearly) all of the face under every start.
+
+    From each start the face vertices the scan covers (:func:`_uncovered`) are
+    laid on it alone (:func:`~workbench.core.face_pose.place_face`: the missing
+    part neither pulls nor costs), and the coverage is found again at the pose
+    reached.  The pose whose covered loss plus :data:`UNCOVERED_COST` per
+    uncovered vertex is lowest wins.  Returns its placement (fractions and
+    ``near_by_group`` over the covered vertices) and the covered mask (per face
+    vertex, at that pose).
+    """
+    from workbench.core.rigid_search import SCALE_RANGE
+
+    pts = base.skin.vertices[face_ids]
+    nrm = base.skin.vertex_normals[face_ids]
+    best: tuple[float, FacePlacement, np.ndarray] | None = None
+    for start in starts[:PARTIAL_STARTS]:
+        matrix = start.matrix
+        covered = ~_uncovered(index, caps, apply_transform(np.linalg.inv(matrix), pts))
+        if covered.mean() >= WHOLE_FACE_COVERAGE or covered.mean() < 0.5 * MIN_SCAN_FACE_COVERAGE:
+            continue
+        slot = np.cumsum(covered) - 1
+        sub = {k: slot[np.asarray(g)[covered[g]]] for k, g in groups.items()}
+        placed = place_face(
+            index, pts[covered], nrm[covered], matrix, scale_range=SCALE_RANGE, groups=sub
+        )
+        now = ~_uncovered(index, caps, apply_transform(np.linalg.inv(placed.matrix), pts))
+        score = (placed.loss * covered.sum() + UNCOVERED_COST * (~covered).sum()) / len(pts)
+        if best is None or score < best[0]:
+            best = (score, placed, now)
+    return None if best is None else (best[1], best[2])
+
+
 def _place_face(
     scan: Mesh,
     base: TemplateHead,
     pose: PoseResult,
     regions: Mapping[str, np.ndarray],
     source: str,
-) -> tuple[PoseResult, FacePlacement]:
+    caps: np.ndarray,
+) -> tuple[PoseResult, FacePlacement, np.ndarray | None]:
     """The search's pose improved by laying the reference face on the scan; refuse a
     scan the face does not find its shape on (:func:`workbench.core.face_pose.place_face`).
 
@@ -433,8 +957,9 @@ def _place_face(
         k: np.arange(a, b) for k, a, b in zip(regions, offsets[:-1], offsets[1:], strict=True)
     }
     index = MeshIndex.shared(scan)  # the head-frame copy of the scan borrows it
+    searched = (pose, *pose.alternatives)
     placements: list[FacePlacement] = []
-    for start in (pose, *pose.alternatives):
+    for start in searched:
         if placements and placements[0].loss < CLEAR_FACE_LOSS:
             break  # the winner's face sits well: the runners-up need not be tried
         placements.append(
@@ -460,24 +985,124 @@ def _place_face(
             matched_fraction=placement.matched_fraction,
         )
     nose = placement.near_by_group.get("nose", 1.0)
-    weak_nose = nose < MIN_PLACED_NOSE and placement.near_fraction < NOSE_DOUBT_FACE
-    if placement.near_fraction < MIN_PLACED_FACE or weak_nose:
-        # a ball, a hand, a smooth crown: convex enough for forehead and cheeks, but the
-        # nose finds nothing of its shape (ball 42 % of the face / 29 % of the nose, a
-        # cylinder 54 / 32 %; real scans 64-99 / 61-100 %: the VHP female's nose tip is
-        # cut off by the CT's field of view).  A face placed well but turned ~10° (Nefertiti
-        # with its axes searched: 72 / 37 %) misses with its nose alone: not refused
-        raise InputError(
-            source,
-            "does not look like a face: laid on it as well as it goes, "
-            f"{100 * placement.near_fraction:.0f} % of the reference face and "
-            f"{100 * nose:.0f} % of its nose find scan surface of their shape within 5 mm "
-            f"(a face scan gives over {100 * MIN_PLACED_FACE:.0f} and "
-            f"{100 * MIN_PLACED_NOSE:.0f} %)",
-            "is this a scan of a face? check the orientation (--anterior/--superior or "
-            "3+ --landmarks) and the units",
+    if _face_like(placement.near_fraction, nose):
+        return pose, placement, None
+    # a part of a face (a CT that ends at the upper teeth, a scan without its chin): the
+    # reference face beyond the scan's rim finds nothing there, and laid whole it slides
+    # up or down to cover more (the headsq skin cut at the upper teeth: its mouth on the
+    # scan's nose, 46 % of the face within 5 mm); laid with the covered part alone
+    partial = _place_partial(index, caps, base, face_ids, groups, searched)
+    shown = ""
+    if partial is not None:
+        part, covered = partial
+        share = float(covered.mean())
+        nose_share = float(covered[groups["nose"]].mean()) if "nose" in groups else 1.0
+        part_nose = part.near_by_group.get("nose", 1.0)
+        if (
+            share >= MIN_SCAN_FACE_COVERAGE
+            and nose_share >= MIN_SCAN_NOSE_COVERAGE
+            and _face_like(part.near_fraction, part_nose)
+        ):
+            pose = replace(
+                searched[0],
+                matrix=part.matrix,
+                scale=part.scale,
+                method=f"{searched[0].method} + partial face placement",
+                cost=part.loss,
+                matched_fraction=part.matched_fraction,
+            )
+            return pose, replace(part, start_loss=placement.start_loss), covered
+        shown = (
+            f"; the scan shows {100 * share:.0f} % of the face and {100 * nose_share:.0f} % "
+            f"of its nose, of which {100 * part.near_fraction:.0f} and "
+            f"{100 * part_nose:.0f} % find their shape (a partial face needs "
+            f"{100 * MIN_SCAN_FACE_COVERAGE:.0f} % of the face shown with "
+            f"{100 * MIN_SCAN_NOSE_COVERAGE:.0f} % of the nose, and the shares above)"
         )
-    return pose, placement
+    # a ball, a hand, a smooth crown: convex enough for forehead and cheeks, but the
+    # nose finds nothing of its shape (ball 42 % of the face / 29 % of the nose, a
+    # cylinder 54 / 32 %; real scans 64-99 / 61-100 %: the VHP female's nose tip is
+    # cut off by the CT's field of view).  A face placed well but turned ~10° (Nefertiti
+    # with its axes searched: 72 / 37 %) misses with its nose alone: not refused
+    raise InputError(
+        source,
+        "does not look like a face: laid on it as well as it goes, "
+        f"{100 * placement.near_fraction:.0f} % of the reference face and "
+        f"{100 * nose:.0f} % of its nose find scan surface of their shape within 5 mm "
+        f"(a face scan gives over {100 * MIN_PLACED_FACE:.0f} and "
+        f"{100 * MIN_PLACED_NOSE:.0f} %){shown}",
+        "is this a scan of a face? check the orientation (--anterior/--superior or "
+        "3+ --landmarks) and the units",
+    )
+
+
+def _fitted_vs_inferred(inferred: Mapping) -> str:
+    """``"62 % of the face fitted to the scan, 38 % inferred from the reference head
+    (marked)"`` from ``figures["inferred"]``."""
+    return (
+        f"{100 * inferred['face_fitted_fraction']:.0f} % of the face fitted to the scan, "
+        f"{100 * inferred['face_inferred_fraction']:.0f} % inferred from the reference head "
+        "(marked)"
+    )
+
+
+def fitted_vs_inferred(figures: Mapping) -> str | None:
+    """The fit's one line on what of the face was fitted and what inferred (None for
+    figures of a fit before the inferred part was recorded)."""
+    inferred = figures.get("inferred")
+    return None if not inferred else _fitted_vs_inferred(inferred)
+
+
+def _fit_check(fig: Mapping, folded_at: str = "") -> dict:
+    """The fit's self-check: ``{"outcome": "confident" | "check", "reasons": [...]}``.
+
+    Fold-overs outside the reference's mouth-corner seam or new crossings of the
+    fitted skin (:data:`MAX_FOLD_OVERS`, :data:`MAX_NEW_CROSSINGS`; real scans
+    give none) mean the skin was pulled onto something that is not one face
+    (two heads through each other, a wrong pose) or folded where it is (an
+    ear): the pack is written, but the command exits with ``EXIT_CHECK``.
+    ``folded_at`` names the regions where the fold-overs are.
+    """
+    reasons = []
+    folds = int(fig["fold_overs_outside_mouth_corner_seam"])
+    if folds > MAX_FOLD_OVERS:
+        where = f" ({folded_at})" if folded_at else ""
+        reasons.append(
+            f"{folds} triangles of the fitted skin are turned over against the "
+            f"reference's{where}: a fit onto one face gives none; look at the skin there "
+            "(many, all over, mean the skin was pulled onto surfaces that are not one "
+            "face: two heads, a wrong pose)"
+        )
+    crossings = int(fig["self_intersections"]["new_pairs"])
+    if crossings > MAX_NEW_CROSSINGS:
+        reasons.append(
+            f"the fitted skin crosses itself in {crossings} triangle pairs the reference "
+            f"does not (a fit onto one face gives none; over {MAX_NEW_CROSSINGS} means a "
+            "skin pulled through itself)"
+        )
+    return {"outcome": "check" if reasons else "confident", "reasons": reasons}
+
+
+def _regions_of(regions: Mapping[str, np.ndarray], faces: np.ndarray) -> str:
+    """``"ear_r 5, upper_lip 2"``: the named regions (not the whole face) holding all
+    three corners of ``faces``, with counts, most first."""
+    counts: dict[str, int] = {}
+    for name, ids in regions.items():
+        if name in ("face", "inferred") or not len(faces):
+            continue
+        inside = np.zeros(int(max(faces.max(), np.max(ids, initial=0))) + 1, bool)
+        inside[np.asarray(ids, dtype=np.int64)] = True
+        n = int(inside[faces].all(axis=1).sum())
+        if n:
+            counts[name] = n
+    return ", ".join(f"{k} {n}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1]))
+
+
+def _face_like(face: float, nose: float) -> bool:
+    """Does a placed face with these shares within 5 mm (of the face, of its nose) find
+    a face's shape (:data:`MIN_PLACED_FACE`, :data:`MIN_PLACED_NOSE`)?"""
+    weak_nose = nose < MIN_PLACED_NOSE and face < NOSE_DOUBT_FACE
+    return face >= MIN_PLACED_FACE and not weak_nose
 
 
 def fit_scan(
@@ -494,6 +1119,7 @@ def fit_scan(
     inputs: Sequence[Mapping] = (),
     progress: Progress | None = None,
     detail: bool = True,
+    bone_source: str = "bone",
 ) -> ScanFit:
     """Adapt the reference head of ``sex`` (or ``base``) to ``scan`` (input frame, mm).
 
@@ -508,9 +1134,10 @@ def fit_scan(
     orientation : (anterior, superior[, left]) in the scan's coordinates, optional
     bone : Mesh, optional
         The true bone surface in the scan's frame (a CT): the estimated skull
-        is compared with it in the report.
-    source : str
-        Name of the scan in error messages (its file).
+        is compared with it in the report.  Refused when it does not lie
+        under the scan, or lies on its skin (:func:`_check_bone`).
+    source, bone_source : str
+        Names of the scan and the bone in error messages (their files).
     detail : bool
         Also carry the scan's fine detail onto the subdivided skin
         (:attr:`ScanFit.detail`, ``figures["detail"]``; ~2-3 s); False for
@@ -532,9 +1159,13 @@ def fit_scan(
     say = progress or (lambda _m: None)
     t0 = time.perf_counter()
     seconds: dict[str, float] = {}
-    check_scan_mesh(scan, source)
+    prepared = prepare_scan(scan, source, say)  # welded, repaired, simplified (the same
+    scan = prepared.mesh  # mesh again when fit_scan_pack prepared it)
+    if bone is not None:  # a bone that is not under this skin makes the comparison garbage
+        _check_bone(scan, bone, bone_source)
     base = base or reference_head(sex)
     pairs, depth_label, warnings = _depth_pairs(base, table, sex, build)
+    warnings += list(prepared.notes)
 
     # 1. orientation and size
     say("orienting the scan ...")
@@ -542,18 +1173,26 @@ def fit_scan(
     regions = face_regions(base)
     face_ids = np.concatenate(list(regions.values()))
     placement = None
+    covered = None  # per face vertex, when the scan shows only part of the face
+    # lids where a CT's volume ended (below the chin, a cut vault): not skin, and their
+    # edges are rims like a hole's (found in the file's own axes, where the volume's
+    # sides are)
+    caps = field_of_view_caps(scan)
     # the scan's closest-point index and which of its vertices a scanner could see do not
     # depend on the pose: they are found beside the pose search (their compiled loops and
     # Embree's casts run without the GIL; ~0.5 s of a 300k-triangle fit)
     with _Beside() as beside:
         beside.run(MeshIndex.shared, scan)
+        # two heads through each other: refused before a face is laid on either
+        one_shell = beside.run(_check_one_shell, scan, source)
         # walls of the airway, mouth and nostrils (a CT's skin surface, parted lips): no
         # scanner sees them and the reference has no surface for them
         seen_job = beside.run(_seen_in_file_axes, scan)
         pose = search_pose(scan, base.skin, hint=orientation, seeds=seeds, mirror="auto")
         searched_scale = pose.scale
+        one_shell()
         if seeds is None:
-            pose, placement = _place_face(scan, base, pose, regions, source)
+            pose, placement, covered = _place_face(scan, base, pose, regions, source, caps)
         seen = seen_job()
     s = pose.scale
     rigid = pose.matrix.copy()
@@ -574,10 +1213,6 @@ def fit_scan(
         )
     rest = head_transformed(base, np.diag([1 / s, 1 / s, 1 / s, 1.0]))
     scan_h = scan_in_frame(scan, rigid, mirrored)
-    # lids where a CT's volume ended (below the chin, a cut vault): not skin, and their
-    # edges are rims like a hole's (found in the file's own axes, where the volume's
-    # sides are)
-    caps = field_of_view_caps(scan)
     cap_d = np.full(scan.n_vertices, np.inf)
     if caps.any():
         cap_d, _ = cKDTree(scan_h.vertices[caps]).query(scan_h.vertices, workers=worker_count())
@@ -593,10 +1228,18 @@ def fit_scan(
     say("registering the reference skin onto the scan ...")
     scan_index = MeshIndex.shared(scan_h)  # the file-frame scan's, when the placement built it
     hard = _user_constraints(landmarks, rest, rigid)
+    # an ear the scan's rim cuts through (a CT that ends below the nose) is held to the
+    # reference's shape: half an ear pulled onto the scan's and half inferred folds over
+    # (the headsq skin cut at the subnasale: 7 fold-overs at the right ear)
+    ears_at = {r: rest.skin.vertices[base.regions[r]] for r in EAR_REGIONS if r in base.regions}
+    cut_ears = [
+        r for r, at in ears_at.items() if _uncovered(scan_index, caps, at).mean() > CUT_EAR_SHARE
+    ]
     fit = fit_skin(
         rest.skin,
         scan_h,
-        base.regions,
+        # (held passive: the regions fit_skin holds when its ears do not follow the scan)
+        {k: v for k, v in base.regions.items() if k not in EAR_REGIONS or k in cut_ears},
         levels=SCAN_LEVELS,
         affine_rounds=AFFINE_ROUNDS,
         source=source,
@@ -607,7 +1250,7 @@ def fit_scan(
         # the ears look for the scan's too: held passive they stay the reference's, a few
         # mm to a centimetre beside the scan's, whose vertices then counted as misses of the
         # cheek; following, 1 mm figures rise 0.3-4 points on every case, no fold-over added
-        ears=True,
+        ears=not cut_ears,
         index=scan_index,
     )
     warnings += list(fit.warnings)
@@ -626,19 +1269,45 @@ def fit_scan(
     )
     on_scan = facing & (to_scan <= ON_SCAN_MM)
     face = _mask(rest.skin.n_vertices, [face_ids])
-    support = float(on_scan[face].mean())
-    if support < MIN_FACE_SUPPORT:
+    # the face the scan shows: on a partial face (a CT that ends at the upper teeth) the
+    # skin beyond the scan's rim follows the reference's shape and is inferred, not missed
+    shown = face & ~_uncovered(scan_index, caps, skin.vertices)
+    shown_share = float(shown.sum() / max(int(face.sum()), 1))
+    partial = shown_share < WHOLE_FACE_COVERAGE
+    support = float(on_scan[shown if partial else face].mean()) if shown.any() else 0.0
+    need = MIN_PARTIAL_SUPPORT if partial else MIN_FACE_SUPPORT
+    if shown_share < MIN_SCAN_FACE_COVERAGE or support < need:
         # a hand, an object, the back of a head: the skin was bent onto it, but most of
         # the face found no surface of its shape near it; that is not a fitted face
+        of_it = (
+            f" of the {100 * shown_share:.0f} % of the reference face the scan shows"
+            if partial
+            else " of the reference face"
+        )
         raise InputError(
             source,
-            f"does not look like a face: only {100 * support:.0f} % of the reference face "
-            f"found scan surface of its shape near it (a face scan gives over "
-            f"{100 * MIN_FACE_SUPPORT:.0f} %)",
+            f"does not look like a face: only {100 * support:.0f} %{of_it} found scan "
+            f"surface of its shape near it (a face scan gives over "
+            f"{100 * MIN_FACE_SUPPORT:.0f} %, a part of a face over {100 * MIN_PARTIAL_SUPPORT:.0f} "
+            f"% of at least {100 * MIN_SCAN_FACE_COVERAGE:.0f} % of the face)",
             "is this a scan of a face? check the orientation (--anterior/--superior or 3+ "
             "--landmarks) and the units",
         )
     skin_lms, absent_skin = carry_skin_landmarks(rest.skin, skin, rest.skin_landmarks, on_scan)
+    tip = skin_lms.as_dict().get(NOSE_TIP)
+    if partial and tip is not None and _uncovered(scan_index, caps, tip[None])[0]:
+        # a band of brow and orbits can take the reference's nose and mouth (the headsq
+        # skin cut 40 mm below the vault's top: the face laid 75 mm low, its nose tip
+        # beyond the scan's rim); a part of a face fixes the pose only with its nose tip
+        # over the scan
+        raise InputError(
+            source,
+            f"shows too little of the face to fit it: {100 * shown_share:.0f} % of the "
+            "reference face lies over the scan, but not the nose tip (pronasale); a "
+            "partial face scan must show the nose with the eyes or the mouth",
+            "give a scan that shows the middle of the face, or place 3+ skin landmarks "
+            "(--landmarks)",
+        )
     skin_lms = _with_confidences(skin_lms, absent_skin, scan_index, landmarks)
     seconds["skin"] = time.perf_counter() - t
 
@@ -723,6 +1392,7 @@ def fit_scan(
     scan_distance[counted] = d
     fig["scan_vertices"] = int(scan_h.n_vertices)
     fig["scan_triangles"] = int(scan_h.n_faces)
+    fig["scan_preparation"] = prepared.figures
     fig["face_region_vertices"] = int(counted.sum())
     fig["face_region_not_head_vertices"] = int((in_face & ~hidden & ~counted & ~sheet).sum())
     fig["face_region_hidden_vertices"] = int(hidden.sum())
@@ -752,6 +1422,24 @@ def fit_scan(
     }
     fig["skin_on_scan_fraction"] = float(on_scan.mean())
     fig["face_on_scan_fraction"] = float(on_scan[face].mean())
+    # skin over no scan (holes, beyond a partial scan's rim) keeps the reference's shape:
+    # inferred, marked per vertex (the pack's region "inferred")
+    inferred_share = 1.0 - fig["face_on_scan_fraction"]
+    fig["inferred"] = {
+        "face_fitted_fraction": round(fig["face_on_scan_fraction"], 4),
+        "face_inferred_fraction": round(inferred_share, 4),
+        "face_shown_by_scan_fraction": round(shown_share, 4),
+        "partial_face": partial,
+        "skin_inferred_vertices": int((~on_scan).sum()),
+        "marked_as": "region 'inferred' of the pack (template.json): skin vertices over no "
+        "scan, whose shape is the reference head's",
+    }
+    if partial and inferred_share > INFERRED_NOTE_SHARE:
+        warnings.append(
+            f"the scan shows {100 * shown_share:.0f} % of the face: "
+            f"{_fitted_vs_inferred(fig['inferred'])}; the inferred part is the reference "
+            "head's shape, not the person's"
+        )
     ref_n, fit_n = ref_settled.skin.face_normals, fitted.face_normals
     folded = (ref_n * fit_n).sum(axis=1) < 0
     fig["fold_overs"] = int(folded.sum())
@@ -774,6 +1462,7 @@ def fit_scan(
         "reference_pairs": len(ref_x),
         "new_pairs": sum(tuple(p) not in ref_x for p in fitted_x.tolist()),
     }
+    fig["self_check"] = _fit_check(fig, _regions_of(head.regions, fitted.faces[folded & ~seam]))
     if layer is not None:
         fig["detail"] = _detail_figures(layer, fitted, scan_h.vertices[counted], face)
         beyond = fig["detail"]["face_over_skin_openings_vertices"]
@@ -846,6 +1535,7 @@ def fit_scan(
             },
         }
     fig["scan_not_head_area_fraction"] = round(fit.not_head, 4)
+    fig["ears_cut_by_the_scan_rim"] = cut_ears  # held to the reference's shape
     seconds["figures"] = time.perf_counter() - t
     if bone is not None:  # the check against a true bone, not part of the fit
         t = time.perf_counter()
@@ -877,7 +1567,13 @@ def fit_scan(
         "warnings": list(warnings),
         "fit_version": FIT_VERSION,
     }
-    head = replace(head, template_id=f"{base.template_id}/scan/{digest}", provenance=provenance)
+    head = replace(
+        head,
+        template_id=f"{base.template_id}/scan/{digest}",
+        provenance=provenance,
+        # the skin the scan does not support: the reference's shape (see figures["inferred"])
+        regions={**head.regions, "inferred": np.flatnonzero(~on_scan)},
+    )
     return ScanFit(
         head, to_head, mirrored, on_scan, fig, tuple(warnings), scan_h, scan_distance, layer
     )
@@ -1164,7 +1860,7 @@ def fit_scan_pack(
     ``extra(folder, result)`` writes further files into the staged pack (the
     CLI's PDF report, which needs the render layer) and returns their paths.
     """
-    from workbench.core.units import check_units_choice, resolve_units
+    from workbench.core.units import check_units_choice, detect_units, resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.markups import read_landmarks
     from workbench.io.meshes import read_mesh
@@ -1181,10 +1877,10 @@ def fit_scan_pack(
     check_output_folder(out, sources, force)  # before the fit, which takes a while
     path = Path(scan_path)
     read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="face")
-    check_scan_mesh(read.mesh, path)
-    colours = read_scan_colours(path, texture=texture)  # a bad texture fails before the fit
-    if scale is None and units == "auto":
-        resolve_units(read.units, "auto", source=str(path))
+    prepared = prepare_scan(read.mesh, path, progress)
+    colours = _working_colours(read_scan_colours(path, texture=texture), read.mesh, prepared)
+    if scale is None and units == "auto":  # judged on what is kept (not a stray blob)
+        resolve_units(detect_units(prepared.mesh, "face"), "auto", source=str(path))
     factor = read.scale_applied
     inputs = [{"role": "scan", "file": path.name, "sha256": file_sha256(path)}]
     if texture is not None:
@@ -1203,14 +1899,25 @@ def fit_scan_pack(
                 "sha256": file_sha256(Path(landmarks)),
             }
         )
+        from workbench.services.template_cache import reference_head
+
+        known = reference_head(sex).skin_landmarks.as_dict()
+        check_landmarks_on_scan(lms, prepared.mesh, landmarks, path.name, known)
     bone = None
     if bone_path is not None:
+        bone_sha = file_sha256(Path(bone_path))
+        if bone_sha == inputs[0]["sha256"]:
+            raise InputError(
+                bone_path,
+                f"(--bone) is the scan itself (the same content as {path.name}): the skin "
+                "cannot be its own bone",
+                "give the bone surface of the same CT (workbench mesh-from-ct CT --tissue "
+                "bone), or leave --bone out",
+            )
         bone = read_mesh(bone_path, scale=factor, kind="skull").mesh
-        inputs.append(
-            {"role": "bone", "file": Path(bone_path).name, "sha256": file_sha256(Path(bone_path))}
-        )
+        inputs.append({"role": "bone", "file": Path(bone_path).name, "sha256": bone_sha})
     result = fit_scan(
-        read.mesh,
+        prepared.mesh,
         landmarks=lms,
         sex=sex,
         table=table,
@@ -1221,7 +1928,11 @@ def fit_scan_pack(
         inputs=inputs,
         progress=progress,
         detail=detail,
+        bone_source=str(bone_path),
     )
+    # (fit_scan prepared the prepared mesh again, finding nothing to do: the file's story)
+    result = replace(result, warnings=(*prepared.notes, *result.warnings))
+    result.figures["scan_preparation"] = prepared.figures
 
     from workbench.io.samples import credits_for
 
