@@ -113,8 +113,12 @@ def write_json(data: dict[str, Any], out: Path | None) -> None:
     else:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(text + "\n", encoding="utf-8")
-        tmp.replace(out)
+        try:
+            tmp.write_text(text + "\n", encoding="utf-8")
+            tmp.replace(out)
+        except BaseException:  # a full disk, Ctrl-C: no half-written .tmp left behind
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 def _json_default(value: Any) -> Any:

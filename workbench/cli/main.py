@@ -7,51 +7,96 @@ line and exit with status 2; anything unexpected prints a short message
 (``--debug`` shows the traceback) and exits with status 1.  A command whose
 skull registration asks for a check (``reconstruct``, ``landmarks suggest``,
 ``template build``) writes its outputs, says why first, and exits with status 3.
+
+A file that cannot be written because the device is full (or over quota,
+read-only, ...) is named with the reason, like any other unreadable or
+unwritable file (status 2); when the error does not carry the file's name,
+the command's ``--out`` is named.
+
+Ctrl-C prints one line, ``interrupted``, and exits with status 130, whichever
+command runs and wherever it is (the sub-commands are imported inside
+:func:`main`, so this holds while they load too).  Outputs are written whole or
+not at all (:mod:`workbench.io.outputs`).  Started as the ``workbench``
+command (``main()`` without arguments), :func:`main` owns the process: after
+an interrupt it ends it at once, without the interpreter's clean-up (where a
+half-loaded native library can crash: exit 139), and once the command has
+finished a late Ctrl-C no longer changes its outcome.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
+import os
+import re
+import signal
 import sys
+import threading
 from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType, ModuleType
+from typing import Any
 
 import workbench
-from workbench.cli import (
-    age_cmd,
-    animate_cmd,
-    batch_cmd,
-    case_cmd,
-    compare_cmd,
-    gui_cmd,
-    ct_cmd,
-    demo_cmd,
-    fit_scan_cmd,
-    landmarks_cmd,
-    mesh_cmd,
-    reconstruct_cmd,
-    samples_cmd,
-    template_cmd,
-    validate_cmd,
-)
 from workbench.core.errors import WorkbenchError
 
-_MODULES = (
-    demo_cmd,
-    ct_cmd,
-    mesh_cmd,
-    landmarks_cmd,
-    case_cmd,
-    template_cmd,
-    fit_scan_cmd,
-    samples_cmd,
-    compare_cmd,
-    reconstruct_cmd,
-    validate_cmd,
-    animate_cmd,
-    age_cmd,
-    batch_cmd,
-    gui_cmd,
-)
+#: exit status after Ctrl-C (128 + SIGINT, what a shell reports for it)
+EXIT_INTERRUPTED = 130
+#: errors of a write that the device or file system refused, as told to the user
+WRITE_FAILURES = {
+    code: text
+    for code, text in (
+        (errno.ENOSPC, "no space left on the device"),
+        (getattr(errno, "EDQUOT", None), "the disk quota is exceeded"),
+        (errno.EROFS, "the file system is read-only"),
+        (errno.EFBIG, "the file is too large for the file system"),
+    )
+    if code is not None
+}
+#: a Ctrl-C that Python dropped is raised again this long after (s; see _Interrupts), at
+#: most _MAX_REDELIVERIES times per command
+REDELIVERY_DELAY_S = 0.01
+_MAX_REDELIVERIES = 20
+
+
+def _command_modules() -> tuple[ModuleType, ...]:
+    """The sub-command modules, in the order of ``workbench --help`` (imported here, inside
+    :func:`main`'s handlers, so a Ctrl-C while they load ends as any other)."""
+    from workbench.cli import (
+        age_cmd,
+        animate_cmd,
+        batch_cmd,
+        case_cmd,
+        compare_cmd,
+        ct_cmd,
+        demo_cmd,
+        fit_scan_cmd,
+        gui_cmd,
+        landmarks_cmd,
+        mesh_cmd,
+        reconstruct_cmd,
+        samples_cmd,
+        template_cmd,
+        validate_cmd,
+    )
+
+    return (
+        demo_cmd,
+        ct_cmd,
+        mesh_cmd,
+        landmarks_cmd,
+        case_cmd,
+        template_cmd,
+        fit_scan_cmd,
+        samples_cmd,
+        compare_cmd,
+        reconstruct_cmd,
+        validate_cmd,
+        animate_cmd,
+        age_cmd,
+        batch_cmd,
+        gui_cmd,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -68,54 +113,251 @@ def build_parser() -> argparse.ArgumentParser:
         "--debug", action="store_true", help="show full tracebacks for unexpected errors"
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in _MODULES:
+    for module in _command_modules():
         module.register(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "handler", None):
-        parser.print_help()
-        return 0
-    try:
-        return int(args.handler(args) or 0)
-    except BrokenPipeError:
-        # the reader went away (``workbench samples list | head``): a normal end; stdout
-        # is pointed at devnull so the interpreter's final flush does not fail again
-        import os
+    """Run one command; its exit status.
 
+    ``argv`` None: the process's own arguments, and the process is the
+    command's (see the module docstring for what that changes on Ctrl-C).
+    """
+    owner = argv is None and threading.current_thread() is threading.main_thread()
+    watch = _Interrupts()
+    try:
+        try:
+            code = _run(argv, watch)
+        finally:
+            if owner:  # the outcome is decided: a late Ctrl-C no longer changes it
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+            watch.restore()
+    except KeyboardInterrupt:  # in the instant between the command's end and the above
+        code = _interrupted()
+    if owner and code == EXIT_INTERRUPTED:
+        _end_process(code)
+    return code
+
+
+def _run(argv: Sequence[str] | None, watch: _Interrupts) -> int:
+    args = argparse.Namespace(command=None, debug=False)  # until the arguments are read
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "handler", None):
+            parser.print_help()
+            return 0
+        code = int(args.handler(args) or 0)
+        if watch.pending():  # a Ctrl-C dropped by Python at the very end of the command
+            return _interrupted()
+        _flush_stdout()
+        return code
+    except KeyboardInterrupt:
+        return _interrupted()
+    except BrokenPipeError:
+        if watch.seen:
+            return _interrupted()
+        # the reader went away (``workbench samples list | head``): a normal end
+        _silence_stdout()
+        return 0
+    except Exception as exc:  # noqa: BLE001 - last resort: never a bare traceback for users
+        if watch.seen:
+            # whatever the interrupt turned into on its way out (an ImportError when it
+            # hit a compiled module's import, an error of a library that caught it)
+            return _interrupted()
+        if isinstance(exc, WorkbenchError):
+            print(f"{_prog(args)}: error: {exc}", file=sys.stderr)
+            return 2
+        if isinstance(exc, OSError):
+            return _os_error(args, exc)
+        return _unexpected(args, exc)
+
+
+class _Interrupts:
+    """Ctrl-C while a command runs: seen (:attr:`seen`), and never dropped.
+
+    SIGINT raises ``KeyboardInterrupt`` as Python's own handler does, and
+    records that it came, so an error it turned into on its way out (an
+    ``ImportError`` when it hit numpy's compiled import) still ends as an
+    interrupt.  A ``KeyboardInterrupt`` raised inside a callback from compiled
+    code (numba's compiler, ctypes) or a finaliser cannot propagate: Python
+    prints "Exception ignored ..." with a traceback and goes on.  Such reports
+    are silenced and the interrupt raised again a moment later (from a timer
+    thread: raised at once it would land in the same callback), and if the
+    command ends before that, it ends as interrupted (:meth:`pending`).  Where
+    SIGINT is ignored or handled by someone else (a Dask worker, another
+    program's handler) only the dropped-interrupt part applies.
+    """
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._redelivered = 0
+        self._armed = False
+        self._lock = threading.Lock()
+        self._hook = sys.unraisablehook
+        self._handler: Any = None
+        sys.unraisablehook = self._unraisable
+        on_main = threading.current_thread() is threading.main_thread()
+        if on_main and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._handler = signal.signal(signal.SIGINT, self._sigint)
+
+    def _sigint(self, signum: int, frame: FrameType | None) -> None:
+        self.seen = True
+        self._armed = False  # this is the interrupt (again): no second one (no lock: a
+        # handler runs between any two bytecodes of the main thread, maybe holding it)
+        raise KeyboardInterrupt
+
+    def _unraisable(self, unraisable: Any) -> None:
+        exc_type = getattr(unraisable, "exc_type", None)
+        if not (isinstance(exc_type, type) and issubclass(exc_type, KeyboardInterrupt)):
+            self._hook(unraisable)
+            return
+        self.seen = True
+        with self._lock:
+            if self._armed or self._redelivered >= _MAX_REDELIVERIES:
+                return
+            self._armed = True
+            self._redelivered += 1
+        timer = threading.Timer(REDELIVERY_DELAY_S, self._redeliver)
+        timer.daemon = True
+        timer.start()
+
+    def _redeliver(self) -> None:
+        with self._lock:
+            if not self._armed:
+                return
+            self._armed = False
+            import _thread
+
+            _thread.interrupt_main()  # nothing when SIGINT is ignored or not Python's
+
+    def pending(self) -> bool:
+        """Whether a dropped interrupt is still to come (then it never will: disarmed)."""
+        with self._lock:
+            armed, self._armed = self._armed, False
+        return armed
+
+    def restore(self) -> None:
+        """Put back the handler and hook found (a SIG_IGN set meanwhile is kept)."""
+        self.pending()
+        if sys.unraisablehook == self._unraisable:
+            sys.unraisablehook = self._hook
+        if self._handler is not None and signal.getsignal(signal.SIGINT) == self._sigint:
+            signal.signal(signal.SIGINT, self._handler)
+
+
+#: the name shown for the standard output in an error (it has no file name)
+STDOUT_NAME = "the standard output"
+
+
+def _flush_stdout() -> None:
+    """Flush what the command printed, so a full device (``> /dev/full``) is reported
+    here, naming the standard output, instead of by the interpreter at exit.  A reader
+    that went away (``| head``) is a normal end."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _silence_stdout()
+    except OSError as exc:
+        _silence_stdout()
+        raise OSError(exc.errno, exc.strerror, STDOUT_NAME) from None
+
+
+def _silence_stdout() -> None:
+    """Point the standard output at devnull: what could not be written is dropped, and
+    the interpreter's own flush at exit does not fail again."""
+    try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-        return 0
-    except WorkbenchError as exc:
-        print(f"workbench {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        # a file the command could not read or write (a folder where a file is
-        # expected, no permission, disk full): name the path and the problem
-        if exc.filename is None or args.debug:
-            return _unexpected(args, exc)
-        where = f"{exc.filename}" + (f" -> {exc.filename2}" if exc.filename2 else "")
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # no descriptor (a stand-in stream)
+        pass
+
+
+def _interrupted() -> int:
+    try:
+        print("interrupted", file=sys.stderr, flush=True)
+    except (OSError, ValueError):  # stderr closed: the status says it
+        pass
+    return EXIT_INTERRUPTED
+
+
+def _end_process(code: int) -> None:
+    """Flush what was printed and end the process now (no interpreter clean-up)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    os._exit(code)
+
+
+#: a staged output folder's temporary name (workbench.io.outputs): ``.NAME.partial-PID``
+_STAGED = re.compile(r"^\.(?P<name>.+)\.partial-\d+$")
+
+
+def _shown_path(name: Any) -> str | None:
+    """``name`` (an OSError's filename) as the user knows it: a path inside a staged
+    output folder is shown at its final place."""
+    if name is None:
+        return None
+    text = os.fsdecode(name) if isinstance(name, bytes | os.PathLike) else str(name)
+    parts = [_STAGED.sub(r"\g<name>", part) for part in Path(text).parts]
+    return str(Path(*parts)) if parts else text
+
+
+def _os_error(args: argparse.Namespace, exc: OSError) -> int:
+    """A file the command could not read or write (a folder where a file is expected, no
+    permission, disk full): name the path and the problem."""
+    where = _shown_path(exc.filename)
+    failure = WRITE_FAILURES.get(exc.errno) if exc.errno is not None else None
+    if failure is not None and not args.debug:
+        if where is None:  # no file named: the standard output, if it fails too, else --out
+            try:
+                _flush_stdout()
+            except OSError as again:
+                where = again.filename
+        target = where or _output_of(args)
+        elsewhere = "the output" if target == STDOUT_NAME else "--out"
+        hint = (
+            f"free some space (or send {elsewhere} to another disk) and run the command again"
+            if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", None))
+            else f"send {elsewhere} to another place"
+        )
         print(
-            f"workbench {args.command}: error: {where}: cannot be read or written "
-            f"({exc.strerror or exc})",
+            f"{_prog(args)}: error: {target}: cannot be written: {failure} ({hint})",
             file=sys.stderr,
         )
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # noqa: BLE001 - last resort: never a bare traceback for users
+    if where is None or args.debug:
         return _unexpected(args, exc)
+    if exc.filename2:
+        where += f" -> {_shown_path(exc.filename2)}"
+    print(
+        f"{_prog(args)}: error: {where}: cannot be read or written ({exc.strerror or exc})",
+        file=sys.stderr,
+    )
+    return 2
+
+
+def _prog(args: argparse.Namespace) -> str:
+    command = getattr(args, "command", None)
+    return f"workbench {command}" if command else "workbench"
+
+
+def _output_of(args: argparse.Namespace) -> str:
+    """What the command writes, for an error that does not name the file: its ``--out``,
+    else the standard output (where a command without one writes)."""
+    out = getattr(args, "out", None)
+    return f"--out {out}" if out is not None else STDOUT_NAME
 
 
 def _unexpected(args: argparse.Namespace, exc: Exception) -> int:
     if args.debug:
         raise exc
     print(
-        f"workbench {args.command}: unexpected error: {type(exc).__name__}: {exc}\n"
+        f"{_prog(args)}: unexpected error: {type(exc).__name__}: {exc}\n"
         "(rerun with --debug for the full traceback, and please report it)",
         file=sys.stderr,
     )

@@ -17,16 +17,26 @@ cancellation point::
     token.cancel()                                          # from anywhere
 
 No units: fractions are 0..1 of the whole job.
+
+Ctrl-C is the other way a job ends early: Python raises ``KeyboardInterrupt``
+wherever the main thread happens to be.  A few places must not be left
+half-done that way: importing a compiled library that registers itself as it
+loads (VTK: interrupted there, the process later dies of a segmentation
+fault).  :func:`interrupts_deferred` holds Ctrl-C back for such a block and
+delivers it right after.
 """
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from types import FrameType
 
 from workbench.core.errors import Cancelled
 
-__all__ = ["CancelToken", "Cancelled", "checking"]
+__all__ = ["CancelToken", "Cancelled", "checking", "interrupts_deferred"]
 
 Progress = Callable[[str, float], None]
 
@@ -80,3 +90,35 @@ def checking(token: CancelToken | None, progress: Progress | None = None) -> Pro
             progress(step, fraction)
 
     return report
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) back during the block; deliver it when the block ends.
+
+    For work that must not stop half-way, e.g. importing VTK (see the module
+    docstring).  A Ctrl-C meanwhile is recorded, and when the block ends the
+    handler that was in place runs (normally: ``KeyboardInterrupt`` is raised
+    there).  Nests.  Python runs signal handlers on the main thread only, so
+    elsewhere (and where SIGINT is ignored or not handled by Python) this does
+    nothing: a worker thread is never interrupted by Ctrl-C anyway.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if not callable(previous):  # SIG_IGN, SIG_DFL or set outside Python: leave it
+        yield
+        return
+    held: list[tuple[int, FrameType | None]] = []
+
+    def hold(signum: int, frame: FrameType | None) -> None:
+        held.append((signum, frame))
+
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if held:
+            previous(*held[0])
