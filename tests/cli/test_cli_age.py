@@ -112,3 +112,18 @@ def test_age_bad_requests(tmp_path: Path, head_male, capsys, extra, message) -> 
     assert main([*argv, "--out", str(tmp_path / "x"), "--no-pdf"]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_age_the_other_sexs_norms_only_on_purpose(tmp_path: Path, head_male, capsys) -> None:
+    """A male head with the female norms: refused, naming both; with the flag, a warning
+    on stderr and in report.json."""
+    argv = ["age", "reference:male", "--sex", "female", "--from", "18", "--to", "12"]
+    assert main([*argv, "--out", str(tmp_path / "x"), "--no-pdf"]) == 2
+    err = capsys.readouterr().err
+    assert "reference:male" in err and "male head" in err and "--sex female" in err
+    assert "--allow-sex-mismatch" in err and not (tmp_path / "x").exists()
+    out = tmp_path / "y"
+    assert main([*argv, "--allow-sex-mismatch", "--out", str(out), "--no-pdf"]) == 0
+    assert "female norms" in capsys.readouterr().err
+    report = json.loads((out / "report.json").read_text())
+    assert any("--allow-sex-mismatch" in w for w in report["ages"][0]["warnings"])

@@ -121,7 +121,11 @@ def test_plain_ply_writing_is_unchanged(tmp_path: Path) -> None:
         mesh.vertices, mesh.faces, comments=()
     )
     target = write_mesh(tmp_path / "plain.ply", mesh)
-    assert ply.header_comments(target) == ["units: mm", "SPACE=RAS", "written by forensic-workbench"]
+    assert ply.header_comments(target) == [
+        "units: mm",
+        "SPACE=RAS",
+        "written by forensic-workbench",
+    ]
     assert samples.credit_for_mesh_file(target) is None
 
 

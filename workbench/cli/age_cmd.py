@@ -12,6 +12,7 @@ and ``sequence.glb`` (the ages as morph targets of one mesh).  See
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from workbench.cli.common import add_force_option, write_json
@@ -67,6 +68,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="FRACTION",
         help="young-child arc-length increase, 0-0.10 (Kähler §8.5.5; fuller cheeks)",
     )
+    p.add_argument(
+        "--allow-sex-mismatch",
+        action="store_true",
+        help="age the head with the norms of --sex even when the head is of the other sex "
+        "(refused otherwise; the report then says so)",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--no-pdf", action="store_true", help="skip report.pdf (and its pictures)")
     add_force_option(p, folder=True)
@@ -76,10 +83,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from workbench.cli.animate_cmd import load_head
     from workbench.model.evidence import file_sha256
-    from workbench.services.age_job import age_to_folder, parse_ages
+    from workbench.services.age_job import age_to_folder, check_head_sex, parse_ages
 
     ages = parse_ages(args.ages) if args.ages is not None else (float(args.to_age),)
+    allow = bool(getattr(args, "allow_sex_mismatch", False))
+    kind, _, named = str(args.head).partition(":")
+    if kind == "reference":  # refused before the head is loaded (or built: ~10 s)
+        check_head_sex(named, args.sex, args.head, allow_mismatch=allow)
+    if not args.no_pdf:
+        # the pictures need VTK: loaded now, before the long work, with Ctrl-C held back
+        # while it loads (importing workbench.render does it; without VTK: no pictures)
+        import workbench.render  # noqa: F401
     head, _frame, paths = load_head(args.head)
+    mismatch = check_head_sex(head, args.sex, args.head, allow_mismatch=allow)
+    if mismatch:
+        print(f"  warning: {mismatch}", file=sys.stderr)
     inputs = []
     for root in paths:
         pack = root if (root / "template.json").is_file() else root / "head"
@@ -105,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         force=args.force,
         progress=lambda m: print(f"  {m}"),
         extra=None if args.no_pdf else _write_pdf,
+        warnings=[mismatch] if mismatch else [],
     )
     for path in files:
         if path.parent == Path(args.out).resolve() or path.suffix in (".json", ".pdf", ".glb"):

@@ -45,6 +45,7 @@ import numpy as np
 
 from workbench.cli.common import add_force_option, output_path
 from workbench.core.errors import InputError
+from workbench.core.limits import MAX_CLIP_SECONDS, check_range
 from workbench.model.template import TemplateHead
 
 if TYPE_CHECKING:
@@ -121,7 +122,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=1.0,
         metavar="S",
-        help=".glb with --expression: length of the clip from neutral to it (default 1 s)",
+        help=".glb with --expression: length of the clip from neutral to it, above 0 and at "
+        f"most {MAX_CLIP_SECONDS:g} s (default 1 s)",
     )
     p.add_argument(
         "--arkit",
@@ -192,6 +194,7 @@ def load_head(spec: str) -> tuple[TemplateHead, str, list[Path]]:
 def run(args: argparse.Namespace) -> int:
     from workbench.services.animation import EXPRESSIONS, Animator
 
+    _check_clip_seconds(args.clip_seconds)
     if args.list:
         print("expressions: " + ", ".join(EXPRESSIONS))
     if args.track is not None:
@@ -262,6 +265,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_clip_seconds(seconds: float) -> None:
+    """``--clip-seconds``: above 0 and at most :data:`~workbench.core.limits.MAX_CLIP_SECONDS`."""
+    check_range(
+        seconds,
+        "--clip-seconds",
+        0.0,
+        MAX_CLIP_SECONDS,
+        unit="s",
+        low_open=True,
+        why="the clip from neutral to the expression; e.g. --clip-seconds 1",
+    )
+
+
 def _glb_targets(args: argparse.Namespace, muscles: dict[str, float]) -> list[str]:
     """The morph targets of a .glb (checked before the head is loaded)."""
     from workbench.services.animation import EXPRESSIONS
@@ -272,8 +288,6 @@ def _glb_targets(args: argparse.Namespace, muscles: dict[str, float]) -> list[st
             "a .glb holds the palette expressions as morph targets, not --muscle/--jaw poses",
             "use --expression NAME (and --targets), or write .ply/.obj for a free pose",
         )
-    if not np.isfinite(args.clip_seconds) or args.clip_seconds <= 0:
-        raise InputError(f"--clip-seconds {args.clip_seconds}", "must be a positive number")
     if args.targets is None:
         names = list(EXPRESSIONS)
     else:

@@ -55,6 +55,35 @@ def parse_ages(text: str) -> tuple[float, ...]:
     return tuple(ages)
 
 
+def check_head_sex(
+    head: TemplateHead | str, sex: str, source: str, *, allow_mismatch: bool = False
+) -> str | None:
+    """Refuse norms of the other sex than the head's own (``head``'s recorded ``sex``, or
+    that sex itself, e.g. from ``reference:female`` before the head is loaded).
+
+    The z-scores are read against the norms of ``sex``; a female head measured
+    against male norms starts 1-2 SD off in most facial measurements, and its
+    aged face follows the other sex's growth, a result that looks like any
+    other.  So a mismatch stops with a message naming both, unless
+    ``allow_mismatch`` (then the returned warning goes into the report).
+    ``source`` names the head (``reference:female``, a pack folder).
+    """
+    own = (head if isinstance(head, str) else str(head.sex or "")).lower()
+    if own not in ("female", "male") or own == sex:
+        return None
+    if not allow_mismatch:
+        raise InputError(
+            source,
+            f"is a {own} head, but --sex {sex} asks for the {sex} norms",
+            f"give --sex {own}, or add --allow-sex-mismatch to age the {own} head with the "
+            f"{sex} norms on purpose",
+        )
+    return (
+        f"a {own} head aged with the {sex} norms (--allow-sex-mismatch): its z-scores are "
+        "read against the other sex's norms"
+    )
+
+
 def age_series(
     head: TemplateHead,
     ages: Sequence[float],
@@ -168,11 +197,13 @@ def age_to_folder(
     force: bool = False,
     progress: Progress | None = None,
     extra: Callable[[Path, TemplateHead, list[AgeResult]], list[Path]] | None = None,
+    warnings: Sequence[str] = (),
 ) -> tuple[list[AgeResult], list[Path]]:
     """Age ``head`` to ``ages`` and write packs, ``report.json`` and ``sequence.glb`` to ``out``.
 
     ``out`` must not hold an input; an existing folder is replaced only with
     ``force`` (kept as ``out.1``) and a failure leaves it as it was.
+    ``warnings`` (e.g. from :func:`check_head_sex`) are added to every age's.
     """
     from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.template_pack import export_template
@@ -192,6 +223,7 @@ def age_to_folder(
     results = [
         replace(
             r,
+            warnings=(*warnings, *r.warnings),
             head=replace(
                 r.head,
                 template_id=f"{head.template_id}/age/{from_age:g}-{r.to_age:g}",

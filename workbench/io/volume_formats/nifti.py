@@ -45,6 +45,47 @@ def _scaled(raw: np.ndarray, slope: float, inter: float) -> np.ndarray:
     return out
 
 
+#: what to do about a header that gives no voxel size (shown with the refusal)
+NO_VOXEL_SIZE_HINT = (
+    "the voxel size cannot be guessed (reading it as 1 mm would silently change every "
+    "length); write the true voxel size into the header (nibabel: "
+    "img.header.set_zooms((dx, dy, dz)); FSL: fslchpixdim FILE dx dy dz) or convert the "
+    "original DICOM series again"
+)
+
+
+def header_voxel_size(path: Path) -> tuple[tuple[float, float, float], bool] | None:
+    """``(pixdim[1:4], has_qform_or_sform)`` from the raw NIfTI-1/-2 header, else None.
+
+    Read from the bytes because nibabel replaces a zero ``pixdim`` with 1 while
+    loading (with a log message only), which would make a scan of unknown
+    voxel size look like 1 mm voxels.  None when the file is not NIfTI (the
+    loader reports that).
+    """
+    import gzip
+    import struct
+
+    try:
+        opener = gzip.open if path.name.lower().endswith(".gz") else open
+        with opener(path, "rb") as handle:
+            raw = handle.read(540)
+    except (OSError, EOFError):
+        return None
+    for order in "<>":
+        size = struct.unpack(order + "i", raw[:4])[0] if len(raw) >= 4 else 0
+        if size == 348 and len(raw) >= 348 and raw[344:347] in (b"n+1", b"ni1"):
+            pixdim = struct.unpack(order + "3f", raw[80:92])
+            codes = struct.unpack(order + "2h", raw[252:256])
+            break
+        if size == 540 and len(raw) >= 540 and raw[4:7] in (b"n+2", b"ni2"):
+            pixdim = struct.unpack(order + "3d", raw[112:136])
+            codes = struct.unpack(order + "2i", raw[344:352])
+            break
+    else:
+        return None
+    return (float(pixdim[0]), float(pixdim[1]), float(pixdim[2])), any(c > 0 for c in codes)
+
+
 def read_nifti(path: Path) -> Volume:
     """Read a 3-D scalar NIfTI image; physical frame RAS, mm."""
     import nibabel as nib  # local import: nibabel is slow to import
@@ -54,6 +95,15 @@ def read_nifti(path: Path) -> Volume:
     path = Path(path)
     if not path.exists():
         raise InputError(path, "file not found")
+    found = header_voxel_size(path)
+    if found is not None and not found[1] and not all(v > 0 for v in found[0]):
+        shown = " x ".join(f"{v:g}" for v in found[0])
+        raise InputError(
+            path,
+            f"the voxel size in the header is {shown} mm (pixdim; neither a qform nor an "
+            "sform is set): the header gives no voxel size",
+            NO_VOXEL_SIZE_HINT,
+        )
     try:
         img = nib.load(str(path))
     except Exception as exc:  # noqa: BLE001 - nibabel raises many types for bad files
@@ -91,7 +141,13 @@ def read_nifti(path: Path) -> Volume:
     axes = affine[:3, :3] * factor
     spacing = np.linalg.norm(axes, axis=0)
     if np.any(spacing == 0):
-        raise InputError(path, "the NIfTI affine has a zero-length axis")
+        shown = " x ".join(f"{v:g}" for v in spacing)
+        raise InputError(
+            path,
+            f"the header gives no voxel size along one axis (the voxel-to-world matrix "
+            f"gives {shown} mm)",
+            NO_VOXEL_SIZE_HINT,
+        )
     direction = axes / spacing
     origin = affine[:3, 3] * factor
     codes = {}
