@@ -8,8 +8,9 @@ head's own frame, which a PLY header names).
 
 ``--out OUT.glb`` writes glTF 2.0 binary instead: the rest skin with every
 palette expression (or those of ``--targets``) as a morph target settled from
-rest, the eyes, teeth, tongue, mandible and cranium as nodes, in the
-Frankfort head frame in metres (glTF +Y up, +Z forward).  With
+rest, the eyes, teeth, tongue, mandible and cranium as nodes, in metres in
+the frame of the head's PLY files (a reference head: the Frankfort head frame,
++Y up, +Z forward; a reconstruction: its skull file's frame).  With
 ``--expression`` that expression's weight is 1 by default and the file holds
 a clip from neutral to it over ``--clip-seconds`` (1 s).  ``--arkit`` adds the
 52 ARKit blendshape names as further targets, each a weighted sum of the
@@ -233,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_output_file(args.out, inputs, args.force)  # before the simulation, not after
     if targets is not None:
-        return _write_glb(args, head, targets, inputs, recipes)
+        return _write_glb(args, head, targets, inputs, recipes, frame)
     anim = Animator(head)
     if args.expression is not None:
         anim.set_expression(args.expression)
@@ -312,6 +313,7 @@ def _write_glb(
     names: list[str],
     inputs: list[Path],
     recipes: dict[str, dict[str, float]] | None = None,
+    frame: str = "",
 ) -> int:
     from workbench.services.gltf_animation import export_head_glb, ramp_keyframes
 
@@ -321,7 +323,7 @@ def _write_glb(
         keyframes = ramp_keyframes(args.expression, args.clip_seconds)
     with output_path(args.out, args, *inputs) as target:
         _, settled, seconds = export_head_glb(
-            head, target, names, keyframes, weights=weights, names_arkit=recipes
+            head, target, names, keyframes, weights=weights, names_arkit=recipes, frame=frame
         )
     size = args.out.stat().st_size
     clip = f"; clip neutral -> {args.expression} over {args.clip_seconds:g} s" if keyframes else ""
@@ -330,8 +332,7 @@ def _write_glb(
         clip += f"; {len(recipes)} ARKit targets, {empty} of them zero (no AU basis)"
     print(
         f"wrote {args.out} ({settled.rest['skin'].n_vertices} vertices, {len(names)} morph "
-        f"targets settled in {seconds:.1f} s{clip}; {size / 1e6:.1f} MB; Frankfort head frame, "
-        "metres, +Y up, +Z forward)"
+        f"targets settled in {seconds:.1f} s{clip}; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
     )
     return 0
 
@@ -395,7 +396,7 @@ def _run_track(args: argparse.Namespace) -> int:
     head, frame, inputs = load_head(args.head)
     inputs = [*inputs, args.track]
     if suffix == ".glb":
-        return _write_track_glb(args, head, track, inputs)
+        return _write_track_glb(args, head, track, inputs, frame)
     from workbench.io.outputs import check_output_file, check_output_folder
 
     if pattern is None:
@@ -457,8 +458,15 @@ def _write_skin(target: Path, anim: Animator, frame: str, what: str) -> None:
         write_mesh(target, skin)
 
 
+def _glb_frame(frame: str) -> str:
+    """The frame line of a written ``.glb``: the head's own (that of its PLY files), metres."""
+    return (
+        f"metres, the frame of the head's PLY files ({(frame or HEAD_FRAME).removesuffix('; mm')})"
+    )
+
+
 def _write_track_glb(
-    args: argparse.Namespace, head: TemplateHead, track: Track, inputs: list[Path]
+    args: argparse.Namespace, head: TemplateHead, track: Track, inputs: list[Path], frame: str = ""
 ) -> int:
     from workbench.io.outputs import check_output_file
     from workbench.services.animation import EXPRESSIONS
@@ -484,7 +492,9 @@ def _write_track_glb(
     if not names and not poses:
         raise InputError(args.track, "animates nothing a .glb can hold (only neutral keys)")
     with output_path(args.out, args, *inputs) as target:
-        _, settled, seconds = export_head_glb(head, target, names, keyframes, poses=poses)
+        _, settled, seconds = export_head_glb(
+            head, target, names, keyframes, poses=poses, frame=frame
+        )
     size = args.out.stat().st_size
     gaze = any(k.gaze != (0.0, 0.0) for k in track.keys)
     print(
@@ -494,6 +504,6 @@ def _write_track_glb(
         f"{sum(1 for n in poses if n.startswith('viseme_'))} visemes) settled in {seconds:.1f} s; "
         f"clip of {frames.n_frames} frames at {track.fps:g} fps over {frames.times[-1]:g} s"
         + ("; gaze is not in the .glb" if gaze else "")
-        + f"; {size / 1e6:.1f} MB; Frankfort head frame, metres, +Y up, +Z forward)"
+        + f"; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
     )
     return 0
