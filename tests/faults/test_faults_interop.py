@@ -468,3 +468,18 @@ def test_glb_vertices_are_the_ply_frame_in_metres(tmp_path: Path, monkeypatch) -
     moved = read(mand.targets[0]["POSITION"]) * 1000.0
     assert np.abs(moved - [-1.0, 1.0, 1.0]).max() < 0.01
     assert settled.skin["smile"].shape == settled.stored_skin["smile"].shape
+
+
+def test_landmark_csv_description_guarded_and_read_back(tmp_path: Path) -> None:
+    """A landmark description that would start a spreadsheet formula is written guarded
+    (leading apostrophe) in the plain CSV, and read back as the user typed it."""
+    from workbench.core.landmarks import Landmark, LandmarkSet
+    from workbench.io.markups import read_landmarks, write_landmarks
+
+    text = '=HYPERLINK("http://x")'
+    lms = LandmarkSet("skull", [Landmark("g", np.array([1.0, 2.0, 3.0]), description=text)])
+    path = tmp_path / "lm.csv"
+    write_landmarks(path, lms)
+    assert "'=HYPERLINK" in path.read_text(encoding="utf-8")
+    (back,) = list(read_landmarks(path, "skull").landmarks)
+    assert back.description == text

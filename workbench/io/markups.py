@@ -55,6 +55,7 @@ import numpy as np
 from workbench.core.errors import InputError, LandmarkError
 from workbench.core.json_limits import read_json
 from workbench.core.landmarks import DEFINED_STATUSES, STATUSES, Landmark, LandmarkSet
+from workbench.core.table_cells import FORMULA_STARTS, csv_cell
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 
 MRK_SCHEMA = (
@@ -698,10 +699,15 @@ def read_csv(
                 [row.get(c) for c in xyz_cols],
                 status,
                 conf,
-                row.get("description") or "",
+                _unguarded(row.get("description") or ""),
             )
         )
     return _build(path, surface, points, catalogue, allow_undefined, strict, [])
+
+
+def _unguarded(text: str) -> str:
+    """A description as written before :func:`write_csv` guarded it (its ``'`` taken off)."""
+    return text[1:] if text[:1] == "'" and text[1:2] in FORMULA_STARTS and text[1:] else text
 
 
 def write_csv(
@@ -714,7 +720,9 @@ def write_csv(
     ]
     for lm in landmark_set:
         xyz = [repr(float(v)) for v in lm.position] if lm.is_defined else ["", "", ""]
-        lines.append(_csv_line([lm.code, *xyz, lm.status, repr(lm.confidence), lm.description]))
+        # a description is free text: one that would start a spreadsheet formula is guarded
+        desc = csv_cell(lm.description)
+        lines.append(_csv_line([lm.code, *xyz, lm.status, repr(lm.confidence), desc]))
     _write_text(Path(path), "".join(lines))
 
 
