@@ -134,6 +134,20 @@ def _cases(s: dict[str, Path], tmp: Path, headsq: Path) -> dict[str, Case]:
     copy = tmp / "hq_bone_copy.ply"
     copy.write_bytes(s["hq_bone"].read_bytes())
     nifti = _nifti_without_voxel_size(tmp / "no_voxel_size.nii")
+    raw = tmp / "volume.raw"
+    raw.write_bytes(np.zeros(8 * 8 * 8, dtype=np.int16).tobytes())
+    nrrd = tmp / "no_spacing.nhdr"
+    nrrd.write_text(
+        "NRRD0004\ndimension: 3\nsizes: 8 8 8\ntype: short\nendian: little\n"
+        "encoding: raw\ndata file: volume.raw\n",
+        encoding="ascii",
+    )
+    mhd = tmp / "no_spacing.mhd"
+    mhd.write_text(
+        "ObjectType = Image\nNDims = 3\nDimSize = 8 8 8\nElementType = MET_SHORT\n"
+        "ElementDataFile = volume.raw\n",
+        encoding="ascii",
+    )
     stl = tmp / "bone.stl"
     exported = tmp / "exported"
 
@@ -206,6 +220,18 @@ def _cases(s: dict[str, Path], tmp: Path, headsq: Path) -> dict[str, Case]:
             not_written=[tmp / "from_nifti.ply"],
             absent=("setting 0 dims to 1",),
         ),
+        "row7-nrrd-without-voxel-size": Case(
+            ["mesh-from-ct", str(nrrd), "--out", str(tmp / "from_nrrd.ply"), "--quiet"],
+            (str(nrrd), "no usable voxel size", "spacings:"),
+            [nrrd, raw],
+            not_written=[tmp / "from_nrrd.ply"],
+        ),
+        "row7-metaimage-without-voxel-size": Case(
+            ["mesh-from-ct", str(mhd), "--out", str(tmp / "from_mhd.ply"), "--quiet"],
+            (str(mhd), "no voxel size", "ElementSpacing ="),
+            [mhd, raw],
+            not_written=[tmp / "from_mhd.ply"],
+        ),
         "row8-enospc-no-file-name": Case(
             ["mesh-from-ct", str(headsq), "--out", str(stl), "--quiet"],
             (str(stl), "cannot be written", "no space left on the device"),
@@ -240,6 +266,8 @@ ROWS = [
     "row7-age-reference-of-the-other-sex",
     "row7-animate-clip-seconds-1e12",
     "row7-nifti-without-voxel-size",
+    "row7-nrrd-without-voxel-size",
+    "row7-metaimage-without-voxel-size",
     "row8-enospc-no-file-name",
     "row8-erofs-no-file-name",
     "row8-edquot-in-a-staged-folder",

@@ -150,9 +150,13 @@ def read_metaimage(path: Path) -> Volume:
     warnings: list[str] = []
     if "elementspacing" in fields:
         spacing = np.array(parse_floats(fields["elementspacing"], path, "ElementSpacing", 3))
-    else:
-        warnings.append("no ElementSpacing in the header; assuming 1 mm")
-        spacing = np.ones(3)
+    else:  # reading it as 1 mm would silently change every length measured on the volume
+        raise InputError(
+            path,
+            "the header gives no voxel size (no ElementSpacing)",
+            "the voxel size cannot be guessed: add it to the header, e.g. "
+            "'ElementSpacing = 0.5 0.5 1.0' (mm), or export the volume again with its geometry",
+        )
     origin = (
         np.array(parse_floats(fields["offset"], path, "Offset", 3))
         if "offset" in fields

@@ -199,8 +199,16 @@ def _geometry(path: Path, fields: dict[str, str], warnings: list[str]):
         text = fields.get("spacings")
         spacing = np.array(parse_floats(text, path, "spacings", 3) if text else [np.nan] * 3)
         if not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
-            warnings.append(f"no usable voxel spacing in the header ({text!r}); assuming 1 mm")
-            spacing = np.where(np.isfinite(spacing) & (spacing > 0), spacing, 1.0)
+            # reading it as 1 mm would silently change every length measured on the volume
+            raise InputError(
+                path,
+                "the header gives no usable voxel size "
+                + (
+                    f"(spacings: {text})" if text else "(neither 'space directions' nor 'spacings')"
+                ),
+                "the voxel size cannot be guessed: add it to the header, e.g. "
+                "'spacings: 0.5 0.5 1.0' (mm), or export the volume again with its geometry",
+            )
         direction = np.eye(3)
     if "spaceorigin" in fields:
         origin = np.array(parse_floats(fields["spaceorigin"], path, "space origin", 3))
