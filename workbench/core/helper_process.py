@@ -116,6 +116,9 @@ def _start() -> subprocess.Popen:
         stdout=subprocess.PIPE,
         env=env,
         close_fds=True,
+        # a Ctrl-C in the terminal reaches the whole process group: the parent handles it,
+        # the child must not die printing a traceback (it stops when its stdin closes)
+        start_new_session=True,
     )
 
 
