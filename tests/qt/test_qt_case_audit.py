@@ -42,6 +42,9 @@ def test_open_reports_the_chain_and_the_missing_face(qtbot, window, tmp_path) ->
     _wait(qtbot, window)
     assert not window.errors, window.errors
     assert any("audit log verified (4 records)" in m for m in window.messages), window.messages
+    assert any(
+        "case.json verified (case.json is as the workbench wrote it" in m for m in window.messages
+    )
     assert "audit log verified (4 records)" in window.status_label.text()
     assert any("Reconstruct face" in m for m in window.messages)
 
@@ -60,3 +63,18 @@ def test_open_refuses_an_edited_log(qtbot, window, tmp_path) -> None:
     _wait(qtbot, window)
     assert window.errors and "record 1" in window.errors[-1] and "edited" in window.errors[-1]
     assert window.document.path != path
+
+
+def test_open_refuses_an_edited_case_json(qtbot, window, tmp_path) -> None:
+    """case.json changed by hand after the last save: the window refuses it, naming the edit."""
+    path = _case_file(tmp_path)
+    with zipfile.ZipFile(path) as source:
+        members = {n: source.read(n) for n in source.namelist()}
+    members["case.json"] = members["case.json"].replace(b'"examiner": "', b'"examiner": "X', 1)
+    assert b'"examiner": "X' in members["case.json"]
+    with zipfile.ZipFile(path, "w") as target:
+        for name, data in members.items():
+            target.writestr(name, data)
+    window.open_case(path)
+    _wait(qtbot, window)
+    assert window.errors and "changed outside the workbench" in window.errors[-1], window.errors

@@ -256,7 +256,10 @@ class FileTool:
         self.replace_case(OpenedCase(loaded.case, CommandStack(loaded.case)), path)
         chain = loaded.audit_chain.summary()
         audit = chain if chain.startswith("audit log") else f"audit log {chain}"
-        notes = [f"{path.name}: evidence and arrays match their hashes; {audit}"]
+        notes = [
+            f"{path.name}: evidence and arrays match their hashes; {audit}; "
+            f"case.json {loaded.content_seal.summary()}"
+        ]
         if "template_hash" in loaded.case.parameters:
             notes.append(
                 f"{path.name} was reconstructed before, but a case file keeps the "
