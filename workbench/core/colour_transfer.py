@@ -172,9 +172,13 @@ def sample_image(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
     # clamp at the borders (texture atlases have no meaningful wrap-around neighbours)
     xa, xb = np.clip(x0i, 0, w - 1), np.clip(x0i + 1, 0, w - 1)
     ya, yb = np.clip(y0i, 0, h - 1), np.clip(y0i + 1, 0, h - 1)
-    img = image.astype(np.float32) if image.dtype != np.float32 else image
-    top = img[ya, xa] * (1 - fx) + img[ya, xb] * fx
-    bottom = img[yb, xa] * (1 - fx) + img[yb, xb] * fx
+
+    # only the pixels read are converted (a whole 8192^2 texture as float32 is 800 MB)
+    def px(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return image[rows, cols].astype(np.float32)
+
+    top = px(ya, xa) * (1 - fx) + px(ya, xb) * fx
+    bottom = px(yb, xa) * (1 - fx) + px(yb, xb) * fx
     out = (top * (1 - fy) + bottom * fy).astype(np.float64)
     out[bad] = np.nan
     return out
