@@ -293,7 +293,7 @@ def test_a_bad_track_file_shows_a_message_in_the_dock(animating, tmp_path):
     broken = tmp_path / "broken.json"
     broken.write_text("{not json")
     assert not tool.open_track(broken)
-    assert "not JSON" in panel.track_message.text()
+    assert "not valid JSON" in panel.track_message.text()
     assert not tool.open_track(tmp_path / "missing.json")
     assert "cannot be read" in panel.track_message.text()
     assert tool.open_track(TRACK)
