@@ -483,3 +483,57 @@ def test_landmark_csv_description_guarded_and_read_back(tmp_path: Path) -> None:
     assert "'=HYPERLINK" in path.read_text(encoding="utf-8")
     (back,) = list(read_landmarks(path, "skull").landmarks)
     assert back.description == text
+
+
+@pytest.mark.parametrize("ext", [".ply", ".stl", ".obj", ".vtk", ".vtp"])
+def test_directions_given_for_an_lps_file_turn_with_it(tmp_path: Path, ext) -> None:
+    """``--anterior``/``--superior`` are in the file's own numbers: for a mesh tagged
+    SPACE=LPS (read with x and y negated) they are negated the same way."""
+    import argparse
+
+    from workbench.cli.reconstruct_cmd import orientation_of
+    from workbench.io.meshes import file_space, write_mesh
+
+    skull, _ = _skull_and_points()
+    for space, sign in (("LPS", -1.0), ("RAS", 1.0)):
+        path = write_mesh(tmp_path / f"bone_{space}{ext}", skull, space=space)
+        assert file_space(path) == space
+        args = argparse.Namespace(anterior=(0.0, -1.0, 0.0), superior=(0.0, 0.0, 1.0), left=None)
+        anterior, superior = orientation_of(args, str(path))
+        assert anterior == (0.0, -1.0 * sign, 0.0) and superior == (0.0, 0.0, 1.0)
+
+
+def test_meshlab_points_on_an_lps_mesh_turn_with_it(tmp_path: Path) -> None:
+    """A MeshLab ``.pp`` holds the mesh file's own numbers: on an LPS-tagged skull they are
+    turned with the mesh, so the case's landmarks stay on the bone."""
+    from workbench.io.markups import write_pp
+    from workbench.io.meshes import write_mesh
+    from workbench.services.case_setup import start_case_from_skull
+
+    skull, points = _skull_and_points()
+    raw = Mesh(skull.vertices * [-1.0, -1.0, 1.0], skull.faces)  # LPS numbers of the skull
+    path = write_mesh(tmp_path / "bone.ply", raw, space="LPS")
+    pp = tmp_path / "points.pp"
+    write_pp(pp, points.transformed(np.diag([-1.0, -1.0, 1.0, 1.0])))  # placed in MeshLab
+    opened = start_case_from_skull(path, units="mm", landmarks_path=pp)
+    got = opened.case.landmarks["skull"].as_dict()
+    want = points.as_dict()
+    assert max(float(np.linalg.norm(got[c] - want[c])) for c in want) < 1e-9
+
+
+def test_validate_directions_turn_with_an_lps_skull(tmp_path: Path) -> None:
+    """A validate manifest's directions follow the skull file the same way (a CT keeps its
+    volume's numbers, so its directions stay as given)."""
+    from workbench.io.meshes import write_mesh
+    from workbench.services.validation import ValidationCase, in_read_frame
+
+    skull, _ = _skull_and_points()
+    lps = write_mesh(tmp_path / "bone.ply", skull, space="LPS")
+    ras = write_mesh(tmp_path / "bone_ras.ply", skull)
+    given = ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0))
+    turned = in_read_frame(ValidationCase("c", lps, ras, orientation=given)).orientation
+    assert turned == ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    kept = in_read_frame(ValidationCase("c", ras, lps, orientation=given)).orientation
+    assert kept == given
+    ct = tmp_path / "head.nii.gz"
+    assert in_read_frame(ValidationCase("c", ct, ras, orientation=given)).orientation == given

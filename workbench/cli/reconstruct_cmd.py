@@ -104,9 +104,20 @@ def _check_directions(args: argparse.Namespace) -> None:
 
 
 def orientation_of(args: argparse.Namespace, argument: str) -> tuple | None:
+    """``(anterior, superior[, left])`` from the options (in the file's own numbers), or the
+    sample's known anatomy; None when not given.
+
+    A mesh file tagged ``SPACE=LPS`` is read with x and y negated
+    (:func:`workbench.io.meshes.read_mesh`), so the directions given for it are
+    turned the same way here.
+    """
     _check_directions(args)
     if args.anterior is not None and args.superior is not None:
-        return (args.anterior, args.superior) + ((args.left,) if args.left else ())
+        from workbench.io.meshes import file_space, to_read_frame
+
+        given = (args.anterior, args.superior) + ((args.left,) if args.left else ())
+        space = None if argument.startswith("sample:") else file_space(argument)
+        return tuple(tuple(to_read_frame(v, space).tolist()) for v in given)
     if argument.startswith("sample:"):
         from workbench.io.samples import registry
 

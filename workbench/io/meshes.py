@@ -45,6 +45,7 @@ from workbench.core.units import (
     unit_scale,
 )
 from workbench.io.mesh_formats import obj, ply, stl, vtk_legacy, vtp
+from workbench.io.mesh_formats._common import space_in
 
 _FORMATS: dict[str, ModuleType] = {
     ".ply": ply,
@@ -102,6 +103,46 @@ def _format_for(path: Path, action: str) -> ModuleType:
             f"supported extensions: {', '.join(SUPPORTED_EXTENSIONS)}",
         )
     return _FORMATS[ext]
+
+
+#: x and y negated: 3D Slicer's LPS <-> RAS (a rotation by 180 degrees about z)
+LPS_TO_RAS = np.array([-1.0, -1.0, 1.0])
+#: how much of a file :func:`file_space` reads to find the tag (the header's start)
+_SPACE_SNIFF_BYTES = 65536
+
+
+def file_space(path: str | PathLike[str]) -> str | None:
+    """The ``SPACE=`` tag a mesh file's header gives ("RAS" / "LPS"), or None.
+
+    A cheap look at the start of the file, for what depends on how
+    :func:`read_mesh` turns the file (an LPS file is read with x and y
+    negated): directions and points a user gives "in the file's
+    coordinates" (``--anterior``, MeshLab ``.pp`` points) are turned the
+    same way with :func:`to_read_frame`.  A VTP file's tag sits in its field
+    data and is read here only from an ASCII file; None for a missing file.
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(_SPACE_SNIFF_BYTES)
+    except OSError:
+        return None
+    if p.suffix.lower() == ".vtp":
+        try:
+            return vtp.read(p, p.read_bytes()).space
+        except (InputError, OSError, ValueError):
+            return None
+    if p.suffix.lower() == ".ply":
+        end = head.find(b"end_header")
+        head = head[: end if end >= 0 else len(head)]
+    return space_in(head)
+
+
+def to_read_frame(vectors: np.ndarray, space: str | None) -> np.ndarray:
+    """Points or directions given in a file's own numbers, in the frame :func:`read_mesh`
+    returns that file in (x and y negated for an LPS-tagged file; else unchanged)."""
+    v = np.asarray(vectors, dtype=np.float64)
+    return v * LPS_TO_RAS if space == "LPS" else v
 
 
 def _load_bytes(path: Path) -> bytes:
@@ -185,14 +226,17 @@ def read_mesh(
         parsed = module.read(path, data)
     vertices = parsed.vertices
     if parsed.space == "LPS":  # Slicer's tag: x and y negated into RAS (a rotation: same winding)
-        vertices = vertices * np.array([-1.0, -1.0, 1.0])
+        vertices = vertices * LPS_TO_RAS
     raw = Mesh(vertices, parsed.faces)
     if not allow_nonfinite:
         _refuse_nonfinite(path, raw)
     report = detect_units(raw, kind)
     messages = list(parsed.messages)
     if parsed.space == "LPS":
-        messages.append("the file says SPACE=LPS (3D Slicer): x and y negated into RAS")
+        messages.append(
+            "the file says SPACE=LPS (3D Slicer): x and y negated into RAS, and so are "
+            "directions given for it (--anterior/--superior/--left) and MeshLab .pp points"
+        )
     if factor is None:
         factor = 1.0
         if report.needs_confirmation:

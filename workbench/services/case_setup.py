@@ -91,6 +91,11 @@ def start_case_from_skull(
             result = read_landmarks(landmarks_path, "skull", catalogue=load_catalogue())
             _refuse_unusable_points(result, landmarks_path)
             landmarks = result.landmarks
+            if read.space == "LPS" and str(landmarks_path).lower().endswith(".pp"):
+                # MeshLab's points are the mesh file's own numbers; the mesh was read turned
+                # from LPS into RAS, and so are they (Slicer's files say their own system)
+                landmarks = landmarks.transformed(np.diag([-1.0, -1.0, 1.0, 1.0]))
+                notes.append(f"{Path(landmarks_path).name}: turned with the mesh (SPACE=LPS)")
             if factor != 1.0:
                 landmarks = landmarks.transformed(_scale_matrix(factor))
             check_landmark_geometry(landmarks, landmarks_path)

@@ -441,6 +441,21 @@ def score_surfaces(
     return ids, out
 
 
+def in_read_frame(case: ValidationCase) -> ValidationCase:
+    """``case`` with its directions (given in the skull file's numbers) turned as the skull
+    is read: x and y negated for a mesh tagged ``SPACE=LPS`` (a CT's surface keeps the
+    volume's numbers, so its directions stay as given)."""
+    from workbench.io.meshes import file_space, to_read_frame
+
+    if case.orientation is None or is_volume(case.skull):
+        return case
+    space = file_space(case.skull)
+    if space != "LPS":
+        return case
+    turned = tuple(tuple(to_read_frame(v, space).tolist()) for v in case.orientation)
+    return replace(case, orientation=turned)
+
+
 def run_case(
     case: ValidationCase,
     out: Path,
@@ -460,6 +475,8 @@ def run_case(
     from workbench.core.offset_surface import uniform_offset
     from workbench.io.meshes import write_mesh
     from workbench.services.compare import REGION_NAMES, face_regions
+
+    case = in_read_frame(case)
     from workbench.services.reconstruction_job import JobSettings, run_reconstruction, write_outputs
     from workbench.services.tissue_model import TissueSettings
 
@@ -619,7 +636,7 @@ def build_references(
                 tmp,
                 sex=case.sex,
                 units=units,
-                orientation=case.orientation if case.orient == "hint" else None,
+                orientation=in_read_frame(case).orientation if case.orient == "hint" else None,
                 staged=True,
             )
             (tmp / "built_from.json").write_text(json.dumps(key), "utf-8")
