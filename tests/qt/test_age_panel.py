@@ -415,3 +415,12 @@ def test_the_arc_increase_field_is_part_of_the_settings_and_the_study(
     assert w.age.settings().arc_increase == pytest.approx(0.08)
     assert w.age.current_study().arc_increase == pytest.approx(0.08)
     assert panel.arc_increase.maximum() == pytest.approx(10.0)  # the issue's 10 % at most
+
+
+def test_norms_of_the_other_sex_are_said_in_the_dock(ageing):
+    """The command line refuses them without --allow-sex-mismatch; the dock, where the sex is
+    chosen on purpose, says so in its status line."""
+    w = ageing
+    assert "Warning" not in w.age._status_text()
+    w.age_panel.sex.setCurrentText("female")
+    assert "Warning: a male head aged with the female norms." in w.age._status_text()
