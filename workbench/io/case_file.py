@@ -217,6 +217,13 @@ def member_limit(name: str) -> int:
     return MAX_OTHER_BYTES
 
 
+def sized_in_case(name: str) -> bool:
+    """Members whose exact size ``case.json`` gives and every read is capped at (arrays by
+    their shape, evidence by its recorded size): judged by that, not by how well they
+    deflate (a mostly empty mask or label volume deflates beyond the bomb ratio)."""
+    return name.startswith(("arrays/", "evidence/"))
+
+
 @dataclass(frozen=True)
 class _Archive:
     """An open case file whose directory passed :func:`check_members`."""
@@ -237,11 +244,13 @@ class _Archive:
     def read(self, name: str, limit: int | None = None) -> bytes:
         """A member's bytes, never decompressing more than its limit plus one byte."""
         cap = member_limit(name) if limit is None else min(limit, member_limit(name))
-        return read_member(self.zip, self.info(name), self.path, cap)
+        ratio = not (sized_in_case(name) and limit is not None)
+        return read_member(self.zip, self.info(name), self.path, cap, ratio=ratio)
 
     def open(self, name: str, limit: int) -> IO[bytes]:
         """A stream over a member that stops past ``limit`` bytes (see :func:`open_member`)."""
-        return open_member(self.zip, self.info(name), self.path, min(limit, member_limit(name)))
+        cap = min(limit, member_limit(name))
+        return open_member(self.zip, self.info(name), self.path, cap, ratio=not sized_in_case(name))
 
 
 def _as_case_error(error: InputError) -> CaseFileError:
@@ -255,7 +264,7 @@ def _open_zip(path: Path) -> Iterator[_Archive]:
     with contextlib.ExitStack() as stack:
         try:
             archive = stack.enter_context(open_archive(path))
-            members = check_members(archive, path, member_limit)
+            members = check_members(archive, path, member_limit, ratio_exempt=sized_in_case)
         except ZipLimitError as error:
             raise _as_case_error(error) from None
         except _DIRECTORY_ERRORS as error:
@@ -550,7 +559,8 @@ def _open_source(candidate: Path, stack: contextlib.ExitStack) -> _Archive | Non
     """A previous case file, opened with the reading limits; None if it cannot be used."""
     with contextlib.suppress(OSError, ZipLimitError, *_DIRECTORY_ERRORS):
         archive = stack.enter_context(open_archive(candidate))
-        return _Archive(archive, check_members(archive, candidate, member_limit), candidate)
+        members = check_members(archive, candidate, member_limit, ratio_exempt=sized_in_case)
+        return _Archive(archive, members, candidate)
     return None
 
 

@@ -182,6 +182,7 @@ def check_members(
     limit_for: Callable[[str], int],
     *,
     max_members: int = MAX_MEMBERS,
+    ratio_exempt: Callable[[str], bool] = lambda _name: False,
 ) -> dict[str, zipfile.ZipInfo]:
     """Every member of ``archive`` by name, after the checks listed in the module docstring.
 
@@ -189,6 +190,11 @@ def check_members(
     ----------
     limit_for : callable
         The largest decompressed size (bytes) accepted for a member name.
+    ratio_exempt : callable
+        Names whose exact size the caller knows from elsewhere and caps every read at
+        (a case's arrays and evidence, sized in ``case.json``): not judged by their
+        compression ratio, since a mostly empty mask or label volume deflates far beyond
+        :data:`MAX_RATIO` to one and is real data.
 
     Raises
     ------
@@ -243,8 +249,10 @@ def check_members(
                 f"{_mb(limit)} a member of its kind may be",
                 "it is padded or not a case file the workbench wrote",
             )
-        if info.file_size > RATIO_FLOOR_BYTES and info.file_size > MAX_RATIO * max(
-            info.compress_size, 1
+        if (
+            info.file_size > RATIO_FLOOR_BYTES
+            and info.file_size > MAX_RATIO * max(info.compress_size, 1)
+            and not ratio_exempt(name)
         ):
             ratio = info.file_size / max(info.compress_size, 1)
             raise ZipLimitError(
@@ -258,10 +266,13 @@ def check_members(
 
 
 # ---------------------------------------------------------------- reading
-def member_cap(info: zipfile.ZipInfo, limit: int) -> int:
-    """The most bytes read from ``info``: ``limit``, and the ratio limit on its packed size."""
+def member_cap(info: zipfile.ZipInfo, limit: int, *, ratio: bool = True) -> int:
+    """The most bytes read from ``info``: ``limit``, and (``ratio``) the ratio limit on its
+    packed size."""
     if info.compress_type == zipfile.ZIP_STORED:
         return min(limit, info.compress_size)
+    if not ratio:
+        return limit
     return min(limit, max(RATIO_FLOOR_BYTES, MAX_RATIO * info.compress_size))
 
 
@@ -313,7 +324,12 @@ class _CappedStream:
 
 
 def open_member(
-    archive: zipfile.ZipFile, info: zipfile.ZipInfo, source: PathArg, limit: int
+    archive: zipfile.ZipFile,
+    info: zipfile.ZipInfo,
+    source: PathArg,
+    limit: int,
+    *,
+    ratio: bool = True,
 ) -> IO[bytes]:
     """A stream over a member that raises :class:`MemberTooLarge` past the member's cap.
 
@@ -325,11 +341,17 @@ def open_member(
         raw = archive.open(info)
     except MEMBER_ERRORS as error:
         raise damaged(source, info.filename, error) from None
-    return cast(IO[bytes], _CappedStream(raw, source, info.filename, member_cap(info, limit)))
+    cap = member_cap(info, limit, ratio=ratio)
+    return cast(IO[bytes], _CappedStream(raw, source, info.filename, cap))
 
 
 def read_member(
-    archive: zipfile.ZipFile, info: zipfile.ZipInfo, source: PathArg, limit: int
+    archive: zipfile.ZipFile,
+    info: zipfile.ZipInfo,
+    source: PathArg,
+    limit: int,
+    *,
+    ratio: bool = True,
 ) -> bytes:
     """A member's bytes: at most its cap plus one byte is decompressed.
 
@@ -339,7 +361,7 @@ def read_member(
         Larger than ``limit`` (or its ratio limit: :class:`MemberTooLarge`), or damaged.
     """
     try:
-        with open_member(archive, info, source, limit) as stream:
+        with open_member(archive, info, source, limit, ratio=ratio) as stream:
             return stream.read()
     except MEMBER_ERRORS as error:
         raise damaged(source, info.filename, error) from None
