@@ -258,31 +258,31 @@ def _as_case_error(error: InputError) -> CaseFileError:
 
 
 @contextlib.contextmanager
+def _reading(path: Path, damaged: tuple[type[BaseException], ...]) -> Iterator[None]:
+    """Errors of reading the case file ``path`` as :class:`CaseFileError` (``damaged``: the
+    library errors that mean a damaged or truncated file)."""
+    try:
+        yield
+    except ZipLimitError as error:
+        raise _as_case_error(error) from None
+    except damaged as error:
+        raise CaseFileError(
+            path, f"the file is damaged or truncated ({error})", "restore it from a backup"
+        ) from None
+    except OSError as error:
+        raise CaseFileError(path, f"cannot read the file ({error})") from None
+
+
+@contextlib.contextmanager
 def _open_zip(path: Path) -> Iterator[_Archive]:
     if not path.is_file():
         raise CaseFileError(path, "no such case file")
     with contextlib.ExitStack() as stack:
-        try:
+        with _reading(path, _DIRECTORY_ERRORS):
             archive = stack.enter_context(open_archive(path))
             members = check_members(archive, path, member_limit, ratio_exempt=sized_in_case)
-        except ZipLimitError as error:
-            raise _as_case_error(error) from None
-        except _DIRECTORY_ERRORS as error:
-            raise CaseFileError(
-                path, f"the file is damaged or truncated ({error})", "restore it from a backup"
-            ) from None
-        except OSError as error:
-            raise CaseFileError(path, f"cannot read the file ({error})") from None
-        try:
+        with _reading(path, _ZIP_ERRORS):
             yield _Archive(archive, MappingProxyType(members), path)
-        except ZipLimitError as error:
-            raise _as_case_error(error) from None
-        except _ZIP_ERRORS as error:
-            raise CaseFileError(
-                path, f"the file is damaged or truncated ({error})", "restore it from a backup"
-            ) from None
-        except OSError as error:
-            raise CaseFileError(path, f"cannot read the file ({error})") from None
 
 
 def _read_stored(archive: _Archive) -> dict[str, Any]:
