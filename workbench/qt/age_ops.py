@@ -802,13 +802,13 @@ class AgeTool(QObject):
         age = self.shown_age
         parts = [f"From {s.from_age:g} y ({s.sex})."]
         if self.source is not None:
-            from workbench.services.age_job import check_head_sex
+            from workbench.services.age_job import sex_mismatch
 
             # the command line refuses this without --allow-sex-mismatch; the dock, where the
             # sex is chosen on purpose, says it beside the results
-            mismatch = check_head_sex(self.source.head, s.sex, "the head", allow_mismatch=True)
+            mismatch = sex_mismatch(self.source.head, s.sex)
             if mismatch:
-                parts.append(f"Warning: {mismatch.split(' (--allow')[0]}.")
+                parts.append(f"Warning: {mismatch}.")
         if age is None:
             parts.append("No aged head yet.")
         else:

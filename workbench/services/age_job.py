@@ -55,11 +55,25 @@ def parse_ages(text: str) -> tuple[float, ...]:
     return tuple(ages)
 
 
+def _own_sex(head: TemplateHead | str) -> str:
+    """``head``'s recorded sex, or ``head`` itself when it is that sex's name."""
+    return (head if isinstance(head, str) else str(head.sex or "")).lower()
+
+
+def sex_mismatch(head: TemplateHead | str, sex: str) -> str | None:
+    """``"a female head aged with the male norms"`` when ``sex`` is not the head's own
+    (``head``'s recorded ``sex``, or that sex itself); None when it is or is not known."""
+    own = _own_sex(head)
+    if own not in ("female", "male") or own == sex:
+        return None
+    return f"a {own} head aged with the {sex} norms"
+
+
 def check_head_sex(
     head: TemplateHead | str, sex: str, source: str, *, allow_mismatch: bool = False
 ) -> str | None:
-    """Refuse norms of the other sex than the head's own (``head``'s recorded ``sex``, or
-    that sex itself, e.g. from ``reference:female`` before the head is loaded).
+    """Refuse norms of the other sex than the head's own (see :func:`sex_mismatch`; e.g.
+    ``reference:female`` before the head is loaded).
 
     The z-scores are read against the norms of ``sex``; a female head measured
     against male norms starts 1-2 SD off in most facial measurements, and its
@@ -68,9 +82,10 @@ def check_head_sex(
     ``allow_mismatch`` (then the returned warning goes into the report).
     ``source`` names the head (``reference:female``, a pack folder).
     """
-    own = (head if isinstance(head, str) else str(head.sex or "")).lower()
-    if own not in ("female", "male") or own == sex:
+    mismatch = sex_mismatch(head, sex)
+    if mismatch is None:
         return None
+    own = _own_sex(head)
     if not allow_mismatch:
         raise InputError(
             source,
@@ -78,10 +93,7 @@ def check_head_sex(
             f"give --sex {own}, or add --allow-sex-mismatch to age the {own} head with the "
             f"{sex} norms on purpose",
         )
-    return (
-        f"a {own} head aged with the {sex} norms (--allow-sex-mismatch): its z-scores are "
-        "read against the other sex's norms"
-    )
+    return f"{mismatch} (--allow-sex-mismatch): its z-scores are read against the other sex's norms"
 
 
 def age_series(
