@@ -365,3 +365,28 @@ def test_core_font_fallback_transliterates(written, tmp_path: Path, monkeypatch)
     report["pictures"] = {}
     text, _ = pdf_text(write_report_pdf(report, tmp_path / "core.pdf"))
     assert CASE_ID in text and "Kähler" in text and "Hona" in text
+
+
+def test_a_long_table_wraps_its_cells_and_repeats_its_heading_on_each_page(tmp_path) -> None:
+    """The report's own table drawing: words wrap inside their column (a word wider than
+    the column is cut), the heading row comes again at the top of every page the table
+    runs on, and no text is lost."""
+    doc = pdf_module.ReportPDF("case-1", "2026-12-05", "workbench test")
+    doc.add_page()
+    long_word = "x" * 120
+    rows = [
+        (f"row{i:03d}", f"the {i}th value with a few words to wrap", long_word if i == 5 else "-")
+        for i in range(120)
+    ]
+    doc.grid(("code", "description", "note"), rows, (20, 40, 30))
+    path = tmp_path / "t.pdf"
+    doc.output(str(path))
+    reader = pypdf.PdfReader(path)
+    assert len(reader.pages) >= 3
+    texts = [page.extract_text() for page in reader.pages]
+    for text in texts:  # the heading row at the top of each page
+        assert text.lstrip().startswith("code")
+    flat = " ".join(" ".join(texts).split())
+    for i in range(120):
+        assert f"row{i:03d}" in flat and f"the {i}th value" in flat
+    assert flat.replace(" ", "").count("x" * 120) == 1  # cut into pieces, all of them kept

@@ -237,35 +237,120 @@ class ReportPDF(FPDF):
         size: float = 8,
         col_styles: dict[int, FontFace] | None = None,
     ) -> None:
-        """A table with a heading row; ``styles`` per row, ``col_styles`` per column."""
+        """A table with a heading row; ``styles`` per row, ``col_styles`` per column.
+
+        Drawn here cell by cell (word wrap from the font's widths, one ``cell`` per
+        line) rather than with fpdf's ``table``, whose layout of a report's ~1,800
+        cells took 1.2 s of a 20 s job.  Every other data row is shaded; the heading
+        row is bold on blue-grey, ruled below, and repeated at the top of each page
+        the table continues on.
+        """
+        aligns = list(aligns or ["L"] * len(widths))
+        base = FontFace(family=self.sans, emphasis=None, size_pt=size)
+        head_face = FontFace(
+            family=self.sans,
+            emphasis="B" if "B" in self.styles else None,
+            size_pt=size,
+            fill_color=(232, 238, 246),
+        )
+        lines_h = size * 0.5
+        pad = (0.8, 1.2, 0.8, 1.2)  # top, right, bottom, left (mm)
+        x0 = self.l_margin
+
+        def use(face: FontFace | None) -> None:
+            face = face or base
+            family = face.family or self.sans
+            style = face.emphasis.style if face.emphasis is not None else ""
+            if family == self.sans:  # only the faces found (bold may be missing)
+                style = "".join(ch for ch in style if ch in self.styles)
+            self.set_font(family, style, face.size_pt or size)
+            self.set_text_color(face.color if face.color is not None else DARK)
+
+        def layout(values: Sequence[Any], faces: Sequence[FontFace | None]) -> list[list[str]]:
+            out = []
+            for value, width, face in zip(values, widths, faces, strict=True):
+                use(face)
+                out.append(self._wrap(self.t(value), width - pad[1] - pad[3]))
+            return out
+
+        def draw(values: Sequence[Any], faces: Sequence[FontFace | None], fill) -> None:
+            cells = layout(values, faces)
+            height = max(len(c) for c in cells) * lines_h + pad[0] + pad[2]
+            if self.get_y() + height > self.page_break_trigger and not drawing_head[0]:
+                self.add_page(orientation=str(self.cur_orientation.value))
+                if headers:
+                    drawing_head[0] = True
+                    draw(headers, [head_face] * len(widths), head_face.fill_color)
+                    drawing_head[0] = False
+            y = self.get_y()
+            x = x0
+            for lines, width, face, align in zip(cells, widths, faces, aligns, strict=True):
+                colour = (face.fill_color if face is not None else None) or fill
+                if colour is not None:
+                    self.set_fill_color(colour)
+                    self.rect(x, y, width, height, style="F")
+                use(face)
+                for k, line in enumerate(lines):
+                    self.set_xy(x + pad[3], y + pad[0] + k * lines_h)
+                    self.cell(width - pad[1] - pad[3], lines_h, line, align=align)
+                x += width
+            self.set_xy(x0, y + height)
+            self.set_fill_color(255, 255, 255)  # each row sets its own shading again
+            if drawing_head[0]:
+                rule[0] = y + height
+            if rule[0] is not None:  # again after the row below, whose shading covers it
+                self.set_draw_color(*DARK)
+                self.set_line_width(0.2)
+                self.line(x0, rule[0], x0 + sum(widths), rule[0])
+                if not drawing_head[0]:
+                    rule[0] = None
+
+        drawing_head = [False]
+        rule: list[float | None] = [None]
+        self.set_x(x0)
+        if headers:
+            # the heading row is not left alone at the foot of a page
+            first = layout(headers, [head_face] * len(widths))
+            need = 2 * (max(len(c) for c in first) * lines_h + pad[0] + pad[2])
+            if self.get_y() + need > self.page_break_trigger:
+                self.add_page(orientation=str(self.cur_orientation.value))
+            drawing_head[0] = True
+            draw(headers, [head_face] * len(widths), head_face.fill_color)
+            drawing_head[0] = False
+        for i, values in enumerate(rows):
+            faces = [
+                (col_styles or {}).get(j) or (styles[i] if styles else None)
+                for j in range(len(widths))
+            ]
+            draw(values, faces, (247, 247, 247) if i % 2 == 0 else None)
+        self.set_text_color(*DARK)
         self.font(size)
-        self.set_fill_color(247, 247, 247)
-        aligns = aligns or ["L"] * len(widths)
-        with self.table(
-            col_widths=tuple(widths),
-            width=sum(widths),
-            align="LEFT",
-            borders_layout="SINGLE_TOP_LINE" if headers else "NONE",
-            first_row_as_headings=bool(headers),
-            line_height=size * 0.5,
-            padding=(0.8, 1.2, 0.8, 1.2),
-            text_align="LEFT",
-            headings_style=FontFace(
-                emphasis="BOLD" if "B" in self.styles else None, fill_color=(232, 238, 246)
-            ),
-            cell_fill_color=(247, 247, 247),
-            cell_fill_mode="ROWS",
-        ) as table:
-            if headers:
-                head = table.row()
-                for text, align in zip(headers, aligns, strict=True):
-                    head.cell(self.t(text), align=align)
-            for i, values in enumerate(rows):
-                row = table.row()
-                for j, (value, align) in enumerate(zip(values, aligns, strict=True)):
-                    style = (col_styles or {}).get(j) or (styles[i] if styles else None)
-                    row.cell(self.t(value), align=align, style=style)
         self.ln(2)
+
+    def _wrap(self, text: str, width: float) -> list[str]:
+        """``text`` broken into lines no wider than ``width`` mm in the current font: at
+        spaces, at its own line breaks, and inside a word only when the word alone is wider."""
+        out: list[str] = []
+        space = self.get_string_width(" ")
+        for paragraph in text.split("\n"):
+            line, used = "", 0.0
+            for word in paragraph.split(" "):
+                w = self.get_string_width(word)
+                if line and used + space + w <= width:
+                    line, used = f"{line} {word}", used + space + w
+                    continue
+                if line:
+                    out.append(line)
+                while w > width and len(word) > 1:  # a word wider than the column
+                    cut = len(word)
+                    while cut > 1 and self.get_string_width(word[:cut]) > width:
+                        cut -= 1
+                    out.append(word[:cut])
+                    word = word[cut:]
+                    w = self.get_string_width(word)
+                line, used = word, w
+            out.append(line)
+        return out or [""]
 
     def key_values(
         self,
