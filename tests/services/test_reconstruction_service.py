@@ -191,3 +191,43 @@ def test_the_cli_job_and_the_window_job_give_the_same_face(
     ):
         assert report[key] == json.loads(json.dumps(mine[key])), key
     assert report["case_id"] == case.meta.case_id != mine["case_id"]
+
+
+# ---------------------------------------------------------------- the working skull
+def _big_sphere() -> Mesh:
+    """A closed sphere of ~300k triangles (over MAX_WORKING_TRIANGLES), radius 80 mm."""
+    import pyvista as pv
+
+    s = pv.Sphere(radius=80.0, theta_resolution=390, phi_resolution=390).triangulate()
+    return Mesh(np.asarray(s.points, float), s.faces.reshape(-1, 4)[:, 1:])
+
+
+def test_a_prefetched_working_skull_is_the_one_decimated_in_place(monkeypatch) -> None:
+    from workbench.core import helper_process
+    from workbench.services import reconstruction_service as rs
+
+    big = _big_sphere()
+    assert big.n_faces > rs.MAX_WORKING_TRIANGLES
+    direct, notes = rs.working_skull(big)
+    assert direct.n_faces <= rs.WORKING_TRIANGLES * 1.01 and "decimated" in notes[0]
+    calls: list[int] = []
+    real = helper_process.call
+    monkeypatch.setattr(
+        helper_process, "call", lambda name, *a: calls.append(len(a[1])) or real(name, *a)
+    )
+    rs.prefetch_working_skull(big)
+    # the same surface read again (another object, equal arrays) takes the prefetched result
+    again = Mesh(big.vertices.copy(), big.faces.copy())
+    work, _ = rs.working_skull(again)
+    assert calls == [big.n_faces]
+    assert np.array_equal(work.vertices, direct.vertices)
+    assert np.array_equal(work.faces, direct.faces)
+    # taken once: a second fit of the same skull decimates it itself, and another skull
+    # never takes a prefetched result
+    rs.prefetch_working_skull(big)
+    other = Mesh(big.vertices * 1.01, big.faces)
+    assert rs.working_skull(other)[0].n_faces <= rs.WORKING_TRIANGLES * 1.01
+    assert len(calls) == 2 and rs._prefetched(big) is not None
+    # a small skull is used as it is and starts nothing
+    rs.prefetch_working_skull(tetra())
+    assert len(calls) == 2 and rs.working_skull(tetra())[0].n_faces == 4

@@ -26,7 +26,10 @@ Arrays cross as pickles (a 100k-triangle mesh is ~3.6 MB: a few ms).
 Who uses it: library code calls :func:`run`, which runs the function right
 there, unless the calling thread has opted in with :func:`offload_here`
 (the desktop window's worker threads do); then it goes to the child.
-Command-line runs and scripts thus never start a second process.
+:func:`call` always goes to the child: the reconstruction job uses it to
+decimate a large skull on the second core while its checks run
+(:func:`workbench.services.reconstruction_service.prefetch_working_skull`).
+Other command-line runs and scripts never start a second process.
 """
 
 from __future__ import annotations

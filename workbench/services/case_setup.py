@@ -8,6 +8,7 @@ the working copy, and the evidence record notes it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -19,7 +20,7 @@ from workbench.commands.case_edits import AddEvidence, SetSpecimen
 from workbench.commands.landmarks import ReplaceLandmarkSet
 from workbench.commands.stack import CommandStack
 from workbench.core.errors import InputError
-from workbench.core.mesh import validate
+from workbench.core.mesh import Mesh, validate
 from workbench.core.units import check_units_choice, resolve_units
 from workbench.io.case_file import load_case
 from workbench.io.catalogue import load_catalogue
@@ -52,6 +53,7 @@ def start_case_from_skull(
     scale: float | None = None,
     examiner: str = "",
     landmarks_path: str | PathLike[str] | None = None,
+    on_read: Callable[[Mesh], None] | None = None,
 ) -> OpenedCase:
     """New case whose specimen is the skull mesh at ``skull_path``.
 
@@ -68,6 +70,10 @@ def start_case_from_skull(
     landmarks_path : path, optional
         Skull landmarks to import (``.mrk.json``, ``.fcsv``, ``.pp``, ``.csv``),
         in the same frame and units as the skull file.
+    on_read : callable, optional
+        Called with the skull mesh (mm) once it is read and its units and shape are
+        accepted, before the slower checks and the case set-up: the reconstruction
+        job starts its working skull's decimation there.
     """
     path = Path(skull_path)
     check_units_choice(units, scale)
@@ -75,6 +81,8 @@ def start_case_from_skull(
     if scale is None and units == "auto":
         resolve_units(read.units, "auto", source=str(path))
     check_skull_mesh(read.mesh, path, units_note=read.units.confirmed)
+    if on_read is not None:
+        on_read(read.mesh)
     factor = read.scale_applied
     units_note = "millimetres" if factor == 1.0 else f"file units x {factor:g} = mm"
     case = Case(meta=CaseMeta.new(examiner=examiner))

@@ -53,6 +53,7 @@ from workbench.services.reconstruction_service import (
     WORKING_TRIANGLES,
     FitInputs,
     FitResult,
+    prefetch_working_skull,
     run_fit,
 )
 from workbench.services.tissue_model import TissueSettings
@@ -185,6 +186,7 @@ def run_reconstruction(
         scale=settings.scale,
         examiner=settings.examiner,
         landmarks_path=settings.landmarks,
+        on_read=prefetch_working_skull,
     )
     case, stack = opened.case, opened.stack
     record_settings(opened, settings)

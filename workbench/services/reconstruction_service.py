@@ -25,8 +25,10 @@ Horizontal), where ``skull_h`` and the guide values are.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
@@ -61,7 +63,7 @@ Progress = Callable[[str], None]
 PathArg = str | PathLike[str]
 #: skulls larger than this are decimated to WORKING_TRIANGLES for the fit
 MAX_WORKING_TRIANGLES = 250_000
-WORKING_TRIANGLES = 200_000
+WORKING_TRIANGLES = 100_000
 #: fit internals when the caller gives none (frozen, shared)
 DEFAULT_TISSUE = TissueSettings()
 
@@ -274,6 +276,51 @@ class FitResult:
         return self.references["spread"]
 
 
+_PREFETCH_LOCK = threading.Lock()
+#: decimations started by :func:`prefetch_working_skull`: (vertices, faces, result)
+_PREFETCHED: list[tuple[np.ndarray, np.ndarray, Future]] = []
+
+
+def prefetch_working_skull(skull: Mesh) -> None:
+    """Start decimating a large ``skull`` now, in the helper process
+    (:mod:`workbench.core.helper_process`; a thread waits on it), so that the checks
+    and the case set-up that follow a read run meanwhile on the other core; the next
+    :func:`working_skull` of the same mesh takes the result.  Small skulls: nothing."""
+    if skull.n_faces <= MAX_WORKING_TRIANGLES:
+        return
+    from workbench.core import helper_process
+
+    future: Future = Future()
+    vertices, faces = skull.vertices, skull.faces
+
+    def work() -> None:
+        try:
+            future.set_result(
+                helper_process.call(
+                    "workbench.core.isosurface:decimate", vertices, faces, WORKING_TRIANGLES
+                )
+            )
+        except BaseException as exc:  # noqa: BLE001 - handed to the one who waits
+            future.set_exception(exc)
+
+    with _PREFETCH_LOCK:  # one job at a time: an earlier one's skull is not wanted now
+        _PREFETCHED[:] = [(vertices, faces, future)]
+    threading.Thread(target=work, name="working-skull", daemon=True).start()
+
+
+def _prefetched(skull: Mesh) -> Future | None:
+    """The decimation :func:`prefetch_working_skull` started for a mesh equal to ``skull``."""
+    with _PREFETCH_LOCK:
+        for i, (v, f, future) in enumerate(_PREFETCHED):
+            same = (v is skull.vertices or np.array_equal(v, skull.vertices)) and (
+                f is skull.faces or np.array_equal(f, skull.faces)
+            )
+            if same:
+                del _PREFETCHED[i]
+                return future
+    return None
+
+
 def working_skull(skull: Mesh, say: Progress = lambda _m: None) -> tuple[Mesh, list[str]]:
     """The skull the fit works on (large scans decimated) and a note if it was."""
     if skull.n_faces <= MAX_WORKING_TRIANGLES:
@@ -281,7 +328,11 @@ def working_skull(skull: Mesh, say: Progress = lambda _m: None) -> tuple[Mesh, l
     # Kähler §8.6.4: a 50-250k-triangle working mesh keeps the editor
     # responsive; the original stays in the case as evidence
     say(f"decimating the working skull {skull.n_faces} -> {WORKING_TRIANGLES} triangles ...")
-    v, f = decimate(skull.vertices, skull.faces, WORKING_TRIANGLES)
+    started = _prefetched(skull)
+    if started is not None:
+        v, f = started.result()
+    else:
+        v, f = decimate(skull.vertices, skull.faces, WORKING_TRIANGLES)
     work = Mesh(v, f)
     return work, [
         f"working skull decimated from {skull.n_faces} to {work.n_faces} triangles "
