@@ -162,13 +162,26 @@ def hinted_registration(base: Base, sex: str, work: Mesh | None = None) -> Skull
     )
 
 
-def _truth_record(base: Base, reg: SkullRegistration, head: TemplateHead) -> dict[str, Any]:
+def snapped_input(reg: SkullRegistration, work: Mesh, codes=SIX) -> dict[str, np.ndarray]:
+    """The landmarks a user receives (input frame): the registration's, each with a snap
+    rule moved to its feature on ``work`` as ``reconstruct`` does
+    (:func:`workbench.services.landmark_snap.snap_suggested`; of the six, g has a rule)."""
+    from workbench.services.landmark_snap import snap_suggested
+
+    snapped, _ = snap_suggested(work, reg.landmarks)
+    return {c: np.asarray(snapped[c].position, np.float64) for c in codes}
+
+
+def _truth_record(
+    base: Base, reg: SkullRegistration, head: TemplateHead, work: Mesh
+) -> dict[str, Any]:
     back = np.linalg.inv(reg.input_to_head)
     point_h, dir_h = condylar_axis_h(reg, head)
     pose = jaw_pose(reg, point_h)
     lms = landmarks_input(reg)
     return {
         "landmarks": {c: p for c, p in lms.items()},
+        "landmarks_snapped": snapped_input(reg, work),
         "input_to_head": reg.input_to_head,
         "mirrored": bool(reg.mirrored),
         "reference_scale": reg.reference_scale,
@@ -280,7 +293,7 @@ def compute_truth(name: str, root: Path | None = None) -> dict[str, Any]:
         "code_root": str(code_root()),
         "head_hash": head.content_hash,
         "clean_mesh": {"n_vertices": work.n_vertices, "n_faces": work.n_faces},
-        **_truth_record(base, reg, head),
+        **_truth_record(base, reg, head, work),
     }
     # the jaw pose measured against each reference a run may use
     jaws = {base.sex: record["jaw"]}
@@ -288,10 +301,11 @@ def compute_truth(name: str, root: Path | None = None) -> dict[str, Any]:
     for sex in {EVAL_SEX} - {base.sex}:
         other_head = reference_head(sex)
         other = hinted_registration(base, sex, work)
-        rec = _truth_record(base, other, other_head)
+        rec = _truth_record(base, other, other_head, work)
         jaws[sex] = rec["jaw"]
         others[sex] = {
             "landmarks": rec["landmarks"],
+            "landmarks_snapped": rec["landmarks_snapped"],
             "landmark_difference_mm": {
                 c: float(np.linalg.norm(rec["landmarks"][c] - record["landmarks"][c])) for c in SIX
             },

@@ -57,6 +57,10 @@ def test_an_open_jaw_in_a_mirrored_turned_cm_file_is_found(corpus_root: Path) ->
     # the same pose as the hint gives on this very mesh, and near the clean one
     assert row["max_error_vs_hinted_same_mesh_mm"] < 5.0
     assert row["max_error_mm"] < 10.0
+    # the landmarks as a user receives them (g snapped to the brow's most forward point) are
+    # scored against the truth's, snapped alike, in the file's own (mirrored, cm) frame
+    assert set(raw["landmarks_snapped"]) == set(truth.SIX)
+    assert row["max_error_snapped_mm"] < 10.0
     assert row["mandible_found"]
     assert abs(row["opening_error_deg"]) < 4.0
 
