@@ -247,3 +247,24 @@ def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):
     assert np.linalg.norm(out["g"].position - g.position) < 3.0
     np.testing.assert_array_equal(out["n"].position, moved["n"].position)
     assert out["g"].status == "suggested"
+
+
+def test_a_suggested_midline_landmark_without_a_rule_goes_onto_the_midline(skull):
+    """The dense registration may leave nasion beside the midline: snap_suggested puts a
+    suggested one on the midsagittal plane (a placed one is the user's and stays)."""
+    from workbench.services.landmark_snap import snap_suggested
+
+    mesh, lms, to_head, index = skull
+    off = index.closest_points(
+        _input(to_head, _head(to_head, lms["n"].position) + [3.0, 0, 0])[None]
+    ).points[0]
+    suggested = lms.with_landmark(lms["n"].moved(off, "suggested"))
+    out, notes = snap_suggested(mesh, suggested)
+    frame = snap_frame(suggested)
+    assert abs(_head(frame, out["n"].position)[0]) < 1e-6
+    assert abs(_head(frame, off)[0]) > 2.0
+    assert out["n"].status == "suggested"
+    assert any(note.startswith("n has no snap rule") and "midsagittal" in note for note in notes)
+    placed = lms.with_landmark(lms["n"].moved(off, "placed"))
+    kept, _ = snap_suggested(mesh, placed)
+    np.testing.assert_array_equal(kept["n"].position, off)

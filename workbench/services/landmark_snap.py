@@ -377,18 +377,28 @@ def _onto_midline(
 def snap_suggested(
     mesh: Mesh, landmarks: LandmarkSet, *, catalogue: LandmarkCatalogue | None = None
 ) -> tuple[LandmarkSet, list[str]]:
-    """Every *suggested* landmark with a snap rule moved to its feature (input frame, mm).
+    """Every *suggested* landmark with a snap rule moved to its feature, and every other
+    suggested midline landmark onto the midsagittal plane (input frame, mm).
 
     Used after the dense registration: the registration puts a landmark
     where the reference's landmark lands, the rule then puts it on the
-    feature its definition names (most anterior, lowest, deepest ...).
-    Placed landmarks are the user's and never move.  Returns the new set and
-    one note per moved landmark; without a head frame (no porions or
-    orbitales) nothing moves and the note says why.
+    feature its definition names (most anterior, lowest, deepest ...).  A
+    midline landmark without a rule (n, rhi, pr, ...) goes to the nearest
+    point of the surface's midline profile: the dense registration left the
+    VHP male's nasion up to 3.8 mm to one side of the midline on the
+    robustness corpus, and a midline landmark lies on that plane by its
+    definition.  Placed landmarks are the user's and never move.  Returns the
+    new set and one note per moved landmark; without a head frame (no porions
+    or orbitales) nothing moves and the note says why.
     """
     catalogue = catalogue or load_catalogue()
     rules = load_snap_rules()
-    todo = [lm.code for lm in landmarks if lm.status == "suggested" and lm.code in rules]
+
+    def snaps(code: str) -> bool:
+        entry = catalogue.get(code, "skull")
+        return code in rules or (entry is not None and entry.side == "midline")
+
+    todo = [lm.code for lm in landmarks if lm.status == "suggested" and snaps(lm.code)]
     if not todo:
         return landmarks, []
     try:
