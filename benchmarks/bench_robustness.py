@@ -4,8 +4,8 @@ the way other programs make them.
 
 Builds the corpus when missing (``benchmarks/results/corpus/meshes/``, git-ignored; meshes
 derived from the CTs are never committed), registers every variant with no hints, no seeds
-and the male reference, and scores it against its truth (the base CT's clean hinted
-registration carried through the same transforms).  Units mm and degrees; the landmarks
+and the male reference, and scores it against its truth (the medians of the base CT's
+hinted registrations at the variants' bone levels, carried through the same transforms).  Units mm and degrees; the landmarks
 are compared in each file's own frame.  Run from the repository root::
 
     WORKBENCH_SAMPLE_MIRRORS=../shared/data .venv/bin/python benchmarks/bench_robustness.py \

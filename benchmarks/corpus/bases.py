@@ -174,6 +174,24 @@ def load_volume(name: str) -> Volume:
     return read_volume(base.path)
 
 
+#: the bone levels the variants are extracted at (HU, or multi-Otsu)
+ISO_LEVELS = ("250", "300", "400", "500", "700", "otsu")
+
+
+def iso_level(base: Base, iso: str, volume: Volume) -> tuple[float, str]:
+    """The level of a spec's ``iso`` in the base's units, and the rule."""
+    if iso == "otsu":
+        from skimage.filters import threshold_multiotsu
+
+        _, t_high = threshold_multiotsu(classes=3, hist=volume.histogram())
+        return float(t_high), "multi-Otsu (3 classes) of the edited volume"
+    hu = float(iso)
+    if base.raw:
+        # raw CT numbers ~ HU + 1024; never below the VTK bone level (1150)
+        return max(base.value(hu), 1150.0), f"{hu:g} HU as raw HU + 1024 (at least 1150)"
+    return hu, f"{hu:g} HU"
+
+
 def with_data(volume: Volume, data: np.ndarray) -> Volume:
     """``volume`` with other voxel values (same geometry, source and units)."""
     return dataclasses.replace(volume, data=data)

@@ -12,12 +12,16 @@ and scores can be recomputed against a newer truth without registering again.
 Scores of one variant (:func:`score`):
 
 * orientation right: all six landmarks (g, n, po_l, po_r, or_l, or_r) within
-  :data:`LANDMARK_TOLERANCE_MM` of the truth — the base's hinted registration
-  with the reference head this run uses (the base's own-sex reference's is
+  :data:`LANDMARK_TOLERANCE_MM` of the truth — the medians of the base's hinted
+  registrations at every bone level the variants use (one per level, see
+  :func:`benchmarks.corpus.truth.compute_truth`), with the reference head this
+  run uses (the base's own-sex reference's is
   reported beside it: two references put a landmark a few mm apart, which is
   not a matter of orientation); for a mirrored file (whose
   left/right cannot be known from its shape) the swapped labelling counts too,
-  and how many came out swapped is reported;
+  and how many came out swapped is reported; the same again for the landmarks a
+  user receives (g snapped to its feature, the other midline landmarks onto the
+  midline: ``landmarks_snapped``);
 * mandible found (``reg.part("mandible").present``) when the variant has one,
   and a false mandible when it has none;
 * jaw opening error (found − truth, degrees), within
@@ -165,6 +169,10 @@ def _worker(args: tuple[dict[str, Any], str | None, bool]) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------- scoring
+def _defined(p: Any) -> bool:
+    return p is not None and all(v is not None for v in p)
+
+
 def _max_error(found: dict, truth: dict, names: dict[str, str] | None = None) -> float:
     names = names or {c: c for c in SIX}
     return float(
@@ -227,7 +235,14 @@ def score(raw: dict[str, Any], entry: dict[str, Any], base_truth: dict[str, Any]
     snapped = raw.get("landmarks_snapped")
     source = other if other is not None else base_truth
     if snapped is not None and "landmarks_snapped" in source:
-        truth_s = {c: apply(x, np.asarray(source["landmarks_snapped"][c])) for c in SIX}
+        # a landmark the registration marks absent (too little bone seen there) is not in
+        # the user's file; the pose used its inferred place, which stands in for it here
+        snapped = {c: p if _defined(p) else found[c] for c, p in snapped.items()}
+        truth_s = {
+            c: apply(x, np.asarray(p if _defined(p) else source["landmarks"][c]))
+            for c, p in source["landmarks_snapped"].items()
+            if c in SIX
+        }
         e_s = _max_error(snapped, truth_s)
         if row["mirrored_file"]:
             e_s = min(e_s, _max_error(snapped, truth_s, SWAPPED))

@@ -62,8 +62,10 @@ from benchmarks.corpus.bases import (
     EXTRA,
     MANDIBLE,
     OTHER,
+    ISO_LEVELS,
     Base,
     index_matrix,
+    iso_level,
     load_volume,
     voxel_points,
     with_data,
@@ -99,7 +101,7 @@ SEED = 28_2028
 COUNTS = {"vhp_female": 92, "vhp_male": 80, "headsq": 58}
 CUT_COUNTS = {"vhp_female": 10, "vhp_male": 8, "headsq": 0}
 
-ISO = ("250", "300", "400", "500", "700", "otsu")
+ISO = ISO_LEVELS
 COMPONENTS = ("largest", "over5", "all")
 SMOOTH = ("none", "taubin")
 TRIANGLES = (50_000, 100_000, 200_000, 0)  # 0: full resolution
@@ -750,20 +752,6 @@ def vault_plane(spec: VariantSpec, anchor: Anchor) -> tuple[np.ndarray, np.ndarr
 
 
 # ---------------------------------------------------------------- surface
-def iso_level(base: Base, iso: str, volume: Volume) -> tuple[float, str]:
-    """The level of a spec's ``iso`` in the base's units, and the rule."""
-    if iso == "otsu":
-        from skimage.filters import threshold_multiotsu
-
-        _, t_high = threshold_multiotsu(classes=3, hist=volume.histogram())
-        return float(t_high), "multi-Otsu (3 classes) of the edited volume"
-    hu = float(iso)
-    if base.raw:
-        # raw CT numbers ~ HU + 1024; never below the VTK bone level (1150)
-        return max(base.value(hu), 1150.0), f"{hu:g} HU as raw HU + 1024 (at least 1150)"
-    return hu, f"{hu:g} HU"
-
-
 def keep_components(mesh: Mesh, how: str) -> tuple[Mesh, dict[str, Any]]:
     """Largest / every component over 5 % of the triangles / everything."""
     from workbench.core.isosurface import face_component_labels

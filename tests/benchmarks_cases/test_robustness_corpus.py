@@ -219,3 +219,33 @@ def test_an_opened_jaw_moves_its_voxels_as_recorded(corpus_root: Path) -> None:
     # a detached one is a piece of its own
     alone = variants.build_variant(_headsq_spec(index=903, mandible="detached"), corpus_root)
     assert alone["build"]["detach"]["separate_piece"]
+
+
+def test_the_truth_is_the_median_over_the_bone_levels() -> None:
+    """The truth's landmarks and openings are medians over one hinted registration per
+    bone level, coordinate by coordinate; a landmark a level left undefined does not count,
+    and the mandible is present when most levels found it."""
+    nan = np.full(3, np.nan)
+
+    def record(shift: float, opening: float, snapped_g=None, present=True) -> dict:
+        lms = {c: np.array([shift, 2 * shift, 0.0]) for c in truth.SIX}
+        snapped = dict(lms, g=nan if snapped_g is None else snapped_g)
+        return {
+            "landmarks": lms,
+            "landmarks_snapped": snapped,
+            "jaw": {"opening_deg": opening, "reported_opening_deg": opening + 1, "x": shift},
+            "mandible_present": present,
+        }
+
+    records = [
+        record(0.0, 5.0, np.array([1.0, 1.0, 1.0])),
+        record(1.0, 9.0, present=False),
+        record(10.0, 6.0, np.array([3.0, 3.0, 3.0])),
+    ]
+    out = truth._median_record(records)
+    np.testing.assert_allclose(out["landmarks"]["n"], [1.0, 2.0, 0.0])  # not the 10 mm one
+    np.testing.assert_allclose(out["landmarks_snapped"]["g"], [2.0, 2.0, 2.0])  # NaN left out
+    assert out["jaw"]["opening_deg"] == 6.0 and out["jaw"]["reported_opening_deg"] == 7.0
+    assert out["jaw"]["x"] == 0.0  # other jaw figures: the first level's
+    assert out["mandible_present"]
+    assert truth.ISO_LEVELS == variants.ISO  # taken at the variants' own levels
