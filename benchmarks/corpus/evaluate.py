@@ -452,6 +452,7 @@ CSV_FIELDS = (
     "max_error_direct_mm",
     "max_error_own_sex_reference_mm",
     "max_error_vs_hinted_same_mesh_mm",
+    "max_error_snapped_mm",
     "mirrored_file",
     "swapped",
     "has_mandible",
