@@ -202,7 +202,7 @@ def snapped_input(reg: SkullRegistration, work: Mesh, codes=SIX) -> dict[str, np
     (:func:`workbench.services.landmark_snap.snap_suggested`; of the six, g has a rule)."""
     from workbench.services.landmark_snap import snap_suggested
 
-    snapped, _ = snap_suggested(work, reg.landmarks)
+    snapped, _ = snap_suggested(work, reg.landmarks, fallback_frame=reg.input_to_head)
     return {c: np.asarray(snapped[c].position, np.float64) for c in codes}
 
 

@@ -268,3 +268,23 @@ def test_a_suggested_midline_landmark_without_a_rule_goes_onto_the_midline(skull
     placed = lms.with_landmark(lms["n"].moved(off, "placed"))
     kept, _ = snap_suggested(mesh, placed)
     np.testing.assert_array_equal(kept["n"].position, off)
+
+
+def test_without_porions_the_registration_frame_is_used(skull):
+    """The registration marks a porion absent where it saw too little bone; the suggested
+    landmarks are then snapped in the registration's own head frame, not left where the
+    dense fit put them."""
+    from workbench.services.landmark_snap import snap_suggested
+
+    mesh, lms, to_head, index = skull
+    feature = snap_landmark(mesh, lms, "g").position
+    # 4 mm up the forehead and 1 mm back, onto the surface: behind the brow
+    low = index.closest_points(_input(to_head, _head(to_head, feature) + [0, 4.0, -1.0])[None])
+    moved = lms.with_landmark(lms["g"].moved(low.points[0], "suggested"))
+    moved = moved.with_landmark(moved["po_l"].moved(np.full(3, np.nan), "absent"))
+    unchanged, notes = snap_suggested(mesh, moved)
+    np.testing.assert_array_equal(unchanged["g"].position, low.points[0])
+    assert notes and "not snapped" in notes[0]
+    out, notes = snap_suggested(mesh, moved, fallback_frame=to_head)
+    assert any(note.startswith("g ") for note in notes)
+    assert np.linalg.norm(out["g"].position - feature) < 2.5

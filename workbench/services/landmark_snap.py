@@ -161,6 +161,7 @@ def snap_landmark(
     *,
     rules: dict[str, SnapRule] | None = None,
     catalogue: LandmarkCatalogue | None = None,
+    to_head: np.ndarray | None = None,
 ) -> SnapResult:
     """Where skull landmark ``code`` snaps to from ``position``; changes nothing.
 
@@ -177,6 +178,9 @@ def snap_landmark(
         Where to search from (input frame, mm; default: the landmark's position).
     rules : dict, optional
         ``{code: SnapRule}``; default :func:`workbench.io.snap_rules.load_snap_rules`.
+    to_head : (4, 4) float, optional
+        The input → head transform to search in; default :func:`snap_frame` of
+        ``landmarks``.
 
     Returns
     -------
@@ -204,7 +208,7 @@ def snap_landmark(
             True,
             f"{code} has no snap rule (its definition names no extremum); not moved",
         )
-    to_head = snap_frame(landmarks)
+    to_head = snap_frame(landmarks) if to_head is None else np.asarray(to_head, np.float64)
     index = snap_index(mesh)
     if rule is None:
         return _onto_midline(index, to_head, start, code)
@@ -375,7 +379,11 @@ def _onto_midline(
 
 
 def snap_suggested(
-    mesh: Mesh, landmarks: LandmarkSet, *, catalogue: LandmarkCatalogue | None = None
+    mesh: Mesh,
+    landmarks: LandmarkSet,
+    *,
+    catalogue: LandmarkCatalogue | None = None,
+    fallback_frame: np.ndarray | None = None,
 ) -> tuple[LandmarkSet, list[str]]:
     """Every *suggested* landmark with a snap rule moved to its feature, and every other
     suggested midline landmark onto the midsagittal plane (input frame, mm).
@@ -387,9 +395,12 @@ def snap_suggested(
     point of the surface's midline profile: the dense registration left the
     VHP male's nasion up to 3.8 mm to one side of the midline on the
     robustness corpus, and a midline landmark lies on that plane by its
-    definition.  Placed landmarks are the user's and never move.  Returns the
-    new set and one note per moved landmark; without a head frame (no porions
-    or orbitales) nothing moves and the note says why.
+    definition.  Placed landmarks are the user's and never move.  The head
+    frame is the landmarks' own (:func:`snap_frame`); when they cannot make one
+    (the registration marked a porion absent: too little bone seen there)
+    ``fallback_frame`` (the registration's input → head transform) is used, and
+    without it nothing moves and the note says why.  Returns the new set and
+    one note per moved landmark.
     """
     catalogue = catalogue or load_catalogue()
     rules = load_snap_rules()
@@ -402,13 +413,17 @@ def snap_suggested(
     if not todo:
         return landmarks, []
     try:
-        snap_frame(landmarks)
+        frame = snap_frame(landmarks)
     except LandmarkError as exc:
-        return landmarks, [f"landmarks not snapped to their features: {exc}"]
+        if fallback_frame is None:
+            return landmarks, [f"landmarks not snapped to their features: {exc}"]
+        frame = np.asarray(fallback_frame, np.float64)
     out, notes = landmarks, []
     for code in todo:
         try:
-            result = snap_landmark(mesh, landmarks, code, rules=rules, catalogue=catalogue)
+            result = snap_landmark(
+                mesh, landmarks, code, rules=rules, catalogue=catalogue, to_head=frame
+            )
         except LandmarkError as exc:
             notes.append(f"{code} not snapped: {exc}")
             continue

@@ -652,7 +652,7 @@ def reconstruct(
     if settings.snap_landmarks:
         from workbench.services.landmark_snap import snap_suggested
 
-        lms, snapped = snap_suggested(bone, lms)
+        lms, snapped = snap_suggested(bone, lms, fallback_frame=to_head)
     lms_h = lms.transformed(to_head)
     doubtful = [
         lm.code
