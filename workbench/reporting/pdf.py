@@ -273,15 +273,18 @@ class ReportPDF(FPDF):
                 out.append(self._wrap(self.t(value), width - pad[1] - pad[3]))
             return out
 
-        def draw(values: Sequence[Any], faces: Sequence[FontFace | None], fill) -> None:
+        heads = [head_face] * len(widths)
+        rule_y: float | None = None  # the rule under the heading row, drawn again below
+
+        def draw(values: Sequence[Any], faces: Sequence[FontFace | None], fill=None) -> None:
+            nonlocal rule_y
+            heading = faces is heads
             cells = layout(values, faces)
             height = max(len(c) for c in cells) * lines_h + pad[0] + pad[2]
-            if self.get_y() + height > self.page_break_trigger and not drawing_head[0]:
+            if not heading and self.get_y() + height > self.page_break_trigger:
                 self.add_page(orientation=str(self.cur_orientation.value))
                 if headers:
-                    drawing_head[0] = True
-                    draw(headers, [head_face] * len(widths), head_face.fill_color)
-                    drawing_head[0] = False
+                    draw(headers, heads)
             y = self.get_y()
             x = x0
             for lines, width, face, align in zip(cells, widths, faces, aligns, strict=True):
@@ -296,27 +299,23 @@ class ReportPDF(FPDF):
                 x += width
             self.set_xy(x0, y + height)
             self.set_fill_color(255, 255, 255)  # each row sets its own shading again
-            if drawing_head[0]:
-                rule[0] = y + height
-            if rule[0] is not None:  # again after the row below, whose shading covers it
+            if heading:
+                rule_y = y + height
+            if rule_y is not None:  # again after the row below, whose shading covers it
                 self.set_draw_color(*DARK)
                 self.set_line_width(0.2)
-                self.line(x0, rule[0], x0 + sum(widths), rule[0])
-                if not drawing_head[0]:
-                    rule[0] = None
+                self.line(x0, rule_y, x0 + sum(widths), rule_y)
+                if not heading:
+                    rule_y = None
 
-        drawing_head = [False]
-        rule: list[float | None] = [None]
         self.set_x(x0)
         if headers:
             # the heading row is not left alone at the foot of a page
-            first = layout(headers, [head_face] * len(widths))
+            first = layout(headers, heads)
             need = 2 * (max(len(c) for c in first) * lines_h + pad[0] + pad[2])
             if self.get_y() + need > self.page_break_trigger:
                 self.add_page(orientation=str(self.cur_orientation.value))
-            drawing_head[0] = True
-            draw(headers, [head_face] * len(widths), head_face.fill_color)
-            drawing_head[0] = False
+            draw(headers, heads)
         for i, values in enumerate(rows):
             faces = [
                 (col_styles or {}).get(j) or (styles[i] if styles else None)

@@ -283,15 +283,17 @@ class FitResult:
 
 
 _PREFETCH_LOCK = threading.Lock()
-#: decimations started by :func:`prefetch_working_skull`: (vertices, faces, result)
-_PREFETCHED: list[tuple[np.ndarray, np.ndarray, Future]] = []
+#: the decimation :func:`prefetch_working_skull` started last: (vertices, faces, result)
+_prefetch: tuple[np.ndarray, np.ndarray, Future] | None = None
 
 
 def prefetch_working_skull(skull: Mesh) -> None:
     """Start decimating a large ``skull`` now, in the helper process
     (:mod:`workbench.core.helper_process`; a thread waits on it), so that the checks
     and the case set-up that follow a read run meanwhile on the other core; the next
-    :func:`working_skull` of the same mesh takes the result.  Small skulls: nothing."""
+    :func:`working_skull` of the same mesh takes the result.  Small skulls: nothing.
+    One at a time: a newer prefetch replaces one not taken."""
+    global _prefetch
     if skull.n_faces <= MAX_WORKING_TRIANGLES:
         return
     from workbench.core import helper_process
@@ -309,22 +311,26 @@ def prefetch_working_skull(skull: Mesh) -> None:
         except BaseException as exc:  # noqa: BLE001 - handed to the one who waits
             future.set_exception(exc)
 
-    with _PREFETCH_LOCK:  # one job at a time: an earlier one's skull is not wanted now
-        _PREFETCHED[:] = [(vertices, faces, future)]
+    with _PREFETCH_LOCK:
+        _prefetch = (vertices, faces, future)
     threading.Thread(target=work, name="working-skull", daemon=True).start()
 
 
 def _prefetched(skull: Mesh) -> Future | None:
-    """The decimation :func:`prefetch_working_skull` started for a mesh equal to ``skull``."""
+    """The decimation :func:`prefetch_working_skull` started for a mesh equal to ``skull``
+    (handed out once)."""
+    global _prefetch
     with _PREFETCH_LOCK:
-        for i, (v, f, future) in enumerate(_PREFETCHED):
-            same = (v is skull.vertices or np.array_equal(v, skull.vertices)) and (
-                f is skull.faces or np.array_equal(f, skull.faces)
-            )
-            if same:
-                del _PREFETCHED[i]
-                return future
-    return None
+        if _prefetch is None:
+            return None
+        v, f, future = _prefetch
+        same = (v is skull.vertices or np.array_equal(v, skull.vertices)) and (
+            f is skull.faces or np.array_equal(f, skull.faces)
+        )
+        if not same:
+            return None
+        _prefetch = None
+        return future
 
 
 def working_skull(skull: Mesh, say: Progress = lambda _m: None) -> tuple[Mesh, list[str]]:
