@@ -252,3 +252,30 @@ def test_a_command_imports_only_its_own_module() -> None:
 def _choices(parser) -> dict:
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return dict(sub.choices)
+
+
+def test_finaliser_errors_after_an_interrupt_are_not_printed():
+    """A Ctrl-C inside a constructor leaves a half-built object whose ``__del__``
+    may fail (pyvista's Renderer reading an attribute never set); once the
+    interrupt is seen that report is dropped, before it the hook found is used."""
+    import types
+
+    from workbench.cli import main as cli_main
+
+    reported = []
+    saved = sys.unraisablehook
+    sys.unraisablehook = reported.append
+    try:
+        watch = cli_main._Interrupts()
+        try:
+            failure = types.SimpleNamespace(exc_type=AttributeError, exc_value=None)
+            sys.unraisablehook(failure)
+            assert reported == [failure]  # no interrupt yet: reported as usual
+            watch.seen = True
+            sys.unraisablehook(failure)
+            assert reported == [failure]  # after the interrupt: dropped
+        finally:
+            watch.restore()
+        assert sys.unraisablehook == reported.append
+    finally:
+        sys.unraisablehook = saved

@@ -218,7 +218,11 @@ class _Interrupts:
     def _unraisable(self, unraisable: Any) -> None:
         exc_type = getattr(unraisable, "exc_type", None)
         if not (isinstance(exc_type, type) and issubclass(exc_type, KeyboardInterrupt)):
-            self._hook(unraisable)
+            if not self.seen:
+                self._hook(unraisable)
+            # else: a finaliser of an object the interrupt cut short in its constructor
+            # (pyvista's Renderer.__del__ reading an attribute never set): the command
+            # ends as interrupted, and that one line is all the user needs to see
             return
         self.seen = True
         with self._lock:
