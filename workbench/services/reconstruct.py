@@ -445,7 +445,9 @@ def fit_head(
     )
     carried = move_eyes(carried, moves)
     hits = _dowel_hits(plan, base)
-    src, dst, labels = [], [], []
+    src: list[np.ndarray] = []
+    dst: list[np.ndarray] = []
+    labels: list[str] = []
     held: dict[str, float] = {}
     guided_pts = np.array([prefit[c] for c in used_guides if c in prefit]).reshape(-1, 3)
     for i, d in enumerate(plan.dowels):
@@ -462,8 +464,16 @@ def fit_head(
         ):
             continue  # a held dowel beside a guided point would fight the guide
         depth = (float(depths[i]) if depths is not None else d.depth_mm) if pinned else depth_now
+        target = d.origin + depth * d.direction
+        same = next((k for k, q in enumerate(src) if np.array_equal(q, point)), None)
+        if same is not None:
+            # two dowels meeting the skin at one point (ss and mp under a flat lip): one
+            # skin point cannot go to two places, it goes to the middle of both tips
+            dst[same] = 0.5 * (dst[same] + target)
+            held[d.code] = depth
+            continue
         src.append(point)
-        dst.append(d.origin + depth * d.direction)
+        dst.append(target)
         labels.append(f"dowel:{d.code}")
         held[d.code] = depth
     for code, target in used_guides.items():
