@@ -16,6 +16,7 @@ display after Vig & Brundo 1978).  Every measurement says how it was obtained.
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -38,6 +39,17 @@ SIDES = (("l", 1.0), ("r", -1.0))
 #: Implementation choices (not published numbers): rays and sections used on the mesh.
 APERTURE_RIM_DEPTH_MM = 4.0  # a frontal ray hitting within this of the row's front is bone
 SECTION_BELOW_CREST_MM = 3.0  # tooth section this far below prosthion (cervical third of crowns)
+#: levels below prosthion of the horizontal rays that trace the outer dental arch (upper
+#: crowns between the cemento-enamel junction and the contact areas)
+ARCH_LEVELS_BELOW_CREST_MM = (2.5, 3.5, 4.5, 5.5)
+ARCH_CENTRE_BEHIND_PR_MM = 25.0  # the rays aim at a point this far behind prosthion
+ARCH_MAX_STEP_MM = 6.0  # a longer step between neighbouring rays is a gap (a missing tooth)
+#: the arch's midline point may lie this far from where a crown below prosthion would be
+MIN_CROWN_MM = 5.0
+#: the labial face must go on this far below prosthion for upper incisor crowns to count
+#: as present (the crest-to-CEJ 1.5 mm and 2 mm of crown: enough for a worn incisor or a
+#: prosthion placed on the crown by a blurred CT, not for a bare alveolar ridge)
+CROWN_CHECK_MM = 3.5
 
 
 def guides_dir() -> Path:
@@ -211,6 +223,90 @@ def _incisal_edge_y(caster: RayCaster, z0: float, pr: np.ndarray) -> float | Non
     return float(np.mean(edges)) if edges else None
 
 
+def _crowns_below(caster: RayCaster, z0: float, pr: np.ndarray) -> bool:
+    """Whether the labial face goes on below prosthion without a gap for
+    :data:`CROWN_CHECK_MM`: frontal rays 2.5 mm either side of the midline meet bone or
+    tooth within 5 mm of prosthion's depth on 80 % of the rows.  Where the upper
+    incisors are missing the maxilla ends within a millimetre or two of prosthion, and
+    lower incisors standing below it (a closed edentulous mouth) are separated from it
+    by a gap."""
+    ys = np.arange(pr[1] - 0.5, pr[1] - CROWN_CHECK_MM - 0.01, -0.5)
+    with np.errstate(invalid="ignore"):
+        z = _front_z(caster, np.array([-2.5, 2.5]), ys, z0)
+        return bool(np.mean(np.abs(z - pr[2]) <= 5.0) >= 0.8)
+
+
+def dental_arch(caster: RayCaster, pr: np.ndarray) -> dict[str, np.ndarray] | None:
+    """The outer (labial and buccal) outline of the upper dental arch, per side.
+
+    Horizontal rays aimed at a point :data:`ARCH_CENTRE_BEHIND_PR_MM` behind
+    prosthion, one per degree from straight ahead to 100 degrees either side, at
+    the crown levels :data:`ARCH_LEVELS_BELOW_CREST_MM`; at each angle the outermost
+    hit of the levels (gaps between crowns let single rays through), median-filtered
+    over 5 degrees.  This works where the teeth of a CT surface are fused into one
+    outline, which a section cannot split into crowns.  Per side ``"l"``/``"r"``:
+    ``(k, 2)`` (x, z) points from the midline outward, ending at the first gap of
+    more than :data:`ARCH_MAX_STEP_MM`; None when no crown stands at the midline
+    (upper incisors missing).
+    """
+    angles = np.radians(np.arange(-100.0, 100.01, 1.0))
+    d = np.column_stack([np.sin(angles), np.zeros_like(angles), np.cos(angles)])
+    centre = np.array([0.0, 0.0, pr[2] - ARCH_CENTRE_BEHIND_PR_MM])
+    radii = []
+    for below in ARCH_LEVELS_BELOW_CREST_MM:
+        c = centre + [0.0, pr[1] - below, 0.0]
+        hits = caster.first_hits(c + 3.0 * ARCH_CENTRE_BEHIND_PR_MM * d, -d)
+        # signed: a ray through a gap meets the far side of the arch behind the centre
+        radii.append(np.where(hits.hit, np.einsum("ij,ij->i", hits.points - c, d), np.nan))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # angles no level hit
+        r = np.nanmax(np.array(radii), axis=0)
+        r[~(r > 0.6 * ARCH_CENTRE_BEHIND_PR_MM)] = np.nan  # behind or well inside the arch
+        # median over 5 degrees, kept where at least 3 of the 5 rays met a crown (a ray
+        # between two crowns, as between the central incisors, takes its neighbours')
+        window = np.lib.stride_tricks.sliding_window_view(np.pad(r, 2, mode="edge"), 5)
+        ok = np.isfinite(window).sum(axis=1) >= 3
+        r = np.where(ok, np.nanmedian(window, axis=1), np.nan)
+    mid = len(angles) // 2
+    if not ok[mid] or abs(r[mid] - ARCH_CENTRE_BEHIND_PR_MM) > MIN_CROWN_MM:
+        return None
+    pts = np.column_stack([r * np.sin(angles), centre[2] + r * np.cos(angles)])
+    out = {}
+    for side, step in (("l", 1), ("r", -1)):
+        run = [pts[mid]]
+        for k in range(mid + step, len(angles) if step > 0 else -1, step):
+            if not ok[k]:
+                continue
+            if np.linalg.norm(pts[k] - run[-1]) > ARCH_MAX_STEP_MM:
+                break
+            run.append(pts[k])
+        out[side] = np.array(run)
+    return out
+
+
+def _arch_canines(arch: Mapping[str, np.ndarray]) -> dict[str, tuple[float, float]] | None:
+    """Per side (x of the canine's lateral aspect, x of the canine–premolar junction)
+    along the arch outline, by the crowns' mesiodistal widths (Nelson & Ash 2010):
+    the canine spans the arch length from central + lateral incisor to central +
+    lateral incisor + canine, measured from the midline; its lateral aspect is the
+    outline's widest point over that span, the junction the point at its end.
+    None when the outline ends before it (a gap: missing teeth)."""
+    w1, w2, w3 = (
+        constant(f"upper_{t}_crown_md") for t in ("central_incisor", "lateral_incisor", "canine")
+    )
+    out = {}
+    for side, run in arch.items():
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(run, axis=0), axis=1))])
+        if s[-1] < w1 + w2 + w3:
+            return None
+        span = (s >= w1 + w2) & (s <= w1 + w2 + w3)
+        sign = 1.0 if side == "l" else -1.0
+        lateral = sign * float(np.max(sign * run[span, 0]))
+        junction = float(np.interp(w1 + w2 + w3, s, run[:, 0]))
+        out[side] = (lateral, junction)
+    return out
+
+
 def section_loops(mesh: Mesh, y: float) -> list[np.ndarray]:
     """Connected pieces of the section of ``mesh`` with the plane ``y``: ``(k, 2)`` (x, z) each."""
     s = mesh.vertices[:, 1] - y
@@ -319,6 +415,17 @@ def measure_skull(
         else:
             m.put(f"aperture_x_{side}", None, "", f"no skull mesh aperture and no apl_{side}")
 
+    if "aperture_x_l" in m and "aperture_x_r" in m:
+        m.put(
+            "aperture_width",
+            m["aperture_x_l"] - m["aperture_x_r"],
+            "widest nasal aperture, left minus right",
+        )
+    else:
+        m.missing["aperture_width"] = m.missing.get(
+            "aperture_x_l", m.missing.get("aperture_x_r", "no aperture width")
+        )
+
     # anterior nasal spine: tip = ans, base = front of the maxilla beneath it
     if "ans" in p:
         m.put("ans_y", p["ans"][1], "anterior nasal spine tip ans")
@@ -354,16 +461,33 @@ def measure_skull(
 
     # teeth: CEJ lines from the alveolar crests, incisal edge, canines
     crest = constant("cej_below_alveolar_crest")
+    no_upper = (
+        "no upper incisor crowns on the skull mesh (the labial face ends within "
+        f"{CROWN_CHECK_MM} mm below prosthion pr, or the dental arch has no tooth at the "
+        "midline: teeth missing?)"
+    )
+    arch = (
+        dental_arch(caster, p["pr"])
+        if caster is not None and "pr" in p and _crowns_below(caster, z0, p["pr"])
+        else None
+    )
+    upper_teeth = caster is None or arch is not None
     if "pr" in p:
-        m.put("upper_cej_y", p["pr"][1] - crest, f"prosthion pr − {crest} mm (crest to CEJ)")
-        edge = _incisal_edge_y(caster, z0, p["pr"]) if caster is not None else None
+        edge = _incisal_edge_y(caster, z0, p["pr"]) if upper_teeth and caster is not None else None
         crown = constant("upper_central_incisor_crown_length")
         m.put(
+            "upper_cej_y",
+            p["pr"][1] - crest if upper_teeth else None,
+            f"prosthion pr − {crest} mm (crest to CEJ)",
+            no_upper,
+        )
+        m.put(
             "incisal_edge_y",
-            edge if edge is not None else p["pr"][1] - crest - crown,
+            edge if edge is not None else p["pr"][1] - crest - crown if caster is None else None,
             "incisal edge of the upper central incisors (rays on the skull mesh)"
             if edge is not None
-            else f"upper CEJ − {crown} mm crown length (no incisal edge found on a mesh)",
+            else f"upper CEJ − {crown} mm crown length (no skull mesh)",
+            no_upper,
         )
     else:
         for k in ("upper_cej_y", "incisal_edge_y"):
@@ -377,20 +501,31 @@ def measure_skull(
         constant("incisor_display_at_rest", sex),
         f"incisor display at rest ({sex or 'sex unknown: mean of men and women'})",
     )
-    found = _canines(skull, p["pr"]) if skull is not None and "pr" in p else None
+    # crowns are counted from the midline: without the incisors the third is a premolar
+    found = _canines(skull, p["pr"]) if skull is not None and "pr" in p and upper_teeth else None
+    where = "crown section of the mesh"
+    if found is None and arch is not None:
+        found = _arch_canines(arch)
+        where = "outer dental arch traced by rays, crown widths after Nelson & Ash 2010"
     half_md = 0.5 * constant("upper_canine_crown_md")
     for side, sign in SIDES:
         if found is not None:
             m.put(
-                f"canine_x_{side}",
-                found[side][0],
-                "lateral aspect of the upper canine (crown section of the mesh)",
+                f"canine_x_{side}", found[side][0], f"lateral aspect of the upper canine ({where})"
             )
             m.put(
                 f"cp_junction_x_{side}",
                 found[side][1],
-                "canine–first-premolar junction (crown section of the mesh)",
+                f"canine–first-premolar junction ({where})",
             )
+        elif caster is not None and "pr" in p:
+            why = (
+                no_upper
+                if not upper_teeth
+                else "the upper dental arch has a gap before the canine (teeth missing?)"
+            )
+            for k in ("canine_x", "cp_junction_x"):
+                m.missing[f"{k}_{side}"] = why
         elif f"sC_{side}" in p:
             # half a canine crown along the arch, whose direction at the canine is
             # taken from pr → sC → ecm2s when those are placed (else straight lateral)
@@ -410,6 +545,10 @@ def measure_skull(
         else:
             for k in ("canine_x", "cp_junction_x"):
                 m.missing[f"{k}_{side}"] = f"no tooth crowns on a mesh and no sC_{side}"
+    for side, _ in SIDES:
+        for width, x in (("intercanine_width", "canine_x"), ("cp_junction_width", "cp_junction_x")):
+            if f"{x}_{side}" not in m and width not in m.missing:
+                m.missing[width] = m.missing.get(f"{x}_{side}", f"no {x}_{side}")
     if "canine_x_l" in m and "canine_x_r" in m:
         m.put(
             "intercanine_width", m["canine_x_l"] - m["canine_x_r"], "lateral aspects of the canines"
