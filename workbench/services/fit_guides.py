@@ -23,7 +23,7 @@ from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.model.reconstruction_setup import DEFAULT_TABLE, DowelSettings, GuideList
 from workbench.services.dowels import DowelPlan
-from workbench.services.guide_rules import published_predictions
+from workbench.services.guide_rules import DefaultRule, effective_rules, published_predictions
 from workbench.services.guides import (
     Guide,
     apply_guides,
@@ -33,9 +33,18 @@ from workbench.services.guides import (
     guides_from_json,
 )
 
-#: a computed guide that would move its skin landmark farther than this from
-#: the tissue-depth fit is taken as a failed skull measurement and switched off
-MAX_GUIDE_SHIFT_MM = 8.0
+#: a computed width guide (nose, mouth) that predicts a width this many standard
+#: deviations from the adult norm of every population and sex of the facial norms
+#: table is taken as a failed skull measurement and switched off (4 SD: about 1 in
+#: 16,000 people); the reference head's own width plays no part
+MAX_NORM_SD = 4.0
+#: the adult age (years) the width norms are read at
+NORM_AGE = 30.0
+#: width guides (left, right) and the facial-norm measurement of their width
+WIDTH_NORMS = {
+    ("nose_width_l", "nose_width_r"): "nasal_width",
+    ("mouth_width_l", "mouth_width_r"): "labial_fissure_width",
+}
 
 SkinTargets = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
 
@@ -53,34 +62,74 @@ def plausible_guides(
     skull_h: Mesh,
     lms_h: LandmarkSet,
     rejected: list[str],
+    sex: str | None = None,
 ) -> dict[str, np.ndarray]:
     """Guide targets, leaving out computed guides that fail their checks.
 
     A guide set by the user is always applied.  A computed one is switched
     off in ``guides`` (and the reason recorded in ``rejected``) when
-    ``check_guides`` finds it outside the skull or anatomically impossible,
-    or when it would move its landmark more than :data:`MAX_GUIDE_SHIFT_MM`
-    from the tissue-depth fit — never a silently distorted face.
+    ``check_guides`` finds it outside the skull or anatomically impossible
+    (a wing inside the aperture, a mouth corner medial to the canine, lip lines
+    out of order ...), or when the width it gives lies more than
+    :data:`MAX_NORM_SD` standard deviations from the adult facial norms
+    (:func:`width_problem`) — reasons the user can see against the skull in the
+    guide views.  How far a guide moves the reference head's own landmark is no
+    reason: the reference is not the person.
     """
+    widths = {g.id: g for g in guides if g.enabled and g.source != "user" and g.kind == "vline"}
     for i, g in enumerate(guides):
         if not g.enabled or g.source == "user":
             continue
         problems = check_guides([g], skull_h, lms_h)
-        shift = max(
-            (float(np.linalg.norm(p - skin[c])) for c, p in apply_guides([g], skin).items()),
-            default=0.0,
-        )
-        if problems or shift > MAX_GUIDE_SHIFT_MM:
-            why = (
-                problems[0]
-                if problems
-                else f"it would move {', '.join(g.affects)} by {shift:.1f} mm"
-            )
+        why = problems[0] if problems else width_problem(g, widths, sex)
+        if why:
             rejected.append(
                 f"guide {g.id} switched off ({why}); check the skull there or set the guide by hand"
             )
             guides[i] = replace(g, enabled=False)
     return apply_guides(guides, skin)
+
+
+def width_problem(guide: Guide, enabled: dict[str, Guide], sex: str | None) -> str:
+    """Why a nose- or mouth-width guide gives an impossible width ("" when it does not).
+
+    The width is the distance between the pair's two lines (twice the line's
+    distance from the midline when its partner is off), compared with the adult
+    norm (:data:`NORM_AGE` years) of the facial norms table for every population
+    and, with the sex unknown, both sexes: the guide fails only when the width
+    lies more than :data:`MAX_NORM_SD` SD from all of them.
+    """
+    from workbench.io.growth_norms import load_growth_norms
+
+    for pair, measurement in WIDTH_NORMS.items():
+        if guide.id not in pair:
+            continue
+        left, right = (enabled.get(k) for k in pair)
+        width = (
+            left.value[0] - right.value[0]
+            if left is not None and right is not None
+            else 2.0 * abs(guide.value[0])
+        )
+        norms = load_growth_norms()
+        sexes = [sex] if sex in ("female", "male") else ["female", "male"]
+        best: tuple[float, float, float, str] | None = None
+        for eth in norms.ethnicities():
+            for sx in sexes:
+                if not norms.has(measurement, sx, eth):
+                    continue
+                lo, hi = norms.age_range(measurement, sx, eth)
+                mean, sd = norms.at(measurement, sx, min(max(NORM_AGE, lo), hi), eth)
+                z = (width - mean) / sd
+                if best is None or abs(z) < abs(best[0]):
+                    best = (z, mean, sd, f"{eth} {sx}, {norms.source_of(measurement, sx, eth)}")
+        if best is not None and abs(best[0]) > MAX_NORM_SD:
+            z, mean, sd, who = best
+            return (
+                f"it gives a {measurement.replace('_', ' ')} of {width:.1f} mm, {abs(z):.1f} SD "
+                f"{'below' if z < 0 else 'above'} the closest adult norm {mean:.1f} ± {sd:.1f} mm "
+                f"({who})"
+            )
+    return ""
 
 
 @dataclass
@@ -98,6 +147,7 @@ class FitGuides:
     enabled: bool = True
     chosen: list[Guide] = field(default_factory=list)
     rejected: list[str] = field(default_factory=list)
+    defaults: list[str] = field(default_factory=list)  # default rules tried (guide_defaults.csv)
 
     def __call__(self, skull_h: Mesh, lms_h: LandmarkSet, plan: DowelPlan) -> SkinTargets | None:
         if not self.enabled:
@@ -105,29 +155,63 @@ class FitGuides:
         tips = {d.code: d.tip for d in plan.active()}
         if self.stored is None:
             table = self.dowels.table if not self.dowels.table.endswith(".csv") else DEFAULT_TABLE
+            missing: list[str] = []
             self.chosen.extend(
-                classic_guides(lms_h, skull_h, dowel_tips=tips, sex=self.dowels.sex, table_id=table)
+                classic_guides(
+                    lms_h,
+                    skull_h,
+                    dowel_tips=tips,
+                    sex=self.dowels.sex,
+                    table_id=table,
+                    problems=missing,
+                )
             )
+            self.rejected.extend(missing)
         else:
             self.chosen.extend(self.stored)
-        if self.rules:
-            self._apply_rules(skull_h, lms_h, tips)
-        return lambda skin: plausible_guides(self.chosen, skin, skull_h, lms_h, self.rejected)
-
-    def _apply_rules(self, skull_h: Mesh, lms_h: LandmarkSet, tips: dict[str, np.ndarray]) -> None:
-        why: list[str] = []
-        preds = published_predictions(
-            lms_h, self.dowels.sex, rules=self.rules, skull=skull_h, dowel_tips=tips, problems=why
+        asked, defaults = effective_rules(self.rules)
+        if self.stored is not None:
+            defaults = []  # the case's own guides: nothing replaces them unasked
+        self.defaults = [d.rule_id for d in defaults]
+        if asked or defaults:
+            self._apply_rules(skull_h, lms_h, tips, asked, defaults)
+        return lambda skin: plausible_guides(
+            self.chosen, skin, skull_h, lms_h, self.rejected, self.dowels.sex
         )
+
+    def _apply_rules(
+        self,
+        skull_h: Mesh,
+        lms_h: LandmarkSet,
+        tips: dict[str, np.ndarray],
+        asked: list[str],
+        defaults: list[DefaultRule],
+    ) -> None:
+        why: dict[str, list[str]] = {}
+        ids = [*asked, *(d.rule_id for d in defaults)]
+        problems: list[str] = []
+        preds = published_predictions(
+            lms_h, self.dowels.sex, rules=ids, skull=skull_h, dowel_tips=tips, problems=problems
+        )
+        for line in problems:
+            why.setdefault(line.split(":", 1)[0], []).append(line.split(":", 1)[-1].strip())
         for pred in preds:
             if pred.target:
                 self.chosen[:] = guides_from_prediction(pred, self.chosen)
         found = {p.rule_id for p in preds}
-        self.rejected.extend(
-            f"published rule {r} not applied: {'; '.join(why) or 'no prediction for this skull'}"
-            for r in self.rules
-            if r not in found
-        )
+        for r in asked:
+            if r not in found:
+                reason = "; ".join(why.get(r, [])) or "no prediction for this skull"
+                self.rejected.append(f"published rule {r} not applied: {reason}")
+        for d in defaults:
+            if d.rule_id not in found:
+                # the classic guide of those landmarks stays (it was computed, or it says
+                # itself why it could not be)
+                reason = "; ".join(why.get(d.rule_id, [])) or "no prediction for this skull"
+                self.rejected.append(
+                    f"default rule {d.rule_id} not applied ({reason}); "
+                    f"the classic guide {d.replaces} stays where it could be measured"
+                )
 
     def problems(self, skull_h: Mesh, lms_h: LandmarkSet) -> list[str]:
         """Checks of the enabled guides on the fitted frame (notes for the report)."""

@@ -127,6 +127,53 @@ def load_rules() -> dict[str, Rule]:
     return out
 
 
+DEFAULT_COLUMNS = ("rule_id", "replaces", "why")
+
+
+@dataclass(frozen=True)
+class DefaultRule:
+    """A published rule applied by default in place of a classic guide (``guide_defaults.csv``)."""
+
+    rule_id: str
+    replaces: str
+    why: str
+
+
+@lru_cache(maxsize=1)
+def load_guide_defaults() -> tuple[DefaultRule, ...]:
+    """The rules applied without ``--rule``, each with the validation that chose it."""
+    path = guides_dir() / "guide_defaults.csv"
+    rules = load_rules()
+    out = []
+    for line, r in read_table_csv(path, DEFAULT_COLUMNS):
+        for col in ("rule_id", "replaces"):
+            if r[col] not in rules:
+                raise InputError(path, f"line {line}: {col} {r[col]!r} is not in guide_rules.csv")
+        if rules[r["replaces"]].kind != "classic" or rules[r["rule_id"]].kind == "classic":
+            raise InputError(path, f"line {line}: a published rule must replace a classic one")
+        out.append(DefaultRule(r["rule_id"], r["replaces"], r["why"]))
+    return tuple(out)
+
+
+def effective_rules(asked: Iterable[str]) -> tuple[list[str], list[DefaultRule]]:
+    """The rules a fit applies: the published ones asked for, and the defaults of
+    :func:`load_guide_defaults` for every feature the user did not choose a rule for.
+
+    Asking for a classic rule (e.g. ``kaehler_mouth_width``) keeps Kähler's guide for
+    its landmarks instead of the default rule.  Returns (published rules asked for,
+    defaults applied).
+    """
+    rules = load_rules()
+    asked = list(asked)
+    chosen = {t for r in asked if r in rules for t in rules[r].target}
+    defaults = [
+        d
+        for d in load_guide_defaults()
+        if not chosen & set(rules[d.rule_id].target) and d.rule_id not in asked
+    ]
+    return [r for r in asked if r in rules and rules[r].kind != "classic"], defaults
+
+
 @dataclass(frozen=True)
 class Prediction:
     """One published rule applied to a skull.
@@ -265,6 +312,9 @@ def _predict(rule: Rule, m: SkullMeasures, table: Mapping[str, Rule]) -> Predict
         _need(m, [f"{key}_l", f"{key}_r"])
         mid = 0.5 * (vals[f"{key}_l"] + vals[f"{key}_r"])
         target = {"ch_l": _point(mid + 0.5 * value), "ch_r": _point(mid - 0.5 * value)}
+    elif "aperture_width" in preds:  # alar width, centred on the aperture
+        mid = 0.5 * (vals["aperture_x_l"] + vals["aperture_x_r"])
+        target = {"al_l": _point(mid + 0.5 * value), "al_r": _point(mid - 0.5 * value)}
     elif rule.quantity == "pFHP":
         _need(m, ["ss_z"])
         target = {"prn": _point(0.0, np.nan, vals["ss_z"] + value)}

@@ -189,9 +189,9 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
         from workbench.services.guide_rules import load_rules
 
         table_of_rules = load_rules()
-        bad = [r for r in rules if r not in table_of_rules or table_of_rules[r].kind == "classic"]
+        bad = [r for r in rules if r not in table_of_rules]
         if bad:
-            known = sorted(k for k, r in table_of_rules.items() if r.kind != "classic")
+            known = sorted(table_of_rules)
             raise InputError(
                 "--rule",
                 f"unknown prediction rule(s): {', '.join(bad)}",

@@ -44,7 +44,7 @@ from workbench.model.case import Case
 from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.model.template import TemplateHead
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
-from workbench.services.fit_guides import MAX_GUIDE_SHIFT_MM, plausible_guides
+from workbench.services.fit_guides import MAX_NORM_SD, plausible_guides
 from workbench.services.guides import guides_from_json, guides_to_json
 from workbench.services.landmark_transfer import TransferResult
 from workbench.services.reconstruct import FitSettings, Reconstruction, articulated_skull
@@ -60,7 +60,7 @@ from workbench.services.tissue_model import TissueSettings
 
 __all__ = [
     "FITTED_HEAD_FRAME_TEXT",
-    "MAX_GUIDE_SHIFT_MM",
+    "MAX_NORM_SD",
     "MAX_WORKING_TRIANGLES",
     "MIN_CONFIDENCE",
     "WORKING_TRIANGLES",
