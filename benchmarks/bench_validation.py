@@ -28,6 +28,12 @@ orientation, no landmarks, scored beside the uniform 6 mm offset, with the
 identity test (the pack built from the CT's own skin and bone, also from the
 bone alone).
 
+``--features`` runs the same unseen cases with the soft-tissue truth
+landmarks of ``tests/data/soft_tissue_truth`` (the true skin at the level they
+were placed on): per feature (pronasale, alar and mouth width, lip heights,
+canthi) the error of the face, of the same fit without guides and of every
+guide rule alone, in ``features.csv`` and ``results.md``.
+
 Each case runs with the built-in reference head at the table's means
 (normal build); with ``--builds`` the two Visible Human cadavers also run at
 heavier builds (mean + k SD, k in :data:`BUILD_GRID`), and each is scored at
@@ -285,6 +291,38 @@ def unseen(out: Path) -> int:
     return code
 
 
+#: the soft-tissue truth landmarks (tests/data/soft_tissue_truth) and the skin level they
+#: were placed on (the true skin must be that surface)
+TRUTH_LANDMARKS = ROOT / "tests" / "data" / "soft_tissue_truth"
+TRUTH_SKIN_ISO = {"headsq": 500.0, "vhp_female": -400.0, "vhp_male": -400.0}
+
+
+def features(out: Path) -> int:
+    """The nose, mouth and eye guides against the true skins' landmarks: the unseen
+    cases (plain bones, no orientation) with ``truth_landmarks``, so ``validate`` adds
+    the fit without guides and every rule's own error (``features.csv``)."""
+    from workbench.cli.main import main as workbench
+    from workbench.io.samples import fetch
+
+    rows = []
+    for cid, sample, iso, mask, ant, sup, left, sex, who in UNSEEN:
+        path = fetch(sample)
+        volume = path / "quarter.nhdr" if path.is_dir() else path
+        bone = plain_bone(volume, iso, out.parent / "plain_bones" / f"{cid}.ply")
+        marks = TRUTH_LANDMARKS / f"{sample}.mrk.json"
+        rows.append(
+            f'{cid},{bone},sample:{sample},mm,{mask},"{ant}","{sup}","{left}",auto,{sex},normal,'
+            f",{TRUTH_SKIN_ISO[sample]:g},{who},{marks}"
+        )
+    path = out.parent / f"{out.name}_manifest.csv"
+    path.write_text(
+        HEADER.strip() + ",truth_landmarks\n" + "\n".join(rows) + "\n", encoding="utf-8"
+    )
+    code = workbench(["validate", str(path), "--no-pictures", "--out", str(out), "--force"])
+    print((out / "results.md").read_text(encoding="utf-8"))
+    return code
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="headsq and VHP female only")
@@ -304,10 +342,18 @@ def main() -> int:
         help="only the fully automatic runs on plain marching-cubes bones (VTK flying edges, "
         "largest piece, as other programs export them) with the identity test",
     )
+    parser.add_argument(
+        "--features",
+        action="store_true",
+        help="the unseen cases scored per feature (nose, mouth, eyes) against the true "
+        "skins' landmarks, beside no guides and every rule alone",
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "validation")
     args = parser.parse_args()
     if args.unseen:
         return unseen(args.out.with_name(args.out.name + "_unseen"))
+    if args.features:
+        return features(args.out.with_name(args.out.name + "_features"))
     from workbench.cli.main import main as workbench
 
     m = manifest(args.out, args.quick)

@@ -63,13 +63,25 @@ def test_consensus_is_the_per_vertex_median():
 @pytest.mark.slow
 def test_headsq_beats_the_uniform_offset(tmp_path, headsq_nhdr):
     ct = str(headsq_nhdr)
-    m = _manifest(
-        tmp_path, f'headsq,{ct},{ct},mm,none,"0,-1,0","0,0,-1","1,0,0",male,normal,1150,500\n'
+    marks = Path(__file__).resolve().parents[1] / "data" / "soft_tissue_truth" / "headsq.mrk.json"
+    m = tmp_path / "manifest.csv"
+    m.write_text(
+        HEADER.strip()
+        + ",truth_landmarks\n"
+        + f'headsq,{ct},{ct},mm,none,"0,-1,0","0,0,-1","1,0,0",male,normal,1150,500,{marks}\n',
+        encoding="utf-8",
     )
     out = tmp_path / "out"
     assert main(["validate", str(m), "--out", str(out), "--no-pictures"]) == 0
     rows = list(csv.DictReader((out / "results.csv").open(encoding="utf-8")))
-    by = {r["method"]: r for r in rows}
+    by = {r["method"]: r for r in rows}  # the offset rows of both runs are equal
+    # with true landmarks: the same fit without guides, and per-feature errors of every rule
+    feats = list(csv.DictReader((out / "features.csv").open(encoding="utf-8")))
+    methods = {r["method"] for r in feats}
+    assert {"reconstruction", "no_guides", "rule kaehler_nose_width"} <= methods
+    assert {"rule nose_purkait2024_alar_width", "rule mouth_75pct_rule"} <= methods
+    assert {r["feature"] for r in feats} >= {"alar_width_mm", "mouth_width_mm", "prn_mm"}
+    assert all(abs(float(r["error_mm"])) < 40.0 for r in feats)  # same frame, same side
     mine, base = by["reconstruction"], by["uniform_6mm_offset"]
     assert mine["n"] == base["n"] and int(mine["n"]) > 5000  # the same truth points
     # VALIDATION.md: the offset scores 51.4 % within 2.5 mm on headsq

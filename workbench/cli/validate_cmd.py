@@ -1,7 +1,8 @@
 """``workbench validate MANIFEST.csv --out DIR``: accuracy on real skull/skin pairs.
 
 Writes ``DIR/results.csv``, ``DIR/results.md``, ``DIR/results.pdf`` (with
-signed-distance pictures on the true skin) and a folder per case with the
+signed-distance pictures on the true skin), ``DIR/features.csv`` for cases with
+true landmarks (``truth_landmarks``) and a folder per case with the
 reconstruction (the same files ``workbench reconstruct`` writes) and the
 extracted surfaces.  See :mod:`workbench.services.validation` for the
 manifest columns and the method.
@@ -27,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="reconstruct real skulls and score them against their true skin",
         description="Run the reconstruction on every case of a manifest (CSV columns: id, skull, "
         "truth, units, mask, anterior, superior, left, sex, build, tissue, template, "
-        "bone_iso, skin_iso; skull and truth may be meshes or CT volumes) and score "
+        "bone_iso, skin_iso, subject, truth_landmarks; skull and truth may be meshes or CT "
+        "volumes) and score "
         "it with the project's metric beside a uniform 6 mm offset of the bone.",
     )
     p.add_argument("manifest", type=Path)
@@ -84,7 +86,13 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     """Every case, the tables and the PDF, into the staged folder ``out``."""
     from workbench import __version__
-    from workbench.reporting.validation_report import markdown, rows, write_csv, write_pdf
+    from workbench.reporting.validation_report import (
+        feature_rows,
+        markdown,
+        rows,
+        write_csv,
+        write_pdf,
+    )
     from workbench.services.compare import REGION_NAMES
     from workbench.services.validation import run_validation
 
@@ -118,6 +126,9 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     credits = sorted({c for case in cases for p in (case.skull, case.truth) if (c := _credit(p))})
     table = rows(results, REGION_NAMES)
     write_csv(table, out / "results.csv")
+    features = feature_rows(results)
+    if features:  # cases with true landmarks: per-feature errors of every method and rule
+        write_csv(features, out / "features.csv")
     tmp = out / "results.md.part"
     tmp.write_text(markdown(results, REGION_NAMES, credits), encoding="utf-8")
     tmp.replace(out / "results.md")

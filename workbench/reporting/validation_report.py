@@ -79,6 +79,46 @@ def _fmt(v: Any, digits: int = 1) -> str:
     return str(v)
 
 
+def feature_table(features: Mapping[str, Mapping[str, float]]) -> list[str]:
+    """Markdown lines: per method (the face, the face without guides, each guide rule
+    alone) the feature errors in mm (predicted − true for widths and heights;
+    distances for points), with the target beside the feature's name."""
+    from workbench.services.feature_validation import FEATURES, TARGETS_MM
+
+    names = [n for n in FEATURES if any(n in e for e in features.values())]
+    head = [f"{n} (≤ {TARGETS_MM[n]:g})" if n in TARGETS_MM else n for n in names]
+    out = [
+        "Features against the true skin's landmarks (mm):",
+        "",
+        "| method | " + " | ".join(head) + " |",
+        "|---|" + "---|" * len(names),
+    ]
+    for method, errs in features.items():
+        cells = [f"{errs[n]:+.1f}" if n in errs else "–" for n in names]
+        out.append(f"| {md_cell(method)} | " + " | ".join(cells) + " |")
+    return out
+
+
+def feature_rows(results: Sequence[tuple[Any, str]]) -> list[dict[str, Any]]:
+    """One row per case, method and feature (``features.csv``)."""
+    from workbench.services.feature_validation import TARGETS_MM
+
+    out = []
+    for res, _label in results:
+        for method, errs in (res.notes.get("features") or {}).items():
+            for name, err in errs.items():
+                out.append(
+                    {
+                        "case": res.case_id,
+                        "method": method,
+                        "feature": name,
+                        "error_mm": round(float(err), 2),
+                        "target_mm": TARGETS_MM.get(name, ""),
+                    }
+                )
+    return out
+
+
 def markdown(
     results: Sequence[tuple[Any, str]], region_names: Sequence[str], credits: Sequence[str] = ()
 ) -> str:
@@ -131,7 +171,10 @@ def markdown(
                     else "–"
                 )
             lines.append(f"| {s.name} | " + " | ".join(cells) + " |")
-        notes = {k: v for k, v in res.notes.items() if v is not None}
+        feats = res.notes.get("features")
+        if feats:
+            lines += ["", *feature_table(feats)]
+        notes = {k: v for k, v in res.notes.items() if v is not None and k != "features"}
         if notes:
             lines += ["", "notes: " + "; ".join(f"{k}: {md_cell(v)}" for k, v in notes.items())]
         lines.append("")

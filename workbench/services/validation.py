@@ -35,6 +35,13 @@ skin_iso   CT level of the skin surface
 subject    who the case is (default: its id); cases of one subject (a skull
            and a cut copy of it) never serve as each other's references;
            it names the subject's reference pack folder (the id's rules)
+truth_landmarks
+           the true skin's soft-tissue landmarks (prn, al, ch, ls, sto, li,
+           en, ex ...; any landmark file format, in the truth surface's frame,
+           absent ones not in view): adds the per-feature errors of
+           :mod:`workbench.services.feature_validation` for the face, for the
+           same reconstruction without guides (run as the method
+           ``no_guides``) and for every guide rule on its own
 ========== ============================================================
 
 With ``leave_one_out`` a reference pack is built from every subject's skin
@@ -99,11 +106,12 @@ COLUMNS = (
     "bone_iso",
     "skin_iso",
     "subject",
+    "truth_landmarks",
 )
 VOLUME_SUFFIXES = (".nii", ".nii.gz", ".nrrd", ".nhdr", ".mhd", ".mha", ".dcm")
 OFFSET_MM = 6.0
 #: names ``validate`` writes in DIR itself (no case id may take them)
-RESERVED = ("references", "results.csv", "results.md", "results.pdf")
+RESERVED = ("references", "results.csv", "results.md", "results.pdf", "features.csv")
 #: a truth surface with this share of its vertices within TRUTH_ON_BONE_MM of the bone is
 #: the bone, not a skin (real soft tissue is 2 mm or more nearly everywhere)
 TRUTH_ON_BONE_MM = 1.0
@@ -133,6 +141,7 @@ class ValidationCase:
     skin_iso: float | None = None
     subject: str = ""
     orient: str = "hint"
+    truth_landmarks: Path | None = None
 
     @property
     def who(self) -> str:
@@ -241,6 +250,7 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
         skull = _resolve(row["skull"], path.parent, f"{where} column skull")
         truth = _resolve(row["truth"], path.parent, f"{where} column truth")
         _refuse_truth_is_skull(skull, truth, f"{where} column truth")
+        marks = (row.get("truth_landmarks") or "").strip()
         cases.append(
             ValidationCase(
                 cid,
@@ -257,6 +267,7 @@ def read_manifest(path: str | Path) -> list[ValidationCase]:
                 isos["skin_iso"],
                 subject,
                 orient,
+                _resolve(marks, path.parent, f"{where} column truth_landmarks") if marks else None,
             )
         )
     return cases
@@ -575,6 +586,8 @@ def run_case(
         )
         res.truth_ids, res.n_points, res.scores = ids, len(ids), scores
         res.files["truth"], res.files["bone"] = truth_path, bone_path
+        if case.truth_landmarks is not None:
+            _feature_notes(res, case, first, label, with_rules=guides != "none")
         res.notes["observed_face_fraction"] = recon.figures.get("face_observed_fraction")
         res.notes["registration"] = {
             k: recon.figures.get("registration", {}).get(k)
@@ -586,6 +599,36 @@ def run_case(
         return res, None
     finally:
         res.seconds["total"] = time.perf_counter() - t0
+
+
+def _feature_notes(
+    res: CaseResult, case: ValidationCase, job: Any, label: str, *, with_rules: bool
+) -> None:
+    """Per-feature errors against the true landmarks (``res.notes["features"]``):
+    the face's own landmarks and, ``with_rules``, every guide rule on its own."""
+    from workbench.services.feature_validation import (
+        feature_errors,
+        read_truth_landmarks,
+        rule_landmarks,
+        to_head,
+    )
+
+    assert case.truth_landmarks is not None
+    truth = read_truth_landmarks(case.truth_landmarks)
+    recon = job.recon
+    truth_h = to_head(truth.positions, recon.input_to_head)
+    feats = {label: feature_errors(recon.head.skin_landmarks.as_dict(), truth_h)}
+    if with_rules:
+        tips = {d.code: d.tip for d in recon.plan.active()}
+        lms_h = recon.landmarks.transformed(recon.input_to_head)
+        predicted, why = rule_landmarks(job.skull_h, lms_h, case.sex, tips)
+        for rule_id, pts in sorted(predicted.items()):
+            errs = feature_errors(pts, truth_h)
+            if errs:
+                feats[f"rule {rule_id}"] = errs
+        res.notes["feature_rules_not_computed"] = why or None
+    res.notes["features"] = feats
+    res.notes["truth_not_in_view"] = truth.absent or None
 
 
 def build_references(
@@ -753,6 +796,11 @@ def _run_validation(
     for case in cases:
         res, job = run_case(case, folders[case.case_id], progress=progress)
         done(res, job, "reconstruction")
+        if case.truth_landmarks is not None:  # the guides' effect: the same fit without them
+            res, job = run_case(
+                case, folders[case.case_id], guides="none", label="no_guides", progress=progress
+            )
+            done(res, job, "no_guides")
     if leave_one_out or identity:
         packs = build_references(cases, out / "references", progress=progress)
         first_case: dict[str, ValidationCase] = {}
