@@ -90,3 +90,16 @@ def test_first_fit_opens_the_guide_view_before_drawing_the_face(
     x, _ = bar.GetPositionCoordinate().GetValue()[:2]
     assert 0.0 < x and x + bar.GetWidth() <= 0.95
     window.draw_face()
+
+    # where the skull was measured for the guides: yellow marks with their labels
+    qtbot.waitUntil(lambda: bool(gv._marks) or bool(gv._unmeasured), timeout=30_000)
+    labels = {label for label, _at, _how in gv._marks}
+    assert "widest aperture" in labels, (labels, gv._unmeasured)
+    gv.refresh()
+    assert "gv_marks" in gv.plotter.actors and "Yellow" in gv.info.text()
+    gv.show_measures.setChecked(False)
+    assert "gv_marks" not in gv.plotter.actors and "Yellow" not in gv.info.text()
+    gv.show_measures.setChecked(True)
+    if os.environ.get("WORKBENCH_SCREENSHOTS"):  # for looking at it by eye
+        gv.plotter.render()
+        gv.plotter.screenshot(os.path.join(os.environ["WORKBENCH_SCREENSHOTS"], "guides.png"))

@@ -10,7 +10,11 @@ point *is* ``(y, z)``:
   horizontal lines (y) in the frontal view, points (y, z) in the lateral
   view — each with its label;
 * the published-rule predictions for the same features in cyan, side by
-  side with the classic guides (:func:`workbench.services.guides.guides_from_prediction`).
+  side with the classic guides (:func:`workbench.services.guides.guides_from_prediction`);
+* in yellow, where the skull measurements behind the guides were taken (the
+  widest aperture, the nasal spine, the canines, the incisal edge and the
+  cemento-enamel junctions, :func:`workbench.services.guide_measure.marks_for_view`),
+  and under the view the measurements that could not be taken, with why.
 
 A guide is dragged with the left button (press within
 :data:`GRAB_RADIUS_PX` of it): the window previews the re-solved face at
@@ -55,6 +59,7 @@ GRAB_RADIUS_PX = 8.0
 PRIORITY = 10.0
 GUIDE = (0.85, 0.10, 0.55)
 PREDICTION = (0.10, 0.75, 0.85)
+MEASURE = (0.95, 0.80, 0.15)
 #: vertical extent of a vline, horizontal extent of an hline (head frame, mm)
 VLINE_Y = (-80.0, 10.0)
 HLINE_X = (-40.0, 40.0)
@@ -103,6 +108,8 @@ class GuideView(QWidget):
         self.drawn_fit: Any = None  # the fit the view shows (None: none yet)
         self._face_actor: Any = None
         self._guide_slots: dict[int, tuple[Any, int, int]] = {}
+        self._marks: list[tuple[str, np.ndarray, str]] = []
+        self._unmeasured: list[str] = []
 
         self.frontal = QRadioButton("Frontal")
         self.lateral = QRadioButton("Lateral")
@@ -118,10 +125,17 @@ class GuideView(QWidget):
             "features, beside the classic guides (magenta)"
         )
         self.show_predictions.toggled.connect(lambda _on: self.refresh())
+        self.show_measures = QCheckBox("Measurements")
+        self.show_measures.setChecked(True)
+        self.show_measures.setToolTip(
+            "Yellow: where the skull was measured for the guides (aperture, "
+            "nasal spine, canines, incisal edge, cemento-enamel junctions)"
+        )
+        self.show_measures.toggled.connect(lambda _on: self.refresh())
         self.info = QLabel("Drag a magenta guide; the face follows.")
         self.info.setWordWrap(True)
         bar = QHBoxLayout()
-        for w in (self.frontal, self.lateral, self.show_predictions):
+        for w in (self.frontal, self.lateral, self.show_predictions, self.show_measures):
             bar.addWidget(w)
         bar.addStretch(1)
 
@@ -176,19 +190,32 @@ class GuideView(QWidget):
         """
         fit = self.session.fit
         self._skull_light = None
+        self._marks, self._unmeasured = [], []
         if fit is None:
             self.refresh()
             return
+
+        def prepare() -> tuple[Any, Any]:
+            from workbench.services.guide_measure import marks_for_view
+
+            light = with_normals(decimated(fit.skull_h, 15_000))
+            lms_h = fit.recon.landmarks
+            if lms_h is not None:
+                lms_h = lms_h.transformed(fit.recon.input_to_head)
+                return light, marks_for_view(lms_h, fit.skull_h)
+            return light, ([], [])
+
         self.runner.submit(
             "guide_view",
             "Preparing the guide view …",
-            lambda: with_normals(decimated(fit.skull_h, 15_000)),
-            lambda light: self._skull_ready(to_polydata(light, normals=True)),
+            prepare,
+            lambda got: self._skull_ready(to_polydata(got[0], normals=True), got[1]),
             lambda _exc: self.refresh(reset_camera=True),
         )
 
-    def _skull_ready(self, light: Any) -> None:
+    def _skull_ready(self, light: Any, marks: Any = ([], [])) -> None:
         self._skull_light = light
+        self._marks, self._unmeasured = marks
         self.refresh(reset_camera=True)
 
     def refresh(self, reset_camera: bool = False) -> None:
@@ -294,10 +321,55 @@ class GuideView(QWidget):
                 except Exception:  # noqa: BLE001 - a prediction that maps to no guide
                     continue
             self._add_set(list(enumerate(predicted)), PREDICTION, 2, "gv_pred", track=False)
-        self.info.setText(
+        text = (
             "Magenta: guides (drag to move). Cyan: published predictions."
             if self.show_predictions.isChecked()
             else "Magenta: guides (drag to move)."
+        )
+        if self.show_measures.isChecked():
+            self._draw_marks()
+            text += " Yellow: where the skull was measured."
+            if self._unmeasured:
+                text += "\nNot measured — " + "; ".join(self._unmeasured[:3])
+        self.info.setText(text)
+
+    def _draw_marks(self) -> None:
+        """The skull measurements' places, yellow, each with its short label."""
+        if not self._marks:
+            return
+        p = self.plotter
+        pts = np.array([at for _label, at, _how in self._marks])
+        # brought to the front of the head along the view (parallel projection: the
+        # place on screen is the same), so the translucent face cannot hide them
+        if self.side == "frontal":
+            pts[:, 2] = self._front() - 1.0
+        else:
+            pts[:, 0] = 149.0
+        p.add_points(
+            pts,
+            color=MEASURE,
+            point_size=9,
+            render_points_as_spheres=True,
+            pickable=False,
+            render=False,
+            name="gv_marks",
+        )
+        # one label per kind and side (the two canine points of a side share a place)
+        labels: dict[tuple[str, int], np.ndarray] = {}
+        for (label, at, _how), shown in zip(self._marks, pts, strict=True):
+            side = int(np.sign(round(at[0], 1))) if self.side == "frontal" else 0
+            labels.setdefault((label, side), shown)
+        p.add_point_labels(
+            np.array(list(labels.values())),
+            [label for label, _side in labels],
+            font_size=9,
+            text_color=MEASURE,
+            shape_opacity=0.0,
+            show_points=False,
+            always_visible=True,
+            pickable=False,
+            render=False,
+            name="gv_mark_labels",
         )
 
     def _add_set(

@@ -133,6 +133,8 @@ class Measure:
 
     value: float
     how: str
+    #: where it was taken (head frame, mm), to be shown on the skull; None: not a place
+    at: tuple[float, float, float] | None = None
 
 
 @dataclass
@@ -148,11 +150,19 @@ class SkullMeasures:
     def __getitem__(self, name: str) -> float:
         return self.values[name].value
 
-    def put(self, name: str, value: float | None, how: str, why_missing: str = "") -> None:
+    def put(
+        self,
+        name: str,
+        value: float | None,
+        how: str,
+        why_missing: str = "",
+        at: np.ndarray | tuple[float, float, float] | None = None,
+    ) -> None:
         if value is None or not np.isfinite(value):
             self.missing[name] = why_missing or how
         else:
-            self.values[name] = Measure(float(value), how)
+            where = None if at is None else (float(at[0]), float(at[1]), float(at[2]))
+            self.values[name] = Measure(float(value), how, where)
 
     def numbers(self) -> dict[str, float]:
         return {k: m.value for k, m in self.values.items()}
@@ -174,24 +184,29 @@ def _front_z(caster: RayCaster, xs: np.ndarray, ys: np.ndarray, z0: float) -> np
     return np.where(hits.hit, hits.points[:, 2], np.nan).reshape(gx.shape)
 
 
-def _aperture_width(caster: RayCaster, z0: float, ys: np.ndarray, side: float) -> float | None:
-    """|x| of the widest aperture point on one side, seen from the front.
+def _aperture_width(
+    caster: RayCaster, z0: float, ys: np.ndarray, side: float
+) -> tuple[float, np.ndarray] | None:
+    """|x| of the widest aperture point on one side, seen from the front, and that
+    point on the rim (head frame).
 
     Per row, rays step outward from 2 mm beside the midline; the aperture ends at
     the first ray that hits within :data:`APERTURE_RIM_DEPTH_MM` of the row's most
     anterior bone (the rim), while rays inside it pass deep into the nasal cavity.
     """
     xs = side * np.arange(2.0, 25.01, 0.5)
-    best = None
+    best: tuple[float, np.ndarray] | None = None
     with np.errstate(invalid="ignore"):
-        for row in _front_z(caster, xs, ys, z0):
+        for y, row in zip(ys, _front_z(caster, xs, ys, z0), strict=True):
             if np.isnan(row).all():
                 continue
             closed = row >= np.nanmax(row) - APERTURE_RIM_DEPTH_MM
             if closed[0] or not closed.any():
                 continue
-            half = abs(xs[int(np.argmax(closed))]) - 0.25
-            best = half if best is None else max(best, half)
+            k = int(np.argmax(closed))
+            half = abs(xs[k]) - 0.25
+            if best is None or half > best[0]:
+                best = (half, np.array([side * half, y, row[k]]))
     return best
 
 
@@ -284,13 +299,16 @@ def dental_arch(caster: RayCaster, pr: np.ndarray) -> dict[str, np.ndarray] | No
     return out
 
 
-def _arch_canines(arch: Mapping[str, np.ndarray]) -> dict[str, tuple[float, float]] | None:
+def _arch_canines(
+    arch: Mapping[str, np.ndarray],
+) -> dict[str, tuple[float, float, np.ndarray, np.ndarray]] | None:
     """Per side (x of the canine's lateral aspect, x of the canine–premolar junction)
     along the arch outline, by the crowns' mesiodistal widths (Nelson & Ash 2010):
     the canine spans the arch length from central + lateral incisor to central +
     lateral incisor + canine, measured from the midline; its lateral aspect is the
-    outline's widest point over that span, the junction the point at its end.
-    None when the outline ends before it (a gap: missing teeth)."""
+    outline's widest point over that span, the junction the point at its end; then
+    both points (x, z) on the outline.  None when the outline ends before it (a gap:
+    missing teeth)."""
     w1, w2, w3 = (
         constant(f"upper_{t}_crown_md") for t in ("central_incisor", "lateral_incisor", "canine")
     )
@@ -301,9 +319,11 @@ def _arch_canines(arch: Mapping[str, np.ndarray]) -> dict[str, tuple[float, floa
             return None
         span = (s >= w1 + w2) & (s <= w1 + w2 + w3)
         sign = 1.0 if side == "l" else -1.0
-        lateral = sign * float(np.max(sign * run[span, 0]))
-        junction = float(np.interp(w1 + w2 + w3, s, run[:, 0]))
-        out[side] = (lateral, junction)
+        widest = np.flatnonzero(span)[int(np.argmax(sign * run[span, 0]))]
+        at_junction = np.array(
+            [np.interp(w1 + w2 + w3, s, run[:, 0]), np.interp(w1 + w2 + w3, s, run[:, 1])]
+        )
+        out[side] = (float(run[widest, 0]), float(at_junction[0]), run[widest], at_junction)
     return out
 
 
@@ -368,6 +388,49 @@ def _canines(mesh: Mesh, pr: np.ndarray) -> dict[str, tuple[float, float]] | Non
     return out
 
 
+#: measurements shown on the skull (the guide view): name -> short label
+MARKED = {
+    "aperture_x_l": "widest aperture",
+    "aperture_x_r": "widest aperture",
+    "spine_projection": "nasal spine",
+    "canine_x_l": "canine",
+    "canine_x_r": "canine",
+    "cp_junction_x_l": "canine-premolar",
+    "cp_junction_x_r": "canine-premolar",
+    "upper_cej_y": "upper CEJ",
+    "incisal_edge_y": "incisal edge",
+    "lower_cej_y": "lower CEJ",
+}
+
+
+def measurement_marks(m: SkullMeasures) -> list[tuple[str, np.ndarray, str]]:
+    """(label, point in the head frame, how it was taken) for every measurement of
+    :data:`MARKED` that has a place: what the guide view draws on the skull."""
+    return [
+        (MARKED[name], np.array(m.values[name].at), m.values[name].how)
+        for name in MARKED
+        if name in m.values and m.values[name].at is not None
+    ]
+
+
+def marks_for_view(
+    lms_h: LandmarkSet, skull_h: Mesh, sex: str | None = None
+) -> tuple[list[tuple[str, np.ndarray, str]], list[str]]:
+    """What the guide view shows of the skull measurements: the marks of
+    :func:`measurement_marks`, and one line per guide measurement that could not be
+    taken, with why (head frame, mm)."""
+    m = measure_skull(lms_h, skull_h, sex=sex)
+    wanted = (*MARKED, "intercanine_width")
+    seen: set[str] = set()
+    missing = []
+    for name in wanted:
+        why = m.missing.get(name)
+        if why and why not in seen:  # one line per reason (left and right share theirs)
+            seen.add(why)
+            missing.append(f"{MARKED.get(name, name.replace('_', ' '))}: {why}")
+    return measurement_marks(m), missing
+
+
 def measure_skull(
     lms: LandmarkSet,
     skull: Mesh | None = None,
@@ -403,8 +466,9 @@ def measure_skull(
         if got is not None:
             m.put(
                 f"aperture_x_{side}",
-                sign * got,
+                sign * got[0],
                 "widest nasal aperture in the frontal view (rays on the skull mesh)",
+                at=got[1],
             )
         elif f"apl_{side}" in p:
             m.put(
@@ -439,6 +503,7 @@ def measure_skull(
             None if base is None else p["ans"][2] - base,
             f"ans z minus the spine base z; base from the {how}",
             "no spine base (mesh or ss)",
+            at=p["ans"],
         )
     else:
         m.missing["spine_projection"] = "no anterior nasal spine ans"
@@ -480,6 +545,7 @@ def measure_skull(
             p["pr"][1] - crest if upper_teeth else None,
             f"prosthion pr − {crest} mm (crest to CEJ)",
             no_upper,
+            at=p["pr"] - [0.0, crest, 0.0],
         )
         m.put(
             "incisal_edge_y",
@@ -488,12 +554,18 @@ def measure_skull(
             if edge is not None
             else f"upper CEJ − {crown} mm crown length (no skull mesh)",
             no_upper,
+            at=None if edge is None else (p["pr"][0], edge, p["pr"][2]),
         )
     else:
         for k in ("upper_cej_y", "incisal_edge_y"):
             m.missing[k] = "no prosthion pr (upper alveolar crest)"
     if "id" in p:
-        m.put("lower_cej_y", p["id"][1] + crest, f"infradentale id + {crest} mm (crest to CEJ)")
+        m.put(
+            "lower_cej_y",
+            p["id"][1] + crest,
+            f"infradentale id + {crest} mm (crest to CEJ)",
+            at=p["id"] + [0.0, crest, 0.0],
+        )
     else:
         m.missing["lower_cej_y"] = "no infradentale id (mandible missing?)"
     m.put(
@@ -502,21 +574,37 @@ def measure_skull(
         f"incisor display at rest ({sex or 'sex unknown: mean of men and women'})",
     )
     # crowns are counted from the midline: without the incisors the third is a premolar
-    found = _canines(skull, p["pr"]) if skull is not None and "pr" in p and upper_teeth else None
+    found: dict[str, tuple[float, float]] | None = (
+        _canines(skull, p["pr"]) if skull is not None and "pr" in p and upper_teeth else None
+    )
     where = "crown section of the mesh"
-    if found is None and arch is not None:
-        found = _arch_canines(arch)
+    traced = _arch_canines(arch) if arch is not None else None
+    if found is None and traced is not None:
+        found = {side: (t[0], t[1]) for side, t in traced.items()}
         where = "outer dental arch traced by rays, crown widths after Nelson & Ash 2010"
+    level = p["pr"][1] - float(np.mean(ARCH_LEVELS_BELOW_CREST_MM)) if "pr" in p else 0.0
+
+    def on_arch(side: str, k: int) -> tuple[float, float, float] | None:
+        """Where the arch puts a canine point (x as measured, level, z), shown on the skull."""
+        if traced is None or found is None:
+            return None
+        xz = traced[side][3] if k else traced[side][2]
+        return (found[side][k], level, float(xz[1]))
+
     half_md = 0.5 * constant("upper_canine_crown_md")
     for side, sign in SIDES:
         if found is not None:
             m.put(
-                f"canine_x_{side}", found[side][0], f"lateral aspect of the upper canine ({where})"
+                f"canine_x_{side}",
+                found[side][0],
+                f"lateral aspect of the upper canine ({where})",
+                at=on_arch(side, 0),
             )
             m.put(
                 f"cp_junction_x_{side}",
                 found[side][1],
                 f"canine–first-premolar junction ({where})",
+                at=on_arch(side, 1),
             )
         elif caster is not None and "pr" in p:
             why = (
