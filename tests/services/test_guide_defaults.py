@@ -92,3 +92,13 @@ def test_a_width_guide_is_refused_by_the_norms_never_by_the_reference():
     assert width_problem(_vline("mouth_width_l", 26.0), {}, "female") == ""
     other = Guide("lip_parting", "l", "hline", "frontal", (-50.0,), ("sto",), "r", "c")
     assert width_problem(other, {}, None) == ""
+
+
+def test_a_broken_spine_and_missing_nasal_bones_leave_the_other_guides(head):
+    """Bad input: without the anterior nasal spine the nose tip says why it is not
+    derived; without the nasal bones (rhinion) nothing else is lost."""
+    lms = head.skull_landmarks.without("ans").without("rhi")
+    problems: list[str] = []
+    guides = {g.id for g in classic_guides(lms, _skull(head), sex="male", problems=problems)}
+    assert "nose_tip" not in guides and any("nose tip" in p and "ans" in p for p in problems)
+    assert {"nose_width_l", "nose_width_r", "mouth_width_l", "lip_parting"} <= guides
