@@ -191,7 +191,9 @@ def test_user_marked_spine_base_follows_the_spine_line(head) -> None:
 # ------------------------------------------------------------------ applying and moving
 def test_apply_changes_only_the_constrained_coordinates(guides, skin) -> None:
     new = apply_guides(guides, skin)
-    assert set(new) == {"al_l", "al_r", "prn", "ch_l", "ch_r", "ls", "li", "sto"}
+    assert set(new) == {"al_l", "al_r", "prn", "c", "ch_l", "ch_r", "ls", "li", "sto"}
+    # the columella point follows pronasale's move (the tip lobule moves as one)
+    assert np.allclose(new["c"] - skin["c"], new["prn"] - skin["prn"])
     g = _by_id(guides)
     assert np.array_equal(new["al_l"][1:], skin["al_l"][1:])
     assert new["al_l"][0] == g["nose_width_l"].value[0]

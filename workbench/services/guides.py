@@ -48,6 +48,9 @@ from workbench.services.guide_rules import Prediction, load_rules
 KINDS = {"vline": ("frontal", 1), "hline": ("frontal", 1), "point": ("lateral", 2)}
 #: Coordinates (0 = x, 1 = y, 2 = z) each kind of guide fixes.
 AXES = {"vline": (0,), "hline": (1,), "point": (1, 2)}
+#: Skin landmarks of the nose's tip lobule that follow a nose-tip guide's move of
+#: pronasale (an implementation choice: the guide rules place prn only).
+TIP_LOBULE = ("c",)
 #: Codes a guide may move besides the catalogue's skin landmarks.
 EXTRA_TARGETS = ("eye_centre_l", "eye_centre_r")
 
@@ -350,7 +353,8 @@ def apply_guides(
     """New target positions for the skin codes the enabled guides affect.
 
     A vline replaces x, an hline y, a lateral point (y, z); every other
-    coordinate is kept.  Codes no enabled guide affects are not returned.
+    coordinate is kept.  Codes no enabled guide affects are not returned, but
+    for the tip lobule (:data:`TIP_LOBULE`), which follows pronasale's move.
 
     Raises
     ------
@@ -376,6 +380,12 @@ def apply_guides(
                     )
                 owner[code, axis] = g.id
                 p[axis] = v
+    tip = out.get("prn")
+    for code in TIP_LOBULE:
+        if tip is not None and code in skin_targets and code not in out:
+            # the tip lobule moves as one: the columella point goes with pronasale
+            # (alone, a moved prn pulls the skin out into a beak)
+            out[code] = np.asarray(skin_targets[code], float) + (tip - skin_targets["prn"])
     return out
 
 
