@@ -118,20 +118,16 @@ class GuideView(QWidget):
         for b in (self.frontal, self.lateral):
             group.addButton(b)
         self.frontal.toggled.connect(lambda on: self.set_side("frontal" if on else "lateral"))
-        self.show_predictions = QCheckBox("Published predictions")
-        self.show_predictions.setChecked(True)
-        self.show_predictions.setToolTip(
+        self.show_predictions = self._toggle(
+            "Published predictions",
             "Cyan: the published prediction rules for the same "
-            "features, beside the classic guides (magenta)"
+            "features, beside the classic guides (magenta)",
         )
-        self.show_predictions.toggled.connect(lambda _on: self.refresh())
-        self.show_measures = QCheckBox("Measurements")
-        self.show_measures.setChecked(True)
-        self.show_measures.setToolTip(
+        self.show_measures = self._toggle(
+            "Measurements",
             "Yellow: where the skull was measured for the guides (aperture, "
-            "nasal spine, canines, incisal edge, cemento-enamel junctions)"
+            "nasal spine, canines, incisal edge, cemento-enamel junctions)",
         )
-        self.show_measures.toggled.connect(lambda _on: self.refresh())
         self.info = QLabel("Drag a magenta guide; the face follows.")
         self.info.setWordWrap(True)
         bar = QHBoxLayout()
@@ -176,6 +172,14 @@ class GuideView(QWidget):
                 ("LeftButtonReleaseEvent", self._on_release),
             )
         }
+
+    def _toggle(self, text: str, tip: str) -> QCheckBox:
+        """A check box, on, that redraws the view when toggled."""
+        box = QCheckBox(text)
+        box.setChecked(True)
+        box.setToolTip(tip)
+        box.toggled.connect(lambda _on: self.refresh())
+        return box
 
     # ------------------------------------------------------------ content
     def set_side(self, side: str) -> None:

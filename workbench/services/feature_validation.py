@@ -33,7 +33,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -70,9 +69,13 @@ class TruthLandmarks:
     """True soft-tissue landmarks of a case: positions (input frame, mm) and the codes
     the file marks absent (not in view), with the reason when it gives one."""
 
-    positions: dict[str, np.ndarray]
+    landmarks: LandmarkSet
     absent: dict[str, str]
     path: Path
+
+    @property
+    def positions(self) -> dict[str, np.ndarray]:
+        return self.landmarks.as_dict()
 
 
 def read_truth_landmarks(path: str | Path) -> TruthLandmarks:
@@ -83,7 +86,7 @@ def read_truth_landmarks(path: str | Path) -> TruthLandmarks:
 
     p = Path(path)
     read = read_landmarks(p, "skin", allow_undefined=True)
-    positions = {lm.code: lm.position for lm in read.landmarks if lm.is_defined}
+    positions = read.landmarks.as_dict()
     absent = {
         lm.code: lm.description or "not in view" for lm in read.landmarks if not lm.is_defined
     }
@@ -94,13 +97,7 @@ def read_truth_landmarks(path: str | Path) -> TruthLandmarks:
             "no nose, mouth or eye landmark with a position",
             f"expected some of {', '.join(sorted(wanted))}",
         )
-    return TruthLandmarks(positions, absent, p)
-
-
-def to_head(points: Mapping[str, np.ndarray], input_to_head: np.ndarray) -> dict[str, np.ndarray]:
-    """``points`` (input frame) carried into the head frame."""
-    m = np.asarray(input_to_head, float)
-    return {c: m[:3, :3] @ np.asarray(p, float) + m[:3, 3] for c, p in points.items()}
+    return TruthLandmarks(read.landmarks.defined(), absent, p)
 
 
 def _swapped(code: str) -> str:
@@ -161,6 +158,7 @@ def rule_landmarks(
         load_rules,
         published_predictions,
     )
+    from workbench.services.guide_measure import sex_code
     from workbench.services.guides import AXES, classic_guides
 
     out: dict[str, dict[str, np.ndarray]] = {}
@@ -183,7 +181,7 @@ def rule_landmarks(
         and r.kind != "classic"
         and r.target
         and r.offered in ("default", "optional")
-        and (r.suits(_sex_code(sex)) or r.rule_id in defaults)
+        and (r.suits(sex_code(sex)) or r.rule_id in defaults)
     ]
     problems = []
     for pred in published_predictions(
@@ -195,25 +193,3 @@ def rule_landmarks(
         rid, _, text = line.partition(":")
         why[rid] = text.strip()
     return out, why
-
-
-def _sex_code(sex: str | None) -> str | None:
-    from workbench.services.guide_measure import sex_code
-
-    return sex_code(sex)
-
-
-def summary_rows(features: Mapping[str, Mapping[str, float]]) -> list[dict[str, Any]]:
-    """One row per (method, feature) for a CSV: ``method, feature, error_mm, target_mm``."""
-    rows = []
-    for method, errs in features.items():
-        for name, err in errs.items():
-            rows.append(
-                {
-                    "method": method,
-                    "feature": name,
-                    "error_mm": round(err, 2),
-                    "target_mm": TARGETS_MM.get(name, ""),
-                }
-            )
-    return rows

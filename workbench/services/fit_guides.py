@@ -147,7 +147,6 @@ class FitGuides:
     enabled: bool = True
     chosen: list[Guide] = field(default_factory=list)
     rejected: list[str] = field(default_factory=list)
-    defaults: list[str] = field(default_factory=list)  # default rules tried (guide_defaults.csv)
 
     def __call__(self, skull_h: Mesh, lms_h: LandmarkSet, plan: DowelPlan) -> SkinTargets | None:
         if not self.enabled:
@@ -172,7 +171,6 @@ class FitGuides:
         asked, defaults = effective_rules(self.rules)
         if self.stored is not None:
             defaults = []  # the case's own guides: nothing replaces them unasked
-        self.defaults = [d.rule_id for d in defaults]
         if asked or defaults:
             self._apply_rules(skull_h, lms_h, tips, asked, defaults)
         return lambda skin: plausible_guides(

@@ -610,13 +610,12 @@ def _feature_notes(
         feature_errors,
         read_truth_landmarks,
         rule_landmarks,
-        to_head,
     )
 
     assert case.truth_landmarks is not None
     truth = read_truth_landmarks(case.truth_landmarks)
     recon = job.recon
-    truth_h = to_head(truth.positions, recon.input_to_head)
+    truth_h = truth.landmarks.transformed(recon.input_to_head).as_dict()
     feats = {label: feature_errors(recon.head.skin_landmarks.as_dict(), truth_h)}
     if with_rules:
         tips = {d.code: d.tip for d in recon.plan.active()}
