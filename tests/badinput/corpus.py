@@ -84,6 +84,8 @@ ENTRIES: tuple[Entry, ...] = (
     _e("build_99", "A", R + " --build 99", ("99", "4 SD"), "--build"),
     _e("build_minus_1e9", "A", R + " --build=-1e9", ("-1e9", "4 SD"), "--build"),
     _e("build_inf", "A", R + " --build inf", "finite", "--build"),
+    _e("build_bmi_5", "A", R + " --build bmi:5", ("BMI 5", "12-70"), "--build"),
+    _e("build_bmi_word", "A", R + " --build bmi:heavy", "bmi:heavy", "--build"),
     _e("ensemble_1e8", "A", R + " --ensemble 100000000", ("100000000", "500"), "--ensemble"),
     _e("ensemble_negative", "A", R + " --ensemble -3", "-3", "--ensemble"),
     _e(

@@ -119,9 +119,12 @@ def test_build_variant_adds_k_sd_exactly(head, skull, plan) -> None:
 
 def test_named_builds_and_impossible_requests(head, skull, tmp_path: Path) -> None:
     lms = head.skull_landmarks
-    with pytest.raises(InputError, match="ttable_2023: no obese build group"):
-        plan_dowels(skull, lms, DepthSettings(build="obese"))
+    # a table without build groups: "obese" is the build model's heavy face
+    obese = plan_dowels(skull, lms, DepthSettings(build="obese"))
+    assert obese.group_label.endswith("heavy build (BMI 34, build model)")
     rhine = "rhine_1983_sw_native_american"
+    with pytest.raises(InputError, match="no standard deviations, so the build model cannot"):
+        plan_dowels(skull, lms, DepthSettings(table=rhine, sex="female", build="obese"))
     with pytest.raises(InputError, match="has no standard deviations, so 'mean \\+ 1 SD'"):
         plan_dowels(skull, lms, DepthSettings(table=rhine, build=1.0))
     with pytest.raises(InputError, match="no depths for males"):

@@ -29,6 +29,8 @@ REGION_FACTOR_RANGE = (0.3, 3.0)
 #: build k (mean + k SD): 4 SD covers 99.99 % of a normal population; beyond it the
 #: table is being extrapolated, not read
 MAX_BUILD_SD = 4.0
+#: a body-mass index outside this is taken as a typing error (kg/m²)
+BMI_RANGE = (12.0, 70.0)
 #: uncertainty-ensemble fits: the spread map settles by ~50 draws, one draw takes ~0.5 s,
 #: so 500 is minutes already (1e8 would run for years)
 MAX_ENSEMBLE = 500

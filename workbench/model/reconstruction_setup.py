@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -40,13 +41,15 @@ from typing import Any
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
-from workbench.core.limits import MAX_BUILD_SD, MAX_TISSUE_DEPTH_MM, REGION_FACTOR_RANGE
+from workbench.core.limits import BMI_RANGE, MAX_BUILD_SD, MAX_TISSUE_DEPTH_MM, REGION_FACTOR_RANGE
 from workbench.model.state import freeze_json, thaw_json
 
 DEFAULT_TABLE = DEFAULT_DEPTH_TABLE
 SEXES = ("female", "male")
-#: named builds; a number k means mean + k SD of the table group
-BUILDS = ("slender", "normal", "obese")
+#: named builds (a table's build groups, else the build model's faces: normal = the means,
+#: obese = heavy); ``bmi:X`` a BMI for the build model; a number k means mean + k SD
+BUILDS = ("slender", "normal", "obese", "average", "heavy")
+_BMI = re.compile(r"^bmi\s*[:= ]?\s*([0-9.]+)$")
 #: soft-tissue models (:mod:`workbench.services.tissue_model`, ``MODELS``)
 TISSUE_MODELS = ("table", "reference")
 #: where the mandible is for the face (see DowelSettings.jaw)
@@ -79,13 +82,23 @@ def parse_build(value: Any) -> str | float:
         text = str(value).strip().lower()
         if text in BUILDS:
             return text
+        bmi = _BMI.match(text)
+        if bmi is not None:
+            b = float(bmi.group(1)) if bmi.group(1).count(".") <= 1 else math.nan
+            if not BMI_RANGE[0] <= b <= BMI_RANGE[1]:
+                raise SetupError(
+                    "build",
+                    f"BMI {bmi.group(1)} is outside {BMI_RANGE[0]:g}-{BMI_RANGE[1]:g} kg/m²",
+                )
+            return f"bmi:{b:g}"
         try:
             k = float(text.removesuffix("sd").strip())
         except ValueError:
             raise SetupError(
                 "build",
                 f"unknown build {value!r}",
-                "use slender, normal, obese, or a number k for mean + k SD",
+                "use slender, average, heavy (or normal, obese), bmi:X for a BMI, "
+                "or a number k for mean + k SD",
             ) from None
     if not math.isfinite(k):
         raise SetupError("build", f"k must be a finite number of SDs, got {value!r}")

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -36,6 +37,13 @@ from workbench.core.limits import check_tissue_depth
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
+from workbench.io.build_model import (
+    BUILD_ALIASES,
+    BUILD_FACES,
+    BuildModel,
+    load_build_model,
+    parse_bmi_build,
+)
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 from workbench.io.tables import DepthTable, load_depth_table
 from workbench.services.dowel_sites import (
@@ -67,9 +75,13 @@ class DepthSettings:
     group : str or None
         Table group; None = the group matching ``sex`` and ``build`` (or the only one).
     sex : "female" | "male" | None
-    build : "slender" | "normal" | "obese" or float k
-        A named build needs a table with such groups; a number k means
-        mean + k·SD of the chosen group (needs SDs).
+    build : "slender" | "average" | "heavy" | "normal" | "obese" | "bmi:X" or float k
+        A named build picks the table's group of that build where it has
+        one; otherwise slender / average / heavy (obese = heavy, normal =
+        the means) and ``bmi:X`` are the build model's
+        (:func:`build_score`: depths ``mean + r·SD·z``, by region).  A
+        number k means mean + k·SD everywhere (uniform, the older
+        variant; needs SDs).
     overrides : {skull code: depth mm}
         Depths set by the user (also for codes the table lacks, and for
         interpolated ``i:`` codes).
@@ -92,6 +104,9 @@ class DepthSettings:
     directions: Mapping[str, tuple[float, float, float]] = field(default_factory=dict)
     normal_radius_mm: float = DOWEL_RADIUS_MM
     interpolate: bool = True
+    #: a user's build model CSV (:func:`workbench.io.build_model.load_build_model`);
+    #: None: the shipped one
+    build_model: str | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,6 +130,10 @@ class Dowel:
     source: str
     excluded: bool = False
     parents: tuple[tuple[str, float], ...] = ()
+    #: depth change (mm) per unit of the build score z (:mod:`workbench.io.build_model`):
+    #: r·SD for a table depth with an SD, the parents' weighted sum for an interpolated
+    #: one, 0 for overrides and depths without an SD
+    per_z_mm: float = 0.0
 
     @property
     def tip(self) -> np.ndarray:
@@ -131,6 +150,10 @@ class DowelPlan:
     citation: str
     group_label: str
     warnings: tuple[str, ...] = ()
+    #: the build score the depths are at (0: the table means or a mean + k SD variant), and
+    #: whether the build model can vary them (False: numeric k, a build group, no SDs)
+    build_z: float = 0.0
+    build_model: bool = False
 
     def active(self) -> tuple[Dowel, ...]:
         return tuple(d for d in self.dowels if not d.excluded)
@@ -173,9 +196,12 @@ def plan_dowels(
     """
     catalogue = catalogue or load_catalogue()
     table = load_depth_table(settings.table, catalogue)
+    model, z, build_label = build_score(table, settings.build, settings.build_model)
     group, k, label, warnings = choose_depth_group(
-        table, settings.group, settings.sex, settings.build
+        table, settings.group, settings.sex, "normal" if build_label else settings.build
     )
+    if build_label:
+        label = f"{label.removesuffix(', mean')}, {build_label}"
     rows = {
         c: i for i, (c, g) in enumerate(zip(table.codes, table.groups, strict=True)) if g == group
     }
@@ -204,6 +230,7 @@ def plan_dowels(
             sd = float(table.sd_mm[rows[c]]) if c in rows else np.nan
             sd_or_none = None if np.isnan(sd) else sd
             skin = (table.skin_codes[rows[c]] if c in rows else "") or catalogue.partner(c, "skull")
+            per_z = 0.0
             if c in overrides:
                 depth, source, sd_or_none = overrides[c], "override", None
             else:
@@ -212,6 +239,9 @@ def plan_dowels(
                 if k and sd_or_none is None:
                     no_sd.append(c)
                 depth, source = mean + (k * sd_or_none if k and sd_or_none else 0.0), "table"
+                if model is not None and sd_or_none:
+                    per_z = model.loading(c) * sd_or_none
+                    depth += per_z * z
                 if depth < MIN_SAMPLE_DEPTH_MM:
                     floored.append(f"{c} ({depth:.1f} mm)")
                     depth = MIN_SAMPLE_DEPTH_MM
@@ -226,11 +256,12 @@ def plan_dowels(
                     mean,
                     source,
                     c in excluded,
+                    per_z_mm=per_z,
                 )
             )
         if floored:
             warnings.append(
-                f"mean {signed_k(k)} SD is below {MIN_SAMPLE_DEPTH_MM:g} mm for "
+                f"{build_label or f'mean {signed_k(k)} SD'} is below {MIN_SAMPLE_DEPTH_MM:g} mm for "
                 f"{', '.join(floored)}: set to {MIN_SAMPLE_DEPTH_MM:g} mm"
             )
         if no_sd:
@@ -267,7 +298,58 @@ def plan_dowels(
         "\n".join(table.citation(key) for key in keys),
         label,
         tuple(warnings),
+        z,
+        model is not None,
     )
+
+
+@lru_cache(maxsize=4)
+def build_model_for(path: str | None = None) -> BuildModel:
+    """The build model at ``path`` (None: the shipped one), read once."""
+    return load_build_model(path)
+
+
+def build_score(
+    table: DepthTable, build: str | float, model_path: str | None = None
+) -> tuple[BuildModel | None, float, str]:
+    """``(build model, z, label)`` for the build asked of ``table``.
+
+    The model is None where the depths cannot vary with build: a number k
+    (mean + k SD, uniform), a named build the table has a group of, or a
+    table without SDs asked for its means.  ``label`` is empty for the
+    table's means ("normal"), else e.g. "heavy build (BMI 34, build model)".
+
+    Raises
+    ------
+    InputError
+        A slender/heavy/BMI build of a table without SDs, a bad BMI, a bad
+        user build model.
+    """
+    if not isinstance(build, str):
+        return None, 0.0, ""
+    text = build.strip().lower()
+    bmi = parse_bmi_build(text)
+    if bmi is None:
+        if text not in (*BUILD_FACES, *BUILD_ALIASES):
+            return None, 0.0, ""  # choose_depth_group names the problem
+        if text in {table.group_build(g) for g in table.group_names()}:
+            return None, 0.0, ""  # the table's own group of that build
+    if np.isnan(table.sd_mm).all():
+        if text in ("normal", "average"):
+            return None, 0.0, ""
+        raise InputError(
+            table.table_id,
+            f"has no standard deviations, so the build model cannot make the {text} face",
+            "choose a table with SDs (e.g. ttable_2023) or one with a group of that build",
+        )
+    model = build_model_for(model_path)
+    if bmi is not None:
+        z = model.z_of_bmi(bmi)
+        return model, z, f"BMI {bmi:g} (build model, z {z:+.2f})"
+    name = BUILD_ALIASES.get(text, text)
+    if text == "normal":
+        return model, 0.0, ""
+    return model, model.z(name), f"{name} build (BMI {model.bmi(name):g}, build model)"
 
 
 def depth_samples(plan: DowelPlan, rng: np.random.Generator) -> np.ndarray:
@@ -476,9 +558,10 @@ def _interpolated(
         )
         sds = [0.0 if p.source == "override" else p.sd_mm for p in ps]
         sd = None if any(s is None for s in sds) else float(np.sqrt(np.sum((w * sds) ** 2)))
+        per_z = float(w @ [p.per_z_mm for p in ps])
         source = "interpolated"
         if code in overrides:
-            depth, source, sd = overrides[code], "override", None
+            depth, source, sd, per_z = overrides[code], "override", None, 0.0
         off = code in excluded or any(p.excluded for p in ps)
         if off and code not in excluded:
             followed.append(code)
@@ -494,6 +577,7 @@ def _interpolated(
                 source,
                 off,
                 parents,
+                per_z_mm=per_z,
             )
         )
     if followed:

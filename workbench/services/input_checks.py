@@ -198,7 +198,12 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
                 f"known rules: {', '.join(known)}",
             )
     from workbench.io.tables import load_depth_table
-    from workbench.services.dowels import DepthSettings, choose_depth_group, setting_codes
+    from workbench.services.dowels import (
+        DepthSettings,
+        build_score,
+        choose_depth_group,
+        setting_codes,
+    )
 
     check_count(
         ensemble,
@@ -210,7 +215,8 @@ def check_fit_settings(dowels: Any, *, ensemble: int = 0, rules: Any = ()) -> No
     if not isinstance(dowels.build, str):
         check_build_sd(dowels.build)
     table = load_depth_table(dowels.table)  # refuses depths and SDs out of bounds
-    choose_depth_group(table, None, dowels.sex, dowels.build)
+    _, _, by_model = build_score(table, dowels.build)  # refuses what the model cannot make
+    choose_depth_group(table, None, dowels.sex, "normal" if by_model else dowels.build)
     # unknown codes in the overrides and exclusions, before the registration
     setting_codes(
         DepthSettings(overrides=dict(dowels.overrides), excluded=frozenset(dowels.excluded))

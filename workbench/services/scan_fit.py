@@ -855,13 +855,23 @@ def _depth_pairs(
 ) -> tuple[dict[str, tuple[str, float]], str, list[str]]:
     from workbench.io.tables import load_depth_table
     from workbench.services.dowel_sites import choose_depth_group
+    from workbench.services.dowels import build_score
     from workbench.services.template import paired_depths
 
     tab = load_depth_table(table)
-    group, k, label, notes = choose_depth_group(tab, None, sex, build)
+    model, z, by_model = build_score(tab, build)
+    group, k, label, notes = choose_depth_group(tab, None, sex, "normal" if by_model else build)
     pairs = paired_depths(
         set(head.skull_landmarks.as_dict()), set(head.skin_landmarks.as_dict()), table, group, k
     )
+    if model is not None and z:
+        # the build model's regional depths (mean + r SD z) for a named build or a BMI
+        sds = {c: sd for c, (_, sd) in tab.lookup(group).items()}
+        pairs = {
+            c: (skin, d + model.loading(c) * sds[c] * z if np.isfinite(sds[c]) else d)
+            for c, (skin, d) in pairs.items()
+        }
+        label = f"{label.removesuffix(', mean')}, {by_model}"
     return pairs, label, notes
 
 

@@ -166,6 +166,8 @@ class SiteCalibration:
     table_mm: float
     reference_mm: float
     sd_mm: float | None
+    #: depth change per unit build score (mm; :attr:`~workbench.services.dowels.Dowel.per_z_mm`)
+    per_z_mm: float = 0.0
 
     @property
     def delta_mm(self) -> float:
@@ -282,7 +284,7 @@ def _compute(head: TemplateHead, depth: DepthSettings, settings: TissueSettings)
             ok = hits.hit
             chosen = [d for d, k in zip(dowels, ok, strict=True) if k]
             sites = [
-                SiteCalibration(d.code, float(d.depth_mm), float(h), d.sd_mm)
+                SiteCalibration(d.code, float(d.depth_mm), float(h), d.sd_mm, d.per_z_mm)
                 for d, h in zip(chosen, hits.distance[ok], strict=True)
             ]
             if len(sites) >= 4:
