@@ -262,7 +262,9 @@ def export_results(
     """Face and head meshes, landmarks (.mrk.json, .fcsv) and the PDF report into ``folder``.
 
     All in the skull file's frame, mm.  ``face.<ext>`` is the fitted skin's
-    face region; ``head/`` holds the whole fitted head: a template pack
+    face region; with a build model, ``face_slender/average/heavy.<ext>``, the
+    band (``face_band_mm.npy``) and ``face_builds.glb`` as ``workbench
+    reconstruct`` writes them; ``head/`` holds the whole fitted head: a template pack
     (PLY parts, landmarks, muscles, ``template.json``; readable by
     ``workbench template``) plus every part again in the other formats
     (``head/skull.obj``, ``head/teeth.stl`` ...).  The report is the one
@@ -276,6 +278,7 @@ def export_results(
     from workbench.services.reconstruction_job import (
         FITTED_HEAD_FRAME_TEXT,
         head_in_input_frame,
+        write_build_files,
     )
 
     out = Path(folder)
@@ -291,6 +294,13 @@ def export_results(
         return files
     for ext in formats:
         files[f"face_{ext}"] = write_mesh(out / f"face.{ext}", fit.recon.face)
+    if fit.builds is not None:  # the three build faces, the band and the morph-target glb
+        files.update(write_build_files(fit.recon, fit.builds, out))
+        for name in fit.builds.names:
+            for ext in (e for e in formats if e != "ply"):
+                files[f"face_{name}_{ext}"] = write_mesh(
+                    out / f"face_{name}.{ext}", fit.builds.face(name, fit.recon)
+                )
     head = head_in_input_frame(fit.recon)
     for path in export_template(head, out / "head", frame=FITTED_HEAD_FRAME_TEXT):
         files[f"head/{path.name}"] = path

@@ -43,6 +43,7 @@ from workbench.io.template_pack import export_template
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.model.template import TemplateHead
+from workbench.services.build_faces import BuildFaces
 from workbench.services.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.fit_guides import MAX_NORM_SD, plausible_guides
 from workbench.services.guides import guides_from_json, guides_to_json
@@ -433,6 +434,16 @@ def build_report(
     )
     if credits:
         report["credits"] = credits
+    if fit.builds is not None:
+        report["builds"] = {
+            **fit.builds.summary(),
+            "files": [f"face_{n}.ply" for n in fit.builds.names]
+            + ["face_builds.glb", "face_band_mm.npy", "face_band_edges_mm.npy"],
+            "note": "the skull cannot tell the build: three faces at the build model's BMIs "
+            "(depths mean + r SD z by region; a stated model, see data_tables/build), and a "
+            "95 % band over the slender-heavy range, the spread a known build leaves, the "
+            "fit's own error and the inferred skin (face.ply vertex band_mm)",
+        }
     if fit.references is not None:
         between = fit.references["spread"]
         report["references"] = {
@@ -561,23 +572,85 @@ def write_outputs(
     return relocate(files, temp, final)
 
 
+#: the band's files beside face.ply
+BAND_FILES = "face_band_mm.npy; inner/outer edges in face_band_edges_mm.npy"
+
+
+def write_build_files(
+    recon: Reconstruction,
+    builds: BuildFaces,
+    out: Path,
+    *,
+    units_per_mm: float = 1.0,
+    units_label: str = "mm",
+) -> dict[str, Path]:
+    """``face_<build>.ply`` per build (the skull file's frame and units, as ``face.ply``),
+    the band (``face_band_mm.npy``: half-width mm per vertex of ``face.ply``;
+    ``face_band_edges_mm.npy``: (n, 2) inner and outer edge, mm along the face's outward
+    normal) and ``face_builds.glb`` (the main face with one morph target per other build,
+    the skull file's frame, mm ÷ 1000)."""
+    from workbench.io.gltf_export import write_glb
+
+    files: dict[str, Path] = {}
+    for name in builds.names:
+        files[f"face_{name}"] = ply.write(
+            out / f"face_{name}.ply",
+            builds.face(name, recon).scaled(units_per_mm),
+            units=units_label,
+            comments=[
+                f"build {name}: BMI {builds.bmi[name]:g} kg/m2 (build model {builds.model_id})"
+            ],
+        )
+    np.save(out / "face_band_mm.npy", builds.half_width_mm.astype(np.float32))
+    edges = np.column_stack([builds.lower_mm, builds.upper_mm]).astype(np.float32)
+    np.save(out / "face_band_edges_mm.npy", edges)
+    files["band"] = out / "face_band_mm.npy"
+    files["band_edges"] = out / "face_band_edges_mm.npy"
+    files["builds_glb"] = write_glb(
+        out / "face_builds.glb",
+        recon.face,
+        {n: recon.to_input(builds.vertices(n)) for n in builds.names if n != builds.main},
+        skin_name=f"face_{builds.main}".replace(" ", "_"),
+        frame=FITTED_HEAD_FRAME_TEXT,
+    )
+    return files
+
+
 def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     face = result.recon.face
     k = result.file_units_per_mm
+    builds = result.fit.builds if result.fit is not None else None
+    band = {"band_mm": builds.half_width_mm} if builds is not None else None
+    band_note = (
+        [f"vertex band_mm: half-width (mm) of the 95 % band, build unknown ({BAND_FILES})"]
+        if builds is not None
+        else []
+    )
     if k == 1.0:
-        files = {"face": write_mesh(out / "face.ply", face)}
+        files = {"face": ply.write(out / "face.ply", face, vertex_scalars=band, comments=band_note)}
     else:  # the skull file's units, and the header says so (not "mm")
         files = {
             "face": ply.write(
                 out / "face.ply",
                 face.scaled(k),
                 units=result.file_units_label,
-                comments=["same surface in mm: face_mm.ply"],
+                comments=["same surface in mm: face_mm.ply", *band_note],
+                vertex_scalars=band,
             )
         }
     if k != 1.0:
         files["face_mm"] = write_mesh(out / "face_mm.ply", face)
+    if builds is not None:
+        files.update(
+            write_build_files(
+                result.recon,
+                builds,
+                out,
+                units_per_mm=k,
+                units_label=result.file_units_label,
+            )
+        )
     reg = result.recon.registration
     if reg is not None and reg.occlusion is not None:
         # the face was fitted over the skull with its jaw in occlusion: that skull beside it

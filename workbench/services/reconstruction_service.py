@@ -44,7 +44,7 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.template import TemplateHead
-from workbench.services.dowels import DepthSettings, DowelPlan
+from workbench.services.dowels import DepthSettings, DowelPlan, build_model_for
 from workbench.services.fit_guides import FitGuides, stored_guides
 from workbench.services.guide_rules import Prediction, published_predictions
 from workbench.services.guides import Guide
@@ -57,6 +57,7 @@ from workbench.services.reconstruct import (
     reconstruct,
 )
 from workbench.services.template_cache import reference_head
+from workbench.services.build_faces import BuildFaces, build_faces
 from workbench.services.tissue_model import TissueSettings
 
 Progress = Callable[[str], None]
@@ -253,7 +254,12 @@ class FitResult:
     references : dict or None
         Library consensus: ``{"heads": [{"id", "path"}], "spread": (n,) mm}``.
     seconds : dict
-        ``{"fit", "ensemble"}`` wall times.
+        ``{"fit", "ensemble", "builds"}`` wall times.
+    builds : BuildFaces or None
+        The slender, average and heavy faces and the uncertainty band
+        (:mod:`workbench.services.build_faces`); None where the depths cannot
+        vary with build (a uniform mean + k SD, a table's build group, a table
+        without SDs, the reference's own tissue, a library consensus).
     """
 
     recon: Reconstruction
@@ -268,6 +274,7 @@ class FitResult:
     rejected: tuple[str, ...] = ()
     references: dict[str, Any] | None = None
     seconds: dict[str, float] = field(default_factory=dict)
+    builds: BuildFaces | None = None
 
     @property
     def warnings(self) -> tuple[str, ...]:
@@ -410,6 +417,22 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
         t = time.perf_counter()
         spread = ensemble_spread(recon, head, skull_h, inputs.ensemble, settings=fit)
         seconds["ensemble"] = time.perf_counter() - t
+    builds = None
+    if references is None:
+        t = time.perf_counter()
+        builds = build_faces(
+            recon, build_model_for(), min_tissue_mm=fit.min_tissue_mm, bone=skull_h
+        )
+        seconds["builds"] = time.perf_counter() - t
+        if (
+            builds is None
+            and recon.plan.build_model is False
+            and not isinstance(dowels.build, (int, float))
+        ):
+            notes.append(
+                "one face only: the depths cannot vary with build here (a table group of "
+                "that build, a table without SDs, or the reference's own tissue)"
+            )
     for mesh in (recon.face, recon.head.skin):  # drawn smooth-shaded: normals here, in the
         _ = mesh.vertex_normals  # worker, not on the GUI thread
     return FitResult(
@@ -425,6 +448,7 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
         rejected,
         references,
         seconds,
+        builds,
     )
 
 

@@ -21,7 +21,7 @@ those of the file (mm for files this module writes).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -406,11 +406,14 @@ def encode(
     units: str = "mm",
     vertex_rgb: np.ndarray | None = None,
     space: str = "RAS",
+    vertex_scalars: Mapping[str, np.ndarray] | None = None,
 ) -> bytes:
     """PLY bytes: binary little endian (default) or ascii, double vertices.
 
     ``vertex_rgb`` ``(n, 3)`` uint8 adds ``uchar red/green/blue`` vertex
-    properties.
+    properties; ``vertex_scalars`` ``{name: (n,)}`` adds ``float`` vertex
+    properties after them (e.g. ``band_mm``, which ParaView, CloudCompare and
+    MeshLab show as a scalar field).
 
     ``comments`` are extra header lines (``comment TEXT``), written after
     the units and writer comments; each must be one line of ASCII text
@@ -420,6 +423,13 @@ def encode(
     "RAS" (the workbench's mesh frame) unless the numbers are LPS.
     """
     fmt = "binary_little_endian" if binary else "ascii"
+    scalars = {k: np.asarray(v, np.float32) for k, v in (vertex_scalars or {}).items()}
+    for name, v in scalars.items():
+        if not name.isidentifier() or not name.isascii():
+            raise ValueError(f"vertex property name {name!r} is not a plain identifier")
+        if v.shape != (len(vertices),):
+            raise ValueError(f"expected ({len(vertices)},) values for {name}, got {v.shape}")
+    scalar_props = "".join(f"property float {name}\n" for name in scalars)
     units_note = UNITS_NOTE if units == "mm" else f"units: {units}"
     _comment_lines([units_note])  # one line of ASCII text, like the other comments
     header = (
@@ -429,6 +439,7 @@ def encode(
         f"element vertex {len(vertices)}\n"
         "property double x\nproperty double y\nproperty double z\n"
         f"{_RGB_PROPERTIES if vertex_rgb is not None else ''}"
+        f"{scalar_props}"
         f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n"
     ).encode("ascii")
     if vertex_rgb is not None:
@@ -436,6 +447,10 @@ def encode(
         if rgb.shape != (len(vertices), 3):
             raise ValueError(f"expected ({len(vertices)}, 3) vertex colours, got {rgb.shape}")
         rgb = np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
+    if scalars:
+        return _encode_with_scalars(
+            header, vertices, faces, rgb if vertex_rgb is not None else None, scalars, binary
+        )
     if binary:
         rec = np.empty(len(faces), np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
         rec["n"] = 3
@@ -457,6 +472,43 @@ def encode(
     return header + body.encode("ascii")
 
 
+def _encode_with_scalars(
+    header: bytes,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    rgb: np.ndarray | None,
+    scalars: Mapping[str, np.ndarray],
+    binary: bool,
+) -> bytes:
+    """The body of :func:`encode` when float vertex properties follow xyz (and the colours)."""
+    fields: list[tuple[str, str, tuple[int, ...]]] = [("p", "<f8", (3,))]
+    if rgb is not None:
+        fields.append(("c", "u1", (3,)))
+    fields += [(f"s{i}", "<f4", ()) for i in range(len(scalars))]
+    table = np.empty(len(vertices), np.dtype(fields))
+    table["p"] = vertices
+    if rgb is not None:
+        table["c"] = rgb
+    for i, v in enumerate(scalars.values()):
+        table[f"s{i}"] = v
+    if binary:
+        rec = np.empty(len(faces), np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
+        rec["n"] = 3
+        rec["i"] = faces
+        return header + table.tobytes() + rec.tobytes()
+    cols = [np.asarray(vertices, np.float64).astype(object)]
+    fmt = "%r %r %r"
+    if rgb is not None:
+        cols.append(rgb.astype(int).astype(object))
+        fmt += " %d %d %d"
+    for v in scalars.values():
+        cols.append(v.astype(np.float64).astype(object)[:, None])
+        fmt += " %r"
+    body = format_rows(fmt + "\n", np.hstack(cols))
+    body += format_rows("3 %d %d %d\n", faces)
+    return header + body.encode("ascii")
+
+
 def write(
     path: str | PathLike[str],
     mesh: Mesh,
@@ -464,8 +516,10 @@ def write(
     comments: Iterable[str] = (),
     units: str = "mm",
     space: str = "RAS",
+    vertex_scalars: Mapping[str, np.ndarray] | None = None,
 ) -> Path:
-    """Write a PLY mesh (vertices in mm) atomically with extra header ``comments``.
+    """Write a PLY mesh (vertices in mm) atomically with extra header ``comments``
+    (and ``vertex_scalars``, float vertex properties: :func:`encode`).
 
     Same checks, errors and atomic write as
     :func:`workbench.io.meshes.write_mesh` (which writes no extra comments);
@@ -489,6 +543,7 @@ def write(
         comments=comments,
         units=units,
         space=space,
+        vertex_scalars=vertex_scalars,
     )
     try:
         _atomic_write(path, payload)
