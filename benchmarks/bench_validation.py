@@ -288,7 +288,83 @@ def unseen(out: Path) -> int:
     path.write_text(HEADER + "\n".join(rows) + "\n", encoding="utf-8")
     code = workbench(["validate", str(path), "--identity", "--out", str(out), "--force"])
     print((out / "results.md").read_text(encoding="utf-8"))
+    print(build_model_summary(out))
     return code
+
+
+#: the build a practitioner would be told for each subject when the class is chosen
+#: leave-one-subject-out: the class that does best (mean |d|) on the *other* subjects of the
+#: same kind (the two cadavers choose for each other; headsq, the only living subject, has
+#: no other and keeps the default, average)
+LOSO_PEERS = {"vhp_female": ("vhp_male",), "vhp_male": ("vhp_female",)}
+
+
+def build_model_summary(out: Path) -> str:
+    """The issue-31 figures of a validate run (``results.csv``, ``bands.csv``): per case the
+    three faces beside the offset, the closest of the three, the class chosen leave-one-
+    subject-out, and the band's coverage (written to ``build_model.md``)."""
+    import csv
+
+    with (out / "results.csv").open(encoding="utf-8") as fh:
+        res = {(r["case"], r["method"]): r for r in csv.DictReader(fh)}
+    bands: dict[tuple[str, str], dict[str, str]] = {}
+    if (out / "bands.csv").is_file():
+        with (out / "bands.csv").open(encoding="utf-8") as fh:
+            bands = {(r["case"], r["band"]): r for r in csv.DictReader(fh) if r["region"] == "all"}
+    cases = sorted({c for c, m in res if m == "reconstruction"})
+
+    def fig(case: str, build: str) -> tuple[float, float]:
+        method = "reconstruction" if build == "average" else f"reconstruction_{build}"
+        r = res[(case, method)]
+        return float(r["pct_within_2_5mm"]), float(r["mean_abs_mm"])
+
+    def subject(case: str) -> str:
+        return case.removesuffix("_plain").removesuffix("_auto")
+
+    names = ("slender", "average", "heavy")
+    lines = [
+        "# Three builds, the band, and the build class chosen leave-one-subject-out",
+        "",
+        "% within 2.5 mm / mean |d| mm of each face; the uniform 6 mm offset; the gain of the "
+        "closest of the three and of the class chosen on the other subject(s) (points of % "
+        "within 2.5 mm); band: % of the scored true skin inside the 95 % band (median "
+        "half-width mm), build unknown and build given as the chosen class.",
+        "",
+        "| case | slender | average | heavy | offset | closest (gain) | class chosen on | "
+        "class (gain) | band, unknown | band, class |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for case in cases:
+        if (case, "reconstruction_heavy") not in res:
+            continue
+        f = {b: fig(case, b) for b in names}
+        off = res[(case, "uniform_6mm_offset")]
+        off_pct = float(off["pct_within_2_5mm"])
+        best = max(names, key=lambda b: f[b][0])
+        peers = [c for c in cases if subject(c) in LOSO_PEERS.get(subject(case), ())]
+        if peers:
+            chosen = min(names, key=lambda b: sum(fig(p, b)[1] for p in peers))
+            on = ", ".join(peers)
+        else:
+            chosen, on = "average", "– (default)"
+        band_u = bands.get((case, "unknown"), {})
+        band_c = bands.get((case, chosen), {})
+
+        def band(b: dict[str, str]) -> str:
+            if not b:
+                return "–"
+            return f"{100 * float(b['coverage']):.1f} ({float(b['half_width_median_mm']):.1f})"
+
+        lines.append(
+            f"| {case} | "
+            + " | ".join(f"{f[b][0]:.1f} / {f[b][1]:.2f}" for b in names)
+            + f" | {off_pct:.1f} / {float(off['mean_abs_mm']):.2f}"
+            + f" | {best} ({f[best][0] - off_pct:+.1f}) | {on} | {chosen} "
+            f"({f[chosen][0] - off_pct:+.1f}) | {band(band_u)} | {band(band_c)} |"
+        )
+    text = "\n".join(lines) + "\n"
+    (out / "build_model.md").write_text(text, encoding="utf-8")
+    return text
 
 
 #: the soft-tissue truth landmarks (tests/data/soft_tissue_truth) and the skin level they

@@ -87,6 +87,7 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     """Every case, the tables and the PDF, into the staged folder ``out``."""
     from workbench import __version__
     from workbench.reporting.validation_report import (
+        band_rows,
         feature_rows,
         markdown,
         rows,
@@ -126,6 +127,9 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     credits = sorted({c for case in cases for p in (case.skull, case.truth) if (c := _credit(p))})
     table = rows(results, REGION_NAMES)
     write_csv(table, out / "results.csv")
+    bands = band_rows(results)
+    if bands:  # the uncertainty band's coverage of the true skin, per build and region
+        write_csv(bands, out / "bands.csv")
     features = feature_rows(results)
     if features:  # cases with true landmarks: per-feature errors of every method and rule
         write_csv(features, out / "features.csv")

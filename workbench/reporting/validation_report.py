@@ -99,6 +99,54 @@ def feature_table(features: Mapping[str, Mapping[str, float]]) -> list[str]:
     return out
 
 
+def band_table(band: Mapping[str, Any], region_names: Sequence[str]) -> list[str]:
+    """Coverage of the uncertainty band (% of the scored points inside, median half-width mm),
+    for the unknown build and for each build given, overall and per region."""
+    lines = [
+        f"Uncertainty band (95 %): % of the scored true skin inside it (median half-width, mm); "
+        f"the main face is the {md_cell(band.get('main'))} one",
+        "",
+        "| build | all | " + " | ".join(region_names) + " |",
+        "|---|---|" + "---|" * len(region_names),
+    ]
+    for name, fig in band.items():
+        if not isinstance(fig, Mapping):
+            continue
+        cells = [_band_cell(fig)] + [
+            _band_cell(fig.get("regions", {}).get(r, {})) for r in region_names
+        ]
+        lines.append(f"| {md_cell(name)} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _band_cell(fig: Mapping[str, Any]) -> str:
+    if not fig.get("n"):
+        return "–"
+    return f"{_fmt(100 * fig['coverage'])} ({_fmt(fig['half_width_median_mm'])})"
+
+
+def band_rows(results: Sequence[tuple[Any, str]]) -> list[dict[str, Any]]:
+    """One row per case, band and region (``bands.csv``): coverage and median half-width."""
+    out = []
+    for res, _label in results:
+        band = res.notes.get("band") or {}
+        for name, fig in band.items():
+            if not isinstance(fig, Mapping):
+                continue
+            for region, f in [("all", fig), *fig.get("regions", {}).items()]:
+                out.append(
+                    {
+                        "case": res.case_id,
+                        "band": name,
+                        "region": region,
+                        "n": f.get("n"),
+                        "coverage": f.get("coverage"),
+                        "half_width_median_mm": f.get("half_width_median_mm"),
+                    }
+                )
+    return out
+
+
 def feature_rows(results: Sequence[tuple[Any, str]]) -> list[dict[str, Any]]:
     """One row per case, method and feature (``features.csv``)."""
     from workbench.services.feature_validation import TARGETS_MM
@@ -174,7 +222,12 @@ def markdown(
         feats = res.notes.get("features")
         if feats:
             lines += ["", *feature_table(feats)]
-        notes = {k: v for k, v in res.notes.items() if v is not None and k != "features"}
+        band = res.notes.get("band")
+        if band:
+            lines += ["", *band_table(band, region_names)]
+        notes = {
+            k: v for k, v in res.notes.items() if v is not None and k not in ("features", "band")
+        }
         if notes:
             lines += ["", "notes: " + "; ".join(f"{k}: {md_cell(v)}" for k, v in notes.items())]
         lines.append("")

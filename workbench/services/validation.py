@@ -574,17 +574,26 @@ def run_case(
             offset = uniform_offset(bone, OFFSET_MM)
             write_mesh(offset_file, offset)
         res.seconds["offset"] = time.perf_counter() - t
+        builds = first.fit.builds if first.fit is not None and len(faces) == 1 else None
+        build_surfaces = (
+            [(f"{label}_{n}", builds.face(n, recon)) for n in builds.names if n != builds.main]
+            if builds is not None
+            else []
+        )
+        regions_v = face_regions(first.template)
         ids, scores = score_surfaces(
             truth,
             bone,
-            [(label, face), (f"uniform_{OFFSET_MM:g}mm_offset", offset)],
+            [(label, face), *build_surfaces, (f"uniform_{OFFSET_MM:g}mm_offset", offset)],
             ant,
             case.mask,
             labels_from=face,
-            vertex_regions=face_regions(first.template),
+            vertex_regions=regions_v,
             region_names=REGION_NAMES,
         )
         res.truth_ids, res.n_points, res.scores = ids, len(ids), scores
+        if builds is not None:
+            res.notes["band"] = _band_notes(builds, face, truth.vertices[ids], regions_v)
         res.files["truth"], res.files["bone"] = truth_path, bone_path
         if case.truth_landmarks is not None:
             _feature_notes(res, case, first, label, with_rules=guides != "none")
@@ -599,6 +608,21 @@ def run_case(
         return res, None
     finally:
         res.seconds["total"] = time.perf_counter() - t0
+
+
+def _band_notes(builds: Any, face: Mesh, points: np.ndarray, regions_v: dict) -> dict[str, Any]:
+    """Coverage of the uncertainty band on the scored true-skin points: the unknown-build
+    band, and each build's own band (its face ± what a known build leaves)."""
+    from workbench.core.face_metric import region_labels
+    from workbench.services.build_faces import band_coverage
+    from workbench.services.compare import REGION_NAMES
+
+    labels = region_labels(points, face, regions_v, REGION_NAMES)
+    out: dict[str, Any] = {"main": builds.main}
+    for name in (None, *builds.names):
+        lower, upper = builds.band(name)
+        out[name or "unknown"] = band_coverage(face, lower, upper, points, labels, REGION_NAMES)
+    return out
 
 
 def _feature_notes(
