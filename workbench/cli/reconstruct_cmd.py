@@ -27,14 +27,21 @@ from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check
 
 
 def _build(value: str) -> str | float:
-    if value in ("slender", "normal", "obese"):
+    if value in ("slender", "normal", "obese", "average", "heavy"):
         return value
+    if value.strip().lower().startswith("bmi"):
+        from workbench.model.reconstruction_setup import SetupError, parse_build
+
+        try:
+            return parse_build(value)
+        except SetupError as exc:
+            raise argparse.ArgumentTypeError(f"--build {value}: {exc.problem}") from None
     try:
         k = float(value.replace("SD", "").replace("sd", "").strip())
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"--build must be slender, normal, obese or a number of SDs (e.g. 1 or -1.5), "
-            f"not {value!r}"
+            f"--build must be slender, average, heavy (or normal, obese), bmi:X (a BMI) or a "
+            f"number of SDs (e.g. 1 or -1.5), not {value!r}"
         ) from None
     if not math.isfinite(k) or abs(k) > MAX_BUILD_SD:
         raise argparse.ArgumentTypeError(
@@ -148,7 +155,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--build",
         type=_build,
         default="normal",
-        help="slender|normal|obese where the table has them, else k for mean + k SD",
+        help="the main face.ply's build: slender | average (default; = normal, the table "
+        "means) | heavy (= obese), bmi:X for a known BMI (the build model, by region), or k "
+        "for a uniform mean + k SD; with a table that has SDs the three faces "
+        "face_slender/average/heavy.ply and the uncertainty band are written beside it",
     )
     p.add_argument("--guides", default="default", help="default | none | guides JSON file")
     p.add_argument(
@@ -419,7 +429,7 @@ def _validate(truth_path: Path, scale: float | None, result) -> dict:
 def _pictures(out: Path, result) -> dict[str, str]:
     import numpy as np
 
-    from workbench.render.reconstruction import render_reconstruction
+    from workbench.render.reconstruction import render_builds, render_reconstruction
 
     from workbench.services.reconstruct import articulated_skull
 
@@ -430,6 +440,7 @@ def _pictures(out: Path, result) -> dict[str, str]:
     skull = result.opened.case.specimen.mesh
     if recon.registration is not None and recon.registration.occlusion is not None:
         skull = articulated_skull(recon.registration)  # the skull the face was fitted over
+    eyes = recon.mesh_to_input(recon.head.meshes["eyes"])
     try:
         paths = render_reconstruction(
             skull,
@@ -437,11 +448,29 @@ def _pictures(out: Path, result) -> dict[str, str]:
             (origins, tips),
             out / "pictures",
             frame=recon.input_to_head,
-            eyes=recon.mesh_to_input(recon.head.meshes["eyes"]),
+            eyes=eyes,
             spread=result.spread,
             inferred=recon.inferred,
         )
     except (RuntimeError, OSError, ValueError) as exc:
         print(f"  note: no pictures (off-screen rendering failed: {exc})")
         return {}
+    builds = result.fit.builds if result.fit is not None else None
+    if builds is not None:
+        # the three build faces side by side and the band map: a failure here loses only
+        # these pictures, never the job
+        try:
+            paths |= render_builds(
+                {name: builds.face(name, recon) for name in builds.names},
+                out / "pictures",
+                frame=recon.input_to_head,
+                bmi=builds.bmi,
+                main=builds.main,
+                eyes=eyes,
+                skull=skull,
+                band_face=recon.face,
+                band_mm=builds.half_width_mm,
+            )
+        except (RuntimeError, OSError, ValueError, InputError) as exc:
+            print(f"  note: no build pictures (rendering failed: {exc})")
     return {k: str(Path(p).relative_to(out)) for k, p in paths.items()}

@@ -20,11 +20,20 @@ Pictures (PNG, named ``<prefix>_<key>.png``; ``key`` is returned):
   three-quarter in one picture with one colour bar.
 
 ``<view>`` is ``front``, ``side`` and ``three_quarter``.
+
+:func:`render_builds` adds the pictures of an unknown body build (named
+``<key>.png``, or ``<prefix>_<key>.png`` with a prefix):
+
+- ``builds_front``, ``builds_side``: the faces of the builds (slender,
+  average, heavy) side by side, front and right profile, one camera for all
+  three (same scale, same place), each labelled with its build and BMI;
+- ``band``: the main face coloured by the half-width (mm) of its 95 %
+  uncertainty band, front, side and three-quarter with one colour bar.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +45,9 @@ from workbench.render.snapshots import _prefer_headless_gl, to_polydata, view_di
 VIEWS = ("front", "side", "three_quarter")
 BONE, SKIN, EYE, BACKGROUND = "#e9e0c9", "#e3b48f", "#d8dde3", "white"
 DOWEL_CMAP, SPREAD_CMAP = "viridis", "YlOrRd"
+#: the views of the build pictures (``builds_<view>``)
+BUILD_VIEWS = ("front", "side")
+BAND_TITLE = "95 % band half-width (mm)"
 TUBE_RADIUS_MM, BALL_RADIUS_MM, SCALE_BAR_MM = 0.9, 1.9, 50.0
 FACE_OPACITY = 0.4
 #: the face is framed down to this far below the skull (the neck is cut off)
@@ -214,6 +226,127 @@ def render_reconstruction(
     return written
 
 
+def render_builds(
+    faces: Mapping[str, Mesh],
+    out_dir: str | Path,
+    *,
+    frame: np.ndarray | None = None,
+    bmi: Mapping[str, float] | None = None,
+    main: str | None = None,
+    eyes: Mesh | None = None,
+    skull: Mesh | None = None,
+    band_face: Mesh | None = None,
+    band_mm: np.ndarray | None = None,
+    prefix: str = "",
+    size: tuple[int, int] = (600, 700),
+) -> dict[str, Path]:
+    """Write the pictures of the build faces and the band to ``out_dir``; return ``{key: path}``.
+
+    Keys ``builds_front``, ``builds_side`` (with ``faces``) and ``band`` (with
+    ``band_mm``), written as ``<key>.png``, or ``<prefix>_<key>.png`` with a
+    ``prefix``.  Each build picture shows the faces side by side in the order of
+    ``faces`` (thinnest first) through one orthographic camera that frames all of
+    them, so their widths and profiles compare at the same scale (50 mm bars).
+
+    Parameters
+    ----------
+    faces : {build name: Mesh}
+        The faces of the builds, mm, input frame (empty: only the band picture).
+    frame : (4, 4), optional
+        Input frame → head frame (default: the input already is the head frame).
+    bmi : {build name: BMI kg/m²}, optional
+        Printed under each face ("slender · BMI 19"); every face needs one.
+    main : str, optional
+        The build of the main face (``face.ply``), marked so under its face.
+    eyes : Mesh, optional
+        Eyeballs drawn with every face (and grey on the band picture), input frame.
+    skull : Mesh, optional
+        The skull, input frame: the faces are cut :data:`NECK_MARGIN_MM` below it
+        (a bust, as in :func:`render_reconstruction`); without it they are whole.
+    band_face : Mesh, optional
+        The main face the band belongs to, mm, input frame.
+    band_mm : (band_face.n_vertices,), optional
+        Half-width (mm, ≥ 0) of the 95 % band per vertex of ``band_face``
+        (adds the ``band`` picture).
+    size : (width, height)
+        Pixels per panel (one panel per face; the band picture has three).
+    """
+    names = _check_builds(faces, bmi, main, band_face, band_mm)
+    anterior, superior = _orientation(frame)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _prefer_headless_gl()
+    import pyvista as pv
+
+    floor = None
+    if skull is not None and skull.n_vertices:
+        floor = float((skull.vertices @ superior).min()) - NECK_MARGIN_MM
+
+    def bust(mesh: Mesh, scalars: dict[str, np.ndarray] | None = None):
+        """``mesh`` as PolyData cut at the floor, and the vertices it keeps (to frame)."""
+        pd = to_polydata(mesh)
+        for key, values in (scalars or {}).items():
+            pd[key] = values
+        if floor is None:
+            return pd, mesh.vertices
+        kept = mesh.vertices[mesh.vertices @ superior >= floor]
+        return pd.clip(normal=superior, origin=superior * floor, invert=False), kept
+
+    def path(key: str) -> Path:
+        return out / (f"{prefix}_{key}.png" if prefix else f"{key}.png")
+
+    eyes_pd = to_polydata(eyes) if eyes is not None and eyes.n_faces else None
+    written: dict[str, Path] = {}
+    studio = _Studio(pv, size)
+    try:
+        busts = {n: bust(faces[n]) for n in names}
+        if busts:
+            # one camera per view frames every face: same scale and place in all panels
+            framed = np.vstack([kept for _, kept in busts.values()])
+            labels = {n: _build_label(n, bmi, main) for n in names}
+            for view in BUILD_VIEWS:
+                cam = _camera(framed, view, anterior, superior, size)
+
+                def build(p, name: str, cam: dict = cam) -> None:
+                    p.add_mesh(
+                        busts[name][0], color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9
+                    )
+                    if eyes_pd is not None:
+                        p.add_mesh(eyes_pd, color=EYE, smooth_shading=True, specular=0.4)
+                    _label(pv, p, cam, labels[name], size)
+
+                written[f"builds_{view}"] = _shoot(
+                    studio,
+                    path(f"builds_{view}"),
+                    [(cam, n) for n in names],
+                    build,
+                    one_bar=True,
+                )
+        if band_face is not None and band_mm is not None:
+            band_pd, kept = bust(band_face, {"band_mm": np.asarray(band_mm, float)})
+            cameras = {v: _camera(kept, v, anterior, superior, size) for v in VIEWS}
+            band_range = _nice_range(np.array([0.0, np.percentile(band_mm, 99.5)]))
+
+            def banded(p, v: str) -> None:
+                actor = p.add_mesh(
+                    band_pd,
+                    scalars="band_mm",
+                    cmap=SPREAD_CMAP,
+                    clim=band_range[:2],
+                    smooth_shading=True,
+                    show_scalar_bar=False,
+                )
+                if eyes_pd is not None:
+                    p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
+                if v == VIEWS[len(VIEWS) // 2]:
+                    _scalar_bar(p, actor, BAND_TITLE, band_range, size)
+
+            written["band"] = _shoot(studio, path("band"), [(cameras[v], v) for v in VIEWS], banded)
+    finally:
+        studio.close()
+    return written
+
+
 # ---------------------------------------------------------------- helpers
 def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, np.ndarray]:
     if skull.n_faces == 0:
@@ -237,6 +370,81 @@ def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, 
         if not np.isfinite(spread).all():
             raise InputError("spread", "the spread map has NaN or infinite values")
     return origins, tips
+
+
+def _check_builds(
+    faces: Mapping[str, Mesh],
+    bmi: Mapping[str, float] | None,
+    main: str | None,
+    band_face: Mesh | None,
+    band_mm: np.ndarray | None,
+) -> tuple[str, ...]:
+    """The build names in order, after checking the inputs of :func:`render_builds`."""
+    if not isinstance(faces, Mapping):
+        raise InputError(
+            "faces", f"the build faces are a {{name: Mesh}} dict, not {type(faces).__name__}"
+        )
+    names = tuple(faces)
+    if not names and band_mm is None:
+        raise InputError("faces", "no build faces and no band: nothing to draw")
+    for name in names:
+        mesh = faces[name]
+        if not isinstance(mesh, Mesh) or mesh.n_faces == 0:
+            raise InputError("faces", f"the {name!r} face has no triangles")
+        if not np.isfinite(mesh.vertices).all():
+            raise InputError("faces", f"the {name!r} face has NaN or infinite vertices")
+    if bmi is not None:
+        missing = [n for n in names if n not in bmi]
+        if missing:
+            raise InputError("bmi", f"no BMI for the {', '.join(map(repr, missing))} face")
+        bad = [n for n in names if not (np.isfinite(bmi[n]) and bmi[n] > 0)]
+        if bad:
+            raise InputError(
+                "bmi", f"the BMI of {', '.join(map(repr, bad))} must be a positive number (kg/m²)"
+            )
+    if main is not None and not isinstance(main, str):
+        raise InputError("main", f"the main build is a name, not {type(main).__name__}")
+    if (band_face is None) != (band_mm is None):
+        raise InputError(
+            "band_mm", "the band picture needs both the face and its per-vertex half-width"
+        )
+    if band_face is not None and band_mm is not None:
+        if band_face.n_faces == 0:
+            raise InputError("band_face", "the band's face has no triangles")
+        if np.shape(band_mm) != (band_face.n_vertices,):
+            raise InputError(
+                "band_mm",
+                f"{np.size(band_mm)} values for a face of {band_face.n_vertices} vertices",
+            )
+        values = np.asarray(band_mm, float)
+        if not np.isfinite(values).all():
+            raise InputError("band_mm", "the band has NaN or infinite values")
+        if (values < 0).any():
+            raise InputError("band_mm", "a band half-width (mm) cannot be negative")
+    return names
+
+
+def _build_label(name: str, bmi: Mapping[str, float] | None, main: str | None) -> str:
+    """``"slender · BMI 19"``; the main face's label says it is ``face.ply``."""
+    text = name if bmi is None else f"{name} · BMI {round(float(bmi[name]), 1):g}"
+    return text + ("\n(face.ply)" if name == main else "")
+
+
+def _label(pv, plotter, cam: dict, text: str, size: tuple[int, int]) -> None:
+    """``text`` centred under the subject, level with the scale bar, in front of everything."""
+    front = cam["centre"] + cam["direction"] * (cam["reach"] / 2)
+    anchor = front - cam["up"] * (cam["scale"] * 0.93)
+    plotter.add_point_labels(
+        pv.PolyData([anchor]),
+        [text],
+        show_points=False,
+        shape=None,
+        font_size=_font(size, 8),
+        text_color="black",
+        always_visible=True,
+        bold=False,
+        justification_horizontal="center",
+    )
 
 
 def _orientation(frame: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -371,12 +579,16 @@ def _shoot(
     draw,
     *,
     peel: bool = False,
+    one_bar: bool = False,
 ) -> Path:
-    """One picture with one panel per ``(camera, view)``; ``draw(plotter, view)`` adds the actors."""
+    """One picture with one panel per ``(camera, view)``; ``draw(plotter, view)`` adds the actors.
+
+    Every panel has a scale bar, or with ``one_bar`` only the last (panels of one camera).
+    """
     from PIL import Image
 
     plotter, images = studio.plotter, []
-    for cam, view in panels:
+    for i, (cam, view) in enumerate(panels):
         plotter.suppress_rendering = True  # not a render per added actor
         plotter.clear()  # actors, scalar bars and lights
         plotter.enable_lightkit()
@@ -385,7 +597,8 @@ def _shoot(
         else:
             plotter.disable_depth_peeling()
         draw(plotter, view)
-        _scale_bar(studio.pv, plotter, cam, studio.size)
+        if not one_bar or i == len(panels) - 1:
+            _scale_bar(studio.pv, plotter, cam, studio.size)
         camera = plotter.camera
         camera.focal_point = cam["centre"]
         camera.position = cam["centre"] + cam["direction"] * cam["reach"]

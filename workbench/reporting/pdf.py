@@ -393,21 +393,39 @@ class ReportPDF(FPDF):
                 self.subheading(title)
             top = self.get_y()
             for k, ((caption, path), h) in enumerate(zip(row, heights, strict=True)):
-                x = self.l_margin + k * (cell_w + gap)
-                if path.is_file():
-                    self.image(str(path), x=x, y=top, w=cell_w, h=h, alt_text=self.t(caption))
-                else:
-                    self.set_draw_color(*GREY)
-                    self.rect(x, top, cell_w, h)
-                    self.set_xy(x + 2, top + h / 2 - 4)
-                    self.font(7.5)
-                    self.multi_cell(cell_w - 4, 4, self.t(f"picture not found: {path}"), align="C")
-                self.set_xy(x, top + h + 0.5)
-                self.font(7.5)
-                self.set_text_color(*GREY)
-                self.cell(cell_w, 4, self.t(caption), align="C")
-                self.set_text_color(*DARK)
+                self._place(self.l_margin + k * (cell_w + gap), top, cell_w, h, caption, path)
             self.set_xy(self.l_margin, top + row_h + 1)
+
+    def picture(self, caption: str, path: Path, min_scale: float = 0.6) -> None:
+        """One captioned picture the width of the page, shrunk (to no less than ``min_scale``
+        of that width, centred) to stay on the current page; else on the next page."""
+        width = self.w - self.l_margin - self.r_margin
+        full_h = width * _aspect(path)
+        scale = min(1.0, (self.page_break_trigger - self.get_y() - 6.0) / full_h)
+        if scale < min_scale:
+            self.add_page()
+            scale = 1.0
+        w, h = width * scale, full_h * scale
+        top = self.get_y()
+        self._place(self.l_margin + (width - w) / 2, top, w, h, caption, path)
+        self.set_xy(self.l_margin, top + h + 6.0)
+
+    def _place(self, x: float, top: float, w: float, h: float, caption: str, path: Path) -> None:
+        """``path`` drawn in the ``w`` × ``h`` mm box at ``(x, top)``, ``caption`` centred
+        under it; a missing file is a framed note."""
+        if path.is_file():
+            self.image(str(path), x=x, y=top, w=w, h=h, alt_text=self.t(caption))
+        else:
+            self.set_draw_color(*GREY)
+            self.rect(x, top, w, h)
+            self.set_xy(x + 2, top + h / 2 - 4)
+            self.font(7.5)
+            self.multi_cell(w - 4, 4, self.t(f"picture not found: {path}"), align="C")
+        self.set_xy(x, top + h + 0.5)
+        self.font(7.5)
+        self.set_text_color(*GREY)
+        self.cell(w, 4, self.t(caption), align="C")
+        self.set_text_color(*DARK)
 
 
 def _aspect(path: Path) -> float:
@@ -433,17 +451,18 @@ def picture_groups(pictures: dict[str, str], base: Path) -> dict[str, list[tuple
         keys.sort(key=lambda k: rank.get(k[len(prefix) :], len(rank)))
         if keys:
             groups[title] = [
-                (view_caption(k[len(prefix) :]), _resolve(pictures[k], base)) for k in keys
+                (view_caption(k[len(prefix) :]), resolve_picture(pictures[k], base)) for k in keys
             ]
             used.update(keys)
     for key in pictures:
         if key not in used:
             groups.setdefault(key, []).append(
-                (key.replace("_", " "), _resolve(pictures[key], base))
+                (key.replace("_", " "), resolve_picture(pictures[key], base))
             )
     return groups
 
 
-def _resolve(path: str, base: Path) -> Path:
+def resolve_picture(path: str, base: Path) -> Path:
+    """A picture's path from the report: relative paths are relative to ``base``."""
     p = Path(path)
     return p if p.is_absolute() else base / p

@@ -64,8 +64,11 @@ from workbench.reporting.pdf import (
     describe_value,
     num,
     picture_groups,
+    resolve_picture,
 )
 
+#: picture keys of :func:`workbench.render.reconstruction.render_builds`
+BUILD_PICTURES = ("builds_front", "builds_side", "band")
 SCHEMA_ID = "reconstruction-report-v1"
 SCHEMA_FILE = "report.schema.json"
 PathArg = str | PathLike[str]
@@ -228,7 +231,15 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
     software = f"{report['software']['name']} {report['software']['version']}"
     pdf = ReportPDF(report["case_id"], report["created"], software)
     pdf.add_page()
-    pictures = picture_groups(dict(report.get("pictures") or {}), base)
+    listed = dict(report.get("pictures") or {})
+    builds = report.get("builds") or None
+    # the build pictures go with their sections (with no builds entry: "Other pictures")
+    build_pictures = {
+        k: resolve_picture(listed.pop(k), base)
+        for k in BUILD_PICTURES
+        if builds is not None and k in listed
+    }
+    pictures = picture_groups(listed, base)
     _title(pdf, report)
     check = report.get("self_check") or {}
     if check.get("outcome") == "check":
@@ -240,6 +251,8 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         )
     if report.get("warnings"):
         pdf.box("Warnings", report["warnings"])
+    if builds is not None:
+        _builds(pdf, builds, build_pictures.get("builds_front"))
     if report.get("credits"):
         pdf.box("Data credits", report["credits"])
     _inputs(pdf, report["inputs"])
@@ -263,7 +276,8 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
     if report.get("registration"):
         _registration(pdf, report["registration"], report.get("self_check"))
     shown = [title for _, title in GROUPS if title in pictures]
-    if shown:
+    side = build_pictures.get("builds_side")
+    if shown or side is not None:
         pdf.heading("Pictures", min_space=100)
         pdf.para(
             "Orthographic views oriented by the head frame (Frankfort Horizontal): front, "
@@ -274,6 +288,14 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         )
         for title in shown:
             pdf.pictures(pictures.pop(title), title=title)
+        if side is not None:
+            pdf.pictures(
+                [("right side, slender to heavy, same scale", side)],
+                columns=1,
+                title="The three builds",
+            )
+    if builds is not None:
+        _band(pdf, builds, build_pictures.get("band"))
     if report.get("ensemble"):
         _ensemble(pdf, report["ensemble"], pictures.pop("spread", []))
     if report.get("validation"):
@@ -311,12 +333,22 @@ def _title(pdf: ReportPDF, report: dict[str, Any]) -> None:
         ("Template", report["template"]["id"]),
         ("Template SHA-256", report["template"]["content_hash"]),
         ("Depth table", f"{table['id']}" + (f" ({table['group']})" if table.get("group") else "")),
-        ("Build", table.get("build") or "–"),
+        ("Build", _build_text(report)),
         ("Units", "mm (every length in this report)"),
         ("Frame", report["frame"]),
         ("Report schema", report["@schema"]),
     ]
     pdf.key_values(pairs, mono_keys=frozenset({"Template SHA-256"}))
+
+
+def _build_text(report: dict[str, Any]) -> str:
+    """The build as asked, and which of the three faces face.ply is."""
+    asked = report["table"].get("build") or "–"
+    builds = report.get("builds")
+    if not builds:
+        return asked
+    names = ", ".join(builds.get("builds", {}))
+    return f"{asked}: face.ply is the {builds.get('main')} face ({names} beside it)"
 
 
 def _inputs(pdf: ReportPDF, inputs: list[dict[str, Any]]) -> None:
@@ -471,6 +503,74 @@ def _registration(pdf: ReportPDF, reg: dict[str, Any], check: dict[str, Any] | N
                 )
             )
     pdf.grid((), rows, (70, 110), aligns=("L", "L"), size=8.5)
+
+
+COUNT_WORDS = {1: "one", 2: "two", 3: "three", 4: "four", 5: "five"}
+
+
+def _bmi(value: Any) -> str:
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    return f"BMI {value:g}" if ok else "BMI –"
+
+
+def _builds(pdf: ReportPDF, builds: dict[str, Any], front: Path | None) -> None:
+    """First page: the three build faces (BMI, which is ``face.ply``) and the band in brief."""
+    pdf.heading("Three builds", min_space=70 if front is not None else 25)
+    faces = builds.get("builds")
+    faces = faces if isinstance(faces, dict) else {}
+    listed = ", ".join(
+        f"{name} ({_bmi(b.get('bmi') if isinstance(b, dict) else None)})"
+        for name, b in faces.items()
+    )
+    main = builds.get("main")
+    text = "The skull cannot tell how heavy the person was, so the face is given for " + (
+        f"{COUNT_WORDS.get(len(faces), len(faces))} body builds (BMI in kg/m²): {listed}."
+        if faces
+        else "several body builds."
+    )
+    if main:
+        text += (
+            f" face.ply is the {main} face."
+            if main in faces
+            else f" face.ply is a face for {main}, between them."
+        )
+    half = (builds.get("band_half_width_mm") or {}).get("median")
+    if half is not None:
+        text += (
+            " With the build unknown, the true skin should lie within a band around face.ply "
+            f"about {num(2 * half)} mm thick (median half-width {num(half)} mm; 95 % band, "
+            "see 'Uncertainty band')."
+        )
+    pdf.para(text, size=9)
+    pdf.ln(1)
+    if front is not None:
+        pdf.picture("front view, slender to heavy, one scale (see the 50 mm bar)", front)
+
+
+def _band(pdf: ReportPDF, builds: dict[str, Any], picture: Path | None) -> None:
+    """The 95 % band around the main face: what it holds, its width, its map."""
+    pdf.heading("Uncertainty band", min_space=100 if picture is not None else 30)
+    hw = builds.get("band_half_width_mm") or {}
+    text = (
+        "Where the true skin may lie, with about 95 % probability, when the build is not "
+        "known: an inner and an outer surface around face.ply. The band spans the slender "
+        "to heavy faces and is widened for what the depth table leaves open even for a "
+        "known build, for the fit's own error and, where no bone lies under the skin, for "
+        "the reference head's guess. Its half-width is half its thickness, measured straight "
+        "out from the skin"
+    )
+    if hw.get("median") is not None:
+        text += f": median {num(hw['median'])} mm, 90th percentile {num(hw.get('p90'))} mm"
+    text += "."
+    files = [str(f) for f in builds.get("files") or () if "band" in str(f)]
+    if files:
+        text += f" Files: {', '.join(files)} (mm, per vertex of face.ply)."
+    pdf.para(text, size=9)
+    pdf.ln(1)
+    if picture is not None:
+        pdf.picture(
+            "half-width of the 95 % band (mm): front, side, three-quarter", picture, min_scale=0.75
+        )
 
 
 def _ensemble(pdf: ReportPDF, ensemble: dict[str, Any], pictures: list[tuple[str, Path]]) -> None:

@@ -424,14 +424,13 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
             recon, build_model_for(), min_tissue_mm=fit.min_tissue_mm, bone=skull_h
         )
         seconds["builds"] = time.perf_counter() - t
-        if (
-            builds is None
-            and recon.plan.build_model is False
-            and not isinstance(dowels.build, (int, float))
-        ):
+        if builds is None:
             notes.append(
-                "one face only: the depths cannot vary with build here (a table group of "
-                "that build, a table without SDs, or the reference's own tissue)"
+                "one face only: a uniform mean + k SD build (use slender, average, heavy or "
+                "bmi:X for the build model's three faces and band)"
+                if isinstance(dowels.build, (int, float))
+                else "one face only: the depths cannot vary with build here (a table group "
+                "of that build, a table without SDs, or the reference's own tissue)"
             )
     for mesh in (recon.face, recon.head.skin):  # drawn smooth-shaded: normals here, in the
         _ = mesh.vertex_normals  # worker, not on the GUI thread

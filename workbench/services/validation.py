@@ -27,7 +27,9 @@ orient     ``hint`` (default: the reconstruction is told the directions) or
            ``auto`` (it orients the skull from the bone alone; the
            directions only pick the metric's points)
 sex        ``female`` | ``male`` (depth table group, built-in head)
-build      ``normal`` | ``slender`` | ``obese`` | k (mean + k SD)
+build      ``normal`` (= ``average``) | ``slender`` | ``heavy`` (= ``obese``) |
+           ``bmi:X`` | k (mean + k SD); the main face, the other two
+           build faces are scored beside it
 tissue     ``table`` | ``reference`` (see tissue_model)
 template   a template pack instead of the built-in head
 bone_iso   CT level of the bone surface (default: the preset for the data)
