@@ -14,7 +14,10 @@ between builds, so the three faces (slender, average, heavy) are the
 fitted face moved along its normals — no second registration or fit — and
 any build between them is a blend (the window's build slider).  Where a
 thinner build would take the skin closer to the bone than the fit's
-minimum tissue, it stops there.
+minimum tissue, it stops there.  Thin parts move as one piece (the nose,
+the lips together, each ear: along their mean normal, blended into the
+normals around them), and the lids, which rest on the eyeball, keep their
+place with the build's change fading in around them (:data:`LID_FADE_MM`).
 
 The band: per vertex, inner and outer offsets (mm along the outward normal
 of the main face) that hold the true skin with ~95 % probability when the
@@ -43,11 +46,28 @@ import numpy as np
 
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
+from workbench.core.thickness import adjacency, smooth_field
 from workbench.io.build_model import BUILD_FACES, BuildModel
+from workbench.model.template import TemplateHead
 from workbench.services.reconstruct import BONE_SEARCH_MM, PRIOR_SD_MM, Reconstruction
 
 #: the band's two-sided 95 % normal quantile
 BAND_Z = 1.96
+#: skin regions that move as one piece between builds (each along its mean normal, blended
+#: into the vertex normals around it): a thin part moved along its own vertex normals
+#: would swell (an ear) or part (the lips)
+RIGID_PARTS: tuple[tuple[str, ...], ...] = (
+    ("nose",),
+    ("upper_lip", "lower_lip"),
+    ("ear_l",),
+    ("ear_r",),
+)
+#: the lids rest on the eyeball, which sits on the bone whatever the build: they keep their
+#: place, and the build's change fades in over this distance around them (mm)
+LIDS = ("eyelid_upper_l", "eyelid_upper_r", "eyelid_lower_l", "eyelid_lower_r")
+LID_FADE_MM = 12.0
+#: smoothing passes blending a rigid part's direction into the normals around it
+BLEND_PASSES = 4
 #: the fitted shape's own error where the bone is observed (σ, mm): set on headsq (the lean
 #: living CT the method was tuned on) as the smallest whole millimetre giving it ≥ 95 %
 #: coverage at the table's means; judged on the two Visible Human cadavers (README)
@@ -172,9 +192,9 @@ def build_faces(
     if not np.any(per_site):
         return None
     skin = recon.head.skin
-    normals = skin.vertex_normals
     base = skin.vertices
-    u = field_.influence @ per_site
+    normals, keep = _directions(recon.head)
+    u = (field_.influence @ per_site) * keep
     z_main = float(plan.build_z)
     zs = {n: model.z(n) for n in BUILD_FACES}
     bmis = {n: model.bmi(n) for n in BUILD_FACES}
@@ -222,6 +242,39 @@ def build_faces(
         sigma,
         floor,
     )
+
+
+def _directions(head: TemplateHead) -> tuple[np.ndarray, np.ndarray]:
+    """``(directions, weights)`` per skin vertex: the outward normals with the rigid parts'
+    mean normals blended in, and 0 on the lids fading to 1 over :data:`LID_FADE_MM`."""
+    from scipy.spatial import cKDTree
+
+    skin = head.skin
+    normals = skin.vertex_normals.copy()
+    adj = adjacency(skin)
+    for names in RIGID_PARTS:
+        ids = np.concatenate(
+            [np.asarray(head.regions[n], dtype=np.int64) for n in names if n in head.regions]
+            or [np.zeros(0, np.int64)]
+        )
+        if not len(ids):
+            continue
+        mean = normals[ids].mean(axis=0)
+        if np.linalg.norm(mean) < 1e-6:
+            continue
+        ind = np.zeros(skin.n_vertices)
+        ind[ids] = 1.0
+        b = np.clip(smooth_field(adj, ind, BLEND_PASSES), 0.0, 1.0)
+        b[ids] = 1.0
+        normals = (1.0 - b)[:, None] * normals + b[:, None] * (mean / np.linalg.norm(mean))
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    keep = np.ones(skin.n_vertices)
+    lids = [np.asarray(head.regions[n], dtype=np.int64) for n in LIDS if n in head.regions]
+    if lids:
+        lid = np.concatenate(lids)
+        dist = cKDTree(skin.vertices[lid]).query(skin.vertices)[0]
+        keep = np.clip(dist / LID_FADE_MM, 0.0, 1.0)
+    return normals, keep
 
 
 def band_coverage(
