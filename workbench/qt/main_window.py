@@ -36,7 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from PySide6.QtCore import QPoint, QRect, Qt
+from PySide6.QtCore import QPoint, QRect, Qt, QTimer
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QApplication,
@@ -72,7 +72,7 @@ from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
 from workbench.qt.panels.landmarks_panel import LandmarksPanel
 from workbench.qt.panels.layers_panel import LayersPanel
-from workbench.qt.panels.reconstruct_panel import ReconstructPanel
+from workbench.qt.panels.reconstruct_panel import BAND_TITLE, ReconstructPanel
 from workbench.qt.panels.scan_fit_panel import ScanFitPanel
 from workbench.qt.picking import ClickPicker
 from workbench.qt.scan_fit_ops import ScanFitTool
@@ -85,6 +85,10 @@ if TYPE_CHECKING:
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
+#: the colour bar titles of the face's colourings (spread, band)
+FACE_BARS = ("spread mm", BAND_TITLE)
+#: ms without a build slider move before the skull is drawn in full again
+BUILD_REST_MS = 300
 #: case parts the dowels and the fit depend on: a change re-plans (and re-fits)
 FIT_PARTS = ("specimen", "landmarks", "dowels", "orientation", "guides")
 
@@ -266,6 +270,14 @@ class MainWindow(QMainWindow):
         self.reconstruct_panel.opacity_changed.connect(lambda v: self.scene.set_opacity("face", v))
         self.scene.layer_changed.connect(self._on_layer_changed)
         self.reconstruct_panel.colouring_changed.connect(lambda _v: self.draw_face())
+        self.reconstruct_panel.build_changed.connect(self.show_build)
+        # while the build slider moves the skull is drawn light (lod.py); full quality again
+        # once it rests (released, or no move for BUILD_REST_MS)
+        self._build_rest = QTimer(self)
+        self._build_rest.setSingleShot(True)
+        self._build_rest.setInterval(BUILD_REST_MS)
+        self._build_rest.timeout.connect(self._build_rested)
+        self.reconstruct_panel.build_slider.sliderReleased.connect(self._build_rest.start)
         self.compare_panel.load_requested.connect(self.ask_load_truth)
         self.session.fit_changed.connect(self.reconstruct_panel.show_result)
         self.session.truth_changed.connect(
@@ -694,15 +706,55 @@ class MainWindow(QMainWindow):
         self.guide_view.fit_changed()
 
     def draw_face(self) -> None:
+        """The fitted face at the build slider's build, coloured as the panel says.
+
+        "spread" and "band" fall back to the plain skin when the fit has no ensemble
+        or no build faces.
+        """
         fit = self.session.fit
         if fit is None:
             self.scene.clear("face")
             return
-        spread = self.reconstruct_panel.colouring.currentText() == "spread"
-        if spread and fit.spread is not None:
-            self.scene.show_face(fit.recon.face, fit.spread, "spread mm")
+        panel = self.reconstruct_panel
+        colouring, z = panel.colouring.currentText(), panel.build_z()
+        face = fit.recon.face
+        if fit.builds is not None and z is not None and z != fit.builds.main_z:
+            face = face.with_vertices(fit.recon.to_input(fit.builds.vertices_at(z)))
+        scalars, title = None, ""
+        if colouring == "spread" and fit.spread is not None:
+            scalars, title = fit.spread, "spread mm"
+        elif colouring == "band" and fit.builds is not None:
+            scalars, title = fit.builds.half_width_mm, BAND_TITLE
+        # pyvista leaves a colour bar placed by position behind when its surface goes
+        # (it only frees bars it placed itself): drop the face's other bars by hand
+        bars = self.plotter.scalar_bars
+        for old in FACE_BARS:
+            if old != title and old in bars:
+                bars.remove_scalar_bar(old, render=False)
+        if scalars is None:
+            self.scene.show_face(face)
         else:
-            self.scene.show_face(fit.recon.face)
+            self.scene.show_face(face, scalars, title)
+
+    def show_build(self, z: float) -> None:
+        """The build slider moved: morph the drawn face to build score ``z`` in place.
+
+        Only the face's points (and normals) change; its actor, colours and colour bar
+        stay, nothing is refitted and nothing goes on the undo stack (view state, see
+        :mod:`workbench.qt.panels.reconstruct_panel`).  One render is requested.
+        """
+        fit = self.session.fit
+        if fit is None or fit.builds is None or not self.scene.has("face"):
+            return
+        self.detail.begin()  # the light skull while the slider moves (_build_rested ends it)
+        self._build_rest.start()
+        self.scene.update_points("face", fit.recon.to_input(fit.builds.vertices_at(z)))
+
+    def _build_rested(self) -> None:
+        """The build slider rests: the skull in full again (one full-quality render)."""
+        if self.scene.closed or self.reconstruct_panel.build_slider.isSliderDown():
+            return  # (held: its release restarts the timer)
+        self.detail.end()
 
     def draw_muscles(self) -> None:
         """The fitted head's muscle grids (mm, input frame), 4 mm under the fitted skin.

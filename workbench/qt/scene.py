@@ -307,7 +307,7 @@ class SceneView(QObject):
 
     @staticmethod
     def _move_points(actor: Any, points: np.ndarray) -> None:
-        data = actor.GetMapper().GetInput()
+        data = _drawn_data(actor)
         new = np.asarray(points, dtype=float).reshape(-1, 3)
         vtk_points = data.GetPoints()
         if vtk_points is None or new.shape[0] != vtk_points.GetNumberOfPoints():
@@ -580,9 +580,7 @@ class SceneView(QObject):
             raise KeyError(f"layer {layer!r} has nothing drawn")
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
-        return np.array(
-            vtk_to_numpy(actors[0].GetMapper().GetInput().GetPoints().GetData()), dtype=float
-        )
+        return np.array(vtk_to_numpy(_drawn_data(actors[0]).GetPoints().GetData()), dtype=float)
 
     def move_layer_points(self, layer: str, points: np.ndarray) -> None:
         """Move the points of every actor of ``layer`` in place (they share one layout,
@@ -596,6 +594,26 @@ class SceneView(QObject):
 
     def _marker_size(self) -> float:
         return 12.0
+
+
+def _drawn_data(actor: Any) -> Any:
+    """The dataset ``actor`` was drawn from (the one to move points in).
+
+    A surface coloured by scalars reaches its mapper through a pass-through
+    algorithm of pyvista's (it sets the active scalars), whose output stays
+    empty until the first render and is a shallow copy after it: the data is
+    the producer's at the top of the mapper's input pipeline.
+    """
+    mapper = actor.GetMapper()
+    algorithm = mapper.GetInputAlgorithm()
+    while (
+        algorithm is not None
+        and algorithm.GetNumberOfInputPorts() > 0
+        and algorithm.GetNumberOfInputConnections(0) > 0
+    ):
+        algorithm = algorithm.GetInputAlgorithm(0, 0)
+    data = algorithm.GetOutputDataObject(0) if algorithm is not None else None
+    return data if data is not None else mapper.GetInput()
 
 
 def _muscle_geometry(

@@ -1,4 +1,5 @@
-"""Reconstruct dock: run the fit, skin opacity and colouring, and the nose/mouth guides.
+"""Reconstruct dock: run the fit, skin opacity and colouring, the build slider and the
+nose/mouth guides.
 
 The fit runs in a worker (the window's ``reconstruct`` request).  Guides are
 listed with their values (mm, head frame: a vertical line fixes x, a
@@ -8,6 +9,18 @@ guide list as the case's ``guides`` part with a
 "Re-fit on change", the window fits again ("Recompute" sets the part back
 to None: guides computed from the skull).  Published-rule predictions for the same
 features are shown beside them for comparison.
+
+The **build** slider runs over the fit's faces for an unknown body build
+(:class:`~workbench.services.build_faces.BuildFaces`: slender, average, heavy,
+labelled with their BMI) and emits the build score ``z`` it points at; the
+window morphs the drawn face to ``builds.vertices_at(z)`` in place.  The
+faces sit at equal steps of the slider; between two of them the score (and
+the BMI shown beside the slider) changes linearly.  The slider is **view
+state, not a case edit**: it pushes nothing on the undo stack, is not saved
+with the case and does not change the saved face, the export or the report,
+which stay the *main* build (the case's build, ``--build`` on the command
+line).  Each new fit puts it back on the main build.  Without build faces
+(``fit.builds is None``) it is disabled, its tooltip says why.
 """
 
 from __future__ import annotations
@@ -20,6 +33,7 @@ from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
     QFormLayout,
+    QGridLayout,
     QHBoxLayout,
     QHeaderView,
     QLabel,
@@ -41,6 +55,8 @@ from workbench.services.guides import Guide
 if TYPE_CHECKING:
     import numpy as np
 
+    from workbench.services.build_faces import BuildFaces
+
 GUIDE_COLUMNS = ("Guide", "Value mm", "On", "Rule")
 FIGURES = (
     ("max_tip_error_mm", "largest dowel-tip error", "mm"),
@@ -48,6 +64,27 @@ FIGURES = (
     ("penetrating_vertices", "skin vertices inside bone", ""),
     ("refits", "non-penetration refits", ""),
     ("seconds", "fit time", "s"),
+)
+#: the colouring combo's entries (see :attr:`ReconstructPanel.colouring_changed`)
+COLOURINGS = ("skin", "spread", "band")
+#: the colour bar title of the "band" colouring ("95 % band half-width mm" on two lines: on
+#: one it ran past the view's right edge)
+BAND_TITLE = "95 % band\nhalf-width mm"
+#: build slider steps between two neighbouring build faces
+BUILD_STEPS = 100
+BUILD_TIP = (
+    "Body build of the face shown (view only: not a case edit, no undo step; the saved "
+    "face, export and report stay the main build, the case's build / --build)"
+)
+NO_FIT_TIP = "Reconstruct the face first: the build slider morphs the fitted face."
+NO_BUILDS_TIP = (
+    "One face only: this fit's tissue depths cannot vary with body build (a uniform "
+    "mean + k SD, a table's build group, a table without SDs or the reference's own "
+    "tissue), so there are no slender/heavy faces to morph between."
+)
+CONSENSUS_TIP = (
+    "One face only: a library consensus (the per-vertex median of several reference "
+    "heads) has no build faces to morph between."
 )
 
 
@@ -59,12 +96,17 @@ class ReconstructPanel(QWidget):
     reconstruct_requested()
     opacity_changed(float)
     colouring_changed(str)
-        "skin" or "spread".
+        "skin", "spread" (the ensemble's spread) or "band" (the 95 % band's half-width).
+    build_changed(float)
+        The build slider moved (by the user or :meth:`set_build`): the build score ``z``
+        to show (between the fit's slender and heavy faces).  View state only: nothing is
+        pushed on the document's stack (see the module docstring).
     """
 
     reconstruct_requested = Signal()
     opacity_changed = Signal(float)
     colouring_changed = Signal(str)
+    build_changed = Signal(float)
 
     def __init__(self, document: Document, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -83,8 +125,12 @@ class ReconstructPanel(QWidget):
         self.ensemble.setRange(0, 50)
         self.ensemble.setToolTip("Number of fits drawing depths from mean ± SD (0 = off)")
         self.colouring = QComboBox()
-        self.colouring.addItems(["skin", "spread"])
-        self.colouring.setToolTip("spread: per-vertex RMS spread of the ensemble (mm)")
+        self.colouring.addItems(list(COLOURINGS))
+        self.colouring.setToolTip(
+            "spread: per-vertex RMS spread of the ensemble (mm)\n"
+            "band: half-width of the 95 % band holding the true skin when the build is "
+            "unknown (mm)"
+        )
         self.colouring.currentTextChanged.connect(self.colouring_changed.emit)
         self.opacity = QSlider(Qt.Orientation.Horizontal)
         self.opacity.setRange(0, 100)
@@ -98,6 +144,8 @@ class ReconstructPanel(QWidget):
         form.addRow("Ensemble fits", self.ensemble)
         form.addRow("Colour", self.colouring)
         form.addRow("Skin opacity", self.opacity)
+        self._builds: BuildFaces | None = None
+        build_box = self._make_build_slider()
 
         self.guide_table = QTableWidget(0, len(GUIDE_COLUMNS))
         self.guide_table.setHorizontalHeaderLabels(list(GUIDE_COLUMNS))
@@ -124,6 +172,7 @@ class ReconstructPanel(QWidget):
         layout = QVBoxLayout(self)
         layout.addWidget(self.check_banner)
         layout.addLayout(form)
+        layout.addWidget(build_box)
         layout.addWidget(QLabel("<b>Guides</b> (head frame, mm)"))
         layout.addWidget(self.guide_table, 1)
         row = QHBoxLayout()
@@ -134,7 +183,140 @@ class ReconstructPanel(QWidget):
         layout.addWidget(self.figures)
         document.part_changed.connect(self._on_part)
 
+    def _make_build_slider(self) -> QWidget:
+        """The build row: "Build", the slider and the current BMI; the faces' labels below."""
+        self.build_slider = QSlider(Qt.Orientation.Horizontal)
+        self.build_slider.setRange(0, 2 * BUILD_STEPS)
+        self.build_slider.setSingleStep(BUILD_STEPS // 20)
+        self.build_slider.setPageStep(BUILD_STEPS)  # Page Up/Down: face to face
+        self.build_slider.setTickPosition(QSlider.TickPosition.TicksBelow)
+        self.build_slider.setTickInterval(BUILD_STEPS)
+        self.build_slider.valueChanged.connect(self._on_build_moved)
+        self.build_value = QLabel("")
+        self.build_value.setMinimumWidth(
+            self.build_value.fontMetrics().horizontalAdvance("BMI 00.0")
+        )
+        self.build_value.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+        self.build_box = QWidget()
+        grid = QGridLayout(self.build_box)
+        grid.setContentsMargins(0, 4, 0, 4)
+        grid.setVerticalSpacing(0)
+        grid.addWidget(QLabel("Build"), 0, 0)
+        grid.addWidget(self.build_slider, 0, 1)
+        grid.addWidget(self.build_value, 0, 2)
+        grid.setColumnStretch(1, 1)
+        # the faces' labels under the slider's track: the first at its left end, the last
+        # at its right end, the others centred on their tick
+        self.build_ticks = QWidget()
+        self._tick_grid = QGridLayout(self.build_ticks)
+        self._tick_grid.setContentsMargins(0, 0, 0, 0)
+        self._tick_grid.setHorizontalSpacing(0)
+        self.build_labels: list[QLabel] = []
+        grid.addWidget(self.build_ticks, 1, 1)
+        self.show_builds(None)
+        return self.build_box
+
     # ------------------------------------------------------------ results → widgets
+    def show_builds(self, builds: BuildFaces | None, why: str = NO_FIT_TIP) -> None:
+        """Set the build slider up for ``builds`` (None: disabled, tooltip ``why``), on its
+        main build, without emitting :attr:`build_changed` (the face drawn next is that
+        build)."""
+        self._builds = builds
+        for label in self.build_labels:
+            self._tick_grid.removeWidget(label)
+            label.deleteLater()
+        self.build_labels = []
+        blocked = self.build_slider.blockSignals(True)
+        try:
+            if builds is None:
+                self.build_slider.setValue(self.build_slider.maximum() // 2)
+                self.build_slider.setEnabled(False)
+                self.build_value.setText("" if why == NO_FIT_TIP else "one face")
+                self.build_box.setToolTip(why)
+                self.build_slider.setToolTip(why)
+                self.build_ticks.setVisible(False)
+                return
+            n = len(builds.names)
+            self.build_slider.setRange(0, (n - 1) * BUILD_STEPS)
+            for i, name in enumerate(builds.names):
+                # "slender (BMI 19)" on two lines: on one, three of them overran the track
+                label = QLabel(f"{name}\n(BMI {_bmi(builds.bmi[name])})")
+                label.setToolTip(f"build score z = {builds.z[name]:+.2f}")
+                if i == 0:
+                    align = Qt.AlignmentFlag.AlignLeft
+                    self._tick_grid.addWidget(label, 0, 0, 1, 1, align)
+                elif i == n - 1:
+                    align = Qt.AlignmentFlag.AlignRight
+                    self._tick_grid.addWidget(label, 0, 2 * i - 1, 1, 1, align)
+                else:  # spans the two half-columns either side of its tick
+                    align = Qt.AlignmentFlag.AlignHCenter
+                    self._tick_grid.addWidget(label, 0, 2 * i - 1, 1, 2, align)
+                label.setAlignment(align | Qt.AlignmentFlag.AlignTop)
+                self.build_labels.append(label)
+            for c in range(2 * (n - 1)):
+                self._tick_grid.setColumnStretch(c, 1)
+            self.build_slider.setValue(round(self._position_of(builds.main_z)))
+            self.build_slider.setEnabled(True)
+            self.build_box.setToolTip("")
+            self.build_slider.setToolTip(BUILD_TIP)
+            self.build_ticks.setVisible(True)
+            self._show_build_value()
+        finally:
+            self.build_slider.blockSignals(blocked)
+
+    def build_z(self) -> float | None:
+        """The build score the slider points at (None without build faces)."""
+        builds = self._builds
+        if builds is None:
+            return None
+        position = self.build_slider.value()
+        if position == round(self._position_of(builds.main_z)):
+            return builds.main_z  # the main face exactly (a main BMI between two ticks)
+        return self._z_at(position)
+
+    def build_position(self, name: str) -> int:
+        """The slider position of build face ``name`` (a name of ``builds.names``)."""
+        if self._builds is None:
+            raise ValueError("no build faces: the slider is disabled")
+        return self._builds.names.index(name) * BUILD_STEPS
+
+    def set_build(self, name: str) -> None:
+        """Move the slider to build face ``name`` (emits :attr:`build_changed` if it moves)."""
+        self.build_slider.setValue(self.build_position(name))
+
+    def _z_at(self, position: float) -> float:
+        """The build score at slider ``position`` (faces at equal steps, linear between)."""
+        builds = self._builds
+        if builds is None:
+            raise ValueError("no build faces")
+        return _interp(position, _ticks(builds), [builds.z[n] for n in builds.names])
+
+    def _position_of(self, z: float) -> float:
+        builds = self._builds
+        if builds is None:
+            raise ValueError("no build faces")
+        return _interp(z, [builds.z[n] for n in builds.names], _ticks(builds))
+
+    def _show_build_value(self) -> None:
+        builds = self._builds
+        if builds is None:
+            return
+        position = self.build_slider.value()
+        bmi = _interp(position, _ticks(builds), [builds.bmi[n] for n in builds.names])
+        self.build_value.setText(f"BMI {bmi:.1f}")
+        at = position // BUILD_STEPS if position % BUILD_STEPS == 0 else None
+        self.build_value.setToolTip(
+            f"{builds.names[at]} face" if at is not None else "between two build faces (a blend)"
+        )
+
+    def _on_build_moved(self, _value: int) -> None:
+        if self._builds is None:
+            return
+        self._show_build_value()
+        z = self.build_z()
+        if z is not None:
+            self.build_changed.emit(z)
+
     def show_opacity(self, value: float) -> None:
         """Show the scene's skin opacity (0–1) on the slider without emitting it back."""
         blocked = self.opacity.blockSignals(True)
@@ -188,6 +370,12 @@ class ReconstructPanel(QWidget):
         try:
             self._show_guides(list(fit.guides) if fit is not None else [])
             self._show_check(fit)
+            # (getattr: stand-ins for a FitResult in tests carry only the older fields)
+            builds = getattr(fit, "builds", None)
+            why = NO_FIT_TIP if fit is None else NO_BUILDS_TIP
+            if getattr(fit, "references", None) is not None:
+                why = CONSENSUS_TIP
+            self.show_builds(builds, why)
             if fit is None:
                 self.figures.setText("Not fitted yet.")
                 self.predictions.setText("")
@@ -267,6 +455,23 @@ def _num(value: object) -> str:
     if isinstance(value, float):
         return f"{value:.2f}"
     return str(value)
+
+
+def _bmi(value: float) -> str:
+    """A BMI for a label: one decimal, none when whole ("19", "24.3")."""
+    return f"{round(float(value), 1):g}"
+
+
+def _ticks(builds: BuildFaces) -> list[float]:
+    """The slider positions of the build faces (thinnest first)."""
+    return [float(i * BUILD_STEPS) for i in range(len(builds.names))]
+
+
+def _interp(x: float, xs: list[float], ys: list[float]) -> float:
+    """Piecewise-linear ``ys`` at ``x`` (``xs`` increasing), clamped at the ends."""
+    import numpy as np
+
+    return float(np.interp(x, xs, ys))
 
 
 def _median(values: np.ndarray) -> float:
