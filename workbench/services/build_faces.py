@@ -65,7 +65,7 @@ RIGID_PARTS: tuple[tuple[str, ...], ...] = (
 #: the lids rest on the eyeball, which sits on the bone whatever the build: they keep their
 #: place, and the build's change fades in over this distance around them (mm)
 LIDS = ("eyelid_upper_l", "eyelid_upper_r", "eyelid_lower_l", "eyelid_lower_r")
-LID_FADE_MM = 12.0
+LID_FADE_MM = 5.0
 #: smoothing passes blending a rigid part's direction into the normals around it
 BLEND_PASSES = 4
 #: the fitted shape's own error where the bone is observed (σ, mm): set on headsq (the lean
@@ -194,7 +194,8 @@ def build_faces(
     skin = recon.head.skin
     base = skin.vertices
     normals, keep = _directions(recon.head)
-    u = (field_.influence @ per_site) * keep
+    u_band = field_.influence @ per_site
+    u = u_band * keep  # the faces: the lids stay on the eyeball
     z_main = float(plan.build_z)
     zs = {n: model.z(n) for n in BUILD_FACES}
     bmis = {n: model.bmi(n) for n in BUILD_FACES}
@@ -212,7 +213,8 @@ def build_faces(
         room[near] = np.maximum(d[near] - min_tissue_mm, 0.0)
     offsets = {n: np.maximum(u * (zs[n] - z_main), -room) for n in BUILD_FACES}
     # the band: the envelope of the spanned builds, widened by 1.96 σ
-    lo_b, hi_b = (np.maximum(u * (zs[b] - z_main), -room) for b in model.band_builds)
+    # (the band keeps the lids' own spread: where they rest is still uncertain)
+    lo_b, hi_b = (np.maximum(u_band * (zs[b] - z_main), -room) for b in model.band_builds)
     lo = np.minimum(np.minimum(lo_b, hi_b), 0.0)
     hi = np.maximum(np.maximum(lo_b, hi_b), 0.0)
     sd = np.array([s.sd_mm or 0.0 for s in field_.sites])
