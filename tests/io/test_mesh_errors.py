@@ -10,7 +10,7 @@ import pytest
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.io import meshes
+from workbench.io import atomic
 from workbench.io.mesh_formats import ply as ply_format
 from workbench.io.meshes import SUPPORTED_EXTENSIONS, read_mesh, write_mesh
 
@@ -136,7 +136,7 @@ def test_write_is_atomic_when_replace_fails(tmp_path, head_mesh, monkeypatch):
     def refuse(src, dst):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(meshes.os, "replace", refuse)
+    monkeypatch.setattr(atomic.os, "replace", refuse)
     with pytest.raises(InputError, match="cannot be written"):
         write_mesh(target, Mesh(head_mesh.vertices * 2, head_mesh.faces))
     monkeypatch.undo()

@@ -51,7 +51,7 @@ import pygltflib as g
 
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
-from workbench.io.meshes import _atomic_write
+from workbench.io.atomic import write_bytes_atomic
 
 #: metres per millimetre (glTF is metres, the workbench mm)
 MM_TO_M = 0.001
@@ -276,5 +276,5 @@ def write_glb(
     payload = b.to_bytes()
     if payload[:4] != b"glTF" or struct.unpack("<I", payload[8:12])[0] != len(payload):
         raise RuntimeError("internal error: malformed GLB")
-    _atomic_write(path, payload)
+    write_bytes_atomic(path, payload)
     return path

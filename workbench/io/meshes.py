@@ -25,8 +25,6 @@ Every problem with an input file raises
 from __future__ import annotations
 
 import math
-import os
-import secrets
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -36,6 +34,7 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
+from workbench.io.atomic import write_bytes_atomic
 from workbench.core.units import (
     UNIT_SCALES,
     UnitsReport,
@@ -274,32 +273,6 @@ def _refuse_nonfinite(path: Path, mesh: Mesh) -> None:
     )
 
 
-def _atomic_write(path: Path, payload: bytes) -> None:
-    """Write beside ``path`` under a unique temporary name, then rename over it.
-
-    ``os.open(..., 0o666)`` lets the umask set the permissions, as for any
-    new file (``tempfile.mkstemp`` would make it private); an existing
-    target keeps its permissions.
-    """
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
-    mode = path.stat().st_mode & 0o7777 if path.exists() else 0o666
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), mode)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(payload)
-            handle.flush()
-            os.fsync(handle.fileno())
-        if path.exists():
-            os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
 def write_mesh(
     path: str | PathLike[str], mesh: Mesh, binary: bool = True, *, space: str = "RAS"
 ) -> Path:
@@ -340,7 +313,7 @@ def write_mesh(
         raise InputError(path, "is a folder, cannot write a mesh file there")
     payload = module.encode(mesh.vertices, np.asarray(mesh.faces), binary=binary, space=space)
     try:
-        _atomic_write(path, payload)
+        write_bytes_atomic(path, payload)
     except OSError as exc:
         raise InputError(path, f"cannot be written ({exc.strerror or exc})") from None
     return path

@@ -59,6 +59,7 @@ from typing import TYPE_CHECKING, Any
 from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal
 from PySide6.QtWidgets import QMessageBox, QWidget
 
+from workbench.io.atomic import write_text_atomic
 from workbench.commands.stack import Command, CommandStack
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.json_limits import read_json
@@ -191,16 +192,7 @@ def owner_alive(pid: int, hostname: str, session_started: float, last_written: f
 
 # ---------------------------------------------------------------- sidecar files
 def _write_json_atomic(path: Path, doc: dict[str, Any]) -> None:
-    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        with open(temp, "w", encoding="utf-8") as stream:
-            json.dump(doc, stream, indent=1, ensure_ascii=False, allow_nan=False)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temp, path)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temp)
+    write_text_atomic(path, json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False))
 
 
 def _iso(epoch: float) -> str:

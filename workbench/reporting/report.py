@@ -42,7 +42,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from functools import lru_cache
@@ -53,6 +52,7 @@ from typing import Any
 import jsonschema
 import numpy as np
 
+from workbench.io.atomic import write_with_atomic
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
 from workbench.reporting.pdf import (
@@ -169,15 +169,7 @@ def _atomic_write(path: PathArg, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then move it into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return write_with_atomic(path, write)
 
 
 def write_report_json(report: Mapping[str, Any], path: PathArg) -> Path:

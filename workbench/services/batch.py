@@ -66,6 +66,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from workbench.io.atomic import write_text_atomic
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.safe_names import child_path
 from workbench.services.batch_figures import Figures, row_figures
@@ -204,22 +205,8 @@ def write_marker(result: RowResult) -> Path:
         "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     path = row.out / MARKER
-    _write_atomic(path, json.dumps(data, indent=2) + "\n")
+    write_text_atomic(path, json.dumps(data, indent=2) + "\n")
     return path
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """``path`` holds ``text`` (UTF-8) or its old content, never a part of it."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{threading.get_ident()}.part")
-    try:
-        with tmp.open("w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def log_path(out: Path, row: BatchRow) -> Path:
@@ -232,7 +219,7 @@ def _start_log(out: Path, row: BatchRow) -> None:
     path = log_path(out, row)
     path.parent.mkdir(exist_ok=True)
     stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    _write_atomic(path, f"{LOG_START}{' '.join(row.argv)}\n{STARTED}{stamp}{NOT_FINISHED}\n")
+    write_text_atomic(path, f"{LOG_START}{' '.join(row.argv)}\n{STARTED}{stamp}{NOT_FINISHED}\n")
 
 
 def _started_by_batch(out: Path, row: BatchRow) -> bool:
@@ -823,7 +810,7 @@ def _record(
     write_marker(result)  # first: a row with its marker is done, whatever happens next
     log = log_path(out, row)
     log.parent.mkdir(exist_ok=True)
-    _write_atomic(log, f"{LOG_START}{' '.join(row.argv)}\n{stdout}{stderr}")
+    write_text_atomic(log, f"{LOG_START}{' '.join(row.argv)}\n{stdout}{stderr}")
     return result
 
 

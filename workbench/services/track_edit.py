@@ -21,7 +21,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from workbench.io.meshes import _atomic_write
+from workbench.io.atomic import write_bytes_atomic
 from workbench.io.outputs import output_file
 from workbench.services.animation_track import DEFAULT_FPS, Key, Track, parse_track
 
@@ -102,5 +102,5 @@ def save_track(
     """
     text = json.dumps(track_to_json(track), indent=2) + "\n"
     with output_file(path, inputs, force) as out:
-        _atomic_write(out, text.encode("utf-8"))
+        write_bytes_atomic(out, text.encode("utf-8"))
     return Path(path)

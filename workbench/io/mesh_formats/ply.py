@@ -30,6 +30,7 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
+from workbench.io.atomic import write_bytes_atomic
 from workbench.io.mesh_formats._common import (
     UNITS_NOTE,
     WRITER_NAME,
@@ -525,7 +526,6 @@ def write(
     :func:`workbench.io.meshes.write_mesh` (which writes no extra comments);
     raises ValueError for a comment that is not one line of ASCII text.
     """
-    from workbench.io.meshes import _atomic_write  # meshes imports this module
 
     path = Path(path)
     if path.suffix.lower() != ".ply":
@@ -546,7 +546,7 @@ def write(
         vertex_scalars=vertex_scalars,
     )
     try:
-        _atomic_write(path, payload)
+        write_bytes_atomic(path, payload)
     except OSError as exc:
         raise InputError(path, f"cannot be written ({exc.strerror or exc})") from None
     return path
