@@ -46,3 +46,74 @@ def test_non_gui_layers_import_without_qt_or_vtk() -> None:
         [sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=False
     )
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
+
+
+def _cycles(graph) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    out: list[list[str]] = []
+    counter = 0
+    for root in sorted(graph.modules):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph.find_modules_directly_imported_by(root))))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append(
+                        (child, iter(sorted(graph.find_modules_directly_imported_by(child))))
+                    )
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                comp = []
+                while True:
+                    m = stack.pop()
+                    on_stack.discard(m)
+                    comp.append(m)
+                    if m == node:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_no_import_cycles() -> None:
+    """No module of workbench imports itself back through others, counting imports made
+    inside functions.  Imports under TYPE_CHECKING (annotations only) are left out: the
+    window still has two such type-only circles (the autosave host protocol, the scan-fit
+    panel and its tool; issue 32)."""
+    import grimp
+
+    graph = grimp.build_graph("workbench", exclude_type_checking_imports=True, cache_dir=None)
+    cycles = _cycles(graph)
+    assert cycles == [], "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+    # the helper itself finds a cycle when there is one
+    fake = _FakeGraph({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}})
+    assert _cycles(fake) == [["a", "b", "c"]]
+
+
+class _FakeGraph:
+    def __init__(self, edges: dict[str, set[str]]) -> None:
+        self.edges = edges
+        self.modules = set(edges)
+
+    def find_modules_directly_imported_by(self, module: str) -> set[str]:
+        return self.edges[module]

@@ -82,11 +82,10 @@ def test_animate_bad_head_and_output(tmp_path: Path, capsys) -> None:
 def test_animate_reconstruction_folder(tmp_path: Path, head_male) -> None:
     """A reconstruction folder holds its head as head/ in the skull file's frame."""
     from workbench.io.template_pack import export_template
-    from workbench.services.reconstruct import warp_head
 
     shift = np.array([10.0, 200.0, -35.0])
     export_template(
-        warp_head(head_male, lambda p: np.asarray(p) + shift),
+        head_male.warped(lambda p: np.asarray(p) + shift),
         tmp_path / "recon" / "head",
         frame="the skull file's frame, mm",
     )

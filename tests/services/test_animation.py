@@ -161,7 +161,6 @@ def test_gaze_turns_the_eyes(anim: Animator, head_male) -> None:
 def test_a_head_in_another_frame_animates_the_same(smiled, anim: Animator, head_male) -> None:
     """A reconstruction's head/ pack is in the skull file's frame: the pose must not depend on it."""
     from workbench.services.jaw import axis_rotation
-    from workbench.services.reconstruct import warp_head
 
     m = axis_rotation(np.array([5.0, -20.0, 30.0]), np.array([0.3, 1.0, 0.2]), np.radians(25.0))
     m[:3, 3] += [40.0, -15.0, 120.0]
@@ -169,7 +168,7 @@ def test_a_head_in_another_frame_animates_the_same(smiled, anim: Animator, head_
     def move(p: np.ndarray) -> np.ndarray:
         return np.asarray(p) @ m[:3, :3].T + m[:3, 3]
 
-    moved = Animator(warp_head(head_male, move))
+    moved = Animator(head_male.warped(move))
     moved.set_expression("smile")
     moved.settle()
     assert np.abs(moved.skin_in_head_frame() - smiled).max() < 1e-3

@@ -19,7 +19,6 @@ from workbench.io.meshes import write_mesh
 from workbench.io.template_pack import load_template_pack
 from workbench.model.template import PARTS
 from workbench.services.landmark_transfer import rim_faces
-from workbench.services.reconstruct import outward
 from workbench.services.reference_parts import skull_surface
 from workbench.services.template_build import MIN_TISSUE_MM, build_template_pack
 
@@ -37,7 +36,7 @@ def built(
     m = result.input_to_head
 
     def to_head(mesh: Mesh) -> Mesh:
-        return outward(Mesh(mesh.vertices @ m[:3, :3].T + m[:3, 3], mesh.faces))
+        return Mesh(mesh.vertices @ m[:3, :3].T + m[:3, 3], mesh.faces).outward()
 
     return {
         "result": result,

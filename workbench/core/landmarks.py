@@ -18,7 +18,7 @@ An undefined point (status ``absent`` or ``missing``) has NaN coordinates.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -187,6 +187,15 @@ class LandmarkSet:
             else:
                 out.append(lm)
         return LandmarkSet(self.surface, tuple(out))
+
+    def warped(self, warp: Callable[[np.ndarray], np.ndarray]) -> LandmarkSet:
+        """Every defined point moved by ``warp`` (``(k, 3) → (k, 3)``, one call)."""
+        defined = [lm for lm in self.landmarks if lm.is_defined]
+        if not defined:
+            return self
+        moved = warp(np.array([lm.position for lm in defined]))
+        new = {lm.code: lm.moved(p, lm.status) for lm, p in zip(defined, moved, strict=True)}
+        return LandmarkSet(self.surface, tuple(new.get(lm.code, lm) for lm in self.landmarks))
 
     def equals(self, other: LandmarkSet) -> bool:
         return (

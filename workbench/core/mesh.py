@@ -234,14 +234,17 @@ class Mesh:
 
     @cached_property
     def vertex_normals(self) -> np.ndarray:
-        """``(n, 3)`` unit area-weighted vertex normals, cached (see :mod:`workbench.core.normals`).
+        """``(n, 3)`` unit area-weighted vertex normals (zero for isolated vertices), cached.
 
-        Computing it once in a worker thread spares the GUI thread the work
-        when the mesh is drawn smooth-shaded.
+        Each face adds its un-normalised normal (length = 2 x area) to its three
+        corners, so large triangles weigh more than slivers.  Computing it once
+        in a worker thread spares the GUI thread the work when the mesh is drawn
+        smooth-shaded.
         """
-        from workbench.core.normals import vertex_normals
-
-        return _frozen(vertex_normals(self))
+        summed = np.asarray(self.vertex_faces_matrix @ self.face_cross)
+        n = np.linalg.norm(summed, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return _frozen(np.where(n > 0, summed / np.where(n > 0, n, 1.0), 0.0))
 
     @cached_property
     def face_normals(self) -> np.ndarray:

@@ -12,11 +12,14 @@ continuously as the point slides over the surface.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from workbench.core.mesh import Mesh
+if TYPE_CHECKING:  # the mesh computes its own normals: no import back at run time
+    from workbench.core.mesh import Mesh
 
 
 def _normalise(v: np.ndarray) -> np.ndarray:
@@ -26,13 +29,9 @@ def _normalise(v: np.ndarray) -> np.ndarray:
 
 
 def vertex_normals(mesh: Mesh) -> np.ndarray:
-    """``(n, 3)`` area-weighted vertex normals (unit; zero for isolated vertices).
-
-    Each face contributes its un-normalised normal (length = 2 x area) to its
-    three corners, so large triangles weigh more than slivers.
-    """
-    summed = mesh.vertex_faces_matrix @ mesh.face_cross
-    return _normalise(np.asarray(summed))
+    """``(n, 3)`` area-weighted vertex normals (unit; zero for isolated vertices), a
+    writable copy of :attr:`workbench.core.mesh.Mesh.vertex_normals`."""
+    return np.array(mesh.vertex_normals)
 
 
 def angle_weighted_vertex_normals(mesh: Mesh) -> np.ndarray:

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -78,6 +78,43 @@ class TemplateHead:
     @property
     def skin(self) -> Mesh:
         return self.meshes["skin"]
+
+    def _eye_owner(self) -> np.ndarray:
+        eyes = self.meshes["eyes"].vertices
+        return np.linalg.norm(eyes[:, None] - self.eye_centres[None], axis=2).argmin(axis=1)
+
+    def warped(self, warp: Callable[[np.ndarray], np.ndarray]) -> TemplateHead:
+        """Every part moved by ``warp`` (``(k, 3) → (k, 3)`` mm); the eyeballs rigidly with
+        their centres (Kähler 2003, §8.3.2), the jaw axis through its warped points."""
+        meshes = {name: m.with_vertices(warp(m.vertices)) for name, m in self.meshes.items()}
+        centres = warp(self.eye_centres)
+        eyes = self.meshes["eyes"].vertices
+        shift = (centres - self.eye_centres)[self._eye_owner()]
+        meshes["eyes"] = self.meshes["eyes"].with_vertices(eyes + shift)
+        axis_pts = warp(np.vstack([self.tmj_axis[0], self.tmj_axis[0] + 10 * self.tmj_axis[1]]))
+        direction = axis_pts[1] - axis_pts[0]
+        return replace(
+            self,
+            meshes=meshes,
+            skin_landmarks=self.skin_landmarks.warped(warp),
+            skull_landmarks=self.skull_landmarks.warped(warp),
+            eye_centres=centres,
+            tmj_axis=np.vstack([axis_pts[0], direction / np.linalg.norm(direction)]),
+        )
+
+    def with_eyes_moved(self, moves: Mapping[int, np.ndarray]) -> TemplateHead:
+        """The eyeballs translated by ``moves`` (eye index → (3,) mm); the skin unchanged."""
+        if not moves:
+            return self
+        shift = np.zeros_like(self.eye_centres)
+        for i, m in moves.items():
+            shift[i] = m
+        eyes = self.meshes["eyes"].vertices
+        meshes = {
+            **self.meshes,
+            "eyes": self.meshes["eyes"].with_vertices(eyes + shift[self._eye_owner()]),
+        }
+        return replace(self, meshes=meshes, eye_centres=self.eye_centres + shift)
 
     @cached_property
     def content_hash(self) -> str:

@@ -43,7 +43,7 @@ from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.services.dowels import DepthSettings, plan_dowels
 from workbench.services.fit_guides import stored_guides
 from workbench.services.guides import Guide, guides_to_json
-from workbench.services.reconstruct import input_frame, outward
+from workbench.services.frame import input_frame
 from workbench.services.reconstruction_service import (
     DowelPreview,
     FitInputs,
@@ -192,7 +192,7 @@ def preview_dowels(
             seeds=placed if len(placed) else None,
             mirror=mirror_from_landmarks(landmarks),
         ).input_to_head
-    skull_h = outward(skull.transformed(to_head))
+    skull_h = skull.transformed(to_head).outward()
     plan = plan_dowels(skull_h, landmarks.transformed(to_head), settings)
     active = plan.active()
     back = np.linalg.inv(to_head)

@@ -185,7 +185,7 @@ def in_frankfort_frame(head: TemplateHead) -> tuple[TemplateHead, bool]:
     Axis-aligned measurements and the head circumference's plane are read in
     this frame; a head already in it (a template pack) is returned as is.
     """
-    from workbench.services.reconstruct import input_frame
+    from workbench.services.frame import input_frame
     from workbench.services.skull_registration import head_transformed
 
     try:
@@ -828,10 +828,9 @@ def _warp_points(
 def _deform(head: TemplateHead, warp: Any) -> TemplateHead:
     from workbench.io.catalogue import load_catalogue
     from workbench.services.frame import head_frame_from_landmarks
-    from workbench.services.reconstruct import warp_head
     from workbench.services.skull_registration import head_transformed
 
-    warped = warp_head(head, warp)
+    warped = head.warped(warp)
     # triangles the warp turned over, relaxed (the reference's own sub-0.01 mm² slivers at
     # the mouth corners turn over at the slightest push and are left to themselves)
     sliver = head.skin.face_areas < SLIVER_MM2
@@ -866,7 +865,7 @@ def _deform(head: TemplateHead, warp: Any) -> TemplateHead:
         dst_in.append(skin_new[partner] - offset / length * depth)
     if len(src_in) >= 4:
         inner = fit_warp(np.array(src_in), np.array(dst_in), smoothing=INNER_SMOOTHING)
-        moved = warp_head(replace(warped, meshes={**warped.meshes}), inner)
+        moved = replace(warped, meshes={**warped.meshes}).warped(inner)
         meshes = dict(warped.meshes)
         for part in INNER_PARTS:
             meshes[part] = moved.meshes[part]

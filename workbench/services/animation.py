@@ -295,7 +295,7 @@ def _to_head_frame(head: TemplateHead) -> tuple[TemplateHead, np.ndarray | None,
     winding, which the muscles' triangles rely on) and its results reflected
     out again with the stored winding.
     """
-    from workbench.services.reconstruct import input_frame, warp_head
+    from workbench.services.frame import input_frame
 
     try:
         m, mirrored = input_frame(head.skull_landmarks)
@@ -308,7 +308,7 @@ def _to_head_frame(head: TemplateHead) -> tuple[TemplateHead, np.ndarray | None,
     def move(p: np.ndarray) -> np.ndarray:
         return np.asarray(p, float) @ m[:3, :3].T + m[:3, 3]
 
-    moved = warp_head(head, move)
+    moved = head.warped(move)
     if mirrored:
         moved = replace(
             moved, meshes={k: Mesh(v.vertices, v.faces[:, ::-1]) for k, v in moved.meshes.items()}

@@ -9,6 +9,8 @@ frame's definition.
 
 from __future__ import annotations
 
+import numpy as np
+
 from workbench.core.errors import LandmarkError
 from workbench.core.frame import HeadFrame, frankfort_frame
 from workbench.core.landmarks import LandmarkSet
@@ -63,3 +65,19 @@ def head_frame_from_landmarks(landmarks: LandmarkSet) -> HeadFrame:
         above=pick(ABOVE_FH[surface]),
         below=pick(BELOW_FH[surface]),
     )
+
+
+def input_frame(landmarks: LandmarkSet) -> tuple[np.ndarray, bool]:
+    """``(input → head 4x4, mirrored)`` from skull landmarks (FH + midline)."""
+    defined = landmarks.defined()
+    frame = head_frame_from_landmarks(defined)
+    if not frame.mirrored_input:
+        return frame.input_to_head, False
+    flip = np.diag([-1.0, 1.0, 1.0, 1.0])
+    again = head_frame_from_landmarks(defined.transformed(flip))
+    if again.mirrored_input:
+        raise LandmarkError(
+            "the skull landmarks contradict each other about left and right "
+            "(check the porions, orbitales and the _l/_r labels)"
+        )
+    return again.input_to_head @ flip, True

@@ -11,7 +11,7 @@ Algorithm (per call; vectorised, no loop over vertices)
 -------------------------------------------------------
 1. The head frame (Frankfort Horizontal + midsagittal plane) from the case's
    skull landmarks, as the reconstruction builds it
-   (:func:`workbench.services.reconstruct.input_frame`); without porions and
+   (:func:`workbench.services.frame.input_frame`); without porions and
    an orbitale a :class:`LandmarkError` names what is missing.
 2. The patch: vertices within ``radius_mm`` of the position that are
    connected (through edges inside that ball) to the vertex nearest it, so
@@ -137,7 +137,7 @@ def snap_index(mesh: Mesh) -> PatchIndex:
 
 def snap_frame(landmarks: LandmarkSet) -> np.ndarray:
     """4x4 input → head transform of skull landmarks; LandmarkError naming what is missing."""
-    from workbench.services.reconstruct import input_frame  # heavy module: import on use
+    from workbench.services.frame import input_frame
 
     try:
         return input_frame(landmarks)[0]

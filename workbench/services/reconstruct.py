@@ -47,17 +47,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from workbench.core.errors import LandmarkError
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
 from workbench.core.thickness import adjacency, smooth_field
-from workbench.core.tps import LandmarkWarp, fit_warp
+from workbench.core.tps import fit_warp
 from workbench.model.template import TemplateHead
 from workbench.services.dowels import DepthSettings, DowelPlan, plan_dowels
-from workbench.services.frame import head_frame_from_landmarks
 from workbench.services.tissue_model import TissueField, TissueSettings, apply_field, tissue_field
 
 if TYPE_CHECKING:
@@ -189,58 +187,6 @@ class Reconstruction:
         if self.observed is None:
             return np.zeros(self.head.skin.n_vertices, bool)
         return self.observed < OBSERVED_LEVEL
-
-
-def input_frame(landmarks: LandmarkSet) -> tuple[np.ndarray, bool]:
-    """``(input → head 4x4, mirrored)`` from skull landmarks (FH + midline)."""
-    defined = landmarks.defined()
-    frame = head_frame_from_landmarks(defined)
-    if not frame.mirrored_input:
-        return frame.input_to_head, False
-    flip = np.diag([-1.0, 1.0, 1.0, 1.0])
-    again = head_frame_from_landmarks(defined.transformed(flip))
-    if again.mirrored_input:
-        raise LandmarkError(
-            "the skull landmarks contradict each other about left and right "
-            "(check the porions, orbitales and the _l/_r labels)"
-        )
-    return again.input_to_head @ flip, True
-
-
-def outward(mesh: Mesh) -> Mesh:
-    """``mesh`` with its triangles wound so normals point away from its centre
-    (:meth:`workbench.core.mesh.Mesh.outward`)."""
-    return mesh.outward()
-
-
-def warp_head(
-    head: TemplateHead, warp: LandmarkWarp | Callable[[np.ndarray], np.ndarray]
-) -> TemplateHead:
-    """Every part of ``head`` moved by ``warp``; the eyes rigidly with their centres (§8.3.2)."""
-    meshes = {name: m.with_vertices(warp(m.vertices)) for name, m in head.meshes.items()}
-    centres = warp(head.eye_centres)
-    eyes = head.meshes["eyes"].vertices
-    owner = np.linalg.norm(eyes[:, None] - head.eye_centres[None], axis=2).argmin(axis=1)
-    meshes["eyes"] = head.meshes["eyes"].with_vertices(eyes + (centres - head.eye_centres)[owner])
-    axis_pts = warp(np.vstack([head.tmj_axis[0], head.tmj_axis[0] + 10 * head.tmj_axis[1]]))
-    direction = axis_pts[1] - axis_pts[0]
-    return replace(
-        head,
-        meshes=meshes,
-        skin_landmarks=_warp_set(head.skin_landmarks, warp),
-        skull_landmarks=_warp_set(head.skull_landmarks, warp),
-        eye_centres=centres,
-        tmj_axis=np.vstack([axis_pts[0], direction / np.linalg.norm(direction)]),
-    )
-
-
-def _warp_set(lms: LandmarkSet, warp: Callable[[np.ndarray], np.ndarray]) -> LandmarkSet:
-    defined = [lm for lm in lms if lm.is_defined]
-    if not defined:
-        return lms
-    moved = warp(np.array([lm.position for lm in defined]))
-    new = {lm.code: lm.moved(p, lm.status) for lm, p in zip(defined, moved, strict=True)}
-    return LandmarkSet(lms.surface, tuple(new.get(lm.code, lm) for lm in lms))
 
 
 def _mask(n: int, head: TemplateHead, names: tuple[str, ...]) -> np.ndarray:
@@ -375,19 +321,6 @@ def eye_moves(
     return moves, figures, notes
 
 
-def move_eyes(head: TemplateHead, moves: Mapping[int, np.ndarray]) -> TemplateHead:
-    """``head`` with its eyeballs translated by ``moves`` (skin unchanged)."""
-    if not moves:
-        return head
-    eyes = head.meshes["eyes"].vertices
-    owner = np.linalg.norm(eyes[:, None] - head.eye_centres[None], axis=2).argmin(axis=1)
-    shift = np.zeros_like(head.eye_centres)
-    for i, m in moves.items():
-        shift[i] = m
-    meshes = {**head.meshes, "eyes": head.meshes["eyes"].with_vertices(eyes + shift[owner])}
-    return replace(head, meshes=meshes, eye_centres=head.eye_centres + shift)
-
-
 def fit_head(
     head: TemplateHead,
     reg: SkullRegistration,
@@ -443,7 +376,7 @@ def fit_head(
         settings.tissue.eye_rule,
         {c: used_guides.pop(c) for c in centres if c in used_guides},
     )
-    carried = move_eyes(carried, moves)
+    carried = carried.with_eyes_moved(moves)
     hits = _dowel_hits(plan, base)
     src: list[np.ndarray] = []
     dst: list[np.ndarray] = []
@@ -538,7 +471,7 @@ def fit_head(
             for lm in carried.skin_landmarks
         ),
     )
-    fitted = replace(carried, meshes=meshes, skin_landmarks=_warp_set(on_skin, warp))
+    fitted = replace(carried, meshes=meshes, skin_landmarks=on_skin.warped(warp))
     tip_err = [
         float(np.linalg.norm(warp(s[None])[0] - t))
         for s, t, lab in zip(src_a, dst_a, labels, strict=False)

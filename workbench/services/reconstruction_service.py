@@ -53,7 +53,6 @@ from workbench.services.reconstruct import (
     FitSettings,
     Reconstruction,
     ensemble_spread,
-    outward,
     reconstruct,
 )
 from workbench.services.template_cache import reference_head
@@ -391,7 +390,7 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     if reg is not None and reg.occlusion is not None:
         skull_h = reg.target_h  # the skull with its jaw in occlusion, as the face was fitted
     else:
-        skull_h = outward(work.transformed(recon.input_to_head))
+        skull_h = work.transformed(recon.input_to_head).outward()
     if recon.landmarks is None:  # reconstruct() always records the landmarks it used
         raise RuntimeError("the reconstruction carries no skull landmarks")
     lms_h = recon.landmarks.transformed(recon.input_to_head)

@@ -736,10 +736,9 @@ def _seen_in_file_axes(scan: Mesh) -> np.ndarray:
     away from it (as :func:`outward` winds it in the head frame): the rays are the head
     frame's, moved rigidly."""
     from workbench.core.normals import vertex_normals
-    from workbench.services.reconstruct import outward
 
     normals = vertex_normals(scan)
-    return seen_from_outside(scan, normals=normals if outward(scan) is scan else -normals)
+    return seen_from_outside(scan, normals=normals if scan.outward() is scan else -normals)
 
 
 class _Beside:
@@ -1156,7 +1155,6 @@ def fit_scan(
     from workbench.core.rigid_search import SCALE_RANGE, search_pose
     from workbench.services.compare import face_regions
     from workbench.services.frame import head_frame_from_landmarks
-    from workbench.services.reconstruct import move_eyes, warp_head
     from workbench.services.skull_registration import head_transformed
     from workbench.services.template_build import (
         carry_skin_landmarks,
@@ -1337,12 +1335,12 @@ def fit_scan(
     targets = skin_pts + depth[:, None] * inward
     src = np.array([skull_at[c] for c in codes])
     warp = fit_warp(src, targets, smoothing=INNER_SMOOTHING)
-    warped = warp_head(rest, warp)
+    warped = rest.warped(warp)
     meshes = dict(warped.meshes)
     meshes.update(_bone_under_skin(meshes, skin, np.asarray(rest.regions["face"])))
     meshes["skin"] = skin
     eye_shift = eyes_behind_lids(warped, skin.vertices, on_scan)
-    head = move_eyes(replace(warped, meshes=meshes, skin_landmarks=skin_lms), eye_shift)
+    head = replace(warped, meshes=meshes, skin_landmarks=skin_lms).with_eyes_moved(eye_shift)
     seconds["inside"] = time.perf_counter() - t
 
     # 4. settle in the Frankfort frame of the estimated skull

@@ -294,9 +294,8 @@ def carry_head(head: TemplateHead, reg: SkullRegistration) -> TemplateHead:
     tongue and landmarks follow the warp fitted to the registered skull; the
     skull parts are the registered ones where observed.
     """
-    from workbench.services.reconstruct import warp_head
 
-    return warp_head(reference_in_frame(head, reg), skull_field(reg))
+    return reference_in_frame(head, reg).warped(skull_field(reg))
 
 
 #: a target vertex belongs to the jaw when the registered mandible (with its teeth) is nearer
@@ -402,7 +401,7 @@ def mirror_from_landmarks(landmarks: LandmarkSet | None) -> str:
     from workbench.core.errors import LandmarkError
 
     try:
-        from workbench.services.reconstruct import input_frame
+        from workbench.services.frame import input_frame
 
         _, mirrored = input_frame(landmarks)
     except (LandmarkError, ValueError, np.linalg.LinAlgError):

@@ -52,7 +52,6 @@ from workbench.core.spatial import MeshIndex
 from workbench.core.threads import worker_count
 from workbench.model.evidence import file_sha256
 from workbench.model.template import TemplateHead
-from workbench.services.reconstruct import move_eyes, outward
 from workbench.services.skull_registration import SkullRegistration
 
 MIN_TISSUE_MM = 1.0  #: skin kept at least this far outside the skull
@@ -247,7 +246,7 @@ def scan_in_frame(scan: Mesh, to_head: np.ndarray, mirrored: bool) -> Mesh:
     moved = scan.transformed(to_head)  # (winding flipped when to_head reflects)
     if bool(np.linalg.det(np.asarray(to_head, float)[:3, :3]) < 0) != mirrored:
         moved = moved.reversed_winding()
-    return outward(moved)
+    return moved.outward()
 
 
 def fit_skin(
@@ -642,7 +641,7 @@ def build_template(
     )
     meshes["skin"] = carried.skin.with_vertices(skin_v)
     eye_shift = eyes_behind_lids(carried, skin_v, on_scan)
-    carried = move_eyes(replace(carried, meshes=meshes), eye_shift)
+    carried = replace(carried, meshes=meshes).with_eyes_moved(eye_shift)
     meshes = dict(carried.meshes)
     seconds["skin"] = time.perf_counter() - t
 
