@@ -48,7 +48,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.frame import apply_transform
-from workbench.core.landmarks import LandmarkSet
+from workbench.core.landmarks import LandmarkSet, merge_user_landmarks
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
@@ -321,6 +321,33 @@ def eye_moves(
     return moves, figures, notes
 
 
+@dataclass(frozen=True, eq=False)
+class HeadFit:
+    """What :func:`fit_head` makes (head frame, mm).
+
+    Attributes
+    ----------
+    head : the fitted head
+    figures : fit figures (tip errors, thin spots, refits, eye figures, seconds)
+    sources, targets : (k, 3) the final warp's correspondences
+    guides : the guide targets used ({skin code: (3,)})
+    labels : per correspondence (see :class:`Reconstruction`)
+    base_skin : (n_skin, 3) the carried, tissue-modelled skin the warp moved
+    held : {skull code: the depth its dowel correspondence holds (mm)}
+    smoothing : (k,) the warp's λ per correspondence (mm)
+    """
+
+    head: TemplateHead
+    figures: dict
+    sources: np.ndarray
+    targets: np.ndarray
+    guides: dict
+    labels: tuple[str, ...]
+    base_skin: np.ndarray
+    held: dict[str, float]
+    smoothing: np.ndarray
+
+
 def fit_head(
     head: TemplateHead,
     reg: SkullRegistration,
@@ -332,25 +359,11 @@ def fit_head(
     tissue: TissueField | None = None,
     depths: np.ndarray | None = None,
     landmarks_h: LandmarkSet | None = None,
-) -> tuple[
-    TemplateHead,
-    dict,
-    np.ndarray,
-    np.ndarray,
-    dict,
-    tuple[str, ...],
-    np.ndarray,
-    dict[str, float],
-    np.ndarray,
-]:
+) -> HeadFit:
     """Carry ``head`` with the registration, model the tissue, warp to dowels and guides.
 
     ``landmarks_h`` (the skull landmarks, head frame) place the eyeballs
     (:func:`eye_moves`); the lids follow their globe in the final warp.
-    Returns the fitted head (head frame), figures, the final warp's
-    correspondences and labels, the guide targets used, the base skin,
-    the depth each dowel correspondence holds and the warp's λ per
-    correspondence.
     """
     from workbench.services.skull_registration import carry_head
 
@@ -489,7 +502,9 @@ def fit_head(
         "eye_notes": eye_notes,
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    return (fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held, lam)
+    return HeadFit(
+        fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held, lam
+    )
 
 
 def _anchors(
@@ -590,7 +605,7 @@ def reconstruct(
         # move with it, and landmarks snap to the articulated bone
         landmarks = _with_jaw_moved(landmarks, reg, head)
         bone = articulated_skull(reg)
-    lms = _merge_landmarks(reg.landmarks, landmarks)
+    lms = merge_user_landmarks(reg.landmarks, landmarks)
     snapped: list[str] = []
     if settings.snap_landmarks:
         from workbench.services.landmark_snap import snap_suggested
@@ -610,7 +625,7 @@ def reconstruct(
     skull_h = reg.target_h
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
-    fitted, figures, src, dst, used, labels, base, held, lam = fit_head(
+    fit = fit_head(
         head,
         reg,
         plan,
@@ -619,7 +634,8 @@ def reconstruct(
         settings=settings,
         landmarks_h=lms_h,
     )
-    observed = _skin_observed(fitted.skin, reg)
+    figures = fit.figures
+    observed = _skin_observed(fit.head.skin, reg)
     face = np.asarray(head.regions.get("face", np.arange(head.skin.n_vertices)), dtype=np.int64)
     figures["registration"] = reg.figures
     figures["snapped_landmarks"] = sum(" moved " in n for n in snapped)
@@ -645,23 +661,23 @@ def reconstruct(
             f"after {figures['refits']} refits"
         )
     return Reconstruction(
-        fitted,
+        fit.head,
         to_head,
         mirrored,
         plan,
-        src,
-        dst,
+        fit.sources,
+        fit.targets,
         figures,
-        used,
+        fit.guides,
         tuple(warnings),
-        labels,
-        base,
-        held,
+        fit.labels,
+        fit.base_skin,
+        fit.held,
         observed,
         _with_jaw_moved(lms, reg, head, back=True),
         reg,
         tissue_field(head, settings.depth, settings.tissue),
-        lam,
+        fit.smoothing,
     )
 
 
@@ -691,20 +707,6 @@ def _with_jaw_moved(
             for lm in given
         ),
     )
-
-
-def _merge_landmarks(found: LandmarkSet, given: LandmarkSet | None) -> LandmarkSet:
-    """The registration's landmarks, with the user's placed (and absent-by-hand) ones kept."""
-    if given is None:
-        return found
-    keep = {
-        lm.code: lm
-        for lm in given
-        if lm.status == "placed" or (lm.status == "absent" and lm.confidence > 0.5)
-    }
-    out = [keep.get(lm.code, lm) for lm in found]
-    out += [lm for c, lm in keep.items() if c not in found]
-    return LandmarkSet("skull", tuple(out))
 
 
 def ensemble_spread(
