@@ -312,7 +312,9 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
         mirror=mirror_from_landmarks(seeds),
     )
     print_self_check(reg.figures.get("self_check"))
-    lms = reg.landmarks
+    from workbench.core.landmarks import merge_user_landmarks
+
+    lms = merge_user_landmarks(reg.landmarks, seeds)  # the seeds stay as the user placed them
     if read.scale_applied != 1.0:  # back to the file's units
         m = np.eye(4)
         m[:3, :3] /= read.scale_applied

@@ -212,3 +212,20 @@ class LandmarkSet:
         return cls(
             surface, tuple(Landmark(c, np.asarray(p, float), status) for c, p in points.items())
         )
+
+
+def merge_user_landmarks(found: LandmarkSet, given: LandmarkSet | None) -> LandmarkSet:
+    """Landmarks ``found`` by a method (a registration's suggestions) with what a person
+    decided kept: landmarks they placed stay where they are, landmarks they marked absent
+    by hand (confidence above 0.5; a method's "absent" has 0) stay absent, and their
+    landmarks of codes the method does not give are kept.  The surface is ``found``'s."""
+    if given is None:
+        return found
+    keep = {
+        lm.code: lm
+        for lm in given
+        if lm.status == "placed" or (lm.status == "absent" and lm.confidence > 0.5)
+    }
+    out = [keep.get(lm.code, lm) for lm in found]
+    out += [lm for lm in given if lm.code not in found]
+    return LandmarkSet(found.surface, tuple(out))

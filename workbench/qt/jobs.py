@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.errors import WorkbenchError
-from workbench.core.landmarks import LandmarkSet
+from workbench.core.landmarks import LandmarkSet, merge_user_landmarks
 from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.evidence import sha256_file
@@ -160,11 +160,9 @@ def suggest_landmarks(
         seeds=placed if len(placed) else None,
         mirror=mirror_from_landmarks(current),
     )
-    # marked absent by a person (SetLandmarkStatus gives confidence 1; the registration 0)
-    user_absent = {lm.code: lm for lm in current if lm.status == "absent" and lm.confidence > 0.5}
-    merged = [user_absent.get(lm.code, lm) for lm in reg.landmarks]
-    extra = [lm for lm in current if lm.code not in reg.landmarks]
-    return LandmarkSet("skull", tuple(merged + extra)), reg
+    # the one merge of the reconstruction (SetLandmarkStatus gives a person's "absent"
+    # confidence 1; the registration's has 0)
+    return merge_user_landmarks(reg.landmarks, current), reg
 
 
 # ------------------------------------------------------------------ dowels
