@@ -147,7 +147,8 @@ def surface_samples(mesh: Mesh, n: int, rng: np.random.Generator) -> _Cloud:
     return _Cloud(pts, mesh.face_normals[faces])
 
 
-def _rotations_24() -> list[np.ndarray]:
+def rotations_24() -> list[np.ndarray]:
+    """The 24 proper rotations that map the coordinate axes onto themselves."""
     out = []
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1.0, -1.0), repeat=3):
@@ -175,7 +176,8 @@ def _exposed(mesh: Mesh, cloud: _Cloud) -> _Cloud:
     return _Cloud(cloud.points[out], cloud.normals[out])
 
 
-def _principal_axes(points: np.ndarray) -> np.ndarray:
+def principal_axes(points: np.ndarray) -> np.ndarray:
+    """Rows: the principal axes of ``points`` (largest spread first), a right-handed set."""
     c = points - points.mean(axis=0)
     _, _, vt = np.linalg.svd(c, full_matrices=False)
     if np.linalg.det(vt) < 0:
@@ -319,7 +321,7 @@ def symmetry_planes(
     looked up on the target's own distance grid (``own``).  The best
     distinct planes are then polished by small tilts and shifts.
     """
-    dirs = np.vstack([_fibonacci_hemisphere(PLANE_DIRECTIONS), _principal_axes(cloud.points)])
+    dirs = np.vstack([_fibonacci_hemisphere(PLANE_DIRECTIONS), principal_axes(cloud.points)])
     offsets = np.arange(-24.0, 24.1, 4.0)
     found = []
     for u in dirs:

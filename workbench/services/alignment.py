@@ -30,12 +30,12 @@ the similarity is solved from them directly (Umeyama) and only refined.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core import rigid_search
 from workbench.core.errors import InputError
 from workbench.core.frame import apply_transform
 from workbench.core.mesh import Mesh
@@ -79,54 +79,25 @@ class Alignment:
 
 
 def surface_samples(mesh: Mesh, n: int, rng: np.random.Generator) -> np.ndarray:
-    """``n`` points spread over the surface with probability ∝ triangle area."""
-    areas = mesh.face_areas
-    if areas.sum() <= 0:
-        raise InputError("mesh", "has no surface area")
-    faces = rng.choice(len(areas), size=n, p=areas / areas.sum())
-    r1, r2 = rng.random(n), rng.random(n)
-    s = np.sqrt(r1)
-    w = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
-    tri = mesh.vertices[mesh.faces[faces]]
-    return np.einsum("ij,ijk->ik", w, tri)
-
-
-def _rotations_24() -> list[np.ndarray]:
-    out = []
-    for perm in itertools.permutations(range(3)):
-        for signs in itertools.product((1.0, -1.0), repeat=3):
-            m = np.zeros((3, 3))
-            m[np.arange(3), perm] = signs
-            if np.linalg.det(m) > 0:
-                out.append(m)
-    return out
-
-
-def _principal_axes(points: np.ndarray) -> np.ndarray:
-    c = points - points.mean(axis=0)
-    _, _, vt = np.linalg.svd(c, full_matrices=False)
-    if np.linalg.det(vt) < 0:
-        vt[2] *= -1
-    return vt  # rows: axes
+    """``n`` points spread over the surface with probability ∝ triangle area
+    (:func:`workbench.core.rigid_search.surface_samples`, without the normals)."""
+    try:
+        return rigid_search.surface_samples(mesh, n, rng).points
+    except ValueError:
+        raise InputError("mesh", "has no surface area") from None
 
 
 def hint_rotation(
     anterior: np.ndarray, superior: np.ndarray, left: np.ndarray | None = None
 ) -> np.ndarray:
-    """Linear map of input directions to the head frame (rows: left, up, forward).
-
-    Without ``left`` the map is a proper rotation.  With ``left`` given and
-    pointing opposite to superior × anterior, the input is mirrored and the
-    map includes the reflection (determinant −1).
-    """
-    ant = np.asarray(anterior, float) / np.linalg.norm(anterior)
-    sup = np.asarray(superior, float)
-    sup = sup - ant * (sup @ ant)
-    sup /= np.linalg.norm(sup)
-    lft = np.cross(sup, ant)
-    if left is not None and np.dot(lft, left) < 0:
-        lft = -lft
-    return np.vstack([lft, sup, ant])
+    """Linear map of input directions to the head frame (rows: left, up, forward), with the
+    reflection included when ``left`` says the input is mirrored (determinant −1); see
+    :func:`workbench.core.rigid_search.hint_rotation`."""
+    rot, mirrored = rigid_search.hint_rotation(anterior, superior, left)
+    if mirrored:
+        rot = rot.copy()
+        rot[0] = -rot[0]
+    return rot
 
 
 def _icp(
@@ -222,8 +193,9 @@ def align_to_reference(
         if orientation is not None:
             rots = [hint_rotation(*orientation)]
         else:
-            pa_s, pa_r = _principal_axes(src), _principal_axes(ref)
-            rots = [pa_r.T @ c @ pa_s for c in _rotations_24()] + _rotations_24()
+            pa_s, pa_r = rigid_search.principal_axes(src), rigid_search.principal_axes(ref)
+            turns = rigid_search.rotations_24()
+            rots = [pa_r.T @ c @ pa_s for c in turns] + turns
         # the mesh is in mm by now (units are checked on reading), so start at
         # scale 1: a size ratio of radii is biased by partial scans
         scale0 = 1.0
