@@ -22,7 +22,7 @@ every move (the drag host's ``preview_guide``, :class:`workbench.qt.hosts.GuideD
 and stores the new value as one undoable step on release (its ``commit_guide``),
 which re-fits the face in the worker.  The fit drawn is the session's
 (:class:`workbench.qt.session.Session`); the guides are the reconstruct
-panel's list (:class:`workbench.qt.hosts.GuideList`).  Elsewhere the left button pans and the
+panel's list (:class:`workbench.qt.hosts.GuideRows`).  Elsewhere the left button pans and the
 wheel zooms (the view never rotates by accident).
 """
 
@@ -49,7 +49,7 @@ from workbench.render.snapshots import to_polydata
 from workbench.services.guides import AXES, Guide, guides_from_prediction
 
 if TYPE_CHECKING:
-    from workbench.qt.hosts import GuideDragHost, GuideList
+    from workbench.qt.hosts import GuideDragHost, GuideRows
     from workbench.qt.jobs import FitResult
     from workbench.qt.scene import SceneView
     from workbench.qt.session import Session
@@ -76,7 +76,7 @@ class GuideView(QWidget):
         The window's worker (the light skull is prepared there).
     scene : SceneView
         The main 3D view (this view paints after its pending paint).
-    guide_list : GuideList
+    guide_list : GuideRows
         The guides, in table row order (the reconstruct panel).
     drag_host : GuideDragHost
         Previews and stores the guide drags.
@@ -87,7 +87,7 @@ class GuideView(QWidget):
         session: Session,
         runner: TaskRunner,
         scene: SceneView,
-        guide_list: GuideList,
+        guide_list: GuideRows,
         drag_host: GuideDragHost,
         parent: QWidget | None = None,
     ) -> None:

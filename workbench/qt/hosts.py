@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from workbench.services.guides import Guide
 
 
-class GuideList(Protocol):
+class GuideRows(Protocol):
     """The guides shown in the guide view, in their table's row order (the reconstruct panel)."""
 
     @property

@@ -25,7 +25,7 @@ there needs a new model part).  :class:`ScanLandmarks` keeps a local undo /
 redo list; the window's Edit → Undo (Ctrl+Z) works on it while this tool's
 dock is in front with a scan open.
 
-The functions :func:`read_scan`, :func:`run_fit` and :func:`save_pack` are
+The functions :func:`read_scan`, :func:`run_scan_fit` and :func:`save_pack` are
 the worker side (plain data, no Qt, no VTK); :class:`ScanFitTool` is the GUI
 side (drawing, picking, dialogs).
 """
@@ -99,7 +99,7 @@ class ScanFitHost(Protocol):
 
 # ------------------------------------------------------------------ worker side (plain data)
 @dataclass(frozen=True)
-class FitSettings:
+class ScanFitSettings:
     """Sex, depth table and build of the fit (the panel's choices)."""
 
     sex: str = "male"
@@ -276,10 +276,10 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
     )
 
 
-def run_fit(
+def run_scan_fit(
     scan: OpenedScan,
     placed: LandmarkSet | None,
-    settings: FitSettings,
+    settings: ScanFitSettings,
     report: Callable[[str, float], None] | None = None,
 ) -> FitView:
     """Worker: :func:`fit_scan` on the opened scan, seeded by ``placed`` (scan frame, mm)."""
@@ -306,7 +306,7 @@ def save_pack(
     scan: OpenedScan,
     out: str | Path,
     placed: LandmarkSet | None,
-    settings: FitSettings,
+    settings: ScanFitSettings,
     *,
     force: bool = False,
     report: Callable[[str, float], None] | None = None,
@@ -505,11 +505,11 @@ class ScanFitTool(QObject):
     def fit_result(self) -> ScanFit | None:
         return None if self.view is None else self.view.fit
 
-    def settings(self) -> FitSettings:
+    def settings(self) -> ScanFitSettings:
         from workbench.model.reconstruction_setup import parse_build
 
         p = self.panel
-        return FitSettings(
+        return ScanFitSettings(
             p.sex_combo.currentText(),
             p.table_combo.currentText() or DEFAULT_DEPTH_TABLE,
             parse_build(p.build_combo.currentText()),
@@ -592,7 +592,7 @@ class ScanFitTool(QObject):
         self.runner.submit(
             CHANNEL,
             f"Fitting the reference head to {scan.path.name} …",
-            lambda report: run_fit(scan, placed, settings, report),
+            lambda report: run_scan_fit(scan, placed, settings, report),
             self._show_fit,
             lambda exc: self._failed("Could not fit the scan", exc),
             progress=True,
