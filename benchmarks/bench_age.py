@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.services.age import AgeResult, age_head
-from workbench.services.age_job import age_series
-from workbench.services.template_cache import reference_head
+from workbench.services.age.change import AgeResult, age_head
+from workbench.services.age.job import age_series
+from workbench.services.templates.cache import reference_head
 
 
 def _line(name: str, r: AgeResult, seconds: float) -> dict:

@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from workbench.qt.app import ensure_app
     from workbench.qt.main_window import MainWindow
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.cache import reference_head
 
     app = ensure_app()
     reference_head("male")  # built (or read from the cache) before the clock starts

@@ -41,8 +41,8 @@ sys.path.insert(0, str(ROOT))
 
 from workbench.core.mass_spring import SkinSimulation  # noqa: E402
 from workbench.core.spatial import MeshIndex  # noqa: E402
-from workbench.services.animation import Animator  # noqa: E402
-from workbench.services.template_cache import reference_head  # noqa: E402
+from workbench.services.animation.animator import Animator  # noqa: E402
+from workbench.services.templates.cache import reference_head  # noqa: E402
 
 _COMPILE_SNIPPET = """
 import time, numpy as np
@@ -98,13 +98,13 @@ def decimated_skin(head, target_vertices: int = 1000):
 
 def track_evaluation(head, seconds: float = 60.0, reps: int = 5) -> None:
     """Print the cost of evaluating a long keyframe + phoneme track against the physics."""
-    from workbench.services.animation_track import (
+    from workbench.services.animation.track import (
         apply_frame,
         evaluate_track,
         parse_track,
         steps_per_frame,
     )
-    from workbench.services.speech import load_visemes
+    from workbench.services.animation.speech import load_visemes
 
     rng = np.random.default_rng(1)
     labels = [p for p in load_visemes().phonemes if p != "sil"]

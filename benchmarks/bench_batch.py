@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 from workbench.cli.batch_cmd import commands  # noqa: E402
 from workbench.cli.main import main  # noqa: E402
-from workbench.services.batch import dask_client, run_batch, run_row_task  # noqa: E402
+from workbench.services.batch.run import dask_client, run_batch, run_row_task  # noqa: E402
 
 TRIVIAL = ["samples", "list"]
 
@@ -51,8 +51,8 @@ def _case(folder: Path, jobs: int) -> tuple[list[Path], Path]:
 
     from workbench.core.mesh import Mesh
     from workbench.io.meshes import write_mesh
-    from workbench.services.reference_parts import skull_surface
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.reference_parts import skull_surface
+    from workbench.services.templates.cache import reference_head
 
     female = reference_head("female")
     reference_head("male")  # built and cached before any timing

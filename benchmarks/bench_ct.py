@@ -96,7 +96,7 @@ def _child(volume_path: str, case: str, traced: bool) -> dict:
     sys.path.insert(0, str(ROOT))
     from workbench.core.isosurface import extract_isosurface
     from workbench.core.volume import Volume
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     data = np.load(volume_path)
     volume = Volume(data, SPACING, modality="CT", units="HU", source="synthetic head CT")

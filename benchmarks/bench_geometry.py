@@ -97,7 +97,7 @@ def uv_sphere(radius: float, n_faces: int) -> Mesh:
 
 def head_mesh() -> Mesh:
     from workbench.io.meshes import read_mesh
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     skin = subdivide(
         mesh_from_ct(DATA / "vtk_headsq_quarter_ct" / "headsq" / "quarter.nhdr", tissue="skin").mesh

@@ -43,7 +43,7 @@ def _bone(name: str):
     from workbench.core.isosurface import decimate
     from workbench.core.mesh import Mesh
     from workbench.io.samples import fetch, registry
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     sample = {"vhp_female": ("vhp_female", 300.0), "headsq": ("headsq", 1150.0)}[name]
     mesh = mesh_from_ct(fetch(sample[0]), tissue="bone", iso=sample[1]).mesh
@@ -55,7 +55,7 @@ def _bone(name: str):
 
 
 def _clear() -> None:
-    import workbench.services.skull_registration as sr
+    import workbench.services.registration.skull_registration as sr
 
     sr._CACHE.clear()
 
@@ -76,9 +76,9 @@ def main() -> int:
     parser.add_argument("--cases", default="vhp_female,headsq")
     args = parser.parse_args()
     from workbench.core.mesh import Mesh
-    from workbench.services.reconstruct import reconstruct
-    from workbench.services.skull_registration import register_skull
-    from workbench.services.template_cache import reference_head
+    from workbench.services.reconstruction.reconstruct import reconstruct
+    from workbench.services.registration.skull_registration import register_skull
+    from workbench.services.templates.cache import reference_head
 
     head = reference_head("male")
     rows = []

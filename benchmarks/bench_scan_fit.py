@@ -5,7 +5,7 @@ Run ``python benchmarks/bench_scan_fit.py`` from the repository root with
 Cases (units mm, each fitted with the built-in male reference head):
 
 * ``headsq``: the skin surface of the VTK headsq CT (``sample:headsq``,
-  :func:`workbench.services.ct_mesh.mesh_from_ct`), its orientation from the
+  :func:`workbench.services.ct.ct_mesh.mesh_from_ct`), its orientation from the
   sample registry, and its bone surface for the estimated skull vs the true
   bone (face → skull);
 * ``nefertiti``: the Nefertiti bust scan (``sample:nefertiti``, no stated
@@ -60,8 +60,8 @@ def _cases():
     from workbench.core.landmarks import LandmarkSet
     from workbench.io.meshes import read_mesh
     from workbench.io.samples import fetch, registry
-    from workbench.services.ct_mesh import mesh_from_ct
-    from workbench.services.template_cache import reference_head
+    from workbench.services.ct.ct_mesh import mesh_from_ct
+    from workbench.services.templates.cache import reference_head
 
     def hint(name: str) -> tuple:
         a = registry()[name].anatomy
@@ -155,8 +155,8 @@ def _cases():
 
 def main() -> int:
     from workbench.core.errors import WorkbenchError
-    from workbench.services.scan_fit import fit_scan
-    from workbench.services.template_cache import reference_head
+    from workbench.services.scan_fit.fit import fit_scan
+    from workbench.services.templates.cache import reference_head
 
     base = reference_head("male")
     out = {}

@@ -112,7 +112,7 @@ def _write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
 
 def _vhf_skin() -> tuple[np.ndarray, np.ndarray]:
     from workbench.io.samples import fetch
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     m = mesh_from_ct(fetch("vhp_female"), "skin").mesh
     return m.vertices, m.faces
@@ -120,7 +120,7 @@ def _vhf_skin() -> tuple[np.ndarray, np.ndarray]:
 
 def _headsq_skin() -> tuple[np.ndarray, np.ndarray]:
     from workbench.io.samples import fetch
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     m = mesh_from_ct(fetch("headsq"), "skin").mesh
     return m.vertices, m.faces

@@ -67,7 +67,7 @@ def icosphere(levels: int, radius: float) -> Mesh:
 
 
 def meshes() -> dict[str, Mesh]:
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.cache import reference_head
 
     sphere = icosphere(6, 90.0)
     return {

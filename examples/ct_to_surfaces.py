@@ -20,7 +20,7 @@ import numpy as np
 from workbench.core.spatial import MeshIndex
 from workbench.io.meshes import write_mesh
 from workbench.samples import fetch, registry
-from workbench.services.ct_mesh import mesh_from_ct
+from workbench.services.ct.ct_mesh import mesh_from_ct
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("example_out")
 out.mkdir(parents=True, exist_ok=True)

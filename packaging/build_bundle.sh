@@ -132,7 +132,7 @@ env -u DISPLAY -u WAYLAND_DISPLAY "$exe" demo --out "$smoke/demo_out" > "$smoke/
 demo_s="$(since "$t0")"
 [ -f "$smoke/demo_out/summary.json" ] || fail "the demo wrote no summary.json"
 # the cached heads carry the same key as a pip install of this release
-key="$(cd "$work" && "$tools/bin/python" -c 'from workbench.services.template_cache import source_key; print(source_key())')"
+key="$(cd "$work" && "$tools/bin/python" -c 'from workbench.services.templates.cache import source_key; print(source_key())')"
 for sex in male female; do
   [ -f "$XDG_CACHE_HOME/forensic-workbench/templates/$sex-$key/template.json" ] \
     || fail "no $sex reference head cached as $XDG_CACHE_HOME/forensic-workbench/templates/$sex-$key"

@@ -80,14 +80,14 @@ def _sample_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def head_male(_sample_cache: Path):
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.cache import reference_head
 
     return reference_head("male")
 
 
 @pytest.fixture(scope="session")
 def head_female(_sample_cache: Path):
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.cache import reference_head
 
     return reference_head("female")
 
@@ -98,8 +98,8 @@ def skull_obj_suggested(skull_obj: Path, head_male):
     male reference head's skull landmarks suggested on it (same frame, mm; ~2 s after the
     reference head).  Treat both as read-only: the landmark set and mesh are shared."""
     from workbench.io.meshes import read_mesh
-    from workbench.services.landmark_transfer import transfer_landmarks
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.landmarks.transfer import transfer_landmarks
+    from workbench.services.templates.reference_parts import skull_surface
 
     mesh = read_mesh(skull_obj, scale=15.0, kind="skull").mesh
     result = transfer_landmarks(
@@ -114,7 +114,7 @@ def skull_obj_suggested(skull_obj: Path, head_male):
 @pytest.fixture(scope="session")
 def headsq_surfaces(headsq_nhdr: Path) -> dict:
     """Bone and skin surfaces of the headsq CT (its physical frame, mm)."""
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     return {t: mesh_from_ct(headsq_nhdr, t).mesh for t in ("bone", "skin")}
 

@@ -4,8 +4,8 @@
 
 HEAD is what ``workbench animate`` takes (a template pack, a reconstruction
 folder, ``reference:male|female``).  Each tile is the skin simulated by
-:class:`workbench.services.animation.Animator` to rest under one expression
-of :data:`workbench.services.animation.EXPRESSIONS` (the six basic
+:class:`workbench.services.animation.animator.Animator` to rest under one expression
+of :data:`workbench.services.animation.animator.EXPRESSIONS` (the six basic
 emotions, neutral, smile, eye closure), drawn from the front, slightly
 above and to the side, with the same camera for every tile.  Units mm, the
 head frame (the Animator works there).
@@ -36,7 +36,7 @@ def main(argv: list[str]) -> int:
     import pyvista as pv
 
     from workbench.cli.animate_cmd import load_head
-    from workbench.services.animation import Animator
+    from workbench.services.animation.animator import Animator
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("head")

@@ -13,7 +13,7 @@ for the same CT file).  ``DIR`` is a cache folder: meshes derived from the CT
 are never committed to the repository.
 
 Outputs (mm, in the volume's physical frame -- RAS for NIfTI, the frame
-:func:`workbench.services.ct_mesh.mesh_from_ct` returns)
+:func:`workbench.services.ct.ct_mesh.mesh_from_ct` returns)
 ---------------------------------------------------------------------------
 ``full_bone.ply``
     The complete bone surface, iso 300 HU, largest component (cranium,
@@ -119,7 +119,7 @@ from workbench.core.mesh import Mesh, boundary_loops  # noqa: E402
 from workbench.core.volume import Volume  # noqa: E402
 from workbench.io.meshes import write_mesh  # noqa: E402
 from workbench.io.volumes import read_volume  # noqa: E402
-from workbench.services.ct_mesh import mesh_from_ct  # noqa: E402
+from workbench.services.ct.ct_mesh import mesh_from_ct  # noqa: E402
 
 GENERATOR_VERSION = 1
 CUT_SKULL = "cut_skull.ply"
@@ -905,7 +905,7 @@ def build_case(
         "units": "mm",
         "frame_note": (
             f"vertices in mm in the volume's physical frame ({volume.frame}), the frame "
-            "workbench.services.ct_mesh.mesh_from_ct returns; "
+            "workbench.services.ct.ct_mesh.mesh_from_ct returns; "
             f"anterior = {dirs['anterior'].tolist()}, superior = {dirs['superior'].tolist()}, "
             f"patient's right = {dirs['right'].tolist()}"
         ),

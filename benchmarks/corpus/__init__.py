@@ -21,7 +21,7 @@ Modules
 Units and frames
 ----------------
 Everything is in millimetres.  The **input frame** of a base is the CT's
-physical frame as :func:`workbench.services.ct_mesh.mesh_from_ct` returns it
+physical frame as :func:`workbench.services.ct.ct_mesh.mesh_from_ct` returns it
 (LPS for the NRRD ``headsq``, RAS for the NIfTI VHP volumes).  The **head
 frame** is the project's (x to the subject's left, y up, z toward the face,
 Frankfort Horizontal at y = 0).  A variant's **file frame** is the base input

@@ -2,7 +2,7 @@
 
 Units mm; every position is in the base's **input frame** (the CT's physical
 frame: LPS for the NRRD ``headsq``, RAS for the NIfTI VHP volumes), the frame
-:func:`workbench.services.ct_mesh.mesh_from_ct` gives the bone surface in.
+:func:`workbench.services.ct.ct_mesh.mesh_from_ct` gives the bone surface in.
 Voxel values are in each volume's own units: HU for the VHP CTs (the reader
 says "unknown", but they are HU), raw 0..3926 CT numbers for ``headsq``
 (roughly HU + 1024; soft tissue ~1050, the VTK bone level 1150).

@@ -90,9 +90,9 @@ def run_variant(
     """
     from workbench.core.errors import WorkbenchError
     from workbench.io.meshes import read_mesh
-    from workbench.services.reconstruction_service import working_skull
-    from workbench.services.skull_registration import register_skull
-    from workbench.services.template_cache import reference_head
+    from workbench.services.reconstruction.service import working_skull
+    from workbench.services.registration.skull_registration import register_skull
+    from workbench.services.templates.cache import reference_head
 
     from benchmarks.corpus.truth import condylar_axis_h, jaw_pose, snapped_input
 

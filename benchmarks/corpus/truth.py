@@ -7,8 +7,8 @@ y up, z toward the face, Frankfort Horizontal at y = 0).
 The clean bone mesh is the base CT's bone surface at its bone level (300 HU
 for the VHP CTs, 1150 for ``headsq``), largest component, no smoothing,
 decimated the way the reconstruction does
-(:func:`workbench.services.reconstruction_service.working_skull`).  It is
-registered with :func:`workbench.services.skull_registration.register_skull`
+(:func:`workbench.services.reconstruction.service.working_skull`).  It is
+registered with :func:`workbench.services.registration.skull_registration.register_skull`
 with the base's orientation hint and the reference head of the base's sex.
 From that registration:
 
@@ -16,7 +16,7 @@ From that registration:
   (``reg.inferred``, head frame, mapped back with ``inv(reg.input_to_head)``);
 * the condylar (TMJ) axis: the reference head's ``tmj_axis`` scaled by
   ``reg.reference_scale`` and settled into the head frame by ``reg.settle``
-  (as :func:`~workbench.services.skull_registration.reference_in_frame` does),
+  (as :func:`~workbench.services.registration.skull_registration.reference_in_frame` does),
   then mapped to the input frame;
 * the jaw pose relative to the cranium (:func:`jaw_pose`: opening in degrees,
   the condyle's protrusion and lateral shift in mm) — once per reference head
@@ -67,10 +67,10 @@ from benchmarks.corpus.common import (
 
 from workbench.core.mesh import Mesh, concatenate
 from workbench.model.template import TemplateHead
-from workbench.services.ct_mesh import mesh_from_ct
-from workbench.services.reconstruction_service import working_skull
-from workbench.services.skull_registration import SkullRegistration, register_skull
-from workbench.services.template_cache import reference_head
+from workbench.services.ct.ct_mesh import mesh_from_ct
+from workbench.services.reconstruction.service import working_skull
+from workbench.services.registration.skull_registration import SkullRegistration, register_skull
+from workbench.services.templates.cache import reference_head
 
 ANCHOR_VERSION = 1
 #: the reference head every automatic run uses (a user may not know the sex)
@@ -199,8 +199,8 @@ def hinted_registration(base: Base, sex: str, work: Mesh | None = None) -> Skull
 def snapped_input(reg: SkullRegistration, work: Mesh, codes=SIX) -> dict[str, np.ndarray]:
     """The landmarks a user receives (input frame): the registration's, each with a snap
     rule moved to its feature on ``work`` as ``reconstruct`` does
-    (:func:`workbench.services.landmark_snap.snap_suggested`; of the six, g has a rule)."""
-    from workbench.services.landmark_snap import snap_suggested
+    (:func:`workbench.services.landmarks.snap.snap_suggested`; of the six, g has a rule)."""
+    from workbench.services.landmarks.snap import snap_suggested
 
     snapped, _ = snap_suggested(work, reg.landmarks, fallback_frame=reg.input_to_head)
     return {c: np.asarray(snapped[c].position, np.float64) for c in codes}

@@ -27,7 +27,7 @@ Build steps (voxels in the base CT's own units, then the surface):
    cylinder, 1500 HU) leaving the mouth forward-down; a head holder (a
    curved shell behind the occiput, 1200 HU); the CT table (a plate under the
    head along the scanner's posterior direction, 1200 HU).
-5. Iso-surface with the project's :func:`~workbench.services.ct_mesh.mesh_from_ct`
+5. Iso-surface with the project's :func:`~workbench.services.ct.ct_mesh.mesh_from_ct`
    (every component), the vault cut (:func:`benchmarks.cases.cut_skull.clip_by_plane`,
    parallel to the anchor's Frankfort plane), the component choice (largest /
    every component over 5 % of the triangles / everything), Taubin smoothing
@@ -791,7 +791,7 @@ def build_mesh(
     from benchmarks.cases.cut_skull import clip_by_plane, hole_voxels
 
     from workbench.core.isosurface import decimate, taubin_smooth
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     base = BASES[spec.base]
     anchor = anchor or load_anchor(spec.base, root)

@@ -3,7 +3,7 @@
 Frame and units
 ---------------
 Every point is in millimetres in the frame of the skin mesh that ``workbench
-validate`` scores against: :func:`workbench.services.ct_mesh.mesh_from_ct`
+validate`` scores against: :func:`workbench.services.ct.ct_mesh.mesh_from_ct`
 (``tissue="skin"``) on the sample volume, at the case's skin level of
 ``benchmarks/bench_validation.py`` (headsq 500, raw VTK CT numbers; Visible
 Human female and male -400 HU), i.e. the CT's physical frame as the extractor
@@ -162,7 +162,7 @@ def extract(case: Case, out: Path):
     """The true skin exactly as ``workbench validate`` extracts it; written as PLY."""
     from workbench.io.meshes import write_mesh
     from workbench.io.samples import fetch
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     path = fetch(case.name)
     result = mesh_from_ct(path, tissue="skin", iso=case.skin_iso)

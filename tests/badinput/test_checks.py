@@ -23,7 +23,8 @@ from workbench.io.mesh_formats import ply
 from workbench.io.meshes import read_mesh
 from workbench.io.volumes import read_volume
 from workbench.model.reconstruction_setup import MAX_DEPTH_MM, DowelSettings, parse_build
-from workbench.services import input_checks
+from workbench.services.case import input_checks
+from workbench.services.reconstruction import fit_checks
 
 
 def test_one_set_of_bounds() -> None:
@@ -54,28 +55,28 @@ def test_range_and_count_checks_name_the_option() -> None:
 def test_face_must_fit_the_skull() -> None:
     skull = skull_mesh()  # 150 x 180 x 200 mm
     head = Mesh(skull.vertices * 1.1, skull.faces)
-    input_checks.check_face_fits_skull(head, skull)  # plausible: no error
+    fit_checks.check_face_fits_skull(head, skull)  # plausible: no error
     # a cut vault (half-height skull) still carries a whole reference head
     cut = Mesh(skull.vertices * np.array([1.0, 0.5, 1.0]), skull.faces)
-    input_checks.check_face_fits_skull(head, cut)
+    fit_checks.check_face_fits_skull(head, cut)
     flat_face = Mesh(skull.vertices * np.array([1.1, 1.1, 0.145]), skull.faces)  # 29 mm deep
     with pytest.raises(InputError, match=r"29\.0 mm against a skull of 150\.0 x 180\.0"):
-        input_checks.check_face_fits_skull(flat_face, skull)
+        fit_checks.check_face_fits_skull(flat_face, skull)
     huge = Mesh(skull.vertices * 3.0, skull.faces)
     with pytest.raises(InputError, match="not a plausible face"):
-        input_checks.check_face_fits_skull(huge, skull)
+        fit_checks.check_face_fits_skull(huge, skull)
 
 
 def test_fit_settings_are_checked_before_the_fit(tmp_path: Path) -> None:
-    input_checks.check_fit_settings(DowelSettings(), ensemble=20)
+    fit_checks.check_fit_settings(DowelSettings(), ensemble=20)
     with pytest.raises(InputError, match="--ensemble: 501"):
-        input_checks.check_fit_settings(DowelSettings(), ensemble=501)
+        fit_checks.check_fit_settings(DowelSettings(), ensemble=501)
     with pytest.raises(InputError, match="--rule: unknown prediction rule"):
-        input_checks.check_fit_settings(DowelSettings(), rules=("nope",))
+        fit_checks.check_fit_settings(DowelSettings(), rules=("nope",))
     table = tmp_path / "deep.csv"
     table.write_text("landmark_code,group,mean_mm,sd_mm,source\ng,adult,75,2,t\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"deep\.csv: line 2: mean_mm 75 mm is implausible"):
-        input_checks.check_fit_settings(DowelSettings(table=str(table)))
+        fit_checks.check_fit_settings(DowelSettings(table=str(table)))
 
 
 def test_landmarks_off_the_skull_are_counted() -> None:
@@ -129,7 +130,7 @@ def test_readers_refuse_what_the_cli_refuses(bad_files: dict[str, Path]) -> None
 
 
 def test_face_ply_header_names_the_file_units(tmp_path: Path) -> None:
-    from workbench.services.reconstruction_job import JobResult, JobSettings
+    from workbench.services.reconstruction.job import JobResult, JobSettings
 
     header = ply.encode(np.zeros((3, 3)), np.array([[0, 1, 2]]), units="cm")
     assert b"comment units: cm\n" in header and b"units: mm" not in header

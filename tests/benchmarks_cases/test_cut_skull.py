@@ -17,7 +17,7 @@ import pytest
 
 from workbench.core.mesh import Mesh, boundary_loops
 from workbench.io.meshes import read_mesh
-from workbench.services.ct_mesh import mesh_from_ct
+from workbench.services.ct.ct_mesh import mesh_from_ct
 
 REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:

@@ -112,7 +112,7 @@ def test_local_cluster_rows_equal_single_runs(tmp_path, skull_obj, head_male, ca
             assert _same(ja, jb), rel
             continue
         assert (out / "rec" / rel).read_bytes() == (single / rel).read_bytes(), rel
-    from workbench.services.batch_figures import reconstruct_figures
+    from workbench.services.batch.figures import reconstruct_figures
 
     figures = reconstruct_figures(single)
     assert figures["max_tip_error_mm"] > 0
@@ -126,7 +126,7 @@ def test_local_cluster_rows_equal_single_runs(tmp_path, skull_obj, head_male, ca
 @pytest.mark.slow
 def test_validate_row_figures_and_plots(tmp_path, head_female):
     from workbench.io.meshes import write_mesh
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.templates.reference_parts import skull_surface
 
     write_mesh(tmp_path / "skull.ply", skull_surface(head_female))
     write_mesh(tmp_path / "skin.ply", head_female.skin)
@@ -187,7 +187,7 @@ def test_fit_scan_row_figures_take_the_skull_and_baseline_scalars(tmp_path):
     """A fit-scan case's row: its report's scalars, skull vs bone and the uniform baseline."""
     import json
 
-    from workbench.services.batch_figures import fit_scan_figures
+    from workbench.services.batch.figures import fit_scan_figures
 
     report = {
         "face_within_1mm_fraction": 0.97,

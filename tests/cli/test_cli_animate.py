@@ -103,7 +103,7 @@ def test_animate_glb_morph_targets(tmp_path: Path, head_male, capsys) -> None:
     """--out .glb: the expressions as morph targets; weight 1 on one = its settled skin."""
     import pygltflib
 
-    from workbench.services.animation import Animator
+    from workbench.services.animation.animator import Animator
 
     out = tmp_path / "head.glb"
     args = ["animate", "reference:male", "--targets", "smile,au26", "--expression", "happiness"]

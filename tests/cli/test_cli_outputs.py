@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-import workbench.services.reconstruction_job as job_module
+import workbench.services.reconstruction.job as job_module
 from workbench.cli.main import main
 from workbench.core.errors import InputError
 from workbench.core.headgen.eyes import icosphere
@@ -25,7 +25,7 @@ from workbench.io.case_file import load_case
 from workbench.io.markups import write_landmarks, write_mrk_json
 from workbench.io.meshes import read_mesh, write_mesh
 from workbench.reporting.report import read_report_json
-from workbench.services.reference_parts import skull_surface
+from workbench.services.templates.reference_parts import skull_surface
 
 
 def _sha(path: Path) -> str:
@@ -533,8 +533,8 @@ def test_demo_refuses_a_folder_that_is_not_a_previous_demo(tmp_path: Path, capsy
 
 
 def test_services_called_from_scripts_refuse_the_same_clashes(ball: Path, tmp_path: Path) -> None:
-    from workbench.services.template_build import build_template_pack
-    from workbench.services.validation import ValidationCase, run_validation
+    from workbench.services.templates.build import build_template_pack
+    from workbench.services.validation.run import ValidationCase, run_validation
 
     before = _sha(ball)
     existing = tmp_path / "pack"

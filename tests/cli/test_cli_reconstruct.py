@@ -14,7 +14,7 @@ from workbench.io.markups import read_landmarks, write_mrk_json
 from workbench.io.meshes import read_mesh, write_mesh
 from workbench.model.evidence import file_sha256 as sha256_file
 from workbench.reporting.report import read_report_json, validate_report
-from workbench.services.reference_parts import skull_surface
+from workbench.services.templates.reference_parts import skull_surface
 
 HEADSQ_FLAGS = ["--anterior", "0,-1,0", "--superior", "0,0,-1", "--left", "1,0,0"]
 

@@ -14,8 +14,8 @@ from workbench.io.markups import write_mrk_json
 from workbench.io.meshes import read_mesh, write_mesh
 from workbench.io.template_pack import load_template_pack
 from workbench.reporting.report import read_report_json
-from workbench.services.landmark_transfer import transfer_landmarks
-from workbench.services.reference_parts import skull_surface
+from workbench.services.landmarks.transfer import transfer_landmarks
+from workbench.services.templates.reference_parts import skull_surface
 
 HEADSQ_FLAGS = ["--anterior", "0,-1,0", "--superior", "0,0,-1", "--left", "1,0,0"]
 SEEDS = ("po_l", "po_r", "or_l", "or_r", "n")

@@ -9,7 +9,7 @@ from workbench.core.face_pose import place_face
 from workbench.core.rigid_search import SCALE_RANGE
 from workbench.core.spatial import MeshIndex
 from tests.services._scans import crowned_bust
-from workbench.services.compare import face_regions
+from workbench.services.templates.regions import face_regions
 
 
 @pytest.fixture(scope="module")

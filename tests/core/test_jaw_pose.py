@@ -13,7 +13,7 @@ from workbench.core.jaw_pose import (
     pose_jaw,
 )
 from workbench.core.mesh import concatenate
-from workbench.services.jaw import axis_rotation
+from workbench.services.registration.jaw import axis_rotation
 
 
 def _parts(head):

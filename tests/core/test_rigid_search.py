@@ -7,7 +7,7 @@ import pytest
 
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.rigid_search import hint_rotation, search_pose
-from workbench.services.reference_parts import skull_surface
+from workbench.services.templates.reference_parts import skull_surface
 
 
 def _rot(seed: int) -> np.ndarray:

@@ -78,7 +78,7 @@ def test_a_mirrored_file_keeps_its_handedness_and_still_finds_the_face(head_fema
 
 
 def test_an_open_jaw_and_a_missing_jaw_do_not_tip_the_cranium(head_female, head_male):
-    from workbench.services.jaw import axis_rotation
+    from workbench.services.registration.jaw import axis_rotation
 
     cranium, jaw = _parts(head_male)
     f_cranium, f_jaw = _parts(head_female)

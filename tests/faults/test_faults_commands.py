@@ -66,7 +66,7 @@ class Case:
 def surfaces(tmp_path_factory: pytest.TempPathFactory, headsq_surfaces, shared_data: Path):
     """Skin and bone PLYs (mm, each CT's own frame): headsq and the two Visible Human
     heads (their 2 mm copies; another person's skin for the other's bone)."""
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     folder = tmp_path_factory.mktemp("fault-surfaces")
     files = {

@@ -392,7 +392,7 @@ def test_glb_vertices_are_the_ply_frame_in_metres(tmp_path: Path, monkeypatch) -
     reconstruction of a mirrored skull file.
     """
     from workbench.io.template_pack import FILES
-    from workbench.services import gltf_animation
+    from workbench.services.animation.animator import gltf as gltf_animation
 
     mesh, _ = _skull_and_points()
     mirror = np.diag([-1.0, 1.0, 1.0])  # stored -> head frame (a reflection)
@@ -508,7 +508,7 @@ def test_meshlab_points_on_an_lps_mesh_turn_with_it(tmp_path: Path) -> None:
     turned with the mesh, so the case's landmarks stay on the bone."""
     from workbench.io.markups import write_pp
     from workbench.io.meshes import write_mesh
-    from workbench.services.case_setup import start_case_from_skull
+    from workbench.services.case.case_setup import start_case_from_skull
 
     skull, points = _skull_and_points()
     raw = Mesh(skull.vertices * [-1.0, -1.0, 1.0], skull.faces)  # LPS numbers of the skull
@@ -525,7 +525,7 @@ def test_validate_directions_turn_with_an_lps_skull(tmp_path: Path) -> None:
     """A validate manifest's directions follow the skull file the same way (a CT keeps its
     volume's numbers, so its directions stay as given)."""
     from workbench.io.meshes import write_mesh
-    from workbench.services.validation import ValidationCase, in_read_frame
+    from workbench.services.validation.run import ValidationCase, in_read_frame
 
     skull, _ = _skull_and_points()
     lps = write_mesh(tmp_path / "bone.ply", skull, space="LPS")

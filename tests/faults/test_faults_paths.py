@@ -515,7 +515,7 @@ def test_validate_tables_guard_user_text(tmp_path):
     """The validate table writers guard every cell themselves (a failed case's message can
     hold user text at its start)."""
     from workbench.reporting.validation_report import markdown, rows, write_csv
-    from workbench.services.validation import CaseResult
+    from workbench.services.validation.run import CaseResult
 
     res = CaseResult("c1", "failed", "=HYPERLINK(x)|row\nbreak")
     write_csv(rows([(res, "reconstruction")], ()), tmp_path / "r.csv")

@@ -26,7 +26,7 @@ ARKIT_52 = {
 
 
 def test_builtin_table_has_the_52_names_and_valid_recipes() -> None:
-    from workbench.services.animation import EXPRESSIONS
+    from workbench.services.animation.animator import EXPRESSIONS
 
     assert len(ARKIT_52) == 52
     with builtin_arkit_table().open(encoding="utf-8") as f:

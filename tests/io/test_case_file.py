@@ -581,7 +581,7 @@ def test_v1_parameters_become_typed_parts(v0_file: Path, tmp_path: Path) -> None
     )
     assert case.orientation == Orientation((0, -1, 0), (0, 0, -1))
     assert case.guides == GuideList((V1_GUIDE,))
-    from workbench.services.guides import guides_from_json
+    from workbench.services.guides.classic import guides_from_json
 
     assert guides_from_json(case.guides.to_state())[0].value == (-20.0, 95.0)
     # parameters that are not settings stay as they were

@@ -32,7 +32,7 @@ from workbench.model.audit import (
 )
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
-from workbench.services.case_setup import describe_case
+from workbench.services.case.case_setup import describe_case
 
 OBJ = b"v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 

@@ -26,7 +26,7 @@ from workbench.io.case_file import (
 from workbench.model.audit import parse_records
 from workbench.model.case import Case
 from workbench.model.state import states_equal
-from workbench.services.case_setup import start_case_from_skull
+from workbench.services.case.case_setup import start_case_from_skull
 
 
 @pytest.fixture

@@ -20,7 +20,7 @@ from workbench.core.mesh import Mesh
 from workbench.io import samples
 from workbench.io.mesh_formats import ply
 from workbench.io.meshes import read_mesh, write_mesh
-from workbench.services.ct_mesh import mesh_from_ct
+from workbench.services.ct.ct_mesh import mesh_from_ct
 
 NLM_CREDIT = "Courtesy of the U.S. National Library of Medicine"
 FROZEN_NOTE = "This copy is a frozen snapshot and may not reflect the most current"

@@ -9,7 +9,7 @@ import pytest
 
 from workbench.core.errors import InputError
 from workbench.io.template_pack import export_template, load_template_pack
-from workbench.services.template_cache import reference_head, source_key
+from workbench.services.templates.cache import reference_head, source_key
 
 
 def test_pack_round_trip_keeps_every_part_and_the_hash(head_female, tmp_path):

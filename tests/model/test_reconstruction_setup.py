@@ -152,7 +152,7 @@ def test_build_parsing() -> None:
 
 
 def test_region_constants_match_the_tissue_model() -> None:
-    from workbench.services import tissue_model
+    from workbench.services.tissue import tissue_model
 
     assert REGIONS == tissue_model.REGIONS
     assert FACTOR_RANGE == tissue_model.FACTOR_RANGE
@@ -231,7 +231,7 @@ def test_guide_list_is_frozen_json_and_round_trips() -> None:
 
 
 def test_guide_list_matches_the_services_json() -> None:
-    from workbench.services.guides import guides_from_json, guides_to_json
+    from workbench.services.guides.classic import guides_from_json, guides_to_json
 
     guides = guides_from_json([GUIDE])
     stored = GuideList(tuple(guides_to_json(guides)))

@@ -142,7 +142,7 @@ def test_spec_refers_to_files_that_exist() -> None:
         assert f'"{name}"' in text and (SPEC.parent / name).is_file()
     assert (PACKAGING / "macos" / "entitlements.plist").is_file()
     # the sources the reference head's cache key hashes, shipped beside the modules
-    from workbench.services.template_cache import _SOURCE_GLOBS
+    from workbench.services.templates.cache import _SOURCE_GLOBS
 
     package = REPO / "workbench"
     for pattern in _SOURCE_GLOBS:

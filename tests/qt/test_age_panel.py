@@ -99,7 +99,7 @@ def test_z_scores_beyond_two_are_highlighted(qtbot):
     from PySide6.QtCore import Qt
 
     from workbench.qt.panels.age_panel import MeasurementModel, out_of_range
-    from workbench.services.age import MeasurementRow
+    from workbench.services.age.change import MeasurementRow
 
     def row(mid: str, before: float, after: float, constraint: str = "norms") -> MeasurementRow:
         # norms 50 ± 4 mm before, 40 ± 2 mm after

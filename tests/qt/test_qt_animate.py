@@ -23,7 +23,7 @@ MOVE_MS = 30_000
 def _head_cached():
     """Build the session's reference head here, at normal priority: the window's worker
     builds a missing one in the nice-10 helper process, which a loaded machine starves."""
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.cache import reference_head
 
     reference_head("male")
 
@@ -180,7 +180,7 @@ def test_lids_slider_closes_the_lids(animating, qtbot):
 def _run_track_skins(frames_wanted: set[int]) -> dict[int, np.ndarray]:
     """``run_track``'s skin at some frames of the example track (a fresh reference head)."""
     from workbench.qt.animate_ops import load_animator
-    from workbench.services.animation_track import load_track, run_track
+    from workbench.services.animation.track import load_track, run_track
 
     out: dict[int, np.ndarray] = {}
     last = max(frames_wanted)
@@ -304,7 +304,7 @@ def test_a_bad_track_file_shows_a_message_in_the_dock(animating, tmp_path):
 def test_record_keyframes_and_save_the_track(animating, qtbot, tmp_path):
     import shutil
 
-    from workbench.services.animation_track import evaluate_track, load_track
+    from workbench.services.animation.track import evaluate_track, load_track
 
     w = animating
     tool, panel = w.animate, w.animate_panel

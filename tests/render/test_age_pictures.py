@@ -21,7 +21,7 @@ from workbench.render.age_pictures import (
     render_compare,
     render_growth_map,
 )
-from workbench.services.age import AgeResult, age_head
+from workbench.services.age.change import AgeResult, age_head
 
 SIZE = (180, 210)
 #: rows at the top of a panel that hold its label text

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh, concatenate
 from workbench.render.reconstruction import VIEWS, render_reconstruction
-from workbench.services.dowels import DepthSettings, plan_dowels
+from workbench.services.tissue.dowels import DepthSettings, plan_dowels
 
 pytestmark = pytest.mark.render
 SIZE = (200, 240)

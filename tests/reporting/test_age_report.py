@@ -26,7 +26,7 @@ from workbench.reporting.age_report import (
     write_age_report,
     z_out_of_range,
 )
-from workbench.services.age import AgeResult, MeasurementRow, age_head
+from workbench.services.age.change import AgeResult, MeasurementRow, age_head
 
 
 def row(z_before: float, z_after: float, constraint: str = "norms") -> MeasurementRow:

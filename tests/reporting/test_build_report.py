@@ -1,7 +1,7 @@
 """The report's "Three builds" and "Uncertainty band" sections (``report["builds"]``).
 
 A small report dict in the schema's layout with the ``builds`` entry of
-:meth:`workbench.services.build_faces.BuildFaces.summary` (as
+:meth:`workbench.services.reconstruction.build_faces.BuildFaces.summary` (as
 ``build_report`` writes it) and stand-in PNGs of the pictures'
 proportions (no rendering here).  The PDF is read back with pypdf.
 """

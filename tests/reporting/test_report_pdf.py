@@ -2,7 +2,7 @@
 
 Real data: the built-in reference head stands in for a reconstruction: its
 cranium, mandible and teeth are the skull, its skull landmarks with 2023
-T-Table dowels (:func:`workbench.services.dowels.plan_dowels`) the landmarks,
+T-Table dowels (:func:`workbench.services.tissue.dowels.plan_dowels`) the landmarks,
 its skin the face.  The skin moved 2 mm outward is the "truth" of the
 validation section.  The PDF is read back with pypdf.
 """
@@ -34,8 +34,9 @@ from workbench.reporting.report import (
     write_report_json,
     write_report_pdf,
 )
-from workbench.services.compare import compare_surfaces, face_regions
-from workbench.services.dowels import DepthSettings, plan_dowels
+from workbench.services.validation.compare import compare_surfaces
+from workbench.services.templates.regions import face_regions
+from workbench.services.tissue.dowels import DepthSettings, plan_dowels
 
 
 CASE_ID = "2024-Hx-0117"

@@ -8,8 +8,8 @@ import pytest
 from workbench.core.errors import InputError
 from workbench.core.head_measure import head_circumference_mm
 from workbench.core.mesh import Mesh
-from workbench.services.age import age_head, hc_scale, measure_circumference
-from workbench.services.template_cache import reference_head
+from workbench.services.age.change import age_head, hc_scale, measure_circumference
+from workbench.services.templates.cache import reference_head
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ def test_a_head_stored_mirrored_in_a_file_frame_ages_like_the_head(male, to_thre
     """A reconstruction of a mirrored skull file is stored mirrored with reversed winding."""
     from dataclasses import replace
 
-    from workbench.services.skull_registration import head_transformed
+    from workbench.services.registration.skull_registration import head_transformed
 
     c, s = np.cos(0.4), np.sin(0.4)
     m = np.array([[-1.0, 0, 0, 90], [0, c, -s, 40], [0, s, c, -25], [0, 0, 0, 1]])
@@ -138,7 +138,7 @@ def test_a_head_stored_mirrored_in_a_file_frame_ages_like_the_head(male, to_thre
 
 
 def test_unfold_relaxes_a_turned_triangle_only() -> None:
-    from workbench.services.age import unfold
+    from workbench.services.age.change import unfold
 
     # a flat 5 x 5 grid, one inner vertex pushed across its neighbours
     xs, ys = np.meshgrid(np.arange(5.0), np.arange(5.0))

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import InputError
-from workbench.services.animation import ACTION_UNITS, EXPRESSIONS, Animator, mix
+from workbench.services.animation.animator import ACTION_UNITS, EXPRESSIONS, Animator, mix
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +160,7 @@ def test_gaze_turns_the_eyes(anim: Animator, head_male) -> None:
 
 def test_a_head_in_another_frame_animates_the_same(smiled, anim: Animator, head_male) -> None:
     """A reconstruction's head/ pack is in the skull file's frame: the pose must not depend on it."""
-    from workbench.services.jaw import axis_rotation
+    from workbench.services.registration.jaw import axis_rotation
 
     m = axis_rotation(np.array([5.0, -20.0, 30.0]), np.array([0.3, 1.0, 0.2]), np.radians(25.0))
     m[:3, 3] += [40.0, -15.0, 120.0]
@@ -206,7 +206,7 @@ def test_a_head_stored_mirrored_animates_like_the_head(head_male, smiled) -> Non
 
     from workbench.core.frame import apply_transform
     from workbench.core.mesh import Mesh
-    from workbench.services.skull_registration import head_transformed
+    from workbench.services.registration.skull_registration import head_transformed
 
     c, s = np.cos(0.5), np.sin(0.5)
     m = np.array([[-1.0, 0, 0, 70], [0, c, -s, 10], [0, s, c, -40], [0, 0, 0, 1]])

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from workbench.core.errors import InputError
-from workbench.services.animation import EXPRESSIONS, Animator, mix
-from workbench.services.animation_track import (
+from workbench.services.animation.animator import EXPRESSIONS, Animator, mix
+from workbench.services.animation.track import (
     TAIL_S,
     evaluate_track,
     glb_clip,

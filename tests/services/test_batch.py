@@ -11,14 +11,14 @@ import pytest
 from workbench.cli.batch_cmd import commands
 from workbench.cli.main import main
 from workbench.core.errors import InputError
-from workbench.services.batch import (
+from workbench.services.batch.run import (
     MARKER,
     error_line,
     file_digest,
     read_marker,
     run_batch,
 )
-from workbench.services.batch_manifest import read_batch_manifest
+from workbench.services.batch.manifest import read_batch_manifest
 
 
 @pytest.fixture(scope="module")
@@ -233,7 +233,7 @@ def test_age_rows_give_growth_figures_and_curves(tmp_path, parsers, head_male):
 
     from workbench.cli import age_cmd
     from workbench.reporting.batch_report import write_summary
-    from workbench.services.batch import summary_record
+    from workbench.services.batch.run import summary_record
 
     if "age" in parsers:
         entry, age = main, {"age": parsers["age"]}
@@ -267,7 +267,7 @@ def test_a_row_whose_registration_asks_for_a_check_is_done_but_flagged(
     lists it apart from failures and the batch command exits 3 (issue 28)."""
     import workbench.cli.reconstruct_cmd as cmd
     from workbench.reporting.batch_report import counts, markdown
-    from workbench.services.batch import summary_record
+    from workbench.services.batch.run import summary_record
 
     reason = "only 62 % of the reference's facial skeleton lies on bone"
     ran: list[Path] = []

@@ -13,7 +13,7 @@ from workbench.core.errors import InputError
 from workbench.io.build_model import BUILD_FACES, load_build_model, parse_bmi_build
 from workbench.io.tables import load_depth_table
 from workbench.model.reconstruction_setup import SetupError, parse_build
-from workbench.services.dowels import DepthSettings, build_score, plan_dowels
+from workbench.services.tissue.dowels import DepthSettings, build_score, plan_dowels
 
 ORIENT = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))  # the generated skull: face +z, up +y
 
@@ -99,7 +99,7 @@ def test_build_scores_of_a_table_with_sds_and_of_one_without() -> None:
 
 
 def test_a_heavy_build_thickens_the_cheeks_far_more_than_the_forehead(head_male) -> None:
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.templates.reference_parts import skull_surface
 
     skull = skull_surface(head_male)
     lms = head_male.skull_landmarks
@@ -129,8 +129,8 @@ def test_a_heavy_build_thickens_the_cheeks_far_more_than_the_forehead(head_male)
 @pytest.fixture(scope="module")
 def job(tmp_path_factory: pytest.TempPathFactory, head_female):
     from workbench.io.meshes import write_mesh
-    from workbench.services.reconstruction_job import JobSettings, run_reconstruction
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.reconstruction.job import JobSettings, run_reconstruction
+    from workbench.services.templates.reference_parts import skull_surface
 
     path = write_mesh(tmp_path_factory.mktemp("builds") / "skull.ply", skull_surface(head_female))
     return run_reconstruction(path, JobSettings(sex="male", orientation=ORIENT))
@@ -149,7 +149,7 @@ def test_three_faces_move_along_the_normals_by_build_and_stay_off_the_bone(job) 
     assert np.median(heavy[face]) > 2.0 and np.median(slender[face]) < -1.0
     assert (heavy >= -1e-9).all() and (slender <= 1e-9).all()
     # the cheeks gain more than the forehead (the model's regional pattern reaches the skin)
-    from workbench.services.compare import face_regions
+    from workbench.services.templates.regions import face_regions
 
     regions = face_regions(job.template)
     cheeks, forehead = np.asarray(regions["cheeks"]), np.asarray(regions["forehead"])
@@ -169,7 +169,7 @@ def test_three_faces_move_along_the_normals_by_build_and_stay_off_the_bone(job) 
 
 @pytest.mark.slow
 def test_the_band_spans_the_builds_and_its_coverage_is_measured(job) -> None:
-    from workbench.services.build_faces import BAND_Z, MODEL_SD_MM, band_coverage
+    from workbench.services.reconstruction.build_faces import BAND_Z, MODEL_SD_MM, band_coverage
 
     b = job.fit.builds
     lower, upper = b.band()
@@ -191,7 +191,7 @@ def test_the_band_spans_the_builds_and_its_coverage_is_measured(job) -> None:
 
 def test_band_coverage_counts_points_between_the_edges_along_the_outward_side() -> None:
     from workbench.core.mesh import Mesh
-    from workbench.services.build_faces import band_coverage
+    from workbench.services.reconstruction.build_faces import band_coverage
 
     g = np.linspace(-50, 50, 21)
     x, y = np.meshgrid(g, g)
@@ -222,7 +222,7 @@ def test_the_job_writes_the_faces_the_band_and_the_morph_targets(job, tmp_path: 
     import pygltflib
 
     from workbench.io.meshes import read_mesh
-    from workbench.services.reconstruction_job import write_outputs
+    from workbench.services.reconstruction.job import write_outputs
 
     files = write_outputs(job, tmp_path / "out")
     out = tmp_path / "out"
@@ -245,10 +245,10 @@ def test_the_job_writes_the_faces_the_band_and_the_morph_targets(job, tmp_path: 
 
 
 def test_a_build_the_table_cannot_vary_gives_one_face_with_a_note(head_male) -> None:
-    from workbench.services.build_faces import build_faces
-    from workbench.services.reconstruct import Reconstruction
+    from workbench.services.reconstruction.build_faces import build_faces
+    from workbench.services.reconstruction.reconstruct import Reconstruction
 
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.templates.reference_parts import skull_surface
 
     plan = plan_dowels(
         skull_surface(head_male), head_male.skull_landmarks, DepthSettings(build=2.0)

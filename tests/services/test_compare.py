@@ -15,13 +15,12 @@ import pytest
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
-from workbench.services.compare import (
+from workbench.services.validation.compare import (
     FIGURE_KEYS,
-    REGION_NAMES,
     compare_surfaces,
-    face_regions,
     template_orientation,
 )
+from workbench.services.templates.regions import REGION_NAMES, face_regions
 
 
 @pytest.fixture(scope="module")

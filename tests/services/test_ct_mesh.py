@@ -9,7 +9,7 @@ import pytest
 
 from workbench.core.mesh import Mesh, validate
 from workbench.io.volumes import read_volume
-from workbench.services.ct_mesh import CTMeshResult, mesh_from_ct
+from workbench.services.ct.ct_mesh import CTMeshResult, mesh_from_ct
 
 # PROVENANCE.md (pyvista/VTK, largest component).  VTK's NRRD reader flips the
 # row (y) axis; we follow the NRRD spec (row 0 first), so y_ours = 201.6 - y_vtk.

@@ -12,8 +12,8 @@ from workbench.core.cancel import Cancelled, CancelToken, checking
 from workbench.core.errors import WorkbenchError
 from workbench.core.volume import Volume
 from workbench.io.volumes import read_volume
-from workbench.services.ct_mesh import mesh_from_ct
-from workbench.services.ct_preview import CtPreview, block_mean, preview_strides
+from workbench.services.ct.ct_mesh import mesh_from_ct
+from workbench.services.ct.ct_preview import CtPreview, block_mean, preview_strides
 
 
 @pytest.fixture(scope="module")

@@ -13,8 +13,8 @@ from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.spatial import MeshIndex
 from workbench.io.tables import load_depth_table
-from workbench.services.dowel_sites import SITE_PATTERN, interpolated_sites
-from workbench.services.dowels import (
+from workbench.services.tissue.dowel_sites import SITE_PATTERN, interpolated_sites
+from workbench.services.tissue.dowels import (
     KAEHLER_CHEEK_EXCLUSIONS,
     MIN_SAMPLE_DEPTH_MM,
     DepthSettings,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.services.test_guide_defaults import _skull
-from workbench.services.feature_validation import (
+from workbench.services.validation.features import (
     feature_errors,
     read_truth_landmarks,
     rule_landmarks,
@@ -82,7 +82,7 @@ def test_truth_landmark_files_read_with_what_is_not_in_view(case):
 def test_headsq_truth_landmarks_lie_on_the_skin_validate_scores(headsq_nhdr):
     """The frame check: the skin validate extracts at iso 500 holds the placed points."""
     from workbench.core.spatial import MeshIndex
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     skin = mesh_from_ct(headsq_nhdr, tissue="skin", iso=500).mesh
     truth = read_truth_landmarks(TRUTH / "headsq.mrk.json")
@@ -93,7 +93,7 @@ def test_headsq_truth_landmarks_lie_on_the_skin_validate_scores(headsq_nhdr):
 
 def test_the_validation_manifest_takes_truth_landmarks(tmp_path, headsq_nhdr):
     from workbench.core.errors import InputError
-    from workbench.services.validation import read_manifest
+    from workbench.services.validation.run import read_manifest
 
     ct = str(headsq_nhdr)
     head = "id,skull,truth,truth_landmarks\n"

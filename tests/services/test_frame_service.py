@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from workbench.core.errors import LandmarkError
 from workbench.core.landmarks import LandmarkSet
-from workbench.services.frame import head_frame_from_landmarks
+from workbench.services.landmarks.frame import head_frame_from_landmarks
 
 # an adult skull's landmarks in the head frame (mm), roughly after Howells' means
 CANONICAL = {

@@ -8,7 +8,7 @@ The mouth-width offset is large because the fitted template dentition is
 narrow (upper canine lateral aspect at |x| ≈ 12.5 mm, adults ≈ 19 mm) and the
 canine–premolar rule under-estimates mouth width anyway (Stephan 2003: by
 about 13 mm, SD 3); the nose-tip height is the known weak point of Krogman's
-rule (see :func:`workbench.services.guides.classic_guides`).
+rule (see :func:`workbench.services.guides.classic.classic_guides`).
 """
 
 from __future__ import annotations
@@ -23,15 +23,15 @@ from scipy.sparse.csgraph import connected_components
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.services.guide_measure import (
+from workbench.services.guides.measure import (
     guides_dir,
     measure_skull,
     parse_number,
     read_table_csv,
     section_loops,
 )
-from workbench.services.guide_rules import load_rules, published_predictions
-from workbench.services.guides import (
+from workbench.services.guides.rules import load_rules, published_predictions
+from workbench.services.guides.classic import (
     Guide,
     apply_guides,
     check_guides,

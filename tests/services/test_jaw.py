@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from workbench.core.spatial import MeshIndex
-from workbench.services.jaw import axis_rotation, open_jaw
+from workbench.services.registration.jaw import axis_rotation, open_jaw
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ import pytest
 
 from workbench.core.errors import LandmarkError
 from workbench.core.spatial import MeshIndex
-from workbench.services.case_setup import start_case_from_skull
-from workbench.services.landmark_placement import SurfacePlacement
+from workbench.services.case.case_setup import start_case_from_skull
+from workbench.services.landmarks.placement import SurfacePlacement
 
 
 @pytest.fixture()

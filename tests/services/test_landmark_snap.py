@@ -19,8 +19,8 @@ from workbench.core.spatial import MeshIndex
 from workbench.io.snap_rules import load_snap_rules
 from workbench.model.case import Case
 from workbench.model.specimen import Specimen
-from workbench.services.landmark_placement import SurfacePlacement
-from workbench.services.landmark_snap import snap_frame, snap_index, snap_landmark
+from workbench.services.landmarks.placement import SurfacePlacement
+from workbench.services.landmarks.snap import snap_frame, snap_index, snap_landmark
 
 
 @pytest.fixture(scope="module")
@@ -224,8 +224,8 @@ def test_the_index_cache_lets_a_mesh_go(skull):
 
 def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):
     from workbench.core.landmarks import LandmarkSet
-    from workbench.services.landmark_snap import snap_suggested
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.landmarks.snap import snap_suggested
+    from workbench.services.templates.reference_parts import skull_surface
 
     skull = skull_surface(head_female)
     lms = head_female.skull_landmarks
@@ -252,7 +252,7 @@ def test_suggested_landmarks_are_snapped_placed_ones_stay(head_female):
 def test_a_suggested_midline_landmark_without_a_rule_goes_onto_the_midline(skull):
     """The dense registration may leave nasion beside the midline: snap_suggested puts a
     suggested one on the midsagittal plane (a placed one is the user's and stays)."""
-    from workbench.services.landmark_snap import snap_suggested
+    from workbench.services.landmarks.snap import snap_suggested
 
     mesh, lms, to_head, index = skull
     off = index.closest_points(
@@ -274,7 +274,7 @@ def test_without_porions_the_registration_frame_is_used(skull):
     """The registration marks a porion absent where it saw too little bone; the suggested
     landmarks are then snapped in the registration's own head frame, not left where the
     dense fit put them."""
-    from workbench.services.landmark_snap import snap_suggested
+    from workbench.services.landmarks.snap import snap_suggested
 
     mesh, lms, to_head, index = skull
     feature = snap_landmark(mesh, lms, "g").position

@@ -7,9 +7,9 @@ import pytest
 
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
-from workbench.services.frame import head_frame_from_landmarks
-from workbench.services.landmark_transfer import transfer_landmarks
-from workbench.services.reference_parts import skull_surface
+from workbench.services.landmarks.frame import head_frame_from_landmarks
+from workbench.services.landmarks.transfer import transfer_landmarks
+from workbench.services.templates.reference_parts import skull_surface
 
 
 def _rotation(deg: float, axis: np.ndarray) -> np.ndarray:
@@ -122,7 +122,7 @@ def test_normals_at_landmarks_do_not_depend_on_the_order_of_the_triangles(skull)
     """A landmark on a vertex (every reference landmark that was snapped) or an edge has
     several faces at the same distance; which one the tree returns depends on the order
     of the triangles.  The normal used is the closest feature's, the same either way."""
-    from workbench.services.landmark_transfer import _normals_at
+    from workbench.services.landmarks.transfer import _normals_at
 
     order = np.random.default_rng(3).permutation(skull.n_faces)
     shuffled = Mesh(skull.vertices, skull.faces[order])

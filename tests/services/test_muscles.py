@@ -10,7 +10,7 @@ from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
 from workbench.model.muscles import MuscleGrid, SurfacePoints
-from workbench.services.muscles import GRID_DEPTH_MM, layout_muscles, read_table71
+from workbench.services.templates.muscles import GRID_DEPTH_MM, layout_muscles, read_table71
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
 

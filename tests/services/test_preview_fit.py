@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from workbench.core.tps import fit_warp
-from workbench.services.guides import Guide
-from workbench.services.preview_fit import PreviewFit
-from workbench.services.reconstruct import SMOOTHING, reconstruct
-from workbench.services.reference_parts import skull_surface
+from workbench.services.guides.classic import Guide
+from workbench.services.reconstruction.preview_fit import PreviewFit
+from workbench.services.reconstruction.reconstruct import SMOOTHING, reconstruct
+from workbench.services.templates.reference_parts import skull_surface
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_moving_a_landmark_moves_its_dowel_tip_and_the_face_near_it(fitted, head
     # around it let go
     targets = recon.targets.copy()
     targets[row] += recon.input_to_head[:3, :3] @ [0.0, 4.0, 0.0]
-    from workbench.services.reconstruct import ANCHOR_CLEARANCE_MM
+    from workbench.services.reconstruction.reconstruct import ANCHOR_CLEARANCE_MM
 
     anchor = np.array([lab == "anchor" for lab in recon.labels])
     keep = ~(anchor & (np.linalg.norm(recon.sources - skin_g, axis=1) < ANCHOR_CLEARANCE_MM))

@@ -11,16 +11,17 @@ import numpy as np
 import pytest
 
 from workbench.core.mesh import Mesh, concatenate
-from workbench.services.compare import compare_surfaces, face_regions
+from workbench.services.validation.compare import compare_surfaces
+from workbench.services.templates.regions import face_regions
 from workbench.core.landmarks import LandmarkSet
-from workbench.services.reconstruct import (
+from workbench.services.reconstruction.reconstruct import (
     FitSettings,
     ensemble_spread,
     eye_moves,
     reconstruct,
 )
-from workbench.services.reference_parts import skull_surface
-from workbench.services.tissue_model import TissueSettings
+from workbench.services.templates.reference_parts import skull_surface
+from workbench.services.tissue.tissue_model import TissueSettings
 
 #: the generated heads place their eyes by Stephan 2002's tangent rule (corneal apex 8.4 mm in
 #: front of ectoconchion); the fit's default, Stephan et al. 2009 (16 mm), moves eyes and lids

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from workbench.services.reconstruct import (
+from workbench.services.reconstruction.reconstruct import (
     ANCHOR_CLEARANCE_MM,
     ANCHOR_SPACING_MM,
     ANCHOR_TAPER_MM,

@@ -22,8 +22,8 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import DowelSettings, Orientation
 from workbench.model.specimen import Specimen
-from workbench.services.reconstruction_service import FitInputs, depth_settings, tissue_settings
-from workbench.services.tissue_model import TissueSettings
+from workbench.services.reconstruction.service import FitInputs, depth_settings, tissue_settings
+from workbench.services.tissue.tissue_model import TissueSettings
 
 ORIENT = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))  # the generated skull: face +z, up +y
 
@@ -131,7 +131,7 @@ def test_settings_conversions() -> None:
 @pytest.fixture(scope="module")
 def skull_file(tmp_path_factory: pytest.TempPathFactory, head_female) -> Path:
     from workbench.io.meshes import write_mesh
-    from workbench.services.reference_parts import skull_surface
+    from workbench.services.templates.reference_parts import skull_surface
 
     return write_mesh(
         tmp_path_factory.mktemp("one-pipeline") / "skull.ply", skull_surface(head_female)
@@ -143,8 +143,8 @@ def test_the_cli_job_and_the_window_job_give_the_same_face(
     skull_file: Path, tmp_path: Path, head_male
 ) -> None:
     from workbench.qt import jobs
-    from workbench.services.case_setup import start_case_from_skull
-    from workbench.services.reconstruction_job import JobSettings, run_reconstruction
+    from workbench.services.case.case_setup import start_case_from_skull
+    from workbench.services.reconstruction.job import JobSettings, run_reconstruction
 
     settings = JobSettings(
         sex="male",
@@ -204,7 +204,7 @@ def _big_sphere() -> Mesh:
 
 def test_a_prefetched_working_skull_is_the_one_decimated_in_place(monkeypatch) -> None:
     from workbench.core import helper_process
-    from workbench.services import reconstruction_service as rs
+    from workbench.services.reconstruction import service as rs
 
     big = _big_sphere()
     assert big.n_faces > rs.MAX_WORKING_TRIANGLES

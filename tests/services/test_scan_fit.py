@@ -1,4 +1,4 @@
-"""``workbench.services.scan_fit``: the reference head fitted to a damaged scan (mm)."""
+"""``workbench.services.scan_fit.fit``: the reference head fitted to a damaged scan (mm)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from tests.services._scans import damaged_skin
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, concatenate
-from workbench.services.scan_fit import check_scan_mesh, fit_scan
+from workbench.services.scan_fit.fit import check_scan_mesh, fit_scan
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +102,7 @@ def test_inner_parts_sit_at_the_table_depths(female_fit, head_male):
 
 
 def test_fitted_head_is_in_the_frankfort_frame(female_fit):
-    from workbench.services.frame import head_frame_from_landmarks
+    from workbench.services.landmarks.frame import head_frame_from_landmarks
 
     frame = head_frame_from_landmarks(female_fit[0].head.skull_landmarks)
     assert np.allclose(frame.input_to_head, np.eye(4), atol=1e-6)
@@ -188,7 +188,7 @@ def test_thin_sheets_over_the_skin_are_told():
     SHEET_MAX_MM."""
     from tests.services._scans import tube
     from workbench.core.spatial import MeshIndex
-    from workbench.services.scan_fit import SHEET_MAX_MM, _sheets_outside, _sheets_over_scan
+    from workbench.services.scan_fit.fit import SHEET_MAX_MM, _sheets_outside, _sheets_over_scan
 
     ball = _ball(60.0)
 
@@ -254,7 +254,7 @@ def test_the_band_over_the_headsq_chin_is_a_sheet(headsq_surfaces, headsq_orient
     """The headsq CT's skin has a band across the chin with skin beneath it (a holder): it
     is found as a sheet, not fitted, and left out of the figures (166 face vertices); the
     face itself is not taken for one."""
-    import workbench.services.scan_fit as scan_fit
+    import workbench.services.scan_fit.fit as scan_fit
 
     found: list[np.ndarray] = []
 
@@ -293,7 +293,7 @@ def test_scan_colour_is_carried_onto_the_fitted_skin(tmp_path, head_female):
     colours follow the scan's (a ramp along the head's height)."""
     from workbench.io.mesh_formats import ply
     from workbench.io.meshes import read_mesh
-    from workbench.services.scan_fit import fit_scan_pack
+    from workbench.services.scan_fit.fit import fit_scan_pack
 
     scan, _ = damaged_skin(head_female)
     height = head_female.skin.vertices[:, 1]  # same vertex order as the scan
@@ -415,8 +415,8 @@ def test_skull_vs_bone_and_its_uniform_offset_baseline(head_female):
     """A head's own skull as the "true bone" scores 0 mm; the face skin moved 6 mm inward
     scores as far as the face's real tissue depths differ from 6 mm; a bone 4 mm forward
     scores between (the surfaces slide past each other where they are not frontal)."""
-    from workbench.services.compare import face_regions
-    from workbench.services.scan_fit import BONE_PARTS, _skull_vs_bone
+    from workbench.services.templates.regions import face_regions
+    from workbench.services.scan_fit.fit import BONE_PARTS, _skull_vs_bone
 
     face = np.zeros(head_female.skin.n_vertices, bool)
     face[np.concatenate(list(face_regions(head_female).values()))] = True

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from workbench.core.errors import InputError
-from workbench.services.skull_check import (
+from workbench.services.registration.skull_check import (
     FACE_CHECK,
     FACE_REFUSE,
     WHAT_TO_GIVE,

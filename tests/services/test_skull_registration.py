@@ -8,8 +8,8 @@ import pytest
 from tests.core._shapes import subdivided_octahedron
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.spatial import MeshIndex
-from workbench.services.reference_parts import skull_surface
-from workbench.services.skull_registration import (
+from workbench.services.templates.reference_parts import skull_surface
+from workbench.services.registration.skull_registration import (
     carry_head,
     mirror_from_landmarks,
     register_skull,
@@ -134,7 +134,7 @@ def test_a_wrong_bone_only_pose_is_doubted_and_a_runner_up_that_passes_is_taken(
     skeleton off the bone is registered again from the search's runner-up, which passes the
     self-check and is used; the user is told."""
     import workbench.core.skull_pose as sp
-    import workbench.services.skull_registration as sr
+    import workbench.services.registration.skull_registration as sr
 
     skull = skull_surface(head_female)
     wrong = _turned_about_vertical(skull.vertices.mean(axis=0))
@@ -155,8 +155,8 @@ def test_a_wrong_bone_only_pose_with_no_better_runner_up_is_refused(
     """No face with a wrong orientation leaves as a result: the registration raises, naming
     what to give."""
     import workbench.core.skull_pose as sp
-    import workbench.services.skull_registration as sr
-    from workbench.services.skull_check import OrientationRefused
+    import workbench.services.registration.skull_registration as sr
+    from workbench.services.registration.skull_check import OrientationRefused
 
     skull = skull_surface(head_female)
     wrong = _turned_about_vertical(skull.vertices.mean(axis=0))
@@ -177,8 +177,8 @@ def test_an_open_jaw_is_articulated_into_occlusion(head_female, head_male):
     """The female skull with her jaw opened 20° (a CT with the mouth open): articulated,
     the jaw's bone lies back where her closed jaw is, the registered mandible and its
     landmarks with it, and the opening found in the scan is reported."""
-    from workbench.services.jaw import axis_rotation
-    from workbench.services.skull_registration import articulate
+    from workbench.services.registration.jaw import axis_rotation
+    from workbench.services.registration.skull_registration import articulate
 
     jaw = concatenate([head_female.meshes["mandible"], head_female.meshes["lower_teeth"]])
     cranium = concatenate([head_female.meshes["cranium"], head_female.meshes["upper_teeth"]])

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from workbench.core.errors import InputError
-from workbench.services.speech import (
+from workbench.services.animation.speech import (
     JAW,
     SILENCE,
     Segment,
@@ -54,7 +54,7 @@ def test_table_reads_every_arpabet_and_timit_label() -> None:
     assert tab.canonical("ax-h") == "AH" and tab.canonical("AH0") == "AH"
     assert tab.canonical("OW1") == "OW" and tab.canonical("xx") is None
     # columns are the project's muscle codes, their protrusions and the jaw
-    from workbench.services.muscles import read_table71
+    from workbench.services.templates.muscles import read_table71
 
     codes = {r["code"] for r in read_table71()}
     for col in tab.columns:
@@ -182,8 +182,8 @@ def lips(head_male):
 
 
 def _lip_gaps(head, lips, labels: str, dur: float = 0.08):
-    from workbench.services.animation import Animator
-    from workbench.services.animation_track import parse_track, run_track
+    from workbench.services.animation.animator import Animator
+    from workbench.services.animation.track import parse_track, run_track
 
     t0 = 0.2
     ph = [

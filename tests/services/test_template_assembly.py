@@ -7,7 +7,7 @@ import pytest
 
 from workbench.io.tables import load_depth_table
 from workbench.model.template import PARTS
-from workbench.services.template import build_reference_head
+from workbench.services.templates.template import build_reference_head
 
 
 @pytest.fixture(scope="module", params=["female", "male"])

@@ -18,9 +18,9 @@ from workbench.core.spatial import MeshIndex
 from workbench.io.meshes import write_mesh
 from workbench.io.template_pack import load_template_pack
 from workbench.model.template import PARTS
-from workbench.services.landmark_transfer import rim_faces
-from workbench.services.reference_parts import skull_surface
-from workbench.services.template_build import MIN_TISSUE_MM, build_template_pack
+from workbench.services.landmarks.transfer import rim_faces
+from workbench.services.templates.reference_parts import skull_surface
+from workbench.services.templates.build import MIN_TISSUE_MM, build_template_pack
 
 
 @pytest.fixture(scope="module")
@@ -158,7 +158,7 @@ def test_push_out_reaches_the_minimum_tissue_in_a_concave_dimple():
     others lie on the person's CT skin)."""
     from tests.core._shapes import subdivided_octahedron
     from workbench.core.normals import vertex_normals
-    from workbench.services.template_build import _push_out
+    from workbench.services.templates.build import _push_out
 
     sphere = subdivided_octahedron(4)
     v = 50.0 * sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)

@@ -13,8 +13,8 @@ import threading
 import numpy as np
 
 from workbench.core import helper_process
-from workbench.services import template as template_module
-from workbench.services.template_cache import cached_folder, reference_head
+from workbench.services.templates import template as template_module
+from workbench.services.templates.cache import cached_folder, reference_head
 
 
 def test_a_worker_thread_gets_the_head_built_by_the_helper_process(

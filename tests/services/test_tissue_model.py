@@ -6,7 +6,7 @@ from workbench.core.errors import InputError
 
 
 def test_eye_placement_follows_the_tissue_model_unless_given():
-    from workbench.services.tissue_model import TissueSettings
+    from workbench.services.tissue.tissue_model import TissueSettings
 
     assert TissueSettings().eye_rule == "stephan2009"
     assert TissueSettings(model="reference").eye_rule == "reference"
@@ -18,9 +18,9 @@ def test_eye_placement_follows_the_tissue_model_unless_given():
 
 def test_the_temples_are_calibrated_and_the_other_interpolated_sites_only_on_request(head_male):
     """No table landmark lies over the temporal fossa: the zygion-vertex sites calibrate it."""
-    from workbench.services.dowel_sites import CALIBRATED_SITES, SITE_PATTERN
-    from workbench.services.dowels import DepthSettings
-    from workbench.services.tissue_model import TissueSettings, tissue_field
+    from workbench.services.tissue.dowel_sites import CALIBRATED_SITES, SITE_PATTERN
+    from workbench.services.tissue.dowels import DepthSettings
+    from workbench.services.tissue.tissue_model import TissueSettings, tissue_field
 
     assert CALIBRATED_SITES == {
         r.code for r in SITE_PATTERN if "zy_l" in r.parents or "zy_r" in r.parents

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from workbench.core.errors import InputError
-from workbench.services.animation_track import Key, load_track, parse_track
-from workbench.services.track_edit import (
+from workbench.services.animation.track import Key, load_track, parse_track
+from workbench.services.animation.track_edit import (
     new_track,
     save_track,
     track_to_json,

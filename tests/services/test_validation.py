@@ -11,7 +11,7 @@ import pytest
 from workbench.cli.main import main
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.services.validation import consensus_face, read_manifest
+from workbench.services.validation.run import consensus_face, read_manifest
 
 HEADER = "id,skull,truth,units,mask,anterior,superior,left,sex,build,bone_iso,skin_iso\n"
 

@@ -6,7 +6,7 @@ pack(s) (``head/``, or ``head_<age>y/`` per age with ``--ages``),
 ``report.json`` and ``report.pdf`` (every measurement with its norms, z
 before and after and residual; front and side pictures before and after)
 and ``sequence.glb`` (the ages as morph targets of one mesh).  See
-:mod:`workbench.services.age` for the method; units mm, Frankfort frame.
+:mod:`workbench.services.age.change` for the method; units mm, Frankfort frame.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 from workbench.cli.common import add_force_option, write_json
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
-from workbench.services.age import AgeResult
+from workbench.services.age.change import AgeResult
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -83,7 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from workbench.cli.animate_cmd import load_head
     from workbench.model.evidence import file_sha256
-    from workbench.services.age_job import age_to_folder, check_head_sex, parse_ages
+    from workbench.services.age.job import age_to_folder, check_head_sex, parse_ages
 
     ages = parse_ages(args.ages) if args.ages is not None else (float(args.to_age),)
     allow = bool(getattr(args, "allow_sex_mismatch", False))

@@ -2,7 +2,7 @@
 
 HEAD is a template pack folder, a reconstruction folder (its ``head/`` pack)
 or ``reference:male`` / ``reference:female``.  The skin is simulated to rest
-in the pose (:class:`workbench.services.animation.Animator`) and the last
+in the pose (:class:`workbench.services.animation.animator.Animator`) and the last
 frame's skin is written to ``--out`` (``.ply`` or ``.obj``; mm, in the
 head's own frame, which a PLY header names).
 
@@ -21,7 +21,7 @@ shapes with an empty recipe are written as zero displacement.
 
 ``--track FILE.json`` animates over time (keyframed expressions, muscles,
 jaw, gaze and lids, and a timed phoneme track with Cohen-Massaro
-coarticulation; the format is in :mod:`workbench.services.animation_track`).
+coarticulation; the format is in :mod:`workbench.services.animation.track`).
 The skin is simulated frame by frame (the first frame settled, then the
 Animator's own 1/600 s steps, 20 a frame at 30 fps).  ``--out OUT.ply|.obj``
 writes the last frame; ``--out DIR/frame_####.ply`` (or ``.obj``) writes
@@ -50,8 +50,8 @@ from workbench.core.limits import MAX_CLIP_SECONDS, check_range
 from workbench.model.template import TemplateHead
 
 if TYPE_CHECKING:
-    from workbench.services.animation import Animator
-    from workbench.services.animation_track import Track
+    from workbench.services.animation.animator import Animator
+    from workbench.services.animation.track import Track
 
 OUT_EXTENSIONS = (".ply", ".obj", ".glb")
 ARKIT_BUILTIN = "builtin"  #: ``--arkit`` without a file
@@ -164,7 +164,7 @@ def load_head(spec: str) -> tuple[TemplateHead, str, list[Path]]:
             raise InputError(
                 spec, "unknown reference head", "use reference:male or reference:female"
             )
-        from workbench.services.template_cache import reference_head
+        from workbench.services.templates.cache import reference_head
 
         return reference_head(sex), HEAD_FRAME, []
     root = Path(spec)
@@ -193,7 +193,7 @@ def load_head(spec: str) -> tuple[TemplateHead, str, list[Path]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.services.animation import EXPRESSIONS, Animator
+    from workbench.services.animation.animator import EXPRESSIONS, Animator
 
     _check_clip_seconds(args.clip_seconds)
     if args.list:
@@ -221,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
     targets = _glb_targets(args, muscles) if glb else None
     recipes = None
     if targets is not None and args.arkit is not None:
-        from workbench.services.gltf_animation import arkit_needed, arkit_recipes
+        from workbench.services.animation.gltf import arkit_needed, arkit_recipes
 
         recipes = arkit_recipes(None if args.arkit == ARKIT_BUILTIN else Path(args.arkit))
         targets = list(dict.fromkeys([*targets, *arkit_needed(recipes)]))
@@ -281,7 +281,7 @@ def _check_clip_seconds(seconds: float) -> None:
 
 def _glb_targets(args: argparse.Namespace, muscles: dict[str, float]) -> list[str]:
     """The morph targets of a .glb (checked before the head is loaded)."""
-    from workbench.services.animation import EXPRESSIONS
+    from workbench.services.animation.animator import EXPRESSIONS
 
     if muscles or args.jaw is not None or args.jaw_protrusion:
         raise InputError(
@@ -315,7 +315,7 @@ def _write_glb(
     recipes: dict[str, dict[str, float]] | None = None,
     frame: str = "",
 ) -> int:
-    from workbench.services.gltf_animation import export_head_glb, ramp_keyframes
+    from workbench.services.animation.gltf import export_head_glb, ramp_keyframes
 
     weights = keyframes = None
     if args.expression is not None:
@@ -356,8 +356,8 @@ def _frame_pattern(out: Path) -> tuple[str, int, str] | None:
 
 
 def _run_track(args: argparse.Namespace) -> int:
-    from workbench.services.animation import Animator
-    from workbench.services.animation_track import evaluate_track, load_track, play_track
+    from workbench.services.animation.animator import Animator
+    from workbench.services.animation.track import evaluate_track, load_track, play_track
 
     clash = [
         opt
@@ -423,7 +423,7 @@ def _run_track(args: argparse.Namespace) -> int:
                 _write_skin(folder / name, anim, frame, f"{label} frame {i} t={frames.times[i]:g}s")
         where = f"{frames.n_frames} frames {args.out.parent / (prefix + '0' * digits + rest)} ..."
     seconds = time.perf_counter() - t0
-    from workbench.services.animation_track import steps_per_frame
+    from workbench.services.animation.track import steps_per_frame
 
     print(
         f"wrote {where}; {frames.n_frames} frames at {track.fps:g} fps over "
@@ -469,9 +469,9 @@ def _write_track_glb(
     args: argparse.Namespace, head: TemplateHead, track: Track, inputs: list[Path], frame: str = ""
 ) -> int:
     from workbench.io.outputs import check_output_file
-    from workbench.services.animation import EXPRESSIONS
-    from workbench.services.animation_track import evaluate_track, glb_clip
-    from workbench.services.gltf_animation import export_head_glb
+    from workbench.services.animation.animator import EXPRESSIONS
+    from workbench.services.animation.track import evaluate_track, glb_clip
+    from workbench.services.animation.gltf import export_head_glb
 
     if args.targets is not None:
         names = [n.strip() for n in args.targets.split(",") if n.strip()]

@@ -1,9 +1,9 @@
 """``workbench batch MANIFEST.csv --out DIR``: a study of many jobs, each its own single command.
 
 Each row of the manifest (columns ``id``, ``job``, ``input`` and the job's
-options; see :mod:`workbench.services.batch_manifest`) runs exactly the
+options; see :mod:`workbench.services.batch.manifest`) runs exactly the
 sub-command it names through this CLI's ``main``, in a Dask worker
-(:mod:`workbench.services.batch`), into ``DIR/<id>/``.  Afterwards
+(:mod:`workbench.services.batch.run`), into ``DIR/<id>/``.  Afterwards
 ``DIR/summary.csv``, ``summary.md``, ``plots/`` and ``summary.pdf``
 (:mod:`workbench.reporting.batch_report`); each row's output in
 ``DIR/logs/<id>.log``.  Exit status 0 when every row is ok, 3 when a row
@@ -123,7 +123,7 @@ class _Stream:
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.services.batch import BatchInterrupted, batch_lock
+    from workbench.services.batch.run import BatchInterrupted, batch_lock
 
     err = _Stream(sys.stderr)
     try:
@@ -148,7 +148,7 @@ def _run(args: argparse.Namespace, say: _Stream, notify: _Stream) -> int:
     from workbench.cli.main import main
     from workbench.core.errors import InputError
     from workbench.reporting.batch_report import write_summary
-    from workbench.services.batch import DEFAULT_MEMORY_LIMIT, run_batch, summary_record
+    from workbench.services.batch.run import DEFAULT_MEMORY_LIMIT, run_batch, summary_record
 
     if args.workers is not None and not 0 <= args.workers <= 256:
         raise InputError(f"--workers {args.workers}", "must be 0 .. 256")

@@ -8,7 +8,7 @@ from pathlib import Path
 from workbench.cli.common import add_force_option, add_units_options, output_path, write_json
 from workbench.io.case_file import evidence_bytes, save_case
 from workbench.io.samples import resolve_input
-from workbench.services.case_setup import describe_case, start_case_from_skull
+from workbench.services.case.case_setup import describe_case, start_case_from_skull
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -100,7 +100,7 @@ def load_mesh(
     if scale is None and units == "auto":
         resolve_units(result.units, "auto", source=str(path))
     if check_skull:
-        from workbench.services.input_checks import check_skull_mesh
+        from workbench.services.case.input_checks import check_skull_mesh
 
         check_skull_mesh(result.mesh, path, units_note=result.units.confirmed)
     return result
@@ -169,7 +169,7 @@ def progress_printer(enabled: bool = True):
 def self_check_status(command: str, check: Mapping[str, Any] | None) -> int:
     """``EXIT_CHECK`` (with one line on stderr saying why) when the registration's
     self-check asks for a check, else 0."""
-    from workbench.services.skull_check import EXIT_CHECK
+    from workbench.services.registration.skull_check import EXIT_CHECK
 
     if not (check and check.get("outcome") == "check"):
         return 0

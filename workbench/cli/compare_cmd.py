@@ -16,7 +16,7 @@ import numpy as np
 from workbench.cli.common import add_force_option, add_units_options, load_mesh, write_json
 from workbench.core.errors import InputError
 from workbench.core.units import UNIT_SCALES
-from workbench.services.compare import REGION_NAMES
+from workbench.services.templates.regions import REGION_NAMES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -115,7 +115,8 @@ def _template_skin(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.services.compare import compare_surfaces, skin_face_regions, template_orientation
+    from workbench.services.validation.compare import compare_surfaces, template_orientation
+    from workbench.services.templates.regions import skin_face_regions
 
     if not args.clim > 0:
         raise InputError("--clim", f"must be positive, got {args.clim}")

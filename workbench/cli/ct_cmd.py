@@ -16,7 +16,7 @@ from workbench.cli.common import add_force_option, output_path, progress_printer
 from workbench.io.mesh_formats import ply
 from workbench.io.meshes import write_mesh
 from workbench.io.samples import credit_comment, resolve_input
-from workbench.services.ct_mesh import mesh_from_ct
+from workbench.services.ct.ct_mesh import mesh_from_ct
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from workbench.core.errors import InputError
     from workbench.io.outputs import check_output_file, same_file
 
-    from workbench.services.ct_mesh import check_extraction_settings
+    from workbench.services.ct.ct_mesh import check_extraction_settings
 
     check_extraction_settings(args.iso, args.target_triangles, args.smooth)
     source = resolve_input(args.volume)

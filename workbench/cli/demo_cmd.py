@@ -29,7 +29,7 @@ from pathlib import Path
 from workbench.cli.common import add_force_option, mesh_summary, progress_printer, write_json
 from workbench.io.meshes import write_mesh
 from workbench.io.samples import fetch, registry
-from workbench.services.ct_mesh import mesh_from_ct
+from workbench.services.ct.ct_mesh import mesh_from_ct
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -144,9 +144,9 @@ def _figures(report: dict, folder: Path) -> dict:
 
 def _builtin(folder: Path, args: argparse.Namespace) -> dict:
     from workbench.cli.reconstruct_cmd import execute
-    from workbench.services.reconstruction_job import JobSettings
-    from workbench.services.reference_parts import skull_surface
-    from workbench.services.template_cache import reference_head
+    from workbench.services.reconstruction.job import JobSettings
+    from workbench.services.templates.reference_parts import skull_surface
+    from workbench.services.templates.cache import reference_head
 
     print("built-in case: the female reference skull, reconstructed with the male head")
     folder.mkdir(parents=True, exist_ok=True)
@@ -164,7 +164,7 @@ def _builtin(folder: Path, args: argparse.Namespace) -> dict:
 def _headsq(folder: Path, args: argparse.Namespace) -> dict | None:
     from workbench.cli.reconstruct_cmd import execute
     from workbench.core.errors import WorkbenchError
-    from workbench.services.reconstruction_job import JobSettings
+    from workbench.services.reconstruction.job import JobSettings
 
     try:
         ct = fetch("headsq")

@@ -1,6 +1,6 @@
 """``workbench fit-scan``: the reference head fitted to a range scan (a template pack).
 
-See :mod:`workbench.services.scan_fit`.  The pack (skin, skull parts,
+See :mod:`workbench.services.scan_fit.fit`.  The pack (skin, skull parts,
 teeth, eyes, tongue, muscles, skin and skull landmarks) is in the fitted
 person's Frankfort head frame, mm; ``fit_report.json`` beside it holds the
 figures of the fit, ``fit_report.pdf`` the same with the scan's distance maps
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from workbench.cli.common import print_self_check, self_check_status
     from workbench.cli.reconstruct_cmd import orientation_of
     from workbench.io.samples import resolve_input
-    from workbench.services.scan_fit import fit_scan_pack, fitted_vs_inferred
+    from workbench.services.scan_fit.fit import fit_scan_pack, fitted_vs_inferred
 
     orientation = orientation_of(args, args.scan)
     result, files = fit_scan_pack(

@@ -160,7 +160,7 @@ def options_from(args: argparse.Namespace):
         raise InputError("--fit-scan", "needs a scan to fit", "give it with --scan FILE")
     tool = args.tool
     if args.expression is not None:
-        from workbench.services.animation import EXPRESSIONS
+        from workbench.services.animation.animator import EXPRESSIONS
 
         if args.expression not in EXPRESSIONS:
             raise InputError(

@@ -186,13 +186,13 @@ def run_convert(args: argparse.Namespace) -> int:
 
 def run_frame(args: argparse.Namespace) -> int:
     from workbench.io.meshes import write_mesh
-    from workbench.services.frame import head_frame_from_landmarks
+    from workbench.services.landmarks.frame import head_frame_from_landmarks
 
     if args.apply and args.out is not None:
         from workbench.io.outputs import check_output_file
 
         check_output_file(args.out, input_paths(args.file, args.apply), args.force)
-    from workbench.services.input_checks import check_landmark_geometry
+    from workbench.services.case.input_checks import check_landmark_geometry
 
     result = _read(args)
     check_landmark_geometry(result.landmarks, args.file)
@@ -227,8 +227,8 @@ def run_frame(args: argparse.Namespace) -> int:
 
 def run_suggest(args: argparse.Namespace) -> int:
     from workbench.cli.reconstruct_cmd import orientation_of
-    from workbench.services.landmark_transfer import transfer_landmarks
-    from workbench.services.template_cache import reference_head
+    from workbench.services.landmarks.transfer import transfer_landmarks
+    from workbench.services.templates.cache import reference_head
 
     from workbench.io.outputs import check_output_file
 
@@ -302,7 +302,10 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
     import numpy as np
 
     from workbench.cli.reconstruct_cmd import orientation_of
-    from workbench.services.skull_registration import mirror_from_landmarks, register_skull
+    from workbench.services.registration.skull_registration import (
+        mirror_from_landmarks,
+        register_skull,
+    )
 
     reg = register_skull(
         read.mesh,
@@ -355,7 +358,7 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
 def run_snap(args: argparse.Namespace) -> int:
     from workbench.commands.stack import CommandStack
     from workbench.io.case_file import load_case, save_case
-    from workbench.services.landmark_placement import SurfacePlacement
+    from workbench.services.landmarks.placement import SurfacePlacement
 
     from workbench.core.errors import InputError
     from workbench.io.outputs import check_output_file, same_file

@@ -251,8 +251,8 @@ def _overrides(items: list[str]) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     from workbench.io.samples import resolve_input
-    from workbench.services.reconstruction_job import JobSettings
-    from workbench.services.tissue_model import TissueSettings
+    from workbench.services.reconstruction.job import JobSettings
+    from workbench.services.tissue.tissue_model import TissueSettings
 
     check_count(
         args.ensemble,
@@ -312,7 +312,7 @@ def execute(
     folder the caller staged (``workbench demo``), written straight into.
     """
     from workbench.io.outputs import check_output_folder, relocate, staged_folder
-    from workbench.services.reconstruction_job import job_inputs, run_reconstruction
+    from workbench.services.reconstruction.job import job_inputs, run_reconstruction
 
     # progress on stderr: stdout opens with the self-check's CHECK lines, then the results
     say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}", file=sys.stderr))
@@ -373,7 +373,7 @@ def execute(
 def _write_all(result, out: Path, truth: Path | None, settings, pictures: bool) -> dict[str, Path]:
     """The job's files, validation figures, pictures and report, all into ``out``."""
     from workbench.reporting.report import write_report_json, write_report_pdf
-    from workbench.services.reconstruction_job import write_outputs
+    from workbench.services.reconstruction.job import write_outputs
 
     files = write_outputs(result, out, staged=True)
     report = result.report
@@ -397,8 +397,8 @@ def _validate(truth_path: Path, scale: float | None, result) -> dict:
     from workbench.core.face_metric import ScoreMask, unit
     from workbench.core.offset_surface import uniform_offset
     from workbench.io.meshes import read_mesh
-    from workbench.services.compare import REGION_NAMES, face_regions
-    from workbench.services.validation import score_surfaces
+    from workbench.services.templates.regions import REGION_NAMES, face_regions
+    from workbench.services.validation.run import score_surfaces
 
     truth = read_mesh(truth_path, units="mm" if scale is None else "auto", scale=scale).mesh
     recon = result.recon
@@ -431,7 +431,7 @@ def _pictures(out: Path, result) -> dict[str, str]:
 
     from workbench.render.reconstruction import render_builds, render_reconstruction
 
-    from workbench.services.reconstruct import articulated_skull
+    from workbench.services.reconstruction.reconstruct import articulated_skull
 
     recon = result.recon
     active = recon.plan.active()

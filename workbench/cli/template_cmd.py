@@ -1,7 +1,7 @@
 """``workbench template export|build`` and ``workbench render template``.
 
 ``template build`` adapts the built-in head to a person's skin and skull
-surfaces (:mod:`workbench.services.template_build`) and writes a template
+surfaces (:mod:`workbench.services.templates.build`) and writes a template
 pack that ``--template PACK`` accepts everywhere; ``export`` and ``render``
 take a pack too.  Units mm, head frame (Frankfort Horizontal).
 """
@@ -109,7 +109,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _head(args: argparse.Namespace):
-    from workbench.services.template_cache import reference_head
+    from workbench.services.templates.cache import reference_head
 
     pack = getattr(args, "template", None)
     print(
@@ -160,7 +160,7 @@ def run_render(args: argparse.Namespace) -> int:
 def run_build(args: argparse.Namespace) -> int:
     from workbench.cli.reconstruct_cmd import orientation_of
     from workbench.io.samples import resolve_input
-    from workbench.services.template_build import build_template_pack
+    from workbench.services.templates.build import build_template_pack
 
     orientation = orientation_of(args, args.skull)
     if orientation is None:

@@ -4,7 +4,7 @@ Writes ``DIR/results.csv``, ``DIR/results.md``, ``DIR/results.pdf`` (with
 signed-distance pictures on the true skin), ``DIR/features.csv`` for cases with
 true landmarks (``truth_landmarks``) and a folder per case with the
 reconstruction (the same files ``workbench reconstruct`` writes) and the
-extracted surfaces.  See :mod:`workbench.services.validation` for the
+extracted surfaces.  See :mod:`workbench.services.validation.run` for the
 manifest columns and the method.
 
 Text from the manifest reaches the tables guarded: every CSV cell through
@@ -64,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from workbench.core.errors import InputError
     from workbench.io.outputs import check_output_folder, staged_folder
-    from workbench.services.validation import read_manifest, reuse_caches, validation_inputs
+    from workbench.services.validation.run import read_manifest, reuse_caches, validation_inputs
 
     cases = read_manifest(args.manifest)
     if args.cases:
@@ -94,8 +94,8 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
         write_csv,
         write_pdf,
     )
-    from workbench.services.compare import REGION_NAMES
-    from workbench.services.validation import run_validation
+    from workbench.services.templates.regions import REGION_NAMES
+    from workbench.services.validation.run import run_validation
 
     from workbench.core.safe_names import child_path
 

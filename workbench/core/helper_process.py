@@ -28,7 +28,7 @@ there, unless the calling thread has opted in with :func:`offload_here`
 (the desktop window's worker threads do); then it goes to the child.
 :func:`call` always goes to the child: the reconstruction job uses it to
 decimate a large skull on the second core while its checks run
-(:func:`workbench.services.reconstruction_service.prefetch_working_skull`).
+(:func:`workbench.services.reconstruction.service.prefetch_working_skull`).
 Other command-line runs and scripts never start a second process.
 """
 

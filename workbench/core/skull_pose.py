@@ -13,7 +13,7 @@ The search is built so that none of these can win against the cranium:
 
 * **the cranium alone orients**: the reference is the cranium with its
   upper teeth; the mandible is posed afterwards on its own
-  (:mod:`workbench.services.skull_registration`), so an open or missing jaw
+  (:mod:`workbench.services.registration.skull_registration`), so an open or missing jaw
   cannot pull the cranium's pitch;
 * **scored both ways**: every pose is judged by how much of the target lies
   on the reference (*forward*: extra anatomy costs a bounded miss) *and* how

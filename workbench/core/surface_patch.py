@@ -1,7 +1,7 @@
 """Local surface patches, plane sections and profile concavities on a triangle mesh.
 
 The geometry behind snapping a landmark to a feature
-(:mod:`workbench.services.landmark_snap`), kept apart as plain numerics:
+(:mod:`workbench.services.landmarks.snap`), kept apart as plain numerics:
 
 * :class:`PatchIndex` finds the *patch* under a point: the vertices within a
   radius that are connected, through mesh edges inside that ball, to the

@@ -7,7 +7,7 @@ validation metric's "within 35 mm of the bone" uses.  Depth tables measure
 along a dowel from a bony landmark, which agrees with it on flat and convex
 bone (forehead, zygoma, chin) and is larger over concavities; callers that
 calibrate against a table do so at the table's sites (see
-:mod:`workbench.services.tissue_model`).
+:mod:`workbench.services.tissue.tissue_model`).
 
 :func:`set_thickness` moves skin vertices along their normals until their
 thickness reaches a target, with the correction smoothed over the skin so

@@ -1,7 +1,7 @@
 """The one reader of the project's CSV tables, and the cell guards of the tables it writes.
 
 :func:`read_csv_rows` reads the tissue-depth tables (:mod:`workbench.io.tables`)
-and the guide constants and rules (:mod:`workbench.services.guide_measure`):
+and the guide constants and rules (:mod:`workbench.services.guides.measure`):
 rows with their line numbers, errors naming the file.  Lines whose first
 non-blank character is ``#`` are comments; a UTF-8 byte-order mark is
 accepted; header names and values are stripped of surrounding blanks.

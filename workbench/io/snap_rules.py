@@ -3,7 +3,7 @@
 ``data_tables/landmarks/snap_rules.csv`` turns the catalogue definitions that
 name an extremum ("most anterior midline point ...", "lowest point ...",
 "deepest midline point of the profile concavity ...") into machine rules for
-:mod:`workbench.services.landmark_snap`.  A rule only restates its landmark's
+:mod:`workbench.services.landmarks.snap`.  A rule only restates its landmark's
 catalogue definition; it cites the same source keys (checked against
 ``catalogue.meta.json``).  Landmarks defined by sutures, midpoints or
 constructions have no row.

@@ -14,7 +14,7 @@ Notes
 -----
 Ages are years (0-100).  ``arc_increase`` is the service's young-child
 increase of the head arcs (a fraction, 0-0.1; see
-:func:`workbench.services.age.age_head`).  The heads the study ages are in
+:func:`workbench.services.age.change.age_head`).  The heads the study ages are in
 their Frankfort frame (x to the subject's left, x = 0 midsagittal, y up,
 z toward the face), in mm; nothing here is a length.  Values are checked
 cheaply here (known source and sex, ages and arc increase in range); the

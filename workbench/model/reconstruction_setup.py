@@ -18,7 +18,7 @@ The values are frozen and compare by value; each has ``to_state()`` /
 They are checked cheaply here (finite positive depths, known builds, sexes,
 tissue models and regions, unit directions); the services check landmark
 codes against the catalogue, table ids against the tables and guides against
-the guide rules (:mod:`workbench.services.reconstruction_service`).
+the guide rules (:mod:`workbench.services.reconstruction.service`).
 
 Notes
 -----
@@ -26,7 +26,7 @@ Depths are millimetres along the dowel.  Orientation vectors are directions
 in the skull file's coordinates (the specimen's input frame), stored with unit
 length.  Guide values are millimetres in the head frame (x to the subject's
 left, y up, z toward the face, Frankfort Horizontal); their JSON layout is
-that of :func:`workbench.services.guides.guides_to_json`.
+that of :func:`workbench.services.guides.classic.guides_to_json`.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ SEXES = ("female", "male")
 #: obese = heavy); ``bmi:X`` a BMI for the build model; a number k means mean + k SD
 BUILDS = ("slender", "normal", "obese", "average", "heavy")
 _BMI = re.compile(r"^bmi\s*[:= ]?\s*([0-9.]+)$")
-#: soft-tissue models (:mod:`workbench.services.tissue_model`, ``MODELS``)
+#: soft-tissue models (:mod:`workbench.services.tissue.tissue_model`, ``MODELS``)
 TISSUE_MODELS = ("table", "reference")
 #: where the mandible is for the face (see DowelSettings.jaw)
 JAW_MODES = ("occlusion", "as-scanned")

@@ -3,7 +3,7 @@
 Units and frame: millimetres in the head frame (x to the subject's left,
 x = 0 midsagittal; y up; z toward the face; Frankfort Horizontal at y = 0).
 
-A template is built by :mod:`workbench.services.template` from the
+A template is built by :mod:`workbench.services.templates.template` from the
 project's own data and code (never downloaded) and identified by
 ``template_id`` plus a content hash over every array, which cases record so a
 reconstruction can name exactly which head it started from.

@@ -1,8 +1,8 @@
 """The "Age progression" tool of the window: a head shown at another age, live under a slider.
 
-The method is the service's (:func:`workbench.services.age.age_head`,
+The method is the service's (:func:`workbench.services.age.change.age_head`,
 ``workbench age``); this tool runs it in the window's worker and shows the
-results.  Export runs :func:`workbench.services.age_job.age_to_folder`, the
+results.  Export runs :func:`workbench.services.age.job.age_to_folder`, the
 function the command line calls, with the same ``extra`` hook for
 ``report.pdf`` (the command line's writer, handed to this module by
 ``workbench gui`` through :func:`set_pdf_hook`: the window's layer may not
@@ -83,7 +83,7 @@ if TYPE_CHECKING:
     from workbench.qt.panels.age_panel import AgePanel
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
-    from workbench.services.age import AgeResult
+    from workbench.services.age.change import AgeResult
 
 #: worker channels: source loading, age steps (one at a time), export
 LOAD_CHANNEL = "age_source"
@@ -247,8 +247,8 @@ def load_source(key: str, head: TemplateHead | None = None) -> SourceHead:
     file's frame; a reference head already is in it), so the source drawn and
     the displacements are in the aged heads' frame.
     """
-    from workbench.services.age import in_frankfort_frame
-    from workbench.services.template_cache import reference_head
+    from workbench.services.age.change import in_frankfort_frame
+    from workbench.services.templates.cache import reference_head
 
     if head is None:
         kind, _, sex = key.partition(":")
@@ -267,7 +267,7 @@ def age_step(
 ) -> AgeStep:
     """Worker: ``head`` aged from ``settings.from_age`` to ``age`` years (the service's result)."""
     from workbench.core.normals import vertex_normals
-    from workbench.services.age import age_head
+    from workbench.services.age.change import age_head
 
     def say(message: str) -> None:
         if report is not None:
@@ -300,11 +300,11 @@ def export_ages(
     report: Callable[[str, float], None] | None = None,
     gui: GuiCall | None = None,
 ) -> tuple[list[AgeResult], list[Path]]:
-    """Worker: :func:`~workbench.services.age_job.age_to_folder` with the tool's inputs.
+    """Worker: :func:`~workbench.services.age.job.age_to_folder` with the tool's inputs.
 
     With ``gui``, ``extra`` (which may draw with VTK) runs on the GUI thread.
     """
-    from workbench.services.age_job import age_to_folder
+    from workbench.services.age.job import age_to_folder
 
     if extra is not None and gui is not None:
         extra = gui.wrap(extra, report, "writing report.pdf (pictures on the GUI thread)")
@@ -802,7 +802,7 @@ class AgeTool(QObject):
         age = self.shown_age
         parts = [f"From {s.from_age:g} y ({s.sex})."]
         if self.source is not None:
-            from workbench.services.age_job import sex_mismatch
+            from workbench.services.age.job import sex_mismatch
 
             # the command line refuses this without --allow-sex-mismatch; the dock, where the
             # sex is chosen on purpose, says it beside the results

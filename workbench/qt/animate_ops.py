@@ -1,6 +1,6 @@
 """The "Animate" tool of the window: a reference head's face moved live in the 3D view.
 
-The physics is the service's (:class:`workbench.services.animation.Animator`,
+The physics is the service's (:class:`workbench.services.animation.animator.Animator`,
 ``workbench animate``); this tool only sets its parameters from the
 :class:`~workbench.qt.panels.animate_panel.AnimatePanel` and shows the
 result.  The head is loaded in the window's worker (the reference head from
@@ -26,8 +26,8 @@ pose of the eyes, as :meth:`Animator.meshes` gives it; the skin does not
 depend on the gaze, so nothing is simulated), the lid slider sets the lid
 nodes' targets and the timer carries the lids there.
 
-Timeline (a track: :mod:`workbench.services.animation_track`).  Frame ``i``
-of a track means exactly what :func:`~workbench.services.animation_track.run_track`
+Timeline (a track: :mod:`workbench.services.animation.track`).  Frame ``i``
+of a track means exactly what :func:`~workbench.services.animation.track.run_track`
 computes: frame 0 is the rest skin settled in frame 0's pose, every later
 frame is frame ``i``'s pose (``apply_frame``) and ``steps_per_frame`` steps
 (20 steps of 1/600 s at 30 fps) from frame ``i - 1``'s simulated state, so
@@ -72,8 +72,8 @@ if TYPE_CHECKING:
     from workbench.qt.panels.animate_panel import AnimatePanel
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
-    from workbench.services.animation import Animator
-    from workbench.services.animation_track import Key, Track, TrackFrames
+    from workbench.services.animation.animator import Animator
+    from workbench.services.animation.track import Key, Track, TrackFrames
 
 #: the worker channel of head loading (a newer load supersedes the older)
 CHANNEL = "animate"
@@ -109,8 +109,8 @@ class AnimateHost(Protocol):
 
 def load_animator(sex: str) -> Animator:
     """The reference head of ``sex`` ready to animate (worker side: no Qt, no VTK)."""
-    from workbench.services.animation import Animator
-    from workbench.services.template_cache import reference_head
+    from workbench.services.animation.animator import Animator
+    from workbench.services.templates.cache import reference_head
 
     return Animator(reference_head(sex))
 
@@ -391,7 +391,7 @@ class AnimateTool(QObject):
     def open_track(self, path: str | Path) -> bool:
         """Load a track file onto the timeline (frame 0 shown); False (and a message in the
         dock) when the file is not a valid track."""
-        from workbench.services.animation_track import load_track
+        from workbench.services.animation.track import load_track
 
         try:
             track = load_track(path)
@@ -420,7 +420,7 @@ class AnimateTool(QObject):
         if anim is None:  # frames need the head's muscle order: evaluated when it is loaded
             self.panel.show_timeline(track.n_frames, 0, track.fps, playing=False)
             return
-        from workbench.services.animation_track import evaluate_track
+        from workbench.services.animation.track import evaluate_track
 
         self.frames = evaluate_track(track, anim.muscle_codes)
         self._stride = max(
@@ -430,7 +430,7 @@ class AnimateTool(QObject):
 
     def _replace_track(self, track: Track) -> None:
         """An edited track: checkpoints before the first frame whose pose changed are kept."""
-        from workbench.services.animation_track import evaluate_track
+        from workbench.services.animation.track import evaluate_track
 
         anim, old = self.animator, self.frames
         self.track = track
@@ -543,7 +543,7 @@ class AnimateTool(QObject):
 
     def set_length(self, seconds: float) -> None:
         """The track's duration (seconds); with no track, a new neutral track of that length."""
-        from workbench.services.track_edit import new_track, with_duration
+        from workbench.services.animation.track_edit import new_track, with_duration
 
         try:
             if self.track is None:
@@ -662,7 +662,7 @@ class AnimateTool(QObject):
 
     def _simulate(self, i: int) -> None:
         """Frame ``i`` from frame ``i - 1``'s state, as ``play_track`` does (0: from rest)."""
-        from workbench.services.animation_track import apply_frame, steps_per_frame
+        from workbench.services.animation.track import apply_frame, steps_per_frame
 
         anim, frames, track = self.animator, self.frames, self.track
         assert anim is not None and frames is not None and track is not None
@@ -677,7 +677,7 @@ class AnimateTool(QObject):
             self._checkpoints[i] = (anim.sim.x.copy(), anim.sim.v.copy())
 
     def _restore(self, i: int) -> None:
-        from workbench.services.animation_track import apply_frame
+        from workbench.services.animation.track import apply_frame
 
         anim, frames = self.animator, self.frames
         assert anim is not None and frames is not None
@@ -696,8 +696,8 @@ class AnimateTool(QObject):
     def current_key(self) -> Key:
         """The animator's pose as a key at the timeline's time (all 24 contractions, jaw,
         gaze, lids; lip protrusion only through the last preset, when it is the preset's)."""
-        from workbench.services.animation import EXPRESSIONS
-        from workbench.services.animation_track import Key
+        from workbench.services.animation.animator import EXPRESSIONS
+        from workbench.services.animation.track import Key
 
         anim = self.animator
         assert anim is not None
@@ -721,7 +721,7 @@ class AnimateTool(QObject):
 
     def record_key(self) -> Key | None:
         """Add the current pose as a key at the timeline's time (a new track if none)."""
-        from workbench.services.track_edit import new_track, with_key
+        from workbench.services.animation.track_edit import new_track, with_key
 
         if self.animator is None:
             return None
@@ -748,7 +748,7 @@ class AnimateTool(QObject):
 
     def save_track_to(self, path: str | Path, *, force: bool = False) -> Path | None:
         """Write the timeline's track as JSON (atomic; never over the file it came from)."""
-        from workbench.services.track_edit import save_track
+        from workbench.services.animation.track_edit import save_track
 
         if self.track is None:
             return None
@@ -925,7 +925,7 @@ def inner_points(anim: Animator, parts: tuple[str, ...]) -> dict[str, np.ndarray
     the stored frame).  ``tests/qt/test_qt_animate.py`` checks it against
     ``meshes()``.
     """
-    from workbench.services.jaw import JAW_PARTS
+    from workbench.services.registration.jaw import JAW_PARTS
 
     m = anim._jaw_matrix
     out: dict[str, np.ndarray] = {}

@@ -71,7 +71,7 @@ from workbench.io.case_file import (
 )
 from workbench.model.case import Case
 from workbench.qt import relay
-from workbench.services.case_setup import OpenedCase
+from workbench.services.case.case_setup import OpenedCase
 
 if TYPE_CHECKING:
     from workbench.qt.hosts import AutosaveHost

@@ -3,7 +3,7 @@
 A non-modal :class:`CtImportDialog` over the main window:
 
 1. reads the volume in the window's worker (channel ``"ct-load"``) into a
-   :class:`~workbench.services.ct_preview.CtPreview` (block-mean preview
+   :class:`~workbench.services.ct.ct_preview.CtPreview` (block-mean preview
    volume, histogram, tissue presets);
 2. shows the preview iso-surface (bone colour; the pieces the extraction
    would drop as grey debris) in its own 3D view, with an iso slider and
@@ -51,7 +51,7 @@ from workbench.core.cancel import CancelToken
 from workbench.qt import jobs
 from workbench.qt.workers import show_fraction
 from workbench.render.snapshots import to_polydata
-from workbench.services.ct_preview import CtPreview, PreviewSurface
+from workbench.services.ct.ct_preview import CtPreview, PreviewSurface
 
 if TYPE_CHECKING:
     from workbench.qt.hosts import CtImportHost
@@ -155,7 +155,7 @@ class CtImportDialog(QDialog):
     path : path
         DICOM folder or NRRD/NHDR, MetaImage, NIfTI file.
     max_voxels : int
-        Size limit of the preview volume (see :mod:`workbench.services.ct_preview`).
+        Size limit of the preview volume (see :mod:`workbench.services.ct.ct_preview`).
 
     Attributes
     ----------

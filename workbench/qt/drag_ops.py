@@ -3,7 +3,7 @@
 A tool the main window composes (:class:`DragTool`).  While the mouse
 moves nothing is written to the case: the view being dragged in draws a
 *preview* — the landmark marker, its dowel, and the face re-solved by
-:class:`workbench.services.preview_fit.PreviewFit` from the last full fit
+:class:`workbench.services.reconstruction.preview_fit.PreviewFit` from the last full fit
 (a few milliseconds) — with a lighter skull and no multisampling
 (:mod:`workbench.qt.lod`).  Mouse moves are coalesced: however fast they
 come, one preview is computed and drawn per event-loop turn, with the newest
@@ -13,7 +13,7 @@ full re-fit in the worker as any other change does.  Esc cancels a drag and
 leaves the case as it was.
 
 Units mm; landmark positions in the input frame, guide values in the head
-frame (see :mod:`workbench.services.guides`).
+frame (see :mod:`workbench.services.guides.classic`).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from PySide6.QtCore import QTimer
 
 from workbench.commands.landmarks import MoveLandmark
 from workbench.core.spatial import MeshIndex
-from workbench.services.guides import Guide
-from workbench.services.preview_fit import PreviewFit
+from workbench.services.guides.classic import Guide
+from workbench.services.reconstruction.preview_fit import PreviewFit
 
 if TYPE_CHECKING:
     from workbench.qt.document import Document

@@ -25,8 +25,8 @@ from workbench.core.errors import UnitsError, WorkbenchError
 from workbench.core.raycast import RayCaster
 from workbench.io.case_file import case_validator, load_case, save_case
 from workbench.qt import autosave, dialogs, jobs
-from workbench.services.case_setup import OpenedCase, start_case_from_skull
-from workbench.services.landmark_snap import snap_index
+from workbench.services.case.case_setup import OpenedCase, start_case_from_skull
+from workbench.services.landmarks.snap import snap_index
 
 if TYPE_CHECKING:
     from workbench.qt.ct_import import CtImportDialog
@@ -95,7 +95,7 @@ def case_from_ct(
     raise :class:`~workbench.core.errors.Cancelled` to stop the job.
     """
     from workbench.io.meshes import write_mesh
-    from workbench.services.ct_mesh import mesh_from_ct
+    from workbench.services.ct.ct_mesh import mesh_from_ct
 
     def report(step: str, fraction: float) -> None:
         if progress is not None:

@@ -10,10 +10,10 @@ point *is* ``(y, z)``:
   horizontal lines (y) in the frontal view, points (y, z) in the lateral
   view — each with its label;
 * the published-rule predictions for the same features in cyan, side by
-  side with the classic guides (:func:`workbench.services.guides.guides_from_prediction`);
+  side with the classic guides (:func:`workbench.services.guides.classic.guides_from_prediction`);
 * in yellow, where the skull measurements behind the guides were taken (the
   widest aperture, the nasal spine, the canines, the incisal edge and the
-  cemento-enamel junctions, :func:`workbench.services.guide_measure.marks_for_view`),
+  cemento-enamel junctions, :func:`workbench.services.guides.measure.marks_for_view`),
   and under the view the measurements that could not be taken, with why.
 
 A guide is dragged with the left button (press within
@@ -46,7 +46,7 @@ from PySide6.QtWidgets import (
 from workbench.qt.lod import decimated, with_normals
 from workbench.qt.scene import SMOOTH, is_closed
 from workbench.render.snapshots import to_polydata
-from workbench.services.guides import AXES, Guide, guides_from_prediction
+from workbench.services.guides.classic import AXES, Guide, guides_from_prediction
 
 if TYPE_CHECKING:
     from workbench.qt.hosts import GuideDragHost, GuideRows
@@ -200,7 +200,7 @@ class GuideView(QWidget):
             return
 
         def prepare() -> tuple[Any, Any]:
-            from workbench.services.guide_measure import marks_for_view
+            from workbench.services.guides.measure import marks_for_view
 
             light = with_normals(decimated(fit.skull_h, 15_000))
             lms_h = fit.recon.landmarks

@@ -24,8 +24,8 @@ if TYPE_CHECKING:
     from workbench.qt.document import Document
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
-    from workbench.services.case_setup import OpenedCase
-    from workbench.services.guides import Guide
+    from workbench.services.case.case_setup import OpenedCase
+    from workbench.services.guides.classic import Guide
 
 
 class GuideRows(Protocol):

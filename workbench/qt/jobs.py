@@ -3,7 +3,7 @@
 The window runs these in a worker thread (:mod:`workbench.qt.workers`) and
 applies their results on the GUI thread through undoable commands.  The
 settings are the case's typed parts, the same ``workbench reconstruct``
-records (:func:`workbench.services.reconstruction_job.run_reconstruction`):
+records (:func:`workbench.services.reconstruction.job.run_reconstruction`):
 
 =========== ================================================================
 part        value
@@ -18,9 +18,9 @@ guides      :class:`~workbench.model.reconstruction_setup.GuideList` set by
 
 The fit is the one pipeline of the command line: :func:`fit_inputs` takes a
 snapshot of the case on the GUI thread, :func:`fit_face` runs
-:func:`workbench.services.reconstruction_service.run_fit` on it in the
+:func:`workbench.services.reconstruction.service.run_fit` on it in the
 worker, and :func:`export_results` writes the report with the same builder
-(:func:`workbench.services.reconstruction_job.build_report`).
+(:func:`workbench.services.reconstruction.job.build_report`).
 
 Units mm.  Landmarks, dowels and the face are returned in the **input frame**
 (the skull file's frame) so they overlay the specimen; the fit itself runs in
@@ -40,23 +40,23 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.evidence import sha256_file
 from workbench.model.reconstruction_setup import GuideList, Orientation
-from workbench.services.dowels import DepthSettings, plan_dowels
-from workbench.services.fit_guides import stored_guides
-from workbench.services.guides import Guide, guides_to_json
-from workbench.services.frame import input_frame
-from workbench.services.reconstruction_service import (
+from workbench.services.tissue.dowels import DepthSettings, plan_dowels
+from workbench.services.guides.fit_guides import stored_guides
+from workbench.services.guides.classic import Guide, guides_to_json
+from workbench.services.landmarks.frame import input_frame
+from workbench.services.reconstruction.service import (
     DowelPreview,
     FitInputs,
     FitResult,
     run_fit,
 )
-from workbench.services.reconstruction_service import depth_settings as _depth_settings
-from workbench.services.skull_registration import (
+from workbench.services.reconstruction.service import depth_settings as _depth_settings
+from workbench.services.registration.skull_registration import (
     SkullRegistration,
     mirror_from_landmarks,
     register_skull,
 )
-from workbench.services.template_cache import reference_head
+from workbench.services.templates.cache import reference_head
 
 __all__ = [
     "DowelPreview",
@@ -211,7 +211,7 @@ def fit_face(inputs: FitInputs) -> FitResult:
     Stored guides are used as they are; without them Kähler's classic guides
     are computed from the skull, and computed guides that fail their
     plausibility checks are switched off with a warning
-    (:func:`workbench.services.reconstruction_service.run_fit`).
+    (:func:`workbench.services.reconstruction.service.run_fit`).
     """
     return run_fit(inputs)
 
@@ -273,7 +273,7 @@ def export_results(
     from workbench.io.markups import write_fcsv, write_mrk_json
     from workbench.io.meshes import write_mesh
     from workbench.io.template_pack import FILES, export_template
-    from workbench.services.reconstruction_job import (
+    from workbench.services.reconstruction.job import (
         FITTED_HEAD_FRAME_TEXT,
         head_in_input_frame,
         write_build_files,
@@ -314,7 +314,7 @@ def export_results(
 
 def _report(out: Path, case: Case, fit: FitResult, notes: list[str]) -> dict[str, Path]:
     from workbench.reporting.report import write_report_json, write_report_pdf
-    from workbench.services.reconstruction_job import build_report
+    from workbench.services.reconstruction.job import build_report
 
     report = build_report(case, fit, notes=notes)
     return {

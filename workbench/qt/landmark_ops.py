@@ -17,7 +17,7 @@ import numpy as np
 from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, ReplaceLandmarkSet
 from workbench.core.errors import WorkbenchError
 from workbench.qt import jobs
-from workbench.services.landmark_snap import snap_landmark
+from workbench.services.landmarks.snap import snap_landmark
 
 if TYPE_CHECKING:
     from workbench.io.catalogue import LandmarkCatalogue

@@ -81,7 +81,7 @@ from workbench.qt.session import Session
 from workbench.qt.workers import TaskRunner, preload, show_fraction
 
 if TYPE_CHECKING:
-    from workbench.services.case_setup import OpenedCase
+    from workbench.services.case.case_setup import OpenedCase
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
@@ -180,7 +180,7 @@ class MainWindow(QMainWindow):
             skull_picker=self.picker,
             parent=self,
         )
-        from workbench.services.animation import EXPRESSIONS
+        from workbench.services.animation.animator import EXPRESSIONS
 
         self.animate_panel = AnimatePanel(EXPRESSIONS)
         self.animate = AnimateTool(
@@ -802,7 +802,8 @@ class MainWindow(QMainWindow):
             self.compare()
 
     def compare(self) -> None:
-        from workbench.services.compare import compare_surfaces, face_regions
+        from workbench.services.validation.compare import compare_surfaces
+        from workbench.services.templates.regions import face_regions
 
         fit, truth_loaded = self.session.fit, self.session.truth
         if truth_loaded is None or fit is None:

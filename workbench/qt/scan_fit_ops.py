@@ -1,8 +1,8 @@
 """The "Fit scan" tool of the window: open a face scan, fit the reference head, assist landmarks.
 
-The fit is the service's (:func:`workbench.services.scan_fit.fit_scan`,
+The fit is the service's (:func:`workbench.services.scan_fit.fit.fit_scan`,
 ``workbench fit-scan``), run in the window's worker with progress and
-cancel; "Save pack…" runs :func:`~workbench.services.scan_fit.fit_scan_pack`
+cancel; "Save pack…" runs :func:`~workbench.services.scan_fit.fit.fit_scan_pack`
 with the same inputs (the scan file, its units, the landmarks the user
 placed, sex, table, build), which refuses an existing folder unless the
 user confirms.
@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     from workbench.qt.picking import ClickPicker
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
-    from workbench.services.scan_fit import ScanFit
+    from workbench.services.scan_fit.fit import ScanFit
 
 #: the worker channel of fits and saves (a newer job supersedes the older)
 CHANNEL = "scan_fit"
@@ -188,8 +188,8 @@ def read_scan(path: str | Path, units: str = "auto", scale: float | None = None)
     from workbench.core.units import check_units_choice, resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.meshes import read_mesh
-    from workbench.services.scan_fit import check_scan_mesh
-    from workbench.services.template_cache import reference_head
+    from workbench.services.scan_fit.fit import check_scan_mesh
+    from workbench.services.templates.cache import reference_head
 
     check_units_choice(units, scale)
     path = Path(path)
@@ -226,7 +226,7 @@ def _fraction_reporter(report: Callable[[str, float], None] | None) -> Callable[
 def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
     """Worker: map a fit into the scan's frame for drawing (see :class:`FitView`)."""
     from workbench.core.spatial import MeshIndex
-    from workbench.services.compare import face_regions
+    from workbench.services.templates.regions import face_regions
 
     back = np.linalg.inv(fit.input_to_head)
     skin = fit.head.skin.transformed(back)  # winding flipped when the scan was mirrored
@@ -284,7 +284,7 @@ def run_scan_fit(
 ) -> FitView:
     """Worker: :func:`fit_scan` on the opened scan, seeded by ``placed`` (scan frame, mm)."""
     from workbench.model.evidence import file_sha256
-    from workbench.services.scan_fit import fit_scan
+    from workbench.services.scan_fit.fit import fit_scan
 
     seeds = placed if placed is not None and len(placed) else None
     result = fit_scan(
@@ -318,7 +318,7 @@ def save_pack(
     the pack as :data:`PLACED_FILE` (scan frame, mm).
     """
     from workbench.io.markups import write_mrk_json
-    from workbench.services.scan_fit import fit_scan_pack
+    from workbench.services.scan_fit.fit import fit_scan_pack
 
     seeds = placed if placed is not None and len(placed) else None
     with tempfile.TemporaryDirectory(prefix="workbench-scan-") as tmp:

@@ -2,7 +2,7 @@
 
 A :class:`Session` only *stores* results and *signals* their changes; it
 computes nothing.  The fit itself is the one pipeline,
-:func:`workbench.qt.jobs.fit_face` (→ :mod:`workbench.services.reconstruction_service`),
+:func:`workbench.qt.jobs.fit_face` (→ :mod:`workbench.services.reconstruction.service`),
 run in the worker by the main window, which hands each result to the session
 on the GUI thread.  Panels and views read the results here and follow the
 signals, instead of reaching into the window.
@@ -25,7 +25,7 @@ from PySide6.QtCore import QObject, Signal
 
 if TYPE_CHECKING:
     from workbench.qt.jobs import DowelPreview, FitResult
-    from workbench.services.compare import Comparison
+    from workbench.services.validation.compare import Comparison
 
 
 class Session(QObject):

@@ -2,7 +2,7 @@
 
 Frame and units: each head is in its own Frankfort frame (x to the
 subject's left, x = 0 midsagittal, y up, z toward the face; the origin
-between the porions), mm — the frame :func:`workbench.services.age.age_head`
+between the porions), mm — the frame :func:`workbench.services.age.change.age_head`
 settles the aged head in.  The two heads are therefore aligned at the
 Frankfort origin with no further registration: what differs between them
 is the growth (or age regression) itself.
@@ -62,7 +62,7 @@ def growth_distance(source_skin: Mesh, aged_skin: Mesh) -> np.ndarray:
     registered further).  The magnitude is the distance to the closest point
     of the source skin; the sign says whether the head grew there (+) or
     became smaller (−).  When the aged skin is the source skin moved (same
-    triangles, as :func:`~workbench.services.age.age_head` makes it), the sign
+    triangles, as :func:`~workbench.services.age.change.age_head` makes it), the sign
     is that of the vertex's own displacement along the source skin's outward
     normal, so a vertex that moved inward reads "smaller" even where its
     closest source point is the wall of a slit (between the lips, the
@@ -300,7 +300,7 @@ def render_age_pictures(
     *,
     size: tuple[int, int] = (360, 420),
 ) -> tuple[dict[str, Path], list[str]]:
-    """Both pictures of every :class:`~workbench.services.age.AgeResult` into ``folder``.
+    """Both pictures of every :class:`~workbench.services.age.change.AgeResult` into ``folder``.
 
     Returns ``({"compare_<age>y": png, "growth_<age>y": png, ...}, notes)``
     in the results' order; the notes say why a picture could not be drawn

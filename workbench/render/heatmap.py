@@ -5,7 +5,7 @@ Units: mm.  The mesh is drawn in its own frame; ``frame`` names that frame
 gives ``(anterior, superior)`` vectors, so that "front" looks at the face.
 
 Colours: a diverging map centred on 0 mm — blue where the value is negative
-(for :mod:`workbench.services.compare`: the reconstruction lies *inside* the
+(for :mod:`workbench.services.validation.compare`: the reconstruction lies *inside* the
 true skin, too little tissue), white near 0, red where positive (outside,
 too much tissue).  Values beyond ``clim`` saturate; vertices without a value
 (NaN: not compared) are grey.

@@ -4,7 +4,7 @@ Units mm (lengths), years (ages); z-scores against the norms of the sex and
 ethnicity.  Frame: each head's Frankfort frame (x to the subject's left,
 x = 0 midsagittal, y up, z toward the face, origin between the porions),
 where the axis-aligned measurements are read (horizontal = x, vertical =
-y, depth = z), as in :mod:`workbench.services.age`.
+y, depth = z), as in :mod:`workbench.services.age.change`.
 
 This module lays out what the caller hands it and imports neither the
 render layer nor ``workbench.io``: the pictures arrive as PNG paths (drawn by
@@ -246,7 +246,7 @@ def write_age_report(
     credits: Sequence[str] = (),
     created: str | None = None,
 ) -> Path:
-    """Write ``folder/report.pdf`` for ``results`` (:class:`~workbench.services.age.AgeResult`).
+    """Write ``folder/report.pdf`` for ``results`` (:class:`~workbench.services.age.change.AgeResult`).
 
     ``source_head`` is the head before the change (its ``template_id`` and
     ``content_hash`` are printed); ``pictures`` maps ``compare_<age>y`` and

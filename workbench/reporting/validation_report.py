@@ -83,7 +83,7 @@ def feature_table(features: Mapping[str, Mapping[str, float]]) -> list[str]:
     """Markdown lines: per method (the face, the face without guides, each guide rule
     alone) the feature errors in mm (predicted − true for widths and heights;
     distances for points), with the target beside the feature's name."""
-    from workbench.services.feature_validation import FEATURES, TARGETS_MM
+    from workbench.services.validation.features import FEATURES, TARGETS_MM
 
     names = [n for n in FEATURES if any(n in e for e in features.values())]
     head = [f"{n} (≤ {TARGETS_MM[n]:g})" if n in TARGETS_MM else n for n in names]
@@ -149,7 +149,7 @@ def band_rows(results: Sequence[tuple[Any, str]]) -> list[dict[str, Any]]:
 
 def feature_rows(results: Sequence[tuple[Any, str]]) -> list[dict[str, Any]]:
     """One row per case, method and feature (``features.csv``)."""
-    from workbench.services.feature_validation import TARGETS_MM
+    from workbench.services.validation.features import TARGETS_MM
 
     out = []
     for res, _label in results:

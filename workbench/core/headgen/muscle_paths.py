@@ -1,6 +1,6 @@
 """Pure geometry for painting muscle grids on the template skin (numpy only).
 
-Helpers used by :mod:`workbench.services.muscles`:
+Helpers used by :mod:`workbench.services.templates.muscles`:
 
 * :func:`linear_rows` -- guide points of a linear muscle, row by row from
   the fixed end to the free end;

@@ -1,7 +1,7 @@
 """Age progression dock: source head, its age and sex, a target-age slider, the measurement table.
 
 Widgets, signals and the table model only; :class:`workbench.qt.age_ops.AgeTool`
-runs the age service (:func:`workbench.services.age.age_head`) in the worker,
+runs the age service (:func:`workbench.services.age.change.age_head`) in the worker,
 draws the heads and hands results back through ``show_*``.  Ages in years,
 lengths in mm (each head in its Frankfort frame).
 
@@ -39,7 +39,7 @@ from PySide6.QtWidgets import (
 )
 
 if TYPE_CHECKING:
-    from workbench.services.age import MeasurementRow
+    from workbench.services.age.change import MeasurementRow
 
 #: source head entries: title → key (``"fit"``: the case's reconstructed head)
 SOURCES = {
@@ -68,7 +68,7 @@ def _num(value: float, digits: int = 1) -> str:
 
 
 class MeasurementModel(QAbstractTableModel):
-    """The rows of an :class:`~workbench.services.age.AgeResult` for a :class:`QTableView`.
+    """The rows of an :class:`~workbench.services.age.change.AgeResult` for a :class:`QTableView`.
 
     Measurements with norms (hard constraints) come first, then those that
     follow the head scale, then the unconstrained ones (landmark missing).

@@ -1,7 +1,7 @@
 """Animate dock: presets, muscle sliders, jaw, gaze, lids, Relax and a track timeline.
 
 Widgets and signals only; :class:`workbench.qt.animate_ops.AnimateTool`
-drives the :class:`workbench.services.animation.Animator` and the 3D view,
+drives the :class:`workbench.services.animation.animator.Animator` and the 3D view,
 and hands the animator's state back through :meth:`AnimatePanel.show_state`
 and the timeline's through :meth:`AnimatePanel.show_timeline`.
 Contractions are 0..1 (slider 0..100 %), the jaw in degrees (positive
@@ -32,7 +32,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from workbench.services.animation import GAZE_RANGE_DEG
+from workbench.services.animation.animator import GAZE_RANGE_DEG
 
 #: head chooser entries: title → reference head sex
 HEADS = {"Reference male": "male", "Reference female": "female"}

@@ -2,7 +2,7 @@
 
 Signed distance from each true-skin vertex to the reconstructed face
 (mm; positive = the reconstruction lies outside the true skin, i.e. too much
-tissue), computed by :func:`workbench.services.compare.compare_surfaces` in
+tissue), computed by :func:`workbench.services.validation.compare.compare_surfaces` in
 a worker.  The true skin must be in the skull file's frame and mm.
 """
 
@@ -22,7 +22,7 @@ from PySide6.QtWidgets import (
 )
 
 if TYPE_CHECKING:
-    from workbench.services.compare import Comparison
+    from workbench.services.validation.compare import Comparison
 
 FIGURE_ROWS = (
     ("mean_abs_mm", "mean |distance|", "mm"),
@@ -64,7 +64,7 @@ class ComparePanel(QWidget):
         layout.addWidget(self.notes)
 
     def show_comparison(self, name: str, comparison: Comparison | None) -> None:
-        """Figures of a :class:`~workbench.services.compare.Comparison` (None clears)."""
+        """Figures of a :class:`~workbench.services.validation.compare.Comparison` (None clears)."""
         if comparison is None:
             self.table.setRowCount(0)
             self.source.setText(

@@ -4,7 +4,7 @@ Select a row, then click on the skull (a click, not a drag) to place it:
 the window turns the pick into a :class:`~workbench.commands.landmarks.PlaceLandmark`.
 "Mark absent" pushes ``SetLandmarkStatus(absent)``; "Snap" asks the window to
 move the selected landmark to the feature its definition names
-(:mod:`workbench.services.landmark_snap`); "Suggest the rest" asks the window
+(:mod:`workbench.services.landmarks.snap`); "Suggest the rest" asks the window
 to run the automatic transfer in a worker thread.  The panel only
 issues commands and requests; it redraws itself from the case's landmarks.
 Positions are mm in the specimen's input frame.

@@ -11,7 +11,7 @@ to None: guides computed from the skull).  Published-rule predictions for the sa
 features are shown beside them for comparison.
 
 The **build** slider runs over the fit's faces for an unknown body build
-(:class:`~workbench.services.build_faces.BuildFaces`: slender, average, heavy,
+(:class:`~workbench.services.reconstruction.build_faces.BuildFaces`: slender, average, heavy,
 labelled with their BMI) and emits the build score ``z`` it points at; the
 window morphs the drawn face to ``builds.vertices_at(z)`` in place.  The
 faces sit at equal steps of the slider; between two of them the score (and
@@ -50,12 +50,12 @@ from workbench.commands.reconstruction_setup import SetGuides
 from workbench.core.errors import WorkbenchError
 from workbench.qt.document import Document
 from workbench.qt.jobs import FitResult, guides_state, user_guides
-from workbench.services.guides import Guide
+from workbench.services.guides.classic import Guide
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from workbench.services.build_faces import BuildFaces
+    from workbench.services.reconstruction.build_faces import BuildFaces
 
 GUIDE_COLUMNS = ("Guide", "Value mm", "On", "Rule")
 FIGURES = (

@@ -1,0 +1,214 @@
+"""An animated head as glTF: every palette expression as a morph target of the skin.
+
+:func:`expression_targets` settles each expression from rest (a fresh
+:class:`~workbench.services.animation.animator.Animator` per expression, so no
+expression inherits another's residue) and returns the skin and the jaw
+parts in the Frankfort head frame (mm).  :func:`export_head_glb` writes them
+with :func:`workbench.io.gltf_export.write_glb` **in the head's own frame**,
+the frame of its PLY files (a reconstruction's ``head/`` pack and
+``face.ply``: the skull file's frame, mirrored when that file is; the
+reference heads: the head frame), in metres: a glTF vertex × 1000 is the
+PLY's vertex in mm.  A glTF frame with weight 1 on one target is the skin
+``workbench animate --expression NAME --out FILE.ply`` writes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.errors import InputError
+from workbench.core.mesh import Mesh
+from workbench.io.arkit_table import read_arkit_table
+from workbench.io.gltf_export import Keyframes, write_glb
+from workbench.model.template import TemplateHead
+from workbench.services.animation.animator import EXPRESSIONS, Animator, Expression
+from workbench.services.registration.jaw import JAW_PARTS, axis_rotation
+
+__all__ = [
+    "ExpressionTargets",
+    "arkit_needed",
+    "arkit_recipes",
+    "export_head_glb",
+    "expression_targets",
+    "ramp_keyframes",
+    "settle_expressions",
+    "settle_poses",
+]
+
+
+@dataclass
+class ExpressionTargets:
+    """Rest meshes and per-expression positions in the Frankfort head frame (mm).
+
+    The ``stored_*`` fields hold the same in the head's own frame (the frame
+    its files are in, with their triangle winding), which the ``.glb`` uses.
+    """
+
+    rest: dict[str, Mesh]  #: every part of the head at rest ("skin", "eyes", "mandible" ...)
+    skin: dict[str, np.ndarray] = field(default_factory=dict)  #: name -> (n, 3) skin positions
+    #: part -> name -> positions, for jaw parts of expressions that move the jaw
+    parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    steps: dict[str, int] = field(default_factory=dict)
+    stored_rest: dict[str, Mesh] = field(default_factory=dict)
+    stored_skin: dict[str, np.ndarray] = field(default_factory=dict)
+    stored_parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+
+
+def _check_names(names: Iterable[str] | None) -> list[str]:
+    chosen = list(EXPRESSIONS) if names is None else list(names)
+    unknown = [n for n in chosen if n not in EXPRESSIONS]
+    if unknown:
+        raise InputError(
+            ", ".join(unknown), "is not an expression", "valid names: " + ", ".join(EXPRESSIONS)
+        )
+    if not chosen:
+        raise InputError("expressions", "none given", "name at least one expression")
+    return list(dict.fromkeys(chosen))
+
+
+def settle_expressions(
+    head: TemplateHead,
+    names: Iterable[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ExpressionTargets:
+    """Settle each expression from rest; skin and moved jaw parts in the head frame (mm)."""
+    chosen = _check_names(names)
+    return settle_poses(head, {name: EXPRESSIONS[name] for name in chosen}, progress)
+
+
+def settle_poses(
+    head: TemplateHead,
+    poses: Mapping[str, Expression],
+    progress: Callable[[str], None] | None = None,
+) -> ExpressionTargets:
+    """Settle each pose (an :class:`Expression`, e.g. a track's key or viseme) from rest.
+
+    Skin and moved jaw parts in the head frame (mm), keyed by the poses' names.
+    """
+    if not poses:
+        raise InputError("expressions", "none given", "name at least one expression")
+    out: ExpressionTargets | None = None
+    for name, pose in poses.items():
+        anim = Animator(head)
+        if out is None:
+            out = ExpressionTargets(rest=dict(anim.head.meshes), stored_rest=dict(head.meshes))
+        anim.set_expression(pose)
+        out.steps[name] = anim.settle()
+        out.skin[name] = anim.skin_in_head_frame()
+        out.stored_skin[name] = anim.skin().vertices  # as `animate --out FILE.ply` writes it
+        if anim.jaw_deg != 0.0 or anim.protrusion_mm != 0.0:
+            # Animator.meshes() is in the head's own frame: the same jaw pose in the head frame
+            point, direction = anim.head.tmj_axis
+            m = axis_rotation(point, direction, np.deg2rad(anim.jaw_deg))
+            m[:3, 3] += np.array([0.0, 0.0, anim.protrusion_mm])
+            for part in JAW_PARTS:
+                if part in out.rest:
+                    v = out.rest[part].vertices
+                    out.parts.setdefault(part, {})[name] = v @ m[:3, :3].T + m[:3, 3]
+            posed = anim.meshes()  # the same jaw pose in the head's own frame
+            for part in JAW_PARTS:
+                if part in out.stored_rest:
+                    out.stored_parts.setdefault(part, {})[name] = posed[part].vertices
+        if progress is not None:
+            progress(name)
+    assert out is not None
+    return out
+
+
+def expression_targets(
+    head: TemplateHead, names: Iterable[str] | None = None
+) -> dict[str, np.ndarray]:
+    """``{expression: (n, 3) settled skin positions}`` in the head frame (mm), from rest.
+
+    ``names``: expressions of :data:`~workbench.services.animation.animator.EXPRESSIONS`
+    (default: all of them, the emotions and the FACS action units).
+    """
+    return settle_expressions(head, names).skin
+
+
+def export_head_glb(
+    head: TemplateHead,
+    path: str | PathLike[str],
+    names: Iterable[str] | None = None,
+    keyframes: Keyframes | None = None,
+    *,
+    weights: Mapping[str, float] | None = None,
+    names_arkit: Mapping[str, Mapping[str, float]] | None = None,
+    progress: Callable[[str], None] | None = None,
+    poses: Mapping[str, Expression] | None = None,
+    frame: str = "",
+) -> tuple[Path, ExpressionTargets, float]:
+    """Write the head as ``.glb`` with the expressions as morph targets.
+
+    Returns ``(path, the settled targets, seconds spent settling)``.  The rest
+    skin and the parts are the head's meshes in its own frame (that of its
+    PLY files; ``frame`` describes it for the file's ``extras``), in metres;
+    parts that follow the jaw get morph targets for the expressions that
+    open or push the jaw.  ``names_arkit`` (see :func:`arkit_recipes`) adds
+    targets that are weighted sums of the settled ones; the expressions they
+    use must be among ``names``.  ``poses`` adds targets that are not palette
+    expressions (a track's key poses and visemes, named by the caller), after
+    ``names``; ``names=[]`` with ``poses`` exports only those.
+    """
+    t0 = time.perf_counter()
+    given = None if names is None else list(names)
+    chosen = [] if given is not None and not given and poses else _check_names(given)
+    clash = [n for n in (poses or {}) if n in chosen]
+    if clash:
+        raise InputError(", ".join(clash), "is both an expression target and a pose target")
+    settled = settle_poses(
+        head, {**{n: EXPRESSIONS[n] for n in chosen}, **dict(poses or {})}, progress
+    )
+    seconds = time.perf_counter() - t0
+    rest = settled.stored_rest
+    extra = {k: m for k, m in rest.items() if k != "skin"}
+    out = write_glb(
+        path,
+        rest["skin"],
+        settled.stored_skin,
+        extra_nodes=extra,
+        node_targets=settled.stored_parts,
+        weights=weights,
+        animation=keyframes,
+        names_arkit=names_arkit,
+        frame=frame or "the head's own frame, as in its PLY files",
+    )
+    return out, settled, seconds
+
+
+def ramp_keyframes(
+    name: str, seconds: float = 1.0, steps: int = 1
+) -> Sequence[tuple[float, dict[str, float]]]:
+    """Keyframes from neutral (all weights 0) to ``name`` at weight 1 over ``seconds``."""
+    ts = np.linspace(0.0, seconds, steps + 1)
+    return [(float(t), {name: float(t / seconds)}) for t in ts]
+
+
+def arkit_recipes(path: str | PathLike[str] | None = None) -> dict[str, dict[str, float]]:
+    """``{ARKit name: {expression: weight}}`` from an ARKit table (default: the built-in one).
+
+    Every recipe target must be an expression of
+    :data:`~workbench.services.animation.animator.EXPRESSIONS` (else :class:`InputError`
+    naming the file, row and the valid names); an empty recipe is a shape
+    with no AU basis, written as zero displacement.
+    """
+    recipes = read_arkit_table(path, valid=EXPRESSIONS)
+    clash = [n for n in recipes if n in EXPRESSIONS]
+    if clash:
+        raise InputError(
+            path or "ARKit table",
+            f"{', '.join(clash)} is an expression name, not a new target name",
+            "give the ARKit shapes names of their own",
+        )
+    return recipes
+
+
+def arkit_needed(recipes: Mapping[str, Mapping[str, float]]) -> list[str]:
+    """The expressions the recipes use, in first-use order (to add to the settled set)."""
+    return list(dict.fromkeys(t for mix in recipes.values() for t in mix))
