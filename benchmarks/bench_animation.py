@@ -98,13 +98,13 @@ def decimated_skin(head, target_vertices: int = 1000):
 
 def track_evaluation(head, seconds: float = 60.0, reps: int = 5) -> None:
     """Print the cost of evaluating a long keyframe + phoneme track against the physics."""
+    from workbench.services.animation.speech import load_visemes
     from workbench.services.animation.track import (
         apply_frame,
         evaluate_track,
         parse_track,
         steps_per_frame,
     )
-    from workbench.services.animation.speech import load_visemes
 
     rng = np.random.default_rng(1)
     labels = [p for p in load_visemes().phonemes if p != "sil"]

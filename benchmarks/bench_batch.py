@@ -51,8 +51,8 @@ def _case(folder: Path, jobs: int) -> tuple[list[Path], Path]:
 
     from workbench.core.mesh import Mesh
     from workbench.io.meshes import write_mesh
-    from workbench.services.templates.reference_parts import skull_surface
     from workbench.services.templates.cache import reference_head
+    from workbench.services.templates.reference_parts import skull_surface
 
     female = reference_head("female")
     reference_head("male")  # built and cached before any timing

@@ -55,19 +55,19 @@ def _row(name: str, times: list[float]) -> str:
 
 def main() -> int:
     from workbench.services.reconstruction.build_faces import build_faces
-    from workbench.services.tissue.dowels import build_model_for
     from workbench.services.reconstruction.job import (
         JobSettings,
         run_reconstruction,
         write_build_files,
     )
+    from workbench.services.tissue.dowels import build_model_for
 
     default = ROOT / "benchmarks" / "results" / "plain_bones" / "headsq_plain.ply"
     skull = Path(sys.argv[1]) if len(sys.argv) > 1 else default
     if not skull.is_file():
         from workbench.io.meshes import write_mesh
-        from workbench.services.templates.reference_parts import skull_surface
         from workbench.services.templates.cache import reference_head
+        from workbench.services.templates.reference_parts import skull_surface
 
         tmp = Path(tempfile.mkdtemp())
         skull = write_mesh(tmp / "generated_skull.ply", skull_surface(reference_head("female")))

@@ -54,7 +54,6 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from benchmarks.corpus.common import apply, data_root
-
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.core.volume import Volume

@@ -88,13 +88,12 @@ def run_variant(
     result lies from the hinted one *on the same surface* separates a wrong orientation
     from landmarks that move with the surface (another iso, smoothing, decimation).
     """
+    from benchmarks.corpus.truth import condylar_axis_h, jaw_pose, snapped_input
     from workbench.core.errors import WorkbenchError
     from workbench.io.meshes import read_mesh
     from workbench.services.reconstruction.service import working_skull
     from workbench.services.registration.skull_registration import register_skull
     from workbench.services.templates.cache import reference_head
-
-    from benchmarks.corpus.truth import condylar_axis_h, jaw_pose, snapped_input
 
     path = corpus_dir(root) / entry["file"]
     head = reference_head(EVAL_SEX)

@@ -41,12 +41,12 @@ from typing import Any
 import numpy as np
 
 from benchmarks.corpus.bases import (
-    ISO_LEVELS,
-    iso_level,
     BASES,
+    ISO_LEVELS,
     SEGMENTATION_VERSION,
     Base,
     Segmentation,
+    iso_level,
     label_picture,
     load_volume,
     segment,
@@ -64,7 +64,6 @@ from benchmarks.corpus.common import (
     unit,
     write_json,
 )
-
 from workbench.core.mesh import Mesh, concatenate
 from workbench.model.template import TemplateHead
 from workbench.services.ct.ct_mesh import mesh_from_ct

@@ -60,9 +60,9 @@ from benchmarks.corpus.bases import (
     BASES,
     CRANIUM,
     EXTRA,
+    ISO_LEVELS,
     MANDIBLE,
     OTHER,
-    ISO_LEVELS,
     Base,
     index_matrix,
     iso_level,
@@ -90,7 +90,6 @@ from benchmarks.corpus.truth import (
     load_segmentation,
     load_truth,
 )
-
 from workbench.core.mesh import Mesh
 from workbench.core.volume import Volume
 
@@ -789,7 +788,6 @@ def build_mesh(
     """The variant's bone mesh in the **base input frame** (mm), its build record and the
     credit line of the data (or None)."""
     from benchmarks.cases.cut_skull import clip_by_plane, hole_voxels
-
     from workbench.core.isosurface import decimate, taubin_smooth
     from workbench.services.ct.ct_mesh import mesh_from_ct
 

@@ -228,9 +228,8 @@ def make_bad_files(folder: Path) -> dict[str, Path]:
     )
     cloud = folder / "point_cloud.ply"
     cloud.write_text(
-        "ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+        f"ply\nformat ascii 1.0\nelement vertex {len(skin)}\nproperty float x\nproperty float y\n"
         "property float z\nend_header\n"
-        % len(skin)
         + "\n".join(" ".join(f"{c:.3f}" for c in p) for p in skin)
         + "\n",
         encoding="ascii",

@@ -3,13 +3,11 @@ row's figures and plots, and the command's own refusals."""
 
 from __future__ import annotations
 
-import json
-
-import numpy as np
-
 import csv
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from workbench.cli.main import main

@@ -13,9 +13,9 @@ import pytest
 
 import workbench
 from workbench.cli.main import main
+from workbench.core.landmarks import LandmarkSet
 from workbench.io.markups import read_landmarks, write_landmarks
 from workbench.io.meshes import read_mesh
-from workbench.core.landmarks import LandmarkSet
 
 
 def test_version_and_help(capsys: pytest.CaptureFixture[str]) -> None:

@@ -12,8 +12,8 @@ from workbench.cli.main import main
 from workbench.core.headgen.skin import build_skin
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
-from workbench.io.template_pack import export_template
 from workbench.io.meshes import write_mesh
+from workbench.io.template_pack import export_template
 
 
 @pytest.fixture(scope="module")

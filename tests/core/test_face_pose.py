@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.services._scans import crowned_bust
 from workbench.core.face_pose import place_face
 from workbench.core.rigid_search import SCALE_RANGE
 from workbench.core.spatial import MeshIndex
-from tests.services._scans import crowned_bust
 from workbench.services.templates.regions import face_regions
 
 

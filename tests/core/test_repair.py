@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from _shapes import OCTA_F, OCTA_V, octahedron, subdivided_octahedron
 
 from workbench.core.mesh import Mesh, validate

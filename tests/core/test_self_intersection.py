@@ -14,7 +14,6 @@ from workbench.core.self_intersection import (
     self_intersections,
 )
 
-
 _PAIR = np.array([[0, 1, 2], [3, 4, 5]])  # two separate faces
 
 

@@ -13,10 +13,10 @@ import pyvista as pv
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from workbench.core import spatial
 from workbench.core.bvh import LeafTree
 from workbench.core.mesh import Mesh
 from workbench.core.raycast import RayCaster
-from workbench.core import spatial
 from workbench.core.spatial import FIN_STRENGTH, MeshIndex, closest_on_triangles, winding_numbers
 from workbench.io.meshes import read_mesh
 

@@ -25,12 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from badinput._files import skull_mesh, sphere
+
 from workbench.cli.main import main as real_main
 from workbench.core.mesh import Mesh
 from workbench.io.meshes import write_mesh
-
 
 # ----------------------------------------------------------------------------- helpers
 

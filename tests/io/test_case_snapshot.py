@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from workbench.commands.case_edits import SetParameter
-from workbench.commands.reconstruction_setup import SetDowelSettings
 from workbench.commands.landmarks import PlaceLandmark
+from workbench.commands.reconstruction_setup import SetDowelSettings
 from workbench.commands.stack import CommandStack
 from workbench.io.case_file import (
     CaseFileError,

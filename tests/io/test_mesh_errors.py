@@ -7,16 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _mesh_cases import FORMATS
+from _mesh_cases import ids as _ids
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.io import atomic
 from workbench.io.mesh_formats import ply as ply_format
 from workbench.io.meshes import SUPPORTED_EXTENSIONS, read_mesh, write_mesh
-
-from _mesh_cases import FORMATS
-from _mesh_cases import ids as _ids
-
 
 # ------------------------------------------------------------------ errors
 # OBJ has no length information: a cut between face lines cannot be detected, so

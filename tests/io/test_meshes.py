@@ -11,12 +11,11 @@ import numpy as np
 import pytest
 import pyvista as pv
 import vtk
+from _mesh_cases import FLOAT32_FORMATS, FORMATS
+from _mesh_cases import ids as _ids
 
 from workbench.core.mesh import Mesh
 from workbench.io.meshes import read_mesh, write_mesh
-
-from _mesh_cases import FLOAT32_FORMATS, FORMATS
-from _mesh_cases import ids as _ids
 
 
 @pytest.fixture(scope="module")

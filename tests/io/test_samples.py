@@ -12,7 +12,6 @@ from workbench.cli.main import main
 from workbench.core.errors import WorkbenchError
 from workbench.io import samples
 
-
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 NLM_CREDIT = "Courtesy of the U.S. National Library of Medicine"
 FROZEN_NOTE = (

@@ -19,6 +19,7 @@ if os.environ.get("QT_QPA_PLATFORM") != "xcb":
     )
 
 from PySide6.QtCore import Qt
+
 from workbench.qt.scene import is_closed
 
 pytestmark = pytest.mark.gui

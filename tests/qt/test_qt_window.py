@@ -174,8 +174,8 @@ def test_suggest_dowels_guides_reconstruct_save_reopen_compare_export(
     _wait(qtbot, window)
     _wait(qtbot, window)
     assert window.comparison is not None
-    from workbench.services.validation.compare import compare_surfaces
     from workbench.services.templates.regions import face_regions
+    from workbench.services.validation.compare import compare_surfaces
 
     direct = compare_surfaces(
         window.fit.recon.face, window.truth[1], recon_regions=face_regions(window.fit.head)

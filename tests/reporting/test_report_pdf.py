@@ -34,10 +34,9 @@ from workbench.reporting.report import (
     write_report_json,
     write_report_pdf,
 )
-from workbench.services.validation.compare import compare_surfaces
 from workbench.services.templates.regions import face_regions
 from workbench.services.tissue.dowels import DepthSettings, plan_dowels
-
+from workbench.services.validation.compare import compare_surfaces
 
 CASE_ID = "2024-Hx-0117"
 

@@ -11,6 +11,7 @@ import pytest
 from workbench.cli.batch_cmd import commands
 from workbench.cli.main import main
 from workbench.core.errors import InputError
+from workbench.services.batch.manifest import read_batch_manifest
 from workbench.services.batch.run import (
     MARKER,
     error_line,
@@ -18,7 +19,6 @@ from workbench.services.batch.run import (
     read_marker,
     run_batch,
 )
-from workbench.services.batch.manifest import read_batch_manifest
 
 
 @pytest.fixture(scope="module")

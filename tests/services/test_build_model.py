@@ -247,7 +247,6 @@ def test_the_job_writes_the_faces_the_band_and_the_morph_targets(job, tmp_path: 
 def test_a_build_the_table_cannot_vary_gives_one_face_with_a_note(head_male) -> None:
     from workbench.services.reconstruction.build_faces import build_faces
     from workbench.services.reconstruction.reconstruct import Reconstruction
-
     from workbench.services.templates.reference_parts import skull_surface
 
     plan = plan_dowels(

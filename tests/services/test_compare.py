@@ -15,12 +15,12 @@ import pytest
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
+from workbench.services.templates.regions import REGION_NAMES, face_regions
 from workbench.services.validation.compare import (
     FIGURE_KEYS,
     compare_surfaces,
     template_orientation,
 )
-from workbench.services.templates.regions import REGION_NAMES, face_regions
 
 
 @pytest.fixture(scope="module")

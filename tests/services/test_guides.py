@@ -23,14 +23,6 @@ from scipy.sparse.csgraph import connected_components
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.services.guides.measure import (
-    guides_dir,
-    measure_skull,
-    parse_number,
-    read_table_csv,
-    section_loops,
-)
-from workbench.services.guides.rules import load_rules, published_predictions
 from workbench.services.guides.classic import (
     Guide,
     apply_guides,
@@ -40,6 +32,14 @@ from workbench.services.guides.classic import (
     guides_from_prediction,
     guides_to_json,
 )
+from workbench.services.guides.measure import (
+    guides_dir,
+    measure_skull,
+    parse_number,
+    read_table_csv,
+    section_loops,
+)
+from workbench.services.guides.rules import load_rules, published_predictions
 
 AXES = {"vline": [0], "hline": [1], "point": [1, 2]}
 

@@ -10,10 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from workbench.core.mesh import Mesh, concatenate
-from workbench.services.validation.compare import compare_surfaces
-from workbench.services.templates.regions import face_regions
 from workbench.core.landmarks import LandmarkSet
+from workbench.core.mesh import Mesh, concatenate
 from workbench.services.reconstruction.reconstruct import (
     FitSettings,
     ensemble_spread,
@@ -21,7 +19,9 @@ from workbench.services.reconstruction.reconstruct import (
     reconstruct,
 )
 from workbench.services.templates.reference_parts import skull_surface
+from workbench.services.templates.regions import face_regions
 from workbench.services.tissue.tissue_model import TissueSettings
+from workbench.services.validation.compare import compare_surfaces
 
 #: the generated heads place their eyes by Stephan 2002's tangent rule (corneal apex 8.4 mm in
 #: front of ectoconchion); the fit's default, Stephan et al. 2009 (16 mm), moves eyes and lids

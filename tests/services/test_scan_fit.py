@@ -415,8 +415,8 @@ def test_skull_vs_bone_and_its_uniform_offset_baseline(head_female):
     """A head's own skull as the "true bone" scores 0 mm; the face skin moved 6 mm inward
     scores as far as the face's real tissue depths differ from 6 mm; a bone 4 mm forward
     scores between (the surfaces slide past each other where they are not frontal)."""
-    from workbench.services.templates.regions import face_regions
     from workbench.services.scan_fit.fit import BONE_PARTS, _skull_vs_bone
+    from workbench.services.templates.regions import face_regions
 
     face = np.zeros(head_female.skin.n_vertices, bool)
     face[np.concatenate(list(face_regions(head_female).values()))] = True

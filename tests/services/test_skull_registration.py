@@ -8,12 +8,12 @@ import pytest
 from tests.core._shapes import subdivided_octahedron
 from workbench.core.mesh import Mesh, concatenate
 from workbench.core.spatial import MeshIndex
-from workbench.services.templates.reference_parts import skull_surface
 from workbench.services.registration.skull_registration import (
     carry_head,
     mirror_from_landmarks,
     register_skull,
 )
+from workbench.services.templates.reference_parts import skull_surface
 
 HINT = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
 

@@ -19,8 +19,8 @@ from workbench.io.meshes import write_mesh
 from workbench.io.template_pack import load_template_pack
 from workbench.model.template import PARTS
 from workbench.services.landmarks.transfer import rim_faces
-from workbench.services.templates.reference_parts import skull_surface
 from workbench.services.templates.build import MIN_TISSUE_MM, build_template_pack
+from workbench.services.templates.reference_parts import skull_surface
 
 
 @pytest.fixture(scope="module")

@@ -470,8 +470,8 @@ def _write_track_glb(
 ) -> int:
     from workbench.io.outputs import check_output_file
     from workbench.services.animation.animator import EXPRESSIONS
-    from workbench.services.animation.track import evaluate_track, glb_clip
     from workbench.services.animation.gltf import export_head_glb
+    from workbench.services.animation.track import evaluate_track, glb_clip
 
     if args.targets is not None:
         names = [n.strip() for n in args.targets.split(",") if n.strip()]

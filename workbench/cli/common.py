@@ -6,8 +6,8 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from workbench.core.errors import WorkbenchError

@@ -115,8 +115,8 @@ def _template_skin(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.services.validation.compare import compare_surfaces, template_orientation
     from workbench.services.templates.regions import skin_face_regions
+    from workbench.services.validation.compare import compare_surfaces, template_orientation
 
     if not args.clim > 0:
         raise InputError("--clim", f"must be positive, got {args.clim}")

@@ -71,7 +71,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from workbench.core.errors import InputError
     from workbench.io.outputs import check_output_file, same_file
-
     from workbench.services.ct.ct_mesh import check_extraction_settings
 
     check_extraction_settings(args.iso, args.target_triangles, args.smooth)

@@ -145,8 +145,8 @@ def _figures(report: dict, folder: Path) -> dict:
 def _builtin(folder: Path, args: argparse.Namespace) -> dict:
     from workbench.cli.reconstruct_cmd import execute
     from workbench.services.reconstruction.job import JobSettings
-    from workbench.services.templates.reference_parts import skull_surface
     from workbench.services.templates.cache import reference_head
+    from workbench.services.templates.reference_parts import skull_surface
 
     print("built-in case: the female reference skull, reconstructed with the male head")
     folder.mkdir(parents=True, exist_ok=True)

@@ -227,10 +227,9 @@ def run_frame(args: argparse.Namespace) -> int:
 
 def run_suggest(args: argparse.Namespace) -> int:
     from workbench.cli.reconstruct_cmd import orientation_of
+    from workbench.io.outputs import check_output_file
     from workbench.services.landmarks.transfer import transfer_landmarks
     from workbench.services.templates.cache import reference_head
-
-    from workbench.io.outputs import check_output_file
 
     check_output_file(args.out, input_paths(args.mesh, args.seed, args.template), args.force)
     read = load_mesh(
@@ -357,11 +356,10 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
 
 def run_snap(args: argparse.Namespace) -> int:
     from workbench.commands.stack import CommandStack
-    from workbench.io.case_file import load_case, save_case
-    from workbench.services.landmarks.placement import SurfacePlacement
-
     from workbench.core.errors import InputError
+    from workbench.io.case_file import load_case, save_case
     from workbench.io.outputs import check_output_file, same_file
+    from workbench.services.landmarks.placement import SurfacePlacement
 
     if args.out is not None:
         if same_file(args.out, args.case):

@@ -14,7 +14,6 @@ import os
 import sys
 from pathlib import Path
 
-from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.cli.common import (
     add_force_option,
     add_units_options,
@@ -22,6 +21,7 @@ from workbench.cli.common import (
     self_check_status,
     write_json,
 )
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check_tissue_depth
 
@@ -430,7 +430,6 @@ def _pictures(out: Path, result) -> dict[str, str]:
     import numpy as np
 
     from workbench.render.reconstruction import render_builds, render_reconstruction
-
     from workbench.services.reconstruction.reconstruct import articulated_skull
 
     recon = result.recon

@@ -86,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     """Every case, the tables and the PDF, into the staged folder ``out``."""
     from workbench import __version__
+    from workbench.core.safe_names import child_path
     from workbench.reporting.validation_report import (
         band_rows,
         feature_rows,
@@ -96,8 +97,6 @@ def _run(args: argparse.Namespace, cases: list, out: Path) -> bool:
     )
     from workbench.services.templates.regions import REGION_NAMES
     from workbench.services.validation.run import run_validation
-
-    from workbench.core.safe_names import child_path
 
     pictures: dict[tuple[str, str], list[tuple[str, Path]]] = {}
 

@@ -42,8 +42,8 @@ from functools import cached_property
 
 import numpy as np
 from scipy import sparse
-from scipy.spatial import cKDTree
 from scipy.sparse.linalg import cg
+from scipy.spatial import cKDTree
 
 from workbench.core.headgen.subdivision import loop_subdivide
 from workbench.core.mesh import Mesh

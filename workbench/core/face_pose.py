@@ -33,8 +33,8 @@ from scipy.spatial import cKDTree
 
 from workbench.core.rigid_search import surface_samples
 from workbench.core.spatial import MeshIndex
-from workbench.core.tps import similarity_transform
 from workbench.core.threads import worker_count
+from workbench.core.tps import similarity_transform
 
 #: robust scale of the face loss (mm, in the reference's size)
 LOSS_SCALE_MM = 4.0

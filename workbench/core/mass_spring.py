@@ -111,7 +111,6 @@ from scipy.sparse.linalg import splu
 from workbench.core.compiled import numba as _numba
 from workbench.core.spatial import MeshIndex
 
-
 NONE, SKULL, JAW = 0, 1, 2
 
 

@@ -57,10 +57,10 @@ from scipy import sparse
 from scipy.sparse.linalg import cg, splu
 from scipy.spatial import cKDTree
 
-from workbench.core.threads import worker_count
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
 from workbench.core.spatial import MeshIndex
+from workbench.core.threads import worker_count
 
 #: relative weight of a hard constraint
 HARD_WEIGHT = 50.0

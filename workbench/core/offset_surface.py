@@ -19,8 +19,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from workbench.core.threads import worker_count
 from workbench.core.mesh import Mesh
+from workbench.core.threads import worker_count
 
 
 def _surface_points(mesh: Mesh, spacing: float) -> np.ndarray:

@@ -59,8 +59,8 @@ from workbench.core.rigid_search import (
     _width_scale,
     hint_rotation,
     nearest_agreeing,
-    rigid_motion,
     plane_placements,
+    rigid_motion,
     surface_samples,
     symmetry_planes,
 )

@@ -48,11 +48,11 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-from workbench.core.compiled import numba
-from workbench.core.threads import worker_count
 from workbench.core.bvh import LeafTree
+from workbench.core.compiled import numba
 from workbench.core.mesh import Mesh
 from workbench.core.normals import _normalise, angle_weighted_sums
+from workbench.core.threads import worker_count
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,6 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.io.atomic import write_bytes_atomic
 from workbench.core.units import (
     UNIT_SCALES,
     UnitsReport,
@@ -43,6 +42,7 @@ from workbench.core.units import (
     detect_units_from_extent,
     unit_scale,
 )
+from workbench.io.atomic import write_bytes_atomic
 from workbench.io.mesh_formats import obj, ply, stl, vtk_legacy, vtp
 from workbench.io.mesh_formats._common import space_in
 

@@ -35,13 +35,13 @@ import numpy as np
 
 from workbench.core.colour_transfer import ScanColours
 from workbench.core.errors import InputError
-from workbench.core.mesh import Mesh
 from workbench.core.limits import (
     SCAN_TEXTURE_MAX_IMAGES,
     SCAN_TEXTURE_MAX_PIXELS,
     SCAN_TEXTURE_MAX_TOTAL_PIXELS,
     SCAN_TEXTURE_WORK_PIXELS,
 )
+from workbench.core.mesh import Mesh
 from workbench.io.mesh_formats import obj, ply
 from workbench.io.mesh_formats._common import ParsedMesh
 

@@ -69,9 +69,9 @@ import numpy as np
 from PySide6.QtCore import QObject, Signal
 
 from workbench.core.errors import InputError, WorkbenchError
-from workbench.qt import relay
 from workbench.core.mesh import Mesh
 from workbench.model.template import TemplateHead
+from workbench.qt import relay
 from workbench.qt.panels.age_panel import SOURCES as PANEL_SOURCES
 
 if TYPE_CHECKING:
@@ -79,7 +79,6 @@ if TYPE_CHECKING:
 
     from workbench.model.age_study import AgeStudy
     from workbench.qt.document import Document
-
     from workbench.qt.panels.age_panel import AgePanel
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner

@@ -59,10 +59,10 @@ from typing import TYPE_CHECKING, Any
 from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal
 from PySide6.QtWidgets import QMessageBox, QWidget
 
-from workbench.io.atomic import write_text_atomic
 from workbench.commands.stack import Command, CommandStack
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.json_limits import read_json
+from workbench.io.atomic import write_text_atomic
 from workbench.io.case_file import (
     detached_copy,
     load_case,

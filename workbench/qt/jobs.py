@@ -40,9 +40,8 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.evidence import sha256_file
 from workbench.model.reconstruction_setup import GuideList, Orientation
-from workbench.services.tissue.dowels import DepthSettings, plan_dowels
-from workbench.services.guides.fit_guides import stored_guides
 from workbench.services.guides.classic import Guide, guides_to_json
+from workbench.services.guides.fit_guides import stored_guides
 from workbench.services.landmarks.frame import input_frame
 from workbench.services.reconstruction.service import (
     DowelPreview,
@@ -57,6 +56,7 @@ from workbench.services.registration.skull_registration import (
     register_skull,
 )
 from workbench.services.templates.cache import reference_head
+from workbench.services.tissue.dowels import DepthSettings, plan_dowels
 
 __all__ = [
     "DowelPreview",

@@ -802,8 +802,8 @@ class MainWindow(QMainWindow):
             self.compare()
 
     def compare(self) -> None:
-        from workbench.services.validation.compare import compare_surfaces
         from workbench.services.templates.regions import face_regions
+        from workbench.services.validation.compare import compare_surfaces
 
         fit, truth_loaded = self.session.fit, self.session.truth
         if truth_loaded is None or fit is None:

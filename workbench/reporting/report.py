@@ -52,9 +52,9 @@ from typing import Any
 import jsonschema
 import numpy as np
 
-from workbench.io.atomic import write_with_atomic
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
+from workbench.io.atomic import write_with_atomic
 from workbench.reporting.pdf import (
     ACCENT,
     DARK,

@@ -33,7 +33,6 @@ from scipy import ndimage
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
-from workbench.core.threads import worker_count
 from workbench.core.isosurface import (
     _compact,
     decimate,
@@ -42,6 +41,7 @@ from workbench.core.isosurface import (
     taubin_smooth,
 )
 from workbench.core.mesh import Mesh, validate
+from workbench.core.threads import worker_count
 
 BIG = np.float32(60.0)  # "far outside" value of an empty grid, mm
 

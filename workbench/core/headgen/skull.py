@@ -33,7 +33,6 @@ import numpy as np
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.headgen import sdf as S  # noqa: N812 - S.sphere(...) reads as the SDF algebra
 from workbench.core.headgen.eyes import corneal_apex_offset, eyeball_mesh
-from workbench.core.headgen.skull_shapes import cranium_grid, mandible_grid, orbit_frame
 from workbench.core.headgen.skull_landmarks import (
     _X,
     _Y,
@@ -43,6 +42,7 @@ from workbench.core.headgen.skull_landmarks import (
     _Rays,
     _scan,
 )
+from workbench.core.headgen.skull_shapes import cranium_grid, mandible_grid, orbit_frame
 from workbench.core.headgen.teeth import Tooth, dental_arches, teeth_mesh, tongue_mesh
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh
@@ -401,11 +401,11 @@ def build_skull(sex: str = "male") -> SkullTemplate:
     params = json.loads(json.dumps(p))
     params["frame_correction"] = fmap.A.tolist()
     params["eye_rule"] = (
-        "globe (radius %.1f mm) centred on the orbital opening: x midway between the medial orbital "
-        "margin and ectoconchion, y midway between mso and mio; corneal apex %.1f mm anterior to the "
-        "mso-mio tangent (Stephan 2002 found the tangent rule under-predicts globe projection by 4 mm "
-        "on average); this puts the apex %.1f mm in front of ectoconchion"
-        % (e["radius"], e["tangent_offset_mm"], apex_z - ec[2])
+        f"globe (radius {e['radius']:.1f} mm) centred on the orbital opening: x midway between "
+        "the medial orbital margin and ectoconchion, y midway between mso and mio; corneal apex "
+        f"{e['tangent_offset_mm']:.1f} mm anterior to the mso-mio tangent (Stephan 2002 found the "
+        "tangent rule under-predicts globe projection by 4 mm on average); this puts the apex "
+        f"{apex_z - ec[2]:.1f} mm in front of ectoconchion"
     )
     params["corneal_apex_anterior_to_ec_mm"] = float(apex_z - ec[2])
     template = SkullTemplate(

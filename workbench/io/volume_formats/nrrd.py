@@ -30,8 +30,8 @@ from workbench.core.errors import InputError
 from workbench.core.volume import Volume
 
 from ._common import (
-    DataSpec,
     ENCODINGS,
+    DataSpec,
     check_sizes,
     expand_file_pattern,
     open_header,

@@ -27,7 +27,6 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
 from workbench.services.age.change import AgeResult, Progress, age_head, in_frankfort_frame

@@ -66,9 +66,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from workbench.io.atomic import write_text_atomic
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.safe_names import child_path
+from workbench.io.atomic import write_text_atomic
 from workbench.services.batch.figures import Figures, row_figures
 from workbench.services.batch.manifest import BatchRow, read_batch_manifest
 from workbench.services.registration.skull_check import EXIT_CHECK

@@ -29,12 +29,12 @@ from workbench.io.meshes import read_mesh
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
 from workbench.model.meta import CaseMeta
+from workbench.model.state import thaw_json
 from workbench.services.case.input_checks import (
     check_landmark_geometry,
     check_landmarks_on_skull,
     check_skull_mesh,
 )
-from workbench.model.state import thaw_json
 
 
 @dataclass

@@ -22,16 +22,16 @@ import numpy as np
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.model.reconstruction_setup import DEFAULT_TABLE, DowelSettings, GuideList
-from workbench.services.tissue.dowels import DowelPlan
-from workbench.services.guides.rules import DefaultRule, effective_rules, published_predictions
 from workbench.services.guides.classic import (
     Guide,
     apply_guides,
     check_guides,
     classic_guides,
-    guides_from_prediction,
     guides_from_json,
+    guides_from_prediction,
 )
+from workbench.services.guides.rules import DefaultRule, effective_rules, published_predictions
+from workbench.services.tissue.dowels import DowelPlan
 
 #: a computed width guide (nose, mouth) that predicts a width this many standard
 #: deviations from the adult norm of every population and sex of the facial norms

@@ -27,11 +27,11 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE, data_tables_dir
-from workbench.io.csv_rows import read_csv_rows
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.raycast import RayCaster
+from workbench.io.csv_rows import read_csv_rows
 from workbench.io.tables import load_depth_table
 
 CONSTANT_COLUMNS = ("name", "sex", "value", "unit", "source", "notes")

@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 
 from workbench import __version__
-from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.commands.case_edits import SetParameter
 from workbench.commands.landmarks import ReplaceLandmarkSet
 from workbench.commands.reconstruction_setup import SetDowelSettings, SetGuides, SetOrientation
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.units import UNIT_SCALES
@@ -43,11 +43,11 @@ from workbench.io.template_pack import export_template
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.model.template import TemplateHead
-from workbench.services.reconstruction.build_faces import BuildFaces
 from workbench.services.case.case_setup import OpenedCase, start_case_from_skull
-from workbench.services.guides.fit_guides import MAX_NORM_SD, plausible_guides
 from workbench.services.guides.classic import guides_from_json, guides_to_json
+from workbench.services.guides.fit_guides import MAX_NORM_SD, plausible_guides
 from workbench.services.landmarks.transfer import TransferResult
+from workbench.services.reconstruction.build_faces import BuildFaces
 from workbench.services.reconstruction.reconstruct import (
     FitSettings,
     Reconstruction,

@@ -44,10 +44,10 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import DowelSettings, GuideList, Orientation
 from workbench.model.template import TemplateHead
-from workbench.services.tissue.dowels import DepthSettings, DowelPlan, build_model_for
+from workbench.services.guides.classic import Guide
 from workbench.services.guides.fit_guides import FitGuides, stored_guides
 from workbench.services.guides.rules import Prediction, published_predictions
-from workbench.services.guides.classic import Guide
+from workbench.services.reconstruction.build_faces import BuildFaces, build_faces
 from workbench.services.reconstruction.fit_checks import check_face_fits_skull, check_fit_settings
 from workbench.services.reconstruction.reconstruct import (
     FitSettings,
@@ -56,7 +56,7 @@ from workbench.services.reconstruction.reconstruct import (
     reconstruct,
 )
 from workbench.services.templates.cache import reference_head
-from workbench.services.reconstruction.build_faces import BuildFaces, build_faces
+from workbench.services.tissue.dowels import DepthSettings, DowelPlan, build_model_for
 from workbench.services.tissue.tissue_model import TissueSettings
 
 Progress = Callable[[str], None]

@@ -47,15 +47,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from workbench.core.errors import InputError
 from workbench.core.bone_pieces import apparatus_faces, judge_pieces
+from workbench.core.errors import InputError
 from workbench.core.frame import apply_transform
 from workbench.core.jaw_pose import JawPose, Occlusion, occlusion, pose_jaw
-from workbench.core.skull_pose import SkullPoseResult
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import Registration, Target, register, smoothstep
 from workbench.core.rigid_search import PoseResult, search_pose
+from workbench.core.skull_pose import SkullPoseResult
 from workbench.core.spatial import MeshIndex
 from workbench.core.threads import query_workers
 from workbench.core.tps import LandmarkWarp, fit_warp

@@ -71,16 +71,17 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, TypeVar
 from os import PathLike
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
+from workbench.core.detail_layer import DetailLayer, build_detail
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.face_pose import FacePlacement, place_face
-from workbench.core.rigid_search import PoseResult
 from workbench.core.frame import apply_transform
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.limits import MIN_SCAN_FACE_COVERAGE, MIN_SCAN_NOSE_COVERAGE
@@ -88,14 +89,13 @@ from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import AFFINE_ROUNDS, Level, smoothstep
 from workbench.core.normals import normals_within_radius
 from workbench.core.raycast import RayCaster
+from workbench.core.rigid_search import PoseResult
 from workbench.core.self_intersection import self_intersections
 from workbench.core.spatial import MeshIndex
+from workbench.core.threads import worker_count
 from workbench.core.tps import fit_warp
 from workbench.core.untangle import untangle
 from workbench.core.visibility import field_of_view_caps, seen_from_outside
-from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
-from workbench.core.detail_layer import DetailLayer, build_detail
-from workbench.core.threads import worker_count
 from workbench.model.template import TemplateHead
 
 Progress = Callable[[str], None]
@@ -853,9 +853,9 @@ def _depth_pairs(
     head: TemplateHead, table: str, sex: str, build: str | float
 ) -> tuple[dict[str, tuple[str, float]], str, list[str]]:
     from workbench.io.tables import load_depth_table
+    from workbench.services.templates.template import paired_depths
     from workbench.services.tissue.dowel_sites import choose_depth_group
     from workbench.services.tissue.dowels import build_score
-    from workbench.services.templates.template import paired_depths
 
     tab = load_depth_table(table)
     model, z, by_model = build_score(tab, build)
@@ -1153,7 +1153,6 @@ def fit_scan(
         batches that need only the animatable head.
     """
     from workbench.core.rigid_search import SCALE_RANGE, search_pose
-    from workbench.services.templates.regions import face_regions
     from workbench.services.landmarks.frame import head_frame_from_landmarks
     from workbench.services.registration.skull_registration import head_transformed
     from workbench.services.templates.build import (
@@ -1163,6 +1162,7 @@ def fit_scan(
         scan_in_frame,
     )
     from workbench.services.templates.cache import reference_head
+    from workbench.services.templates.regions import face_regions
 
     say = progress or (lambda _m: None)
     t0 = time.perf_counter()
@@ -1868,11 +1868,11 @@ def fit_scan_pack(
     ``extra(folder, result)`` writes further files into the staged pack (the
     CLI's PDF report, which needs the render layer) and returns their paths.
     """
+    from workbench.core.colour_transfer import transfer_colours
     from workbench.core.units import check_units_choice, detect_units, resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.markups import read_landmarks
     from workbench.io.meshes import read_mesh
-    from workbench.core.colour_transfer import transfer_colours
     from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.scan_colours import read_scan_colours
     from workbench.io.skin_colour_export import write_coloured_skin

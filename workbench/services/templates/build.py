@@ -589,8 +589,8 @@ def build_template(
     from workbench.services.registration.skull_registration import (
         carry_head,
         mirror_from_landmarks,
-        register_skull,
         reference_in_frame,
+        register_skull,
     )
 
     say = progress or (lambda _m: None)
@@ -768,16 +768,14 @@ def build_template_pack(
     ``staged=True``: ``out`` is a private folder of the caller, written
     straight into.
     """
-    from workbench.core.units import resolve_units
+    from workbench.core.units import check_units_choice, resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.markups import read_landmarks
     from workbench.io.meshes import read_mesh
     from workbench.io.outputs import check_output_folder, write_folder
     from workbench.io.template_pack import export_template
-    from workbench.services.templates.cache import reference_head
-
-    from workbench.core.units import check_units_choice
     from workbench.services.case.input_checks import check_skull_mesh
+    from workbench.services.templates.cache import reference_head
 
     check_units_choice(units, scale)
     sources = [skin_path, skull_path, skin_landmarks, skull_landmarks]

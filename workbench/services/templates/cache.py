@@ -19,8 +19,8 @@ import tempfile
 from os import PathLike
 from pathlib import Path
 
-from workbench.core.data_paths import DEFAULT_DEPTH_TABLE, data_tables_dir
 from workbench.core import helper_process
+from workbench.core.data_paths import DEFAULT_DEPTH_TABLE, data_tables_dir
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.io.template_pack import export_template, load_template_pack
 from workbench.model.template import TemplateHead

@@ -35,6 +35,7 @@ from functools import cached_property
 
 import numpy as np
 
+from workbench.core.data_paths import data_tables_dir
 from workbench.core.headgen.muscle_paths import (
     MIRROR,
     linear_rows,
@@ -43,7 +44,6 @@ from workbench.core.headgen.muscle_paths import (
     polar_radius,
     unit,
 )
-from workbench.core.data_paths import data_tables_dir
 from workbench.core.headgen.skin import SkinTemplate
 from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex

@@ -33,8 +33,8 @@ import numpy as np
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
-from workbench.core.limits import check_tissue_depth
 from workbench.core.landmarks import LandmarkSet
+from workbench.core.limits import check_tissue_depth
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.io.build_model import (
@@ -46,6 +46,7 @@ from workbench.io.build_model import (
 )
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 from workbench.io.tables import DepthTable, load_depth_table
+from workbench.services.templates.template import DOWEL_RADIUS_MM
 from workbench.services.tissue.dowel_sites import (
     OFF_BONE_MM,
     SITE_PATTERN,
@@ -55,7 +56,6 @@ from workbench.services.tissue.dowel_sites import (
     interpolated_sites,
     signed_k,
 )
-from workbench.services.templates.template import DOWEL_RADIUS_MM
 
 #: Kähler's spm2 / sbm2 (supra / sub second molar), excluded in his reconstructions (§8.6.8).
 KAEHLER_CHEEK_EXCLUSIONS = frozenset({"ecm2s_l", "ecm2s_r", "ecm2i_l", "ecm2i_r"})

@@ -48,9 +48,9 @@ from workbench.core.raycast import RayCaster
 from workbench.core.spatial import MeshIndex
 from workbench.core.thickness import adjacency, harmonic_fill, smooth_field
 from workbench.model.template import TemplateHead
+from workbench.services.templates.reference_parts import skull_surface
 from workbench.services.tissue.dowel_sites import CALIBRATED_SITES
 from workbench.services.tissue.dowels import DepthSettings, plan_dowels
-from workbench.services.templates.reference_parts import skull_surface
 
 MODELS = ("table", "reference")
 #: where the eyeballs go: ``stephan2009`` — corneal apex 16 mm in front of the

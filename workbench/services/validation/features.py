@@ -153,13 +153,13 @@ def rule_landmarks(
     Returns ({rule id: {skin code: (3,) with NaN for coordinates the rule does not
     fix}}, {rule id: why it could not be computed}).
     """
+    from workbench.services.guides.classic import AXES, classic_guides
+    from workbench.services.guides.measure import sex_code
     from workbench.services.guides.rules import (
         load_guide_defaults,
         load_rules,
         published_predictions,
     )
-    from workbench.services.guides.measure import sex_code
-    from workbench.services.guides.classic import AXES, classic_guides
 
     out: dict[str, dict[str, np.ndarray]] = {}
     why: dict[str, str] = {}
