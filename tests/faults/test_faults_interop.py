@@ -392,7 +392,7 @@ def test_glb_vertices_are_the_ply_frame_in_metres(tmp_path: Path, monkeypatch) -
     reconstruction of a mirrored skull file.
     """
     from workbench.io.template_pack import FILES
-    from workbench.services.animation.animator import gltf as gltf_animation
+    from workbench.services.animation import gltf as gltf_animation
 
     mesh, _ = _skull_and_points()
     mirror = np.diag([-1.0, 1.0, 1.0])  # stored -> head frame (a reflection)
