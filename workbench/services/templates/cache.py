@@ -29,8 +29,8 @@ _PACKAGE = Path(__file__).resolve().parents[1]
 #: sources whose content decides the built-in head
 _SOURCE_GLOBS = (
     "core/headgen/*.py",
-    "services/template.py",
-    "services/muscles.py",
+    "services/templates/template.py",
+    "services/templates/muscles.py",
     "model/template.py",
     "model/muscles.py",
     "core/tps.py",
