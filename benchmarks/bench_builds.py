@@ -18,7 +18,7 @@ several repeats (median, min, max in seconds):
 and prints their sum beside the job's own fit time, with the budget
 (three faces add < 3 s).  The whole-process cost is measured by timing
 ``workbench reconstruct`` itself against the previous build (see the
-README).  Units: seconds; skin vertex count printed.
+docs/reconstruction.md).  Units: seconds; skin vertex count printed.
 """
 
 from __future__ import annotations

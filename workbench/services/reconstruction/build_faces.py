@@ -74,7 +74,8 @@ LID_FADE_MM = 5.0
 BLEND_PASSES = 4
 #: the fitted shape's own error where the bone is observed (σ, mm): set on headsq (the lean
 #: living CT the method was tuned on) as the smallest whole millimetre giving it ≥ 95 %
-#: coverage at the table's means; judged on the two Visible Human cadavers (README)
+#: coverage at the table's means; judged on the two Visible Human cadavers
+#: (docs/validation.md)
 MODEL_SD_MM = 1.0
 
 
