@@ -179,19 +179,9 @@ def render_reconstruction(
         if spread is not None and face_pd is not None:
             spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
 
-            def coloured(p, v) -> None:
-                actor = p.add_mesh(
-                    face_pd,
-                    scalars="spread_mm",
-                    cmap=SPREAD_CMAP,
-                    clim=spread_range[:2],
-                    smooth_shading=True,
-                    show_scalar_bar=False,
-                )
-                if eyes_pd is not None:
-                    p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
-                if v == views[len(views) // 2]:
-                    _scalar_bar(p, actor, "spread (mm)", spread_range, size)
+            coloured = _scalar_map(
+                face_pd, "spread_mm", spread_range, eyes_pd, "spread (mm)", views, size
+            )
 
             written["spread"] = _shoot(
                 studio, out / f"{prefix}_spread.png", [(cameras[v], v) for v in views], coloured
@@ -327,19 +317,7 @@ def render_builds(
             cameras = {v: _camera(kept, v, anterior, superior, size) for v in VIEWS}
             band_range = _nice_range(np.array([0.0, np.percentile(band_mm, 99.5)]))
 
-            def banded(p, v: str) -> None:
-                actor = p.add_mesh(
-                    band_pd,
-                    scalars="band_mm",
-                    cmap=SPREAD_CMAP,
-                    clim=band_range[:2],
-                    smooth_shading=True,
-                    show_scalar_bar=False,
-                )
-                if eyes_pd is not None:
-                    p.add_mesh(eyes_pd, color="#b0b0b0", smooth_shading=True)
-                if v == VIEWS[len(VIEWS) // 2]:
-                    _scalar_bar(p, actor, BAND_TITLE, band_range, size)
+            banded = _scalar_map(band_pd, "band_mm", band_range, eyes_pd, BAND_TITLE, VIEWS, size)
 
             written["band"] = _shoot(studio, path("band"), [(cameras[v], v) for v in VIEWS], banded)
     finally:
@@ -348,6 +326,35 @@ def render_builds(
 
 
 # ---------------------------------------------------------------- helpers
+def _scalar_map(
+    surface,
+    scalars: str,
+    scale: tuple[float, float, float],
+    eyes,
+    title: str,
+    views: Sequence[str],
+    size: tuple[int, int],
+):
+    """A painter for :func:`_shoot`: ``surface`` coloured by its point data ``scalars`` (mm)
+    on ``scale``, the eyes grey, one colour bar titled ``title`` under the middle view."""
+
+    def paint(p, v: str) -> None:
+        actor = p.add_mesh(
+            surface,
+            scalars=scalars,
+            cmap=SPREAD_CMAP,
+            clim=scale[:2],
+            smooth_shading=True,
+            show_scalar_bar=False,
+        )
+        if eyes is not None:
+            p.add_mesh(eyes, color="#b0b0b0", smooth_shading=True)
+        if v == views[len(views) // 2]:
+            _scalar_bar(p, actor, title, scale, size)
+
+    return paint
+
+
 def _check(skull: Mesh, face: Mesh | None, dowels, spread) -> tuple[np.ndarray, np.ndarray]:
     if skull.n_faces == 0:
         raise InputError("skull", "the skull mesh has no triangles")
