@@ -12,8 +12,8 @@ import pytest
 
 from workbench.core.mesh import Mesh
 from workbench.core.raycast import RayCaster
-from workbench.services.guides.classic import Guide, classic_guides
 from workbench.services.guides import measure as gm
+from workbench.services.guides.classic import Guide, classic_guides
 from workbench.services.guides.fit_guides import width_problem
 from workbench.services.guides.rules import effective_rules, load_guide_defaults, load_rules
 
