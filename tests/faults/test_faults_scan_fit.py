@@ -185,7 +185,8 @@ def test_row10_partial_face_below_nose(
 def test_row7_fold_overs_ask_for_a_check():
     """The issue's two heads in one scan left 17 fold-overs and exited 0: above
     MAX_FOLD_OVERS the fit asks for a check, naming where they are."""
-    from workbench.services.scan_fit.fit import MAX_FOLD_OVERS, _fit_check
+    from workbench.services.scan_fit.figures import _fit_check
+    from workbench.services.scan_fit.settings import MAX_FOLD_OVERS
 
     figures = {"fold_overs_outside_mouth_corner_seam": 17, "self_intersections": {"new_pairs": 0}}
     check = _fit_check(figures, "ear_r 9, cheek_l 8")
@@ -198,7 +199,7 @@ def test_row7_fold_overs_ask_for_a_check():
 def test_row7_folded_fit_exits_3(files, tmp_path, capsys, monkeypatch):
     """The CLI writes the pack of a fit that asks for a check but exits 3 and says why
     (stubbed fit: a real scan that folds is refused earlier, see the two heads)."""
-    import workbench.services.scan_fit.fit as scan_fit
+    import workbench.services.scan_fit.pack as scan_fit
 
     reason = "17 triangles of the fitted skin are turned over against the reference's"
     figures = {

@@ -9,7 +9,8 @@ from tests.services._scans import damaged_skin
 from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh, concatenate
-from workbench.services.scan_fit.fit import check_scan_mesh, fit_scan
+from workbench.services.scan_fit.checks import check_scan_mesh
+from workbench.services.scan_fit.fit import fit_scan
 
 
 @pytest.fixture(scope="module")
@@ -188,7 +189,8 @@ def test_thin_sheets_over_the_skin_are_told():
     SHEET_MAX_MM."""
     from tests.services._scans import tube
     from workbench.core.spatial import MeshIndex
-    from workbench.services.scan_fit.fit import SHEET_MAX_MM, _sheets_outside, _sheets_over_scan
+    from workbench.services.scan_fit.settings import SHEET_MAX_MM
+    from workbench.services.scan_fit.sheets import _sheets_outside, _sheets_over_scan
 
     ball = _ball(60.0)
 
@@ -293,7 +295,7 @@ def test_scan_colour_is_carried_onto_the_fitted_skin(tmp_path, head_female):
     colours follow the scan's (a ramp along the head's height)."""
     from workbench.io.mesh_formats import ply
     from workbench.io.meshes import read_mesh
-    from workbench.services.scan_fit.fit import fit_scan_pack
+    from workbench.services.scan_fit.pack import fit_scan_pack
 
     scan, _ = damaged_skin(head_female)
     height = head_female.skin.vertices[:, 1]  # same vertex order as the scan
@@ -415,7 +417,8 @@ def test_skull_vs_bone_and_its_uniform_offset_baseline(head_female):
     """A head's own skull as the "true bone" scores 0 mm; the face skin moved 6 mm inward
     scores as far as the face's real tissue depths differ from 6 mm; a bone 4 mm forward
     scores between (the surfaces slide past each other where they are not frontal)."""
-    from workbench.services.scan_fit.fit import BONE_PARTS, _skull_vs_bone
+    from workbench.services.scan_fit.figures import _skull_vs_bone
+    from workbench.services.scan_fit.settings import BONE_PARTS
     from workbench.services.templates.regions import face_regions
 
     face = np.zeros(head_female.skin.n_vertices, bool)

@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     from workbench.cli.common import print_self_check, self_check_status
     from workbench.cli.reconstruct_cmd import orientation_of
     from workbench.io.samples import resolve_input
-    from workbench.services.scan_fit.fit import fit_scan_pack, fitted_vs_inferred
+    from workbench.services.scan_fit.figures import fitted_vs_inferred
+    from workbench.services.scan_fit.pack import fit_scan_pack
 
     orientation = orientation_of(args, args.scan)
     result, files = fit_scan_pack(

@@ -326,7 +326,7 @@ def colours_on_working_scan(
     face_source: np.ndarray | None,
 ) -> ScanColours:
     """``colours`` (aligned with the file's mesh) aligned with ``working``, the scan the
-    fit uses (:func:`workbench.services.scan_fit.fit.prepare_scan`).
+    fit uses (:func:`workbench.services.scan_fit.checks.prepare_scan`).
 
     With ``vertex_of`` (each file vertex's working vertex, -1: left out) and
     ``face_source`` (each working triangle's file triangle), vertex colours

@@ -2,7 +2,7 @@
 
 The fit is the service's (:func:`workbench.services.scan_fit.fit.fit_scan`,
 ``workbench fit-scan``), run in the window's worker with progress and
-cancel; "Save pack…" runs :func:`~workbench.services.scan_fit.fit.fit_scan_pack`
+cancel; "Save pack…" runs :func:`~workbench.services.scan_fit.pack.fit_scan_pack`
 with the same inputs (the scan file, its units, the landmarks the user
 placed, sex, table, build), which refuses an existing folder unless the
 user confirms.
@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     from workbench.qt.picking import ClickPicker
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
-    from workbench.services.scan_fit.fit import ScanFit
+    from workbench.services.scan_fit.settings import ScanFit
 
 #: the worker channel of fits and saves (a newer job supersedes the older)
 CHANNEL = "scan_fit"
@@ -188,7 +188,7 @@ def read_scan(path: str | Path, units: str = "auto", scale: float | None = None)
     from workbench.core.units import check_units_choice, resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.meshes import read_mesh
-    from workbench.services.scan_fit.fit import check_scan_mesh
+    from workbench.services.scan_fit.checks import check_scan_mesh
     from workbench.services.templates.cache import reference_head
 
     check_units_choice(units, scale)
@@ -318,7 +318,7 @@ def save_pack(
     the pack as :data:`PLACED_FILE` (scan frame, mm).
     """
     from workbench.io.markups import write_mrk_json
-    from workbench.services.scan_fit.fit import fit_scan_pack
+    from workbench.services.scan_fit.pack import fit_scan_pack
 
     seeds = placed if placed is not None and len(placed) else None
     with tempfile.TemporaryDirectory(prefix="workbench-scan-") as tmp:

@@ -2,7 +2,7 @@
 
 Frame and units: everything is in the fitted person's head frame (x to the
 subject's left, x = 0 midsagittal, y up, z toward the face), mm — the frame
-:class:`workbench.services.scan_fit.fit.ScanFit` holds the scan and the fitted
+:class:`workbench.services.scan_fit.settings.ScanFit` holds the scan and the fitted
 skin in.  Views are orthographic: "front" looks at the face along -z,
 "left" at the subject's left profile (camera on +x), "right" at the right
 profile (camera on -x).
@@ -281,7 +281,7 @@ def render_distance_histogram(
 def render_scan_fit_pictures(
     result: Any, folder: str | Path, *, size: tuple[int, int] = (440, 520)
 ) -> tuple[dict[str, Path], list[str]]:
-    """The pictures of a :class:`~workbench.services.scan_fit.fit.ScanFit` into ``folder``.
+    """The pictures of a :class:`~workbench.services.scan_fit.settings.ScanFit` into ``folder``.
 
     Returns ``({"distance": png, "signed": png, "histogram": png}, notes)``;
     a picture that cannot be drawn (no OpenGL, no scan kept in the result)

@@ -6,7 +6,7 @@ Horizontal at y = 0), as in :mod:`workbench.services.scan_fit.fit`.
 
 Two steps, so the layout can be tested without a fit:
 
-* :func:`fit_scan_summary` turns a :class:`~workbench.services.scan_fit.fit.ScanFit`
+* :func:`fit_scan_summary` turns a :class:`~workbench.services.scan_fit.settings.ScanFit`
   into a plain, JSON-able dict (provenance, the figure rows beside the
   issue's targets, warnings, per-landmark tables);
 * :func:`write_fit_scan_pdf` lays that dict out with the look of the other

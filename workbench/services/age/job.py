@@ -30,7 +30,7 @@ from typing import Any
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
 from workbench.services.age.change import AgeResult, Progress, age_head, in_frankfort_frame
-from workbench.services.scan_fit.fit import _json_default
+from workbench.services.scan_fit.pack import _json_default
 
 #: most ages one request may ask for
 MAX_AGES = 40
