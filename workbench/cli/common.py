@@ -13,6 +13,7 @@ from typing import Any
 from workbench.core.errors import WorkbenchError
 from workbench.core.mesh import Mesh
 from workbench.core.units import UNIT_SCALES, check_units_choice, resolve_units
+from workbench.io.atomic import json_default, write_json_atomic
 from workbench.io.meshes import MeshReadResult, read_mesh
 from workbench.io.samples import resolve_input
 
@@ -107,26 +108,11 @@ def load_mesh(
 
 
 def write_json(data: dict[str, Any], out: Path | None) -> None:
-    text = json.dumps(data, indent=2, default=_json_default)
     if out is None:
-        print(text)
+        print(json.dumps(data, indent=2, default=json_default))
     else:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        try:
-            tmp.write_text(text + "\n", encoding="utf-8")
-            tmp.replace(out)
-        except BaseException:  # a full disk, Ctrl-C: no half-written .tmp left behind
-            tmp.unlink(missing_ok=True)
-            raise
-
-
-def _json_default(value: Any) -> Any:
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+        write_json_atomic(out, data)  # a full disk, Ctrl-C: the old file or the whole new one
 
 
 def mesh_summary(mesh: Mesh) -> dict[str, Any]:

@@ -9,11 +9,13 @@ failure the temporary file is removed and the target is left as it was.
 
 from __future__ import annotations
 
+import json
 import os
 import secrets
 from collections.abc import Callable
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 
 def _temporary(path: Path) -> Path:
@@ -64,3 +66,19 @@ def write_with_atomic(path: str | PathLike[str], write: Callable[[Path], object]
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def json_default(value: Any) -> Any:
+    """``json.dumps``'s ``default`` for the values results hold: numpy arrays and scalars
+    (as lists and numbers) and paths (as text)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def write_json_atomic(path: str | PathLike[str], data: Any, *, indent: int = 2) -> Path:
+    """``data`` as JSON (UTF-8, a final newline; numpy values and paths converted by
+    :func:`json_default`) written to ``path`` atomically."""
+    return write_text_atomic(path, json.dumps(data, indent=indent, default=json_default) + "\n")

@@ -19,7 +19,6 @@ dialog.  The output folder (written as a whole, see
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
@@ -28,9 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from workbench.core.errors import InputError
+from workbench.io.atomic import write_json_atomic
 from workbench.model.template import TemplateHead
 from workbench.services.age.change import AgeResult, Progress, age_head, in_frankfort_frame
-from workbench.services.scan_fit.pack import _json_default
 
 #: most ages one request may ask for
 MAX_AGES = 40
@@ -269,9 +268,7 @@ def age_to_folder(
             files += export_template(r.head, folder / pack_name(r.to_age, several))
         report = report_dict(head, results, inputs)
         report["seconds"] = round(seconds, 3)
-        path = folder / "report.json"
-        path.write_text(json.dumps(report, indent=1, default=_json_default) + "\n", "utf-8")
-        files.append(path)
+        files.append(write_json_atomic(folder / "report.json", report, indent=1))
         files.append(write_sequence_glb(folder / "sequence.glb", source, results))
         if extra is not None:
             files += extra(folder, source, results)

@@ -15,7 +15,6 @@ share the scan file's frame; the pack is in the fitted person's head frame
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from os import PathLike
@@ -29,6 +28,7 @@ from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
+from workbench.io.atomic import write_json_atomic
 from workbench.services.scan_fit.checks import check_landmarks_on_scan, prepare_scan
 from workbench.services.scan_fit.fit import fit_scan
 from workbench.services.scan_fit.settings import (
@@ -266,20 +266,16 @@ def _write_pack(
             "observed_fraction": round(float(skin_rgb.observed_fraction), 4),
             "atlas_size": COLOUR_ATLAS_SIZE,
         }
-    report = folder / "fit_report.json"
-    report.write_text(
-        json.dumps(
-            {
-                "template_id": result.head.template_id,
-                "scan": path.name,
-                "mirrored_input": result.mirrored_input,
-                "input_to_head": result.input_to_head.tolist(),
-                "warnings": list(result.warnings),
-                **result.figures,
-            },
-            indent=2,
-            default=_json_default,
-        )
+    report = write_json_atomic(
+        folder / "fit_report.json",
+        {
+            "template_id": result.head.template_id,
+            "scan": path.name,
+            "mirrored_input": result.mirrored_input,
+            "input_to_head": result.input_to_head.tolist(),
+            "warnings": list(result.warnings),
+            **result.figures,
+        },
     )
     more = [] if extra is None else extra(folder, result)
     return [*files, report, *more]
@@ -297,11 +293,3 @@ def _working_colours(
     return colours_on_working_scan(
         colours, file_mesh.vertices, prepared.mesh, prepared.vertex_of, prepared.face_source
     )
-
-
-def _json_default(value: object) -> object:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
