@@ -97,12 +97,10 @@ def _cycles(graph) -> list[list[str]]:
 
 def test_no_import_cycles() -> None:
     """No module of workbench imports itself back through others, counting imports made
-    inside functions.  Imports under TYPE_CHECKING (annotations only) are left out: the
-    window still has two such type-only circles (the autosave host protocol, the scan-fit
-    panel and its tool; issue 32)."""
+    inside functions and those for annotations only (under TYPE_CHECKING)."""
     import grimp
 
-    graph = grimp.build_graph("workbench", exclude_type_checking_imports=True, cache_dir=None)
+    graph = grimp.build_graph("workbench", cache_dir=None)
     cycles = _cycles(graph)
     assert cycles == [], "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
     # the helper itself finds a cycle when there is one

@@ -206,7 +206,7 @@ def test_bad_scans_give_a_readable_message(qtbot, window, tmp_path):
 
 
 def test_scan_landmarks_undo_redo() -> None:
-    from workbench.qt.scan_fit_ops import ScanLandmarks
+    from workbench.qt.scan_fit_state import ScanLandmarks
 
     lms = ScanLandmarks()
     assert lms.place("n", np.zeros(3)) and lms.undo_text == "Place n"

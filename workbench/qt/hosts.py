@@ -20,7 +20,6 @@ if TYPE_CHECKING:
 
     from PySide6.QtWidgets import QDockWidget, QMenuBar, QWidget
 
-    from workbench.qt.autosave import Autosaver
     from workbench.qt.document import Document
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
@@ -50,7 +49,10 @@ class AutosaveHost(Protocol):
     document: Document
     messages: list[str]
     interactive: bool
-    autosaver: Autosaver
+    #: the window's :class:`workbench.qt.autosave.Autosaver`, typed where it is used
+    #: (``recover`` annotates it): naming the class here made hosts and autosave import
+    #: each other
+    autosaver: Any
 
     def window(self) -> QWidget: ...
 

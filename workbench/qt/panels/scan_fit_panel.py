@@ -37,7 +37,7 @@ from workbench.io.tables import list_tables
 from workbench.qt.panels.dowels_panel import BUILDS
 
 if TYPE_CHECKING:
-    from workbench.qt.scan_fit_ops import FitView, OpenedScan, ScanLandmarks
+    from workbench.qt.scan_fit_state import FitView, OpenedScan, ScanLandmarks
 
 COLUMNS = ("Code", "Name", "State", "Conf. (mm)")
 UNITS = ("auto", "mm", "cm", "m", "in")
