@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from workbench.core.errors import InputError
-from workbench.io.build_model import BUILD_FACES, load_build_model, parse_bmi_build
+from workbench.io.build_model import BUILD_FACES, load_build_model
 from workbench.io.tables import load_depth_table
-from workbench.model.reconstruction_setup import SetupError, parse_build
+from workbench.model.reconstruction_setup import SetupError, parse_bmi_build, parse_build
 from workbench.services.tissue.dowels import DepthSettings, build_score, plan_dowels
 
 ORIENT = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))  # the generated skull: face +z, up +y

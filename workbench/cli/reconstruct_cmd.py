@@ -27,11 +27,11 @@ from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check
 
 
 def _build(value: str) -> str | float:
-    if value in ("slender", "normal", "obese", "average", "heavy"):
+    from workbench.model.reconstruction_setup import BUILDS, SetupError, parse_build
+
+    if value in BUILDS:
         return value
     if value.strip().lower().startswith("bmi"):
-        from workbench.model.reconstruction_setup import SetupError, parse_build
-
         try:
             return parse_build(value)
         except SetupError as exc:

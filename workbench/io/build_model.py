@@ -178,29 +178,3 @@ def _number(meta: dict[str, Any], key: str, path: Path) -> float:
     if not isinstance(value, (int, float)) or not math.isfinite(float(value)):
         raise InputError(path, f"{key} is missing or not a number")
     return float(value)
-
-
-def parse_bmi_build(text: str) -> float | None:
-    """The BMI of a build written ``bmi:27.5`` / ``bmi 27.5`` / ``bmi=27.5`` (None if not
-    such a text).
-
-    Raises
-    ------
-    InputError
-        A BMI that is not a number or lies outside :data:`BMI_RANGE`.
-    """
-    t = text.strip().lower()
-    if not t.startswith("bmi"):
-        return None
-    rest = t[3:].lstrip(" :=")
-    try:
-        bmi = float(rest)
-    except ValueError:
-        raise InputError("build", f"{text!r}: the BMI is not a number", "e.g. bmi:27.5") from None
-    if not (math.isfinite(bmi) and BMI_RANGE[0] <= bmi <= BMI_RANGE[1]):
-        raise InputError(
-            "build",
-            f"BMI {bmi:g} kg/m² is outside {BMI_RANGE[0]:g}-{BMI_RANGE[1]:g}",
-            "a BMI is weight in kg over height in m squared, e.g. bmi:27.5",
-        )
-    return bmi

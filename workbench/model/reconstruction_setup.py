@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -49,7 +48,6 @@ SEXES = ("female", "male")
 #: named builds (a table's build groups, else the build model's faces: normal = the means,
 #: obese = heavy); ``bmi:X`` a BMI for the build model; a number k means mean + k SD
 BUILDS = ("slender", "normal", "obese", "average", "heavy")
-_BMI = re.compile(r"^bmi\s*[:= ]?\s*([0-9.]+)$")
 #: soft-tissue models (:mod:`workbench.services.tissue.tissue_model`, ``MODELS``)
 TISSUE_MODELS = ("table", "reference")
 #: where the mandible is for the face (see DowelSettings.jaw)
@@ -69,6 +67,31 @@ class SetupError(InputError, ValueError):
 
 
 # ------------------------------------------------------------------ dowels
+def parse_bmi_build(text: str) -> float | None:
+    """The BMI (kg/m²) of a build written ``bmi:27.5`` / ``bmi 27.5`` / ``bmi=27.5``, or None
+    when ``text`` is not such a build.
+
+    Raises
+    ------
+    SetupError
+        A BMI that is not a number or lies outside :data:`~workbench.core.limits.BMI_RANGE`.
+    """
+    t = str(text).strip().lower()
+    if not t.startswith("bmi"):
+        return None
+    try:
+        bmi = float(t[3:].lstrip(" :="))
+    except ValueError:
+        raise SetupError("build", f"{text!r}: the BMI is not a number", "e.g. bmi:27.5") from None
+    if not (math.isfinite(bmi) and BMI_RANGE[0] <= bmi <= BMI_RANGE[1]):
+        raise SetupError(
+            "build",
+            f"BMI {bmi:g} kg/m² is outside {BMI_RANGE[0]:g}-{BMI_RANGE[1]:g}",
+            "a BMI is weight in kg over height in m squared, e.g. bmi:27.5",
+        )
+    return bmi
+
+
 def parse_build(value: Any) -> str | float:
     """``"normal"`` / ``"slender"`` / ``"obese"``, or k (float) for mean + k SD.
 
@@ -82,15 +105,9 @@ def parse_build(value: Any) -> str | float:
         text = str(value).strip().lower()
         if text in BUILDS:
             return text
-        bmi = _BMI.match(text)
+        bmi = parse_bmi_build(text)
         if bmi is not None:
-            b = float(bmi.group(1)) if bmi.group(1).count(".") <= 1 else math.nan
-            if not BMI_RANGE[0] <= b <= BMI_RANGE[1]:
-                raise SetupError(
-                    "build",
-                    f"BMI {bmi.group(1)} is outside {BMI_RANGE[0]:g}-{BMI_RANGE[1]:g} kg/m²",
-                )
-            return f"bmi:{b:g}"
+            return f"bmi:{bmi:g}"
         try:
             k = float(text.removesuffix("sd").strip())
         except ValueError:

@@ -42,10 +42,10 @@ from workbench.io.build_model import (
     BUILD_FACES,
     BuildModel,
     load_build_model,
-    parse_bmi_build,
 )
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 from workbench.io.tables import DepthTable, load_depth_table
+from workbench.model.reconstruction_setup import parse_bmi_build
 from workbench.services.templates.template import DOWEL_RADIUS_MM
 from workbench.services.tissue.dowel_sites import (
     OFF_BONE_MM,

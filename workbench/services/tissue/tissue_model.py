@@ -49,6 +49,7 @@ from workbench.core.spatial import MeshIndex
 from workbench.core.thickness import adjacency, harmonic_fill, smooth_field
 from workbench.model.template import TemplateHead
 from workbench.services.templates.reference_parts import skull_surface
+from workbench.services.templates.regions import REGION_NAMES
 from workbench.services.tissue.dowel_sites import CALIBRATED_SITES
 from workbench.services.tissue.dowels import DepthSettings, plan_dowels
 
@@ -59,7 +60,7 @@ MODELS = ("table", "reference")
 #: reference head has them, carried with its skull
 EYE_PLACEMENTS = ("auto", "stephan2009", "reference")
 #: regions a factor can be set for (:func:`workbench.services.templates.regions.face_regions`)
-REGIONS = ("forehead", "orbits", "nose", "cheeks", "mouth", "chin")
+REGIONS = REGION_NAMES
 #: skin regions of the reference head that keep their shape
 FEATURE_REGIONS = (
     "nose",
