@@ -109,6 +109,13 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from workbench.core.compiled import numba as _numba
+from workbench.core.mass_spring_setup import (
+    BoneContact,
+    edge_topology,
+    kinematic_jaw_share,
+    muscle_weights_per_node,
+    triangle_areas,
+)
 from workbench.core.spatial import MeshIndex
 
 NONE, SKULL, JAW = 0, 1, 2
@@ -277,46 +284,6 @@ class SkinParameters:
     hold_ratio: float = 0.1
 
 
-def edge_topology(
-    faces: np.ndarray, n: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Edges of a triangle mesh and the bending pairs across them.
-
-    Returns ``edges`` ``(e, 2)`` (unique, low id first), ``bend`` ``(b, 2)``
-    (the two vertices opposite each interior edge), ``bend_edge`` ``(b,)``
-    (the edge each bending pair crosses) and ``edge_face`` ``(3f, 2)``
-    (edge id, face id) incidences.
-    """
-    f = np.asarray(faces, dtype=np.int64)
-    a = f.reshape(-1)
-    b = f[:, [1, 2, 0]].reshape(-1)
-    opp = f[:, [2, 0, 1]].reshape(-1)
-    face_of = np.repeat(np.arange(len(f)), 3)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * n + hi
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    first = np.r_[True, ks[1:] != ks[:-1]]
-    edge_id_sorted = np.cumsum(first) - 1
-    edge_id = np.empty_like(edge_id_sorted)
-    edge_id[order] = edge_id_sorted
-    uniq = order[first]
-    edges = np.stack([lo[uniq], hi[uniq]], axis=1)
-    # interior edges: consecutive equal keys in sorted order
-    pair = np.nonzero(ks[1:] == ks[:-1])[0]
-    bend = np.stack([opp[order[pair]], opp[order[pair + 1]]], axis=1)
-    bend_edge = edge_id_sorted[pair]
-    ok = bend[:, 0] != bend[:, 1]
-    edge_face = np.stack([edge_id, face_of], axis=1)
-    return edges, bend[ok], bend_edge[ok], edge_face
-
-
-def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``(f,)`` triangle areas in mm²."""
-    v = vertices[faces]
-    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-
-
 class SkinSimulation:
     """Mass-spring skin on a triangle mesh, stepped by projective dynamics.
 
@@ -359,7 +326,37 @@ class SkinSimulation:
         free_of_bone = np.zeros(n, bool) if bone_free is None else np.asarray(bone_free, bool)
         lower = np.zeros(n, bool) if lower_face is None else np.asarray(lower_face, bool)
 
-        # --- masses (g): lumped third of rest triangle areas x thickness x density
+        area_f = self._init_masses(x0, f)
+        bone = self._init_bone_attachment(x0, sim, free_of_bone, lower, cranium, mandible)
+
+        # --- stiffness scales (see module docstring)
+        k_area = p.density_g_per_mm3 * p.thickness_mm / p.response_time_s**2  # g/(s^2 mm^2)
+        modulus = k_area * p.membrane_length_mm**2  # g/s^2
+        self.k_area = k_area
+        self.modulus = modulus
+        self._init_springs(x0, f, area_f, sim)
+        self._init_node_weights(sim, muscle_weights_per_node(n, muscle_nodes, muscle_weights, sim))
+        self.bone_rest = np.linalg.norm(x0 - bone.points, axis=1)
+        self._init_system(sim)
+
+        self.x = x0.copy()
+        self.v = np.zeros_like(x0)
+        self.jaw_rotation = np.eye(3)
+        self.jaw_translation = np.zeros(3)
+        self._targets = x0[self.muscle_nodes].copy()
+        self._kin_rest = x0[self.kinematic]
+        self._kin_jaw = kinematic_jaw_share(bone, self.kinematic, p.bone_max_mm)
+        self._init_local_step(x0, bone.points)
+        self.steps_taken = 0
+
+    def _init_masses(self, x0: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Lumped masses (g): a third of each rest triangle's area x thickness x density.
+
+        Sets ``_vf`` (vertex-face incidence), ``rest_area`` (mm², per vertex)
+        and ``mass``; returns the rest triangle areas (mm²).
+        """
+        p = self.params
+        n = len(x0)
         area_f = triangle_areas(x0, f)
         self._vf = sp.csr_matrix(
             (np.ones(f.size), (f.reshape(-1), np.repeat(np.arange(len(f)), 3))), shape=(n, len(f))
@@ -367,8 +364,24 @@ class SkinSimulation:
         area_v = (self._vf @ area_f) / 3.0
         self.rest_area = np.maximum(area_v, 1e-9)
         self.mass = self.rest_area * p.thickness_mm * p.density_g_per_mm3
+        return area_f
 
-        # --- bone attachment, decided once from skin-bone distances
+    def _init_bone_attachment(
+        self,
+        x0: np.ndarray,
+        sim: np.ndarray,
+        free_of_bone: np.ndarray,
+        lower: np.ndarray,
+        cranium: MeshIndex,
+        mandible: MeshIndex | None,
+    ) -> BoneContact:
+        """Decide once, from the rest skin-bone distances (mm), which bone each node follows.
+
+        Sets ``attachment``, ``follows``, ``guard_nodes``, ``bone_distance`` and
+        the rest bone points and unit normals (head frame); returns the contact.
+        """
+        p = self.params
+        n = len(x0)
         cl_c = cranium.closest_points(x0)
         d_c = cl_c.distances
         bone_pt = cl_c.points.copy()
@@ -399,15 +412,18 @@ class SkinSimulation:
         self.bone_distance = d_b
         self._bone_pt0 = bone_pt
         self._bone_n0 = bone_n / np.maximum(np.linalg.norm(bone_n, axis=1, keepdims=True), 1e-12)
+        return BoneContact(bone_pt, d_b, nearer_jaw)
 
-        # --- stiffness scales (see module docstring)
-        h = p.time_step_s
-        k_area = p.density_g_per_mm3 * p.thickness_mm / p.response_time_s**2  # g/(s^2 mm^2)
-        modulus = k_area * p.membrane_length_mm**2  # g/s^2
-        self.k_area = k_area
-        self.modulus = modulus
+    def _init_springs(self, x0: np.ndarray, f: np.ndarray, area_f: np.ndarray, sim: np.ndarray):
+        """Edge and bending springs: rest lengths (mm) and Van Gelder stiffnesses (g/s²).
 
-        edges, bend, bend_edge, edge_face = edge_topology(f, n)
+        Springs between two kinematic nodes do nothing and are dropped.  Sets
+        ``spring_i``, ``spring_j``, ``spring_rest``, ``spring_w`` (edge springs
+        first) and the counts ``n_edge_springs``, ``n_bend_springs``.
+        """
+        p = self.params
+        modulus = self.modulus
+        edges, bend, bend_edge, edge_face = edge_topology(f, len(x0))
         e_area = np.bincount(edge_face[:, 0], weights=area_f[edge_face[:, 1]], minlength=len(edges))
         r_e = np.linalg.norm(x0[edges[:, 0]] - x0[edges[:, 1]], axis=1)
         r_b = np.linalg.norm(x0[bend[:, 0]] - x0[bend[:, 1]], axis=1)
@@ -425,12 +441,14 @@ class SkinSimulation:
         self.n_edge_springs = int(keep_e.sum())
         self.n_bend_springs = int(keep_b.sum())
 
-        mw = np.zeros(n)
-        if muscle_nodes is not None and len(muscle_nodes):
-            mw[np.asarray(muscle_nodes, np.int64)] = np.clip(
-                np.asarray(muscle_weights, float), 0, 1
-            )
-        mw[~sim] = 0.0
+    def _init_node_weights(self, sim: np.ndarray, mw: np.ndarray) -> None:
+        """Per-node weights (g/s²) of the bone, tether, muscle and hold terms, and their nodes.
+
+        ``mw`` is the muscle weight per node (0 on kinematic nodes): the bone
+        spring is scaled by ``1 - mw`` so the bone and muscle springs blend.
+        """
+        p = self.params
+        k_area, attach = self.k_area, self.attachment
         self.muscle_weight = mw
         bone_total = np.where(attach != NONE, k_area * self.rest_area * (1.0 - mw), 0.0)
         self.bone_w = (1.0 - p.tether_fraction) * bone_total
@@ -438,9 +456,20 @@ class SkinSimulation:
         self.muscle_w = p.muscle_ratio * k_area * self.rest_area * mw
         self.bone_nodes = np.nonzero(self.bone_w > 0)[0]
         self.muscle_nodes = np.nonzero(self.muscle_w > 0)[0]
-        self.bone_rest = np.linalg.norm(x0 - bone_pt, axis=1)
+        # nodes with neither bone nor full muscle springs: a weak pull to rest (Lee's h_i, L 8),
+        # or sliding cheeks would converge very slowly and drift
+        self.hold_w = np.where(
+            sim & (attach == NONE), p.hold_ratio * k_area * self.rest_area * (1.0 - mw), 0.0
+        )
+        self.hold_nodes = np.nonzero(self.hold_w > 0)[0]
 
-        # --- global matrix M/h^2 + sum w A^T A, split into free / kinematic blocks
+    def _init_system(self, sim: np.ndarray) -> None:
+        """Global matrix ``M/h² + Σ w AᵀA``, split into free / kinematic blocks, and its LU.
+
+        ``A`` is the spring incidence (one row per spring, +1 at i, -1 at j);
+        factorised once for the real-time step ``params.time_step_s``.
+        """
+        n = self.n
         m = len(self.spring_i)
         rows = np.arange(m)
         a_mat = sp.csr_matrix(
@@ -454,12 +483,6 @@ class SkinSimulation:
         lap = (a_mat.T @ w_springs @ a_mat).tocsr()
         self.free = np.nonzero(sim)[0]
         self.kinematic = np.nonzero(~sim)[0]
-        # nodes with neither bone nor full muscle springs: a weak pull to rest (Lee's h_i, L 8),
-        # or sliding cheeks would converge very slowly and drift
-        self.hold_w = np.where(
-            sim & (attach == NONE), p.hold_ratio * k_area * self.rest_area * (1.0 - mw), 0.0
-        )
-        self.hold_nodes = np.nonzero(self.hold_w > 0)[0]
         self._stiff = (
             lap + sp.diags(self.bone_w + self.tether_w + self.muscle_w + self.hold_w)
         ).tocsc()
@@ -468,29 +491,18 @@ class SkinSimulation:
         ).tocsr()  # n x m: scatter of w * projected spring vectors
         self._a_t_w_free = self._a_t_w[self.free]
         self._l_fk = self._stiff[self.free][:, self.kinematic].tocsr()
-        self._lu, self._inertia = self._factor(h)
+        self._lu, self._inertia = self._factor(self.params.time_step_s)
         self._settle_solver: tuple[Any, np.ndarray] | None = None
 
-        self.x = x0.copy()
-        self.v = np.zeros_like(x0)
-        self.jaw_rotation = np.eye(3)
-        self.jaw_translation = np.zeros(3)
-        self._targets = x0[self.muscle_nodes].copy()
-        self._kin_rest = x0[self.kinematic]
-        # kinematic nodes nearer the mandible than the cranium follow the jaw fully within
-        # bone_max_mm of it and fade to the skull (as Breton's jaw
-        # region fades toward the neck, digest §12) over three more, so the opening jaw never
-        # cuts the neck skin
-        near = nearer_jaw[self.kinematic]
-        fade = np.clip(
-            1.0 - (d_b[self.kinematic] - p.bone_max_mm) / (3.0 * p.bone_max_mm), 0.0, 1.0
-        )
-        self._kin_jaw = np.where(near, fade, 0.0)[:, None]
+    def _init_local_step(self, x0: np.ndarray, bone_pt: np.ndarray) -> None:
+        """Gathered per-term arrays the local step reads (anchors and normals in the head frame,
+        mm; weights in g/s²; positions of the nodes in the free block)."""
+        n = self.n
         self._bone_jaw = self.attachment[self.bone_nodes] == JAW
         self._bone_anchor = bone_pt[self.bone_nodes].copy()
         self._bone_normal = self._bone_n0[self.bone_nodes].copy()
         bone_face_ids = np.unique(self._vf[self.bone_nodes].indices)
-        self._bone_faces = f[bone_face_ids]
+        self._bone_faces = self.faces[bone_face_ids]
         self._face_of_bone = self._vf[self.bone_nodes][:, bone_face_ids].tocsr()
         ring = self._vf[self.bone_nodes].tocsr()  # one-ring faces of each bone node, for the kernel
         self._ring_ptr = ring.indptr.astype(np.int64)
@@ -512,8 +524,7 @@ class SkinSimulation:
         self._guard_anchor = bone_pt[g].copy()
         self._guard_normal = self._bone_n0[g].copy()
         depth0 = np.einsum("ij,ij->i", x0[g] - bone_pt[g], self._bone_n0[g])
-        self._margin = np.minimum(p.bone_margin_mm, np.maximum(depth0, 0.0))
-        self.steps_taken = 0
+        self._margin = np.minimum(self.params.bone_margin_mm, np.maximum(depth0, 0.0))
 
     def _factor(self, h: float) -> tuple[Any, np.ndarray]:
         """LU of the free block of ``M/h² + Σ w AᵀA`` and the inertia weights ``m/h²``."""

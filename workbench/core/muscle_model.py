@@ -111,6 +111,89 @@ def _arc_params(poly: np.ndarray) -> np.ndarray:
     return s / s[-1] if s[-1] > 0 else np.linspace(0.0, 1.0, len(poly))
 
 
+def _sheet_grids(specs: Sequence[MuscleSpec]) -> tuple[list[np.ndarray], list[int]]:
+    """Each muscle's rows resampled to its longest row: ``(rows, cols, 3)`` grids (mm).
+
+    Also returns the index of each grid's first control point in the
+    concatenation of all grids (row-major).
+    """
+    grids: list[np.ndarray] = []
+    base = 0
+    bases = []
+    for s in specs:
+        width = max(len(r) for r in s.rows)
+        g = np.stack([_resample(r, width) for r in s.rows])
+        grids.append(g)
+        bases.append(base)
+        base += g.shape[0] * g.shape[1]
+    return grids, bases
+
+
+def _sheet_samples(
+    g: np.ndarray, base: int, linear: bool, bw: np.ndarray, uu: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Bilinear samples of one muscle sheet ``g`` (mm), cell by cell.
+
+    ``bw`` are the bilinear weights of the samples in a cell (corner order
+    (r, c), (r, c+1), (r+1, c), (r+1, c+1)) and ``uu`` their parameter across
+    the rows.  Returns the sample positions, their four corner control-point
+    ids (``base`` added), the weights and the bulge profile (``4 t (1 - t)``
+    along a linear muscle, 1 on a sphincter).
+    """
+    rows, cols = g.shape[:2]
+    pos, cps, prof = [], [], []
+    for r in range(rows - 1):
+        for c in range(max(cols - 1, 1)):
+            c1 = min(c + 1, cols - 1)
+            corner = np.array(
+                [r * cols + c, r * cols + c1, (r + 1) * cols + c, (r + 1) * cols + c1]
+            )
+            pos.append(bw @ g.reshape(-1, 3)[corner])
+            cps.append(np.broadcast_to(base + corner, bw.shape))
+            t = (r + uu) / (rows - 1)
+            prof.append(4.0 * t * (1.0 - t) if linear else np.ones_like(t))
+    return (
+        np.concatenate(pos),
+        np.concatenate(cps),
+        np.tile(bw, (len(pos), 1)),
+        np.concatenate(prof),
+    )
+
+
+def _sheet_influence(
+    samples: np.ndarray,
+    x: np.ndarray,
+    nrm: np.ndarray,
+    allowed: np.ndarray | None,
+    inner_mm: float,
+    outer_mm: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Skin nodes a sheet's samples reach, their nearest sample and weight ``φ``.
+
+    ``φ`` is 1 up to ``inner_mm`` and falls off as a squared cosine to 0 at
+    ``outer_mm`` (mm), the distance divided by ``n_s · n_d`` (clamped at 0.5)
+    so a sheet directly below a node is preferred; ``allowed`` (optional
+    ``(n,)`` bool) limits the nodes.  Weights below 1e-3 are dropped.
+    """
+    dist, near = cKDTree(samples).query(x, k=1, distance_upper_bound=outer_mm)
+    ok = np.isfinite(dist)
+    if allowed is not None:
+        ok &= allowed
+    vid = np.nonzero(ok)[0]
+    near = near[vid]
+    nd = x[vid] - samples[near]
+    nd /= np.maximum(np.linalg.norm(nd, axis=1, keepdims=True), 1e-12)
+    cos = np.clip(np.einsum("ij,ij->i", nrm[vid], nd), 0.5, 1.0)
+    d_eff = dist[vid] / cos
+    phi = np.where(
+        d_eff <= inner_mm,
+        1.0,
+        np.cos(0.5 * np.pi * np.clip((d_eff - inner_mm) / (outer_mm - inner_mm), 0, 1)) ** 2,
+    )
+    keep = phi > 1e-3
+    return vid[keep], near[keep], phi[keep]
+
+
 class MuscleRig:
     """The muscles of a head and their linear map to skin-node targets.
 
@@ -140,20 +223,11 @@ class MuscleRig:
         self.on_jaw = np.array([s.attachment == "jaw" for s in specs], bool)
         x = np.asarray(skin_vertices, float)
         nrm = np.asarray(skin_normals, float)
-        grids: list[np.ndarray] = []
-        base = 0
-        bases = []
-        for s in specs:
-            width = max(len(r) for r in s.rows)
-            g = np.stack([_resample(r, width) for r in s.rows])
-            grids.append(g)
-            bases.append(base)
-            base += g.shape[0] * g.shape[1]
+        grids, bases = _sheet_grids(specs)
         self.grids = grids
         self.rest_points = (
             np.concatenate([g.reshape(-1, 3) for g in grids]) if grids else np.zeros((0, 3))
         )
-        n_pts = len(self.rest_points)
         self.point_muscle = (
             np.concatenate(
                 [np.full(g.shape[0] * g.shape[1], m) for m, g in enumerate(grids)]
@@ -161,11 +235,22 @@ class MuscleRig:
             if grids
             else np.zeros(0, np.int64)
         )
+        self._init_linear_fibres(specs, bases)
+        self._init_sphincters(specs, bases)
+        self._init_skin_attachment(
+            specs, bases, x, nrm, candidates, inner_mm, outer_mm, samples_per_cell
+        )
 
-        # --- linear fibres (columns), padded to one array
+    def _init_linear_fibres(self, specs: Sequence[MuscleSpec], bases: list[int]) -> None:
+        """Fibres of the linear muscles (grid columns, fixed end first), padded to one array.
+
+        Per fibre: control-point ids ``_lf_idx`` (padded with the last id), arc
+        parameters ``_lf_t`` in [0, 1], validity mask, segment count, muscle
+        and rest points (mm).
+        """
         fib_idx: list[np.ndarray] = []
         fib_mus: list[int] = []
-        for m, (s, g) in enumerate(zip(specs, grids, strict=True)):
+        for m, (s, g) in enumerate(zip(specs, self.grids, strict=True)):
             if s.kind != "linear":
                 continue
             rows, cols = g.shape[:2]
@@ -188,12 +273,18 @@ class MuscleRig:
         self._lf_muscle = np.asarray(fib_mus, np.int64)
         self._lf_pts = self.rest_points[self._lf_idx]
 
-        # --- sphincter points: ring level (0 outermost .. 1 innermost) and axis
+    def _init_sphincters(self, specs: Sequence[MuscleSpec], bases: list[int]) -> None:
+        """Sphincter control points: ring level (0 outermost .. 1 innermost) and axis geometry.
+
+        Stores each point's projection on its muscle's axis (mm), its offset
+        from that projection and the outward axis vector per unit protrusion
+        (``|a_1 - a_0|`` long, from ``a_1`` toward ``a_0``, the end nearer the skin).
+        """
         sph_pts: list[np.ndarray] = []
         sph_level: list[np.ndarray] = []
         sph_mus: list[np.ndarray] = []
         axes = np.zeros((len(specs), 2, 3))
-        for m, (s, g) in enumerate(zip(specs, grids, strict=True)):
+        for m, (s, g) in enumerate(zip(specs, self.grids, strict=True)):
             if s.kind != "sphincter":
                 continue
             if s.axis is None:
@@ -220,7 +311,24 @@ class MuscleRig:
         self._sp_out = -ax_u * ax_len[:, None]
         self._sp_rel = p - self._sp_perp
 
-        # --- skin attachment: bilinear samples of each sheet
+    def _init_skin_attachment(
+        self,
+        specs: Sequence[MuscleSpec],
+        bases: list[int],
+        x: np.ndarray,
+        nrm: np.ndarray,
+        candidates: Mapping[str, np.ndarray] | None,
+        inner_mm: float,
+        outer_mm: float,
+        samples_per_cell: int,
+    ) -> None:
+        """Attach skin nodes to the sheets (K 7.4.6) and fold the result into two sparse maps.
+
+        ``_w_disp`` maps control-point displacements (mm) to node
+        displacements, ``_w_bulge`` per-muscle bulge heights (mm) to node
+        offsets along the rest normals; both are normalised by the node
+        weights ``min(1, Σφ)``.
+        """
         tree_rows: list[np.ndarray] = []
         tree_cols: list[np.ndarray] = []
         tree_vals: list[np.ndarray] = []
@@ -232,41 +340,14 @@ class MuscleRig:
         grid_u, grid_v = np.meshgrid(uv, uv, indexing="ij")
         uu, vv = grid_u.ravel(), grid_v.ravel()
         bw = np.stack([(1 - uu) * (1 - vv), (1 - uu) * vv, uu * (1 - vv), uu * vv], axis=1)
-        for m, (s, g) in enumerate(zip(specs, grids, strict=True)):
-            rows, cols = g.shape[:2]
-            pos, cps, prof = [], [], []
-            for r in range(rows - 1):
-                for c in range(max(cols - 1, 1)):
-                    c1 = min(c + 1, cols - 1)
-                    corner = np.array(
-                        [r * cols + c, r * cols + c1, (r + 1) * cols + c, (r + 1) * cols + c1]
-                    )
-                    pos.append(bw @ g.reshape(-1, 3)[corner])
-                    cps.append(np.broadcast_to(bases[m] + corner, bw.shape))
-                    t = (r + uu) / (rows - 1)
-                    prof.append(4.0 * t * (1.0 - t) if s.kind == "linear" else np.ones_like(t))
-            samples = np.concatenate(pos)
-            sample_cp = np.concatenate(cps)
-            sample_w = np.tile(bw, (len(pos), 1))
-            sample_prof = np.concatenate(prof)
-            dist, near = cKDTree(samples).query(x, k=1, distance_upper_bound=outer_mm)
-            ok = np.isfinite(dist)
-            if candidates is not None and s.code in candidates:
-                ok &= np.asarray(candidates[s.code], bool)
-            vid = np.nonzero(ok)[0]
-            near = near[vid]
-            nd = x[vid] - samples[near]
-            nd /= np.maximum(np.linalg.norm(nd, axis=1, keepdims=True), 1e-12)
-            cos = np.clip(np.einsum("ij,ij->i", nrm[vid], nd), 0.5, 1.0)
-            d_eff = dist[vid] / cos
-            phi = np.where(
-                d_eff <= inner_mm,
-                1.0,
-                np.cos(0.5 * np.pi * np.clip((d_eff - inner_mm) / (outer_mm - inner_mm), 0, 1))
-                ** 2,
+        for m, (s, g) in enumerate(zip(specs, self.grids, strict=True)):
+            samples, sample_cp, sample_w, sample_prof = _sheet_samples(
+                g, bases[m], s.kind == "linear", bw, uu
             )
-            keep = phi > 1e-3
-            vid, near, phi = vid[keep], near[keep], phi[keep]
+            allowed = None
+            if candidates is not None and s.code in candidates:
+                allowed = np.asarray(candidates[s.code], bool)
+            vid, near, phi = _sheet_influence(samples, x, nrm, allowed, inner_mm, outer_mm)
             phi_sum[vid] += phi
             tree_rows.append(np.repeat(vid, 4))
             tree_cols.append(sample_cp[near].ravel())
@@ -285,7 +366,7 @@ class MuscleRig:
         v_all = np.concatenate(tree_vals) if tree_vals else np.zeros(0)
         self._w_disp = sp.csr_matrix(
             (v_all * scale[r_all], (r_all, np.concatenate(tree_cols) if tree_cols else r_all)),
-            shape=(len(attached), n_pts),
+            shape=(len(attached), len(self.rest_points)),
         )
         rb = local[np.concatenate(bulge_rows)] if bulge_rows else np.zeros(0, np.int64)
         vb = np.concatenate(bulge_vals) if bulge_vals else np.zeros(0)

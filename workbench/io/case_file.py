@@ -60,20 +60,17 @@ import contextlib
 import dataclasses
 import hashlib
 import json
-import math
 import os
-import struct
 import time
 import uuid
 import zipfile
-import zlib
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from os import PathLike
 from pathlib import Path
 from types import MappingProxyType
-from typing import IO, Any, Protocol
+from typing import Any, Protocol
 
 import jsonschema
 import numpy as np
@@ -81,16 +78,29 @@ import numpy as np
 import workbench
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
-from workbench.core.json_limits import MAX_JSON_BYTES, loads_limited
+from workbench.core.json_limits import loads_limited
+from workbench.io.case_archive import (
+    AUDIT,
+    CASE_JSON,
+    CaseArchive,
+    CaseFileError,
+    array_limit,
+    open_case_zip,
+    open_previous,
+    read_stored_json,
+)
+from workbench.io.case_archive import MAX_ARRAY_BYTES as MAX_ARRAY_BYTES
+from workbench.io.case_archive import MAX_AUDIT_BYTES as MAX_AUDIT_BYTES
+from workbench.io.case_archive import MAX_CASE_JSON_BYTES as MAX_CASE_JSON_BYTES
+from workbench.io.case_archive import MAX_EVIDENCE_BYTES as MAX_EVIDENCE_BYTES
+from workbench.io.case_archive import MAX_OTHER_BYTES as MAX_OTHER_BYTES
+from workbench.io.case_archive import member_limit as member_limit
+from workbench.io.case_archive import sized_in_case as sized_in_case
 from workbench.io.migrations import CURRENT_VERSION, SCHEMA_ID, MigrationError, migrate
 from workbench.io.zip_limits import (
     MEMBER_ERRORS,
     MemberTooLarge,
     ZipLimitError,
-    check_members,
-    open_archive,
-    open_member,
-    read_member,
 )
 from workbench.model.audit import (
     ANCHOR_KEY,
@@ -115,33 +125,9 @@ from workbench.model.evidence import (
 )
 from workbench.model.state import ARRAY_KEY, array_from_npy, join_arrays, split_arrays
 
-CASE_JSON = "case.json"
-AUDIT = "audit.jsonl"
 OK = "ok"
-_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError)
-#: what opening a zip's directory can raise for a damaged file, besides _ZIP_ERRORS
-_DIRECTORY_ERRORS = (*_ZIP_ERRORS, RuntimeError, struct.error, UnicodeDecodeError, ValueError)
-
-#: largest ``case.json`` read: 200 landmarks, guides and settings are well under 1 MiB
-MAX_CASE_JSON_BYTES = 16 * 1024 * 1024
-#: largest ``audit.jsonl`` read: ~150,000 records of ~400 bytes
-MAX_AUDIT_BYTES = MAX_JSON_BYTES
-#: largest ``arrays/*.npy`` member: a 45-million-vertex mesh; each array is also held
-#: to the size its reference in case.json gives (dtype x shape + header)
-MAX_ARRAY_BYTES = 2 * 1024**3
-#: largest ``evidence/*`` member (a CT volume in one file); evidence is hashed as it
-#: streams, never held in memory, and each member is also held to its recorded size
-MAX_EVIDENCE_BYTES = 8 * 1024**3
-#: anything else in the archive (never read; a case file writes nothing else)
-MAX_OTHER_BYTES = 64 * 1024 * 1024
-#: room for the ``.npy`` header in front of an array's data
-_NPY_HEADER_BYTES = 64 * 1024
 
 PathArg = str | PathLike[str]
-
-
-class CaseFileError(InputError):
-    """A case file that cannot be read or written; names the file and the problem."""
 
 
 @dataclass(frozen=True)
@@ -204,101 +190,6 @@ def validate_case_json(doc: Any, source: PathArg) -> None:
 
 
 # ---------------------------------------------------------------- reading
-def member_limit(name: str) -> int:
-    """The largest decompressed size accepted for the case-file member ``name`` (bytes)."""
-    if name == CASE_JSON:
-        return MAX_CASE_JSON_BYTES
-    if name == AUDIT:
-        return MAX_AUDIT_BYTES
-    if name.startswith("arrays/"):
-        return MAX_ARRAY_BYTES
-    if name.startswith("evidence/"):
-        return MAX_EVIDENCE_BYTES
-    return MAX_OTHER_BYTES
-
-
-def sized_in_case(name: str) -> bool:
-    """Members whose exact size ``case.json`` gives and every read is capped at (arrays by
-    their shape, evidence by its recorded size): judged by that, not by how well they
-    deflate (a mostly empty mask or label volume deflates beyond the bomb ratio)."""
-    return name.startswith(("arrays/", "evidence/"))
-
-
-@dataclass(frozen=True)
-class _Archive:
-    """An open case file whose directory passed :func:`check_members`."""
-
-    zip: zipfile.ZipFile
-    members: Mapping[str, zipfile.ZipInfo]
-    path: Path
-
-    def has(self, name: str) -> bool:
-        return name in self.members
-
-    def info(self, name: str) -> zipfile.ZipInfo:
-        try:
-            return self.members[name]
-        except KeyError:
-            raise CaseFileError(self.path, f"{name} is missing from the case file") from None
-
-    def read(self, name: str, limit: int | None = None) -> bytes:
-        """A member's bytes, never decompressing more than its limit plus one byte."""
-        cap = member_limit(name) if limit is None else min(limit, member_limit(name))
-        ratio = not (sized_in_case(name) and limit is not None)
-        return read_member(self.zip, self.info(name), self.path, cap, ratio=ratio)
-
-    def open(self, name: str, limit: int) -> IO[bytes]:
-        """A stream over a member that stops past ``limit`` bytes (see :func:`open_member`)."""
-        cap = min(limit, member_limit(name))
-        return open_member(self.zip, self.info(name), self.path, cap, ratio=not sized_in_case(name))
-
-
-def _as_case_error(error: InputError) -> CaseFileError:
-    return CaseFileError(error.source, error.problem, error.hint)
-
-
-@contextlib.contextmanager
-def _reading(path: Path, damaged: tuple[type[BaseException], ...]) -> Iterator[None]:
-    """Errors of reading the case file ``path`` as :class:`CaseFileError` (``damaged``: the
-    library errors that mean a damaged or truncated file)."""
-    try:
-        yield
-    except ZipLimitError as error:
-        raise _as_case_error(error) from None
-    except damaged as error:
-        raise CaseFileError(
-            path, f"the file is damaged or truncated ({error})", "restore it from a backup"
-        ) from None
-    except OSError as error:
-        raise CaseFileError(path, f"cannot read the file ({error})") from None
-
-
-@contextlib.contextmanager
-def _open_zip(path: Path) -> Iterator[_Archive]:
-    if not path.is_file():
-        raise CaseFileError(path, "no such case file")
-    with contextlib.ExitStack() as stack:
-        with _reading(path, _DIRECTORY_ERRORS):
-            archive = stack.enter_context(open_archive(path))
-            members = check_members(archive, path, member_limit, ratio_exempt=sized_in_case)
-        with _reading(path, _ZIP_ERRORS):
-            yield _Archive(archive, MappingProxyType(members), path)
-
-
-def _read_stored(archive: _Archive) -> dict[str, Any]:
-    """``case.json`` as stored (decoded within the JSON limits, not migrated)."""
-    raw = archive.read(CASE_JSON)
-    try:
-        doc = loads_limited(
-            raw, archive.path, max_bytes=MAX_CASE_JSON_BYTES, what="case.json member"
-        )
-    except InputError as error:
-        raise _as_case_error(error) from None
-    if not isinstance(doc, dict):
-        raise CaseFileError(archive.path, "case.json is not a JSON object")
-    return doc
-
-
 def _current(stored: Mapping[str, Any], path: Path) -> dict[str, Any]:
     """A stored ``case.json`` migrated to the current format and validated."""
     try:
@@ -309,24 +200,14 @@ def _current(stored: Mapping[str, Any], path: Path) -> dict[str, Any]:
     return doc
 
 
-def _read_document(archive: _Archive) -> dict[str, Any]:
+def _read_document(archive: CaseArchive) -> dict[str, Any]:
     """``case.json``, migrated to the current format and validated."""
-    return _current(_read_stored(archive), archive.path)
+    return _current(read_stored_json(archive), archive.path)
 
 
-def _array_limit(ref: Mapping[str, Any]) -> int:
-    """The size of the ``.npy`` member ``ref`` describes, plus room for its header."""
-    try:
-        itemsize = np.dtype(str(ref["dtype"])).itemsize
-        count = math.prod(int(n) for n in ref["shape"])
-    except (TypeError, ValueError, KeyError):
-        return MAX_ARRAY_BYTES
-    return min(MAX_ARRAY_BYTES, itemsize * max(count, 0) + _NPY_HEADER_BYTES)
-
-
-def _load_array(archive: _Archive, status: dict[str, str], ref: Mapping[str, Any]) -> np.ndarray:
+def _load_array(archive: CaseArchive, status: dict[str, str], ref: Mapping[str, Any]) -> np.ndarray:
     member = f"arrays/{ref[ARRAY_KEY]}.npy"
-    limit = _array_limit(ref)
+    limit = array_limit(ref)
     try:
         data = archive.read(member, limit)
     except MemberTooLarge:
@@ -343,7 +224,7 @@ def _load_array(archive: _Archive, status: dict[str, str], ref: Mapping[str, Any
         raise CaseFileError(archive.path, f"{member}: {error}") from None
 
 
-def _evidence_status(archive: _Archive, item: EvidenceFile) -> str:
+def _evidence_status(archive: CaseArchive, item: EvidenceFile) -> str:
     member = f"evidence/{item.name}"
     if not archive.has(member):
         return "missing from the case file"
@@ -405,8 +286,8 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
     """
     path = Path(path)
     status: dict[str, str] = {}
-    with _open_zip(path) as archive:
-        stored = _read_stored(archive)
+    with open_case_zip(path) as archive:
+        stored = read_stored_json(archive)
         doc = _current(stored, path)
         digests = (_digest(stored, path), _digest(doc, path))
         store = _evidence_store(doc, path)
@@ -466,8 +347,8 @@ def evidence_bytes(path: PathArg, name: str, *, allow_tampered: bool = False) ->
     content seal (unless ``allow_tampered``).
     """
     path = Path(path)
-    with _open_zip(path) as archive:
-        stored = _read_stored(archive)
+    with open_case_zip(path) as archive:
+        stored = read_stored_json(archive)
         current = _current(stored, path)
         store = {e.name: e for e in _evidence_store(current, path)}
         if name not in store:
@@ -555,26 +436,19 @@ def _bound_log(case: Case) -> AuditLog:
     return case.audit
 
 
-def _open_source(candidate: Path, stack: contextlib.ExitStack) -> _Archive | None:
-    """A previous case file, opened with the reading limits; None if it cannot be used."""
-    with contextlib.suppress(OSError, ZipLimitError, *_DIRECTORY_ERRORS):
-        archive = stack.enter_context(open_archive(candidate))
-        members = check_members(archive, candidate, member_limit, ratio_exempt=sized_in_case)
-        return _Archive(archive, members, candidate)
-    return None
-
-
-def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[_Archive]:
+def _sources(path: Path, case: Case, stack: contextlib.ExitStack) -> list[CaseArchive]:
     """Readable previous case files (target first, then where the case came from)."""
     found = []
     for candidate in dict.fromkeys(p for p in (path, case.source_path) if p is not None):
-        source = _open_source(Path(candidate), stack)
+        source = open_previous(Path(candidate), stack)
         if source is not None:
             found.append(source)
     return found
 
 
-def _check_audit_prefix(path: Path, case: Case, sources: list[_Archive], new_audit: bytes) -> None:
+def _check_audit_prefix(
+    path: Path, case: Case, sources: list[CaseArchive], new_audit: bytes
+) -> None:
     """Refuse to overwrite this case's file if its log is not a prefix of ``new_audit``."""
     if not sources or sources[0].path != path:
         return  # nothing to overwrite
@@ -595,7 +469,7 @@ def _check_audit_prefix(path: Path, case: Case, sources: list[_Archive], new_aud
         )
 
 
-def _evidence_source(item: EvidenceFile, sources: list[_Archive]) -> Opener:
+def _evidence_source(item: EvidenceFile, sources: list[CaseArchive]) -> Opener:
     """An opener for a copy of ``item`` whose bytes hash to its recorded sha256."""
     member = f"evidence/{item.name}"
     openers: list[Opener] = [_member_opener(a, member, item.size) for a in sources if a.has(member)]
@@ -611,7 +485,7 @@ def _evidence_source(item: EvidenceFile, sources: list[_Archive]) -> Opener:
     return found
 
 
-def _member_opener(archive: _Archive, member: str, size: int) -> Opener:
+def _member_opener(archive: CaseArchive, member: str, size: int) -> Opener:
     """Opens ``member`` of ``archive`` read at most ``size`` bytes (more is an error)."""
     return lambda: archive.open(member, size)
 
@@ -808,5 +682,5 @@ def read_case_json(path: PathArg) -> dict[str, Any]:
     CaseFileError
     """
     path = Path(path)
-    with _open_zip(path) as archive:
+    with open_case_zip(path) as archive:
         return _read_document(archive)

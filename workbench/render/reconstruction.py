@@ -33,8 +33,10 @@ Pictures (PNG, named ``<prefix>_<key>.png``; ``key`` is returned):
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -104,115 +106,169 @@ def render_reconstruction(
     framed = [skull.vertices, tips]
     face_pd = None
     if face is not None:  # a bust: the face cut just below the skull (no long neck)
-        floor = float((skull.vertices @ superior).min()) - NECK_MARGIN_MM
-        keep = face.vertices @ superior >= floor
-        framed.append(face.vertices[keep])
-        face_pd = to_polydata(face)
-        if spread is not None:
-            face_pd["spread_mm"] = np.asarray(spread, float)
-        if inferred is not None:
-            face_pd["inferred"] = np.asarray(inferred, float)
-        face_pd = face_pd.clip(normal=superior, origin=superior * floor, invert=False)
+        face_pd, kept = _face_bust(face, skull, superior, spread, inferred)
+        framed.append(kept)
     cameras = {v: _camera(np.vstack(framed), v, anterior, superior, size) for v in views}
-    peg = _pegs(pv, origins, tips) if len(origins) else None
-    depth_range = _nice_range(np.linalg.norm(tips - origins, axis=1))
-    # the skull's cached vertex normals: VTK's normals filter on a 200k-triangle skull for
-    # every picture it is in cost ~0.1 s each
-    skull_pd = to_polydata(skull, normals=True)
-    eyes_pd = to_polydata(eyes) if eyes is not None and eyes.n_faces else None
+    scene = _Scene(
+        # the skull's cached vertex normals: VTK's normals filter on a 200k-triangle skull for
+        # every picture it is in cost ~0.1 s each
+        skull=to_polydata(skull, normals=True),
+        pegs=_pegs(pv, origins, tips) if len(origins) else None,
+        depth_range=_nice_range(np.linalg.norm(tips - origins, axis=1)),
+        face=face_pd,
+        eyes=to_polydata(eyes) if eyes is not None and eyes.n_faces else None,
+        size=size,
+    )
 
-    def draw_skull(p, bar: bool) -> None:
+    def path(key: str) -> Path:
+        return out / f"{prefix}_{key}.png"
+
+    written: dict[str, Path] = {}
+    studio = _Studio(pv, size)
+    try:
+        for view in views:
+            written.update(_shoot_view(studio, scene, cameras[view], view, path))
+        if spread is not None and face_pd is not None:
+            spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
+
+            coloured = _scalar_map(
+                face_pd, "spread_mm", spread_range, scene.eyes, "spread (mm)", views, size
+            )
+
+            written["spread"] = _shoot(
+                studio, path("spread"), [(cameras[v], v) for v in views], coloured
+            )
+        if inferred is not None and face_pd is not None and np.any(inferred):
+            written["inferred"] = _shoot(
+                studio,
+                path("inferred"),
+                [(cameras[v], v) for v in views],
+                scene.inferred_painter(views[0]),
+            )
+    finally:
+        studio.close()
+    return written
+
+
+def _face_bust(
+    face: Mesh,
+    skull: Mesh,
+    superior: np.ndarray,
+    spread: np.ndarray | None,
+    inferred: np.ndarray | None,
+) -> tuple[Any, np.ndarray]:
+    """The face as PolyData cut :data:`NECK_MARGIN_MM` below the skull, and the vertices it keeps.
+
+    ``superior`` is the unit up direction in the input frame; ``spread`` (mm)
+    and ``inferred`` become point data ``spread_mm`` and ``inferred``.
+    """
+    floor = float((skull.vertices @ superior).min()) - NECK_MARGIN_MM
+    keep = face.vertices @ superior >= floor
+    face_pd = to_polydata(face)
+    if spread is not None:
+        face_pd["spread_mm"] = np.asarray(spread, float)
+    if inferred is not None:
+        face_pd["inferred"] = np.asarray(inferred, float)
+    return face_pd.clip(normal=superior, origin=superior * floor, invert=False), face.vertices[keep]
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """What the reconstruction pictures draw, as PolyData (mm, input frame).
+
+    ``pegs`` are the dowel tubes and balls (None without dowels), coloured on
+    ``depth_range`` (mm, :func:`_nice_range`); ``face`` is the cut bust (None
+    without a face); ``size`` is the panel size in pixels.
+    """
+
+    skull: Any
+    pegs: list | None
+    depth_range: tuple[float, float, float]
+    face: Any
+    eyes: Any
+    size: tuple[int, int]
+
+    def draw_skull(self, p, bar: bool) -> None:
+        """The bone and the dowels coloured by depth, with its colour bar if ``bar``."""
         p.add_mesh(
-            skull_pd,
+            self.skull,
             color=BONE,
             smooth_shading=False,
             interpolation="phong",
             specular=0.15,
             diffuse=0.85,
         )
-        if peg is not None:
+        if self.pegs is not None:
             actors = [
                 p.add_mesh(
                     part,
                     scalars="depth_mm",
                     cmap=DOWEL_CMAP,
-                    clim=depth_range[:2],
+                    clim=self.depth_range[:2],
                     smooth_shading=True,
                     show_scalar_bar=False,
                 )
-                for part in peg
+                for part in self.pegs
             ]
             if bar:
-                _scalar_bar(p, actors[0], "tissue depth (mm)", depth_range, size)
+                _scalar_bar(p, actors[0], "tissue depth (mm)", self.depth_range, self.size)
 
-    def over(p, _v) -> None:
-        draw_skull(p, False)
-        p.add_mesh(face_pd, color=SKIN, opacity=FACE_OPACITY, smooth_shading=True, specular=0.1)
+    def over(self, p, _v) -> None:
+        """The skull and dowels under the semi-transparent face."""
+        self.draw_skull(p, False)
+        p.add_mesh(self.face, color=SKIN, opacity=FACE_OPACITY, smooth_shading=True, specular=0.1)
 
-    def alone(p, _v) -> None:
-        p.add_mesh(face_pd, color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9)
-        if eyes_pd is not None:
-            p.add_mesh(eyes_pd, color=EYE, smooth_shading=True, specular=0.4)
+    def alone(self, p, _v) -> None:
+        """The face alone, with the eyes."""
+        p.add_mesh(self.face, color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9)
+        if self.eyes is not None:
+            p.add_mesh(self.eyes, color=EYE, smooth_shading=True, specular=0.4)
 
-    written: dict[str, Path] = {}
-    studio = _Studio(pv, size)
-    try:
-        for view in views:
-            written[f"skull_dowels_{view}"] = _shoot(
-                studio,
-                out / f"{prefix}_skull_dowels_{view}.png",
-                [(cameras[view], view)],
-                lambda p, _v: draw_skull(p, True),
+    def inferred_painter(self, first_view: str) -> Callable[[Any, str], None]:
+        """A painter for :func:`_shoot`: skin over missing bone in blue-grey, explained in
+        the ``first_view`` panel."""
+
+        def marked(p, v) -> None:
+            p.add_mesh(
+                self.face,
+                scalars="inferred",
+                cmap=[SKIN, INFERRED],
+                clim=(0.0, 1.0),
+                smooth_shading=True,
+                show_scalar_bar=False,
+                specular=0.1,
             )
-            if face_pd is None:
-                continue
-            written[f"face_skull_{view}"] = _shoot(
-                studio,
-                out / f"{prefix}_face_skull_{view}.png",
-                [(cameras[view], view)],
-                over,
-                peel=True,
-            )
-            written[f"face_{view}"] = _shoot(
-                studio, out / f"{prefix}_face_{view}.png", [(cameras[view], view)], alone
-            )
-        if spread is not None and face_pd is not None:
-            spread_range = _nice_range(np.array([0.0, np.percentile(spread, 99.5)]))
-
-            coloured = _scalar_map(
-                face_pd, "spread_mm", spread_range, eyes_pd, "spread (mm)", views, size
-            )
-
-            written["spread"] = _shoot(
-                studio, out / f"{prefix}_spread.png", [(cameras[v], v) for v in views], coloured
-            )
-        if inferred is not None and face_pd is not None and np.any(inferred):
-
-            def marked(p, v) -> None:
-                p.add_mesh(
-                    face_pd,
-                    scalars="inferred",
-                    cmap=[SKIN, INFERRED],
-                    clim=(0.0, 1.0),
-                    smooth_shading=True,
-                    show_scalar_bar=False,
-                    specular=0.1,
+            if self.eyes is not None:
+                p.add_mesh(self.eyes, color=EYE, smooth_shading=True)
+            if v == first_view:
+                p.add_text(
+                    "blue-grey: no bone under the skin (inferred from the reference)",
+                    position="lower_left",
+                    font_size=9,
+                    color="#333333",
                 )
-                if eyes_pd is not None:
-                    p.add_mesh(eyes_pd, color=EYE, smooth_shading=True)
-                if v == views[0]:
-                    p.add_text(
-                        "blue-grey: no bone under the skin (inferred from the reference)",
-                        position="lower_left",
-                        font_size=9,
-                        color="#333333",
-                    )
 
-            written["inferred"] = _shoot(
-                studio, out / f"{prefix}_inferred.png", [(cameras[v], v) for v in views], marked
-            )
-    finally:
-        studio.close()
+        return marked
+
+
+def _shoot_view(
+    studio: _Studio, scene: _Scene, cam: dict, view: str, path: Callable[[str], Path]
+) -> dict[str, Path]:
+    """The pictures of one view: skull and dowels, then (with a face) face over skull and face."""
+    written = {
+        f"skull_dowels_{view}": _shoot(
+            studio,
+            path(f"skull_dowels_{view}"),
+            [(cam, view)],
+            lambda p, _v: scene.draw_skull(p, True),
+        )
+    }
+    if scene.face is None:
+        return written
+    written[f"face_skull_{view}"] = _shoot(
+        studio, path(f"face_skull_{view}"), [(cam, view)], scene.over, peel=True
+    )
+    written[f"face_{view}"] = _shoot(studio, path(f"face_{view}"), [(cam, view)], scene.alone)
     return written
 
 

@@ -24,7 +24,10 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
+
+if TYPE_CHECKING:
+    from workbench.reporting.pdf import ReportPDF
 
 #: |z| above this is outside the norms' usual range (about 95 % of people lie within ±2 SD)
 Z_LIMIT: Final = 2.0
@@ -257,19 +260,41 @@ def write_age_report(
     ``credits`` are data credit lines the source head must carry.  Written
     atomically (``report.pdf.part`` then renamed).
     """
-    from fpdf import FontFace
-
-    from workbench.reporting.pdf import ACCENT, DARK, GREY, ReportPDF
+    from workbench.reporting.pdf import ReportPDF
     from workbench.reporting.report import utc_now
 
     if not results:
         raise ValueError("no age results to report")
     created = created or utc_now()
-    first = results[0]
-    fig0 = first.figures
     case = str(getattr(source_head, "template_id", "head"))
     pdf = ReportPDF(case, created, software)
     pdf.set_title(f"Age change report, {case}")
+    _title_page(pdf, source_head, results, case, created, software)
+    _summary_section(pdf, results)
+    _measurement_pages(pdf, results)
+    _picture_pages(pdf, results, dict(pictures or {}), notes)
+    _references(pdf, results, dict(citations or {}), credits)
+    path = Path(folder) / "report.pdf"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    pdf.output(str(tmp))
+    tmp.replace(path)
+    return path
+
+
+def _title_page(
+    pdf: ReportPDF,
+    source_head: Any,
+    results: Sequence[Any],
+    case: str,
+    created: str,
+    software: str,
+) -> None:
+    """First page: title, the change in ages, provenance, units, frame, method and warnings."""
+    from workbench.reporting.pdf import ACCENT, DARK
+
+    first = results[0]
+    fig0 = first.figures
     pdf.add_page()
     pdf.font(17, "B")
     pdf.set_text_color(*ACCENT)
@@ -302,6 +327,11 @@ def write_age_report(
     if warnings:
         pdf.box("Warnings", list(dict.fromkeys(warnings)))
 
+
+def _summary_section(pdf: ReportPDF, results: Sequence[Any]) -> None:
+    """The table of key figures per target age (mm, z) and what they mean."""
+    from workbench.reporting.pdf import GREY
+
     pdf.heading("Summary per target age")
     pdf.grid(
         (
@@ -329,7 +359,18 @@ def write_age_report(
         color=GREY,
     )
 
-    # the measurement tables, one per age, on landscape pages
+
+def _measurement_pages(pdf: ReportPDF, results: Sequence[Any]) -> None:
+    """The measurement tables, one per target age, on landscape pages (mm, z-scores).
+
+    Rows with a z-score outside ±:data:`Z_LIMIT` print highlighted; the rows
+    without norms at both ages are listed after each table with the reason.
+    """
+    from fpdf import FontFace
+
+    from workbench.reporting.pdf import GREY
+
+    fig0 = results[0].figures
     marked = FontFace(
         family=pdf.sans,
         emphasis="B" if "B" in pdf.styles else None,
@@ -372,7 +413,16 @@ def write_age_report(
                 pdf.para(f"{label}: " + ", ".join(names), size=7.5)
                 pdf.ln(0.5)
 
-    pics = dict(pictures or {})
+
+def _picture_pages(
+    pdf: ReportPDF, results: Sequence[Any], pics: Mapping[str, Path], notes: Sequence[str]
+) -> None:
+    """The comparison and growth-displacement pictures per target age, with their legends.
+
+    ``notes`` print where the pictures would be (e.g. no OpenGL).
+    """
+    from workbench.reporting.pdf import GREY
+
     if pics or notes:
         pdf.add_page(orientation="P")
         pdf.heading("Pictures")
@@ -411,8 +461,12 @@ def write_age_report(
     for note in notes:
         pdf.para(f"Note: {note}", size=8, color=GREY)
 
+
+def _references(
+    pdf: ReportPDF, results: Sequence[Any], cite: Mapping[str, str], credits: Sequence[str]
+) -> None:
+    """References (norms' sources, head-circumference charts, the method) and data credits."""
     pdf.heading("References", min_space=40)
-    cite = dict(citations or {})
     keys = source_keys(results)
     if keys:
         pdf.subheading("Facial norms")
@@ -436,9 +490,3 @@ def write_age_report(
         pdf.heading("Data credits", min_space=20)
         for c in credits:
             pdf.para(c, size=8)
-    path = Path(folder) / "report.pdf"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    pdf.output(str(tmp))
-    tmp.replace(path)
-    return path

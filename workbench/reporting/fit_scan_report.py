@@ -75,183 +75,15 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
     fig: Mapping[str, Any] = result.figures
     prov: Mapping[str, Any] = result.head.provenance or {}
     rows: list[dict[str, Any]] = []
-
-    def row(figure: str, value: str, target: str = "", met: bool | None = None) -> None:
-        rows.append({"figure": figure, "value": value, "target": target, "met": met})
-
-    if "scan_vertices" in fig:
-        row("Scan", f"{fig['scan_vertices']} vertices, {fig.get('scan_triangles', '–')} triangles")
-    hidden = fig.get("face_region_hidden_vertices")
-    not_head = fig.get("face_region_not_head_vertices")
-    sheets = fig.get("face_region_sheet_vertices")
-    left_out = [
-        f"{n} {what}"
-        for n, what in (
-            (hidden, "cavity walls"),
-            (not_head, "not the head"),
-            (sheets, "thin sheets over the skin"),
-        )
-        if n
-    ]
-    row(
-        "Face-region scan vertices counted",
-        str(fig["face_region_vertices"])
-        + (f" (also left out: {', '.join(left_out)})" if left_out else ""),
-    )
-    w1, w25 = fig["face_within_1mm_fraction"], fig["face_within_2_5mm_fraction"]
-    row(
-        "Within 1 mm of the fitted skin",
-        _pct(w1),
-        f"≥ {_pct(TARGET_WITHIN_1MM)}",
-        w1 >= TARGET_WITHIN_1MM,
-    )
-    row(
-        "Within 2.5 mm of the fitted skin",
-        _pct(w25),
-        f"≥ {_pct(TARGET_WITHIN_2_5MM)}",
-        w25 >= TARGET_WITHIN_2_5MM,
-    )
-    row(
-        "Distance scan → fitted skin, mean / median",
-        f"{_mm(fig.get('face_mean_distance_mm'))} / {_mm(fig.get('face_median_distance_mm'))}",
-    )
-    back = fig.get("face_skin_to_scan_mm")
-    if back:
-        row(
-            "Fitted face skin → scan (where on the scan)",
-            f"mean {_mm(back.get('mean'))}, p95 {_mm(back.get('p95'))}, "
-            f"{_pct(back.get('within_2_5mm_fraction'))} within 2.5 mm (n = {back.get('n')})",
-        )
-    if "face_on_scan_fraction" in fig:
-        inferred = fig.get("inferred")
-        row(
-            "Face skin supported by the scan",
-            _pct(fig["face_on_scan_fraction"])
-            + (
-                f"; {_pct(inferred['face_inferred_fraction'])} inferred from the reference "
-                "head (the pack's region 'inferred')"
-                if inferred
-                else ""
-            ),
-        )
-    folds = int(fig["fold_overs"])
-    row("Fold-overs (triangles turned over)", str(folds), "0", folds == 0)
-    if "fold_overs_outside_mouth_corner_seam" in fig:
-        off = int(fig["fold_overs_outside_mouth_corner_seam"])
-        row(
-            "… outside the reference's mouth-corner seam",
-            f"{off} (the rest are the reference skin's own sliver triangles there)",
-            "0",
-            off == 0,
-        )
-    cross = fig.get("self_intersections")
-    if cross:
-        new = int(cross.get("new_pairs", 0))
-        row(
-            "Self-intersections added by the fit",
-            f"{new} crossing triangle pairs ({cross.get('pairs')} in all; the reference skin "
-            f"has {cross.get('reference_pairs')} at the mouth corners)",
-            "0",
-            new == 0,
-        )
-    check = fig.get("self_check")
-    if check and check.get("outcome") == "check":
-        row("Self-check", "check before use: " + "; ".join(check.get("reasons", ())), "", False)
-    detail = fig.get("detail")
-    if detail:
-        d1, d25 = detail["face_within_1mm_fraction"], detail["face_within_2_5mm_fraction"]
-        row(
-            "Fine detail (skin_detailed.ply): within 1 / 2.5 mm",
-            f"{_pct(d1)} / {_pct(d25)}, mean {_mm(detail.get('face_mean_distance_mm'))} "
-            f"({detail['fine_vertices']} vertices, {detail['levels']} Loop steps over the "
-            f"fitted skin; {_pct(detail.get('face_observed_fraction'))} of its face saw the scan)",
-            f"≥ {_pct(TARGET_WITHIN_1MM)} / {_pct(TARGET_WITHIN_2_5MM)}",
-            d1 >= TARGET_WITHIN_1MM and d25 >= TARGET_WITHIN_2_5MM,
-        )
-        beyond = detail.get("face_over_skin_openings_vertices")
-        if beyond:
-            row(
-                "… scan over the skin's eye, mouth, nostril openings",
-                f"{beyond} vertices (closed eyes or mouth on the scan); within 2.5 mm "
-                f"without them {_pct(detail.get('face_within_2_5mm_fraction_off_openings'))}",
-            )
-        bad = int(detail["fold_overs"]) + int(detail["new_crossings"])
-        row(
-            "… fold-overs / crossings it added",
-            f"{detail['fold_overs']} / {detail['new_crossings']}",
-            "0",
-            bad == 0,
-        )
-    if fig.get("face_region_hidden_vertices"):
-        row(
-            "Scan left out: cavity walls no scanner sees",
-            f"{fig['face_region_hidden_vertices']} vertices (airway, mouth, nostrils)",
-        )
-    lm = fig.get("skin_landmark_to_scan_mm") or {}
-    absent = list(lm.get("absent") or [])
-    row(
-        "Skin landmarks → scan",
-        f"mean {_mm(lm.get('mean'))}, max {_mm(lm.get('max'))} (n = {lm.get('n', 0)}"
-        + (f"; over no scan: {', '.join(absent)})" if absent else ")"),
-    )
-    user = fig.get("skin_landmark_to_user_mm")
-    row(
-        "Skin landmarks → user-placed",
-        f"mean {_mm(user['mean'])}, max {_mm(user['max'])} (n = {len(user.get('per_landmark', {}))})"
-        if user
-        else "none placed",
-    )
+    _distance_rows(rows, fig)
+    _integrity_rows(rows, fig)
+    if fig.get("detail"):
+        _detail_rows(rows, fig["detail"])
+    _landmark_rows(rows, fig)
+    _depth_and_bone_rows(rows, fig)
+    _orientation_rows(rows, fig, bool(result.mirrored_input))
     depths = fig["tissue_depths"]
-    row(
-        "Tissue depths vs the table",
-        f"mean |fitted − table| {_mm(depths['mean_abs_diff_mm'])}, max "
-        f"{_mm(depths.get('max_abs_diff_mm'))} over {depths['pairs']} pairs "
-        f"({depths['table']}, {depths['group']})",
-    )
-    if "face_skin_inside_skull_vertices" in fig:
-        inside = int(fig["face_skin_inside_skull_vertices"])
-        row("Face skin vertices inside the skull", str(inside), "0", inside == 0)
-    bone = fig.get("skull_vs_bone")
-    row(
-        "Estimated skull vs true bone (face region)",
-        f"mean |d| {_mm(bone.get('mean_abs_mm'))}, {_pct(bone.get('within_2_5mm_fraction'))} "
-        f"within 2.5 mm (n = {bone.get('face_skull_vertices', '–')})"
-        if bone
-        else "no bone given",
-    )
-    base = (bone or {}).get("uniform_offset_baseline")
-    if bone and base:
-        row(
-            f"Baseline: face skin {base['depth_mm']:g} mm inward vs true bone",
-            f"mean |d| {_mm(base.get('mean_abs_mm'))}, {_pct(base.get('within_2_5mm_fraction'))} "
-            f"within 2.5 mm (n = {base.get('face_skin_vertices', '–')})",
-            "the estimated skull beats it",
-            bone.get("within_2_5mm_fraction", 0.0) > base.get("within_2_5mm_fraction", 1.0),
-        )
-    orient = fig.get("orientation") or {}
-    row(
-        "Orientation",
-        f"{orient.get('method', '–')}, {orient.get('handedness', '–')}; reference scaled "
-        f"{orient.get('reference_scale', '–')}; matched {_pct(orient.get('matched_fraction'))}",
-    )
-    placed = orient.get("face_placement")
-    if placed:
-        near = placed.get("face_within_5mm_fraction")
-        row(
-            "Reference face laid on the scan",
-            f"{_pct(near)} of its vertices within 5 mm of the scan"
-            + (" (moved from the search's pose)" if placed.get("moved") else ""),
-            "> 50 %",
-            near is not None and float(near) > 0.5,
-        )
-    row("Mirrored input", "yes" if result.mirrored_input else "no")
-    secs = dict(fig.get("seconds") or {})
-    total = secs.pop("total", None)
-    row(
-        "Seconds",
-        ("–" if total is None else f"{float(total):.1f}")
-        + (" (" + ", ".join(f"{k} {float(v):.1f}" for k, v in secs.items()) + ")" if secs else ""),
-    )
+    user = fig.get("skin_landmark_to_user_mm")
     per = depths.get("per_landmark") or {}
     base = prov.get("base_template") or {}
     return {
@@ -279,6 +111,238 @@ def fit_scan_summary(result: Any, scan_name: str) -> dict[str, Any]:
             {"code": c, "mm": float(g)} for c, g in ((user or {}).get("per_landmark") or {}).items()
         ],
     }
+
+
+def _row(
+    rows: list[dict[str, Any]], figure: str, value: str, target: str = "", met: bool | None = None
+) -> None:
+    """Append one figure row: its text value, the target (text) and whether it is met."""
+    rows.append({"figure": figure, "value": value, "target": target, "met": met})
+
+
+def _distance_rows(rows: list[dict[str, Any]], fig: Mapping[str, Any]) -> None:
+    """Rows of the scan, the counted face region and the scan-to-skin distances (mm, %)."""
+    if "scan_vertices" in fig:
+        _row(
+            rows,
+            "Scan",
+            f"{fig['scan_vertices']} vertices, {fig.get('scan_triangles', '–')} triangles",
+        )
+    hidden = fig.get("face_region_hidden_vertices")
+    not_head = fig.get("face_region_not_head_vertices")
+    sheets = fig.get("face_region_sheet_vertices")
+    left_out = [
+        f"{n} {what}"
+        for n, what in (
+            (hidden, "cavity walls"),
+            (not_head, "not the head"),
+            (sheets, "thin sheets over the skin"),
+        )
+        if n
+    ]
+    _row(
+        rows,
+        "Face-region scan vertices counted",
+        str(fig["face_region_vertices"])
+        + (f" (also left out: {', '.join(left_out)})" if left_out else ""),
+    )
+    w1, w25 = fig["face_within_1mm_fraction"], fig["face_within_2_5mm_fraction"]
+    _row(
+        rows,
+        "Within 1 mm of the fitted skin",
+        _pct(w1),
+        f"≥ {_pct(TARGET_WITHIN_1MM)}",
+        w1 >= TARGET_WITHIN_1MM,
+    )
+    _row(
+        rows,
+        "Within 2.5 mm of the fitted skin",
+        _pct(w25),
+        f"≥ {_pct(TARGET_WITHIN_2_5MM)}",
+        w25 >= TARGET_WITHIN_2_5MM,
+    )
+    _row(
+        rows,
+        "Distance scan → fitted skin, mean / median",
+        f"{_mm(fig.get('face_mean_distance_mm'))} / {_mm(fig.get('face_median_distance_mm'))}",
+    )
+    back = fig.get("face_skin_to_scan_mm")
+    if back:
+        _row(
+            rows,
+            "Fitted face skin → scan (where on the scan)",
+            f"mean {_mm(back.get('mean'))}, p95 {_mm(back.get('p95'))}, "
+            f"{_pct(back.get('within_2_5mm_fraction'))} within 2.5 mm (n = {back.get('n')})",
+        )
+    if "face_on_scan_fraction" in fig:
+        inferred = fig.get("inferred")
+        _row(
+            rows,
+            "Face skin supported by the scan",
+            _pct(fig["face_on_scan_fraction"])
+            + (
+                f"; {_pct(inferred['face_inferred_fraction'])} inferred from the reference "
+                "head (the pack's region 'inferred')"
+                if inferred
+                else ""
+            ),
+        )
+
+
+def _integrity_rows(rows: list[dict[str, Any]], fig: Mapping[str, Any]) -> None:
+    """Rows of the fitted skin's fold-overs, self-intersections and the fit's self-check."""
+    folds = int(fig["fold_overs"])
+    _row(rows, "Fold-overs (triangles turned over)", str(folds), "0", folds == 0)
+    if "fold_overs_outside_mouth_corner_seam" in fig:
+        off = int(fig["fold_overs_outside_mouth_corner_seam"])
+        _row(
+            rows,
+            "… outside the reference's mouth-corner seam",
+            f"{off} (the rest are the reference skin's own sliver triangles there)",
+            "0",
+            off == 0,
+        )
+    cross = fig.get("self_intersections")
+    if cross:
+        new = int(cross.get("new_pairs", 0))
+        _row(
+            rows,
+            "Self-intersections added by the fit",
+            f"{new} crossing triangle pairs ({cross.get('pairs')} in all; the reference skin "
+            f"has {cross.get('reference_pairs')} at the mouth corners)",
+            "0",
+            new == 0,
+        )
+    check = fig.get("self_check")
+    if check and check.get("outcome") == "check":
+        _row(
+            rows,
+            "Self-check",
+            "check before use: " + "; ".join(check.get("reasons", ())),
+            "",
+            False,
+        )
+
+
+def _detail_rows(rows: list[dict[str, Any]], detail: Mapping[str, Any]) -> None:
+    """Rows of the fine-detail skin (``skin_detailed.ply``): distances (mm, %) and defects."""
+    d1, d25 = detail["face_within_1mm_fraction"], detail["face_within_2_5mm_fraction"]
+    _row(
+        rows,
+        "Fine detail (skin_detailed.ply): within 1 / 2.5 mm",
+        f"{_pct(d1)} / {_pct(d25)}, mean {_mm(detail.get('face_mean_distance_mm'))} "
+        f"({detail['fine_vertices']} vertices, {detail['levels']} Loop steps over the "
+        f"fitted skin; {_pct(detail.get('face_observed_fraction'))} of its face saw the scan)",
+        f"≥ {_pct(TARGET_WITHIN_1MM)} / {_pct(TARGET_WITHIN_2_5MM)}",
+        d1 >= TARGET_WITHIN_1MM and d25 >= TARGET_WITHIN_2_5MM,
+    )
+    beyond = detail.get("face_over_skin_openings_vertices")
+    if beyond:
+        _row(
+            rows,
+            "… scan over the skin's eye, mouth, nostril openings",
+            f"{beyond} vertices (closed eyes or mouth on the scan); within 2.5 mm "
+            f"without them {_pct(detail.get('face_within_2_5mm_fraction_off_openings'))}",
+        )
+    bad = int(detail["fold_overs"]) + int(detail["new_crossings"])
+    _row(
+        rows,
+        "… fold-overs / crossings it added",
+        f"{detail['fold_overs']} / {detail['new_crossings']}",
+        "0",
+        bad == 0,
+    )
+
+
+def _landmark_rows(rows: list[dict[str, Any]], fig: Mapping[str, Any]) -> None:
+    """Rows of the scan left out as cavity walls and of the skin landmarks' distances (mm)."""
+    if fig.get("face_region_hidden_vertices"):
+        _row(
+            rows,
+            "Scan left out: cavity walls no scanner sees",
+            f"{fig['face_region_hidden_vertices']} vertices (airway, mouth, nostrils)",
+        )
+    lm = fig.get("skin_landmark_to_scan_mm") or {}
+    absent = list(lm.get("absent") or [])
+    _row(
+        rows,
+        "Skin landmarks → scan",
+        f"mean {_mm(lm.get('mean'))}, max {_mm(lm.get('max'))} (n = {lm.get('n', 0)}"
+        + (f"; over no scan: {', '.join(absent)})" if absent else ")"),
+    )
+    user = fig.get("skin_landmark_to_user_mm")
+    _row(
+        rows,
+        "Skin landmarks → user-placed",
+        f"mean {_mm(user['mean'])}, max {_mm(user['max'])} (n = {len(user.get('per_landmark', {}))})"
+        if user
+        else "none placed",
+    )
+
+
+def _depth_and_bone_rows(rows: list[dict[str, Any]], fig: Mapping[str, Any]) -> None:
+    """Rows of the tissue depths against the table, skin inside the skull and the true bone."""
+    depths = fig["tissue_depths"]
+    _row(
+        rows,
+        "Tissue depths vs the table",
+        f"mean |fitted − table| {_mm(depths['mean_abs_diff_mm'])}, max "
+        f"{_mm(depths.get('max_abs_diff_mm'))} over {depths['pairs']} pairs "
+        f"({depths['table']}, {depths['group']})",
+    )
+    if "face_skin_inside_skull_vertices" in fig:
+        inside = int(fig["face_skin_inside_skull_vertices"])
+        _row(rows, "Face skin vertices inside the skull", str(inside), "0", inside == 0)
+    bone = fig.get("skull_vs_bone")
+    _row(
+        rows,
+        "Estimated skull vs true bone (face region)",
+        f"mean |d| {_mm(bone.get('mean_abs_mm'))}, {_pct(bone.get('within_2_5mm_fraction'))} "
+        f"within 2.5 mm (n = {bone.get('face_skull_vertices', '–')})"
+        if bone
+        else "no bone given",
+    )
+    base = (bone or {}).get("uniform_offset_baseline")
+    if bone and base:
+        _row(
+            rows,
+            f"Baseline: face skin {base['depth_mm']:g} mm inward vs true bone",
+            f"mean |d| {_mm(base.get('mean_abs_mm'))}, {_pct(base.get('within_2_5mm_fraction'))} "
+            f"within 2.5 mm (n = {base.get('face_skin_vertices', '–')})",
+            "the estimated skull beats it",
+            bone.get("within_2_5mm_fraction", 0.0) > base.get("within_2_5mm_fraction", 1.0),
+        )
+
+
+def _orientation_rows(rows: list[dict[str, Any]], fig: Mapping[str, Any], mirrored: bool) -> None:
+    """Rows of the orientation search, the face placement, mirroring and the run time (s)."""
+    orient = fig.get("orientation") or {}
+    _row(
+        rows,
+        "Orientation",
+        f"{orient.get('method', '–')}, {orient.get('handedness', '–')}; reference scaled "
+        f"{orient.get('reference_scale', '–')}; matched {_pct(orient.get('matched_fraction'))}",
+    )
+    placed = orient.get("face_placement")
+    if placed:
+        near = placed.get("face_within_5mm_fraction")
+        _row(
+            rows,
+            "Reference face laid on the scan",
+            f"{_pct(near)} of its vertices within 5 mm of the scan"
+            + (" (moved from the search's pose)" if placed.get("moved") else ""),
+            "> 50 %",
+            near is not None and float(near) > 0.5,
+        )
+    _row(rows, "Mirrored input", "yes" if mirrored else "no")
+    secs = dict(fig.get("seconds") or {})
+    total = secs.pop("total", None)
+    _row(
+        rows,
+        "Seconds",
+        ("–" if total is None else f"{float(total):.1f}")
+        + (" (" + ", ".join(f"{k} {float(v):.1f}" for k, v in secs.items()) + ")" if secs else ""),
+    )
 
 
 def write_fit_scan_pdf(

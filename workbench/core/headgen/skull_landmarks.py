@@ -8,6 +8,9 @@ mirrors them.  Split out of :mod:`workbench.core.headgen.skull`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from workbench.core.raycast import RayCaster
@@ -91,11 +94,29 @@ def _orbit_edge(rays: _Rays, oc, frame, u: float, sign: float) -> np.ndarray:
     return hits[first]
 
 
+_Put = Callable[[str, Any, str, str], None]
+
+
 def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
-    """Midline and left-side landmarks: code -> (position, part, construction)."""
+    """Midline and left-side landmarks: code -> (position, part, construction).
+
+    The groups are placed in a fixed order (cranial midline, mandibular
+    midline, orbit, lateral face, aperture and alveoli, ramus); later groups
+    read points placed by earlier ones (glabella, orbitale, menton, pogonion).
+    """
     out: dict = {}
     put = lambda code, q, part, how: out.__setitem__(code, (np.asarray(q, float), part, how))  # noqa: E731
-    # --- midline profile of the cranium
+    g = _place_cranial_midline(cr, h, put)
+    _place_mandibular_midline(md, h, put)
+    _place_orbit(cr, h, g, put, out)
+    _place_lateral_face(cr, h, put)
+    _place_aperture_and_alveoli(cr, md, h, put)
+    _place_ramus(md, h, put, out)
+    return out
+
+
+def _place_cranial_midline(cr: _Rays, h: dict, put: _Put) -> np.ndarray:
+    """Midline profile of the cranium, glabella to basion; returns glabella (mm, head frame)."""
     gl = h["glabella"]
     g = _pick(_profile(cr, gl[1] - 10, gl[1] + 15), lambda q: q[:, 2], "g")
     put("g", g, "cranium", "most anterior point of the midline profile between the brows")
@@ -165,7 +186,11 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
         "cranium",
         "anterior rim of the foramen magnum in the midline",
     )
-    # --- midline of the mandible
+    return g
+
+
+def _place_mandibular_midline(md: _Rays, h: dict, put: _Put) -> None:
+    """Midline points of the mandible: alveolar crest, chin and symphysis (mm, head frame)."""
     id_ = _pick(
         _profile(md, h["lower_crest_y"] + 6, h["lower_crest_y"] - 8),
         lambda q: np.where(q[:, 2] > 60, q[:, 1], -1e9),
@@ -191,7 +216,14 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
         "mandible",
         "chin outline on the bisector between the facial profile and the lower border",
     )
-    # --- orbit
+
+
+def _place_orbit(cr: _Rays, h: dict, g: np.ndarray, put: _Put, out: dict) -> None:
+    """Left orbital margin points and their neighbours on the frontal and zygomatic bones.
+
+    ``g`` is glabella (mm, head frame); ``out`` holds the points placed so far
+    (orbitale is read back from it).
+    """
     oc, frame = h["orbit_centre"], h["orbit_frame"]
     e1, e2, e3 = frame
     put(
@@ -234,7 +266,10 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
         "cranium",
         "frontal bone 28 mm lateral, 32 mm above glabella",
     )
-    # --- lateral face and temporal bone
+
+
+def _place_lateral_face(cr: _Rays, h: dict, put: _Put) -> None:
+    """Zygomatic arch, mastoid and ear-canal points of the left side, by rays along -x."""
     yy, zz = np.meshgrid(np.arange(-12.0, 6.0, 0.5), np.arange(10.0, 55.0, 0.5), indexing="ij")
     grid = np.column_stack([np.full(yy.size, 300.0), yy.ravel(), zz.ravel()])
     put(
@@ -264,7 +299,10 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
         "cranium",
         "roof of the ear canal 2 mm inside its opening",
     )
-    # --- nasal aperture and alveolar processes
+
+
+def _place_aperture_and_alveoli(cr: _Rays, md: _Rays, h: dict, put: _Put) -> None:
+    """Left piriform aperture margin and the alveolar bone over the canines and second molars."""
     y0, y1 = h["ans_y"] + 3.0, h["rhinion_y"] - 3.0
     aps = _scan(cr, (1.5, y0, h["aperture_z"]), (0, 0.25, 0), int((y1 - y0) / 0.25), _X)
     apl = _pick(aps, lambda q: q[:, 0], "apl", mask=aps[:, 0] < 25)
@@ -301,11 +339,9 @@ def _place_left(cr: _Rays, md: _Rays, h: dict) -> dict:
         "mandible",
         "buccal alveolar margin at the lower second molar",
     )
-    _place_ramus(md, h, put, out)
-    return out
 
 
-def _place_ramus(md: _Rays, h: dict, put, out: dict) -> None:
+def _place_ramus(md: _Rays, h: dict, put: _Put, out: dict) -> None:
     """Ramus, angle and lower-border landmarks of the left side."""
 
     def breadth(y):  # rearmost contiguous run of lateral hits = the ramus at height y

@@ -143,9 +143,26 @@ def mandible_grid(p: dict, teeth: list[Tooth]) -> S.Grid:
 
 # ------------------------------------------------------------------ cranium
 def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
-    """Half (x >= 0) distance field of the cranium (skull without the mandible)."""
+    """Half (x >= 0) distance field of the cranium (skull without the mandible).
+
+    Built in a fixed order of smooth unions and subtractions (the order
+    matters: each blend sees the field built so far); grid step ``p["grid_mm"]``.
+    """
     h = p["grid_mm"]
     g = S.Grid((-80, -62, -100), (80, 128, 118), h, half=True)
+    _add_vault_and_base(g, p)
+    _add_face_blocks(g, p)
+    _add_orbits(g, p)
+    _add_temporal_region(g, p)
+    _add_upper_alveolus(g, p, teeth)
+    _add_nasal_region(g, p)
+    # keep clear of the mandible (this hollows the glenoid fossae)
+    _subtract_grid(g, mandible, p["mandible"]["clearance_mm"], k=1.0)
+    return g
+
+
+def _add_vault_and_base(g: S.Grid, p: dict) -> None:
+    """The braincase: tapered parietal vault, frontal bulge, flat base and its blocks (mm)."""
     vp, vf, tp = p["vault_parietal"], p["vault_frontal"], p["vault_taper"]
     par = S.SuperEllipsoid(vp["centre"], vp["radii"], vp.get("exponent", 2.0))
 
@@ -167,7 +184,10 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     g.union(_ell(p["base_block"]), k=8.0)
     g.union(_ell(p["sphenoid_block"]), k=8.0)
     g.union(_ell(p["occipital_protuberance"]), k=4.0)
-    # face: orbit surroundings, nasal root, maxillae, zygomas
+
+
+def _add_face_blocks(g: S.Grid, p: dict) -> None:
+    """Bulk of the face: orbit surroundings, nasal root, maxillae, zygomas and brows (mm)."""
     oc, orot = orbit_frame(p)
     g.union(
         S.Ellipsoid(oc + np.array([0.0, -1.0, -16.0]), (24, 22, 16), orot), k=6.0, bilateral=True
@@ -185,7 +205,11 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     g.union(S.RoundCone(**_cone(p["orbital_pillar"])), k=4.0, bilateral=True)
     br = p["brow"]
     g.union(_sweep(br["curve"], br["radii"]), k=br["blend"], bilateral=True)
-    # orbital rims, then the orbital cavities
+
+
+def _add_orbits(g: S.Grid, p: dict) -> None:
+    """Orbital rims, then the orbital openings and cavities cut along the orbit frame's normal."""
+    oc, orot = orbit_frame(p)
     o = p["orbit"]
     rim3 = np.array(
         [
@@ -211,6 +235,10 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
         k=3.0,
         bilateral=True,
     )
+
+
+def _add_temporal_region(g: S.Grid, p: dict) -> None:
+    """Temporal fossa and zygomatic arch, then the temporal bone: ear canal, mastoid, glenoid."""
     # temporal fossa, then the zygomatic arches across it
     tf = p["temporal_fossa"]
     g.subtract(_ell(tf), k=tf["blend"], bilateral=True)
@@ -233,7 +261,14 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     )
     g.union(_ell(p["occipital_condyle"]), k=3.0, bilateral=True)
     g.subtract(_ell(p["foramen_magnum"]), k=2.0)
-    # upper alveolar process and palate
+
+
+def _add_upper_alveolus(g: S.Grid, p: dict, teeth: list[Tooth]) -> None:
+    """Upper alveolar process around the left upper teeth and the palate, trimmed to the crowns.
+
+    The process is swept through points half a root length above each tooth's
+    cemento-enamel junction and continued through its mirror image (mm).
+    """
     upper = sorted((t for t in teeth if t.jaw == "U" and t.side == "l"), key=lambda t: -t.tip[2])
     ua = p["upper_alveolus"]
     crest = np.array([t.cej + ua["crest_above_cej"] * t.axis for t in upper])
@@ -273,7 +308,10 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
         return np.maximum(y - np.interp(z, cz, cy) + 0 * x, cz[0] - 6.0 - z)
 
     g.subtract(S.Function(below_crest, (-45, -75, cz[0] - 6.0), (45, cy.max() + 1, 115)), k=1.0)
-    # nasal aperture and cavity, then septum, conchae and anterior nasal spine
+
+
+def _add_nasal_region(g: S.Grid, p: dict) -> None:
+    """Nasal bones, piriform rim and aperture, nasal cavity, septum, conchae and spine (mm)."""
     na = p["nasal_aperture"]
     half = np.asarray(na["outline"], float)
     outline = np.vstack([half, half[-2:0:-1] * [-1, 1]])
@@ -300,9 +338,6 @@ def cranium_grid(p: dict, teeth: list[Tooth], mandible: S.Grid) -> S.Grid:
     g.union(S.Box(p["septum"]["centre"], p["septum"]["half"], round_mm=0.8), k=1.0)
     g.union(_ell(p["concha"]), k=2.0, bilateral=True)
     g.union(S.RoundCone(**_cone(p["ans"])), k=2.0)
-    # keep clear of the mandible (this hollows the glenoid fossae)
-    _subtract_grid(g, mandible, p["mandible"]["clearance_mm"], k=1.0)
-    return g
 
 
 @overload
