@@ -38,10 +38,16 @@ os.environ.setdefault("WORKBENCH_SAMPLE_MIRRORS", str(SHARED))
 sys.path.insert(0, str(ROOT))
 
 from workbench.cli.batch_cmd import commands  # noqa: E402
-from workbench.cli.main import main  # noqa: E402
-from workbench.services.batch.run import dask_client, run_batch, run_row_task  # noqa: E402
+from workbench.pipelines.batch.run import dask_client, run_batch, run_row_task  # noqa: E402
 
 TRIVIAL = ["samples", "list"]
+
+
+def _trivial_options():
+    """``workbench samples list`` as a batch row's parsed options (the cheapest job there is)."""
+    options = commands()["samples"].parse_args(TRIVIAL[1:])
+    options.command, options.debug = TRIVIAL[0], False
+    return options
 
 
 def _case(folder: Path, jobs: int) -> tuple[list[Path], Path]:
@@ -86,7 +92,6 @@ def _batch(manifest: Path, out: Path, workers: int) -> tuple[float, list]:
         manifest,
         out,
         commands={k: v for k, v in commands().items() if k != "batch"},
-        entry=main,
         workers=workers,
         notify=lambda m: print(f"    {m}", flush=True),
     )
@@ -95,20 +100,21 @@ def _batch(manifest: Path, out: Path, workers: int) -> tuple[float, list]:
 
 def _overhead(n: int) -> tuple[float, float, float]:
     """(cluster start s, direct call s, task round trip s) for the trivial command."""
+    trivial = _trivial_options()
     direct = []
     for _ in range(n):
         t = time.perf_counter()
-        run_row_task(main, TRIVIAL)
+        run_row_task(trivial)
         direct.append(time.perf_counter() - t)
     t0 = time.perf_counter()
     with dask_client(2, None) as client:
         start = time.perf_counter() - t0
-        client.submit(run_row_task, main, TRIVIAL, pure=False).result()  # warm both imports
-        client.submit(run_row_task, main, TRIVIAL, pure=False).result()
+        client.submit(run_row_task, trivial, pure=False).result()  # warm both imports
+        client.submit(run_row_task, trivial, pure=False).result()
         trips = []
         for _ in range(n):
             t = time.perf_counter()
-            client.submit(run_row_task, main, TRIVIAL, pure=False).result()
+            client.submit(run_row_task, trivial, pure=False).result()
             trips.append(time.perf_counter() - t)
     return start, sum(direct) / n, sum(trips) / n
 

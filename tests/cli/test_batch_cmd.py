@@ -110,9 +110,9 @@ def test_local_cluster_rows_equal_single_runs(tmp_path, skull_obj, head_male, ca
             assert _same(ja, jb), rel
             continue
         assert (out / "rec" / rel).read_bytes() == (single / rel).read_bytes(), rel
-    from workbench.services.batch.figures import reconstruct_figures
+    from workbench.pipelines.batch.figures import reconstruct_figures
 
-    figures = reconstruct_figures(single)
+    figures = reconstruct_figures(json.loads((single / "report.json").read_text(encoding="utf-8")))
     assert figures["max_tip_error_mm"] > 0
     for key, value in figures.items():
         assert float(rows["rec"][key]) == pytest.approx(value), key
@@ -181,11 +181,9 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def test_fit_scan_row_figures_take_the_skull_and_baseline_scalars(tmp_path):
+def test_fit_scan_row_figures_take_the_skull_and_baseline_scalars():
     """A fit-scan case's row: its report's scalars, skull vs bone and the uniform baseline."""
-    import json
-
-    from workbench.services.batch.figures import fit_scan_figures
+    from workbench.pipelines.batch.figures import fit_scan_figures
 
     report = {
         "face_within_1mm_fraction": 0.97,
@@ -195,8 +193,7 @@ def test_fit_scan_row_figures_take_the_skull_and_baseline_scalars(tmp_path):
             "uniform_offset_baseline": {"depth_mm": 6.0, "mean_abs_mm": 11.8},
         },
     }
-    (tmp_path / "fit_report.json").write_text(json.dumps(report), encoding="utf-8")
-    row = fit_scan_figures(tmp_path)
+    row = fit_scan_figures(report)
     assert row["skull_vs_bone_mean_abs_mm"] == 6.6
     assert row["skull_vs_bone_baseline_mean_abs_mm"] == 11.8
     assert row["skull_vs_bone_baseline_depth_mm"] == 6.0

@@ -142,11 +142,11 @@ def test_a_head_built_from_the_visible_human_ct_carries_the_nlm_credit(
 ) -> None:
     import pypdf
 
-    from workbench.cli.age_cmd import _write_pdf
+    from workbench.pipelines.age import write_age_report_pdf
 
     built = {"built_from": [{"role": "skin", "file": "vhm_head_ct_1mm.nii.gz", "sha256": "0" * 64}]}
     source = replace(head_male, provenance=built)
-    files = _write_pdf(tmp_path, source, [aged])
+    files = write_age_report_pdf(tmp_path, source, [aged])
     assert tmp_path / "report.pdf" in files
     assert {p.name for p in files} == {"compare_3y.png", "growth_3y.png", "report.pdf"}
     reader = pypdf.PdfReader(tmp_path / "report.pdf")

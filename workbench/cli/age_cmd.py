@@ -17,8 +17,7 @@ from pathlib import Path
 
 from workbench.cli.common import add_force_option, write_json
 from workbench.core.errors import InputError
-from workbench.model.template import TemplateHead
-from workbench.services.age.change import AgeResult
+from workbench.pipelines.outcome import JobOutcome
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -80,10 +79,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> JobOutcome:
+    """The aged heads with their report; the growth figures as values."""
     from workbench.cli.animate_cmd import load_head
     from workbench.model.evidence import file_sha256
-    from workbench.services.age.job import age_to_folder, check_head_sex, parse_ages
+    from workbench.pipelines.age import age_to_folder_with_report
+    from workbench.pipelines.batch.figures import age_figures
+    from workbench.services.age.job import check_head_sex, parse_ages
 
     ages = parse_ages(args.ages) if args.ages is not None else (float(args.to_age),)
     allow = bool(getattr(args, "allow_sex_mismatch", False))
@@ -109,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         if not norms_path.is_file():
             raise InputError(norms_path, "does not exist (a norms CSV was expected)")
         inputs.append({"role": "norms", "file": norms_path.name, "sha256": file_sha256(norms_path)})
-    results, files = age_to_folder(
+    results, files = age_to_folder_with_report(
         head,
         args.out,
         sex=args.sex,
@@ -122,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
         input_paths=[*paths, *([Path(args.norms)] if args.norms.lower().endswith(".csv") else [])],
         force=args.force,
         progress=lambda m: print(f"  {m}"),
-        extra=None if args.no_pdf else _write_pdf,
+        report=not args.no_pdf,
+        note=lambda m: print(f"  note: {m}"),
         warnings=[mismatch] if mismatch else [],
     )
     for path in files:
@@ -131,74 +134,19 @@ def run(args: argparse.Namespace) -> int:
     for r in results:
         for w in r.warnings:
             print(f"  note ({r.to_age:g} y): {w}")
-    write_json(
-        {
-            "out": str(Path(args.out).resolve()),
-            "ages": [
-                {
-                    "to_age": r.to_age,
-                    "hard_residual_mm": r.figures["hard_residual_mm"],
-                    "z_change_max": r.figures["z_change_max"],
-                    "head_circumference_mm": r.figures["head_circumference_mm"],
-                    "unconstrained": r.figures["unconstrained"],
-                    "seconds": r.figures["seconds"],
-                }
-                for r in results
-            ],
-        },
-        None,
-    )
-    return 0
-
-
-def _write_pdf(folder: Path, head: TemplateHead, results: list[AgeResult]) -> list[Path]:
-    """``pictures/*.png`` and ``report.pdf`` into the staged output folder; without OpenGL, no pictures.
-
-    The norms' citations and the source head's data credits (a Visible Human
-    sample named anywhere in its provenance) are looked up here, so the
-    reporting layer needs neither ``workbench.io`` nor the render layer.
-    """
-    from workbench import __version__
-    from workbench.io.growth_norms import load_growth_norms, load_head_circumference
-    from workbench.io.samples import registry
-    from workbench.reporting.age_report import (
-        chart_references,
-        provenance_credits,
-        source_keys,
-        write_age_report,
-    )
-
-    try:
-        from workbench.render.age_pictures import render_age_pictures
-
-        pictures, notes = render_age_pictures(head, results, folder / "pictures")
-    except (ImportError, RuntimeError, OSError) as exc:  # no pyvista / OpenGL at all
-        pictures, notes = {}, [f"no pictures ({exc})"]
-    for note in notes:
-        print(f"  note: {note}")
-    change = dict(results[0].head.provenance.get("age_change") or {})
-    table = load_growth_norms(str(change.get("norms") or results[0].figures["norms"]))
-    citations = {key: table.citation(key) for key in source_keys(results)}
-    charts = load_head_circumference()
-    citations |= {name: charts.citation(name) for name in chart_references(results)}
-    credited: dict[str, str] = {}
-    for sample in registry().values():
-        if not sample.credit:
-            continue
-        for f in (*sample.files, *sample.extra_files):
-            credited[f.sha256] = sample.credit
-            credited[Path(f.path).name] = sample.credit
-        credited[sample.name] = sample.credit
-        if "visible human" in sample.description.lower():
-            credited["visible human"] = sample.credit
-    pdf = write_age_report(
-        folder,
-        head,
-        results,
-        pictures,
-        notes=notes,
-        software=f"workbench {__version__}",
-        citations=citations,
-        credits=provenance_credits(head.provenance or {}, credited),
-    )
-    return [*pictures.values(), pdf]
+    summary = {
+        "out": str(Path(args.out).resolve()),
+        "ages": [
+            {
+                "to_age": r.to_age,
+                "hard_residual_mm": r.figures["hard_residual_mm"],
+                "z_change_max": r.figures["z_change_max"],
+                "head_circumference_mm": r.figures["head_circumference_mm"],
+                "unconstrained": r.figures["unconstrained"],
+                "seconds": r.figures["seconds"],
+            }
+            for r in results
+        ],
+    }
+    write_json(summary, None)
+    return JobOutcome(0, age_figures(summary))

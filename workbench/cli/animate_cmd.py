@@ -48,6 +48,7 @@ from workbench.cli.common import add_force_option, output_path
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_CLIP_SECONDS, check_range
 from workbench.model.template import TemplateHead
+from workbench.pipelines.outcome import JobOutcome
 
 if TYPE_CHECKING:
     from workbench.services.animation.animator import Animator
@@ -192,7 +193,8 @@ def load_head(spec: str) -> tuple[TemplateHead, str, list[Path]]:
     return head, frame or HEAD_FRAME, [root]
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> JobOutcome | int:
+    """The skin (or glTF, or frames) the options ask for; its key figures as values."""
     from workbench.services.animation.animator import EXPRESSIONS, Animator
 
     _check_clip_seconds(args.clip_seconds)
@@ -263,7 +265,15 @@ def run(args: argparse.Namespace) -> int:
         f"wrote {args.out} ({skin.n_vertices} vertices; {pose}; settled in {steps} iterations; "
         f"largest skin movement {moved:.1f} mm)"
     )
-    return 0
+    return JobOutcome(
+        0,
+        {
+            "vertices": skin.n_vertices,
+            "settle_iterations": int(steps),
+            "largest_movement_mm": round(moved, 1),
+            "output_bytes": args.out.stat().st_size,
+        },
+    )
 
 
 def _check_clip_seconds(seconds: float) -> None:
@@ -314,7 +324,7 @@ def _write_glb(
     inputs: list[Path],
     recipes: dict[str, dict[str, float]] | None = None,
     frame: str = "",
-) -> int:
+) -> JobOutcome:
     from workbench.services.animation.gltf import export_head_glb, ramp_keyframes
 
     weights = keyframes = None
@@ -334,7 +344,15 @@ def _write_glb(
         f"wrote {args.out} ({settled.rest['skin'].n_vertices} vertices, {len(names)} morph "
         f"targets settled in {seconds:.1f} s{clip}; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
     )
-    return 0
+    return JobOutcome(
+        0,
+        {
+            "vertices": settled.rest["skin"].n_vertices,
+            "morph_targets": len(names),
+            "targets_seconds": round(seconds, 1),
+            "output_bytes": size,
+        },
+    )
 
 
 def _ascii(text: str) -> str:
@@ -355,7 +373,7 @@ def _frame_pattern(out: Path) -> tuple[str, int, str] | None:
     return name[:start], digits, rest
 
 
-def _run_track(args: argparse.Namespace) -> int:
+def _run_track(args: argparse.Namespace) -> JobOutcome:
     from workbench.services.animation.animator import Animator
     from workbench.services.animation.track import evaluate_track, load_track, play_track
 
@@ -431,7 +449,10 @@ def _run_track(args: argparse.Namespace) -> int:
         f"{steps_per_frame(anim, track.fps)} simulation steps a frame, simulated in "
         f"{seconds:.1f} s ({anim.skin().n_vertices} vertices, mm)"
     )
-    return 0
+    figures = {"vertices": anim.skin().n_vertices, "frames": frames.n_frames}
+    if args.out.is_file():
+        figures["output_bytes"] = args.out.stat().st_size
+    return JobOutcome(0, figures)
 
 
 def _check_frame_folder(folder: Path) -> None:
@@ -467,7 +488,7 @@ def _glb_frame(frame: str) -> str:
 
 def _write_track_glb(
     args: argparse.Namespace, head: TemplateHead, track: Track, inputs: list[Path], frame: str = ""
-) -> int:
+) -> JobOutcome:
     from workbench.io.outputs import check_output_file
     from workbench.services.animation.animator import EXPRESSIONS
     from workbench.services.animation.gltf import export_head_glb
@@ -506,4 +527,11 @@ def _write_track_glb(
         + ("; gaze is not in the .glb" if gaze else "")
         + f"; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
     )
-    return 0
+    return JobOutcome(
+        0,
+        {
+            "vertices": settled.rest["skin"].n_vertices,
+            "morph_targets": len(names) + len(poses),
+            "output_bytes": size,
+        },
+    )

@@ -1,9 +1,11 @@
 """``workbench batch MANIFEST.csv --out DIR``: a study of many jobs, each its own single command.
 
 Each row of the manifest (columns ``id``, ``job``, ``input`` and the job's
-options; see :mod:`workbench.services.batch.manifest`) runs exactly the
-sub-command it names through this CLI's ``main``, in a Dask worker
-(:mod:`workbench.services.batch.run`), into ``DIR/<id>/``.  Afterwards
+options; see :mod:`workbench.pipelines.batch.manifest`) runs exactly the
+job it names, read by that sub-command's own parser and run by its own
+function (which calls the job's pipeline), in a Dask worker
+(:mod:`workbench.pipelines.batch.run`), into ``DIR/<id>/``; the row's figures
+come back as values.  Afterwards
 ``DIR/summary.csv``, ``summary.md``, ``plots/`` and ``summary.pdf``
 (:mod:`workbench.reporting.batch_report`); each row's output in
 ``DIR/logs/<id>.log``.  Exit status 0 when every row is ok, 3 when a row
@@ -123,7 +125,7 @@ class _Stream:
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.services.batch.run import BatchInterrupted, batch_lock
+    from workbench.pipelines.batch.run import BatchInterrupted, batch_lock
 
     err = _Stream(sys.stderr)
     try:
@@ -145,10 +147,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, say: _Stream, notify: _Stream) -> int:
     from workbench import __version__
-    from workbench.cli.main import main
     from workbench.core.errors import InputError
+    from workbench.pipelines.batch.run import DEFAULT_MEMORY_LIMIT, run_batch, summary_record
     from workbench.reporting.batch_report import write_summary
-    from workbench.services.batch.run import DEFAULT_MEMORY_LIMIT, run_batch, summary_record
 
     if args.workers is not None and not 0 <= args.workers <= 256:
         raise InputError(f"--workers {args.workers}", "must be 0 .. 256")
@@ -165,7 +166,6 @@ def _run(args: argparse.Namespace, say: _Stream, notify: _Stream) -> int:
         args.manifest,
         args.out,
         commands={k: v for k, v in commands().items() if k != "batch"},
-        entry=main,
         workers=workers,
         scheduler=args.scheduler,
         resume=args.resume,

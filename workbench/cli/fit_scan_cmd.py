@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 from workbench.cli.common import add_force_option, add_units_options, write_json
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
+from workbench.pipelines.outcome import JobOutcome
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -81,15 +81,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> JobOutcome:
+    """The fitted pack with its report; exit status 3 when the fit asks for a check."""
     from workbench.cli.common import print_self_check, self_check_status
     from workbench.cli.reconstruct_cmd import orientation_of
     from workbench.io.samples import resolve_input
+    from workbench.pipelines.batch.figures import fit_scan_figures
+    from workbench.pipelines.scan_fit import fit_scan_to_folder
     from workbench.services.scan_fit.figures import fitted_vs_inferred
-    from workbench.services.scan_fit.pack import fit_scan_pack
 
     orientation = orientation_of(args, args.scan)
-    result, files = fit_scan_pack(
+    result, files = fit_scan_to_folder(
         resolve_input(args.scan),
         args.out,
         units=args.units,
@@ -103,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         texture=args.texture,
         force=args.force,
         progress=lambda m: print(f"  {m}"),
-        extra=lambda folder, fit: _write_pdf(folder, fit, Path(args.scan).name),
+        note=lambda m: print(f"  note: {m}"),
         detail=args.detail,
     )
     fig = result.figures
@@ -139,28 +141,9 @@ def run(args: argparse.Namespace) -> int:
         None,
     )
     # written, but a fit that asks for a check is not a plain success (exit 3)
-    return self_check_status("fit-scan", fig.get("self_check"))
-
-
-def _write_pdf(folder: Path, result: Any, scan_name: str) -> list[Path]:
-    """``pictures/*.png`` and ``fit_report.pdf`` into the staged pack; without OpenGL, no maps."""
-    from workbench import __version__
-    from workbench.reporting.fit_scan_report import fit_scan_summary, write_fit_scan_pdf
-
-    try:
-        from workbench.render.scan_fit_pictures import render_scan_fit_pictures
-
-        pictures, notes = render_scan_fit_pictures(result, folder / "pictures")
-    except (ImportError, RuntimeError, OSError) as exc:  # no pyvista / OpenGL at all
-        pictures, notes = {}, [f"no pictures ({exc})"]
-    for note in notes:
-        print(f"  note: {note}")
-    notes = [*notes, *(f"Data credit: {c}" for c in result.figures.get("credits", []))]
-    pdf = write_fit_scan_pdf(
-        fit_scan_summary(result, scan_name),
-        folder / "fit_report.pdf",
-        pictures,
-        notes=notes,
-        software=f"workbench {__version__}",
+    check = fig.get("self_check") or {}
+    return JobOutcome(
+        self_check_status("fit-scan", check),
+        fit_scan_figures(fig),
+        list(check.get("reasons", ())) if check.get("outcome") == "check" else [],
     )
-    return [*pictures.values(), pdf]

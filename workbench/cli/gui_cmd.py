@@ -214,11 +214,13 @@ def options_from(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.cli.age_cmd import _write_pdf
+    from workbench.pipelines.age import write_age_report_pdf
     from workbench.qt.age_ops import set_pdf_hook
     from workbench.qt.app import run as run_window
 
-    set_pdf_hook(_write_pdf)  # the window's age export writes report.pdf as `workbench age`
+    set_pdf_hook(
+        write_age_report_pdf
+    )  # the window's age export writes report.pdf as `workbench age`
     return run_window(options_from(args))
 
 

@@ -26,33 +26,19 @@ finished a late Ctrl-C no longer changes its outcome.
 from __future__ import annotations
 
 import argparse
-import errno
 import os
-import re
 import signal
 import sys
 import threading
 from collections.abc import Sequence
-from pathlib import Path
 from types import FrameType, ModuleType
 from typing import Any
 
 import workbench
-from workbench.core.errors import WorkbenchError
+from workbench.pipelines.outcome import STDOUT_NAME, failure_status
 
 #: exit status after Ctrl-C (128 + SIGINT, what a shell reports for it)
 EXIT_INTERRUPTED = 130
-#: errors of a write that the device or file system refused, as told to the user
-WRITE_FAILURES = {
-    code: text
-    for code, text in (
-        (errno.ENOSPC, "no space left on the device"),
-        (getattr(errno, "EDQUOT", None), "the disk quota is exceeded"),
-        (errno.EROFS, "the file system is read-only"),
-        (errno.EFBIG, "the file is too large for the file system"),
-    )
-    if code is not None
-}
 #: a Ctrl-C that Python dropped is raised again this long after (s; see _Interrupts), at
 #: most _MAX_REDELIVERIES times per command
 REDELIVERY_DELAY_S = 0.01
@@ -173,12 +159,7 @@ def _run(argv: Sequence[str] | None, watch: _Interrupts) -> int:
             # whatever the interrupt turned into on its way out (an ImportError when it
             # hit a compiled module's import, an error of a library that caught it)
             return _interrupted()
-        if isinstance(exc, WorkbenchError):
-            print(f"{_prog(args)}: error: {exc}", file=sys.stderr)
-            return 2
-        if isinstance(exc, OSError):
-            return _os_error(args, exc)
-        return _unexpected(args, exc)
+        return failure_status(exc, args, flush_stdout=_flush_stdout)
 
 
 class _Interrupts:
@@ -258,10 +239,6 @@ class _Interrupts:
             signal.signal(signal.SIGINT, self._handler)
 
 
-#: the name shown for the standard output in an error (it has no file name)
-STDOUT_NAME = "the standard output"
-
-
 def _flush_stdout() -> None:
     """Flush what the command printed, so a full device (``> /dev/full``) is reported
     here, naming the standard output, instead of by the interpreter at exit.  A reader
@@ -302,77 +279,6 @@ def _end_process(code: int) -> None:
         except (OSError, ValueError, AttributeError):
             pass
     os._exit(code)
-
-
-#: a staged output folder's temporary name (workbench.io.outputs): ``.NAME.partial-PID``
-_STAGED = re.compile(r"^\.(?P<name>.+)\.partial-\d+$")
-
-
-def _shown_path(name: Any) -> str | None:
-    """``name`` (an OSError's filename) as the user knows it: a path inside a staged
-    output folder is shown at its final place."""
-    if name is None:
-        return None
-    text = os.fsdecode(name) if isinstance(name, bytes | os.PathLike) else str(name)
-    parts = [_STAGED.sub(r"\g<name>", part) for part in Path(text).parts]
-    return str(Path(*parts)) if parts else text
-
-
-def _os_error(args: argparse.Namespace, exc: OSError) -> int:
-    """A file the command could not read or write (a folder where a file is expected, no
-    permission, disk full): name the path and the problem."""
-    where = _shown_path(exc.filename)
-    failure = WRITE_FAILURES.get(exc.errno) if exc.errno is not None else None
-    if failure is not None and not args.debug:
-        if where is None:  # no file named: the standard output, if it fails too, else --out
-            try:
-                _flush_stdout()
-            except OSError as again:
-                where = again.filename
-        target = where or _output_of(args)
-        elsewhere = "the output" if target == STDOUT_NAME else "--out"
-        hint = (
-            f"free some space (or send {elsewhere} to another disk) and run the command again"
-            if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", None))
-            else f"send {elsewhere} to another place"
-        )
-        print(
-            f"{_prog(args)}: error: {target}: cannot be written: {failure} ({hint})",
-            file=sys.stderr,
-        )
-        return 2
-    if where is None or args.debug:
-        return _unexpected(args, exc)
-    if exc.filename2:
-        where += f" -> {_shown_path(exc.filename2)}"
-    print(
-        f"{_prog(args)}: error: {where}: cannot be read or written ({exc.strerror or exc})",
-        file=sys.stderr,
-    )
-    return 2
-
-
-def _prog(args: argparse.Namespace) -> str:
-    command = getattr(args, "command", None)
-    return f"workbench {command}" if command else "workbench"
-
-
-def _output_of(args: argparse.Namespace) -> str:
-    """What the command writes, for an error that does not name the file: its ``--out``,
-    else the standard output (where a command without one writes)."""
-    out = getattr(args, "out", None)
-    return f"--out {out}" if out is not None else STDOUT_NAME
-
-
-def _unexpected(args: argparse.Namespace, exc: Exception) -> int:
-    if args.debug:
-        raise exc
-    print(
-        f"{_prog(args)}: unexpected error: {type(exc).__name__}: {exc}\n"
-        "(rerun with --debug for the full traceback, and please report it)",
-        file=sys.stderr,
-    )
-    return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from workbench.cli.common import (
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_BUILD_SD, MAX_ENSEMBLE, check_count, check_tissue_depth
+from workbench.pipelines.outcome import JobOutcome
 
 
 def _build(value: str) -> str | float:
@@ -249,8 +249,10 @@ def _overrides(items: list[str]) -> dict[str, float]:
     return out
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> JobOutcome:
+    """The reconstruction folder; exit status 3 when the registration asks for a check."""
     from workbench.io.samples import resolve_input
+    from workbench.pipelines.batch.figures import reconstruct_figures
     from workbench.services.reconstruction.job import JobSettings
     from workbench.services.tissue.tissue_model import TissueSettings
 
@@ -289,7 +291,12 @@ def run(args: argparse.Namespace) -> int:
         pictures=not args.no_pictures,
         force=args.force,
     )
-    return self_check_status("reconstruct", report.get("self_check"))
+    check = report.get("self_check") or {}
+    return JobOutcome(
+        self_check_status("reconstruct", check),
+        reconstruct_figures(report),
+        list(check.get("reasons", ())) if check.get("outcome") == "check" else [],
+    )
 
 
 def execute(
@@ -303,173 +310,32 @@ def execute(
     force: bool = False,
     staged: bool = False,
 ) -> dict:
-    """Run the job, write every output into ``out``; returns the report dict.
+    """Run the job (:func:`workbench.pipelines.reconstruct.reconstruct_to_folder`), print
+    what it wrote and its figures; returns the report dict.
 
-    ``out`` is checked before the fit and written as a whole
-    (:func:`workbench.io.outputs.staged_folder`): it may not hold an input,
-    an existing folder is replaced only with ``force`` (kept as ``DIR.1``),
-    and a failure leaves it as it was.  ``staged=True``: ``out`` is a fresh
-    folder the caller staged (``workbench demo``), written straight into.
+    ``staged=True``: ``out`` is a fresh folder the caller staged (``workbench demo``).
     """
-    from workbench.io.outputs import check_output_folder, relocate, staged_folder
-    from workbench.services.reconstruction.job import job_inputs, run_reconstruction
+    from workbench.pipelines.reconstruct import reconstruct_to_folder, summary_figures
 
     # progress on stderr: stdout opens with the self-check's CHECK lines, then the results
-    say = (lambda _m: None) if quiet else (lambda m: print(f"  {m}", file=sys.stderr))
-    inputs = job_inputs(skull_path, settings, truth)
-    if not staged:
-        check_output_folder(out, inputs, force)  # before the fit, which takes a while
-    result = run_reconstruction(skull_path, settings, progress=say)
-    if staged:
-        files = _write_all(result, out, truth, settings, pictures)
-    else:
-        with staged_folder(out, force, inputs, notify=None if quiet else print) as temp:
-            files = _write_all(result, temp, truth, settings, pictures)
-        files = relocate(files, temp, Path(os.path.abspath(out)))
-        result.opened.case.source_path = files["case"]
-    report = result.report
-    report["_seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
+    done = reconstruct_to_folder(
+        skull_path,
+        settings,
+        out,
+        truth=truth,
+        pictures=pictures,
+        force=force,
+        staged=staged,
+        progress=None if quiet else (lambda m: print(f"  {m}", file=sys.stderr)),
+        notify=None if quiet else print,
+    )
+    report = done.report
     if quiet:
         return report
-    check = report.get("self_check") or {}
-    print_self_check(check)  # the self-check's doubt first, apart from the notes
-    for name, path in files.items():
+    print_self_check(report.get("self_check"))  # the self-check's doubt first, apart from the notes
+    for name, path in done.files.items():
         print(f"wrote {name}: {path}")
-    fit = report["fit"]
-    summary = {
-        k: fit.get(k)
-        for k in (
-            "max_tip_error_mm",
-            "min_tissue_mm",
-            "penetrating_vertices",
-            "refits",
-            "suggested_landmarks",
-            "absent_landmarks",
-        )
-    }
-    summary["seconds"] = report["_seconds"]
-    if check:
-        summary["self_check"] = check.get("outcome")
-    jaw = (report.get("registration") or {}).get("jaw") or {}
-    if jaw.get("present"):
-        occ = jaw.get("occlusion")
-        summary["jaw"] = {
-            "opening_in_scan_deg": jaw.get("opening_deg"),
-            "for_the_face": f"occlusion ({occ['method']})" if occ else "as scanned",
-        }
-    if report["ensemble"]:
-        summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
-    if report["validation"]:
-        summary["validation"] = {
-            k: report["validation"][k]
-            for k in ("mean_abs_mm", "pct_within_2_5mm", "pct_within_5mm")
-        }
     for w in report["warnings"]:
         print(f"  note: {w}")
-    write_json(summary, None)
+    write_json(summary_figures(report), None)
     return report
-
-
-def _write_all(result, out: Path, truth: Path | None, settings, pictures: bool) -> dict[str, Path]:
-    """The job's files, validation figures, pictures and report, all into ``out``."""
-    from workbench.reporting.report import write_report_json, write_report_pdf
-    from workbench.services.reconstruction.job import write_outputs
-
-    files = write_outputs(result, out, staged=True)
-    report = result.report
-    if truth is not None:
-        report["validation"] = _validate(truth, settings.scale, result)
-    if pictures:
-        report["pictures"] = _pictures(out, result)
-    files["report"] = write_report_json(report, out / "report.json")
-    files["report_pdf"] = write_report_pdf(report, out / "report.pdf", base_dir=out)
-    return files
-
-
-def _validate(truth_path: Path, scale: float | None, result) -> dict:
-    """The project's metric (VALIDATION.md) on the true skin, beside a uniform 6 mm offset.
-
-    The anterior direction is the fitted head frame's (no other is known
-    here); ``workbench validate`` takes it from its manifest.
-    """
-    import numpy as np
-
-    from workbench.core.face_metric import ScoreMask, unit
-    from workbench.core.offset_surface import uniform_offset
-    from workbench.io.meshes import read_mesh
-    from workbench.services.templates.regions import REGION_NAMES, face_regions
-    from workbench.services.validation.run import score_surfaces
-
-    truth = read_mesh(truth_path, units="mm" if scale is None else "auto", scale=scale).mesh
-    recon = result.recon
-    bone = result.opened.case.specimen.mesh
-    anterior = unit(np.linalg.inv(recon.input_to_head)[:3, :3] @ [0.0, 0.0, 1.0])
-    _, (mine, base) = score_surfaces(
-        truth,
-        bone,
-        [("reconstruction", recon.face), ("uniform_6mm_offset", uniform_offset(bone))],
-        anterior,
-        ScoreMask(),
-        labels_from=recon.face,
-        vertex_regions=face_regions(result.template),
-        region_names=REGION_NAMES,
-    )
-    return {
-        **mine.figures,
-        "regions": mine.regions,
-        "truth": str(truth_path),
-        "region": "face (VALIDATION.md metric)",
-        "metric": "VALIDATION.md: outermost, anterior-facing true-skin vertices in front of "
-        "the bone centre and within 35 mm of the bone; distance to the "
-        "reconstruction (positive: outside)",
-        "baseline": {"method": "uniform 6 mm offset of the bone", **base.figures},
-    }
-
-
-def _pictures(out: Path, result) -> dict[str, str]:
-    import numpy as np
-
-    from workbench.render.reconstruction import render_builds, render_reconstruction
-    from workbench.services.reconstruction.reconstruct import articulated_skull
-
-    recon = result.recon
-    active = recon.plan.active()
-    origins = recon.to_input(np.array([d.origin for d in active]))
-    tips = recon.to_input(np.array([d.tip for d in active]))
-    skull = result.opened.case.specimen.mesh
-    if recon.registration is not None and recon.registration.occlusion is not None:
-        skull = articulated_skull(recon.registration)  # the skull the face was fitted over
-    eyes = recon.mesh_to_input(recon.head.meshes["eyes"])
-    try:
-        paths = render_reconstruction(
-            skull,
-            recon.face,
-            (origins, tips),
-            out / "pictures",
-            frame=recon.input_to_head,
-            eyes=eyes,
-            spread=result.spread,
-            inferred=recon.inferred,
-        )
-    except (RuntimeError, OSError, ValueError) as exc:
-        print(f"  note: no pictures (off-screen rendering failed: {exc})")
-        return {}
-    builds = result.fit.builds if result.fit is not None else None
-    if builds is not None:
-        # the three build faces side by side and the band map: a failure here loses only
-        # these pictures, never the job
-        try:
-            paths |= render_builds(
-                {name: builds.face(name, recon) for name in builds.names},
-                out / "pictures",
-                frame=recon.input_to_head,
-                bmi=builds.bmi,
-                main=builds.main,
-                eyes=eyes,
-                skull=skull,
-                band_face=recon.face,
-                band_mm=builds.half_width_mm,
-            )
-        except (RuntimeError, OSError, ValueError, InputError) as exc:
-            print(f"  note: no build pictures (rendering failed: {exc})")
-    return {k: str(Path(p).relative_to(out)) for k, p in paths.items()}

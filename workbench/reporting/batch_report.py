@@ -1,7 +1,7 @@
 """The summary of a batch study: ``summary.csv``, ``summary.md``, plots and ``summary.pdf``.
 
 Input is plain data, one *record* per manifest row (built by
-``workbench.services.batch.run.summary_record``)::
+``workbench.pipelines.batch.run.summary_record``)::
 
     {"id", "job", "line", "status" ("ok" | "check" | "failed"), "resumed", "exit_status",
      "seconds", "message", "folder", "figures": {name: number},

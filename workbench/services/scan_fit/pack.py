@@ -74,7 +74,7 @@ def fit_scan_pack(
     *,
     units: str = "auto",
     scale: float | None = None,
-    landmarks: str | PathLike[str] | None = None,
+    landmarks: str | PathLike[str] | LandmarkSet | None = None,
     sex: str = "male",
     table: str = DEFAULT_DEPTH_TABLE,
     build: str | float = "normal",
@@ -111,7 +111,9 @@ def fit_scan_pack(
     from workbench.io.outputs import check_output_folder, write_folder
 
     check_units_choice(units, scale)
-    sources = [scan_path, landmarks, bone_path, texture]
+    # landmarks placed in the window have no file
+    landmark_file = None if isinstance(landmarks, LandmarkSet) else landmarks
+    sources = [scan_path, landmark_file, bone_path, texture]
     check_output_folder(out, sources, force)  # before the fit, which takes a while
     scan = _read_scan(scan_path, units, scale, texture, progress)
     path, prepared, inputs = scan.path, scan.prepared, scan.inputs
@@ -182,16 +184,29 @@ def _read_scan(
     return _ScanFile(path, prepared, colours, factor, inputs)
 
 
-def _read_landmarks(landmarks: str | PathLike[str], scan: _ScanFile, sex: str) -> LandmarkSet:
+def _read_landmarks(
+    landmarks: str | PathLike[str] | LandmarkSet, scan: _ScanFile, sex: str
+) -> LandmarkSet:
     """The skin landmark file, in the scan's units, checked against the scan
     (:func:`~workbench.services.scan_fit.checks.check_landmarks_on_scan`, the reference
-    of ``sex`` telling which landmarks may coincide); noted in ``scan.inputs``."""
+    of ``sex`` telling which landmarks may coincide); noted in ``scan.inputs``.
+
+    A :class:`LandmarkSet` (the window's placed landmarks) is already in the scan's
+    frame and in mm; it is checked the same way and noted as placed, without a file.
+    """
     from workbench.io.catalogue import load_catalogue
     from workbench.io.markups import read_landmarks
     from workbench.model.evidence import file_sha256
     from workbench.services.templates.cache import reference_head
 
     factor, inputs, prepared, path = scan.factor, scan.inputs, scan.prepared, scan.path
+    known = reference_head(sex).skin_landmarks.as_dict()
+    if isinstance(landmarks, LandmarkSet):
+        inputs.append(
+            {"role": "skin_landmarks", "file": "(placed in the window)", "count": len(landmarks)}
+        )
+        check_landmarks_on_scan(landmarks, prepared.mesh, "placed landmarks", path.name, known)
+        return landmarks
     lms = read_landmarks(
         landmarks, "skin", catalogue=load_catalogue(), allow_undefined=True
     ).landmarks.transformed(np.diag([factor, factor, factor, 1.0]))
@@ -202,7 +217,6 @@ def _read_landmarks(landmarks: str | PathLike[str], scan: _ScanFile, sex: str) -
             "sha256": file_sha256(Path(landmarks)),
         }
     )
-    known = reference_head(sex).skin_landmarks.as_dict()
     check_landmarks_on_scan(lms, prepared.mesh, landmarks, path.name, known)
     return lms
 

@@ -11,8 +11,8 @@ import pytest
 from workbench.cli.batch_cmd import commands
 from workbench.cli.main import main
 from workbench.core.errors import InputError
-from workbench.services.batch.manifest import read_batch_manifest
-from workbench.services.batch.run import (
+from workbench.pipelines.batch.manifest import read_batch_manifest
+from workbench.pipelines.batch.run import (
     MARKER,
     error_line,
     file_digest,
@@ -122,7 +122,6 @@ def _run(manifest: Path, out: Path, parsers, resume: bool = False, lines: list |
         manifest,
         out,
         commands=parsers,
-        entry=main,
         workers=0,
         resume=resume,
         notify=(lines.append if lines is not None else None),
@@ -209,46 +208,19 @@ def test_inputs_inside_the_batch_folder_are_refused(tmp_path, parsers):
     assert skull.read_text(encoding="utf-8") == "x" and not (out / "r").exists()
 
 
-def _age_entry(argv: list[str]) -> int:
-    """``workbench age`` through its own parser, for as long as main.py does not list it."""
-    import argparse
-    import sys
-
-    from workbench.cli import age_cmd
-    from workbench.core.errors import WorkbenchError
-
-    parser = argparse.ArgumentParser(prog="workbench")
-    age_cmd.register(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(argv)
-    try:
-        return int(args.handler(args) or 0)
-    except WorkbenchError as exc:
-        print(f"workbench age: error: {exc}", file=sys.stderr)
-        return 2
-
-
 @pytest.mark.slow
 def test_age_rows_give_growth_figures_and_curves(tmp_path, parsers, head_male):
-    import argparse
-
-    from workbench.cli import age_cmd
+    from workbench.pipelines.batch.run import summary_record
     from workbench.reporting.batch_report import write_summary
-    from workbench.services.batch.run import summary_record
 
-    if "age" in parsers:
-        entry, age = main, {"age": parsers["age"]}
-    else:
-        parser = argparse.ArgumentParser(prog="workbench")
-        sub = parser.add_subparsers(dest="command")
-        age_cmd.register(sub)
-        entry, age = _age_entry, {"age": sub.choices["age"]}
+    age = {"age": parsers["age"]}
     m = _write(
         tmp_path / "m.csv",
         'id,job,input,sex,from,ages,no-pdf\ngrow,age,reference:male,male,30,"8,16",true\n'
         "old,age,reference:male,male,30,200,true\n",
     )
     out = tmp_path / "out"
-    grow, old = run_batch(m, out, commands=age, entry=entry, workers=0)
+    grow, old = run_batch(m, out, commands=age, workers=0)
     assert old.status == "failed" and "200" in old.message
     assert grow.status == "ok", grow.message
     f = grow.figures
@@ -266,8 +238,8 @@ def test_a_row_whose_registration_asks_for_a_check_is_done_but_flagged(
     its CHECK reason is its message, a resumed batch does not run it again, the summary
     lists it apart from failures and the batch command exits 3 (issue 28)."""
     import workbench.cli.reconstruct_cmd as cmd
+    from workbench.pipelines.batch.run import summary_record
     from workbench.reporting.batch_report import counts, markdown
-    from workbench.services.batch.run import summary_record
 
     reason = "only 62 % of the reference's facial skeleton lies on bone"
     ran: list[Path] = []

@@ -1,14 +1,13 @@
-"""Key figures of a finished batch row, read from the files its command wrote.
+"""Key figures of a finished job, taken from the values it made (not from what it printed).
 
-Each sub-command leaves its figures where its single run puts them:
-``reconstruct`` in ``report.json`` (fit, ensemble, validation against a
-``--truth``), ``validate`` in ``results.csv`` (one row per case and method,
-the metric of ``VALIDATION.md`` overall and per face region), ``fit-scan``
-in ``fit_report.json`` (the face within 1 / 2.5 mm, distances in mm) and
-``animate`` only in its closing line on stdout (vertices, settle iterations,
-largest skin movement in mm), ``age`` in the summary it prints (per target
-age: head circumference, residual in mm, largest z-score change).  A sub-command this module does not know (a new
-one, such as ``age``) gets the numbers of the last JSON object it printed.
+Each job function returns its figures in a :class:`~workbench.pipelines.outcome.JobOutcome`,
+built here from its own results: ``reconstruct`` from its report (fit,
+ensemble, validation against a ``--truth``), ``validate`` from its table (one
+row per case and method, the metric of ``VALIDATION.md``), ``fit-scan`` from
+the fit's figures (the face within 1 / 2.5 mm, distances in mm), ``age`` from
+its summary (per target age: head circumference, residual in mm, largest
+z-score change); ``animate`` builds its own (vertices, settle iterations,
+largest skin movement in mm, morph targets, bytes written).
 
 Figures are flat ``{name: number or text}`` dicts (units in the names: ``_mm``,
 ``pct_`` 0-100, ``_fraction`` 0-1), so they go straight into summary.csv.
@@ -17,11 +16,11 @@ Figures are flat ``{name: number or text}`` dicts (units in the names: ``_mm``,
 from __future__ import annotations
 
 import csv
-import json
 import math
-import re
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 Figures = dict[str, Any]
 
@@ -46,15 +45,13 @@ AGE_KEYS = {
     "hard_residual_mm": ("max",),
     "z_change_max": ("",),
 }
-ANIMATE_LINE = re.compile(
-    r"\((?P<vertices>\d+) vertices(?:; .*?settled in (?P<iterations>\d+) iterations; largest skin "
-    r"movement (?P<movement>[0-9.]+) mm)?(?:, (?P<targets>\d+) morph targets settled in "
-    r"(?P<target_seconds>[0-9.]+) s)?"
-)
 
 
 def _number(value: Any) -> Any:
-    """A finite int/float as is (floats to 4 decimals), text as is, anything else None."""
+    """A finite int/float as is (floats to 4 decimals; numpy scalars as Python numbers), text
+    as is, anything else None."""
+    if isinstance(value, np.generic):
+        value = value.item()
     if isinstance(value, bool):
         return int(value)
     if isinstance(value, int):
@@ -77,16 +74,8 @@ def _scalars(data: Any, keys: tuple[str, ...] | None = None, prefix: str = "") -
     return out
 
 
-def _read_json(path: Path) -> dict[str, Any]:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
-def reconstruct_figures(folder: Path) -> Figures:
-    report = _read_json(folder / "report.json")
+def reconstruct_figures(report: dict[str, Any]) -> Figures:
+    """``reconstruct``: the fit's figures, the ensemble spread and a ``--truth`` validation."""
     out = _scalars(report.get("fit"), RECONSTRUCT_FIT)
     ensemble = report.get("ensemble")
     if isinstance(ensemble, dict):
@@ -115,8 +104,9 @@ def _float(text: Any) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def validate_figures(folder: Path) -> Figures:
-    rows = validate_rows(folder)
+def validate_figures(rows: list[dict[str, Any]]) -> Figures:
+    """``validate``: the cases, the failed ones and each method's mean figures over the cases
+    (``rows``: the study's table, one row per case and method, as in ``results.csv``)."""
     cases = {r.get("case") for r in rows}
     failed = {r.get("case") for r in rows if r.get("status") != "ok"}
     out: Figures = {"cases": len(cases), "failed_cases": len(failed)}
@@ -130,8 +120,9 @@ def validate_figures(folder: Path) -> Figures:
     return out
 
 
-def fit_scan_figures(folder: Path) -> Figures:
-    report = _read_json(folder / "fit_report.json")
+def fit_scan_figures(report: dict[str, Any]) -> Figures:
+    """``fit-scan``: the face's distances to the scan, fold-overs, tissue and bone checks
+    (``report``: the fit's figures, as in ``fit_report.json``)."""
     out = _scalars(report, FIT_SCAN_KEYS)
     tissue = report.get("tissue_depths")
     if isinstance(tissue, dict):
@@ -144,61 +135,11 @@ def fit_scan_figures(folder: Path) -> Figures:
     return out
 
 
-def animate_figures(output: Path, stdout: str) -> Figures:
-    out: Figures = {}
-    lines = [ln for ln in stdout.splitlines() if ln.startswith("wrote ")]
-    match = ANIMATE_LINE.search(lines[-1]) if lines else None
-    if match:
-        names = {
-            "vertices": "vertices",
-            "iterations": "settle_iterations",
-            "movement": "largest_movement_mm",
-            "targets": "morph_targets",
-            "target_seconds": "targets_seconds",
-        }
-        for group, name in names.items():
-            if match.group(group) is not None:
-                out[name] = (
-                    float(match.group(group))
-                    if "." in match.group(group)
-                    else int(match.group(group))
-                )
-    if output.is_file():
-        out["output_bytes"] = output.stat().st_size
-    return out
-
-
-def _last_json(stdout: str) -> dict[str, Any]:
-    """The last JSON object a command printed (starting at the beginning of a line)."""
-    decoder = json.JSONDecoder()
-    last: dict[str, Any] = {}
-    for i, ch in enumerate(stdout):
-        if ch == "{" and (i == 0 or stdout[i - 1] == "\n"):
-            try:
-                data, _ = decoder.raw_decode(stdout, i)
-            except ValueError:
-                continue
-            if isinstance(data, dict):
-                last = data
-    return last
-
-
-def printed_json(stdout: str) -> Figures:
-    """The numbers of the last JSON object a command printed (one level of nesting)."""
-    out: Figures = {}
-    for k, v in _last_json(stdout).items():
-        if isinstance(v, dict):
-            out.update(_scalars(v, None, f"{k}_"))
-        elif (n := _number(v)) is not None and not isinstance(n, str):
-            out[k] = n
-    return out
-
-
-def age_figures(stdout: str) -> Figures:
+def age_figures(summary: dict[str, Any]) -> Figures:
     """``age``: the source head's circumference and per target age (``_<age>y`` in the name)
     the aged head's and the chart's target (mm), the largest hard-landmark residual (mm) and
-    the largest z-score change, from the summary it prints."""
-    ages = _last_json(stdout).get("ages")
+    the largest z-score change (``summary``: what ``workbench age`` prints)."""
+    ages = summary.get("ages")
     out: Figures = {}
     for item in ages if isinstance(ages, list) else ():
         age = _number(item.get("to_age")) if isinstance(item, dict) else None
@@ -215,19 +156,3 @@ def age_figures(stdout: str) -> Figures:
                 else:
                     out[f"{key}{'_' + sub if sub else ''}_{age:g}y"] = number
     return out
-
-
-def row_figures(job: str, argv: list[str], stdout: str) -> Figures:
-    """Key figures of a finished row of ``job`` whose command line was ``argv``."""
-    out = Path(argv[argv.index("--out") + 1])
-    if job == "reconstruct":
-        return reconstruct_figures(out)
-    if job == "validate":
-        return validate_figures(out)
-    if job == "fit-scan":
-        return fit_scan_figures(out)
-    if job == "animate":
-        return animate_figures(out, stdout)
-    if job == "age":
-        return age_figures(stdout) or printed_json(stdout)
-    return printed_json(stdout)

@@ -73,6 +73,9 @@ class BatchRow:
     out: Path
     values: dict[str, str] = field(default_factory=dict)
     error: str | None = None
+    #: ``argv`` parsed by the job's own parser (its ``handler`` is the job's function); None
+    #: when argparse refused it (``error``)
+    options: argparse.Namespace | None = None
 
 
 def _option_map(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
@@ -155,16 +158,20 @@ def _row_argv(
     return argv, problems
 
 
-def _parse_error(parser: argparse.ArgumentParser, argv: list[str]) -> str | None:
-    """argparse's own complaint about a value (bad choice, not a number), or None."""
+def _parse(
+    parser: argparse.ArgumentParser, argv: list[str]
+) -> tuple[argparse.Namespace | None, str | None]:
+    """The row's options as its job reads them, or argparse's own complaint about a value
+    (bad choice, not a number)."""
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err):
-            parser.parse_args(argv[1:])
+            options = parser.parse_args(argv[1:])
     except SystemExit:
         lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
-        return lines[-1].split(": error: ", 1)[-1] if lines else "invalid arguments"
-    return None
+        return None, lines[-1].split(": error: ", 1)[-1] if lines else "invalid arguments"
+    options.command, options.debug = argv[0], False  # as the command line's parser sets them
+    return options, None
 
 
 def read_batch_manifest(
@@ -254,17 +261,8 @@ def read_batch_manifest(
         argv, bad = _row_argv(job, values, commands[job], base, out / row_id, where)
         problems += bad
         if not bad:
-            rows.append(
-                BatchRow(
-                    start,
-                    row_id,
-                    job,
-                    argv,
-                    out / row_id,
-                    values,
-                    _parse_error(commands[job], argv),
-                )
-            )
+            options, error = _parse(commands[job], argv)
+            rows.append(BatchRow(start, row_id, job, argv, out / row_id, values, error, options))
     if problems:
         raise InputError(path, "; ".join(problems), "fix these lines; nothing was run")
     if not rows:

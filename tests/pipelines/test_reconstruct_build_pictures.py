@@ -1,5 +1,5 @@
-"""``workbench reconstruct``'s pictures: the build pictures join the others, and their
-failure costs only themselves (``reconstruct_cmd._pictures``).
+"""The reconstruction folder's pictures: the build pictures join the others, and their
+failure costs only themselves (``pipelines.reconstruct.reconstruction_pictures``).
 
 The renderers are replaced by stand-ins that record their arguments, and the
 job result by a minimal stand-in: only the wiring is under test here
@@ -14,8 +14,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from workbench.cli import reconstruct_cmd
 from workbench.core.mesh import Mesh
+from workbench.pipelines.reconstruct import reconstruction_pictures
 from workbench.render import reconstruction
 
 TRI = Mesh(np.eye(3), np.array([[0, 1, 2]]))
@@ -69,7 +69,7 @@ def renderers(monkeypatch):
 
 
 def test_build_pictures_join_the_others(renderers, tmp_path: Path) -> None:
-    pictures = reconstruct_cmd._pictures(tmp_path, fake_result(fake_builds()))
+    pictures = reconstruction_pictures(tmp_path, fake_result(fake_builds()))
     assert pictures == {
         "face_front": "pictures/recon_face_front.png",
         "builds_front": "pictures/builds_front.png",
@@ -84,19 +84,20 @@ def test_build_pictures_join_the_others(renderers, tmp_path: Path) -> None:
 
 
 def test_no_builds_no_build_pictures(renderers, tmp_path: Path) -> None:
-    pictures = reconstruct_cmd._pictures(tmp_path, fake_result(None))
+    pictures = reconstruction_pictures(tmp_path, fake_result(None))
     assert pictures == {"face_front": "pictures/recon_face_front.png"}
     assert "builds" not in renderers
     result = fake_result(None)
     result.fit = None  # a job without a fit (e.g. a library of packs)
-    assert reconstruct_cmd._pictures(tmp_path, result) == pictures
+    assert reconstruction_pictures(tmp_path, result) == pictures
 
 
-def test_a_build_picture_failure_is_a_note(renderers, monkeypatch, tmp_path, capsys) -> None:
+def test_a_build_picture_failure_is_a_note(renderers, monkeypatch, tmp_path) -> None:
     def broken(faces, out_dir, **kw):
         raise RuntimeError("off-screen window lost")
 
     monkeypatch.setattr(reconstruction, "render_builds", broken)
-    pictures = reconstruct_cmd._pictures(tmp_path, fake_result(fake_builds()))
+    notes: list[str] = []
+    pictures = reconstruction_pictures(tmp_path, fake_result(fake_builds()), notes.append)
     assert pictures == {"face_front": "pictures/recon_face_front.png"}
-    assert "no build pictures" in capsys.readouterr().out
+    assert len(notes) == 1 and notes[0].startswith("no build pictures")

@@ -1,13 +1,14 @@
 """Batch studies: every row of a manifest run as its own single command, on Dask distributed.
 
-``workbench batch MANIFEST.csv --out DIR`` (see :mod:`workbench.services.batch.manifest`
-for the manifest).  Each row is exactly one sub-command: its argv is built
-from the row and handed to the CLI's entry point (``workbench.cli.main.main``)
-inside a Dask worker, so ``DIR/<id>/`` holds byte for byte the files the
-single command writes (mm, each command's own frames), plus the batch's
-marker ``DIR/<id>/batch_row.json``.  This layer cannot import the CLI, so
-the entry point and the sub-command parsers are passed in (the CLI does;
-a script can pass ``workbench.cli.main.main`` too).
+``workbench batch MANIFEST.csv --out DIR`` (see :mod:`workbench.pipelines.batch.manifest`
+for the manifest).  Each row is exactly one job: its argv is built from the
+row and read by the job's own parser (passed in: this layer cannot import
+the CLI, which builds them), and the parsed options go to the job's function
+(the parser's ``handler``: the one the command line runs, which calls the
+job's pipeline) inside a Dask worker.  So ``DIR/<id>/`` holds byte for byte
+the files the single command writes (mm, each command's own frames), plus
+the batch's marker ``DIR/<id>/batch_row.json``, and the row's key figures
+come back from the job as values (:class:`~workbench.pipelines.outcome.JobOutcome`).
 
 Engine: a ``LocalCluster`` of ``workers`` processes with one thread each, a
 bounded memory per worker, and one BLAS/OpenMP/numba thread per worker
@@ -69,8 +70,9 @@ from typing import Any
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.safe_names import child_path
 from workbench.io.atomic import write_text_atomic
-from workbench.services.batch.figures import Figures, row_figures
-from workbench.services.batch.manifest import BatchRow, read_batch_manifest
+from workbench.pipelines.batch.figures import Figures
+from workbench.pipelines.batch.manifest import BatchRow, read_batch_manifest
+from workbench.pipelines.outcome import JobOutcome, failure_status
 from workbench.services.registration.skull_check import EXIT_CHECK
 
 MARKER = "batch_row.json"
@@ -97,7 +99,6 @@ IGNORE_SIGINT = "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
 #: row statuses whose outputs are complete (a resumed batch does not run them again);
 #: "check": written, but the registration asks for a check (exit status 3)
 DONE = ("ok", "check")
-Entry = Callable[[list[str]], int]
 Notify = Callable[[str], None]
 
 
@@ -486,29 +487,40 @@ def _clear_stale(row: BatchRow, notify: Notify) -> None:
 # ----------------------------------------------------------------------------- the task
 
 
-def run_row_task(entry: Entry, argv: list[str]) -> dict[str, Any]:
-    """Run one command line in this process with one numeric thread; what it said and returned.
+def run_row_task(options: argparse.Namespace) -> dict[str, Any]:
+    """Run one job in this process with one numeric thread: its status, figures and what it said.
 
-    This is the Dask task (one per row).  ``entry`` is the CLI's ``main``; its
-    stdout and stderr are captured (one task at a time per worker thread).
+    This is the Dask task (one per row).  ``options`` are the row's options as
+    its job's parser read them; ``options.handler`` is the job's function (the
+    one the command line runs, calling the job's pipeline), which returns a
+    :class:`~workbench.pipelines.outcome.JobOutcome` with the figures as values.
+    What it prints is captured for the row's log (one task at a time per worker
+    thread); an error becomes the command's own one-line message
+    (:func:`~workbench.pipelines.outcome.failure_status`).
     """
     from threadpoolctl import threadpool_limits
 
     out, err = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()
+    outcome: JobOutcome | int | None
     with (
         threadpool_limits(limits=1),
         contextlib.redirect_stdout(out),
         contextlib.redirect_stderr(err),
     ):
         try:
-            code = int(entry(list(argv)) or 0)
-        except SystemExit as exc:  # argparse's own exit on a bad value
-            code = exc.code if isinstance(exc.code, int) else 2
-    if code == 130:  # the command saw Ctrl-C (its main returns 130): the batch stops too
+            outcome = options.handler(options)
+        except SystemExit as exc:  # argparse's own exit on a value checked late
+            outcome = exc.code if isinstance(exc.code, int) else 2
+        except Exception as exc:  # noqa: BLE001 - the job's error is the row's message
+            outcome = failure_status(exc, options)
+    done = outcome if isinstance(outcome, JobOutcome) else JobOutcome(int(outcome or 0))
+    if done.status == 130:  # the job saw Ctrl-C: the batch stops too
         raise KeyboardInterrupt
     return {
-        "exit_status": code,
+        "exit_status": done.status,
+        "figures": dict(done.figures),
+        "check": list(done.check),
         "seconds": round(time.perf_counter() - t0, 3),
         "stdout": out.getvalue(),
         "stderr": err.getvalue(),
@@ -516,18 +528,19 @@ def run_row_task(entry: Entry, argv: list[str]) -> dict[str, Any]:
     }
 
 
-def run_row(entry: Entry, row: BatchRow, digests: dict[str, str], out: Path) -> RowResult:
+def run_row(row: BatchRow, digests: dict[str, str], out: Path) -> RowResult:
     """Run one row and record it (its log and marker) at once: the Dask task.
 
-    The marker is written here, in the worker, as soon as the command's
+    The marker is written here, in the worker, as soon as the job's
     outputs are final, so an interrupted batch keeps every finished row.
     """
-    return _record(row, digests, run_row_task(entry, row.argv), out)
+    assert row.options is not None  # rows argparse refused are recorded, never run
+    return _record(row, digests, run_row_task(row.options), out)
 
 
 def error_line(stderr: str, code: int, stdout: str = "") -> str:
-    """The command's one-line error message (its stderr's ``error:`` line; else the cases
-    a validate run reports failed on stdout; else stderr's last line or the exit status)."""
+    """The job's one-line error message (its stderr's ``error:`` line; else the cases
+    a validate run reports failed; else stderr's last line or the exit status)."""
     lines = [ln.strip() for ln in stderr.splitlines() if ln.strip()]
     for ln in reversed(lines):
         if ": error:" in ln or "unexpected error" in ln:
@@ -649,7 +662,6 @@ def _restore_environ(saved: Mapping[str, str]) -> None:
 
 def _run_dask(
     tasks: Sequence[BatchRow],
-    entry: Entry,
     client: Any,
     digests: Mapping[str, dict[str, str]],
     out: Path,
@@ -662,7 +674,6 @@ def _run_dask(
     futures = {
         client.submit(
             run_row,
-            entry,
             row,
             digests[row.row_id],
             out,
@@ -694,7 +705,6 @@ def run_batch(
     out: str | Path,
     *,
     commands: Mapping[str, argparse.ArgumentParser],
-    entry: Entry,
     workers: int = 2,
     scheduler: str | None = None,
     resume: bool = False,
@@ -703,8 +713,8 @@ def run_batch(
 ) -> list[RowResult]:
     """Run every row of ``manifest`` into ``out``; the results in manifest order.
 
-    ``commands``: the sub-command parsers by name (columns are checked against
-    them); ``entry``: the CLI's ``main(argv) -> exit status``.  ``workers=0``
+    ``commands``: the jobs' parsers by name (columns are checked against them,
+    and each parser's ``handler`` default is the job's function).  ``workers=0``
     runs in this process; otherwise on Dask (``scheduler`` or a local
     cluster).  ``notify`` gets one progress line per finished row.  Writes
     ``out/<id>/batch_row.json`` for every row that ran and ``out/logs/<id>.log``
@@ -717,9 +727,7 @@ def run_batch(
     with batch_lock(out):
         to_run, finished = plan(rows, out, manifest, resume)
         try:
-            results = _run_rows(
-                rows, to_run, finished, out, entry, workers, scheduler, memory_limit, say
-            )
+            results = _run_rows(rows, to_run, finished, out, workers, scheduler, memory_limit, say)
         except KeyboardInterrupt:
             raise BatchInterrupted(_finished_rows(rows), len(rows)) from None
     return [results[r.row_id] for r in rows]
@@ -735,7 +743,6 @@ def _run_rows(
     to_run: Sequence[tuple[BatchRow, dict[str, str]]],
     finished: Sequence[RowResult],
     out: Path,
-    entry: Entry,
     workers: int,
     scheduler: str | None,
     memory_limit: str,
@@ -767,7 +774,7 @@ def _run_rows(
 
     if runnable and workers == 0 and not scheduler:
         for row in runnable:
-            done(row, run_row(entry, row, digests[row.row_id], out))
+            done(row, run_row(row, digests[row.row_id], out))
     elif runnable:
         n = max(1, min(workers, len(runnable)))
         died = "the worker running it died" + (
@@ -776,7 +783,7 @@ def _run_rows(
         try:
             with dask_client(n, scheduler, memory_limit, out / "logs" / WORKER_LOG) as client:
                 try:
-                    _run_dask(runnable, entry, client, digests, out, done, died)
+                    _run_dask(runnable, client, digests, out, done, died)
                 except KeyboardInterrupt:
                     _silence_dask()  # before the cluster closes
                     raise
@@ -791,21 +798,21 @@ def _record(
 ) -> RowResult:
     code = outcome.get("exit_status")
     stdout, stderr = outcome.get("stdout", ""), outcome.get("stderr", "")
+    figures = dict(outcome.get("figures") or {})
     if outcome.get("died"):
         result = RowResult(row, "failed", None, None, outcome["died"], inputs=digests)
     elif code == 0:
-        figures = row_figures(row.job, row.argv, stdout)
         result = RowResult(row, "ok", 0, outcome.get("seconds"), "", figures, digests)
     elif code == EXIT_CHECK:  # written, but the registration asks for a check (issue 28)
-        figures = row_figures(row.job, row.argv, stdout)
-        reasons = [ln[len("CHECK: ") :] for ln in stdout.splitlines() if ln.startswith("CHECK: ")]
+        reasons = list(outcome.get("check") or ())
         message = "CHECK: " + ("; ".join(reasons) or error_line(stderr, code, stdout))
         result = RowResult(row, "check", code, outcome.get("seconds"), message, figures, digests)
     else:
         message = error_line(stderr, code or 0, stdout)
-        result = RowResult(row, "failed", code, outcome.get("seconds"), message, inputs=digests)
-        if row.job == "validate":  # the cases that did run are in results.csv
-            result.figures = row_figures(row.job, row.argv, stdout)
+        # a validate run whose cases partly failed still has figures for those that ran
+        result = RowResult(
+            row, "failed", code, outcome.get("seconds"), message, figures, inputs=digests
+        )
     result.worker = outcome.get("worker", "")
     write_marker(result)  # first: a row with its marker is done, whatever happens next
     log = log_path(out, row)
@@ -816,7 +823,7 @@ def _record(
 
 def summary_record(result: RowResult) -> dict[str, Any]:
     """One row of the summary as plain data (:mod:`workbench.reporting.batch_report`)."""
-    from workbench.services.batch.figures import validate_rows
+    from workbench.pipelines.batch.figures import validate_rows
 
     row = result.row
     return {

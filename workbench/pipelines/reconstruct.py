@@ -1,0 +1,377 @@
+"""Skull → face, as a finished folder: the reconstruction job's meshes, pictures and report.
+
+:func:`reconstruct_to_folder` is ``workbench reconstruct``: open the skull as a
+case, fit the reference head (:func:`workbench.services.reconstruction.job.run_reconstruction`)
+and write the folder.  :func:`export_fit` is the window's *Export…*: the
+same folder from a fit the window already holds.  Both end in
+:func:`write_reconstruction`, so the command line, the window and a batch
+row write the same files for the same case.
+
+The folder (all in the skull file's frame; mm unless the skull file is in
+other units, which ``face.ply`` then states in its header): ``face.ply``
+(with the 95 % band as the vertex property ``band_mm``), the three build
+faces and ``face_builds.glb``, ``head/`` (the fitted head as a template
+pack), ``skull_landmarks.mrk.json``, ``case.fcase``, ``report.json``,
+``report.pdf`` and its ``pictures/``.  The window adds the meshes in its
+other formats (``face.obj``, ``head/skin.stl`` ...).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from workbench.core.errors import InputError
+
+if TYPE_CHECKING:
+    from workbench.core.mesh import Mesh
+    from workbench.model.case import Case
+    from workbench.services.reconstruction.job import JobResult, JobSettings
+    from workbench.services.reconstruction.service import FitResult
+
+Say = Callable[[str], None]
+#: draws the report's pictures: ``draw(out, result, note) -> {name: path relative to out}``;
+#: the window wraps it to run on its GUI thread (VTK never runs on a worker)
+Draw = Callable[[Path, "JobResult", Say], dict[str, str]]
+
+
+def _quiet(_message: str) -> None:
+    return None
+
+
+@dataclass
+class ReconstructionFolder:
+    """What a reconstruction pipeline wrote: the job's result, its files and its report."""
+
+    result: JobResult
+    files: dict[str, Path]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def report(self) -> dict[str, Any]:
+        return self.result.report
+
+    def figures(self) -> dict[str, Any]:
+        """The job's key figures as values (what the command line prints as JSON)."""
+        return summary_figures(self.report)
+
+
+def summary_figures(report: dict[str, Any]) -> dict[str, Any]:
+    """Key figures of a reconstruction report: tips, tissue, the self-check, jaw, validation."""
+    fit = report["fit"]
+    summary: dict[str, Any] = {
+        k: fit.get(k)
+        for k in (
+            "max_tip_error_mm",
+            "min_tissue_mm",
+            "penetrating_vertices",
+            "refits",
+            "suggested_landmarks",
+            "absent_landmarks",
+        )
+    }
+    summary["seconds"] = report.get("_seconds")
+    check = report.get("self_check") or {}
+    if check:
+        summary["self_check"] = check.get("outcome")
+    jaw = (report.get("registration") or {}).get("jaw") or {}
+    if jaw.get("present"):
+        occ = jaw.get("occlusion")
+        summary["jaw"] = {
+            "opening_in_scan_deg": jaw.get("opening_deg"),
+            "for_the_face": f"occlusion ({occ['method']})" if occ else "as scanned",
+        }
+    if report.get("ensemble"):
+        summary["ensemble_spread_mm"] = report["ensemble"]["spread_mm"]
+    if report.get("validation"):
+        summary["validation"] = {
+            k: report["validation"][k]
+            for k in ("mean_abs_mm", "pct_within_2_5mm", "pct_within_5mm")
+        }
+    return summary
+
+
+def reconstruct_to_folder(
+    skull_path: Path,
+    settings: JobSettings,
+    out: Path,
+    *,
+    truth: Path | None = None,
+    pictures: bool = True,
+    force: bool = False,
+    staged: bool = False,
+    progress: Say | None = None,
+    notify: Say | None = None,
+) -> ReconstructionFolder:
+    """Reconstruct the face over the skull at ``skull_path`` and write every output into ``out``.
+
+    ``out`` is checked before the fit (which takes a while) and written as a
+    whole (:func:`workbench.io.outputs.staged_folder`): it may not hold an
+    input, an existing folder is replaced only with ``force`` (kept as
+    ``DIR.1``), and a failure leaves it as it was.  ``staged=True``: ``out`` is
+    a fresh folder the caller staged (``workbench demo``), written straight
+    into.  ``truth``: a true skin to score the face against (VALIDATION.md).
+    ``progress`` hears the fit's steps; ``notify`` where a replaced folder was
+    kept and why a picture is missing.
+    """
+    from workbench.io.outputs import check_output_folder, relocate, staged_folder
+    from workbench.services.reconstruction.job import job_inputs, run_reconstruction
+
+    say = notify or _quiet
+    inputs = job_inputs(skull_path, settings, truth)
+    if not staged:
+        check_output_folder(out, inputs, force)
+    result = run_reconstruction(skull_path, settings, progress=progress)
+    notes: list[str] = []
+
+    def note(message: str) -> None:
+        notes.append(message)
+        say(f"  note: {message}")
+
+    if staged:
+        files = write_reconstruction(result, out, truth=truth, pictures=pictures, note=note)
+    else:
+        with staged_folder(out, force, inputs, notify=notify) as temp:
+            files = write_reconstruction(result, temp, truth=truth, pictures=pictures, note=note)
+        files = relocate(files, temp, Path(os.path.abspath(out)))
+        result.opened.case.source_path = files["case"]
+    result.report["_seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
+    return ReconstructionFolder(result, files, notes)
+
+
+def write_reconstruction(
+    result: JobResult,
+    out: Path,
+    *,
+    truth: Path | None = None,
+    pictures: bool = True,
+    formats: tuple[str, ...] = (),
+    draw: Draw | None = None,
+    note: Say = _quiet,
+) -> dict[str, Path]:
+    """The job's files, validation figures, pictures and report, all into the folder ``out``.
+
+    ``out`` exists and is the caller's (a staged folder).  ``formats``: the
+    face, the build faces and the head's parts again in these mesh formats
+    besides PLY (``"obj"``, ``"stl"``).  ``draw`` replaces the picture drawer
+    (:func:`reconstruction_pictures`), e.g. to run it on another thread.
+    """
+    from workbench.reporting.report import write_report_json, write_report_pdf
+    from workbench.services.reconstruction.job import write_outputs
+
+    files = write_outputs(result, out, staged=True)
+    files.update(_other_formats(result, out, formats))
+    report = result.report
+    if truth is not None:
+        report["validation"] = validation_figures(truth, result.settings.scale, result)
+    if pictures:
+        report["pictures"] = (draw or reconstruction_pictures)(out, result, note)
+    files["report"] = write_report_json(report, out / "report.json")
+    files["report_pdf"] = write_report_pdf(report, out / "report.pdf", base_dir=out)
+    return files
+
+
+def _other_formats(result: JobResult, out: Path, formats: tuple[str, ...]) -> dict[str, Path]:
+    """``face.<ext>``, ``face_<build>.<ext>`` and ``head/<part>.<ext>`` for each extra format."""
+    from workbench.core.mesh import concatenate
+    from workbench.io.meshes import write_mesh
+    from workbench.io.template_pack import FILES
+    from workbench.services.reconstruction.job import head_in_input_frame
+
+    others = [e for e in formats if e != "ply"]  # the folder already holds the PLY files
+    if not others:
+        return {}
+    from workbench.io.markups import write_fcsv
+
+    files: dict[str, Path] = {}
+    lms = result.opened.case.landmarks["skull"]
+    if len(lms):  # Slicer's older markups format beside the .mrk.json
+        write_fcsv(out / "skull_landmarks.fcsv", lms, coordinate_system="RAS")
+        files["landmarks_fcsv"] = out / "skull_landmarks.fcsv"
+    recon, builds = result.recon, result.fit.builds if result.fit is not None else None
+    for ext in others:
+        files[f"face_{ext}"] = write_mesh(out / f"face.{ext}", recon.face)
+        if builds is None:
+            continue
+        for name in builds.names:
+            files[f"face_{name}_{ext}"] = write_mesh(
+                out / f"face_{name}.{ext}", builds.face(name, recon)
+            )
+    head = head_in_input_frame(recon)
+    for name, parts in FILES.items():
+        stem, mesh = Path(name).stem, concatenate([head.meshes[p] for p in parts])
+        for ext in others:
+            files[f"head/{stem}.{ext}"] = write_mesh(out / "head" / f"{stem}.{ext}", mesh)
+    return files
+
+
+def validation_figures(truth_path: Path, scale: float | None, result: JobResult) -> dict:
+    """The project's metric (VALIDATION.md) on the true skin, beside a uniform 6 mm offset.
+
+    The anterior direction is the fitted head frame's (no other is known
+    here); ``workbench validate`` takes it from its manifest.
+    """
+    from workbench.core.face_metric import ScoreMask, unit
+    from workbench.core.offset_surface import uniform_offset
+    from workbench.io.meshes import read_mesh
+    from workbench.services.templates.regions import REGION_NAMES, face_regions
+    from workbench.services.validation.run import score_surfaces
+
+    truth = read_mesh(truth_path, units="mm" if scale is None else "auto", scale=scale).mesh
+    recon = result.recon
+    bone = _skull_of(result)
+    anterior = unit(np.linalg.inv(recon.input_to_head)[:3, :3] @ [0.0, 0.0, 1.0])
+    _, (mine, base) = score_surfaces(
+        truth,
+        bone,
+        [("reconstruction", recon.face), ("uniform_6mm_offset", uniform_offset(bone))],
+        anterior,
+        ScoreMask(),
+        labels_from=recon.face,
+        vertex_regions=face_regions(result.template),
+        region_names=REGION_NAMES,
+    )
+    return {
+        **mine.figures,
+        "regions": mine.regions,
+        "truth": str(truth_path),
+        "region": "face (VALIDATION.md metric)",
+        "metric": "VALIDATION.md: outermost, anterior-facing true-skin vertices in front of "
+        "the bone centre and within 35 mm of the bone; distance to the "
+        "reconstruction (positive: outside)",
+        "baseline": {"method": "uniform 6 mm offset of the bone", **base.figures},
+    }
+
+
+def _skull_of(result: JobResult) -> Mesh:
+    """The case's skull mesh (mm, the skull file's frame); a job always has one."""
+    mesh = result.opened.case.specimen.mesh
+    if mesh is None:
+        raise InputError("the case", "has no skull mesh", "open a skull before reconstructing")
+    return mesh
+
+
+def reconstruction_pictures(out: Path, result: JobResult, note: Say = _quiet) -> dict[str, str]:
+    """The report's pictures into ``out/pictures``: {name: path relative to ``out``}.
+
+    Without off-screen rendering the job goes on without pictures, and
+    ``note`` says why; the three build faces and the band map are drawn apart,
+    so a failure there loses only those pictures.
+    """
+    from workbench.render.reconstruction import render_builds, render_reconstruction
+    from workbench.services.reconstruction.reconstruct import articulated_skull
+
+    recon = result.recon
+    active = recon.plan.active()
+    origins = recon.to_input(np.array([d.origin for d in active]))
+    tips = recon.to_input(np.array([d.tip for d in active]))
+    skull = _skull_of(result)
+    if recon.registration is not None and recon.registration.occlusion is not None:
+        skull = articulated_skull(recon.registration)  # the skull the face was fitted over
+    eyes = recon.mesh_to_input(recon.head.meshes["eyes"])
+    try:
+        paths = render_reconstruction(
+            skull,
+            recon.face,
+            (origins, tips),
+            out / "pictures",
+            frame=recon.input_to_head,
+            eyes=eyes,
+            spread=result.spread,
+            inferred=recon.inferred,
+        )
+    except (RuntimeError, OSError, ValueError) as exc:
+        note(f"no pictures (off-screen rendering failed: {exc})")
+        return {}
+    builds = result.fit.builds if result.fit is not None else None
+    if builds is not None:
+        try:
+            paths |= render_builds(
+                {name: builds.face(name, recon) for name in builds.names},
+                out / "pictures",
+                frame=recon.input_to_head,
+                bmi=builds.bmi,
+                main=builds.main,
+                eyes=eyes,
+                skull=skull,
+                band_face=recon.face,
+                band_mm=builds.half_width_mm,
+            )
+        except (RuntimeError, OSError, ValueError, InputError) as exc:
+            note(f"no build pictures (rendering failed: {exc})")
+    return {k: str(Path(p).relative_to(out)) for k, p in paths.items()}
+
+
+def job_result_of(case: Case, fit: FitResult, notes: list[str] | None = None) -> JobResult:
+    """A fit the window holds, as the job result :func:`write_reconstruction` writes (mm).
+
+    The report is built as ``workbench reconstruct`` builds it; the window's
+    skull is in mm (it was read in mm or converted on opening), so the
+    folder is in mm.  The folder's ``case.fcase`` is saved from a copy of
+    ``case`` with a stack of its own: saving marks a case's audit log
+    persisted and its stack clean, and the window's case is not saved by an
+    export.
+    """
+    import copy
+
+    from workbench.commands.stack import CommandStack
+    from workbench.services.case.case_setup import OpenedCase
+    from workbench.services.reconstruction.job import JobResult, JobSettings, build_report
+
+    own = copy.deepcopy(case)
+    opened = OpenedCase(own, CommandStack(own), list(notes or []))
+    return JobResult(
+        opened,
+        fit.head,
+        fit.recon,
+        fit.skull_h,
+        None,
+        list(fit.guides),
+        fit.spread_map,
+        build_report(case, fit, notes=list(notes or [])),
+        dict(fit.seconds),
+        JobSettings(units="mm"),
+        fit,
+    )
+
+
+def export_fit(
+    case: Case,
+    fit: FitResult,
+    out: Path,
+    *,
+    notes: list[str] | None = None,
+    formats: tuple[str, ...] = (),
+    pictures: bool = True,
+    draw: Draw | None = None,
+    force: bool = False,
+    notify: Say | None = None,
+) -> ReconstructionFolder:
+    """The window's *Export…*: the reconstruction folder of a fit already made, staged as a whole.
+
+    The same files as :func:`reconstruct_to_folder` for the same case, plus
+    the meshes in ``formats``; an existing non-empty ``out`` is replaced only
+    with ``force`` (kept as ``DIR.1``).  The case saved in the folder is a
+    copy: the window's own case file is not touched.
+    """
+    from workbench.io.outputs import relocate, staged_folder
+
+    result = job_result_of(case, fit, notes)
+    inputs = [Path(ev.original_path) for ev in case.evidence if getattr(ev, "original_path", None)]
+    written: list[str] = []
+
+    def note(message: str) -> None:
+        written.append(message)
+        if notify is not None:
+            notify(message)
+
+    with staged_folder(out, force, inputs, notify=notify) as temp:
+        files = write_reconstruction(
+            result, temp, pictures=pictures, formats=formats, draw=draw, note=note
+        )
+    return ReconstructionFolder(result, relocate(files, temp, Path(os.path.abspath(out))), written)
