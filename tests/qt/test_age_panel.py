@@ -136,8 +136,8 @@ def test_z_scores_beyond_two_are_highlighted(qtbot):
 
 
 def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
-    from workbench.qt import age_ops
-    from workbench.qt.age_ops import DISTANCE_TITLE, OVERLAY_OPACITY
+    from workbench.qt.tools.age import drawing
+    from workbench.qt.tools.age.drawing import DISTANCE_TITLE, OVERLAY_OPACITY
 
     w = ageing
     tool = w.age
@@ -148,7 +148,7 @@ def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
     assert np.allclose(tool.offset(), 0)
     assert np.allclose(tool.drawn_points("before"), src)  # in place, translucent
     assert tool.actors()["before"].GetProperty().GetOpacity() == pytest.approx(OVERLAY_OPACITY)
-    data = age_ops.drawn_data(tool.actors()["after"])
+    data = drawing.drawn_data(tool.actors()["after"])
     from vtkmodules.util.numpy_support import vtk_to_numpy
 
     shown = vtk_to_numpy(data.GetPointData().GetArray(DISTANCE_TITLE))
@@ -164,11 +164,11 @@ def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
 
 
 def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path, monkeypatch):
-    from workbench.cli.age_cmd import _write_pdf
-    from workbench.qt import age_ops
+    from workbench.pipelines.age import write_age_report_pdf
+    from workbench.qt.tools.age import work
 
-    monkeypatch.setattr(age_ops, "_PDF_HOOK", None)
-    age_ops.set_pdf_hook(_write_pdf)  # as `workbench gui` does
+    monkeypatch.setattr(work, "_PDF_HOOK", None)
+    work.set_pdf_hook(write_age_report_pdf)  # as `workbench gui` does
     w = ageing
     tool = w.age
     out = tmp_path / "aged"
@@ -198,7 +198,7 @@ def test_the_export_hook_runs_on_the_gui_thread_inside_the_folder_write(
 ):
     import threading
 
-    from workbench.qt import age_ops
+    from workbench.qt.tools.age import work
 
     seen = []
 
@@ -208,7 +208,7 @@ def test_the_export_hook_runs_on_the_gui_thread_inside_the_folder_write(
         path.write_text(",".join(f"{r.to_age:g}" for r in results), "utf-8")
         return [path]
 
-    monkeypatch.setattr(age_ops, "_PDF_HOOK", hook)
+    monkeypatch.setattr(work, "_PDF_HOOK", hook)
     w = ageing
     tool = w.age
     w.age_panel.export_all.setChecked(True)  # every computed age: here only 10 y

@@ -70,7 +70,7 @@ def fitted(window, real_fit, qtbot):
     panel = window.reconstruct_panel
     panel.colouring.setCurrentText("skin")
     if window.fit is not real_fit:
-        window._show_fit(real_fit)
+        window.reconstruction.show_fit(real_fit)
     assert window.wait_idle(60)
     panel.set_build(real_fit.builds.main)
     _painted(window, qtbot)
@@ -199,7 +199,7 @@ def test_a_fit_without_build_faces_disables_the_slider(fitted, qtbot):
     panel, fit = window.reconstruct_panel, window.fit
     panel.set_build("heavy")
     one_face = replace(fit, builds=None)
-    window._show_fit(one_face)
+    window.reconstruction.show_fit(one_face)
     assert window.wait_idle(60)
     try:
         assert window.fit is one_face
@@ -219,7 +219,7 @@ def test_a_fit_without_build_faces_disables_the_slider(fitted, qtbot):
         assert BAND_TITLE not in window.plotter.scalar_bars
     finally:
         panel.colouring.setCurrentText("skin")
-        window._show_fit(fit)
+        window.reconstruction.show_fit(fit)
         assert window.wait_idle(60)
     # the real fit again: enabled, on its main build
     assert panel.build_slider.isEnabled()

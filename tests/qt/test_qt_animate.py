@@ -121,7 +121,7 @@ def _nearest_vertex(w, name: str) -> int:
 def test_gaze_sliders_turn_the_eyes_and_left_right_mirror(animating):
     from scipy.spatial import cKDTree
 
-    from workbench.qt.animate_ops import inner_points
+    from workbench.qt.tools.animate.drawing import inner_points
 
     w = animating
     tool, panel = w.animate, w.animate_panel
@@ -179,7 +179,7 @@ def test_lids_slider_closes_the_lids(animating, qtbot):
 # ---------------------------------------------------------------- timeline
 def _run_track_skins(frames_wanted: set[int]) -> dict[int, np.ndarray]:
     """``run_track``'s skin at some frames of the example track (a fresh reference head)."""
-    from workbench.qt.animate_ops import load_animator
+    from workbench.qt.tools.animate.drawing import load_animator
     from workbench.services.animation.track import load_track, run_track
 
     out: dict[int, np.ndarray] = {}

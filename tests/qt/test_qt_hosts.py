@@ -27,8 +27,8 @@ def test_every_menu_action_is_in_the_menu_host() -> None:
 
 def test_window_and_tools_provide_their_hosts() -> None:
     from workbench.qt import hosts
-    from workbench.qt.drag_ops import DragTool
     from workbench.qt.main_window import MainWindow
+    from workbench.qt.tools.drags import DragTool
 
     window_attrs = {
         "document",

@@ -214,7 +214,7 @@ def test_after_paint_runs_behind_the_next_paint_and_after_a_fit(window, qtbot):
     gv.refresh = lambda *a, **k: (refreshed_at.append(scene.paints), original(*a, **k))[1]
     try:
         main_paints = scene.paints
-        window._show_fit(new_fit)
+        window.reconstruction.show_fit(new_fit)
         assert gv.drawn_fit is not new_fit and window.busy
         assert window.wait_idle(60)
     finally:

@@ -49,7 +49,7 @@ def _open(qtbot, window, path) -> None:
 
 
 def test_open_fit_place_undo_and_fit_again_with_seeds(qtbot, window, scan_case):
-    from workbench.qt.scan_fit_ops import DISTANCE_TITLE
+    from workbench.qt.tools.scan_fit.tool import DISTANCE_TITLE
 
     path, truth = scan_case
     tool, panel = window.scan_fit, window.scan_fit_panel
@@ -117,9 +117,10 @@ def test_open_fit_place_undo_and_fit_again_with_seeds(qtbot, window, scan_case):
     np.testing.assert_allclose(placed["n"].position, expected, atol=1.0)
     assert tool.landmark_states()["n"] == "placed"
     assert panel.selected_code() != "n"  # the next code to place is selected
-    # Edit → Undo works on the placements while the Fit scan dock is in front
+    # Edit → Undo: the placement is a step of the window's one undo stack
     undo = window.actions_by_id["undo"]
-    assert undo.isEnabled() and "Place n" in undo.text()
+    assert undo.isEnabled() and "Place n (scan fit)" in undo.text()
+    assert window.document.stack.undo_text == "Place n (scan fit)"
     undo.trigger()
     assert "n" not in tool.landmarks.placed
     assert tool.landmark_states()["n"] in ("guess", "over hole")  # the guess again
@@ -157,7 +158,7 @@ def test_open_fit_place_undo_and_fit_again_with_seeds(qtbot, window, scan_case):
 def test_save_pack_writes_the_folder_and_refuses_an_existing_one(
     qtbot, window, scan_case, tmp_path
 ):
-    from workbench.qt.scan_fit_ops import PLACED_FILE
+    from workbench.qt.tools.scan_fit.work import PLACED_FILE
 
     path, truth = scan_case
     tool = window.scan_fit
@@ -205,23 +206,52 @@ def test_bad_scans_give_a_readable_message(qtbot, window, tmp_path):
     assert not window.busy and "Open a scan" in window.status_text()
 
 
-def test_scan_landmarks_undo_redo() -> None:
-    from workbench.qt.scan_fit_state import ScanLandmarks
+def test_scan_landmark_edits_are_steps_of_the_case_stack() -> None:
+    """Placements are commands on the case's one stack: undone in order with the case's
+    edits, audited, the case's parts untouched; a new scan leaves old steps inert."""
+    from workbench.commands.stack import CommandStack
+    from workbench.model.case import Case
+    from workbench.qt.tools.scan_fit.state import ScanLandmarks
 
-    lms = ScanLandmarks()
-    assert lms.place("n", np.zeros(3)) and lms.undo_text == "Place n"
-    assert lms.place("n", np.ones(3)) and lms.undo_text == "Move n"
-    assert not lms.place("n", np.ones(3))  # no change, no step
-    assert lms.place_many({"prn": np.ones(3), "pg": np.zeros(3)}, "Accept 2")
-    assert lms.remove("pg") and not lms.remove("pg")
-    assert lms.undo() and "pg" in lms.placed
-    assert lms.undo() and "prn" not in lms.placed
-    assert lms.undo() and np.allclose(lms.placed["n"].position, 0.0)
-    assert lms.redo() and np.allclose(lms.placed["n"].position, 1.0)
-    assert lms.place("g", np.zeros(3)) and not lms.can_redo  # a new change drops the redo list
-    lms.clear()
-    assert not len(lms.placed) and not lms.can_undo
-    assert isinstance(lms.placed, LandmarkSet)
+    case = Case()
+    stack = CommandStack(case)
+    redrawn = []
+    lms = ScanLandmarks(on_change=lambda: redrawn.append(len(lms.placed)))
+    lms.clear("face_scan.ply")
+    before = case.landmarks
+    edit = lms.place("n", np.zeros(3))
+    assert edit is not None and edit.label == "Place n (scan fit)"
+    stack.push(edit)
+    assert stack.undo_text == "Place n (scan fit)" and redrawn == [1]
+    edit = lms.place("n", np.ones(3))
+    assert edit is not None and edit.label == "Move n (scan fit)"
+    stack.push(edit)
+    assert lms.place("n", np.ones(3)) is None  # no change, no step
+    many = lms.place_many({"prn": np.ones(3), "pg": np.zeros(3)}, "Accept 2")
+    assert many is not None and many.codes == ["pg", "prn"]
+    stack.push(many)
+    stack.push(lms.remove("pg"))
+    assert lms.remove("pg") is None
+    stack.undo()
+    assert "pg" in lms.placed
+    stack.undo()
+    assert "prn" not in lms.placed
+    stack.undo()
+    assert np.allclose(lms.placed["n"].position, 0.0)
+    stack.redo()
+    assert np.allclose(lms.placed["n"].position, 1.0)
+    stack.push(lms.place("g", np.zeros(3)))
+    assert not stack.can_redo  # a new change drops the redo list
+    # audited on the case's log, the case's own parts unchanged
+    records = case.audit.records
+    assert records[0]["operation"] == "Place n (scan fit)"
+    assert records[0]["parameters"]["scan"] == "face_scan.ply"
+    assert case.landmarks is before
+    # another scan: no placements, and the previous scan's steps no longer act
+    lms.clear("other.ply")
+    assert not len(lms.placed) and isinstance(lms.placed, LandmarkSet)
+    stack.undo()
+    assert not len(lms.placed)
 
 
 def test_gui_options_for_the_fit_scan_tool(tmp_path, scan_case) -> None:

@@ -99,7 +99,7 @@ ACTIONS: tuple[ActionSpec, ...] = (
 )
 
 
-#: the Fit scan tool's entries (:class:`workbench.qt.scan_fit_ops.ScanFitTool` methods),
+#: the Fit scan tool's entries (:class:`workbench.qt.tools.scan_fit.tool.ScanFitTool` methods),
 #: added by :func:`add_tool_actions` after the window's own menus
 SCAN_FIT_ACTIONS: tuple[ActionSpec, ...] = (
     ActionSpec(

@@ -1,33 +1,34 @@
-"""The workbench main window: a 3D view, tool docks, menus, status bar.
+"""The workbench main window: it assembles a 3D view, the tool docks, menus, status bar.
 
-Wiring (created in this order in ``__init__``)::
+Wiring (built in this order by ``__init__``'s ``_build_*`` steps)::
 
     MainWindow
-    ├── Document            case + CommandStack + file; Qt signals for changes
+    ├── Document            case + CommandStack (the one undo stack) + file; Qt signals
     ├── Session             derived results (fit, dowel preview, true skin, comparison)
     ├── TaskRunner          worker threads; results come back on the GUI thread
+    ├── FileTool            open, save, export (file_ops)
     ├── QtInteractor        central 3D view (pyvistaqt)
     │   ├── SceneView       named layers: skull, landmarks, dowels, guides, muscles, face, truth
     │   └── ClickPicker     click (not drag) on the skull → PlaceLandmark
+    ├── tools (qt/tools)    LandmarkTool (draw, place, suggest, snap), DragTool (live
+    │                       drags), ScanFitTool (a face scan fitted by the scan-fit
+    │                       service, its landmarks; own picker), AnimateTool (the
+    │                       animation service's Animator, live skin), AgeTool (the age
+    │                       service under a target-age slider), ReconstructTool (dowel
+    │                       plan, face fit and its drawing, comparison)
     ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel,
     │                       ScanFitPanel, AnimatePanel, AgePanel (docks);
     │                       LayersPanel below them (visibility + opacity per layer)
-    ├── tools               FileTool (open, save, export), LandmarkTool (draw, place,
-    │                       suggest, snap), DragTool (live drags), ScanFitTool (a face
-    │                       scan fitted by the scan-fit service, its landmarks; own picker),
-    │                       AnimateTool (the animation service's Animator, live skin),
-    │                       AgeTool (the age service under a target-age slider)
     ├── GuideView           second view: guides over the session's fit (drags → DragTool)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
 
-The window holds no geometry logic: edits are commands pushed on the
-document's stack, computations are :mod:`workbench.qt.jobs` functions run in
-the worker, and their results are drawn (derived results such as the fitted
-face are not part of the case; the typed settings that produce them are:
-the ``dowels``, ``orientation`` and ``guides`` parts, and the fit is the
-command line's own pipeline, :func:`workbench.qt.jobs.fit_face`).
-Units mm; the scene is in the specimen's input frame (the skull file's
-coordinates).
+The window holds no geometry logic and no tool's logic: it builds the pieces,
+connects them, and keeps thin methods (``reconstruct``, ``open_scan``,
+``show_age`` ...) that the menus, scripts and tests call and the tools carry
+out.  Edits are commands pushed on the document's stack, computations are
+:mod:`workbench.qt.jobs` (or a tool's worker) functions run in the worker, and
+their results are drawn.  Units mm; the scene is in the specimen's input frame
+(the skull file's coordinates).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from PySide6.QtCore import QPoint, QRect, Qt, QTimer
+from PySide6.QtCore import QPoint, QRect, Qt
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QApplication,
@@ -58,13 +59,9 @@ from workbench.qt.actions import (
     add_tool_actions,
     build_menus,
 )
-from workbench.qt.age_ops import AgeTool
-from workbench.qt.animate_ops import AnimateTool
 from workbench.qt.document import Document
-from workbench.qt.drag_ops import DragTool
 from workbench.qt.file_ops import FileTool
 from workbench.qt.guide_view import GuideView
-from workbench.qt.landmark_ops import LandmarkTool
 from workbench.qt.lod import InteractiveDetail
 from workbench.qt.panels.age_panel import AgePanel
 from workbench.qt.panels.animate_panel import AnimatePanel
@@ -72,25 +69,21 @@ from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
 from workbench.qt.panels.landmarks_panel import LandmarksPanel
 from workbench.qt.panels.layers_panel import LayersPanel
-from workbench.qt.panels.reconstruct_panel import BAND_TITLE, ReconstructPanel
+from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.panels.scan_fit_panel import ScanFitPanel
 from workbench.qt.picking import ClickPicker
-from workbench.qt.scan_fit_ops import ScanFitTool
-from workbench.qt.scene import SceneView, is_closed
+from workbench.qt.scene import SceneView
 from workbench.qt.session import Session
+from workbench.qt.tools.age.tool import AgeTool
+from workbench.qt.tools.animate.tool import AnimateTool
+from workbench.qt.tools.drags import DragTool
+from workbench.qt.tools.landmarks import LandmarkTool
+from workbench.qt.tools.reconstruct import FIT_PARTS, ReconstructTool
+from workbench.qt.tools.scan_fit.tool import ScanFitTool
 from workbench.qt.workers import TaskRunner, preload, show_fraction
 
 if TYPE_CHECKING:
     from workbench.services.case.case_setup import OpenedCase
-
-#: the frame needs these (porions, orbitales, nasion) before dowels can be planned
-FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
-#: the colour bar titles of the face's colourings (spread, band)
-FACE_BARS = ("spread mm", BAND_TITLE)
-#: ms without a build slider move before the skull is drawn in full again
-BUILD_REST_MS = 300
-#: case parts the dowels and the fit depend on: a change re-plans (and re-fits)
-FIT_PARTS = ("specimen", "landmarks", "dowels", "orientation", "guides")
 
 
 class MainWindow(QMainWindow):
@@ -107,8 +100,6 @@ class MainWindow(QMainWindow):
 
     def __init__(self, *, auto_update: bool | float = True, interactive: bool = True) -> None:
         super().__init__()
-        from pyvistaqt import QtInteractor
-
         gc_guard.install()  # cyclic garbage (Qt wrappers) collected on this thread only
 
         self.interactive = interactive
@@ -120,6 +111,39 @@ class MainWindow(QMainWindow):
         self.runner = TaskRunner(self)
         self.files = FileTool(self.document, self.session, self.runner, self)
         preload()  # what the workers will import, before the event loop runs
+
+        self._build_views(auto_update)
+        self._build_skull_tools()
+        self._build_dock_tools()
+        self._build_docks()
+        self._build_guide_view()
+        self.reconstruction = ReconstructTool(
+            self.document,
+            self.session,
+            self.runner,
+            self.scene,
+            self.plotter,
+            self.detail,
+            self.guide_view,
+            self.reconstruct_panel,
+            self.dowels_panel,
+            self.compare_panel,
+            self,
+            parent=self,
+        )
+        self._build_menus()
+        self._build_status_bar()
+        self._connect()
+        self.resize(1400, 900)
+        self._update_title()
+
+        from workbench.qt.autosave import install_autosave
+
+        self.autosaver = install_autosave(self)  # snapshots of unsaved work (crash recovery)
+
+    def _build_views(self, auto_update: bool | float) -> None:
+        """The central 3D view (and the splitter the guide view joins later), its layers."""
+        from pyvistaqt import QtInteractor
 
         self.plotter = QtInteractor(self, auto_update=auto_update)
         # pyvista's "q" would close the 3D view
@@ -140,6 +164,8 @@ class MainWindow(QMainWindow):
         self.detail = InteractiveDetail(self.plotter, self.runner.submit)
         self._skull_poly: Any = None
 
+    def _build_skull_tools(self) -> None:
+        """The case's panels and the tools that edit the skull: landmarks, drags, picking."""
         self.landmarks_panel = LandmarksPanel(self.document, self.catalogue)
         self.dowels_panel = DowelsPanel(self.document)
         self.reconstruct_panel = ReconstructPanel(self.document)
@@ -170,6 +196,9 @@ class MainWindow(QMainWindow):
             on_drag_start=drags.on_drag_start,
             on_drag_end=drags.on_drag_end,
         )
+
+    def _build_dock_tools(self) -> None:
+        """The tools with a view of their own: scan fit, animate, age progression."""
         self.scan_fit_panel = ScanFitPanel()
         self.scan_fit = ScanFitTool(
             self.scan_fit_panel,
@@ -178,6 +207,7 @@ class MainWindow(QMainWindow):
             self.runner,
             self,
             skull_picker=self.picker,
+            document=self.document,
             parent=self,
         )
         from workbench.services.animation.animator import EXPRESSIONS
@@ -197,6 +227,9 @@ class MainWindow(QMainWindow):
             case_sex=lambda: self.document.case.dowels.sex,
             parent=self,
         )
+
+    def _build_docks(self) -> None:
+        """The tool panels as tabbed docks on the right, the Layers dock below them."""
         self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (
             ("landmarks", "Skull landmarks", self.landmarks_panel),
@@ -223,6 +256,9 @@ class MainWindow(QMainWindow):
         self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock, Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"], dock], [620, 230], Qt.Orientation.Vertical)
         self.resizeDocks([self.docks["landmarks"]], [420], Qt.Orientation.Horizontal)
+
+    def _build_guide_view(self) -> None:
+        """The second view (guides over the fit, orthographic), hidden until the first fit."""
         self.guide_view = GuideView(
             self.session, self.runner, self.scene, self.reconstruct_panel, self.drags
         )
@@ -232,11 +268,14 @@ class MainWindow(QMainWindow):
         self.views.setStretchFactor(0, 3)
         self.views.setStretchFactor(1, 2)
         self.guide_view.hide()  # shown with the first fit, or from the View menu
+
+    def _build_menus(self) -> None:
         self.actions_by_id = build_menus(self)
         self.actions_by_id.update(add_tool_actions(self, self.scan_fit, SCAN_FIT_ACTIONS))
         self.actions_by_id.update(add_tool_actions(self, self, ANIMATE_ACTIONS))
         self.actions_by_id.update(add_tool_actions(self, self, AGE_ACTIONS))
 
+    def _build_status_bar(self) -> None:
         self.status_label = QLabel("Open a skull mesh, a CT or a case (File menu).")
         self.progress = QProgressBar()
         self.progress.setRange(0, 0)
@@ -246,14 +285,14 @@ class MainWindow(QMainWindow):
         self._busy_text, self._status_before = "", ""
         self.statusBar().addPermanentWidget(self.progress)
 
+    def _connect(self) -> None:
+        """The window's own reactions: the case to the scene, docks to their tools, status."""
         self.document.case_replaced.connect(self._on_case_replaced)
         self.document.part_changed.connect(self._on_part)
         self.document.part_changed.connect(
             lambda part: self.guide_view.refresh() if part == "guides" else None
         )
         self.document.stack_changed.connect(self._update_title)
-        self.scan_fit.history_changed.connect(self._update_title)
-        self.docks["fit_scan"].visibilityChanged.connect(lambda _v: self._update_title())
         self.docks["animate"].visibilityChanged.connect(
             lambda v: self.animate.ensure_loaded() if v else None
         )
@@ -266,29 +305,9 @@ class MainWindow(QMainWindow):
         self.landmarks_panel.selection_changed.connect(lambda _c: self.landmarks.draw_landmarks())
         self.landmarks_panel.suggest_requested.connect(self.landmarks.suggest_landmarks)
         self.landmarks_panel.snap_requested.connect(lambda _code: self.landmarks.snap_selected())
-        self.reconstruct_panel.reconstruct_requested.connect(self.reconstruct)
         self.reconstruct_panel.opacity_changed.connect(lambda v: self.scene.set_opacity("face", v))
         self.scene.layer_changed.connect(self._on_layer_changed)
-        self.reconstruct_panel.colouring_changed.connect(lambda _v: self.draw_face())
-        self.reconstruct_panel.build_changed.connect(self.show_build)
-        # while the build slider moves the skull is drawn light (lod.py); full quality again
-        # once it rests (released, or no move for BUILD_REST_MS)
-        self._build_rest = QTimer(self)
-        self._build_rest.setSingleShot(True)
-        self._build_rest.setInterval(BUILD_REST_MS)
-        self._build_rest.timeout.connect(self._build_rested)
-        self.reconstruct_panel.build_slider.sliderReleased.connect(self._build_rest.start)
         self.compare_panel.load_requested.connect(self.ask_load_truth)
-        self.session.fit_changed.connect(self.reconstruct_panel.show_result)
-        self.session.truth_changed.connect(
-            lambda truth: self.compare_panel.show_comparison(truth[0], None)
-        )
-        self.resize(1400, 900)
-        self._update_title()
-
-        from workbench.qt.autosave import install_autosave
-
-        self.autosaver = install_autosave(self)  # snapshots of unsaved work (crash recovery)
 
     # ------------------------------------------------------------ results (the session's)
     @property
@@ -478,7 +497,7 @@ class MainWindow(QMainWindow):
 
     def _update_title(self) -> None:
         self.setWindowTitle(self.document.title)
-        stack: Any = self.scan_fit.landmarks if self._scan_fit_undo() else self.document.stack
+        stack = self.document.stack  # the one undo stack: case edits and scan placements
         undo, redo = self.actions_by_id["undo"], self.actions_by_id["redo"]
         undo.setEnabled(stack.can_undo)
         redo.setEnabled(stack.can_redo)
@@ -486,28 +505,13 @@ class MainWindow(QMainWindow):
         redo.setText(f"&Redo {stack.redo_text}" if stack.can_redo else "&Redo")
 
     # ------------------------------------------------------------ edit actions
-    def _scan_fit_undo(self) -> bool:
-        """Undo/redo work on the scan's placed landmarks (the Fit scan dock is in front
-        with a scan open), else on the case (see :mod:`workbench.qt.scan_fit_ops`)."""
-        dock = self.docks.get("fit_scan")
-        return bool(
-            dock is not None
-            and self.scan_fit.has_scan
-            and dock.isVisible()
-            and not dock.visibleRegion().isEmpty()
-        )
-
     def undo(self) -> None:
-        if self._scan_fit_undo():
-            self.scan_fit.undo()
-        else:
-            self.document.undo()
+        """Edit ▸ Undo: the last step of the one undo stack (a case edit or, see
+        :mod:`workbench.qt.tools.scan_fit`, a placement on the scan)."""
+        self.document.undo()
 
     def redo(self) -> None:
-        if self._scan_fit_undo():
-            self.scan_fit.redo()
-        else:
-            self.document.redo()
+        self.document.redo()
 
     def mark_absent(self) -> None:
         self.landmarks_panel.mark_absent()
@@ -615,222 +619,31 @@ class MainWindow(QMainWindow):
         self._skull_poly = None if actor is None else pv.wrap(actor.GetMapper().GetInput())
         self.detail.set_skull(actor, self._skull_poly, self.document.case.specimen.mesh)
 
-    # ------------------------------------------------------------ dowels
+    # ------------------------------------------------------------ reconstruct (the tool's)
     def schedule_dowels(self) -> None:
-        case = self.document.case
-        lms = case.landmarks["skull"]
-        if case.specimen.mesh is None or not all(c in lms.as_dict() for c in FRAME_CODES):
-            self.session.set_preview(None)
-            self.scene.clear("dowels")
-            self.dowels_panel.show_plan(
-                None, "Dowels appear once the porions and orbitales are placed (or suggested)."
-            )
-            return
-        skull, settings = case.specimen.mesh, jobs.depth_settings(case)
-        self.runner.submit(
-            "dowels",
-            "Planning dowels …",
-            lambda: jobs.preview_dowels(skull, lms, settings),
-            self._show_dowels,
-            self._dowels_failed,
-        )
+        self.reconstruction.schedule_dowels()
 
-    def _show_dowels(self, preview: jobs.DowelPreview) -> None:
-        self.session.set_preview(preview)
-        self.scene.show_dowels(preview.origins, preview.tips)
-        self.dowels_panel.show_plan(preview)
-
-    def _dowels_failed(self, exc: BaseException) -> None:
-        self.session.set_preview(None)
-        self.scene.clear("dowels")
-        self.dowels_panel.show_plan(None, dialogs.error_text("No dowels", exc)[0])
-
-    # ------------------------------------------------------------ reconstruct
     def reconstruct(self) -> None:
         """Fit the face in the worker (guides and ensemble as the panel says)."""
-        case = self.document.case
-        if case.specimen.mesh is None:
-            self.status("Open a skull first.")
-            return
-        panel = self.reconstruct_panel
-        try:  # the snapshot the worker fits; the user may go on editing the case
-            inputs = jobs.fit_inputs(
-                case, use_guides=panel.use_guides.isChecked(), ensemble=panel.ensemble.value()
-            )
-        except Exception as exc:  # noqa: BLE001 - shown as a readable message
-            self.show_error("The stored guides are not usable", exc)
-            return
-        self.runner.submit(
-            "fit",
-            "Reconstructing the face …",
-            lambda: jobs.fit_face(inputs),
-            self._show_fit,
-            lambda exc: self.show_error("Could not reconstruct the face", exc),
-        )
-
-    def _show_fit(self, fit: jobs.FitResult) -> None:
-        self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
-        reg = fit.recon.registration
-        check = {} if reg is None else reg.figures.get("self_check") or {}
-        if check.get("outcome") == "check":
-            # the self-check's doubt first (issue 28): the user confirms before using the face
-            self.status(f"CHECK: {check['reasons'][0]} (face fitted; confirm the orientation)")
-        else:
-            self.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
-        if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
-            # the first fit opens the guide view.  Both views then repaint
-            # in one pass (the main view narrows, the new one appears), so
-            # open it while both are cheap to draw (the new one empty, the
-            # main one without the face) and draw the fit after that paint
-            self.show_guide_view(True, draw=False)
-            self.scene.after_paint(lambda f=fit: self._draw_fit(f), render=False)
-        else:
-            self._draw_fit(fit)
-
-    def _draw_fit(self, fit: jobs.FitResult) -> None:
-        if fit is not self.session.fit or self.scene.closed:
-            return  # a newer fit (or none) is on its way, or the window closed
-        self._show_dowels(fit.preview)
-        self.draw_face()
-        self.draw_muscles()
-        self.draw_guides()
-        if self.session.truth is not None:
-            self.compare()
-        # the guide view after the main view's paint: its drawing and paint
-        # would otherwise join that paint in one long block of the event loop
-        self.scene.after_paint(lambda f=fit: self._show_fit_in_guide_view(f))
-
-    def _show_fit_in_guide_view(self, fit: jobs.FitResult) -> None:
-        if fit is not self.session.fit or is_closed(self.guide_view.plotter):
-            return
-        self.guide_view.fit_changed()
+        self.reconstruction.reconstruct()
 
     def draw_face(self) -> None:
-        """The fitted face at the build slider's build, coloured as the panel says.
-
-        "spread" and "band" fall back to the plain skin when the fit has no ensemble
-        or no build faces.
-        """
-        fit = self.session.fit
-        if fit is None:
-            self.scene.clear("face")
-            return
-        panel = self.reconstruct_panel
-        colouring, z = panel.colouring.currentText(), panel.build_z()
-        face = fit.recon.face
-        if fit.builds is not None and z is not None and z != fit.builds.main_z:
-            face = face.with_vertices(fit.recon.to_input(fit.builds.vertices_at(z)))
-        scalars, title = None, ""
-        if colouring == "spread" and fit.spread is not None:
-            scalars, title = fit.spread, "spread mm"
-        elif colouring == "band" and fit.builds is not None:
-            scalars, title = fit.builds.half_width_mm, BAND_TITLE
-        # pyvista leaves a colour bar placed by position behind when its surface goes
-        # (it only frees bars it placed itself): drop the face's other bars by hand
-        bars = self.plotter.scalar_bars
-        for old in FACE_BARS:
-            if old != title and old in bars:
-                bars.remove_scalar_bar(old, render=False)
-        if scalars is None:
-            self.scene.show_face(face)
-        else:
-            self.scene.show_face(face, scalars, title)
-
-    def show_build(self, z: float) -> None:
-        """The build slider moved: morph the drawn face to build score ``z`` in place.
-
-        Only the face's points (and normals) change; its actor, colours and colour bar
-        stay, nothing is refitted and nothing goes on the undo stack (view state, see
-        :mod:`workbench.qt.panels.reconstruct_panel`).  One render is requested.
-        """
-        fit = self.session.fit
-        if fit is None or fit.builds is None or not self.scene.has("face"):
-            return
-        self.detail.begin()  # the light skull while the slider moves (_build_rested ends it)
-        self._build_rest.start()
-        self.scene.update_points("face", fit.recon.to_input(fit.builds.vertices_at(z)))
-
-    def _build_rested(self) -> None:
-        """The build slider rests: the skull in full again (one full-quality render)."""
-        if self.scene.closed or self.reconstruct_panel.build_slider.isSliderDown():
-            return  # (held: its release restarts the timer)
-        self.detail.end()
+        self.reconstruction.draw_face()
 
     def draw_muscles(self) -> None:
-        """The fitted head's muscle grids (mm, input frame), 4 mm under the fitted skin.
-
-        Each grid rides on the skin (triangle + barycentric weights + depth,
-        see :class:`workbench.model.muscles.MuscleGrid`), so its rows are
-        evaluated on the fitted head's skin and mapped to the input frame.
-        """
-        fit = self.session.fit
-        head = fit.recon.head if fit is not None else None
-        if fit is None or head is None or not head.muscles:
-            self.scene.clear("muscles")
-            return
-        to_input = fit.recon.to_input
-        self.scene.show_muscles(
-            [[to_input(row) for row in grid.rows(head.skin)] for grid in head.muscles]
-        )
+        self.reconstruction.draw_muscles()
 
     def draw_guides(self) -> None:
-        fit = self.session.fit
-        if fit is None:
-            self.scene.clear("guides")
-            return
-        segments, points = jobs.guide_geometry(fit)
-        self.scene.show_guides(segments, points)
+        self.reconstruction.draw_guides()
 
-    # ------------------------------------------------------------ compare
+    def show_build(self, z: float) -> None:
+        self.reconstruction.show_build(z)
+
     def load_truth(self, path: str | Path, scale: float | None = None) -> None:
-        from workbench.io.meshes import read_mesh
-
-        path = Path(path)
-        self.runner.submit(
-            "truth",
-            f"Reading {path.name} …",
-            lambda: read_mesh(path, units="mm" if scale is None else "auto", scale=scale).mesh,
-            lambda mesh: self._truth_loaded(path.name, mesh),
-            lambda exc: self.show_error(f"Could not read {path.name}", exc),
-        )
-
-    def _truth_loaded(self, name: str, mesh: Any) -> None:
-        self.session.set_truth(name, mesh)  # the compare panel follows (truth_changed)
-        self.scene.show_truth(mesh)
-        self.docks["compare"].raise_()
-        if self.session.fit is not None:
-            self.compare()
+        self.reconstruction.load_truth(path, scale)
 
     def compare(self) -> None:
-        from workbench.services.templates.regions import face_regions
-        from workbench.services.validation.compare import compare_surfaces
-
-        fit, truth_loaded = self.session.fit, self.session.truth
-        if truth_loaded is None or fit is None:
-            return
-        name, truth = truth_loaded
-        face, regions = fit.recon.face, face_regions(fit.head)
-        self.runner.submit(
-            "compare",
-            "Comparing with the true skin …",
-            lambda: compare_surfaces(face, truth, recon_regions=regions),
-            self._show_comparison,
-            lambda exc: self.show_error("Could not compare", exc),
-        )
-
-    def _show_comparison(self, comparison: Any) -> None:
-        truth_loaded = self.session.truth
-        if truth_loaded is None:  # a comparison is only started with a true skin
-            raise RuntimeError("a comparison arrived without a true skin")
-        self.session.set_comparison(comparison)
-        name, truth = truth_loaded
-        self.scene.show_truth(truth, comparison.truth_vertex_values())
-        self.compare_panel.show_comparison(name, comparison)
-        self.status(
-            f"Compared with {name}: mean |distance| "
-            f"{comparison.figures['mean_abs_mm']:.2f} mm "
-            f"({self.runner.timings.get('compare', 0):.1f} s)"
-        )
+        self.reconstruction.compare()
 
     # ------------------------------------------------------------ pictures and closing
     @property

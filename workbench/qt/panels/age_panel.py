@@ -1,6 +1,6 @@
 """Age progression dock: source head, its age and sex, a target-age slider, the measurement table.
 
-Widgets, signals and the table model only; :class:`workbench.qt.age_ops.AgeTool`
+Widgets, signals and the table model only; :class:`workbench.qt.tools.age.tool.AgeTool`
 runs the age service (:func:`workbench.services.age.change.age_head`) in the worker,
 draws the heads and hands results back through ``show_*``.  Ages in years,
 lengths in mm (each head in its Frankfort frame).
@@ -180,7 +180,14 @@ class AgePanel(QWidget):
         )
         intro.setWordWrap(True)
         layout.addWidget(intro)
+        layout.addLayout(self._build_settings(ethnicities))
+        layout.addLayout(self._build_keep())
+        layout.addLayout(self._build_modes())
+        self._build_results(layout)
+        layout.addLayout(self._build_export())
 
+    def _build_settings(self, ethnicities: Sequence[str]) -> QFormLayout:
+        """Head, sex, age now, norms population, arc increase and the target-age slider."""
         form = QFormLayout()
         self.source = QComboBox()
         self.source.addItems(list(SOURCES))
@@ -222,6 +229,11 @@ class AgePanel(QWidget):
         )
         self.arc_increase.valueChanged.connect(lambda _v: self.settings_changed.emit())
         form.addRow("Arc increase", self.arc_increase)
+        form.addRow("Target age", self._build_target())
+        return form
+
+    def _build_target(self) -> QWidget:
+        """The target-age slider (whole years) and its value."""
         self.target = QSlider(Qt.Orientation.Horizontal)
         self.target.setRange(0, 40)
         self.target.setValue(DEFAULT_TARGET_AGE)
@@ -238,9 +250,9 @@ class AgePanel(QWidget):
         box.setContentsMargins(0, 0, 0, 0)
         box.addWidget(self.target, 1)
         box.addWidget(self.target_value)
-        form.addRow("Target age", row)
-        layout.addLayout(form)
+        return row
 
+    def _build_keep(self) -> QHBoxLayout:
         # the settings above, kept in the case: next to them, not below the table
         keep = QHBoxLayout()
         self.keep_button = QPushButton("Keep in case")
@@ -255,8 +267,10 @@ class AgePanel(QWidget):
         self.case_note.setWordWrap(True)
         keep.addWidget(self.keep_button, 0, Qt.AlignmentFlag.AlignTop)
         keep.addWidget(self.case_note, 1)
-        layout.addLayout(keep)
+        return keep
 
+    def _build_modes(self) -> QHBoxLayout:
+        """Side by side or overlay."""
         modes = QHBoxLayout()
         self.mode_group = QButtonGroup(self)
         self.mode_buttons: dict[str, QRadioButton] = {}
@@ -268,8 +282,10 @@ class AgePanel(QWidget):
             modes.addWidget(button)
         self.mode_buttons["side"].setChecked(True)
         modes.addStretch(1)
-        layout.addLayout(modes)
+        return modes
 
+    def _build_results(self, layout: QVBoxLayout) -> None:
+        """Status, error, figures and the measurement table of the age shown."""
         self.status = QLabel("Open this dock to load the head.")
         self.status.setWordWrap(True)
         layout.addWidget(self.status)
@@ -304,6 +320,7 @@ class AgePanel(QWidget):
         )
         layout.addWidget(self.table, 1)
 
+    def _build_export(self) -> QHBoxLayout:
         buttons = QHBoxLayout()
         self.export_button = QPushButton("Export…")
         self.export_button.setToolTip(
@@ -319,7 +336,7 @@ class AgePanel(QWidget):
         buttons.addWidget(self.export_button)
         buttons.addWidget(self.export_all)
         buttons.addStretch(1)
-        layout.addLayout(buttons)
+        return buttons
 
     # ------------------------------------------------------------ reading
     def source_key(self) -> str:

@@ -1,6 +1,6 @@
 """Animate dock: presets, muscle sliders, jaw, gaze, lids, Relax and a track timeline.
 
-Widgets and signals only; :class:`workbench.qt.animate_ops.AnimateTool`
+Widgets and signals only; :class:`workbench.qt.tools.animate.tool.AnimateTool`
 drives the :class:`workbench.services.animation.animator.Animator` and the 3D view,
 and hands the animator's state back through :meth:`AnimatePanel.show_state`
 and the timeline's through :meth:`AnimatePanel.show_timeline`.

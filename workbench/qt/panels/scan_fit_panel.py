@@ -1,6 +1,6 @@
 """Fit scan dock: open a face scan, fit the reference head, show its figures, assist landmarks.
 
-Widgets and signals only; :class:`workbench.qt.scan_fit_ops.ScanFitTool`
+Widgets and signals only; :class:`workbench.qt.tools.scan_fit.tool.ScanFitTool`
 does the work (worker jobs, drawing, picking) and hands results back through
 ``show_*``.  The landmark table lists the reference head's skin landmark
 codes with their state (placed by the user, the fit's first guess, a guess
@@ -37,7 +37,8 @@ from workbench.io.tables import list_tables
 from workbench.qt.panels.dowels_panel import BUILDS
 
 if TYPE_CHECKING:
-    from workbench.qt.scan_fit_state import FitView, OpenedScan, ScanLandmarks
+    from workbench.commands.stack import CommandStack
+    from workbench.qt.tools.scan_fit.state import FitView, OpenedScan
 
 COLUMNS = ("Code", "Name", "State", "Conf. (mm)")
 UNITS = ("auto", "mm", "cm", "m", "in")
@@ -348,7 +349,8 @@ class ScanFitPanel(QWidget):
         if self.selected_code() != selected:
             self.selection_changed.emit(self.selected_code())
 
-    def show_history(self, history: ScanLandmarks) -> None:
+    def show_history(self, history: CommandStack) -> None:
+        """The Undo / Redo buttons follow the window's one undo stack."""
         self.undo_button.setEnabled(history.can_undo)
         self.redo_button.setEnabled(history.can_redo)
         self.undo_button.setToolTip(f"Undo {history.undo_text}" if history.can_undo else "")

@@ -1,51 +1,29 @@
-"""The "Fit scan" tool of the window: open a face scan, fit the reference head, assist landmarks.
+"""The "Fit scan" tool's controller: the dock, the worker's jobs, drawing and picking on the scan.
 
-The fit is the service's (:func:`workbench.services.scan_fit.fit.fit_scan`,
-``workbench fit-scan``), run in the window's worker with progress and
-cancel; "Save pack…" runs :func:`~workbench.services.scan_fit.pack.fit_scan_pack`
-with the same inputs (the scan file, its units, the landmarks the user
-placed, sex, table, build), which refuses an existing folder unless the
-user confirms.
-
-Frames and units: mm.  The 3D view shows the scan in **its own input frame**
-(the scan file's coordinates after units), so the fitted skin and its
-landmarks are mapped back with :meth:`ScanFit.to_input`.  The scan is
-coloured by each vertex's distance to the fitted skin (0–2.5 mm; grey where
-the service does not count it: outside the face, at hole rims, not the head).
-
-Landmarks (skin, the reference head's codes): the fit's landmarks are the
-*first guess* (orange; violet over holes, where the service marks them
-absent).  The user places a landmark by clicking the scan (code chosen in
-the panel), drags the selected one, accepts the guess of one or all; these
-*placed* landmarks (green) seed "Fit again" (3 or more orient the scan).
-
-Undo: placements live here, not in the case: the case's landmark sets are in
-the skull specimen's frame and a scan is not part of a case (holding it
-there needs a new model part).  :class:`ScanLandmarks` keeps a local undo /
-redo list; the window's Edit → Undo (Ctrl+Z) works on it while this tool's
-dock is in front with a scan open.
-
-The functions :func:`read_scan`, :func:`run_scan_fit` and :func:`save_pack` are
-the worker side (plain data, no Qt, no VTK); :class:`ScanFitTool` is the GUI
-side (drawing, picking, dialogs).
+See :mod:`workbench.qt.tools.scan_fit` for what the tool does; the worker side is
+:mod:`~workbench.qt.tools.scan_fit.work`.  Frames and units: mm, the scan's own frame.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from PySide6.QtCore import QObject, QTimer, Signal
+from PySide6.QtCore import QObject, QTimer
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError, UnitsError, WorkbenchError
-from workbench.core.landmarks import LandmarkSet
-from workbench.core.mesh import Mesh
-from workbench.qt.scan_fit_state import FitView, OpenedScan, ScanFitSettings, ScanLandmarks
+from workbench.qt.document import Document
+from workbench.qt.tools.common import folder_is_free
+from workbench.qt.tools.scan_fit.state import (
+    EditScanLandmarks,
+    FitView,
+    OpenedScan,
+    ScanFitSettings,
+    ScanLandmarks,
+)
+from workbench.qt.tools.scan_fit.work import read_scan, run_scan_fit, save_pack
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
@@ -72,16 +50,6 @@ STATE_COLOURS = {
 }
 SELECTED = (1.0, 0.95, 0.1)
 MARKER_PX = 10.0
-#: fraction of the fit done when the service reports a step (by the step's first word)
-STEP_FRACTIONS = {
-    "orienting": 0.03,
-    "registering": 0.12,
-    "placing": 0.7,
-    "carrying": 0.75,
-    "measuring": 0.95,
-}
-#: the placed landmarks in a saved pack (scan frame, mm)
-PLACED_FILE = "landmarks_on_scan.mrk.json"
 
 
 class ScanFitHost(Protocol):
@@ -97,191 +65,12 @@ class ScanFitHost(Protocol):
     def window(self) -> QWidget: ...
 
 
-# ------------------------------------------------------------------ worker side
-def read_scan(path: str | Path, units: str = "auto", scale: float | None = None) -> OpenedScan:
-    """Worker: read and check a scan exactly as :func:`fit_scan_pack` does (mm).
-
-    Raises :class:`~workbench.core.errors.UnitsError` when ``units`` is
-    "auto" and the size does not look like mm (the window asks), and
-    :class:`~workbench.core.errors.InputError` for a file that is not a
-    face scan (a point cloud, a few triangles, a size not a head's).
-    """
-    from workbench.core.units import check_units_choice, resolve_units
-    from workbench.io.catalogue import load_catalogue
-    from workbench.io.meshes import read_mesh
-    from workbench.services.scan_fit.checks import check_scan_mesh
-    from workbench.services.templates.cache import reference_head
-
-    check_units_choice(units, scale)
-    path = Path(path)
-    read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="face")
-    if scale is None and units == "auto":
-        resolve_units(read.units, "auto", source=str(path))
-    check_scan_mesh(read.mesh, path)
-    _ = read.mesh.vertex_normals  # cached: spares the GUI thread when drawing
-    codes = reference_head("male").skin_landmarks.codes
-    catalogue = load_catalogue()
-    names = {}
-    for code in codes:
-        entry = catalogue.get(code, "skin")
-        names[code] = entry.name if entry is not None else ""
-    return OpenedScan(
-        path, units, scale, read.mesh, float(read.scale_applied), tuple(codes), names, read.messages
-    )
-
-
-def _fraction_reporter(report: Callable[[str, float], None] | None) -> Callable[[str], None]:
-    """The service's step messages as ``report(step, fraction)`` (which may cancel)."""
-    last = [0.0]
-
-    def say(message: str) -> None:
-        words = message.split()
-        first = words[0] if words else ""
-        last[0] = max(last[0], STEP_FRACTIONS.get(first, last[0]))
-        if report is not None:
-            report(message, last[0])
-
-    return say
-
-
-def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
-    """Worker: map a fit into the scan's frame for drawing (see :class:`FitView`)."""
-    from workbench.core.spatial import MeshIndex
-    from workbench.services.templates.regions import face_regions
-
-    back = np.linalg.inv(fit.input_to_head)
-    skin = fit.head.skin.transformed(back)  # winding flipped when the scan was mirrored
-    on = np.asarray(fit.skin_on_scan, bool)[skin.faces].all(axis=1)
-    parts = (Mesh(skin.vertices, skin.faces[~on]), Mesh(skin.vertices, skin.faces[on]))
-    for part in parts:
-        part.__dict__["vertex_normals"] = skin.vertex_normals  # shading of the whole skin
-    detail_parts = None
-    if fit.detail is not None:
-        fine = fit.detail.apply(fit.head.skin.vertices).transformed(back)
-        fine_on = on[fit.detail.parent_faces]
-        detail_parts = (
-            Mesh(fine.vertices, fine.faces[~fine_on]),
-            Mesh(fine.vertices, fine.faces[fine_on]),
-        )
-        for part in detail_parts:
-            part.__dict__["vertex_normals"] = fine.vertex_normals
-    lms = fit.head.skin_landmarks.defined()
-    codes = list(lms.codes)
-    guess_pts = fit.to_input(lms.positions_of(codes)) if codes else np.zeros((0, 3))
-    guess = {c: p for c, p in zip(codes, guess_pts, strict=True)}
-    absent = fit.figures.get("skin_landmark_to_scan_mm", {}).get("absent", [])
-    to_scan = MeshIndex(scan).closest_points(guess_pts).distances if len(guess_pts) else np.zeros(0)
-    ids = np.concatenate(list(face_regions(fit.head).values()))
-    face = skin.vertices[np.unique(ids)] if len(ids) else skin.vertices
-    lo, hi = face.min(axis=0), face.max(axis=0)
-    a, s = back[:3, :3] @ [0.0, 0.0, 1.0], back[:3, :3] @ [0.0, 1.0, 0.0]
-    distance = (
-        np.asarray(fit.scan_distance, float)
-        if fit.scan_distance is not None
-        else np.full(scan.n_vertices, np.nan)
-    )
-    return FitView(
-        fit,
-        skin,
-        parts,
-        distance,
-        guess,
-        frozenset(absent),
-        {c: float(d) for c, d in zip(codes, to_scan, strict=True)},
-        a / np.linalg.norm(a),
-        s / np.linalg.norm(s),
-        np.column_stack([lo, hi]).ravel(),
-        seeds,
-        {c: float(lms[c].confidence) for c in codes},
-        detail_parts,
-    )
-
-
-def run_scan_fit(
-    scan: OpenedScan,
-    placed: LandmarkSet | None,
-    settings: ScanFitSettings,
-    report: Callable[[str, float], None] | None = None,
-) -> FitView:
-    """Worker: :func:`fit_scan` on the opened scan, seeded by ``placed`` (scan frame, mm)."""
-    from workbench.model.evidence import file_sha256
-    from workbench.services.scan_fit.fit import fit_scan
-
-    seeds = placed if placed is not None and len(placed) else None
-    result = fit_scan(
-        scan.mesh,
-        landmarks=seeds,
-        sex=settings.sex,
-        table=settings.table,
-        build=settings.build,
-        source=str(scan.path),
-        inputs=[{"role": "scan", "file": scan.path.name, "sha256": file_sha256(scan.path)}],
-        progress=_fraction_reporter(report),
-    )
-    if report is not None:
-        report("drawing the fit", 0.98)
-    return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds))
-
-
-def save_pack(
-    scan: OpenedScan,
-    out: str | Path,
-    placed: LandmarkSet | None,
-    settings: ScanFitSettings,
-    *,
-    force: bool = False,
-    report: Callable[[str, float], None] | None = None,
-) -> tuple[FitView, list[Path]]:
-    """Worker: :func:`fit_scan_pack` with the tool's inputs; returns the fit and the files.
-
-    The placed landmarks go to the service as a landmark file in the scan
-    file's units (it scales them as it scales the scan) and are copied into
-    the pack as :data:`PLACED_FILE` (scan frame, mm).
-    """
-    from workbench.io.markups import write_mrk_json
-    from workbench.services.scan_fit.pack import fit_scan_pack
-
-    seeds = placed if placed is not None and len(placed) else None
-    with tempfile.TemporaryDirectory(prefix="workbench-scan-") as tmp:
-        lm_file = None
-        if seeds is not None:
-            lm_file = Path(tmp) / f"{scan.path.stem}_skin_landmarks.mrk.json"
-            k = 1.0 / scan.factor
-            write_mrk_json(lm_file, seeds.transformed(np.diag([k, k, k, 1.0])), "RAS")
-
-        def extra(folder: Path, _result: ScanFit) -> list[Path]:
-            if seeds is None:
-                return []
-            write_mrk_json(folder / PLACED_FILE, seeds, "RAS")
-            return [folder / PLACED_FILE]
-
-        result, files = fit_scan_pack(
-            scan.path,
-            out,
-            units=scan.units,
-            scale=scan.scale,
-            landmarks=lm_file,
-            sex=settings.sex,
-            table=settings.table,
-            build=settings.build,
-            force=force,
-            progress=_fraction_reporter(report),
-            extra=extra,
-        )
-    return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds)), list(files)
-
-
-# ------------------------------------------------------------------ GUI side
 class ScanFitTool(QObject):
-    """The "Fit scan" tool: see the module docstring.
+    """The "Fit scan" tool: see :mod:`workbench.qt.tools.scan_fit`.
 
-    Signals
-    -------
-    history_changed()
-        The placed landmarks' undo / redo state changed (the Edit menu follows).
+    ``document`` (default: ``host.document``, else a document of the tool's own) holds
+    the undo stack the placements are pushed on: the window's one stack.
     """
-
-    history_changed = Signal()
 
     def __init__(
         self,
@@ -293,6 +82,7 @@ class ScanFitTool(QObject):
         *,
         skull_picker: ClickPicker | None = None,
         catalogue: LandmarkCatalogue | None = None,
+        document: Document | None = None,
         parent: QObject | None = None,
     ) -> None:
         super().__init__(parent)
@@ -307,7 +97,12 @@ class ScanFitTool(QObject):
         self.skull_picker = skull_picker
         self.scan: OpenedScan | None = None
         self.view: FitView | None = None
-        self.landmarks = ScanLandmarks()
+        self.landmarks = ScanLandmarks(on_change=self._changed)
+        if document is None:
+            document = getattr(host, "document", None) or Document(host.show_error, self)
+        self.document: Document = document
+        document.stack_changed.connect(self._show_history)
+        self._show_history()
         self.saved: list[Path] = []
         self._actors: dict[str, list[Any]] = {}
         self._scan_poly: Any = None
@@ -399,7 +194,7 @@ class ScanFitTool(QObject):
     def _scan_opened(self, scan: OpenedScan) -> None:
         self.runner.cancel(CHANNEL)  # a fit of the previous scan is of no use now
         self.scan, self.view = scan, None
-        self.landmarks.clear()
+        self.landmarks.clear(scan.path.name)
         self.panel.show_scan(scan)
         self.panel.show_fit(None)
         self._refresh_landmarks()
@@ -407,7 +202,6 @@ class ScanFitTool(QObject):
         self._clear("skin")
         self.draw_landmarks()
         self.reset_camera()
-        self.history_changed.emit()
         n = scan.mesh.n_faces
         self.host.status(
             f"Scan {scan.path.name}: {n:,} triangles ({scan.factor:g} mm per file unit). "
@@ -573,10 +367,16 @@ class ScanFitTool(QObject):
         )
 
     def _changed(self) -> None:
+        """The placed landmarks changed (a command was done or undone): redraw."""
         self._refresh_landmarks()
-        self.panel.show_history(self.landmarks)
         self.draw_landmarks()
-        self.history_changed.emit()
+
+    def _show_history(self) -> None:
+        self.panel.show_history(self.document.stack)
+
+    def _push(self, edit: EditScanLandmarks | None) -> bool:
+        """Do ``edit`` as one step of the window's undo stack; False if nothing changed."""
+        return edit is not None and self.document.push(edit)
 
     def position_of(self, code: str) -> np.ndarray | None:
         """The landmark ``code`` as drawn: placed, else the first guess (scan frame, mm)."""
@@ -600,17 +400,13 @@ class ScanFitTool(QObject):
         if not code:
             self.host.status("Choose a landmark code in the Fit scan list, then click the scan.")
             return
-        if self.landmarks.place(code, point):
-            self._changed()
+        if self._push(self.landmarks.place(code, point)):
             self.panel.select_next_unplaced(code, self.landmarks.placed)
             self.host.status(f"Placed {code} on the scan (Ctrl+Z undoes it).")
 
     def place(self, code: str, point: np.ndarray) -> bool:
         """Place (or move) ``code`` at ``point`` (scan frame, mm); one undo step."""
-        ok = self.landmarks.place(code, point)
-        if ok:
-            self._changed()
-        return ok
+        return self._push(self.landmarks.place(code, point))
 
     def grab_target(self) -> tuple[str, np.ndarray] | None:
         code = self.panel.selected_code()
@@ -632,10 +428,8 @@ class ScanFitTool(QObject):
 
     def on_drag_end(self, code: str, point: np.ndarray | None) -> None:
         self._drag = None
-        if point is None or not self.landmarks.place(code, point, "Drag"):
+        if point is None or not self._push(self.landmarks.place(code, point, "Drag")):
             self.draw_landmarks()
-            return
-        self._changed()
 
     def cancel_drag(self) -> None:
         if self.picker is not None and self.picker.dragging is not None:
@@ -646,8 +440,7 @@ class ScanFitTool(QObject):
         if not code or self.view is None or code not in self.view.guess:
             self.host.status("Select a landmark of the first guess to accept it.")
             return
-        if self.landmarks.place(code, self.view.guess[code], "Accept"):
-            self._changed()
+        self._push(self.landmarks.place(code, self.view.guess[code], "Accept"))
 
     def accept_all(self) -> None:
         """Accept every guess over the scan not placed yet (one undo step)."""
@@ -660,22 +453,20 @@ class ScanFitTool(QObject):
             for c, p in view.guess.items()
             if c not in view.over_holes and c not in self.landmarks.placed
         }
-        if self.landmarks.place_many(todo, f"Accept {len(todo)} guessed landmarks"):
-            self._changed()
+        if self._push(self.landmarks.place_many(todo, f"Accept {len(todo)} guessed landmarks")):
             self.host.status(f"Accepted {len(todo)} landmarks of the first guess.")
 
     def remove_selected(self) -> None:
         code = self.panel.selected_code()
-        if code and self.landmarks.remove(code):
-            self._changed()
+        if code:
+            self._push(self.landmarks.remove(code))
 
     def undo(self) -> None:
-        if self.landmarks.undo():
-            self._changed()
+        """The dock's Undo: the window's one undo stack (as Edit ▸ Undo)."""
+        self.document.undo()
 
     def redo(self) -> None:
-        if self.landmarks.redo():
-            self._changed()
+        self.document.redo()
 
     # ------------------------------------------------------------ drawing
     def _scan_actor(self) -> Any:
@@ -875,9 +666,3 @@ class ScanFitTool(QObject):
         if self.picker is not None:
             self.picker.detach()
             self.picker = None
-
-
-def folder_is_free(folder: str | Path) -> bool:
-    """True when ``folder`` does not exist or is an empty folder."""
-    path = Path(folder)
-    return not os.path.lexists(path) or (path.is_dir() and not any(path.iterdir()))

@@ -1,55 +1,7 @@
-"""The "Animate" tool of the window: a reference head's face moved live in the 3D view.
+"""The "Animate" tool's controller: the dock's parameters, the live timer, the timeline.
 
-The physics is the service's (:class:`workbench.services.animation.animator.Animator`,
-``workbench animate``); this tool only sets its parameters from the
-:class:`~workbench.qt.panels.animate_panel.AnimatePanel` and shows the
-result.  The head is loaded in the window's worker (the reference head from
-the template cache, then the animator's set-up, ~1.5 s); afterwards a
-:class:`QTimer` every :data:`FRAME_MS` ms advances the skin
-:data:`STEPS_PER_FRAME` simulation steps on the GUI thread (~600 steps/s for
-the reference skin: ~17 ms a frame) and moves the drawn skin's points in
-place (no actor is re-added).  The timer stops once the skin has settled
-(largest vertex move in a frame below :data:`SETTLED_MM` for
-:data:`SETTLED_FRAMES` frames) and starts again with the next change.
-
-Frames and units: mm, the head's own frame (the reference head is stored in
-the Frankfort head frame: x to the subject's left, y up, z toward the face),
-not the case's skull.  Its layers (skin; skull, teeth and eyes) belong to
-this tool, not to :data:`workbench.qt.scene.LAYERS`.
-
-Undo: slider and preset changes are view state, not case edits.  The case
-is not changed, nothing goes on the document's undo stack, and Relax is the
-way back to the face at rest.
-
-Gaze and lids: the gaze sliders turn the eyes (drawn from the animator's
-pose of the eyes, as :meth:`Animator.meshes` gives it; the skin does not
-depend on the gaze, so nothing is simulated), the lid slider sets the lid
-nodes' targets and the timer carries the lids there.
-
-Timeline (a track: :mod:`workbench.services.animation.track`).  Frame ``i``
-of a track means exactly what :func:`~workbench.services.animation.track.run_track`
-computes: frame 0 is the rest skin settled in frame 0's pose, every later
-frame is frame ``i``'s pose (``apply_frame``) and ``steps_per_frame`` steps
-(20 steps of 1/600 s at 30 fps) from frame ``i - 1``'s simulated state, so
-the skin keeps its own dynamics (lag, overshoot) between keys.  Play runs
-that, one frame per tick of a :class:`QTimer` at the track's fps (slower
-than real time when a frame takes longer to compute than ``1 / fps``; no
-frame is skipped, since each one's state is the next one's start).
-
-Scrubbing semantics, chosen so that a scrubbed frame is the same skin as
-``run_track``'s (not a quasi-static approximation): the simulation state
-(node positions and velocities) of every computed frame is kept as a
-checkpoint (every ``stride``-th frame once a track's checkpoints would pass
-:data:`CHECKPOINT_BUDGET_BYTES`).  Scrubbing to a frame, backwards or
-forwards, restores its checkpoint (instant); a frame not computed yet is
-reached by simulating on from the nearest earlier checkpoint, one frame per
-timer tick so the window stays responsive (the time label says so).
-Resetting to a frame's pose and settling instead would be quicker on a long
-jump but shows the face at rest in that pose, which differs from the
-played frame wherever the face is moving (speech: millimetres).  A slider,
-preset or Relax change leaves the track: the skin is then the slider pose
-(moving under the live timer as before), and "Record keyframe" stores that
-pose as a key at the timeline's time.
+See :mod:`workbench.qt.tools.animate` for what the tool shows and how a track is
+played and scrubbed; the drawing is :mod:`~workbench.qt.tools.animate.drawing`.
 """
 
 from __future__ import annotations
@@ -63,8 +15,7 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.core.errors import WorkbenchError
-from workbench.core.mesh import Mesh
-from workbench.core.normals import vertex_normals
+from workbench.qt.tools.animate.drawing import AnimateDrawing, load_animator
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
@@ -84,13 +35,6 @@ STEPS_PER_FRAME = 10
 SETTLED_MM = 2e-3
 #: ... for this many frames in a row
 SETTLED_FRAMES = 3
-#: parts drawn under the skin (the "Skull and teeth" check box); the eyes are always shown
-INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth")
-ALWAYS_SHOWN = ("eyes",)
-INNER_COLOURS = {"eyes": (0.95, 0.95, 0.95), "upper_teeth": (1.0, 1.0, 0.94)}
-#: parts moved with the jaw, and the parts the gaze turns
-JAW_MOVED = ("mandible", "lower_teeth", "tongue")
-GAZE_MOVED = ("eyes",)
 #: memory for a track's frame checkpoints (positions + velocities of every skin node)
 CHECKPOINT_BUDGET_BYTES = 96 * 2**20
 #: length of a track started by "Record keyframe" with no track loaded (seconds)
@@ -107,16 +51,8 @@ class AnimateHost(Protocol):
     def window(self) -> QWidget: ...
 
 
-def load_animator(sex: str) -> Animator:
-    """The reference head of ``sex`` ready to animate (worker side: no Qt, no VTK)."""
-    from workbench.services.animation.animator import Animator
-    from workbench.services.templates.cache import reference_head
-
-    return Animator(reference_head(sex))
-
-
-class AnimateTool(QObject):
-    """See the module docstring.
+class AnimateTool(QObject, AnimateDrawing):
+    """The "Animate" tool: see :mod:`workbench.qt.tools.animate`.
 
     Signals
     -------
@@ -781,211 +717,8 @@ class AnimateTool(QObject):
         if path:  # the dialog asked before replacing a file; it is kept as a backup
             self.save_track_to(path, force=True)
 
-    # ------------------------------------------------------------ drawing
-    def draw(self) -> None:
-        """(Re)draw the skin and the inner parts of the loaded head."""
-        from workbench.qt.scene import BONE, SKIN, SMOOTH
-        from workbench.render.snapshots import to_polydata
-
-        self.clear()
-        anim = self.animator
-        if anim is None:
-            return
-        meshes = anim.meshes()
-        skin = meshes["skin"]
-        actor = self.plotter.add_mesh(
-            to_polydata(skin, normals=True),
-            color=SKIN,
-            **SMOOTH,
-            pickable=False,
-            render=False,
-            name="animate_skin",
-        )
-        self._actors["skin"] = actor
-        self._faces = {part: mesh.faces for part, mesh in meshes.items()}
-        # vertex-face incidence of each part, kept for the per-frame normals
-        self._vf = {part: mesh.vertex_faces_matrix for part, mesh in meshes.items()}
-        self._points = skin.vertices.copy()
-        for part in INNER_PARTS + ALWAYS_SHOWN:
-            if part not in meshes:
-                continue
-            poly = to_polydata(meshes[part], normals=True)
-            paint: dict[str, Any] = {"color": INNER_COLOURS.get(part, BONE)}
-            if part == "eyes":  # an iris and pupil, so that the gaze can be seen
-                poly.point_data["rgb"] = eye_colours(anim)
-                paint = {"scalars": "rgb", "rgb": True}
-            actor = self.plotter.add_mesh(
-                poly,
-                **paint,
-                **SMOOTH,
-                pickable=False,
-                render=False,
-                name=f"animate_{part}",
-            )
-            actor.SetVisibility(part in ALWAYS_SHOWN or self.panel.bones.isChecked())
-            self._actors[part] = actor
-        self._jaw_drawn = anim.jaw_deg
-        self._gaze_drawn = anim.gaze
-        self._show_inner(self.panel.bones.isChecked())
-
-    def actors(self) -> dict[str, Any]:
-        """``{part: actor}`` drawn by this tool (tests)."""
-        return dict(self._actors)
-
-    def clear(self) -> None:
-        for actor in self._actors.values():
-            self.plotter.remove_actor(actor, render=False)
-        self._actors.clear()
-        self._points = None
-        self.scene.request_render()
-
-    def _show_inner(self, on: bool) -> None:
-        for part in INNER_PARTS:
-            actor = self._actors.get(part)
-            if actor is not None:
-                actor.SetVisibility(bool(on))
-        skin = self._actors.get("skin")
-        if skin is not None:  # the bones show through a translucent skin
-            skin.GetProperty().SetOpacity(0.55 if on else 1.0)
-            if on:
-                skin.GetProperty().BackfaceCullingOn()
-            else:
-                skin.GetProperty().BackfaceCullingOff()
-        self.scene.request_render()
-
-    def _move_skin(self, points: np.ndarray) -> None:
-        actor = self._actors.get("skin")
-        anim = self.animator
-        if actor is None or anim is None:
-            return
-        _set_points(actor, points, self._faces["skin"], self._vf.get("skin"))
-        self._points = points
-
-    def _move_inner(self) -> None:
-        """Move the jaw's parts and the eyes to the animator's pose (points in place)."""
-        anim = self.animator
-        if anim is None:
-            return
-        for part, points in inner_points(anim, JAW_MOVED + GAZE_MOVED).items():
-            actor = self._actors.get(part)
-            if actor is not None:
-                _set_points(actor, points, self._faces[part], self._vf.get(part))
-        self._jaw_drawn = anim.jaw_deg
-        self._gaze_drawn = anim.gaze
-        self.scene.request_render()
-
-    def _move_inner_if_moved(self) -> None:
-        anim = self.animator
-        if anim is not None and (anim.jaw_deg != self._jaw_drawn or anim.gaze != self._gaze_drawn):
-            self._move_inner()
-
-    def drawn_points(self, part: str) -> np.ndarray:
-        """``(n, 3)`` vertices (mm) of a drawn part as the 3D view has them (tests)."""
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        data = self._actors[part].GetMapper().GetInput()
-        return vtk_to_numpy(data.GetPoints().GetData()).copy()
-
-    def reset_camera(self) -> None:
-        """Look at the face from the front (the head frame: +z toward the face, +y up)."""
-        anim = self.animator
-        if anim is None:
-            return
-        v = anim.skin().vertices
-        lm = anim.head.skin_landmarks.as_dict()
-        face = v[v[:, 2] > np.percentile(v[:, 2], 40)]  # the front of the head
-        lo, hi = face.min(axis=0), face.max(axis=0)
-        centre = (lo + hi) / 2
-        if "prn" in lm and "gn" in lm and "g" in lm:  # between brow and chin
-            centre[1] = (float(lm["g"][1]) + float(lm["gn"][1])) / 2
-        renderer = self.plotter.renderer
-        camera = renderer.GetActiveCamera()
-        camera.SetFocalPoint(*centre)
-        camera.SetPosition(*(centre + np.array([0.0, 0.0, 600.0])))
-        camera.SetViewUp(0.0, 1.0, 0.0)
-        renderer.ResetCamera(*np.column_stack([lo, hi]).ravel())
-        camera.Zoom(1.5)
-        renderer.ResetCameraClippingRange()
-        self.scene.request_render()
-
     def detach(self) -> None:
         """Stop the timers (before the view closes)."""
         self.timer.stop()
         self.track_timer.stop()
         self.playing = False
-
-
-def inner_points(anim: Animator, parts: tuple[str, ...]) -> dict[str, np.ndarray]:
-    """``{part: (n, 3)}`` vertices (mm, the head's own frame) of the jaw's parts and the
-    eyes in the animator's current pose: :meth:`Animator.meshes` without its skin.
-
-    ``meshes()`` also computes the exact skin (~50 ms on the reference head),
-    too slow for every frame of a track whose jaw or gaze moves; this takes the
-    same transforms (the animator's jaw matrix, its eye turn and its map back to
-    the stored frame).  ``tests/qt/test_qt_animate.py`` checks it against
-    ``meshes()``.
-    """
-    from workbench.services.registration.jaw import JAW_PARTS
-
-    m = anim._jaw_matrix
-    out: dict[str, np.ndarray] = {}
-    for part in parts:
-        mesh = anim.head.meshes.get(part)
-        if mesh is None:
-            continue
-        v = np.asarray(mesh.vertices, float)
-        if part in JAW_PARTS:
-            v = v @ m[:3, :3].T + m[:3, 3]
-        elif part == "eyes" and anim.gaze != (0.0, 0.0):
-            v = anim._turned_eyes(v)
-        out[part] = anim._out(v)
-    return out
-
-
-#: iris and pupil half-angles (degrees from the eye's forward axis, +z at rest): an iris
-#: about 12 mm across on a 24 mm eye, a pupil about 4 mm
-IRIS_DEG, PUPIL_DEG, EDGE_DEG = 30.0, 11.0, 4.0
-EYE_WHITE, IRIS, PUPIL = (242, 240, 235), (88, 110, 128), (14, 12, 12)
-
-
-def eye_colours(anim: Animator) -> np.ndarray:
-    """``(n, 3)`` uint8 colours of the eyes' vertices: white, an iris and a pupil about each
-    eye's forward axis at rest (+z in the head frame), so a turned eye is seen turned."""
-    v = np.asarray(anim.head.meshes["eyes"].vertices, float)
-    centres = np.asarray(anim.head.eye_centres, float)
-    owner = np.linalg.norm(v[:, None] - centres[None], axis=2).argmin(axis=1)
-    d = v - centres[owner]
-    cos = d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    # soft edges over EDGE_DEG (per-vertex colours of a 2.5k-vertex eye look jagged otherwise)
-    iris = np.clip((IRIS_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
-    pupil = np.clip((PUPIL_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
-    rgb = np.asarray(EYE_WHITE, float) * (1 - iris) + np.asarray(IRIS, float) * iris
-    rgb = rgb * (1 - pupil) + np.asarray(PUPIL, float) * pupil
-    return np.round(rgb).astype(np.uint8)
-
-
-def _set_points(actor: Any, points: np.ndarray, faces: np.ndarray, vf: Any = None) -> None:
-    """Move an actor's polydata points (and its normals) in place.
-
-    ``vf``: the part's ``Mesh.vertex_faces_matrix`` (its topology does not
-    change), so a frame's normals are one sparse product, not a rebuild.
-    """
-    from vtkmodules.util.numpy_support import vtk_to_numpy
-
-    data = actor.GetMapper().GetInput()
-    vtk_points = data.GetPoints()
-    new = np.asarray(points, float)
-    vtk_to_numpy(vtk_points.GetData())[:] = new
-    vtk_points.Modified()
-    normals = data.GetPointData().GetNormals()
-    if normals is not None:
-        if vf is None:
-            vtk_to_numpy(normals)[:] = vertex_normals(Mesh(new, faces))
-        else:
-            t = new[faces]
-            summed = np.asarray(vf @ np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-            length = np.linalg.norm(summed, axis=1, keepdims=True)
-            vtk_to_numpy(normals)[:] = summed / np.where(length > 0, length, 1.0)
-        normals.Modified()
-    data.Modified()
