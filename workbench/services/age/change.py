@@ -32,6 +32,8 @@ measurements (horizontal = x, vertical = y, depth = z) are read.
    the head) by a second, smooth warp of the inner parts; the result is
    settled in the Frankfort frame of its skull landmarks.  Muscles are skin
    triangles with barycentric weights, so they ride on the new skin.
+
+The warp steps (4-5) are in :mod:`workbench.services.age.warp_steps`.
 """
 
 from __future__ import annotations
@@ -50,16 +52,25 @@ from workbench.core.growth_solve import (
     Constraint,
     SoftPair,
     arc_length,
-    arc_sagitta,
     nearby_pairs,
     solve_landmarks,
 )
 from workbench.core.head_measure import head_circumference_mm, head_section, section_perimeter
 from workbench.core.mesh import Mesh
-from workbench.core.normals import normals_within_radius
 from workbench.core.spatial import MeshIndex
-from workbench.core.tps import fit_warp
 from workbench.model.template import TemplateHead
+from workbench.services.age.warp_steps import (
+    SLIVER_MM2,
+    arc_middles,
+    deform,
+    inside_before,
+    skin_out_of_skull,
+    skin_warp,
+    warp_points,
+)
+from workbench.services.age.warp_steps import (
+    unfold as unfold,  # re-exported: callers import it from here
+)
 
 Progress = Callable[[str], None]
 
@@ -67,14 +78,6 @@ Progress = Callable[[str], None]
 AGE_LIMITS = (0.0, 100.0)
 #: the young-child arc-length increase is capped at Kähler's 10 % (§8.5.5)
 MAX_ARC_INCREASE = 0.10
-#: regulariser of the inner parts' depth-restoring warp (as the scan fit's)
-INNER_SMOOTHING = 2.0
-#: regulariser of the skin warp at landmarks without a hard constraint (those with one
-#: are met exactly, λ = 0): their solved places are a least-squares compromise, and
-#: interpolating them exactly creased the lower face of an 18 -> 3 y head
-LOOSE_SMOOTHING = 100.0
-#: radius of the skin normal average at a landmark or arc middle (mm)
-NORMAL_RADIUS_MM = 6.0
 #: nearest landmarks each landmark is softly tied to
 SOFT_NEIGHBOURS = 4
 #: Table 8.2's head-size measurements: with no norms here they are *hard* constraints at
@@ -83,7 +86,6 @@ SOFT_NEIGHBOURS = 4
 HEAD_SIZE = ("depth:g-op", "horizontal:t_l-t_r", "vertical:v-t_l", "vertical:v-t_r")
 #: rounds of the head-size correction (the tape predicted from the warp, a secant step)
 HEAD_SIZE_ROUNDS = 4
-INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue", "eyes")
 
 
 @dataclass(frozen=True)
@@ -301,11 +303,97 @@ def age_head(
         table, a head without the landmarks the method needs, an arc
         increase outside 0–10 %.
     """
-    from workbench.io.growth_norms import load_growth_norms, load_head_circumference
-    from workbench.io.growth_table82 import AXIS_OF, load_table82
+    from workbench.io.growth_norms import load_head_circumference
 
     say = progress or (lambda _m: None)
     t0 = time.perf_counter()
+    a0, a1, table, eth = _checked_request(sex, from_age, to_age, norms, ethnicity, arc_increase)
+    hc_ref = load_head_circumference()
+    notes: list[str] = []
+
+    head, reframed = in_frankfort_frame(head)
+    if reframed:
+        notes.append(
+            "the head was not in its Frankfort frame (a reconstruction is stored in the skull "
+            "file's frame): measured and aged in the frame of its porions and orbitales"
+        )
+    pts = head_points(head)
+    codes = list(pts)
+    index = {c: i for i, c in enumerate(codes)}
+    p = np.array([pts[c] for c in codes])
+
+    # 1-2. measure and set the targets
+    say("measuring the head ...")
+    rows, hard = _norm_targets(table, sex, eth, a0, a1, p, index)
+    size = _head_size(head, hc_ref, sex, a0, a1, notes)
+    soft, arcs = _scale_targets(p, index, size.scale, rows, hard)
+    anchor = [index[c] for c in ("t_l", "t_r") if c in index] or [
+        index[c] for c in ("po_l", "po_r") if c in index
+    ]
+    if not anchor:
+        raise InputError("HEAD", "has neither tragia nor porions: the growth solve has no anchor")
+
+    # 3-4. solve, then the arcs
+    say("solving the landmark constraints ...")
+    solved = _solve_to_head_size(head, pts, p, hard, soft, arcs, index, size, arc_increase, anchor)
+
+    # 5. deform the whole head
+    say("warping the head ...")
+    aged = deform(head, solved.warp)
+    aged, pushed, skull = skin_out_of_skull(
+        aged, head.skin.face_normals, keep=head.skin.face_areas < SLIVER_MM2
+    )
+    seconds = time.perf_counter() - t0
+
+    # the report: measure the aged head as it came out
+    after = head_points(aged)
+    out_rows = _rows_after(rows, after, size.scale)
+    out_rows += _arc_rows_after(aged, after, solved.arc_rows, arc_increase)
+    figures: dict[str, Any] = {
+        "from_age": a0,
+        "to_age": a1,
+        "sex": sex,
+        "ethnicity": eth,
+        "norms": table.norms_id,
+        "hard_constraints": len(solved.hard),
+        "soft_constraints": len(soft),
+        **_outcome_figures(head, aged, skull, out_rows, hc_ref, sex, size, solved),
+        "skin_vertices_moved_out_of_skull": pushed,
+        **_fold_figures(head, aged),
+        "seconds": round(seconds, 3),
+        "unconstrained": [r.measurement_id for r in out_rows if r.constraint == "unconstrained"],
+    }
+    warnings = tuple(dict.fromkeys(notes))
+    before_lm = {c: p[i] for i, c in enumerate(codes)}
+    return AgeResult(
+        aged,
+        a0,
+        a1,
+        sex,
+        tuple(out_rows),
+        figures,
+        warnings,
+        before_lm,
+        {c: after[c] for c in codes if c in after},
+    )
+
+
+def _checked_request(
+    sex: str,
+    from_age: float,
+    to_age: float,
+    norms: str,
+    ethnicity: str | None,
+    arc_increase: float,
+) -> tuple[float, float, Any, str]:
+    """The request's ages (years), its norms table and ethnicity, after checking them.
+
+    Raises :class:`InputError` for an age outside :data:`AGE_LIMITS`, a sex
+    other than female or male, an arc increase outside 0–10 % and an
+    ethnicity the norms table does not have (in that order).
+    """
+    from workbench.io.growth_norms import load_growth_norms
+
     a0 = _check_age(from_age, "--from")
     a1 = _check_age(to_age, "--to")
     if sex not in ("female", "male"):
@@ -324,25 +412,29 @@ def age_head(
         raise InputError(
             "--ethnicity", f"'{eth}' has no norms in {table.norms_id}", "known: " + ", ".join(known)
         )
-    hc_ref = load_head_circumference()
-    notes: list[str] = []
+    return a0, a1, table, eth
 
-    head, reframed = in_frankfort_frame(head)
-    if reframed:
-        notes.append(
-            "the head was not in its Frankfort frame (a reconstruction is stored in the skull "
-            "file's frame): measured and aged in the frame of its porions and orbitales"
-        )
-    pts = head_points(head)
-    codes = list(pts)
-    index = {c: i for i, c in enumerate(codes)}
-    p = np.array([pts[c] for c in codes])
 
-    # 1-2. measure and set the targets
-    say("measuring the head ...")
+def _norm_targets(
+    table: Any,
+    sex: str,
+    eth: str,
+    a0: float,
+    a1: float,
+    p: np.ndarray,
+    index: Mapping[str, int],
+) -> tuple[list[MeasurementRow], list[Constraint]]:
+    """Rows of the measurements with norms and the hard constraints they give (§8.5.4).
+
+    ``p`` holds the head's landmarks (mm, Frankfort frame) in the order of
+    ``index``.  Each measurement with norms at both ages keeps its z-score,
+    d_t = μ_t + (σ_t/σ_c)(d_c − μ_c); one whose norms do not cover both ages
+    follows the head scale, one the head's landmarks do not allow is listed
+    as unconstrained.  Raises :class:`InputError` when an age lies outside
+    every measurement's norms or when no hard constraint is left.
+    """
     rows: list[MeasurementRow] = []
     hard: list[Constraint] = []
-    hard_rows: list[int] = []
     usable_ages: list[tuple[float, float]] = []
     for m in table.measurements:
         if not table.has(m.measurement_id, sex, eth):
@@ -370,7 +462,6 @@ def age_head(
         mu_c, sd_c = table.at(m.measurement_id, sex, a0, eth)
         mu_t, sd_t = table.at(m.measurement_id, sex, a1, eth)
         d_t = mu_t + (sd_t / sd_c) * (d_c - mu_c)  # Kähler §8.5.4
-        hard_rows.append(len(rows))
         hard.append(Constraint(index[m.a], index[m.b], d_t, None, m.measurement_id))
         rows.append(
             MeasurementRow(
@@ -407,7 +498,29 @@ def age_head(
             f"{table.norms_id} gives no measurement with norms at both {a0:g} and {a1:g} y "
             f"for {sex}, {eth} that the head's landmarks allow",
         )
+    return rows, hard
 
+
+@dataclass(frozen=True)
+class _HeadSize:
+    """The head circumference before and at the target age, and the global scale s."""
+
+    hc_c: float  # measured on the source head (mm)
+    h0: float  # the chart's ages read for the source and target ages (years)
+    h1: float
+    z_hc: float  # the source's z-score on the chart
+    scale: float  # s: the circumference's change at a kept z-score
+    hc_t: float  # target circumference, s · hc_c (mm)
+
+
+def _head_size(
+    head: TemplateHead, hc_ref: Any, sex: str, a0: float, a1: float, notes: list[str]
+) -> _HeadSize:
+    """The head circumference's change from ``a0`` to ``a1`` years at a kept z-score.
+
+    Raises :class:`InputError` when the circumference cannot be measured;
+    chart notes (ages read at the chart's end) are added to ``notes``.
+    """
     hc_c = measure_circumference(head)
     if not np.isfinite(hc_c):
         raise InputError(
@@ -420,7 +533,24 @@ def age_head(
     h1 = _hc_age(hc_ref, sex, a1, notes)
     z_hc = hc_ref.z(sex, h0, hc_c)
     scale = hc_scale(hc_ref, sex, h0, h1, z_hc)
-    hc_t = scale * hc_c
+    return _HeadSize(hc_c, h0, h1, z_hc, scale, scale * hc_c)
+
+
+def _scale_targets(
+    p: np.ndarray,
+    index: Mapping[str, int],
+    scale: float,
+    rows: list[MeasurementRow],
+    hard: list[Constraint],
+) -> tuple[list[SoftPair], list[Any]]:
+    """Kähler's Table 8.2 measurements without norms here, at the head scale ``scale``.
+
+    Appends their rows to ``rows`` and the head-size measurements (as hard
+    constraints, mm along their axis) to ``hard``; returns the soft pairs
+    (each landmark's nearby pairs, then the table's other measurements) and
+    the table's arcs, which are met after the solve.
+    """
+    from workbench.io.growth_table82 import AXIS_OF, load_table82
 
     soft: list[SoftPair] = [SoftPair(a, b, (0, 1, 2), "nearby") for a, b in nearby_pairs(p)]
     hard_pairs = {(c.a, c.b) for c in hard} | {(c.b, c.a) for c in hard}
@@ -464,15 +594,40 @@ def age_head(
                 ),
             )
         )
-    anchor = [index[c] for c in ("t_l", "t_r") if c in index] or [
-        index[c] for c in ("po_l", "po_r") if c in index
-    ]
-    if not anchor:
-        raise InputError("HEAD", "has neither tragia nor porions: the growth solve has no anchor")
+    return soft, arcs
 
-    # 3-4. solve, then the arcs; the head-size targets are corrected until the skin's
-    # tape around the head (predicted from the warp of its g-op section) meets the chart
-    say("solving the landmark constraints ...")
+
+@dataclass(frozen=True)
+class _Solved:
+    """The landmark solve after the head-size correction and the skin warp it gives."""
+
+    hard: list[Constraint]  # the hard constraints of the last round (head-size targets corrected)
+    sol: Any  # the last round's solve (workbench.core.growth_solve)
+    warp: Any  # the skin's thin-plate spline, source head frame -> aged (mm)
+    arc_rows: list[tuple[Any, float, float]]  # (arc, current length, target length), mm
+    landmark_solve_s: list[float]  # seconds of each round's landmark solve
+    solve_s: float  # seconds of the whole loop with its warps
+
+
+def _solve_to_head_size(
+    head: TemplateHead,
+    pts: Mapping[str, np.ndarray],
+    p: np.ndarray,
+    hard: list[Constraint],
+    soft: list[SoftPair],
+    arcs: list[Any],
+    index: Mapping[str, int],
+    size: _HeadSize,
+    arc_increase: float,
+    anchor: list[int],
+) -> _Solved:
+    """Solve the landmarks (§8.5.3), then the arcs, correcting the head-size targets.
+
+    Each round scales the head-size targets by k until the skin's tape
+    around the head (its g-op section moved by the round's warp, mm) meets
+    the chart's target circumference (a secant step, at most
+    :data:`HEAD_SIZE_ROUNDS` rounds).
+    """
     t_solve = time.perf_counter()
     section = head_section(head.skin, pts["g"], pts["op"])
     size_rows = [i for i, c in enumerate(hard) if c.label in HEAD_SIZE]
@@ -485,31 +640,28 @@ def age_head(
             for i, c in enumerate(hard)
         ]
         t_ls = time.perf_counter()
-        sol = solve_landmarks(p, hard_k, soft, scale, anchor)
+        sol = solve_landmarks(p, hard_k, soft, size.scale, anchor)
         landmark_solve_s.append(time.perf_counter() - t_ls)
         q = sol.points
-        src, dst, lam, arc_rows = _warp_points(
-            head, p, q, hard_k, arcs, index, scale, arc_increase, skin_index
+        src, dst, lam, arc_rows = warp_points(
+            head, p, q, hard_k, arcs, index, size.scale, arc_increase, skin_index
         )
-        warp = _skin_warp(src, dst, lam)
+        warp = skin_warp(src, dst, lam)
         moved = warp(np.vstack([section, pts["g"], pts["op"]]))
         predicted = section_perimeter(moved[:-2], moved[-2], moved[-1])
-        if not np.isfinite(predicted) or abs(predicted / hc_t - 1.0) < 1e-3:
+        if not np.isfinite(predicted) or abs(predicted / size.hc_t - 1.0) < 1e-3:
             break
-        k_size *= hc_t / predicted
-    hard = hard_k
+        k_size *= size.hc_t / predicted
     solve_s = time.perf_counter() - t_solve
+    return _Solved(hard_k, sol, warp, arc_rows, landmark_solve_s, solve_s)
 
-    # 5. deform the whole head
-    say("warping the head ...")
-    aged = _deform(head, warp)
-    aged, pushed, skull = _skin_out_of_skull(
-        aged, head.skin.face_normals, keep=head.skin.face_areas < SLIVER_MM2
-    )
-    seconds = time.perf_counter() - t0
 
-    # the report: measure the aged head as it came out
-    after = head_points(aged)
+def _rows_after(
+    rows: Sequence[MeasurementRow], after: Mapping[str, np.ndarray], scale: float
+) -> list[MeasurementRow]:
+    """``rows`` measured again on the aged head's landmarks ``after`` (mm), with targets."""
+    from workbench.io.growth_table82 import AXIS_OF
+
     out_rows = []
     for row in rows:
         if row.constraint == "unconstrained":
@@ -526,8 +678,20 @@ def age_head(
             value = float(np.linalg.norm(a - b))
         target = row.target_mm if row.constraint == "norms" else scale * row.before_mm
         out_rows.append(replace(row, after_mm=value, target_mm=target))
+    return out_rows
+
+
+def _arc_rows_after(
+    aged: TemplateHead,
+    after: Mapping[str, np.ndarray],
+    arc_rows: Sequence[tuple[Any, float, float]],
+    arc_increase: float,
+) -> list[MeasurementRow]:
+    """The rows of the arcs, measured over the aged skin (circle segment through the skin
+    point over the chord's middle, mm)."""
+    out_rows = []
     if arc_rows:
-        mids_new, normals_new = _arc_middles(
+        mids_new, normals_new = arc_middles(
             aged.skin,
             MeshIndex(aged.skin),
             np.array([after[t.a] for t, _, _ in arc_rows]),
@@ -552,43 +716,50 @@ def age_head(
                 f"head scale{' + young-child increase' if arc_increase else ''}",
             )
         )
+    return out_rows
 
+
+def _outcome_figures(
+    head: TemplateHead,
+    aged: TemplateHead,
+    skull: MeshIndex,
+    out_rows: Sequence[MeasurementRow],
+    hc_ref: Any,
+    sex: str,
+    size: _HeadSize,
+    solved: _Solved,
+) -> dict[str, Any]:
+    """The report's figures of the residuals, the circumference, the solve and the face
+    skin inside the skull (source ``head`` and ``aged`` head, mm)."""
     hc_after = measure_circumference(aged)
     normed = [r for r in out_rows if r.constraint == "norms"]
     res = np.array([abs(r.residual_mm) for r in normed])
     dz = np.array([abs(r.z_after - r.z_before) for r in normed])
     face = np.unique(np.concatenate([np.asarray(v) for k, v in aged.regions.items()]))
     inside = int((skull.signed_distance(aged.skin.vertices[face]) < 0).sum())
-    inside0 = _inside_before(head, face)
-    folded = (head.skin.face_normals * aged.skin.face_normals).sum(axis=1) < 0
-    sliver = head.skin.face_areas < SLIVER_MM2
-    figures: dict[str, Any] = {
-        "from_age": a0,
-        "to_age": a1,
-        "sex": sex,
-        "ethnicity": eth,
-        "norms": table.norms_id,
-        "hard_constraints": len(hard),
-        "soft_constraints": len(soft),
+    inside0 = inside_before(head, face)
+    sol = solved.sol
+    h0, h1 = size.h0, size.h1
+    return {
         "hard_residual_mm": {
             "median": _r(float(np.median(res)), 3),
             "max": _r(float(res.max()), 3),
         },
         "z_change_max": _r(float(dz.max()), 4),
-        "global_scale": round(float(scale), 5),
+        "global_scale": round(float(size.scale), 5),
         "head_circumference_mm": {
-            "before": _r(hc_c, 1),
+            "before": _r(size.hc_c, 1),
             "after": _r(hc_after, 1),
-            "target": _r(hc_t, 1),
-            "z_before": _r(z_hc, 3),
+            "target": _r(size.hc_t, 1),
+            "z_before": _r(size.z_hc, 3),
             "z_after": _r(hc_ref.z(sex, h1, hc_after), 3),
             "chart": f"{hc_ref.reference_for(h0)} at {h0:g} y, {hc_ref.reference_for(h1)} at {h1:g} y",
         },
         "solve": {
             # the landmark solve (per head-size round) and the whole loop with its warps
-            "seconds": round(max(landmark_solve_s), 4),
-            "head_size_rounds": len(landmark_solve_s),
-            "with_head_size_correction_seconds": round(solve_s, 4),
+            "seconds": round(max(solved.landmark_solve_s), 4),
+            "head_size_rounds": len(solved.landmark_solve_s),
+            "with_head_size_correction_seconds": round(solved.solve_s, 4),
             "rounds": sol.rounds,
             "condition_number_limit": CONDITION_NUMBER,
             "condition": [round(c, 1) for c in sol.condition],
@@ -596,291 +767,19 @@ def age_head(
         },
         # the reference heads have a few orbit vertices a fraction of a mm inside the bone
         "face_skin_inside_skull_vertices": {"after": inside, "before": inside0},
-        "skin_vertices_moved_out_of_skull": pushed,
+    }
+
+
+def _fold_figures(head: TemplateHead, aged: TemplateHead) -> dict[str, int]:
+    """Skin triangles the age change turned over (against the source head's normals)."""
+    folded = (head.skin.face_normals * aged.skin.face_normals).sum(axis=1) < 0
+    sliver = head.skin.face_areas < SLIVER_MM2
+    return {
         # turned-over skin triangles, apart from the reference's own slivers at the mouth
         # corners (< 0.05 mm², the lips' seam), which are counted on their own
         "fold_overs": int((folded & ~sliver).sum()),
         "fold_overs_mouth_corner_slivers": int((folded & sliver).sum()),
-        "seconds": round(seconds, 3),
-        "unconstrained": [r.measurement_id for r in out_rows if r.constraint == "unconstrained"],
     }
-    warnings = tuple(dict.fromkeys(notes))
-    before_lm = {c: p[i] for i, c in enumerate(codes)}
-    return AgeResult(
-        aged,
-        a0,
-        a1,
-        sex,
-        tuple(out_rows),
-        figures,
-        warnings,
-        before_lm,
-        {c: after[c] for c in codes if c in after},
-    )
-
-
-#: skin found inside the aged skull is put this far outside it (mm)
-SKULL_CLEARANCE_MM = 0.5
-
-
-def _skin_out_of_skull(
-    head: TemplateHead, rest_normals: np.ndarray, keep: np.ndarray | None = None
-) -> tuple[TemplateHead, int, MeshIndex]:
-    """Skin vertices inside the cranium or mandible moved to just outside (mm; how many, and
-    the index of the skull, which this leaves as it is).
-
-    The warps keep the source's tissue depths at the paired landmarks, but
-    between them thin skin (the orbit rims, where the reference heads already
-    have a few vertices a fraction of a mm inside the bone; the nasal dorsum of
-    a small child) can end inside.  The push is spread over the neighbourhood
-    (pushed vertices held, the others relaxed to their neighbours' mean push),
-    triangles it turned over (against ``rest_normals``; ``keep`` as in
-    :func:`unfold`) are relaxed, and this repeats while skin is inside.
-    """
-    skull = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
-    skin = head.skin
-    adjacency = None
-    first = 0
-    for round_ in range(PUSH_ROUNDS):
-        v = skin.vertices
-        bad = np.flatnonzero(skull.signed_distance(v) < 0)
-        if round_ == 0:
-            first = len(bad)
-        if not len(bad):
-            break
-        cl = skull.closest_points(v[bad])
-        normal = skull.pseudo_normals(cl.face_ids, cl.barycentric)
-        push = np.zeros_like(v)
-        push[bad] = cl.points + SKULL_CLEARANCE_MM * normal - v[bad]
-        held = np.zeros(len(v), bool)
-        held[bad] = True
-        adj, degree = adjacency = adjacency or _adjacency(skin)
-        for _ in range(PUSH_SPREAD_PASSES):
-            mean = (adj @ push) / np.maximum(degree, 1)[:, None]
-            push[~held] = mean[~held]
-        skin = unfold(skin.with_vertices(v + push), rest_normals, keep=keep, adjacency=adjacency)
-    if skin is head.skin:
-        return head, 0, skull
-    return replace(head, meshes={**head.meshes, "skin": skin}), first, skull
-
-
-#: rounds of push (and unfold) while skin is inside the skull
-PUSH_ROUNDS = 6
-#: Jacobi passes that spread the out-of-skull push over the skin around the pushed vertices
-PUSH_SPREAD_PASSES = 20
-
-
-def _adjacency(skin: Mesh) -> tuple[Any, np.ndarray]:
-    """Vertex adjacency of ``skin`` (sparse 0/1 matrix) and each vertex's degree."""
-    from scipy import sparse
-
-    f = skin.faces
-    n = skin.n_vertices
-    e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-    adj = ((adj + adj.T) > 0).astype(float)
-    return adj, np.asarray(adj.sum(axis=1)).ravel()
-
-
-_INSIDE: dict[str, int] = {}
-
-
-def _inside_before(head: TemplateHead, face: np.ndarray) -> int:
-    """Face skin vertices inside the source skull (once per source head: a sequence reuses it)."""
-    key = head.content_hash
-    if key not in _INSIDE:
-        skull = MeshIndex(_concat([head.meshes["cranium"], head.meshes["mandible"]]))
-        _INSIDE[key] = int((skull.signed_distance(head.skin.vertices[face]) < 0).sum())
-    return _INSIDE[key]
-
-
-def _concat(meshes: Sequence[Mesh]) -> Mesh:
-    from workbench.core.mesh import concatenate
-
-    return concatenate(list(meshes))
-
-
-def _arc_middles(
-    skin: Mesh, index: MeshIndex, a: np.ndarray, b: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The skin points over the middles of chords a_i–b_i and the outward unit normals
-    there, ``(k, 3)`` each (mm; one query for all arcs)."""
-    middle = (np.reshape(a, (-1, 3)) + np.reshape(b, (-1, 3))) / 2
-    if not len(middle):
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    hit = index.closest_points(middle).points
-    normal = normals_within_radius(skin, hit, NORMAL_RADIUS_MM)
-    normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    return hit, normal
-
-
-#: relaxation rounds for skin triangles the warp turned over (each round: the vertices
-#: of turned triangles and their neighbours move halfway to their neighbours' mean)
-UNFOLD_ROUNDS = 30
-#: skin triangles smaller than this (mm²) are the reference's mouth-corner slivers
-SLIVER_MM2 = 0.05
-
-
-def unfold(
-    skin: Mesh,
-    rest_normals: np.ndarray,
-    keep: np.ndarray | None = None,
-    adjacency: tuple[Any, np.ndarray] | None = None,
-) -> Mesh:
-    """``skin`` with triangles that turned over (against ``rest_normals``) relaxed flat again.
-
-    A thin-plate spline driven by landmarks that move unevenly (the chin
-    rising past the cheek landmarks for a young child) can turn a few skin
-    triangles over between landmarks.  Only the vertices of turned triangles
-    and their one-ring move (umbrella relaxation toward their neighbours'
-    mean), so the landmarks (stored as points) and the rest of the skin stay;
-    ``keep`` lists triangles not to look at (the reference's own slivers);
-    ``adjacency`` is :func:`_adjacency` of ``skin`` when the caller has it.
-    """
-    f = skin.faces
-    n = skin.n_vertices
-    adj, degree = adjacency or _adjacency(skin)
-    # rims (neck, eye and mouth openings) stay: relaxing them would shrink the openings
-    rim = np.zeros(n, bool)
-    rim[skin.edges_unique[skin.edge_face_counts == 1].ravel()] = True
-    v = skin.vertices.copy()
-    ignore = np.zeros(len(f), bool) if keep is None else np.asarray(keep, bool)
-    for _ in range(UNFOLD_ROUNDS):
-        cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        turned = ((cross * rest_normals).sum(axis=1) < 0) & ~ignore
-        if not turned.any():
-            break
-        move = np.zeros(n, bool)
-        move[f[turned].ravel()] = True
-        move |= np.asarray(adj[move].sum(axis=0)).ravel() > 0
-        move &= ~rim
-        mean = (adj @ v) / np.maximum(degree, 1)[:, None]
-        v[move] += 0.5 * (mean[move] - v[move])
-    return skin.with_vertices(v)
-
-
-def _local_scale(warp: Callable[[np.ndarray], np.ndarray], point: np.ndarray) -> float:
-    """Cube root of the warp's Jacobian determinant at ``point`` (central differences, 1 mm)."""
-    e = np.eye(3)
-    cols = [(warp((point + e[i])[None])[0] - warp((point - e[i])[None])[0]) / 2 for i in range(3)]
-    det = float(np.linalg.det(np.column_stack(cols)))
-    return float(np.cbrt(det)) if det > 0 else 1.0
-
-
-def _skin_warp(src: np.ndarray, dst: np.ndarray, lam: np.ndarray) -> Any:
-    """The thin-plate spline of the skin: coinciding sources (stomion and stomion superius
-    of closed lips) merged, hard-constraint landmarks exact, the rest loose."""
-    key = np.round(src, 6)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
-    merged = np.zeros((len(first), 3))
-    np.add.at(merged, inverse, dst)
-    merged /= np.bincount(inverse, minlength=len(first))[:, None]
-    lam_merged = np.full(len(first), np.inf)
-    np.minimum.at(lam_merged, inverse, lam)
-    return fit_warp(src[first], merged, smoothing=lam_merged)
-
-
-def _warp_points(
-    head: TemplateHead,
-    p: np.ndarray,
-    q: np.ndarray,
-    hard: Sequence[Constraint],
-    arcs: Sequence[Any],
-    index: Mapping[str, int],
-    scale: float,
-    arc_increase: float,
-    skin_index: MeshIndex | None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[Any, float, float]]]:
-    """Source and target points of the skin warp (landmarks, then arc middles) and their λ."""
-    src_pts = [p]
-    dst_pts = [q]
-    arc_rows = []
-    if arcs:
-        assert skin_index is not None
-        ends = np.array([(index[t.a], index[t.b]) for t in arcs])
-        mids, normals = _arc_middles(head.skin, skin_index, p[ends[:, 0]], p[ends[:, 1]])
-    for k, t in enumerate(arcs):
-        ia, ib = index[t.a], index[t.b]
-        mid, normal = mids[k], normals[k]
-        chord_c = float(np.linalg.norm(p[ia] - p[ib]))
-        h_c = max(0.0, float((mid - (p[ia] + p[ib]) / 2) @ normal))
-        arc_c = arc_length(chord_c, h_c)
-        arc_t = scale * arc_c * (1.0 + arc_increase)
-        chord_t = float(np.linalg.norm(q[ia] - q[ib]))
-        h_t = arc_sagitta(chord_t, arc_t)
-        # the middle moves with the solved chord's middle, then to the target sagitta
-        new_mid = mid + ((q[ia] + q[ib]) - (p[ia] + p[ib])) / 2 + (h_t - h_c) * normal
-        src_pts.append(mid[None])
-        dst_pts.append(new_mid[None])
-        arc_rows.append((t, arc_c, arc_t))
-    src = np.vstack(src_pts)
-    dst = np.vstack(dst_pts)
-    # the warp meets the targets of hard constraints (and the arc middles) exactly and
-    # follows the other landmarks, whose places are the solve's compromise, loosely
-    exact = np.zeros(len(src), bool)
-    exact[[c.a for c in hard] + [c.b for c in hard]] = True
-    exact[len(p) :] = True
-    lam = np.where(exact, 0.0, LOOSE_SMOOTHING)
-    return src, dst, lam, arc_rows
-
-
-def _deform(head: TemplateHead, warp: Any) -> TemplateHead:
-    from workbench.io.catalogue import load_catalogue
-    from workbench.services.landmarks.frame import head_frame_from_landmarks
-    from workbench.services.registration.skull_registration import head_transformed
-
-    warped = head.warped(warp)
-    # triangles the warp turned over, relaxed (the reference's own sub-0.01 mm² slivers at
-    # the mouth corners turn over at the slightest push and are left to themselves)
-    sliver = head.skin.face_areas < SLIVER_MM2
-    skin = unfold(warped.skin, head.skin.face_normals, keep=sliver)
-    warped = replace(warped, meshes={**warped.meshes, "skin": skin})
-    # eyeballs: scaled about their new centres by the warp's local size change
-    eyes = warped.meshes["eyes"].vertices
-    owner = np.linalg.norm(eyes[:, None] - warped.eye_centres[None], axis=2).argmin(axis=1)
-    factors = np.array([_local_scale(warp, c) for c in head.eye_centres])
-    eyes = warped.eye_centres[owner] + factors[owner, None] * (eyes - warped.eye_centres[owner])
-    meshes = dict(warped.meshes)
-    meshes["eyes"] = warped.meshes["eyes"].with_vertices(eyes)
-    warped = replace(warped, meshes=meshes, eye_radius=float(head.eye_radius * factors.mean()))
-
-    # the source tissue depths restored below the new skin landmarks
-    catalogue = load_catalogue()
-    skin_old = head.skin_landmarks.as_dict()
-    skin_new = warped.skin_landmarks.as_dict()
-    skull_old = head.skull_landmarks.as_dict()
-    skull_new = warped.skull_landmarks.as_dict()
-    src_in, dst_in = [], []
-    for code, old in skull_old.items():
-        partner = catalogue.partner(code, "skull")
-        if not partner or partner not in skin_old or partner not in skin_new:
-            continue
-        depth = float(np.linalg.norm(skin_old[partner] - old))
-        offset = skin_new[partner] - skull_new[code]
-        length = float(np.linalg.norm(offset))
-        if length < 1e-6:
-            continue
-        src_in.append(skull_new[code])
-        dst_in.append(skin_new[partner] - offset / length * depth)
-    if len(src_in) >= 4:
-        inner = fit_warp(np.array(src_in), np.array(dst_in), smoothing=INNER_SMOOTHING)
-        moved = replace(warped, meshes={**warped.meshes}).warped(inner)
-        meshes = dict(warped.meshes)
-        for part in INNER_PARTS:
-            meshes[part] = moved.meshes[part]
-        warped = replace(
-            warped,
-            meshes=meshes,
-            skull_landmarks=moved.skull_landmarks,
-            eye_centres=moved.eye_centres,
-            tmj_axis=moved.tmj_axis,
-        )
-    try:
-        settle = head_frame_from_landmarks(warped.skull_landmarks).input_to_head
-    except WorkbenchError:
-        settle = np.eye(4)
-    return head_transformed(warped, settle)
 
 
 def aged_template_id(head: TemplateHead, from_age: float, to_age: float) -> str:

@@ -42,7 +42,7 @@ from workbench.core.errors import InputError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
 from workbench.io.catalogue import load_catalogue
-from workbench.services.guides.measure import measure_skull
+from workbench.services.guides.measure import SkullMeasures, measure_skull
 from workbench.services.guides.rules import Prediction, load_rules
 
 KINDS = {"vline": ("frontal", 1), "hline": ("frontal", 1), "point": ("lateral", 2)}
@@ -185,9 +185,6 @@ def classic_guides(
             problems.append(f"{what} guide not derived ({'; '.join(absent)})")
         return bool(absent)
 
-    def how(*names: str) -> str:
-        return "; ".join(f"{n} = {m[n]:.1f} mm from {m.values[n].how}" for n in names)
-
     rules = load_rules()
 
     def lateral(rule_id: str, name: str, side: str, sign: float) -> float:
@@ -208,42 +205,12 @@ def classic_guides(
                     (lateral(width.rule_id, "aperture_x", side, sign),),
                     (f"al_{side}",),
                     *_rule(width.rule_id),
-                    derivation=f"{how(f'aperture_x_{side}')} + {width.intercept} mm",
+                    derivation=f"{_how(m, f'aperture_x_{side}')} + {width.intercept} mm",
                 )
             )
 
     if not skip("nose tip", ["spine_projection", "mp_dowel_z", "ans_y", "ans_z"]):
-        krogman = rules["krogman_nose_tip"]
-        factor = {p: c for c, p in krogman.terms}["spine_projection"]
-        ans = np.array([m["ans_y"], m["ans_z"]])
-        if spine_base is not None:
-            base = np.asarray(spine_base, float).reshape(3)[1:]
-            u = ans - base
-            length = float(np.linalg.norm(u))
-            if not np.isfinite(length) or length < 1.0 or u[1] < 0.2 * length:
-                raise InputError(
-                    "spine_base",
-                    "the spine base must lie at least 1 mm behind ans, "
-                    "with the spine pointing forward",
-                )
-            u /= length
-            tip = ans + (m["mp_dowel_z"] - ans[1]) / u[1] * u + factor * length * u
-            text = f"spine line from the given base, length {length:.1f} mm"
-        else:
-            tip = np.array([ans[0], krogman.evaluate(m.numbers())])
-            text = how("spine_projection") + "; spine line parallel to FH through ans"
-        out.append(
-            Guide(
-                "nose_tip",
-                "Nose tip (pronasale)",
-                "point",
-                "lateral",
-                tuple(tip),
-                ("prn",),
-                *_rule("krogman_nose_tip"),
-                derivation=f"{text}; {how('mp_dowel_z')}; factor {factor}",
-            )
-        )
+        out.append(_nose_tip(m, rules["krogman_nose_tip"], spine_base))
 
     for side, sign, word in (("l", 1.0, "left"), ("r", -1.0, "right")):
         if not skip(f"mouth width ({word})", [f"cp_junction_x_{side}"]):
@@ -256,7 +223,7 @@ def classic_guides(
                     (lateral("kaehler_mouth_width", "cp_junction_x", side, sign),),
                     (f"ch_{side}",),
                     *_rule("kaehler_mouth_width"),
-                    derivation=how(f"cp_junction_x_{side}"),
+                    derivation=_how(m, f"cp_junction_x_{side}"),
                 )
             )
     for gid, label, name, code, rule in (
@@ -273,7 +240,7 @@ def classic_guides(
                     (rules[rule].evaluate(m.numbers()),),
                     (code,),
                     *_rule(rule),
-                    derivation=how(name),
+                    derivation=_how(m, name),
                 )
             )
     if not skip("lip parting line", ["incisal_edge_y"]):
@@ -286,10 +253,47 @@ def classic_guides(
                 (rules["kaehler_lip_parting"].evaluate(m.numbers()),),
                 ("sto", "ch_l", "ch_r"),
                 *_rule("kaehler_lip_parting"),
-                derivation=f"{how('incisal_edge_y')} + {how('incisor_display')}",
+                derivation=f"{_how(m, 'incisal_edge_y')} + {_how(m, 'incisor_display')}",
             )
         )
     return out
+
+
+def _how(m: SkullMeasures, *names: str) -> str:
+    """How the measurements ``names`` were taken, for a guide's derivation (mm)."""
+    return "; ".join(f"{n} = {m[n]:.1f} mm from {m.values[n].how}" for n in names)
+
+
+def _nose_tip(m: SkullMeasures, krogman: Any, spine_base: np.ndarray | None) -> Guide:
+    """The nose-tip guide (lateral view: y, z of pronasale, mm) by Krogman's rule; see
+    :func:`classic_guides` for the spine line with and without a given ``spine_base``."""
+    factor = {p: c for c, p in krogman.terms}["spine_projection"]
+    ans = np.array([m["ans_y"], m["ans_z"]])
+    if spine_base is not None:
+        base = np.asarray(spine_base, float).reshape(3)[1:]
+        u = ans - base
+        length = float(np.linalg.norm(u))
+        if not np.isfinite(length) or length < 1.0 or u[1] < 0.2 * length:
+            raise InputError(
+                "spine_base",
+                "the spine base must lie at least 1 mm behind ans, with the spine pointing forward",
+            )
+        u /= length
+        tip = ans + (m["mp_dowel_z"] - ans[1]) / u[1] * u + factor * length * u
+        text = f"spine line from the given base, length {length:.1f} mm"
+    else:
+        tip = np.array([ans[0], krogman.evaluate(m.numbers())])
+        text = _how(m, "spine_projection") + "; spine line parallel to FH through ans"
+    return Guide(
+        "nose_tip",
+        "Nose tip (pronasale)",
+        "point",
+        "lateral",
+        tuple(tip),
+        ("prn",),
+        *_rule("krogman_nose_tip"),
+        derivation=f"{text}; {_how(m, 'mp_dowel_z')}; factor {factor}",
+    )
 
 
 def guides_from_prediction(pred: Prediction, guides: list[Guide]) -> list[Guide]:

@@ -453,7 +453,21 @@ def measure_skull(
         caster = RayCaster.shared(skull)
         z0 = float(skull.vertices[:, 2].max() + 5.0)
 
-    # nose width: the widest aperture (frontal rays on the mesh, else the bony alare)
+    _measure_nose_width(m, p, caster, z0)
+    _measure_spine_and_philtrum(m, p, caster, z0, dowel_tips, table_id)
+    # teeth: CEJ lines from the alveolar crests, incisal edge, canines
+    arch, upper_teeth, no_upper = _measure_incisors(m, p, caster, z0, sex)
+    _measure_canines(m, p, skull, caster, arch, upper_teeth, no_upper)
+    _measure_rynn_distances(m, p)
+    _measure_orbits(m, p)
+    return m
+
+
+def _measure_nose_width(
+    m: SkullMeasures, p: Mapping[str, np.ndarray], caster: RayCaster | None, z0: float
+) -> None:
+    """The widest nasal aperture (head frame x, mm): frontal rays on the mesh from ``z0``
+    in front of it, else the bony alare apl_l/apl_r."""
     ys = None
     if caster is not None and ("ans" in p or "apl_l" in p or "apl_r" in p):
         lo = p["ans"][1] if "ans" in p else min(p[c][1] for c in ("apl_l", "apl_r") if c in p) - 15
@@ -490,7 +504,18 @@ def measure_skull(
             "aperture_x_l", m.missing.get("aperture_x_r", "no aperture width")
         )
 
-    # anterior nasal spine: tip = ans, base = front of the maxilla beneath it
+
+def _measure_spine_and_philtrum(
+    m: SkullMeasures,
+    p: Mapping[str, np.ndarray],
+    caster: RayCaster | None,
+    z0: float,
+    dowel_tips: Mapping[str, np.ndarray] | None,
+    table_id: str,
+) -> None:
+    """The anterior nasal spine (tip = ans, base = front of the maxilla beneath it) and
+    the mid-philtrum dowel tip's depth z (given, else skull mp plus the table's mean
+    depth parallel to FH), mm."""
     if "ans" in p:
         m.put("ans_y", p["ans"][1], "anterior nasal spine tip ans")
         m.put("ans_z", p["ans"][2], "anterior nasal spine tip ans")
@@ -524,7 +549,21 @@ def measure_skull(
     else:
         m.missing["mp_dowel_z"] = "no mid-philtrum landmark mp and no dowel tip"
 
-    # teeth: CEJ lines from the alveolar crests, incisal edge, canines
+
+def _measure_incisors(
+    m: SkullMeasures,
+    p: Mapping[str, np.ndarray],
+    caster: RayCaster | None,
+    z0: float,
+    sex: str | None,
+) -> tuple[dict[str, np.ndarray] | None, bool, str]:
+    """The CEJ lines from the alveolar crests, the upper incisal edge and the incisor
+    display (y, mm).
+
+    Returns the upper dental arch traced on the mesh (None without one),
+    whether upper teeth are there (always assumed without a mesh) and the
+    reason given when they are not.
+    """
     crest = constant("cej_below_alveolar_crest")
     no_upper = (
         "no upper incisor crowns on the skull mesh (the labial face ends within "
@@ -573,6 +612,21 @@ def measure_skull(
         constant("incisor_display_at_rest", sex),
         f"incisor display at rest ({sex or 'sex unknown: mean of men and women'})",
     )
+    return arch, upper_teeth, no_upper
+
+
+def _measure_canines(
+    m: SkullMeasures,
+    p: Mapping[str, np.ndarray],
+    skull: Mesh | None,
+    caster: RayCaster | None,
+    arch: dict[str, np.ndarray] | None,
+    upper_teeth: bool,
+    no_upper: str,
+) -> None:
+    """The upper canines' lateral aspects and the canine–premolar junctions (x, mm) and
+    the widths between them: from the mesh's crown section, else the traced arch, else
+    (without a mesh) the supracanine landmarks sC plus half a canine crown."""
     # crowns are counted from the midline: without the incisors the third is a premolar
     found: dict[str, tuple[float, float]] | None = (
         _canines(skull, p["pr"]) if skull is not None and "pr" in p and upper_teeth else None
@@ -615,21 +669,12 @@ def measure_skull(
             for k in ("canine_x", "cp_junction_x"):
                 m.missing[f"{k}_{side}"] = why
         elif f"sC_{side}" in p:
-            # half a canine crown along the arch, whose direction at the canine is
-            # taken from pr → sC → ecm2s when those are placed (else straight lateral)
-            sc = p[f"sC_{side}"][[0, 2]]
-            lateral = 1.0
-            if "pr" in p and f"ecm2s_{side}" in p:
-                d1 = sc - p["pr"][[0, 2]]
-                d2 = p[f"ecm2s_{side}"][[0, 2]] - sc
-                t = d1 / np.linalg.norm(d1) + d2 / np.linalg.norm(d2)
-                lateral = abs(t[0]) / np.linalg.norm(t)
-            x = sc[0] + sign * half_md * lateral
+            at_x = _canine_from_supracanine(p, side, sign, half_md)
             how = (
                 f"supracanine sC_{side} + half the canine crown width ({half_md} mm) along the arch"
             )
-            m.put(f"canine_x_{side}", x, how)
-            m.put(f"cp_junction_x_{side}", x, how)
+            m.put(f"canine_x_{side}", at_x, how)
+            m.put(f"cp_junction_x_{side}", at_x, how)
         else:
             for k in ("canine_x", "cp_junction_x"):
                 m.missing[f"{k}_{side}"] = f"no tooth crowns on a mesh and no sC_{side}"
@@ -647,7 +692,26 @@ def measure_skull(
             "canine–premolar junctions",
         )
 
-    # Rynn et al. 2010 distances
+
+def _canine_from_supracanine(
+    p: Mapping[str, np.ndarray], side: str, sign: float, half_md: float
+) -> float:
+    """The canine's lateral aspect x (mm) from supracanine sC: half a canine crown
+    (``half_md``) along the arch, whose direction at the canine is taken from
+    pr → sC → ecm2s when those are placed (else straight lateral)."""
+    sc = p[f"sC_{side}"][[0, 2]]
+    lateral = 1.0
+    if "pr" in p and f"ecm2s_{side}" in p:
+        d1 = sc - p["pr"][[0, 2]]
+        d2 = p[f"ecm2s_{side}"][[0, 2]] - sc
+        t = d1 / np.linalg.norm(d1) + d2 / np.linalg.norm(d2)
+        lateral = abs(t[0]) / np.linalg.norm(t)
+    return sc[0] + sign * half_md * lateral
+
+
+def _measure_rynn_distances(m: SkullMeasures, p: Mapping[str, np.ndarray]) -> None:
+    """Rynn et al. 2010's distances X (n–ans), Y (rhi–ss), Z (n–ss) and the heights and
+    depths of n, pr and ss they are laid off from (mm)."""
     for name, (a, b) in {"X": ("n", "ans"), "Y": ("rhi", "ss"), "Z": ("n", "ss")}.items():
         if a in p and b in p:
             m.put(name, float(np.linalg.norm(p[a] - p[b])), f"distance {a}–{b}")
@@ -660,7 +724,10 @@ def measure_skull(
     if "ss" in p:
         m.put("ss_z", p["ss"][2], "subspinale ss")
 
-    # orbits (supraconchion ≈ mso, dlom ≈ ec; see guides.meta.json)
+
+def _measure_orbits(m: SkullMeasures, p: Mapping[str, np.ndarray]) -> None:
+    """Orbit heights and breadths, centres and the mso–or tangent per side (mm;
+    supraconchion ≈ mso, dlom ≈ ec, see guides.meta.json)."""
     for side, _ in SIDES:
         need = [f"{c}_{side}" for c in ("mso", "or", "d", "ec")]
         if not all(c in p for c in need):
@@ -680,4 +747,3 @@ def measure_skull(
             orb[2] + (cy - orb[1]) * (mso[2] - orb[2]) / (mso[1] - orb[1]),
             "mso–or tangent at mid-orbit height",
         )
-    return m

@@ -61,6 +61,7 @@ from workbench.services.reconstruction.service import (
     prefetch_working_skull,
     run_fit,
 )
+from workbench.services.registration.result import SkullRegistration
 from workbench.services.tissue.tissue_model import TissueSettings
 
 __all__ = [
@@ -292,50 +293,8 @@ def build_report(
     inputs = fit.inputs if fit.inputs is not None else FitInputs.from_case(case)
     head, recon, spread = fit.head, fit.recon, fit.spread
     landmarks = recon.landmarks or inputs.landmarks or LandmarkSet("skull")
-    catalogue = load_catalogue()
     plan = recon.plan
-    by_code = {d.code: d for d in plan.dowels}
-    rows = []
-    for lm in landmarks:
-        d = by_code.get(lm.code)
-        entry = catalogue.get(lm.code, "skull")
-        rows.append(
-            {
-                "code": lm.code,
-                "name": entry.name if entry else lm.code,
-                "status": lm.status,
-                "confidence": float(lm.confidence) if lm.is_defined else None,
-                "position_mm": None if not lm.is_defined else [float(v) for v in lm.position],
-                "skin_code": None if d is None else d.skin_code,
-                "table_depth_mm": None if d is None else d.table_depth_mm,
-                "sd_mm": None if d is None else d.sd_mm,
-                "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
-                "source": "none" if d is None else ("excluded" if d.excluded else d.source),
-                "direction": None if d is None else _dir_in(recon, d.direction),
-                "note": (
-                    f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: "
-                    "no dowel until confirmed or moved"
-                )
-                if lm.status == "suggested" and d is None and lm.confidence < MIN_CONFIDENCE
-                else None,
-            }
-        )
-    for d in plan.dowels:
-        if d.source == "interpolated":
-            rows.append(
-                {
-                    "code": d.code,
-                    "name": "interpolated site",
-                    "status": "suggested",
-                    "position_mm": [float(v) for v in recon.to_input(d.origin[None])[0]],
-                    "skin_code": None,
-                    "table_depth_mm": None,
-                    "sd_mm": d.sd_mm,
-                    "depth_mm": None if d.excluded else float(d.depth_mm),
-                    "source": "excluded" if d.excluded else "interpolated",
-                    "direction": _dir_in(recon, d.direction),
-                }
-            )
+    rows = _landmark_rows(landmarks, recon)
     figures = {k: v for k, v in recon.figures.items() if k != "registration"}
     figures["suggested_landmarks"] = sum(lm.status == "suggested" for lm in landmarks)
     figures["placed_landmarks"] = sum(lm.status == "placed" for lm in landmarks)
@@ -346,25 +305,7 @@ def build_report(
     if suggestion is not None:
         warnings += list(suggestion.warnings)
     reg = recon.registration
-    registration = (
-        None
-        if reg is None
-        else {
-            "method": "dense registration of the reference skull onto the bone (orientation search, "
-            "per-part coarse-to-fine non-rigid), soft tissue carried by the skull's "
-            "displacement field",
-            **reg.figures,
-            "parts": [
-                {
-                    "name": p.name,
-                    "present": p.present,
-                    "observed_fraction": p.observed_fraction,
-                    "note": p.note,
-                }
-                for p in reg.parts
-            ],
-        }
-    )
+    registration = None if reg is None else _registration_record(reg)
     dowels = inputs.dowels
     report = {
         "@schema": "reconstruction-report-v1",
@@ -429,6 +370,82 @@ def build_report(
         "pictures": {},
         "warnings": warnings,
     }
+    _add_credits_builds_references(report, case, fit)
+    return report
+
+
+def _landmark_rows(landmarks: LandmarkSet, recon: Reconstruction) -> list[dict[str, Any]]:
+    """The report's landmark rows (input frame, mm): every landmark with its dowel (or
+    none, with the reason), then the interpolated dowel sites."""
+    catalogue = load_catalogue()
+    plan = recon.plan
+    by_code = {d.code: d for d in plan.dowels}
+    rows = []
+    for lm in landmarks:
+        d = by_code.get(lm.code)
+        entry = catalogue.get(lm.code, "skull")
+        rows.append(
+            {
+                "code": lm.code,
+                "name": entry.name if entry else lm.code,
+                "status": lm.status,
+                "confidence": float(lm.confidence) if lm.is_defined else None,
+                "position_mm": None if not lm.is_defined else [float(v) for v in lm.position],
+                "skin_code": None if d is None else d.skin_code,
+                "table_depth_mm": None if d is None else d.table_depth_mm,
+                "sd_mm": None if d is None else d.sd_mm,
+                "depth_mm": None if d is None or d.excluded else float(d.depth_mm),
+                "source": "none" if d is None else ("excluded" if d.excluded else d.source),
+                "direction": None if d is None else _dir_in(recon, d.direction),
+                "note": (
+                    f"suggested with confidence {lm.confidence:.2f} < {MIN_CONFIDENCE:g}: "
+                    "no dowel until confirmed or moved"
+                )
+                if lm.status == "suggested" and d is None and lm.confidence < MIN_CONFIDENCE
+                else None,
+            }
+        )
+    for d in plan.dowels:
+        if d.source == "interpolated":
+            rows.append(
+                {
+                    "code": d.code,
+                    "name": "interpolated site",
+                    "status": "suggested",
+                    "position_mm": [float(v) for v in recon.to_input(d.origin[None])[0]],
+                    "skin_code": None,
+                    "table_depth_mm": None,
+                    "sd_mm": d.sd_mm,
+                    "depth_mm": None if d.excluded else float(d.depth_mm),
+                    "source": "excluded" if d.excluded else "interpolated",
+                    "direction": _dir_in(recon, d.direction),
+                }
+            )
+    return rows
+
+
+def _registration_record(reg: SkullRegistration) -> dict[str, Any]:
+    """The skull registration as the report records it: method, figures, parts."""
+    return {
+        "method": "dense registration of the reference skull onto the bone (orientation search, "
+        "per-part coarse-to-fine non-rigid), soft tissue carried by the skull's "
+        "displacement field",
+        **reg.figures,
+        "parts": [
+            {
+                "name": p.name,
+                "present": p.present,
+                "observed_fraction": p.observed_fraction,
+                "note": p.note,
+            }
+            for p in reg.parts
+        ],
+    }
+
+
+def _add_credits_builds_references(report: dict[str, Any], case: Case, fit: FitResult) -> None:
+    """The report's optional sections: credit lines the input data need, the build faces
+    and the per-reference-head fits (``report`` is changed in place)."""
     # data that must carry a credit line (the Visible Human CTs, and meshes made from them)
     from workbench.io.samples import credits_for
 
@@ -458,7 +475,6 @@ def build_report(
                 "p90": float(np.percentile(between, 90)),
             },
         }
-    return report
 
 
 def self_check_record(figures: Mapping[str, Any]) -> dict[str, Any] | None:

@@ -42,7 +42,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -55,6 +55,7 @@ from workbench.core.spatial import MeshIndex
 from workbench.core.thickness import adjacency, smooth_field
 from workbench.core.tps import fit_warp
 from workbench.model.template import TemplateHead
+from workbench.services.reconstruction.eyes import eye_moves, eye_sides, lid_vertices
 from workbench.services.tissue.dowels import DepthSettings, DowelPlan, plan_dowels
 from workbench.services.tissue.tissue_model import (
     TissueField,
@@ -91,8 +92,6 @@ BONE_SEARCH_MM = 30.0
 NO_CLEARANCE_REGIONS = ("neck",)
 #: a skin vertex is observed when the bone beneath it is (smoothed weight above this)
 OBSERVED_LEVEL = 0.5
-#: an eye placement rule moving a globe farther than this is taken as a bad landmark (mm)
-EYE_MAX_SHIFT_MM = 15.0
 #: spacing of the lid correspondences that carry the lids with their eyeball (mm)
 LID_SPACING_MM = 4.0
 
@@ -243,89 +242,6 @@ def _dowel_hits(plan: DowelPlan, skin: Mesh) -> dict[str, tuple[float, np.ndarra
     }
 
 
-def _eye_sides(head: TemplateHead) -> list[tuple[int, str]]:
-    """(index into ``eye_centres``, side) — left is +x in the head frame."""
-    return [(i, "l" if head.eye_centres[i, 0] > 0 else "r") for i in range(len(head.eye_centres))]
-
-
-def _lid_vertices(head: TemplateHead, i: int, side: str) -> np.ndarray:
-    """Skin vertices of the lids over eye ``i``: the lid regions and the palpebral opening."""
-    groups = [
-        head.regions[r]
-        for r in (f"eyelid_upper_{side}", f"eyelid_lower_{side}")
-        if r in head.regions
-    ]
-    if f"eye_{side}" in head.openings:
-        groups.append(head.openings[f"eye_{side}"])
-    if groups:
-        return np.unique(np.concatenate([np.asarray(g, dtype=np.int64) for g in groups]))
-    # a reference without regions: the skin just in front of the globe
-    d = head.skin.vertices - head.eye_centres[i]
-    near = (np.linalg.norm(d, axis=1) < head.eye_radius + 6.0) & (d[:, 2] > 0)
-    return np.flatnonzero(near)
-
-
-def eye_moves(
-    head: TemplateHead,
-    landmarks_h: LandmarkSet | None,
-    placement: str,
-    guided: Mapping[str, np.ndarray],
-) -> tuple[dict[int, np.ndarray], dict, list[str]]:
-    """How far each eyeball (and the lids over it) moves: ``{eye index: (3,) mm}``.
-
-    A guide for ``eye_centre_<side>`` (a published eye rule, or set by the
-    user) puts the centre there.  Otherwise, with ``placement ==
-    "stephan2009"``, the globe moves along z (head frame) until its corneal
-    apex lies 16 mm (``stephan2009_globe_projection``) in front of the registered
-    ectoconchion of its side — Stephan, Huang & Davidson 2009 (corneal apex
-    about 16 mm in front of the lateral orbital margin; ectoconchion stands
-    for the margin as in :mod:`workbench.services.guides.measure`).  Returns
-    the moves, flat figures (``eye_placement``, ``eye_<side>_by``,
-    ``eye_<side>_shift_mm``, ``eye_<side>_apex_in_front_of_ec_mm``) and
-    notes (an eye left where it was, and why).
-    """
-    from workbench.services.guides.measure import constant
-
-    moves: dict[int, np.ndarray] = {}
-    figures: dict = {"eye_placement": placement}
-    notes: list[str] = []
-    eyes = head.meshes.get("eyes")
-    if eyes is None or not len(head.eye_centres):
-        return moves, figures, notes
-    owner = np.linalg.norm(eyes.vertices[:, None] - head.eye_centres[None], axis=2).argmin(axis=1)
-    lms = {lm.code: lm for lm in landmarks_h} if landmarks_h is not None else {}
-    for i, side in _eye_sides(head):
-        code = f"eye_centre_{side}"
-        if code in guided:
-            moves[i] = np.asarray(guided[code], float).reshape(3) - head.eye_centres[i]
-            figures[f"eye_{side}_by"] = "guide"
-            figures[f"eye_{side}_shift_mm"] = round(float(np.linalg.norm(moves[i])), 2)
-            continue
-        if placement != "stephan2009":
-            continue
-        ec = lms.get(f"ec_{side}")
-        if ec is None or not ec.is_defined:
-            notes.append(
-                f"eye ({side}): no ectoconchion ec_{side} on the skull; the eyeball "
-                "stays where the reference has it"
-            )
-            continue
-        apex = float(eyes.vertices[owner == i, 2].max())
-        dz = float(ec.position[2]) + constant("stephan2009_globe_projection") - apex
-        if abs(dz) > EYE_MAX_SHIFT_MM:
-            notes.append(
-                f"eye ({side}): the published projection would move the eyeball "
-                f"{dz:+.1f} mm (more than {EYE_MAX_SHIFT_MM:g} mm); check ec_{side} — "
-                "the eyeball stays where the reference has it"
-            )
-            continue
-        moves[i] = np.array([0.0, 0.0, dz])
-        figures[f"eye_{side}_by"] = "stephan2009"
-        figures[f"eye_{side}_shift_mm"] = round(dz, 2)
-        figures[f"eye_{side}_apex_in_front_of_ec_mm"] = round(apex + dz - float(ec.position[2]), 2)
-    return moves, figures, notes
-
-
 @dataclass(frozen=True, eq=False)
 class HeadFit:
     """What :func:`fit_head` makes (head frame, mm).
@@ -385,7 +301,7 @@ def fit_head(
     on_base = np.einsum("ij,ijk->ik", cp.barycentric, base.vertices[base.faces[cp.face_ids]])
     prefit = dict(zip(skin_codes, on_base, strict=True))
     used_guides = dict(guide_targets or {})
-    centres = {f"eye_centre_{side}": carried.eye_centres[i] for i, side in _eye_sides(carried)}
+    centres = {f"eye_centre_{side}": carried.eye_centres[i] for i, side in eye_sides(carried)}
     if guides is not None:
         used_guides.update(guides({**prefit, **centres}))
     moves, eye_figures, eye_notes = eye_moves(
@@ -396,11 +312,104 @@ def fit_head(
     )
     carried = carried.with_eyes_moved(moves)
     hits = _dowel_hits(plan, base)
+    guided_pts = np.array([prefit[c] for c in used_guides if c in prefit]).reshape(-1, 3)
+    src, dst, labels, held = _dowel_correspondences(
+        plan, hits, used_guides, guided_pts, settings, depths
+    )
+    for code, target in used_guides.items():
+        if code in prefit:
+            src.append(prefit[code])
+            dst.append(np.asarray(target, float))
+            labels.append(f"guide:{code}")
+    for i, side in eye_sides(carried):
+        if i in moves and np.linalg.norm(moves[i]) > 0.05:  # the lids go with their eyeball
+            lids = lid_vertices(carried, i, side)
+            # cells of the reference's own lid (the carried one moves with the skull: noise
+            # on it must not change which vertices are picked)
+            lids = lids[_spread(head.skin.vertices[lids], LID_SPACING_MM)]
+            src += list(base.vertices[lids])
+            dst += list(base.vertices[lids] + moves[i])
+            labels += [f"eye:{side}"] * len(lids)
+    anchors, hold = _anchors(head.skin.vertices, base.vertices, src, dst)
+    src += list(base.vertices[anchors])
+    dst += list(base.vertices[anchors])
+    labels += ["anchor"] * len(anchors)
+    src_a, dst_a = np.array(src), np.array(dst)
+    lam = np.full(len(src_a), SMOOTHING)
+    lam[len(src_a) - len(anchors) :] = SMOOTHING / hold
+
+    # no skin inside (or too close to) the target bone: clearance correspondences
+    exempt = _mask(n, head, NO_CLEARANCE_REGIONS)
+    for loop in head.openings.values():
+        exempt[np.asarray(loop, dtype=np.int64)] = True
+    cl = _clearance_refits(base, reg, settings, exempt, src_a, dst_a, lam, labels)
+    src_a, dst_a, lam, warp, signed, checked = (
+        cl.src,
+        cl.dst,
+        cl.lam,
+        cl.warp,
+        cl.signed,
+        cl.checked,
+    )
+    meshes = {
+        **carried.meshes,
+        "skin": base.with_vertices(cl.moved),
+        "cranium": reg.meshes["cranium"],
+    }
+    if reg.part("mandible").present:
+        meshes["mandible"] = reg.meshes["mandible"]
+    on_skin = LandmarkSet(
+        "skin",
+        tuple(
+            lm.moved(prefit[lm.code], lm.status) if lm.code in prefit else lm
+            for lm in carried.skin_landmarks
+        ),
+    )
+    fitted = replace(carried, meshes=meshes, skin_landmarks=on_skin.warped(warp))
+    tip_err = [
+        float(np.linalg.norm(warp(s[None])[0] - t))
+        for s, t, lab in zip(src_a, dst_a, labels, strict=False)
+        if lab.startswith("dowel:")
+    ]
+    figures = {
+        "max_tip_error_mm": max(tip_err) if tip_err else 0.0,
+        "min_tissue_mm": float(signed[checked].min()) if checked.any() else None,
+        "penetrating_vertices": int(((signed < 0) & checked).sum()),
+        "thin_vertices": int(((signed < settings.min_tissue_mm) & checked).sum()),
+        "refits": int(cl.refits),
+        "extra_correspondences": int(cl.extra),
+        "correspondences": len(src_a),
+        **eye_figures,
+        "eye_notes": eye_notes,
+        "seconds": round(time.perf_counter() - t0, 3),
+    }
+    return HeadFit(
+        fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held, lam
+    )
+
+
+def _dowel_correspondences(
+    plan: DowelPlan,
+    hits: Mapping[str, tuple[float, np.ndarray]],
+    used_guides: Mapping[str, np.ndarray],
+    guided_pts: np.ndarray,
+    settings: FitSettings,
+    depths: np.ndarray | None,
+) -> tuple[list[np.ndarray], list[np.ndarray], list[str], dict[str, float]]:
+    """Skin points (where each dowel meets the modelled skin, ``hits``) and their targets
+    at the dowel tips (head frame, mm), their labels and each dowel's held depth (mm).
+
+    A dowel is pinned at its table (or given ``depths``) depth when the
+    settings pin dowels or it was overridden; otherwise it holds the modelled
+    depth.  Dowels whose skin landmark a guide decides, and held dowels
+    within :data:`ANCHOR_CLEARANCE_MM` of a guided point (``guided_pts``), are
+    left out; two dowels meeting the skin at one point send it to the middle
+    of both tips.
+    """
     src: list[np.ndarray] = []
     dst: list[np.ndarray] = []
     labels: list[str] = []
     held: dict[str, float] = {}
-    guided_pts = np.array([prefit[c] for c in used_guides if c in prefit]).reshape(-1, 3)
     for i, d in enumerate(plan.dowels):
         if d.excluded or d.code not in hits:
             continue
@@ -427,33 +436,43 @@ def fit_head(
         dst.append(target)
         labels.append(f"dowel:{d.code}")
         held[d.code] = depth
-    for code, target in used_guides.items():
-        if code in prefit:
-            src.append(prefit[code])
-            dst.append(np.asarray(target, float))
-            labels.append(f"guide:{code}")
-    for i, side in _eye_sides(carried):
-        if i in moves and np.linalg.norm(moves[i]) > 0.05:  # the lids go with their eyeball
-            lids = _lid_vertices(carried, i, side)
-            # cells of the reference's own lid (the carried one moves with the skull: noise
-            # on it must not change which vertices are picked)
-            lids = lids[_spread(head.skin.vertices[lids], LID_SPACING_MM)]
-            src += list(base.vertices[lids])
-            dst += list(base.vertices[lids] + moves[i])
-            labels += [f"eye:{side}"] * len(lids)
-    anchors, hold = _anchors(head.skin.vertices, base.vertices, src, dst)
-    src += list(base.vertices[anchors])
-    dst += list(base.vertices[anchors])
-    labels += ["anchor"] * len(anchors)
-    src_a, dst_a = np.array(src), np.array(dst)
-    lam = np.full(len(src_a), SMOOTHING)
-    lam[len(src_a) - len(anchors) :] = SMOOTHING / hold
+    return src, dst, labels, held
 
-    # no skin inside (or too close to) the target bone: clearance correspondences
+
+@dataclass(frozen=True)
+class _Clearance:
+    """The skin warp after the clearance refits (head frame, mm) and what they found."""
+
+    src: np.ndarray  # correspondence sources, clearance points appended
+    dst: np.ndarray  # their targets
+    lam: np.ndarray  # per correspondence smoothing
+    warp: Any  # the final warp
+    moved: np.ndarray  # the modelled skin's vertices moved by it
+    signed: np.ndarray  # per skin vertex: signed tissue depth over the target bone (mm)
+    checked: np.ndarray  # skin vertices the depth check applies to
+    refits: int
+    extra: int  # clearance correspondences added
+
+
+def _clearance_refits(
+    base: Mesh,
+    reg: SkullRegistration,
+    settings: FitSettings,
+    exempt: np.ndarray,
+    src_a: np.ndarray,
+    dst_a: np.ndarray,
+    lam: np.ndarray,
+    labels: list[str],
+) -> _Clearance:
+    """Fit the skin warp and refit, up to ``settings.max_refits`` times, while skin lies
+    inside or closer than ``settings.min_tissue_mm`` to the target bone.
+
+    Each refit adds clearance correspondences (labelled in ``labels``): the
+    too-thin skin vertices of ``base`` (``exempt`` excepted), spread
+    :data:`CLEARANCE_SPACING_MM` apart, held
+    ``min_tissue_mm + CLEARANCE_BAND_MM`` out along the bone's normal.
+    """
     index = MeshIndex(reg.target_h)
-    exempt = _mask(n, head, NO_CLEARANCE_REGIONS)
-    for loop in head.openings.values():
-        exempt[np.asarray(loop, dtype=np.int64)] = True
     t_weight = reg.target_weight
     refits = 0
     extra = 0
@@ -479,37 +498,7 @@ def fit_head(
         lam = np.concatenate([lam, np.full(int(keep.sum()), SMOOTHING)])
         labels += ["clearance"] * int(keep.sum())
         extra += int(keep.sum())
-    meshes = {**carried.meshes, "skin": base.with_vertices(moved), "cranium": reg.meshes["cranium"]}
-    if reg.part("mandible").present:
-        meshes["mandible"] = reg.meshes["mandible"]
-    on_skin = LandmarkSet(
-        "skin",
-        tuple(
-            lm.moved(prefit[lm.code], lm.status) if lm.code in prefit else lm
-            for lm in carried.skin_landmarks
-        ),
-    )
-    fitted = replace(carried, meshes=meshes, skin_landmarks=on_skin.warped(warp))
-    tip_err = [
-        float(np.linalg.norm(warp(s[None])[0] - t))
-        for s, t, lab in zip(src_a, dst_a, labels, strict=False)
-        if lab.startswith("dowel:")
-    ]
-    figures = {
-        "max_tip_error_mm": max(tip_err) if tip_err else 0.0,
-        "min_tissue_mm": float(signed[checked].min()) if checked.any() else None,
-        "penetrating_vertices": int(((signed < 0) & checked).sum()),
-        "thin_vertices": int(((signed < settings.min_tissue_mm) & checked).sum()),
-        "refits": int(refits),
-        "extra_correspondences": int(extra),
-        "correspondences": len(src_a),
-        **eye_figures,
-        "eye_notes": eye_notes,
-        "seconds": round(time.perf_counter() - t0, 3),
-    }
-    return HeadFit(
-        fitted, figures, src_a, dst_a, used_guides, tuple(labels), base.vertices, held, lam
-    )
+    return _Clearance(src_a, dst_a, lam, warp, moved, signed, checked, refits, extra)
 
 
 def _anchors(

@@ -36,145 +36,58 @@ Steps:
    or inferred — never refused; which ones were inferred is reported).
 
 Deterministic (seeded sampling, no data-dependent random choices).
+
+The result type is :class:`workbench.services.registration.result.SkullRegistration`;
+bringing the jaw into occlusion afterwards is
+:func:`workbench.services.registration.articulation.articulate` (both importable
+from here).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.bone_pieces import apparatus_faces, judge_pieces
 from workbench.core.errors import InputError
-from workbench.core.frame import apply_transform
-from workbench.core.jaw_pose import JawPose, Occlusion, occlusion, pose_jaw
+from workbench.core.jaw_pose import JawPose, pose_jaw
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh, boundary_loops, concatenate
 from workbench.core.nonrigid import Registration, Target, register, smoothstep
 from workbench.core.rigid_search import PoseResult, search_pose
 from workbench.core.skull_pose import SkullPoseResult
 from workbench.core.spatial import MeshIndex
-from workbench.core.threads import query_workers
 from workbench.core.tps import LandmarkWarp, fit_warp
 from workbench.model.template import TemplateHead
 from workbench.services.landmarks.frame import head_frame_from_landmarks
+from workbench.services.registration.articulation import (
+    articulate as articulate,  # re-exported: callers import it from here
+)
+from workbench.services.registration.result import (
+    OBSERVED_WEIGHT,
+    PART_OF,
+    PartReport,
+    SkullRegistration,
+    apply_points,
+)
 
 #: target vertices this close to a hole rim or the field-of-view edge fade out (mm)
 RIM_MM = 5.0
 #: target vertices farther than EXTRA_MM[0] from the posed reference skull start to fade,
 #: beyond EXTRA_MM[1] they are ignored (mm)
 EXTRA_MM = (10.0, 20.0)
-#: a vertex is "observed" when its final match weight exceeds this
-OBSERVED_WEIGHT = 0.3
 #: teeth are decimated to about this many triangles for the registration
 TEETH_TRIANGLES = 3000
 FH_CODES = ("po_l", "po_r", "or_l", "or_r")
 
-PART_OF = {"cranium": 0, "upper_teeth": 0, "mandible": 1, "lower_teeth": 1}
 PART_NAMES = ("cranium", "mandible")
 
 Progress = Callable[[str], None]
-
-
-@dataclass(frozen=True)
-class PartReport:
-    """What the registration found for one part of the reference skull."""
-
-    name: str
-    present: bool
-    observed_fraction: float
-    note: str = ""
-
-
-@dataclass(frozen=True)
-class SkullRegistration:
-    """The reference skull on a target skull (see the module docstring).
-
-    Attributes
-    ----------
-    input_to_head : (4, 4)
-        Rigid map of input coordinates into the target's head frame (mm); a
-        reflection included when ``mirrored``.
-    mirrored : bool
-    reference_scale : float
-        Uniform scale applied to the reference head before the non-rigid step.
-    meshes : mapping
-        Registered reference parts (head frame, mm): ``cranium``,
-        ``upper_teeth``, ``mandible``, ``lower_teeth`` — the registration
-        resolution (teeth decimated).
-    rest : mapping
-        The same parts as laid out in the (scaled) reference, before the
-        mandible pose and the non-rigid step: the field ``rest → meshes``
-        carries the rest of the head (:func:`carry_head`).
-    observed : mapping
-        Per part, per vertex weight 0..1 of the final match to real bone.
-    landmarks : LandmarkSet
-        Skull landmarks in the **input frame**: suggested (observed) or absent.
-    inferred : mapping
-        Code → head-frame position carried by the registration, for every
-        reference landmark (observed or not).
-    target_h : Mesh
-        The target bone in the head frame (outward).
-    target_weight : (n_target_vertices,)
-    parts : tuple of PartReport
-    pose : PoseResult
-    settle : (4, 4)
-        Rigid correction from the oriented reference's frame to the target's
-        own Frankfort frame (the last step of ``input_to_head``).
-    figures : dict
-    warnings : tuple of str
-    jaw : JawPose or None
-        The mandible's pose found on the bone (head frame; ``jaw.present``
-        False when none was found); None for registrations made without it.
-    jaw_axis : (2, 3)
-        The condylar axis (point, unit direction) of the rest layout, head frame.
-    occlusion : Occlusion or None
-        Set by :func:`articulate`: how the jaw was brought into occlusion
-        (``meshes``, ``target_h``, ``inferred`` and ``landmarks`` then show the
-        jaw closed); None: the jaw as scanned.
-    jaw_bone : (n_target_vertices,) bool or None
-        Set by :func:`articulate`: the target vertices that belong to the jaw.
-    """
-
-    input_to_head: np.ndarray
-    mirrored: bool
-    reference_scale: float
-    meshes: Mapping[str, Mesh]
-    rest: Mapping[str, Mesh]
-    observed: Mapping[str, np.ndarray]
-    landmarks: LandmarkSet
-    inferred: Mapping[str, np.ndarray]
-    target_h: Mesh
-    target_weight: np.ndarray
-    parts: tuple[PartReport, ...]
-    pose: PoseResult
-    settle: np.ndarray = field(default_factory=lambda: np.eye(4))
-    figures: dict = field(default_factory=dict)
-    warnings: tuple[str, ...] = ()
-    jaw: JawPose | None = None
-    jaw_axis: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0, 0], [1.0, 0, 0]]))
-    occlusion: Occlusion | None = None
-    jaw_bone: np.ndarray | None = None
-
-    def part(self, name: str) -> PartReport:
-        return next(p for p in self.parts if p.name == name)
-
-    def displacement_samples(self, spacing_mm: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
-        """A spread subset of (rest, registered) vertex pairs of every part (head frame)."""
-        rest = concatenate([self.rest[p] for p in PART_OF]).vertices
-        moved = concatenate([self.meshes[p] for p in PART_OF]).vertices
-        _, first = np.unique(
-            np.floor(rest / spacing_mm).astype(np.int64), axis=0, return_index=True
-        )
-        pick = np.sort(first)
-        return rest[pick], moved[pick]
-
-
-def _apply(m: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return apply_transform(m, np.reshape(p, (-1, 3)))
 
 
 def _registration_parts(head: TemplateHead, scale: float) -> dict[str, Mesh]:
@@ -269,13 +182,13 @@ def head_transformed(head: TemplateHead, m: np.ndarray) -> TemplateHead:
     from dataclasses import replace
 
     k = float(abs(np.linalg.det(m[:3, :3])) ** (1 / 3))
-    axis = _apply(m, np.vstack([head.tmj_axis[0], head.tmj_axis[0] + head.tmj_axis[1]]))
+    axis = apply_points(m, np.vstack([head.tmj_axis[0], head.tmj_axis[0] + head.tmj_axis[1]]))
     return replace(
         head,
-        meshes={p: x.with_vertices(_apply(m, x.vertices)) for p, x in head.meshes.items()},
+        meshes={p: x.with_vertices(apply_points(m, x.vertices)) for p, x in head.meshes.items()},
         skin_landmarks=head.skin_landmarks.transformed(m),
         skull_landmarks=head.skull_landmarks.transformed(m),
-        eye_centres=_apply(m, head.eye_centres),
+        eye_centres=apply_points(m, head.eye_centres),
         eye_radius=head.eye_radius * k,
         tmj_axis=np.vstack([axis[0], (axis[1] - axis[0]) / np.linalg.norm(axis[1] - axis[0])]),
     )
@@ -296,96 +209,6 @@ def carry_head(head: TemplateHead, reg: SkullRegistration) -> TemplateHead:
     """
 
     return reference_in_frame(head, reg).warped(skull_field(reg))
-
-
-#: a target vertex belongs to the jaw when the registered mandible (with its teeth) is nearer
-#: to it than the registered cranium, and within this distance (mm)
-JAW_BONE_MM = 8.0
-#: target tooth points: bone this close to the registered teeth (mm), used when at least
-#: TEETH_OBSERVED of the registered teeth's vertices were observed on bone
-TEETH_MM = 6.0
-TEETH_OBSERVED = 0.25
-
-
-def articulate(reg: SkullRegistration, head: TemplateHead) -> SkullRegistration:
-    """``reg`` with the jaw brought into occlusion (teeth together, condyles in the fossae).
-
-    Practitioners articulate the mandible before they reconstruct; a CT comes
-    with the mouth open, or the jaw pushed.  The jaw's bone (target vertices
-    nearer the registered mandible than the cranium) and the registered
-    mandible with its teeth are turned by
-    :func:`workbench.core.jaw_pose.occlusion`: back through the jaw's found
-    pose to the reference's closed relation, then about the condylar axis
-    until the lower teeth meet the upper ones; a skull without teeth keeps the
-    reference head's vertical dimension (its teeth in occlusion).  Triangles
-    joining the jaw to the cranium (the joints, touching teeth) are left out
-    of the articulated bone.  The mandible's landmarks move with it.
-    Returns ``reg`` itself when no mandible was found.
-    """
-    if reg.jaw is None or not reg.jaw.present:
-        return reg
-    target = reg.target_h
-    jaw_parts = ("mandible", "lower_teeth")
-    lower_ref = concatenate([reg.meshes[p] for p in jaw_parts]).vertices
-    upper_ref = concatenate([reg.meshes[p] for p in ("cranium", "upper_teeth")]).vertices
-    # only bone within reach of the registered jaw can be the jaw's
-    lo, hi = lower_ref.min(axis=0) - JAW_BONE_MM, lower_ref.max(axis=0) + JAW_BONE_MM
-    near = np.flatnonzero(((target.vertices >= lo) & (target.vertices <= hi)).all(axis=1))
-    pts = target.vertices[near]
-    workers = query_workers(len(pts))
-    d_jaw = cKDTree(lower_ref).query(pts, workers=workers)[0]
-    d_cranium = cKDTree(upper_ref).query(pts, workers=workers)[0]
-    on_jaw_bone = (d_jaw < d_cranium) & (d_jaw < JAW_BONE_MM)
-    bone = np.zeros(target.n_vertices, bool)
-    bone[near[on_jaw_bone]] = True
-    teeth = [
-        float(np.mean(reg.observed[p] > OBSERVED_WEIGHT)) for p in ("lower_teeth", "upper_teeth")
-    ]
-    lower = upper = None
-    if min(teeth) >= TEETH_OBSERVED:
-        near_lower = cKDTree(reg.meshes["lower_teeth"].vertices).query(pts, workers=workers)[0]
-        near_upper = cKDTree(reg.meshes["upper_teeth"].vertices).query(pts, workers=workers)[0]
-        lower = pts[on_jaw_bone & (near_lower < TEETH_MM)]
-        upper = pts[~on_jaw_bone & (near_upper < TEETH_MM)]
-    occ = occlusion(reg.jaw, reg.jaw_axis, lower, upper)
-    m = occ.matrix
-    moved_v = target.vertices.copy()
-    moved_v[bone] = _apply(m, moved_v[bone])
-    labels = bone[target.faces]
-    whole = labels.all(axis=1) | ~labels.any(axis=1)
-    target_a = Mesh(moved_v, target.faces[whole])
-    meshes = dict(reg.meshes)
-    for p in jaw_parts:
-        meshes[p] = reg.meshes[p].with_vertices(_apply(m, reg.meshes[p].vertices))
-    on_jaw = {c for c, part in head.skull_landmark_part.items() if part == "mandible"}
-    inferred = {c: (_apply(m, p)[0] if c in on_jaw else p) for c, p in reg.inferred.items()}
-    to_input = np.linalg.inv(reg.input_to_head) @ m @ reg.input_to_head
-    lms = tuple(
-        lm.moved(_apply(to_input, lm.position)[0], lm.status)
-        if lm.code in on_jaw and lm.is_defined
-        else lm
-        for lm in reg.landmarks
-    )
-    figures = dict(reg.figures)
-    figures["jaw"] = {
-        **dict(figures.get("jaw", {})),
-        "occlusion": {
-            **occ.figures(),
-            "opening_in_ct_deg": round(reg.jaw.opening_deg, 2),
-            "jaw_bone_vertices": int(bone.sum()),
-            "joining_triangles_left_out": int((~whole).sum()),
-        },
-    }
-    return replace(
-        reg,
-        meshes=meshes,
-        target_h=target_a,
-        inferred=inferred,
-        landmarks=LandmarkSet(reg.landmarks.surface, lms),
-        figures=figures,
-        occlusion=occ,
-        jaw_bone=bone,
-    )
 
 
 def mirror_from_landmarks(landmarks: LandmarkSet | None) -> str:
@@ -489,7 +312,7 @@ def _orient_and_pose_jaw(
     mirrored = bool(np.linalg.det(rigid[:3, :3]) < 0)
     k = 1.0 / s  # the reference is scaled instead of the target
     target_h = Mesh(
-        _apply(rigid, skull.vertices), skull.faces[:, ::-1] if mirrored else skull.faces
+        apply_points(rigid, skull.vertices), skull.faces[:, ::-1] if mirrored else skull.faces
     )
     if target_h.volume < 0:
         target_h = Mesh(target_h.vertices, target_h.faces[:, ::-1])
@@ -509,7 +332,7 @@ def _orient_and_pose_jaw(
     )
     if jaw.present:
         for name in ("mandible", "lower_teeth"):
-            parts[name] = Mesh(_apply(jaw.matrix, parts[name].vertices), parts[name].faces)
+            parts[name] = Mesh(apply_points(jaw.matrix, parts[name].vertices), parts[name].faces)
     weights, tfig = target_weights(target_h, concatenate(list(parts.values())))
     if not_bone is not None:
         weights = np.where(not_bone, 0.0, weights)
@@ -720,27 +543,14 @@ def _register_from_pose(
     t0 = time.perf_counter()
     seconds: dict[str, float] = {}
     warnings: list[str] = []
-    ref_lms = head.skull_landmarks.as_dict()
     say("posing the mandible ...")
     t = time.perf_counter()
     warnings += notes
     placed_jaw = _orient_and_pose_jaw(skull, head, pose, not_bone)
     seconds["mandible"] = time.perf_counter() - t
-    rigid, mirrored, k, target_h = (
-        placed_jaw.rigid,
-        placed_jaw.mirrored,
-        placed_jaw.k,
-        placed_jaw.target_h,
-    )
-    parts, layout, weights, tfig = (
-        placed_jaw.parts,
-        placed_jaw.layout,
-        placed_jaw.weights,
-        placed_jaw.tfig,
-    )
-    target, jaw = placed_jaw.target, placed_jaw.jaw
-    mandible_present = jaw.present
-    if not mandible_present:
+    rigid, mirrored, k = placed_jaw.rigid, placed_jaw.mirrored, placed_jaw.k
+    jaw = placed_jaw.jaw
+    if not jaw.present:
         warnings.append(
             f"no mandible found (only {100 * jaw.support:.0f} % of the reference "
             "mandible finds bone): it follows the cranium and the lower face is "
@@ -752,102 +562,23 @@ def _register_from_pose(
                 else ""
             )
         )
-
-    names = list(PART_OF)
-    src = concatenate([parts[p] for p in names])
-    offsets = np.cumsum([0] + [parts[p].n_vertices for p in names])
-    labels = np.concatenate(
-        [np.full(parts[p].n_vertices, PART_OF[p] if mandible_present else 0) for p in names]
-    )
-    active = np.ones(src.n_vertices, bool)
-    if not mandible_present:
-        for p in ("mandible", "lower_teeth"):
-            i = names.index(p)
-            active[offsets[i] : offsets[i + 1]] = False
-    hard = None
-    if seeds is not None:
-        user = [(c, p) for c, p in placed.items()]
-        if user:
-            rest_all = src.vertices
-            ids = []
-            pts = []
-            tree_src = cKDTree(rest_all)
-            for code, pos in user:
-                _, vid = tree_src.query(k * ref_lms[code])
-                ids.append(int(vid))
-                pts.append(_apply(rigid, pos[None])[0])
-            hard = (np.array(ids), np.array(pts))
     say("registering the reference skull onto the bone ...")
     t = time.perf_counter()
-    reg: Registration = register(src, target, parts=labels, active=active, hard=hard)
+    fit = _fit_parts(head, placed_jaw, placed if seeds is not None else {})
     seconds["nonrigid"] = time.perf_counter() - t
+    reports = _part_reports(fit.observed, jaw.present)
 
-    moved, observed, rest = {}, {}, {}
-    for i, p in enumerate(names):
-        sl = slice(offsets[i], offsets[i + 1])
-        moved[p] = Mesh(reg.vertices[sl], parts[p].faces)
-        rest[p] = layout[p]
-        observed[p] = np.where(active[sl], reg.weights[sl], 0.0)
-    reports = []
-    for part, members in (
-        ("cranium", ("cranium", "upper_teeth")),
-        ("mandible", ("mandible", "lower_teeth")),
-    ):
-        frac = float(np.mean(np.concatenate([observed[m] for m in members]) > OBSERVED_WEIGHT))
-        present = part == "cranium" or mandible_present
-        note = "" if present else "missing: follows the cranium (inferred)"
-        reports.append(PartReport(part, present, round(frac, 4), note))
-
-    carried, support = _carry_landmarks(head, rest, moved, observed, k)
-    # the target's own Frankfort frame from the registered porions and orbitales
-    fh_set = LandmarkSet("skull", tuple(Landmark(c, carried[c], "suggested", 1.0) for c in carried))
-    inferred_fh = [c for c in FH_CODES if support.get(c, 0.0) < OBSERVED_WEIGHT]
-    if inferred_fh:
-        warnings.append(
-            "Frankfort Horizontal from the registered reference: "
-            + ", ".join(inferred_fh)
-            + " not on observed bone (inferred)"
-        )
-    fh = head_frame_from_landmarks(fh_set).input_to_head
-    settle = fh if np.isfinite(fh).all() else np.eye(4)
+    carried, support = _carry_landmarks(head, fit.rest, fit.moved, fit.observed, k)
+    settle = _target_frame(carried, support, warnings)
     input_to_head = settle @ rigid
-    moved = {p: Mesh(_apply(settle, m.vertices), m.faces) for p, m in moved.items()}
-    rest = {p: Mesh(_apply(settle, m.vertices), m.faces) for p, m in rest.items()}
-    target_h = Mesh(_apply(settle, target_h.vertices), target_h.faces)
-    carried = {c: _apply(settle, p[None])[0] for c, p in carried.items()}
-    back = np.linalg.inv(input_to_head)
-    lms = []
-    for lm in head.skull_landmarks:
-        if lm.code not in carried:
-            continue
-        sup = support[lm.code]
-        if lm.code in placed:
-            lms.append(Landmark(lm.code, placed[lm.code], "placed", 1.0, lm.description))
-        elif sup >= OBSERVED_WEIGHT:
-            lms.append(
-                Landmark(
-                    lm.code,
-                    _apply(back, carried[lm.code][None])[0],
-                    "suggested",
-                    round(min(1.0, sup), 3),
-                    "from the dense skull registration",
-                )
-            )
-        else:
-            lms.append(
-                Landmark(
-                    lm.code,
-                    np.full(3, np.nan),
-                    "absent",
-                    0.0,
-                    "no bone under the registered reference (inferred position "
-                    "kept by the registration)",
-                )
-            )
-    landmarks = LandmarkSet("skull", tuple(lms))
+    moved = {p: Mesh(apply_points(settle, m.vertices), m.faces) for p, m in fit.moved.items()}
+    rest = {p: Mesh(apply_points(settle, m.vertices), m.faces) for p, m in fit.rest.items()}
+    target_h = Mesh(apply_points(settle, placed_jaw.target_h.vertices), placed_jaw.target_h.faces)
+    carried = {c: apply_points(settle, p[None])[0] for c, p in carried.items()}
+    landmarks = _input_landmarks(head, carried, support, placed, np.linalg.inv(input_to_head))
     axis = np.vstack([k * head.tmj_axis[0], head.tmj_axis[1]])
     measures = _check_measures(
-        head, found, input_to_head, settle, carried, support, observed, jaw, k
+        head, found, input_to_head, settle, carried, support, fit.observed, jaw, k
     )
     check = judge(measures, pose.method, jaw.figures())
     seconds["total"] = time.perf_counter() - t0
@@ -867,16 +598,178 @@ def _register_from_pose(
         "check_measures": measures,
         "self_check": check.to_dict(),
         "observed_fraction": {r.name: r.observed_fraction for r in reports},
-        "median_observed_distance_mm": round(
-            float(np.median(reg.distances[reg.weights > OBSERVED_WEIGHT]))
-            if (reg.weights > OBSERVED_WEIGHT).any()
-            else float("nan"),
-            3,
-        ),
-        "iterations": reg.iterations,
-        **tfig,
+        "median_observed_distance_mm": _median_observed_distance(fit.reg),
+        "iterations": fit.reg.iterations,
+        **placed_jaw.tfig,
         "seconds": {kk: round(v, 3) for kk, v in seconds.items()},
     }
+    _add_input_warnings(pose, mirrored, placed_jaw.tfig, figures, warnings)
+    return SkullRegistration(
+        input_to_head,
+        mirrored,
+        k,
+        moved,
+        rest,
+        fit.observed,
+        landmarks,
+        carried,
+        target_h,
+        placed_jaw.weights,
+        tuple(reports),
+        pose,
+        settle,
+        figures,
+        tuple(warnings),
+        jaw.transformed(settle),
+        np.vstack([apply_points(settle, axis[0])[0], settle[:3, :3] @ axis[1]]),
+    )
+
+
+@dataclass(frozen=True)
+class _PartsFit:
+    """The non-rigid registration of the reference skull parts (oriented reference frame, mm)."""
+
+    reg: Registration
+    moved: dict[str, Mesh]  # per part: registered onto the bone
+    rest: dict[str, Mesh]  # per part: the scaled reference layout before the jaw pose
+    observed: dict[str, np.ndarray]  # per part, per vertex: weight 0..1 of the match to bone
+
+
+def _fit_parts(
+    head: TemplateHead, placed_jaw: _Placed, placed: Mapping[str, np.ndarray]
+) -> _PartsFit:
+    """Register the reference parts onto the oriented target, both parts at once.
+
+    Without a mandible the jaw's parts move with the cranium and take no
+    part (inactive, never observed).  ``placed`` (user landmarks, input frame,
+    mm) become hard constraints on the reference vertices nearest their
+    scaled reference positions.
+    """
+    parts, k, mandible_present = placed_jaw.parts, placed_jaw.k, placed_jaw.jaw.present
+    names = list(PART_OF)
+    src = concatenate([parts[p] for p in names])
+    offsets = np.cumsum([0] + [parts[p].n_vertices for p in names])
+    labels = np.concatenate(
+        [np.full(parts[p].n_vertices, PART_OF[p] if mandible_present else 0) for p in names]
+    )
+    active = np.ones(src.n_vertices, bool)
+    if not mandible_present:
+        for p in ("mandible", "lower_teeth"):
+            i = names.index(p)
+            active[offsets[i] : offsets[i + 1]] = False
+    hard = None
+    if placed:
+        ref_lms = head.skull_landmarks.as_dict()
+        tree_src = cKDTree(src.vertices)
+        ids = []
+        pts = []
+        for code, pos in placed.items():
+            _, vid = tree_src.query(k * ref_lms[code])
+            ids.append(int(vid))
+            pts.append(apply_points(placed_jaw.rigid, pos[None])[0])
+        hard = (np.array(ids), np.array(pts))
+    reg: Registration = register(src, placed_jaw.target, parts=labels, active=active, hard=hard)
+    moved, observed, rest = {}, {}, {}
+    for i, p in enumerate(names):
+        sl = slice(offsets[i], offsets[i + 1])
+        moved[p] = Mesh(reg.vertices[sl], parts[p].faces)
+        rest[p] = placed_jaw.layout[p]
+        observed[p] = np.where(active[sl], reg.weights[sl], 0.0)
+    return _PartsFit(reg, moved, rest, observed)
+
+
+def _part_reports(observed: Mapping[str, np.ndarray], mandible_present: bool) -> list[PartReport]:
+    """Cranium and mandible (each with its teeth): observed fraction and presence."""
+    reports = []
+    for part, members in (
+        ("cranium", ("cranium", "upper_teeth")),
+        ("mandible", ("mandible", "lower_teeth")),
+    ):
+        frac = float(np.mean(np.concatenate([observed[m] for m in members]) > OBSERVED_WEIGHT))
+        present = part == "cranium" or mandible_present
+        note = "" if present else "missing: follows the cranium (inferred)"
+        reports.append(PartReport(part, present, round(frac, 4), note))
+    return reports
+
+
+def _target_frame(
+    carried: Mapping[str, np.ndarray], support: Mapping[str, float], warnings: list[str]
+) -> np.ndarray:
+    """The settle (4 x 4) into the target's own Frankfort frame from the registered porions
+    and orbitales (oriented reference frame → head frame, mm); the identity when they give
+    none.  Frankfort points not on observed bone are named in ``warnings``."""
+    fh_set = LandmarkSet("skull", tuple(Landmark(c, carried[c], "suggested", 1.0) for c in carried))
+    inferred_fh = [c for c in FH_CODES if support.get(c, 0.0) < OBSERVED_WEIGHT]
+    if inferred_fh:
+        warnings.append(
+            "Frankfort Horizontal from the registered reference: "
+            + ", ".join(inferred_fh)
+            + " not on observed bone (inferred)"
+        )
+    fh = head_frame_from_landmarks(fh_set).input_to_head
+    return fh if np.isfinite(fh).all() else np.eye(4)
+
+
+def _input_landmarks(
+    head: TemplateHead,
+    carried: Mapping[str, np.ndarray],
+    support: Mapping[str, float],
+    placed: Mapping[str, np.ndarray],
+    back: np.ndarray,
+) -> LandmarkSet:
+    """The skull landmarks in the input frame (``back``: head frame → input, mm).
+
+    A landmark the user placed stays as placed; a carried one on observed
+    bone is suggested with its support as confidence; one over missing bone
+    is absent (its carried position stays in the registration's
+    ``inferred``).
+    """
+    lms = []
+    for lm in head.skull_landmarks:
+        if lm.code not in carried:
+            continue
+        sup = support[lm.code]
+        if lm.code in placed:
+            lms.append(Landmark(lm.code, placed[lm.code], "placed", 1.0, lm.description))
+        elif sup >= OBSERVED_WEIGHT:
+            lms.append(
+                Landmark(
+                    lm.code,
+                    apply_points(back, carried[lm.code][None])[0],
+                    "suggested",
+                    round(min(1.0, sup), 3),
+                    "from the dense skull registration",
+                )
+            )
+        else:
+            lms.append(
+                Landmark(
+                    lm.code,
+                    np.full(3, np.nan),
+                    "absent",
+                    0.0,
+                    "no bone under the registered reference (inferred position "
+                    "kept by the registration)",
+                )
+            )
+    return LandmarkSet("skull", tuple(lms))
+
+
+def _median_observed_distance(reg: Registration) -> float:
+    """Median distance (mm) of the observed registered vertices to the bone (NaN: none)."""
+    return round(
+        float(np.median(reg.distances[reg.weights > OBSERVED_WEIGHT]))
+        if (reg.weights > OBSERVED_WEIGHT).any()
+        else float("nan"),
+        3,
+    )
+
+
+def _add_input_warnings(
+    pose: PoseResult, mirrored: bool, tfig: Mapping[str, Any], figures: dict, warnings: list[str]
+) -> None:
+    """Warnings (and the orientation's handedness note) about the input file itself: a
+    mirrored file, an assumed handedness, much bone surface far from any skull part."""
     if mirrored:
         warnings.append(
             "the input is mirrored (left-handed coordinates): the head frame "
@@ -893,22 +786,3 @@ def _register_from_pose(
             "lies far from any skull part (C-spine, hyoid, apparatus, debris) and "
             "was ignored"
         )
-    return SkullRegistration(
-        input_to_head,
-        mirrored,
-        k,
-        moved,
-        rest,
-        observed,
-        landmarks,
-        carried,
-        target_h,
-        weights,
-        tuple(reports),
-        pose,
-        settle,
-        figures,
-        tuple(warnings),
-        jaw.transformed(settle),
-        np.vstack([_apply(settle, axis[0])[0], settle[:3, :3] @ axis[1]]),
-    )

@@ -29,6 +29,8 @@ iso-surfaces of one CT) we do this densely, with the machinery of the skull
 Units mm; head frame of the *target* (x to the subject's left, x = 0
 midsagittal, y up, z toward the face, Frankfort Horizontal at y = 0).
 ``provenance["input_to_head"]`` maps the input files' coordinates into it.
+The checks of the skin and skull pair before a build are in
+:mod:`workbench.services.templates.pair_checks`.
 """
 
 from __future__ import annotations
@@ -53,6 +55,13 @@ from workbench.core.threads import worker_count
 from workbench.model.evidence import file_sha256
 from workbench.model.template import TemplateHead
 from workbench.services.registration.skull_registration import SkullRegistration
+from workbench.services.templates.pair_checks import (
+    check_distinct_inputs,
+    check_not_swapped,
+    check_skin_fits_skull,
+    measure_pair,
+    vertex_mask,
+)
 
 MIN_TISSUE_MM = 1.0  #: skin kept at least this far outside the skull
 #: skin not registered (the simplified ears do not match a real one) / not pushed off the bone
@@ -77,26 +86,6 @@ SKIN_LEVELS = (
     Level(5.0, 0.3, 2.0, 6),
     Level(3.5, 0.25, 1.5, 5),
 )
-
-
-#: input checks before a build (:func:`check_skin_fits_skull`), on up to PAIR_SAMPLES
-#: skull vertices.  The skin of one CT encloses its bone: measured on headsq and both
-#: Visible Human heads, the median skull-to-skin distance is 11-18 mm (vault and face
-#: 3-15 mm, the inner table, sinuses and C-spine deeper) and no skull point lies more than
-#: 2 mm outside the skin (0-0.05 %); headsq's skin centred on a Visible Human skull lets
-#: 27 % of it through, its own skin moved by 10 mm 4 %, by 20 mm 1.6 %.  A skin of a
-#: similar head placed just so over the skull passes (the Visible Human skins centred on
-#: each other's skull: 0-1.3 %): geometry alone cannot tell two such people apart
-PAIR_SAMPLES = 6000
-#: the skull lying farther than this (mm, median) from the skin: not one scan, or two frames
-PAIR_FAR_MM = 50.0
-#: a median tissue thinner than this (mm): the "skin" hugs the bone (a second bone surface)
-PAIR_MIN_MEDIAN_TISSUE_MM = 2.0
-#: a median tissue thicker than this (mm): the skin is far too large for the skull
-PAIR_MAX_MEDIAN_TISSUE_MM = 35.0
-#: skull points more than PAIR_OUTSIDE_MM outside the skin: at most this fraction
-PAIR_OUTSIDE_MM = 2.0
-PAIR_MAX_OUTSIDE_FRACTION = 0.01
 
 
 Progress = Callable[[str], None]
@@ -135,13 +124,6 @@ class BuildResult:
 
 def _apply(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return apply_transform(m, np.reshape(p, (-1, 3)))
-
-
-def _mask(n: int, groups: Sequence) -> np.ndarray:
-    m = np.zeros(n, dtype=bool)
-    for ids in groups:
-        m[np.asarray(ids, dtype=np.int64)] = True
-    return m
 
 
 def _push_out(skin: Mesh, skull: Mesh, exclude: np.ndarray) -> tuple[np.ndarray, int, float]:
@@ -296,7 +278,7 @@ def fit_skin(
             "head holder, gel, table) and was ignored"
         )
     unprojected = () if ears else UNPROJECTED_REGIONS
-    passive = _mask(skin.n_vertices, [regions[r] for r in unprojected if r in regions])
+    passive = vertex_mask(skin.n_vertices, [regions[r] for r in unprojected if r in regions])
     target = Target(scan_h, weights, pull_stride=max(1, int((weights > 0.05).sum()) // 8000))
     if index is not None:
         target.use_index(index)
@@ -377,194 +359,6 @@ def eyes_behind_lids(
     return moves
 
 
-# ------------------------------------------------------------------ input checks
-def _pair_source(skin_source: object, skull_source: object) -> str:
-    return f"--skin {skin_source} and --skull {skull_source}"
-
-
-def check_distinct_inputs(
-    skin_path: str | PathLike[str],
-    skull_path: str | PathLike[str],
-    hashes: tuple[str, str] | None = None,
-) -> None:
-    """Refuse one file given as both surfaces (same path, or same content: ``hashes`` are
-    the two files' SHA-256 when the caller has them)."""
-    skin_path, skull_path = Path(skin_path), Path(skull_path)
-    same = False
-    try:
-        same = skin_path.samefile(skull_path)
-    except OSError:
-        same = skin_path.absolute() == skull_path.absolute()
-    if same:
-        raise InputError(
-            _pair_source(skin_path, skull_path),
-            "are the same file",
-            "give the skin surface as --skin and the bone surface as --skull (e.g. both "
-            "extracted from one CT with workbench mesh-from-ct --tissue skin / --tissue bone)",
-        )
-    if hashes is None:
-        hashes = (file_sha256(skin_path), file_sha256(skull_path))
-    if hashes[0] == hashes[1]:
-        raise InputError(
-            _pair_source(skin_path, skull_path),
-            f"have the same content (SHA-256 {hashes[0][:16]}...): one surface given twice",
-            "give the skin surface as --skin and the bone surface as --skull",
-        )
-
-
-@dataclass(frozen=True)
-class PairMeasure:
-    """Skull vertices measured against the skin (:func:`measure_pair`; mm, one frame).
-
-    ``distance`` (unsigned) for every sampled skull vertex; ``depth`` (signed,
-    outside > 0) for those the skin covers (closest skin point not on a hole's
-    or the field of view's rim); mean distances of skull and skin vertices from
-    the skull's centroid.
-    """
-
-    n_points: int
-    distance: np.ndarray
-    depth: np.ndarray
-    radius_skull: float
-    radius_skin: float
-
-    @property
-    def figures(self) -> dict[str, float]:
-        depth = self.depth
-        return {
-            "skull_points": float(self.n_points),
-            "covered_fraction": len(depth) / max(self.n_points, 1),
-            "median_distance_mm": float(np.median(self.distance)),
-            "outside_fraction": float((depth > 0).mean()) if len(depth) else 0.0,
-            "through_fraction": float((depth > PAIR_OUTSIDE_MM).mean()) if len(depth) else 0.0,
-            "median_tissue_mm": float(np.median(-depth)) if len(depth) else float("nan"),
-            "mean_radius_skull_mm": self.radius_skull,
-            "mean_radius_skin_mm": self.radius_skin,
-        }
-
-
-def measure_pair(skin: Mesh, skull: Mesh) -> PairMeasure | None:
-    """Up to :data:`PAIR_SAMPLES` skull vertices measured against ``skin`` (None when
-    either mesh has too few triangles to judge: left to the other checks)."""
-    if skin.n_faces < 4 or skull.n_faces < 4:
-        return None
-    step = max(1, skull.n_vertices // PAIR_SAMPLES)
-    points = skull.vertices[::step]
-    outward_skin = skin.outward()
-    cp, signed = MeshIndex(outward_skin).signed_closest_points(points)
-    rim = np.zeros(skin.n_faces, dtype=bool)
-    loops = boundary_loops(outward_skin)
-    if loops:
-        rim = _mask(skin.n_vertices, loops)[skin.faces].any(axis=1)
-    covered = ~rim[cp.face_ids]
-    centre = skull.vertices.mean(axis=0)
-    return PairMeasure(
-        len(points),
-        cp.distances,
-        signed[covered],
-        float(np.linalg.norm(skull.vertices - centre, axis=1).mean()),
-        float(np.linalg.norm(skin.vertices - centre, axis=1).mean()),
-    )
-
-
-def check_not_swapped(
-    measure: PairMeasure | None, skin_source: object = "skin", skull_source: object = "skull"
-) -> None:
-    """Refuse a skull surface that encloses the skin surface (any units: no lengths used).
-
-    Swapped when the two overlap (median distance under half the skull's mean
-    radius), most of the skull the skin covers lies outside it, and the
-    skull's vertices lie farther from its centre than the skin's.
-    """
-    if measure is None or len(measure.depth) < 0.2 * measure.n_points:
-        return
-    f = measure.figures
-    overlap = f["median_distance_mm"] < 0.5 * measure.radius_skull
-    if overlap and f["outside_fraction"] > 0.5 and measure.radius_skull > measure.radius_skin:
-        raise InputError(
-            _pair_source(skin_source, skull_source),
-            f"the skull surface encloses the skin surface ({100 * f['outside_fraction']:.0f} % "
-            "of the skull lies outside the skin, and the skull is the larger of the two: "
-            f"{measure.radius_skull / max(measure.radius_skin, 1e-12):.2f} x the skin's mean "
-            "radius): skin and skull look swapped",
-            "give the skin surface as --skin and the bone surface as --skull",
-        )
-
-
-def check_skin_fits_skull(
-    skin: Mesh | PairMeasure | None,
-    skull: Mesh | None = None,
-    skin_source: object = "skin",
-    skull_source: object = "skull",
-) -> dict[str, float]:
-    """Refuse a skin and a skull (mm, one frame) that cannot be one person's, before the
-    (long) build; ``skin`` may be a :class:`PairMeasure` already taken (then no ``skull``).
-
-    On up to :data:`PAIR_SAMPLES` skull vertices (:func:`measure_pair`):
-
-    - the skull far from the skin (median > :data:`PAIR_FAR_MM`): not in one frame;
-    - swapped (:func:`check_not_swapped`);
-    - more than :data:`PAIR_MAX_OUTSIDE_FRACTION` of the skull the skin covers more
-      than :data:`PAIR_OUTSIDE_MM` outside it: the skin does not fit that skull
-      (another person's, or moved);
-    - a median tissue outside :data:`PAIR_MIN_MEDIAN_TISSUE_MM` -
-      :data:`PAIR_MAX_MEDIAN_TISSUE_MM`: a second bone surface, or a skin far too large.
-
-    Returns the figures (fractions, mm; empty when the meshes are too small to judge).
-    """
-    if isinstance(skin, PairMeasure) or skin is None:
-        measure = skin
-    else:
-        if skull is None:
-            raise TypeError("check_skin_fits_skull needs the skull with a skin mesh")
-        measure = measure_pair(skin, skull)
-    if measure is None:
-        return {}
-    source = _pair_source(skin_source, skull_source)
-    f = measure.figures
-    median = f["median_distance_mm"]
-    if median > PAIR_FAR_MM:
-        raise InputError(
-            source,
-            f"the skull lies {median:.0f} mm (median) from the skin: the two surfaces are "
-            "not in one frame (another scan, another person, or moved)",
-            "give the skin and bone surfaces of one CT, both in the scan's own coordinates",
-        )
-    if len(measure.depth) < 0.2 * measure.n_points:  # the skin covers too little to judge
-        return f
-    check_not_swapped(measure, skin_source, skull_source)
-    depth = measure.depth
-    if f["through_fraction"] > PAIR_MAX_OUTSIDE_FRACTION:
-        worst = float(np.quantile(depth, 0.99))
-        raise InputError(
-            source,
-            f"{100 * f['through_fraction']:.1f} % of the skull lies more than "
-            f"{PAIR_OUTSIDE_MM:g} mm outside the skin (1 % by {worst:.0f} mm or more; one "
-            f"person's skin keeps the bone inside, at most "
-            f"{100 * PAIR_MAX_OUTSIDE_FRACTION:g} % may poke through): the skin does not fit "
-            "this skull",
-            "another person's skin, or the two surfaces are not in one frame; give the skin "
-            "and bone surfaces of one CT",
-        )
-    tissue = f["median_tissue_mm"]
-    if not PAIR_MIN_MEDIAN_TISSUE_MM <= tissue <= PAIR_MAX_MEDIAN_TISSUE_MM:
-        thin = tissue < PAIR_MIN_MEDIAN_TISSUE_MM
-        raise InputError(
-            source,
-            f"the skin lies {tissue:.1f} mm (median) from the skull, outside the "
-            f"{PAIR_MIN_MEDIAN_TISSUE_MM:g}-{PAIR_MAX_MEDIAN_TISSUE_MM:g} mm of soft tissue "
-            "of one person's head: "
-            + (
-                "the skin hugs the bone (is --skin a second bone surface?)"
-                if thin
-                else "the skin is far too large for this skull (another person's skin?)"
-            ),
-            "give the skin and bone surfaces of one CT (workbench mesh-from-ct --tissue skin "
-            "/ --tissue bone)",
-        )
-    return f
-
-
 # ------------------------------------------------------------------ entry points
 def build_template(
     skin: Mesh,
@@ -587,7 +381,6 @@ def build_template(
     provenance, hashed into the template id).
     """
     from workbench.services.registration.skull_registration import (
-        carry_head,
         mirror_from_landmarks,
         reference_in_frame,
         register_skull,
@@ -615,94 +408,21 @@ def build_template(
 
     t = time.perf_counter()
     say("carrying the reference head and registering its skin onto the scan ...")
-    carried = carry_head(base, reg)
-    skin_h = scan_in_frame(skin, to_head, mirrored)
-    fit = fit_skin(
-        carried.skin,
-        skin_h,
-        base.regions,
-        source="skin",
-        near="the head carried onto the skull",
-        hint="are skin and skull in the same frame and units?",
-    )
-    warnings += fit.warnings
-    sreg, on_scan = fit.registration, fit.on_scan
-    not_head = fit.not_head
-    n_skin = base.skin.n_vertices
-    meshes = dict(carried.meshes)
-    meshes["cranium"] = reg.meshes["cranium"]
-    if reg.part("mandible").present:
-        meshes["mandible"] = reg.meshes["mandible"]
-    keep = [base.regions[r] for r in NO_CLEARANCE_REGIONS if r in base.regions]
-    skin_v, pushed, min_tissue = _push_out(
-        carried.skin.with_vertices(sreg.vertices),
-        concatenate([meshes[p] for p in SKULL_PARTS]),
-        _mask(n_skin, keep + list(base.openings.values())),
-    )
-    meshes["skin"] = carried.skin.with_vertices(skin_v)
-    eye_shift = eyes_behind_lids(carried, skin_v, on_scan)
-    carried = replace(carried, meshes=meshes).with_eyes_moved(eye_shift)
-    meshes = dict(carried.meshes)
+    stage = _skin_onto_scan(base, reg, skin)
+    warnings += stage.fit.warnings
+    carried, on_scan, meshes = stage.carried, stage.fit.on_scan, dict(stage.carried.meshes)
     seconds["skin"] = time.perf_counter() - t
 
     # landmarks: skull with the registered skull, skin with the registered skin
-    note = ABSENT_NOTE
     absent_skull = [lm.code for lm in reg.landmarks if not lm.is_defined]
-    skull_lms = LandmarkSet(
-        "skull",
-        tuple(
-            Landmark(
-                lm.code,
-                reg.inferred[lm.code],
-                lm.status,
-                lm.confidence,
-                note if lm.code in absent_skull else lm.description,
-            )
-            if lm.is_defined and lm.code in reg.inferred
-            else lm
-            for lm in base.skull_landmarks
-        ),
-    )
+    skull_lms = _skull_landmarks(base, reg, absent_skull)
     rest = reference_in_frame(base, reg)
     skin_lms, absent_skin = carry_skin_landmarks(
         rest.skin, meshes["skin"], rest.skin_landmarks, on_scan
     )
     head = replace(carried, meshes=meshes, skin_landmarks=skin_lms, skull_landmarks=skull_lms)
 
-    face = np.asarray(base.regions.get("face", np.arange(n_skin)), dtype=np.int64)
-    cp = MeshIndex(skin_h).closest_points(skin_v[face])
-    rim = np.zeros(skin_h.n_faces, bool)
-    loops = boundary_loops(skin_h)
-    if loops:
-        on_rim = _mask(skin_h.n_vertices, loops)
-        rim = on_rim[skin_h.faces].any(axis=1)
-    near = (cp.distances < 10.0) & ~rim[cp.face_ids]
-    bone_obs = np.concatenate([reg.observed[p] for p in ("cranium", "mandible")])
-    figures = {
-        "skin_on_scan_fraction": float(on_scan.mean()),
-        "face_on_scan_fraction": float(on_scan[face].mean()),
-        "bone_observed_fraction": float(np.mean(bone_obs > 0.3)),
-        "face_vertices_near_target": int(near.sum()),
-        "face_within_1_5mm_fraction": float((cp.distances[near] <= 1.5).mean())
-        if near.any()
-        else 0.0,
-        "face_median_distance_mm": float(np.median(cp.distances[near])) if near.any() else None,
-        "pushed_out_vertices": pushed,
-        "eye_shift_mm": {str(i): round(float(m[2]), 2) for i, m in eye_shift.items()},
-        "min_tissue_before_push_mm": min_tissue,
-        "scan_not_head_area_fraction": round(not_head, 4),
-        "skull_registration": {
-            k: reg.figures[k]
-            for k in (
-                "orientation",
-                "observed_fraction",
-                "median_observed_distance_mm",
-                "jaw",
-                "self_check",
-            )
-            if k in reg.figures
-        },
-    }
+    figures = _build_figures(base, reg, stage)
     seconds["total"] = time.perf_counter() - t0
     figures["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
     digest = hashlib.sha256(
@@ -738,6 +458,119 @@ def build_template(
     }
     head = replace(head, template_id=f"{base.template_id}/built/{digest}", provenance=provenance)
     return BuildResult(head, to_head, bool(mirrored), reg, on_scan, figures, tuple(warnings))
+
+
+@dataclass(frozen=True)
+class _SkinStage:
+    """The reference head carried onto the registered skull with its skin on the scan
+    (target's head frame, mm)."""
+
+    carried: TemplateHead  # registered skull parts, skin on the scan, eyes behind the lids
+    skin_h: Mesh  # the skin scan in the head frame
+    fit: SkinFit  # the skin registration
+    skin_v: np.ndarray  # the registered skin's vertices after the push out of the skull
+    pushed: int  # skin vertices closer than MIN_TISSUE_MM to the skull (pushed out)
+    min_tissue: float  # the smallest skin-to-skull distance before the push (mm)
+    eye_shift: dict  # per eye: its shift (mm) behind the lids
+
+
+def _skin_onto_scan(base: TemplateHead, reg: SkullRegistration, skin: Mesh) -> _SkinStage:
+    """Carry ``base`` by the skull registration ``reg`` and register its skin onto ``skin``
+    (input frame, mm).
+
+    The registered cranium (and mandible, when present) replace the carried
+    ones; the registered skin is pushed at least :data:`MIN_TISSUE_MM` out of
+    the skull (neck and openings excepted) and the eyes are moved behind the
+    lids.
+    """
+    from workbench.services.registration.skull_registration import carry_head
+
+    carried = carry_head(base, reg)
+    skin_h = scan_in_frame(skin, reg.input_to_head, reg.mirrored)
+    fit = fit_skin(
+        carried.skin,
+        skin_h,
+        base.regions,
+        source="skin",
+        near="the head carried onto the skull",
+        hint="are skin and skull in the same frame and units?",
+    )
+    meshes = dict(carried.meshes)
+    meshes["cranium"] = reg.meshes["cranium"]
+    if reg.part("mandible").present:
+        meshes["mandible"] = reg.meshes["mandible"]
+    keep = [base.regions[r] for r in NO_CLEARANCE_REGIONS if r in base.regions]
+    skin_v, pushed, min_tissue = _push_out(
+        carried.skin.with_vertices(fit.registration.vertices),
+        concatenate([meshes[p] for p in SKULL_PARTS]),
+        vertex_mask(base.skin.n_vertices, keep + list(base.openings.values())),
+    )
+    meshes["skin"] = carried.skin.with_vertices(skin_v)
+    eye_shift = eyes_behind_lids(carried, skin_v, fit.on_scan)
+    carried = replace(carried, meshes=meshes).with_eyes_moved(eye_shift)
+    return _SkinStage(carried, skin_h, fit, skin_v, pushed, min_tissue, eye_shift)
+
+
+def _skull_landmarks(
+    base: TemplateHead, reg: SkullRegistration, absent_skull: Sequence[str]
+) -> LandmarkSet:
+    """``base``'s skull landmarks at their registered places (head frame, mm); those absent
+    on the bone keep the carried place with :data:`ABSENT_NOTE`."""
+    return LandmarkSet(
+        "skull",
+        tuple(
+            Landmark(
+                lm.code,
+                reg.inferred[lm.code],
+                lm.status,
+                lm.confidence,
+                ABSENT_NOTE if lm.code in absent_skull else lm.description,
+            )
+            if lm.is_defined and lm.code in reg.inferred
+            else lm
+            for lm in base.skull_landmarks
+        ),
+    )
+
+
+def _build_figures(base: TemplateHead, reg: SkullRegistration, stage: _SkinStage) -> dict:
+    """How well the built head matches its scan: fractions on the scan and the bone, the
+    face's distances to the skin scan away from its rims (mm), the push and eye shifts."""
+    on_scan, skin_h, skin_v = stage.fit.on_scan, stage.skin_h, stage.skin_v
+    face = np.asarray(base.regions.get("face", np.arange(base.skin.n_vertices)), dtype=np.int64)
+    cp = MeshIndex(skin_h).closest_points(skin_v[face])
+    rim = np.zeros(skin_h.n_faces, bool)
+    loops = boundary_loops(skin_h)
+    if loops:
+        on_rim = vertex_mask(skin_h.n_vertices, loops)
+        rim = on_rim[skin_h.faces].any(axis=1)
+    near = (cp.distances < 10.0) & ~rim[cp.face_ids]
+    bone_obs = np.concatenate([reg.observed[p] for p in ("cranium", "mandible")])
+    return {
+        "skin_on_scan_fraction": float(on_scan.mean()),
+        "face_on_scan_fraction": float(on_scan[face].mean()),
+        "bone_observed_fraction": float(np.mean(bone_obs > 0.3)),
+        "face_vertices_near_target": int(near.sum()),
+        "face_within_1_5mm_fraction": float((cp.distances[near] <= 1.5).mean())
+        if near.any()
+        else 0.0,
+        "face_median_distance_mm": float(np.median(cp.distances[near])) if near.any() else None,
+        "pushed_out_vertices": stage.pushed,
+        "eye_shift_mm": {str(i): round(float(m[2]), 2) for i, m in stage.eye_shift.items()},
+        "min_tissue_before_push_mm": stage.min_tissue,
+        "scan_not_head_area_fraction": round(stage.fit.not_head, 4),
+        "skull_registration": {
+            k: reg.figures[k]
+            for k in (
+                "orientation",
+                "observed_fraction",
+                "median_observed_distance_mm",
+                "jaw",
+                "self_check",
+            )
+            if k in reg.figures
+        },
+    }
 
 
 def build_template_pack(

@@ -27,7 +27,9 @@ intersects the skull away from its openings.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -206,8 +208,6 @@ def fit_skull_to_skin(
     from scipy.spatial import cKDTree
 
     codes = sorted(depths)
-    p_skin = skin_landmarks.positions_of([depths[c][0] for c in codes])
-    d = np.array([depths[c][1] for c in codes])
     orig = dict(parts)
     extra0 = {k: np.asarray(v, float) for k, v in (extra_points or {}).items()}
     lms0 = skull_landmarks
@@ -224,66 +224,34 @@ def fit_skull_to_skin(
     fh_codes = [c for c in ("po_l", "po_r", "or_l", "or_r") if c in lms0.as_dict()]
     s0 = lms0.positions_of(codes)
     fh0 = lms0.positions_of(fh_codes).reshape(-1, 3)
-    lm_src = np.vstack([s0, fh0])
-    fh_dst = fh0 * [1.0, 0.0, 1.0]
+    targets = _DowelTargets(
+        lm_src=np.vstack([s0, fh0]),
+        fh_dst=fh0 * [1.0, 0.0, 1.0],
+        p_skin=skin_landmarks.positions_of([depths[c][0] for c in codes]),
+        d=np.array([depths[c][1] for c in codes]),
+        pairs=_mirror_pairs(codes),
+    )
     keep_away = np.vstack([s0, fh0])  # no clearance constraints right at the landmarks
 
     # clearance constraints: primary source points (x >= 0 or midline) and offsets
     c_src = np.zeros((0, 3))
     c_off = np.zeros((0, 3))
-    mirror = np.array([-1.0, 1.0, 1.0])
-
-    def expand(src: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        near_midline = np.abs(src[:, 0]) <= 0.5 * CLEARANCE_SPACING_MM
-        off = off.copy()
-        off[near_midline, 0] = 0.0  # points near the midline move parallel to it
-        # every point off the midline gets its mirror image, those near it too: one left
-        # of it without its image made the fitted skull lopsided (dacryon 0.9 mm off)
-        side = np.abs(src[:, 0]) > 1e-6
-        return (np.vstack([src, src[side] * mirror]), np.vstack([off, off[side] * mirror]))
-
-    def solve(n: np.ndarray):
-        lm_dst = np.vstack([p_skin - d[:, None] * n, fh_dst])
-        if not len(c_src):
-            return fit_warp(lm_src, lm_dst)
-        src, off = expand(c_src, c_off)
-        base = fit_warp(lm_src, lm_dst)
-        return fit_warp(np.vstack([lm_src, src]), np.vstack([lm_dst, base(src) + off]))
-
-    def apply(w) -> dict[str, Mesh]:
-        return {k: m.with_vertices(w(m.vertices)) for k, m in orig.items()}
-
-    # left/right pairs get mirror-image dowels, so the targets are symmetric
-    index = {c: i for i, c in enumerate(codes)}
-    pairs = [
-        (i, index[c[:-2] + "_r"])
-        for i, c in enumerate(codes)
-        if c.endswith("_l") and c[:-2] + "_r" in index
-    ]
-
-    def symmetric(n: np.ndarray) -> np.ndarray:
-        n = n.copy()
-        for i, j in pairs:
-            n[i] = 0.5 * (n[i] + n[j] * mirror)
-            n[j] = n[i] * mirror
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
-
-    n = symmetric(dowel_directions(orig, s0, part_names, codes))
+    n = targets.symmetric(dowel_directions(orig, s0, part_names, codes))
     iterations = 0
     alpha = np.full(len(codes), damping)
     last_step = np.zeros_like(n)
     for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported below
-        w = solve(n)
-        current = apply(w)
-        s = p_skin - d[:, None] * n
-        n_new = symmetric(dowel_directions(current, s, part_names, codes))
-        tip_move = float((d * np.linalg.norm(n_new - n, axis=1)).max())
+        w = targets.solve(n, c_src, c_off)
+        current = _warped_parts(orig, w)
+        s = targets.p_skin - targets.d[:, None] * n
+        n_new = targets.symmetric(dowel_directions(current, s, part_names, codes))
+        tip_move = float((targets.d * np.linalg.norm(n_new - n, axis=1)).max())
         step = n_new - n
         # a landmark whose direction update flips sign oscillates: damp it harder
         flip = np.einsum("ij,ij->i", step, last_step) < 0
         alpha = np.where(flip, np.maximum(alpha * 0.5, 0.05), np.minimum(alpha * 1.25, damping))
         last_step = step
-        n = symmetric(n + alpha[:, None] * step)
+        n = targets.symmetric(n + alpha[:, None] * step)
         added, grown = 0, 0.0
         if tip_move < 1.0:  # settle the dowel landmarks before adding clearance constraints
             c_src, c_off, added, grown = _update_clearance(
@@ -299,8 +267,8 @@ def fit_skull_to_skin(
             )
         if tip_move < tolerance_mm and added == 0 and grown < tolerance_mm:
             break
-    w = solve(n)
-    parts = apply(w)
+    w = targets.solve(n, c_src, c_off)
+    parts = _warped_parts(orig, w)
     extra = {k: w(v) for k, v in extra0.items()}
     lms = LandmarkSet(
         lms0.surface,
@@ -313,6 +281,7 @@ def fit_skull_to_skin(
     )
     s = lms.positions_of(codes)
     n = dowel_directions(parts, s, part_names, codes)
+    p_skin, d = targets.p_skin, targets.d
     along = np.einsum("ij,ij->i", p_skin - s, n)
     off_axis = np.linalg.norm(p_skin - s - along[:, None] * n, axis=1)
     report = SkullFitReport(
@@ -322,9 +291,80 @@ def fit_skull_to_skin(
         },
         min_clearance_mm=_min_clearance(parts, skin_index, openings),
         iterations=iterations,
-        extra_constraints=len(expand(c_src, c_off)[0]),
+        extra_constraints=len(_with_mirror_images(c_src, c_off)[0]),
     )
     return parts, lms, extra, report
+
+
+#: x -> -x: the mirror image across the midsagittal plane (head frame)
+_MIRROR = np.array([-1.0, 1.0, 1.0])
+
+
+def _with_mirror_images(src: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Clearance constraints (bone points, head frame, and their inward offsets, mm) with
+    the mirror image of every point off the midline x = 0 added.
+
+    Points within half :data:`CLEARANCE_SPACING_MM` of the midline move
+    parallel to it (no x offset); they get their image too: one left of it
+    without its image made the fitted skull lopsided (dacryon 0.9 mm off).
+    """
+    near_midline = np.abs(src[:, 0]) <= 0.5 * CLEARANCE_SPACING_MM
+    off = off.copy()
+    off[near_midline, 0] = 0.0
+    side = np.abs(src[:, 0]) > 1e-6
+    return (np.vstack([src, src[side] * _MIRROR]), np.vstack([off, off[side] * _MIRROR]))
+
+
+def _mirror_pairs(codes: Sequence[str]) -> list[tuple[int, int]]:
+    """Index pairs (left, right) of the ``_l``/``_r`` landmarks among ``codes``."""
+    index = {c: i for i, c in enumerate(codes)}
+    return [
+        (i, index[c[:-2] + "_r"])
+        for i, c in enumerate(codes)
+        if c.endswith("_l") and c[:-2] + "_r" in index
+    ]
+
+
+def _warped_parts(orig: Mapping[str, Mesh], w: Any) -> dict[str, Mesh]:
+    """Every bone part of ``orig`` moved by the warp ``w`` (head frame, mm)."""
+    return {k: m.with_vertices(w(m.vertices)) for k, m in orig.items()}
+
+
+@dataclass(frozen=True)
+class _DowelTargets:
+    """The landmark constraints of :func:`fit_skull_to_skin` (head frame, mm).
+
+    ``lm_src`` are the skull's paired landmarks then its Frankfort landmarks;
+    the paired ones go to ``p_skin − d n`` (skin landmark minus the table
+    depth along the dowel direction), the Frankfort ones to ``fh_dst`` (on
+    y = 0).  ``pairs`` index left/right landmarks, whose dowels are kept
+    mirror images so the targets are symmetric.
+    """
+
+    lm_src: np.ndarray
+    fh_dst: np.ndarray
+    p_skin: np.ndarray
+    d: np.ndarray
+    pairs: list[tuple[int, int]]
+
+    def solve(self, n: np.ndarray, c_src: np.ndarray, c_off: np.ndarray) -> Any:
+        """One warp of the original skull meeting every constraint for dowel directions
+        ``n``; the clearance points' targets follow the landmark-only warp plus their
+        offsets."""
+        lm_dst = np.vstack([self.p_skin - self.d[:, None] * n, self.fh_dst])
+        if not len(c_src):
+            return fit_warp(self.lm_src, lm_dst)
+        src, off = _with_mirror_images(c_src, c_off)
+        base = fit_warp(self.lm_src, lm_dst)
+        return fit_warp(np.vstack([self.lm_src, src]), np.vstack([lm_dst, base(src) + off]))
+
+    def symmetric(self, n: np.ndarray) -> np.ndarray:
+        """Unit dowel directions ``n`` with each left/right pair made mirror images."""
+        n = n.copy()
+        for i, j in self.pairs:
+            n[i] = 0.5 * (n[i] + n[j] * _MIRROR)
+            n[j] = n[i] * _MIRROR
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def _clearance(mesh: Mesh, skin_index: MeshIndex) -> np.ndarray:
