@@ -4,12 +4,13 @@ and the output rules, run through the CLI in this process.
 Every entry is one problem.  It checks the exit status, that the message names the file or
 option and the problem, that no traceback or "unexpected error" is printed, that the input
 files are unchanged (SHA-256) and that nothing is written outside ``--out``.  Meshes are
-small synthetic spheres (mm); batch rows run a stand-in for the CLI's ``main`` where the
+small synthetic spheres (mm); batch rows run a stand-in for the reconstruct job where the
 problem is the batch's own (interrupts, closed streams), so the file stays fast.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import json
@@ -73,8 +74,8 @@ class Case:
     absent: tuple[str, ...] = ()
     inputs: list[Path] = field(default_factory=list)
     check: Callable[[Path], None] | None = None
-    #: stands in for the CLI's main in batch rows
-    entry: Callable[[list[str]], int] | None = None
+    #: stands in for the reconstruct job in batch rows
+    entry: Callable[[argparse.Namespace], int] | None = None
     #: stdout and stderr are pipes whose reader went away
     closed_streams: bool = False
 
@@ -195,12 +196,14 @@ def batch_out_column(tmp: Path) -> Case:
     return case
 
 
-def _fake_main(seen: list[str], interrupt_on: str | None = None) -> Callable[[list[str]], int]:
-    """Stands in for the CLI's main in batch rows: writes the row's folder, or "presses
-    Ctrl-C" on the row ``interrupt_on`` (its main returns 130, as the real one does)."""
+def _fake_job(
+    seen: list[str], interrupt_on: str | None = None
+) -> Callable[[argparse.Namespace], int]:
+    """Stands in for the reconstruct job in batch rows: writes the row's folder, or "presses
+    Ctrl-C" on the row ``interrupt_on`` (it returns 130, as a command that saw Ctrl-C does)."""
 
-    def entry(argv: list[str]) -> int:
-        out = Path(argv[argv.index("--out") + 1])
+    def entry(args: argparse.Namespace) -> int:
+        out = Path(args.out)
         seen.append(out.name)
         if out.name == interrupt_on:
             out.mkdir(parents=True, exist_ok=True)
@@ -222,18 +225,18 @@ def batch_interrupted(tmp: Path) -> Case:
     case.words = ("interrupted: 1 of 3 rows done", "rerun with --resume")
     case.absent = ("nothing was run",)
     seen: list[str] = []
-    case.entry = _fake_main(seen, interrupt_on="r2")
+    case.entry = _fake_job(seen, interrupt_on="r2")
 
     def check(_t: Path) -> None:
         assert seen == ["r1", "r2"]
         assert json.loads((case.out / "r1" / "batch_row.json").read_text())["status"] == "ok"
         assert not (case.out / "r2" / "batch_row.json").exists()
         # --resume: r1 is done, r2's unfinished folder is the batch's own (kept as r2.1)
-        import workbench.cli.main as cli
+        import workbench.cli.reconstruct_cmd as job
 
         again: list[str] = []
         with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(cli, "main", _fake_main(again))
+            mp.setattr(job, "run", _fake_job(again))
             assert real_main([*case.argv, "--resume"]) == 0
         assert again == ["r2", "r3"]
         assert (case.out / "r2.1" / "half.txt").is_file()
@@ -249,7 +252,7 @@ def batch_stdout_closed(tmp: Path) -> Case:
     case.inputs.append(tmp / "s.ply")
     case.status = 0
     case.words = ()
-    case.entry = _fake_main([])
+    case.entry = _fake_job([])
     case.closed_streams = True
 
     def check(_t: Path) -> None:
@@ -289,7 +292,7 @@ def batch_lock_stale(tmp: Path) -> Case:
     (case.out / ".batch.lock").write_text(json.dumps(stale), encoding="utf-8")
     case.status = 0
     case.argv.append("--resume")
-    case.entry = _fake_main([])
+    case.entry = _fake_job([])
 
     def check(_t: Path) -> None:
         assert (case.out / "summary.csv").is_file()
@@ -448,10 +451,10 @@ class _Closed:
 @pytest.mark.parametrize("build", ENTRIES)
 def test_fault(build, tmp_path, capsys, monkeypatch):
     case = build(tmp_path)
-    if case.entry is not None:
-        import workbench.cli.main as cli
+    if case.entry is not None:  # the batch's rows run this instead of the reconstruct job
+        import workbench.cli.reconstruct_cmd as job
 
-        monkeypatch.setattr(cli, "main", case.entry)
+        monkeypatch.setattr(job, "run", case.entry)
     if case.closed_streams:
         monkeypatch.setattr(sys, "stdout", _Closed())
         monkeypatch.setattr(sys, "stderr", _Closed())

@@ -125,7 +125,8 @@ class _Stream:
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.pipelines.batch.run import BatchInterrupted, batch_lock
+    from workbench.pipelines.batch.lock import batch_lock
+    from workbench.pipelines.batch.run import BatchInterrupted
 
     err = _Stream(sys.stderr)
     try:

@@ -41,11 +41,8 @@ Interruptions and concurrency:
   (a preload) and write their stderr to ``DIR/logs/_dask-workers.log``, so
   the terminal shows no worker tracebacks; after a Ctrl-C Dask's loggers
   are silenced (a cluster closed under running tasks complains at length).
-- One batch at a time per ``DIR``: :func:`batch_lock` holds ``DIR/.batch.lock``
-  (``fcntl.flock`` where there is one, else a file created with ``O_EXCL``)
-  with the holder's pid and host; a second batch into the same folder is
-  refused naming that process; the lock of a process that died is taken
-  over (flock: released by the kernel; ``O_EXCL``: its pid no longer runs).
+- One batch at a time per ``DIR``: :func:`~workbench.pipelines.batch.lock.batch_lock`
+  holds ``DIR/.batch.lock`` (see :mod:`workbench.pipelines.batch.lock`).
 """
 
 from __future__ import annotations
@@ -57,9 +54,7 @@ import io
 import json
 import logging
 import os
-import socket
 import sys
-import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -71,14 +66,13 @@ from workbench.core.errors import InputError, WorkbenchError
 from workbench.core.safe_names import child_path
 from workbench.io.atomic import write_text_atomic
 from workbench.pipelines.batch.figures import Figures
+from workbench.pipelines.batch.lock import LOCK, batch_lock
 from workbench.pipelines.batch.manifest import BatchRow, read_batch_manifest
 from workbench.pipelines.outcome import JobOutcome, failure_status
 from workbench.services.registration.skull_check import EXIT_CHECK
 
 MARKER = "batch_row.json"
 MARKER_FORMAT = 1
-#: the lock file of a running batch, inside DIR
-LOCK = ".batch.lock"
 #: the first line of every row log (``DIR/logs/<id>.log``) the batch writes
 LOG_START = "$ workbench "
 #: the second line of a row log while the row runs (replaced by its output when recorded)
@@ -234,159 +228,6 @@ def _started_by_batch(out: Path, row: BatchRow) -> bool:
     return (
         first.startswith(LOG_START) and second.startswith(STARTED) and second.endswith(NOT_FINISHED)
     )
-
-
-# ----------------------------------------------------------------------------- the lock
-
-_HELD: dict[str, int] = {}
-_HELD_GUARD = threading.Lock()
-
-
-def _lock_holder(lock: Path) -> dict[str, Any]:
-    try:
-        data = json.loads(lock.read_text(encoding="utf-8") or "{}")
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
-def _lock_busy(out: Path, lock: Path) -> InputError:
-    holder = _lock_holder(lock)
-    who = (
-        f"process {holder.get('pid')} on {holder.get('host')}, started {holder.get('started_utc')}"
-        if holder.get("pid")
-        else f"another process (see {lock})"
-    )
-    return InputError(
-        out,
-        f"another batch is writing into this folder ({who})",
-        "wait for it to finish, or choose another --out",
-    )
-
-
-def _lock_text() -> str:
-    return json.dumps(
-        {
-            "pid": os.getpid(),
-            "host": socket.gethostname(),
-            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        }
-    )
-
-
-def _acquire_flock(out: Path, lock: Path) -> Callable[[], None]:
-    import fcntl
-
-    while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            raise _lock_busy(out, lock) from None
-        try:  # the file may have been removed by its last holder meanwhile: lock the new one
-            same = os.path.samestat(os.fstat(fd), os.stat(lock))
-        except OSError:
-            same = False
-        if same:
-            break
-        os.close(fd)
-    os.ftruncate(fd, 0)
-    os.write(fd, _lock_text().encode())
-
-    def release() -> None:
-        with contextlib.suppress(OSError):
-            os.unlink(lock)
-        os.close(fd)  # closing releases the flock
-
-    return release
-
-
-def _acquire_exclusive(out: Path, lock: Path) -> Callable[[], None]:
-    """Without flock: the lock file created with O_EXCL; a dead holder's file is taken over."""
-    from workbench.io.outputs import _pid_alive
-
-    for _ in range(2):
-        try:
-            fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            holder = _lock_holder(lock)
-            stale = (
-                holder.get("host") == socket.gethostname()
-                and isinstance(holder.get("pid"), int)
-                and not _pid_alive(holder["pid"])
-            )
-            if not stale:
-                raise _lock_busy(out, lock) from None
-            with contextlib.suppress(OSError):
-                os.unlink(lock)
-            continue
-        os.write(fd, _lock_text().encode())
-        os.close(fd)
-        return lambda: lock.unlink(missing_ok=True)
-    raise _lock_busy(out, lock)
-
-
-@contextlib.contextmanager
-def batch_lock(out: str | Path) -> Iterator[Path]:
-    """Hold the batch lock of the folder ``out`` (made if need be) while the block runs.
-
-    Re-entrant within one process (the CLI holds it around ``run_batch`` and
-    the summary).  Another process holding it: an InputError naming the
-    folder and that process's pid and host.  A folder this call made is
-    removed again when it is still empty afterwards (a refused batch leaves
-    nothing behind).
-    """
-    from workbench.io.outputs import check_not_special
-
-    out = Path(os.path.abspath(out))
-    key = str(out)
-    with _HELD_GUARD:
-        if key in _HELD:
-            _HELD[key] += 1
-            nested = True
-        else:
-            nested = False
-    if nested:
-        try:
-            yield out / LOCK
-        finally:
-            with _HELD_GUARD:
-                _HELD[key] -= 1
-        return
-    check_not_special(out)
-    if os.path.lexists(out) and not out.is_dir():
-        raise InputError(out, "is a file", "give a folder for --out")
-    made = not os.path.lexists(out)
-    out.mkdir(parents=True, exist_ok=True)
-    lock = out / LOCK
-    try:
-        acquire = _acquire_flock if _has_flock() else _acquire_exclusive
-        release = acquire(out, lock)
-    except BaseException:
-        if made:
-            with contextlib.suppress(OSError):
-                out.rmdir()
-        raise
-    with _HELD_GUARD:
-        _HELD[key] = 1
-    try:
-        yield lock
-    finally:
-        with _HELD_GUARD:
-            _HELD.pop(key, None)
-        release()
-        if made:
-            with contextlib.suppress(OSError):
-                out.rmdir()  # only when empty
-
-
-def _has_flock() -> bool:
-    try:
-        import fcntl
-    except ImportError:
-        return False
-    return hasattr(fcntl, "flock")
 
 
 def _inside(path: Path, folder: Path) -> bool:
