@@ -163,12 +163,7 @@ def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
     assert np.allclose(tool.drawn_points("after"), step.result.head.skin.vertices)
 
 
-def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path, monkeypatch):
-    from workbench.pipelines.age import write_age_report_pdf
-    from workbench.qt.tools.age import work
-
-    monkeypatch.setattr(work, "_PDF_HOOK", None)
-    work.set_pdf_hook(write_age_report_pdf)  # as `workbench gui` does
+def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path):
     w = ageing
     tool = w.age
     out = tmp_path / "aged"
@@ -193,22 +188,22 @@ def test_export_writes_what_workbench_age_writes(ageing, qtbot, tmp_path, monkey
     assert not w.document.stack.can_undo  # export only: the case is not changed
 
 
-def test_the_export_hook_runs_on_the_gui_thread_inside_the_folder_write(
+def test_the_report_writer_runs_on_the_gui_thread_inside_the_folder_write(
     ageing, qtbot, tmp_path, monkeypatch
 ):
     import threading
 
-    from workbench.qt.tools.age import work
+    from workbench.pipelines import age as pipeline
 
     seen = []
 
-    def hook(folder, head, results):
+    def writer(folder, head, results, note=None):
         seen.append((threading.current_thread() is threading.main_thread(), folder))
         path = folder / "extra.txt"
         path.write_text(",".join(f"{r.to_age:g}" for r in results), "utf-8")
         return [path]
 
-    monkeypatch.setattr(work, "_PDF_HOOK", hook)
+    monkeypatch.setattr(pipeline, "write_age_report_pdf", writer)
     w = ageing
     tool = w.age
     w.age_panel.export_all.setChecked(True)  # every computed age: here only 10 y

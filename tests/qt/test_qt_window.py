@@ -198,7 +198,8 @@ def test_suggest_dowels_guides_reconstruct_save_reopen_compare_export(
     assert (tmp_path / "out" / "report.pdf").stat().st_size > 5_000
     # the whole fitted head, in the skull file's frame: its cranium lies on the evidence
     head_files = {"skin", "skull", "mandible", "teeth", "eyes", "tongue"}
-    assert {f"{p}.{e}" for p in head_files for e in ("ply", "obj", "stl")} <= names
+    written = {p.name for p in (tmp_path / "out" / "head").iterdir()}
+    assert {f"{p}.{e}" for p in head_files for e in ("ply", "obj", "stl")} <= written
     cranium = read_mesh(tmp_path / "out" / "head" / "skull.obj", units="mm").mesh
     dist = MeshIndex(window.document.case.specimen.mesh).closest_points(cranium.vertices).distances
     # (3.4 mm measured: the quarter-resolution CT is cropped, part of the vault is missing)

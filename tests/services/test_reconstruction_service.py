@@ -142,8 +142,8 @@ def skull_file(tmp_path_factory: pytest.TempPathFactory, head_female) -> Path:
 def test_the_cli_job_and_the_window_job_give_the_same_face(
     skull_file: Path, tmp_path: Path, head_male
 ) -> None:
-    from workbench.qt import jobs
     from workbench.services.case.case_setup import start_case_from_skull
+    from workbench.services.reconstruction import case_steps as jobs
     from workbench.services.reconstruction.job import JobSettings, run_reconstruction
 
     settings = JobSettings(
@@ -176,8 +176,10 @@ def test_the_cli_job_and_the_window_job_give_the_same_face(
     assert "ecm2s_l" not in window.preview.codes and window.recon.plan["g"].depth_mm == 6.5
 
     # one report builder: the window's export writes the job's report
-    files = jobs.export_results(tmp_path / "export", case, window, formats=("ply",))
-    report = json.loads(files["report_json"].read_text(encoding="utf-8"))
+    from workbench.pipelines.reconstruct import export_fit
+
+    files = export_fit(case, window, tmp_path / "export", pictures=False).files
+    report = json.loads(files["report"].read_text(encoding="utf-8"))
     mine = cli.report
     for key in (
         "template",

@@ -214,13 +214,8 @@ def options_from(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from workbench.pipelines.age import write_age_report_pdf
-    from workbench.qt.age_ops import set_pdf_hook
     from workbench.qt.app import run as run_window
 
-    set_pdf_hook(
-        write_age_report_pdf
-    )  # the window's age export writes report.pdf as `workbench age`
     return run_window(options_from(args))
 
 

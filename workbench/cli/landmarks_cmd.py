@@ -301,22 +301,13 @@ def _suggest_skull(args: argparse.Namespace, read, head, seeds) -> int:
     import numpy as np
 
     from workbench.cli.reconstruct_cmd import orientation_of
-    from workbench.services.registration.skull_registration import (
-        mirror_from_landmarks,
-        register_skull,
-    )
+    from workbench.core.landmarks import LandmarkSet
+    from workbench.services.reconstruction.case_steps import suggest_landmarks
 
-    reg = register_skull(
-        read.mesh,
-        head,
-        hint=orientation_of(args, args.mesh),
-        seeds=seeds,
-        mirror=mirror_from_landmarks(seeds),
-    )
+    # the seeds stay as the user placed them (the window's Suggest does the same)
+    given = seeds if seeds is not None else LandmarkSet("skull", ())
+    lms, reg = suggest_landmarks(read.mesh, given, head, orientation_of(args, args.mesh))
     print_self_check(reg.figures.get("self_check"))
-    from workbench.core.landmarks import merge_user_landmarks
-
-    lms = merge_user_landmarks(reg.landmarks, seeds)  # the seeds stay as the user placed them
     if read.scale_applied != 1.0:  # back to the file's units
         m = np.eye(4)
         m[:3, :3] /= read.scale_applied

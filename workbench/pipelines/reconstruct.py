@@ -35,6 +35,15 @@ if TYPE_CHECKING:
     from workbench.services.reconstruction.service import FitResult
 
 Say = Callable[[str], None]
+#: the fit's key figures (in the report's ``fit`` section): printed, and a batch row's columns
+FIT_FIGURES = (
+    "max_tip_error_mm",
+    "min_tissue_mm",
+    "penetrating_vertices",
+    "refits",
+    "suggested_landmarks",
+    "absent_landmarks",
+)
 #: draws the report's pictures: ``draw(out, result, note) -> {name: path relative to out}``;
 #: the window wraps it to run on its GUI thread (VTK never runs on a worker)
 Draw = Callable[[Path, "JobResult", Say], dict[str, str]]
@@ -64,17 +73,7 @@ class ReconstructionFolder:
 def summary_figures(report: dict[str, Any]) -> dict[str, Any]:
     """Key figures of a reconstruction report: tips, tissue, the self-check, jaw, validation."""
     fit = report["fit"]
-    summary: dict[str, Any] = {
-        k: fit.get(k)
-        for k in (
-            "max_tip_error_mm",
-            "min_tissue_mm",
-            "penetrating_vertices",
-            "refits",
-            "suggested_landmarks",
-            "absent_landmarks",
-        )
-    }
+    summary: dict[str, Any] = {k: fit.get(k) for k in FIT_FIGURES}
     summary["seconds"] = report.get("_seconds")
     check = report.get("self_check") or {}
     if check:
@@ -310,34 +309,30 @@ def reconstruction_pictures(out: Path, result: JobResult, note: Say = _quiet) ->
 def job_result_of(case: Case, fit: FitResult, notes: list[str] | None = None) -> JobResult:
     """A fit the window holds, as the job result :func:`write_reconstruction` writes (mm).
 
-    The report is built as ``workbench reconstruct`` builds it; the window's
-    skull is in mm (it was read in mm or converted on opening), so the
-    folder is in mm.  The folder's ``case.fcase`` is saved from a copy of
-    ``case`` with a stack of its own: saving marks a case's audit log
-    persisted and its stack clean, and the window's case is not saved by an
-    export.
+    The window's case is not touched: the folder's case is a copy
+    (:func:`~workbench.io.case_file.detached_copy`) with a stack of its own, on
+    which the fit is recorded as ``workbench reconstruct`` records it
+    (:func:`~workbench.services.reconstruction.job.record_fit`: the landmarks it
+    was fitted with, the reference head, the table group) before the report is
+    built from it; saving it into the folder then marks only the copy saved.
+    The window's skull is in mm (read in mm or converted on opening), so the
+    folder is in mm.
     """
-    import copy
-
     from workbench.commands.stack import CommandStack
+    from workbench.io.case_file import detached_copy
     from workbench.services.case.case_setup import OpenedCase
-    from workbench.services.reconstruction.job import JobResult, JobSettings, build_report
-
-    own = copy.deepcopy(case)
-    opened = OpenedCase(own, CommandStack(own), list(notes or []))
-    return JobResult(
-        opened,
-        fit.head,
-        fit.recon,
-        fit.skull_h,
-        None,
-        list(fit.guides),
-        fit.spread_map,
-        build_report(case, fit, notes=list(notes or [])),
-        dict(fit.seconds),
-        JobSettings(units="mm"),
-        fit,
+    from workbench.services.reconstruction.job import (
+        JobResult,
+        JobSettings,
+        build_report,
+        record_fit,
     )
+
+    own = detached_copy(case)
+    opened = OpenedCase(own, CommandStack(own), list(notes or []))
+    record_fit(opened.stack, fit)
+    report = build_report(own, fit, notes=list(notes or []))
+    return JobResult.of_fit(opened, fit, report, dict(fit.seconds), JobSettings(units="mm"))
 
 
 def export_fit(

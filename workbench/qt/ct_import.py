@@ -48,10 +48,10 @@ from PySide6.QtWidgets import (
 )
 
 from workbench.core.cancel import CancelToken
-from workbench.qt import jobs
 from workbench.qt.workers import show_fraction
 from workbench.render.snapshots import to_polydata
 from workbench.services.ct.ct_preview import CtPreview, PreviewSurface
+from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from workbench.qt.hosts import CtImportHost
@@ -297,7 +297,7 @@ class CtImportDialog(QDialog):
                 if max_voxels is None
                 else CtPreview.load(path, progress=progress, max_voxels=max_voxels)
             )
-            return ct, jobs.sample_orientation(path)
+            return ct, case_steps.sample_orientation(path)
 
         self.runner.submit(
             LOAD,

@@ -76,3 +76,20 @@ def ask_save_changes(parent: QWidget, name: str) -> QMessageBox.StandardButton:
         | QMessageBox.StandardButton.Cancel,
         QMessageBox.StandardButton.Save,
     )
+
+
+def ask_replace_folder(parent: QWidget, folder: object, what: str) -> bool:
+    """Ask before replacing a folder that is not empty with ``what``; True: replace it.
+
+    Nothing is deleted: the previous folder is kept beside the new one as a
+    numbered copy (``DIR.1``, :func:`workbench.io.outputs.staged_folder`).
+    """
+    answer = QMessageBox.question(
+        parent,
+        "Replace the folder?",
+        f"{folder} already exists and is not empty.\n\nReplace it with {what}? (The old "
+        "folder is kept beside it as a numbered copy.)",
+        QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Cancel,
+        QMessageBox.StandardButton.Cancel,
+    )
+    return answer == QMessageBox.StandardButton.Yes

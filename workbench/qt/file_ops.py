@@ -24,9 +24,11 @@ from workbench.commands.stack import CommandStack
 from workbench.core.errors import UnitsError, WorkbenchError
 from workbench.core.raycast import RayCaster
 from workbench.io.case_file import case_validator, load_case, save_case
-from workbench.qt import autosave, dialogs, jobs
+from workbench.qt import autosave, dialogs
+from workbench.qt.gui_call import GuiCall
 from workbench.services.case.case_setup import OpenedCase, start_case_from_skull
 from workbench.services.landmarks.snap import snap_index
+from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from workbench.qt.ct_import import CtImportDialog
@@ -38,17 +40,19 @@ if TYPE_CHECKING:
 MESH_FILTER = "Meshes (*.ply *.stl *.obj *.vtk *.vtp);;All files (*)"
 CASE_FILTER = "Case files (*.fcase);;All files (*)"
 CT_FILTER = "Volumes (*.nhdr *.nrrd *.mha *.mhd *.nii *.nii.gz);;All files (*)"
+#: the mesh formats of the window's export (PLY always; OBJ and STL for the tools artists use)
+EXPORT_FORMATS = ("ply", "obj", "stl")
 
 
 def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
     """Record the known anatomy directions of a public sample (not an undo step)."""
     from workbench.commands.reconstruction_setup import SetOrientation
 
-    anatomy = jobs.sample_orientation(source)
+    anatomy = case_steps.sample_orientation(source)
     if anatomy is not None and opened.case.orientation is None:
         opened.stack.push(
             SetOrientation(
-                jobs.anatomy_orientation(anatomy), label="Orientation of the sample file"
+                case_steps.anatomy_orientation(anatomy), label="Orientation of the sample file"
             )
         )
         opened.stack.clear()
@@ -143,6 +147,8 @@ class FileTool:
         self.runner = runner
         self.host = host
         self.exported: dict[str, Path] = {}
+        #: the export's report pictures are drawn on the GUI thread (VTK)
+        self.gui_call = GuiCall()
         self.ct_dialog: CtImportDialog | None = None
 
     def status(self, text: str) -> None:
@@ -311,19 +317,57 @@ class FileTool:
         return self.save_to(name) if name else False
 
     # ------------------------------------------------------------ export
-    def export_to(self, folder: str | Path) -> None:
-        """Face and head meshes, landmarks and the PDF report into ``folder`` (worker)."""
+    def export_to(self, folder: str | Path, force: bool = False) -> bool:
+        """The reconstruction folder ``workbench reconstruct`` writes, into ``folder`` (worker).
+
+        :func:`workbench.pipelines.reconstruct.export_fit`: the face (and the
+        build faces) and the fitted head in PLY, OBJ and STL, landmarks, the
+        case, ``report.pdf`` with its pictures (drawn on the GUI thread).  A
+        folder that is not empty is replaced only when the user confirms (the
+        old one is kept as ``DIR.1``).  False when refused at once.
+        """
+        from workbench.pipelines.reconstruct import export_fit, reconstruction_pictures
+        from workbench.qt.tools.common import folder_is_free
+
         case, fit, notes = self.document.case, self.session.fit, list(self.document.notes)
+        out = Path(folder)
+        if fit is None:
+            self.status("Nothing to export yet: reconstruct the face first (Reconstruct).")
+            return False
+        if not force and not folder_is_free(out):
+            if not (
+                self.host.interactive
+                and dialogs.ask_replace_folder(self.host.window(), out, "the reconstruction")
+            ):
+                self.status(f"Not exported: {out} already exists and is not empty.")
+                return False
+            force = True
+        draw = self.gui_call.wrap(reconstruction_pictures, None, "drawing the report's pictures")
+        kept: list[str] = []
         self.runner.submit(
             "export",
-            f"Exporting to {folder} …",
-            lambda: jobs.export_results(folder, case, fit, notes=notes),
-            self._exported,
-            lambda exc: self.show_error(f"Could not export to {folder}", exc),
+            f"Exporting to {out} …",
+            lambda: (
+                export_fit(
+                    case,
+                    fit,
+                    out,
+                    notes=notes,
+                    formats=EXPORT_FORMATS,
+                    draw=draw,
+                    force=force,
+                    notify=kept.append,
+                ).files
+            ),
+            lambda files: self._exported(files, kept),
+            lambda exc: self.show_error(f"Could not export to {out}", exc),
         )
+        return True
 
-    def _exported(self, files: dict[str, Path]) -> None:
+    def _exported(self, files: dict[str, Path], notes: list[str] | None = None) -> None:
         self.exported = files
+        for note in notes or ():
+            self.host.messages.append(note)
         folders = sorted({str(p.parent) for p in files.values()}, key=len)
         where = f" into {folders[0]}" if folders else ""
         kinds = sorted({key.split("/")[0].split("_")[0] for key in files})

@@ -50,10 +50,10 @@ from workbench.services.guides.classic import AXES, Guide, guides_from_predictio
 
 if TYPE_CHECKING:
     from workbench.qt.hosts import GuideDragHost, GuideRows
-    from workbench.qt.jobs import FitResult
     from workbench.qt.scene import SceneView
     from workbench.qt.session import Session
     from workbench.qt.workers import TaskRunner
+    from workbench.services.reconstruction.case_steps import FitResult
 
 GRAB_RADIUS_PX = 8.0
 PRIORITY = 10.0

@@ -26,7 +26,7 @@ The window holds no geometry logic and no tool's logic: it builds the pieces,
 connects them, and keeps thin methods (``reconstruct``, ``open_scan``,
 ``show_age`` ...) that the menus, scripts and tests call and the tools carry
 out.  Edits are commands pushed on the document's stack, computations are
-:mod:`workbench.qt.jobs` (or a tool's worker) functions run in the worker, and
+:mod:`workbench.services.reconstruction.case_steps` (or a tool's worker) functions run in the worker, and
 their results are drawn.  Units mm; the scene is in the specimen's input frame
 (the skull file's coordinates).
 """
@@ -51,7 +51,7 @@ from PySide6.QtWidgets import (
 )
 
 from workbench.io.catalogue import load_catalogue
-from workbench.qt import dialogs, gc_guard, jobs
+from workbench.qt import dialogs, gc_guard
 from workbench.qt.actions import (
     AGE_ACTIONS,
     ANIMATE_ACTIONS,
@@ -81,6 +81,7 @@ from workbench.qt.tools.landmarks import LandmarkTool
 from workbench.qt.tools.reconstruct import FIT_PARTS, ReconstructTool
 from workbench.qt.tools.scan_fit.tool import ScanFitTool
 from workbench.qt.workers import TaskRunner, preload, show_fraction
+from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from workbench.services.case.case_setup import OpenedCase
@@ -311,12 +312,12 @@ class MainWindow(QMainWindow):
 
     # ------------------------------------------------------------ results (the session's)
     @property
-    def fit(self) -> jobs.FitResult | None:
+    def fit(self) -> case_steps.FitResult | None:
         """The last fitted face (:attr:`Session.fit`)."""
         return self.session.fit
 
     @property
-    def preview(self) -> jobs.DowelPreview | None:
+    def preview(self) -> case_steps.DowelPreview | None:
         """The dowel plan drawn (:attr:`Session.preview`)."""
         return self.session.preview
 
@@ -367,8 +368,8 @@ class MainWindow(QMainWindow):
     def ask_save_as(self) -> bool:
         return self.files.ask_save_as()
 
-    def export_to(self, folder: str | Path) -> None:
-        self.files.export_to(folder)
+    def export_to(self, folder: str | Path, force: bool = False) -> bool:
+        return self.files.export_to(folder, force)
 
     @property
     def exported(self) -> dict[str, Path]:
@@ -529,7 +530,7 @@ class MainWindow(QMainWindow):
         if self.document.case.specimen.mesh is None and self.scan_fit.has_scan:
             self.scan_fit.reset_camera()  # only a scan is shown: look at its face
             return
-        axes = jobs.view_axes(self.document.case)
+        axes = case_steps.view_axes(self.document.case)
         self.scene.reset_camera(*(axes or (None, None)))
 
     def cancel_drag(self) -> None:
@@ -687,6 +688,7 @@ class MainWindow(QMainWindow):
         self.animate.detach()
         self.age.detach()
         self.detail.detach()
+        self.files.gui_call.close()
         self.scene.detach()
         self.guide_view.close_view()
         self.plotter.close()

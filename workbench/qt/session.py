@@ -2,7 +2,7 @@
 
 A :class:`Session` only *stores* results and *signals* their changes; it
 computes nothing.  The fit itself is the one pipeline,
-:func:`workbench.qt.jobs.fit_face` (→ :mod:`workbench.services.reconstruction.service`),
+:func:`workbench.services.reconstruction.case_steps.fit_face` (→ :mod:`workbench.services.reconstruction.service`),
 run in the worker by the main window, which hands each result to the session
 on the GUI thread.  Panels and views read the results here and follow the
 signals, instead of reaching into the window.
@@ -10,7 +10,7 @@ signals, instead of reaching into the window.
 None of this is part of the case (see :mod:`workbench.qt.document`): a case
 keeps the settings that produce these results, and opening or replacing a
 case clears them (:meth:`Session.clear_fit`).  Units mm, input frame (the
-fit's head-frame parts are documented in :mod:`workbench.qt.jobs`).
+fit's head-frame parts are documented in :mod:`workbench.services.reconstruction.case_steps`).
 
 Each setter emits its signal on every call, also when the value is the same:
 a listener is told "this is the current value" (e.g. a panel cleared again
@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 from PySide6.QtCore import QObject, Signal
 
 if TYPE_CHECKING:
-    from workbench.qt.jobs import DowelPreview, FitResult
+    from workbench.services.reconstruction.case_steps import DowelPreview, FitResult
     from workbench.services.validation.compare import Comparison
 
 
@@ -46,12 +46,12 @@ class Session(QObject):
     # ------------------------------------------------------------ accessors
     @property
     def fit(self) -> FitResult | None:
-        """The last fitted face (:class:`workbench.qt.jobs.FitResult`), or None."""
+        """The last fitted face (:class:`workbench.services.reconstruction.case_steps.FitResult`), or None."""
         return self._fit
 
     @property
     def preview(self) -> DowelPreview | None:
-        """The last dowel plan drawn (:class:`workbench.qt.jobs.DowelPreview`), or None."""
+        """The last dowel plan drawn (:class:`workbench.services.reconstruction.case_steps.DowelPreview`), or None."""
         return self._preview
 
     @property

@@ -1,6 +1,6 @@
 """Background work for the window: worker threads, results back on the GUI thread.
 
-Workers run plain functions (:mod:`workbench.qt.jobs`, services) that return
+Workers run plain functions (:mod:`workbench.services.reconstruction.case_steps`, services) that return
 values; they never touch the case, Qt widgets or VTK, and hold no reference
 to a Qt object (``fn`` must close over data only).  The result (or the
 error) goes back through :mod:`workbench.qt.relay`, so the callback runs on

@@ -22,16 +22,11 @@ from typing import Any
 
 import numpy as np
 
+from workbench.pipelines.reconstruct import FIT_FIGURES
+
 Figures = dict[str, Any]
 
-RECONSTRUCT_FIT = (
-    "max_tip_error_mm",
-    "min_tissue_mm",
-    "penetrating_vertices",
-    "refits",
-    "suggested_landmarks",
-    "absent_landmarks",
-)
+RECONSTRUCT_FIT = FIT_FIGURES
 VALIDATION_KEYS = ("n", "mean_abs_mm", "rms_mm", "p95_mm", "pct_within_2_5mm", "pct_within_5mm")
 FIT_SCAN_KEYS = (
     "face_within_1mm_fraction",

@@ -37,7 +37,7 @@ from workbench.core.errors import WorkbenchError
 from workbench.io.tables import list_tables, load_depth_table
 from workbench.model.reconstruction_setup import parse_build
 from workbench.qt.document import Document
-from workbench.qt.jobs import DowelPreview
+from workbench.services.reconstruction.case_steps import DowelPreview
 
 BUILDS = ("slender", "normal", "obese", "-2", "-1", "1", "2")
 COLUMNS = ("Code", "Table mm", "Depth mm", "Source", "Use")

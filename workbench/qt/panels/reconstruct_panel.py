@@ -49,8 +49,8 @@ from PySide6.QtWidgets import (
 from workbench.commands.reconstruction_setup import SetGuides
 from workbench.core.errors import WorkbenchError
 from workbench.qt.document import Document
-from workbench.qt.jobs import FitResult, guides_state, user_guides
 from workbench.services.guides.classic import Guide
+from workbench.services.reconstruction.case_steps import FitResult, guides_state, user_guides
 
 if TYPE_CHECKING:
     import numpy as np

@@ -5,7 +5,7 @@ skull landmarks, scan fit, animate, age progression; the live drags serve the
 landmark and guide editing).  It reads its panel's choices, runs **one
 service** (``workbench.services.*``) in the window's worker
 (:class:`workbench.qt.workers.TaskRunner`, often through a plain function of
-:mod:`workbench.qt.jobs` or of its own worker module), and draws the result
+:mod:`workbench.services.reconstruction.case_steps` or of its own worker module), and draws the result
 through the scene (:class:`workbench.qt.scene.SceneView`, or actors it owns in
 the same plotter).  Edits of the case are commands pushed on the document's one
 undo stack (:class:`workbench.qt.document.Document`); derived results live in

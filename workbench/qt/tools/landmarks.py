@@ -16,8 +16,8 @@ import numpy as np
 
 from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, ReplaceLandmarkSet
 from workbench.core.errors import WorkbenchError
-from workbench.qt import jobs
 from workbench.services.landmarks.snap import snap_landmark
+from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from workbench.io.catalogue import LandmarkCatalogue
@@ -89,11 +89,11 @@ class LandmarkTool:
             self.status("Open a skull first.")
             return
         skull, current = case.specimen.mesh, case.landmarks["skull"]
-        sex, orient = case.dowels.sex, jobs.orientation(case)
+        sex, orient = case.dowels.sex, case_steps.orientation(case)
         self.runner.submit(
             "suggest",
             "Suggesting skull landmarks …",
-            lambda: jobs.suggest_landmarks(skull, current, sex, orient),
+            lambda: case_steps.suggest_landmarks(skull, current, sex, orient),
             self._apply_suggestion,
             lambda exc: self.show_error("Could not suggest landmarks", exc),
         )

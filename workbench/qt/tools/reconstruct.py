@@ -3,8 +3,8 @@
 The controller behind the Dowels, "Reconstruct and guides" and Compare docks.
 The dowel plan follows the case (re-planned in the worker whenever a part the
 plan depends on changes); "Reconstruct" snapshots the case's typed settings
-(:func:`workbench.qt.jobs.fit_inputs`) and fits the face in the worker with
-the command line's own pipeline (:func:`workbench.qt.jobs.fit_face`).  The
+(:func:`workbench.services.reconstruction.case_steps.fit_inputs`) and fits the face in the worker with
+the command line's own pipeline (:func:`workbench.services.reconstruction.case_steps.fit_face`).  The
 result is a derived result of the window's :class:`~workbench.qt.session.Session`,
 not a part of the case, and is drawn through the scene (face, muscles,
 guides), in the guide view, and compared with a true skin when one is loaded.
@@ -20,9 +20,10 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from PySide6.QtCore import QObject, QTimer
 
-from workbench.qt import dialogs, jobs
+from workbench.qt import dialogs
 from workbench.qt.panels.reconstruct_panel import BAND_TITLE
 from workbench.qt.scene import is_closed
+from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QDockWidget
@@ -126,16 +127,16 @@ class ReconstructTool(QObject):
                 None, "Dowels appear once the porions and orbitales are placed (or suggested)."
             )
             return
-        skull, settings = case.specimen.mesh, jobs.depth_settings(case)
+        skull, settings = case.specimen.mesh, case_steps.depth_settings(case)
         self.runner.submit(
             "dowels",
             "Planning dowels …",
-            lambda: jobs.preview_dowels(skull, lms, settings),
+            lambda: case_steps.preview_dowels(skull, lms, settings),
             self._show_dowels,
             self._dowels_failed,
         )
 
-    def _show_dowels(self, preview: jobs.DowelPreview) -> None:
+    def _show_dowels(self, preview: case_steps.DowelPreview) -> None:
         self.session.set_preview(preview)
         self.scene.show_dowels(preview.origins, preview.tips)
         self.dowels_panel.show_plan(preview)
@@ -154,7 +155,7 @@ class ReconstructTool(QObject):
             return
         panel = self.reconstruct_panel
         try:  # the snapshot the worker fits; the user may go on editing the case
-            inputs = jobs.fit_inputs(
+            inputs = case_steps.fit_inputs(
                 case, use_guides=panel.use_guides.isChecked(), ensemble=panel.ensemble.value()
             )
         except Exception as exc:  # noqa: BLE001 - shown as a readable message
@@ -163,12 +164,12 @@ class ReconstructTool(QObject):
         self.runner.submit(
             "fit",
             "Reconstructing the face …",
-            lambda: jobs.fit_face(inputs),
+            lambda: case_steps.fit_face(inputs),
             self.show_fit,
             lambda exc: self.host.show_error("Could not reconstruct the face", exc),
         )
 
-    def show_fit(self, fit: jobs.FitResult) -> None:
+    def show_fit(self, fit: case_steps.FitResult) -> None:
         self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
         reg = fit.recon.registration
         check = {} if reg is None else reg.figures.get("self_check") or {}
@@ -187,7 +188,7 @@ class ReconstructTool(QObject):
         else:
             self._draw_fit(fit)
 
-    def _draw_fit(self, fit: jobs.FitResult) -> None:
+    def _draw_fit(self, fit: case_steps.FitResult) -> None:
         if fit is not self.session.fit or self.scene.closed:
             return  # a newer fit (or none) is on its way, or the window closed
         self._show_dowels(fit.preview)
@@ -200,7 +201,7 @@ class ReconstructTool(QObject):
         # would otherwise join that paint in one long block of the event loop
         self.scene.after_paint(lambda f=fit: self._show_fit_in_guide_view(f))
 
-    def _show_fit_in_guide_view(self, fit: jobs.FitResult) -> None:
+    def _show_fit_in_guide_view(self, fit: case_steps.FitResult) -> None:
         if fit is not self.session.fit or is_closed(self.guide_view.plotter):
             return
         self.guide_view.fit_changed()
@@ -278,7 +279,7 @@ class ReconstructTool(QObject):
         if fit is None:
             self.scene.clear("guides")
             return
-        segments, points = jobs.guide_geometry(fit)
+        segments, points = case_steps.guide_geometry(fit)
         self.scene.show_guides(segments, points)
 
     # ------------------------------------------------------------ compare

@@ -1,7 +1,8 @@
-"""The window's background jobs: plain functions over the services, no Qt, no VTK.
+"""The reconstruction of a case held open, one step at a time (the window's tools call these).
 
-The window runs these in a worker thread (:mod:`workbench.qt.workers`) and
-applies their results on the GUI thread through undoable commands.  The
+Plain functions over the services, no Qt, no VTK: the window runs them in its
+worker thread and applies their results on the GUI thread through undoable
+commands; scripts and the command line call them too.  The
 settings are the case's typed parts, the same ``workbench reconstruct``
 records (:func:`workbench.services.reconstruction.job.run_reconstruction`):
 
@@ -19,8 +20,8 @@ guides      :class:`~workbench.model.reconstruction_setup.GuideList` set by
 The fit is the one pipeline of the command line: :func:`fit_inputs` takes a
 snapshot of the case on the GUI thread, :func:`fit_face` runs
 :func:`workbench.services.reconstruction.service.run_fit` on it in the
-worker, and :func:`export_results` writes the report with the same builder
-(:func:`workbench.services.reconstruction.job.build_report`).
+worker; the window's export is the reconstruction pipeline's
+(:func:`workbench.pipelines.reconstruct.export_fit`).
 
 Units mm.  Landmarks, dowels and the face are returned in the **input frame**
 (the skull file's frame) so they overlay the specimen; the fit itself runs in
@@ -40,6 +41,7 @@ from workbench.core.mesh import Mesh
 from workbench.model.case import Case
 from workbench.model.evidence import sha256_file
 from workbench.model.reconstruction_setup import GuideList, Orientation
+from workbench.model.template import TemplateHead
 from workbench.services.guides.classic import Guide, guides_to_json
 from workbench.services.guides.fit_guides import stored_guides
 from workbench.services.landmarks.frame import input_frame
@@ -63,7 +65,6 @@ __all__ = [
     "FitInputs",
     "FitResult",
     "depth_settings",
-    "export_results",
     "fit_face",
     "fit_inputs",
     "guide_geometry",
@@ -142,24 +143,35 @@ def user_guides(case: Case) -> list[Guide] | None:
 
 
 # ------------------------------------------------------------------ suggest
-def suggest_landmarks(
-    skull: Mesh, current: LandmarkSet, sex: str, orient: tuple | None
-) -> tuple[LandmarkSet, SkullRegistration]:
-    """Suggest the skull landmarks not placed yet (input frame, mm), by the dense registration.
-
-    Landmarks the user placed are seeds (and hard constraints) and stay as
-    they are; landmarks the user marked absent stay absent.  Returns the new
-    set and the registration (figures, warnings; reused by the fit).
-    """
-    head = reference_head(sex)
+def _register(
+    skull: Mesh, current: LandmarkSet, head: TemplateHead | str, orient: tuple | None
+) -> SkullRegistration:
+    """The dense registration of the reference skull onto ``skull`` (input frame, mm), the
+    landmarks the user placed as its seeds and their handedness as its mirror."""
+    if isinstance(head, str):
+        head = reference_head(head)
     placed = LandmarkSet("skull", tuple(lm for lm in current if lm.status == "placed"))
-    reg = register_skull(
+    return register_skull(
         skull,
         head,
         hint=orient,
         seeds=placed if len(placed) else None,
         mirror=mirror_from_landmarks(current),
     )
+
+
+def suggest_landmarks(
+    skull: Mesh, current: LandmarkSet, head: TemplateHead | str, orient: tuple | None
+) -> tuple[LandmarkSet, SkullRegistration]:
+    """Suggest the skull landmarks not placed yet (input frame, mm), by the dense registration.
+
+    ``head``: the reference head (or the sex of the built-in one).  Landmarks
+    the user placed are seeds (and hard constraints) and stay as they are;
+    landmarks the user marked absent stay absent.  Returns the new set and
+    the registration (figures, warnings; reused by the fit).  The window's
+    *Suggest* and ``workbench landmarks suggest`` both call this.
+    """
+    reg = _register(skull, current, head, orient)
     # the one merge of the reconstruction (SetLandmarkStatus gives a person's "absent"
     # confidence 1; the registration's has 0)
     return merge_user_landmarks(reg.landmarks, current), reg
@@ -181,15 +193,7 @@ def preview_dowels(
     try:
         to_head, _ = input_frame(landmarks)
     except (WorkbenchError, ValueError):
-        head = reference_head(str(settings.sex or "male"))
-        placed = LandmarkSet("skull", tuple(lm for lm in landmarks if lm.status == "placed"))
-        to_head = register_skull(
-            skull,
-            head,
-            hint=orient,
-            seeds=placed if len(placed) else None,
-            mirror=mirror_from_landmarks(landmarks),
-        ).input_to_head
+        to_head = _register(skull, landmarks, str(settings.sex or "male"), orient).input_to_head
     skull_h = skull.transformed(to_head).outward()
     plan = plan_dowels(skull_h, landmarks.transformed(to_head), settings)
     active = plan.active()
@@ -245,79 +249,3 @@ def guide_geometry(fit: FitResult) -> tuple[list[tuple[np.ndarray, np.ndarray]],
 def guides_state(guides: list[Guide] | tuple[Guide, ...]) -> GuideList:
     """Guides as the case's ``guides`` part (``SetGuides``)."""
     return GuideList(tuple(guides_to_json(guides)))
-
-
-# ------------------------------------------------------------------ export
-def export_results(
-    folder: str | Path,
-    case: Case,
-    fit: FitResult | None,
-    *,
-    formats: tuple[str, ...] = ("ply", "obj", "stl"),
-    report: bool = True,
-    notes: list[str] | None = None,
-) -> dict[str, Path]:
-    """Face and head meshes, landmarks (.mrk.json, .fcsv) and the PDF report into ``folder``.
-
-    All in the skull file's frame, mm.  ``face.<ext>`` is the fitted skin's
-    face region; with a build model, ``face_slender/average/heavy.<ext>``, the
-    band (``face_band_mm.npy``) and ``face_builds.glb`` as ``workbench
-    reconstruct`` writes them; ``head/`` holds the whole fitted head: a template pack
-    (PLY parts, landmarks, muscles, ``template.json``; readable by
-    ``workbench template``) plus every part again in the other formats
-    (``head/skull.obj``, ``head/teeth.stl`` ...).  The report is the one
-    ``workbench reconstruct`` writes (``reconstruction-report-v1``), without
-    pictures.
-    """
-    from workbench.core.mesh import concatenate
-    from workbench.io.markups import write_fcsv, write_mrk_json
-    from workbench.io.meshes import write_mesh
-    from workbench.io.template_pack import FILES, export_template
-    from workbench.services.reconstruction.job import (
-        FITTED_HEAD_FRAME_TEXT,
-        head_in_input_frame,
-        write_build_files,
-    )
-
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
-    files: dict[str, Path] = {}
-    lms = case.landmarks["skull"]
-    if len(lms):
-        write_mrk_json(out / "skull_landmarks.mrk.json", lms, coordinate_system="RAS")
-        write_fcsv(out / "skull_landmarks.fcsv", lms, coordinate_system="RAS")
-        files["landmarks_mrk"] = out / "skull_landmarks.mrk.json"
-        files["landmarks_fcsv"] = out / "skull_landmarks.fcsv"
-    if fit is None:
-        return files
-    for ext in formats:
-        files[f"face_{ext}"] = write_mesh(out / f"face.{ext}", fit.recon.face)
-    if fit.builds is not None:  # the three build faces, the band and the morph-target glb
-        files.update(write_build_files(fit.recon, fit.builds, out))
-        for name in fit.builds.names:
-            for ext in (e for e in formats if e != "ply"):
-                files[f"face_{name}_{ext}"] = write_mesh(
-                    out / f"face_{name}.{ext}", fit.builds.face(name, fit.recon)
-                )
-    head = head_in_input_frame(fit.recon)
-    for path in export_template(head, out / "head", frame=FITTED_HEAD_FRAME_TEXT):
-        files[f"head/{path.name}"] = path
-    others = [e for e in formats if e != "ply"]  # the pack already wrote the PLY files
-    for name, parts in FILES.items():
-        stem, mesh = Path(name).stem, concatenate([head.meshes[p] for p in parts])
-        for ext in others:
-            files[f"head/{stem}.{ext}"] = write_mesh(out / "head" / f"{stem}.{ext}", mesh)
-    if report:
-        files.update(_report(out, case, fit, notes or []))
-    return files
-
-
-def _report(out: Path, case: Case, fit: FitResult, notes: list[str]) -> dict[str, Path]:
-    from workbench.reporting.report import write_report_json, write_report_pdf
-    from workbench.services.reconstruction.job import build_report
-
-    report = build_report(case, fit, notes=notes)
-    return {
-        "report_json": write_report_json(report, out / "report.json"),
-        "report_pdf": write_report_pdf(report, out / "report.pdf", base_dir=out),
-    }

@@ -29,6 +29,7 @@ from workbench import __version__
 from workbench.commands.case_edits import SetParameter
 from workbench.commands.landmarks import ReplaceLandmarkSet
 from workbench.commands.reconstruction_setup import SetDowelSettings, SetGuides, SetOrientation
+from workbench.commands.stack import CommandStack
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
@@ -130,6 +131,30 @@ class JobResult:
     settings: JobSettings = field(default_factory=JobSettings)
     fit: FitResult | None = None
 
+    @classmethod
+    def of_fit(
+        cls,
+        opened: OpenedCase,
+        fit: FitResult,
+        report: dict[str, Any],
+        seconds: dict[str, float],
+        settings: JobSettings,
+    ) -> JobResult:
+        """The result of a fit of ``opened``'s case, with its report and timings."""
+        return cls(
+            opened,
+            fit.head,
+            fit.recon,
+            fit.skull_h,
+            None,
+            list(fit.guides),
+            fit.spread_map,
+            report,
+            seconds,
+            settings,
+            fit,
+        )
+
     @property
     def file_units_per_mm(self) -> float:
         """1 / (mm per unit of the skull file): to write results in the file's own units."""
@@ -177,6 +202,27 @@ def record_settings(opened: OpenedCase, settings: JobSettings) -> None:
         )
 
 
+def record_fit(stack: CommandStack, fit: FitResult) -> None:
+    """What a fit leaves in its case, as commands on ``stack`` (each one undo step, audited):
+    the skull landmarks it was fitted with (input frame, mm), the reference head's id and
+    hash, the depth table's group.  ``workbench reconstruct`` and the window's export both
+    record these before the report is built from the case."""
+    if fit.recon.landmarks is not None:  # None only when the fit kept no landmark set
+        stack.push(
+            ReplaceLandmarkSet(
+                surface="skull",
+                new_set=fit.recon.landmarks,
+                label="Skull landmarks from the dense registration",
+            )
+        )
+    for key, value in (
+        ("template_id", fit.head.template_id),
+        ("template_hash", fit.head.content_hash),
+        ("depth_group", fit.recon.plan.group_label),
+    ):
+        stack.push(SetParameter(key=key, value=value))
+
+
 def run_reconstruction(
     skull_path: str | PathLike[str],
     settings: JobSettings = JobSettings(),
@@ -208,34 +254,9 @@ def run_reconstruction(
     times["open"] = time.perf_counter() - t
     fit = run_fit(inputs, progress=say)
     times.update(fit.seconds)
-    if fit.recon.landmarks is not None:  # None only when the fit kept no landmark set
-        stack.push(
-            ReplaceLandmarkSet(
-                surface="skull",
-                new_set=fit.recon.landmarks,
-                label="Skull landmarks from the dense registration",
-            )
-        )
-    for key, value in (
-        ("template_id", fit.head.template_id),
-        ("template_hash", fit.head.content_hash),
-        ("depth_group", fit.recon.plan.group_label),
-    ):
-        stack.push(SetParameter(key=key, value=value))
+    record_fit(stack, fit)
     report = build_report(case, fit, notes=opened.notes, guides_file=settings.guides_file)
-    return JobResult(
-        opened,
-        fit.head,
-        fit.recon,
-        fit.skull_h,
-        None,
-        list(fit.guides),
-        fit.spread_map,
-        report,
-        times,
-        settings,
-        fit,
-    )
+    return JobResult.of_fit(opened, fit, report, times, settings)
 
 
 def _input_record(ev: Any) -> dict[str, Any]:

@@ -2,15 +2,14 @@
 
 The method is the service's (:func:`workbench.services.age.change.age_head`,
 ``workbench age``); this tool runs it in the window's worker and shows the
-results.  Export runs :func:`workbench.services.age.job.age_to_folder`, the
-function the command line calls, with the same ``extra`` hook for
-``report.pdf`` (the command line's writer, handed to the tool by
-``workbench gui`` through :func:`~workbench.qt.tools.age.work.set_pdf_hook`: the window's layer may not
-import the command line's).  The export runs in the worker, but the hook
-draws the report's pictures with VTK, and worker threads never touch VTK
-(ARCHITECTURE.md §3.4): the worker hands the hook to the GUI thread
-(:class:`~workbench.qt.tools.age.work.GuiCall`) and waits for it, so the folder is still written as one
-piece by ``age_to_folder``.
+results.  Export runs the age pipeline
+(:func:`workbench.pipelines.age.age_to_folder_with_report`), the function the
+command line calls, so the folder holds what ``workbench age`` writes, report
+and pictures included.  The export runs in the worker, but the report's
+pictures are drawn with VTK, and worker threads never touch VTK
+(ARCHITECTURE.md §3.4): the worker hands the picture and PDF writer to the GUI
+thread (:class:`~workbench.qt.gui_call.GuiCall`) and waits for it, so the
+folder is still written as one piece.
 
 Live preview
 ------------

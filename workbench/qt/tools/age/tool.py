@@ -14,18 +14,17 @@ from PySide6.QtCore import QObject, Signal
 
 from workbench.core.errors import InputError, WorkbenchError
 from workbench.model.template import TemplateHead
+from workbench.qt.gui_call import GuiCall
 from workbench.qt.panels.age_panel import SOURCES as PANEL_SOURCES
 from workbench.qt.tools.age.drawing import AgeDrawing
 from workbench.qt.tools.age.text import figures_html, in_dock, study_text
 from workbench.qt.tools.age.work import (
     AgeSettings,
-    GuiCall,
     NormsInfo,
     SourceHead,
     age_step,
     export_ages,
     load_source,
-    pdf_hook,
 )
 from workbench.qt.tools.common import folder_is_free
 
@@ -556,19 +555,11 @@ class AgeTool(QObject, AgeDrawing):
             self.export_to(name)
 
     def _may_replace(self, folder: Path) -> bool:
-        if not self.host.interactive:
-            return False
-        from PySide6.QtWidgets import QMessageBox
+        from workbench.qt import dialogs
 
-        answer = QMessageBox.question(
-            self.host.window(),
-            "Replace the folder?",
-            f"{folder} already exists and is not empty.\n\nReplace it? (The old folder is "
-            "kept beside it as a numbered copy.)",
-            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Cancel,
-            QMessageBox.StandardButton.Cancel,
+        return self.host.interactive and dialogs.ask_replace_folder(
+            self.host.window(), folder, "the aged heads"
         )
-        return answer == QMessageBox.StandardButton.Yes
 
     def export_to(self, folder: str | Path, force: bool = False) -> bool:
         """Write the aged head(s) into ``folder`` (worker) as ``workbench age`` does.
@@ -591,12 +582,7 @@ class AgeTool(QObject, AgeDrawing):
                 self.panel.show_error(f"Not exported: {exc}")
                 return False
             force = True
-        head, settings, ages, extra = (
-            source.head,
-            self.settings(),
-            self.ages_to_export(),
-            pdf_hook(),
-        )
+        head, settings, ages = source.head, self.settings(), self.ages_to_export()
         gui = self.gui_call
         self.panel.export_button.setEnabled(False)
         self.panel.show_status(f"Exporting {', '.join(f'{a} y' for a in ages)} to {out.name} …")
@@ -604,7 +590,7 @@ class AgeTool(QObject, AgeDrawing):
             EXPORT_CHANNEL,
             f"Exporting the aged head to {out.name} …",
             lambda report: export_ages(
-                head, settings, ages, out, force=force, extra=extra, report=report, gui=gui
+                head, settings, ages, out, force=force, report=report, gui=gui
             ),
             self._exported,
             self._export_failed,

@@ -3,26 +3,26 @@
 :func:`load_source` reads a head and the norms it is aged with, :func:`age_step`
 ages it to one target age, :func:`export_ages` writes the folder ``workbench age``
 writes.  They run in the window's worker thread.  The one exception to "no VTK" is
-the PDF report's hook, which draws pictures: :class:`GuiCall` hands it to the GUI
-thread while the worker waits.  The hook itself is set by ``workbench gui`` through
-:func:`set_pdf_hook` (the window's layer may not import the command line's).
+the report's pictures: :func:`export_ages` calls the age pipeline
+(:func:`workbench.pipelines.age.age_to_folder_with_report`, what ``workbench age``
+calls), and :class:`~workbench.qt.gui_call.GuiCall` hands its picture and PDF writer
+to the GUI thread while the worker waits.
 
 Units mm, ages in years; heads in their own head frame.
 """
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.model.template import TemplateHead
-from workbench.qt import relay
+from workbench.qt.gui_call import GuiCall
 
 if TYPE_CHECKING:
     from workbench.services.age.change import AgeResult
@@ -35,71 +35,6 @@ DISTANCE_TITLE = "displacement mm"
 #: fraction of an age step done when the service reports a step (by its first word)
 STEP_FRACTIONS = {"measuring": 0.05, "solving": 0.3, "warping": 0.45}
 BEFORE_COLOUR = (0.80, 0.80, 0.84)
-
-ExtraHook = Callable[[Path, TemplateHead, list["AgeResult"]], list[Path]]
-_PDF_HOOK: ExtraHook | None = None
-
-
-def set_pdf_hook(hook: ExtraHook | None) -> None:
-    """The ``extra`` writer :func:`export_ages` hands to ``age_to_folder`` (``report.pdf``).
-
-    ``workbench gui`` sets the command line's own writer here, so the
-    window's export writes what ``workbench age`` writes; without it (a
-    window built by a script or a test) the export has no PDF.
-    """
-    global _PDF_HOOK
-    _PDF_HOOK = hook
-
-
-def pdf_hook() -> ExtraHook | None:
-    return _PDF_HOOK
-
-
-class GuiCall:
-    """Lets a worker run a function on the GUI thread and wait for its result.
-
-    Made on the GUI thread; :meth:`wrap` gives the worker a stand-in for
-    ``fn`` that posts the call through :mod:`workbench.qt.relay` (plain data:
-    the function, its arguments, a box and an event) and waits, checking
-    ``report`` (which raises :class:`~workbench.core.errors.Cancelled` when
-    the job is cancelled or the window shuts down) while it waits.
-    """
-
-    def __init__(self) -> None:
-        self._key = relay.register(self._run)
-        self.runs = 0
-
-    def _run(self, payload: Any) -> None:
-        fn, args, box, done = payload
-        try:
-            box.append((True, fn(*args)))
-        except BaseException as exc:  # noqa: BLE001 - handed back to the waiting worker
-            box.append((False, exc))
-        finally:
-            self.runs += 1
-            done.set()
-
-    def wrap(
-        self, fn: Callable[..., Any], report: Callable[[str, float], None] | None, step: str
-    ) -> Callable[..., Any]:
-        key = self._key
-
-        def on_gui_thread(*args: Any) -> Any:
-            box: list[tuple[bool, Any]] = []
-            done = threading.Event()
-            relay.post(key, (fn, args, box, done))
-            while not done.wait(0.1):
-                if report is not None:
-                    report(step, 0.96)
-            ok, value = box[0]
-            if not ok:
-                raise value
-            return value
-
-        return on_gui_thread
-
-    def close(self) -> None:
-        relay.unregister(self._key)
 
 
 # ------------------------------------------------------------------ worker side (plain data)
@@ -221,18 +156,24 @@ def export_ages(
     out: str | Path,
     *,
     force: bool = False,
-    extra: ExtraHook | None = None,
+    pdf: bool = True,
     report: Callable[[str, float], None] | None = None,
     gui: GuiCall | None = None,
 ) -> tuple[list[AgeResult], list[Path]]:
-    """Worker: :func:`~workbench.services.age.job.age_to_folder` with the tool's inputs.
+    """Worker: the age pipeline (:func:`~workbench.pipelines.age.age_to_folder_with_report`,
+    as ``workbench age``) with the tool's inputs: the aged packs, pictures and ``report.pdf``.
 
-    With ``gui``, ``extra`` (which may draw with VTK) runs on the GUI thread.
+    With ``gui``, the pictures and the PDF (drawn with VTK) are written on the GUI thread.
     """
-    from workbench.services.age.job import age_to_folder
+    from workbench.pipelines.age import age_to_folder_with_report, write_age_report_pdf
 
-    if extra is not None and gui is not None:
-        extra = gui.wrap(extra, report, "writing report.pdf (pictures on the GUI thread)")
+    draw = (
+        None
+        if gui is None
+        else gui.wrap(
+            write_age_report_pdf, report, "writing report.pdf (pictures on the GUI thread)"
+        )
+    )
 
     n = max(len(ages), 1)
     done = [0]
@@ -243,9 +184,11 @@ def export_ages(
         if report is not None:
             report(message, min(0.95, (done[0] - 1) / n if done[0] else 0.0))
 
-    return age_to_folder(
+    return age_to_folder_with_report(
         head,
         out,
+        report=pdf,
+        draw=draw,
         sex=settings.sex,
         from_age=settings.from_age,
         ages=list(ages),
@@ -257,5 +200,4 @@ def export_ages(
         ],
         force=force,
         progress=say,
-        extra=extra,
     )

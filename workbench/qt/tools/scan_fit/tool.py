@@ -15,6 +15,7 @@ from PySide6.QtCore import QObject, QTimer
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError, UnitsError, WorkbenchError
 from workbench.qt.document import Document
+from workbench.qt.gui_call import GuiCall
 from workbench.qt.tools.common import folder_is_free
 from workbench.qt.tools.scan_fit.state import (
     EditScanLandmarks,
@@ -92,6 +93,8 @@ class ScanFitTool(QObject):
         self.scene = scene
         self.plotter = plotter
         self.runner = runner
+        #: the pack's report pictures are drawn on the GUI thread (VTK), the rest in the worker
+        self.gui_call = GuiCall()
         self.host = host
         self.catalogue = catalogue
         self.skull_picker = skull_picker
@@ -289,19 +292,11 @@ class ScanFitTool(QObject):
 
     def _may_replace(self, folder: Path) -> bool:
         """Ask before replacing a non-empty folder (never when not interactive)."""
-        if not self.host.interactive:
-            return False
-        from PySide6.QtWidgets import QMessageBox
+        from workbench.qt import dialogs
 
-        answer = QMessageBox.question(
-            self.host.window(),
-            "Replace the folder?",
-            f"{folder} already exists and is not empty.\n\nReplace it (everything in it) "
-            "with the fitted pack?",
-            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Cancel,
-            QMessageBox.StandardButton.Cancel,
+        return self.host.interactive and dialogs.ask_replace_folder(
+            self.host.window(), folder, "the fitted pack"
         )
-        return answer == QMessageBox.StandardButton.Yes
 
     def save_to(self, folder: str | Path, force: bool = False) -> bool:
         """Fit again and write the pack into ``folder`` (worker); False if refused at once.
@@ -331,13 +326,15 @@ class ScanFitTool(QObject):
         except WorkbenchError as exc:
             self.host.show_error("The fit settings are not usable", exc)
             return False
-        placed = self.landmarks.placed
+        placed, gui = self.landmarks.placed, self.gui_call
         self.panel.set_running(True)
         self.panel.show_state(f"Fitting and writing {out.name} …")
         self.runner.submit(
             CHANNEL,
             f"Saving the fitted pack {out.name} …",
-            lambda report: save_pack(scan, out, placed, settings, force=force, report=report),
+            lambda report: save_pack(
+                scan, out, placed, settings, force=force, report=report, gui=gui
+            ),
             self._saved,
             lambda exc: self._failed("The pack was not saved", exc),
             progress=True,
@@ -666,3 +663,4 @@ class ScanFitTool(QObject):
         if self.picker is not None:
             self.picker.detach()
             self.picker = None
+        self.gui_call.close()

@@ -7,7 +7,6 @@ for drawing.  Units mm.
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -16,6 +15,7 @@ import numpy as np
 
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
+from workbench.qt.gui_call import GuiCall
 from workbench.qt.tools.scan_fit.state import FitView, OpenedScan, ScanFitSettings
 
 if TYPE_CHECKING:
@@ -166,41 +166,44 @@ def save_pack(
     *,
     force: bool = False,
     report: Callable[[str, float], None] | None = None,
+    gui: GuiCall | None = None,
 ) -> tuple[FitView, list[Path]]:
-    """Worker: :func:`fit_scan_pack` with the tool's inputs; returns the fit and the files.
+    """Worker: the scan-fit pipeline (:func:`~workbench.pipelines.scan_fit.fit_scan_to_folder`,
+    as ``workbench fit-scan``) with the tool's inputs; returns the fit and the files.
 
-    The placed landmarks go to the service as a landmark file in the scan
-    file's units (it scales them as it scales the scan) and are copied into
-    the pack as :data:`PLACED_FILE` (scan frame, mm).
+    The pack holds what the command line writes, ``fit_report.pdf`` and its
+    pictures included (drawn on the GUI thread when ``gui`` is given).  The
+    placed landmarks (scan frame, mm) go to the fit as they are and are
+    copied into the pack as :data:`PLACED_FILE`.
     """
     from workbench.io.markups import write_mrk_json
-    from workbench.services.scan_fit.pack import fit_scan_pack
+    from workbench.pipelines.scan_fit import fit_scan_to_folder, write_scan_fit_report
 
     seeds = placed if placed is not None and len(placed) else None
-    with tempfile.TemporaryDirectory(prefix="workbench-scan-") as tmp:
-        lm_file = None
+    pictures = (
+        write_scan_fit_report
+        if gui is None
+        else gui.wrap(write_scan_fit_report, report, "writing fit_report.pdf (pictures)")
+    )
+
+    def draw(folder: Path, result: ScanFit, name: str, note: Callable[[str], None]) -> list[Path]:
+        files = list(pictures(folder, result, name, note))
         if seeds is not None:
-            lm_file = Path(tmp) / f"{scan.path.stem}_skin_landmarks.mrk.json"
-            k = 1.0 / scan.factor
-            write_mrk_json(lm_file, seeds.transformed(np.diag([k, k, k, 1.0])), "RAS")
-
-        def extra(folder: Path, _result: ScanFit) -> list[Path]:
-            if seeds is None:
-                return []
             write_mrk_json(folder / PLACED_FILE, seeds, "RAS")
-            return [folder / PLACED_FILE]
+            files.append(folder / PLACED_FILE)
+        return files
 
-        result, files = fit_scan_pack(
-            scan.path,
-            out,
-            units=scan.units,
-            scale=scan.scale,
-            landmarks=lm_file,
-            sex=settings.sex,
-            table=settings.table,
-            build=settings.build,
-            force=force,
-            progress=_fraction_reporter(report),
-            extra=extra,
-        )
+    result, files = fit_scan_to_folder(
+        scan.path,
+        out,
+        landmarks=seeds,
+        draw=draw,
+        units=scan.units,
+        scale=scan.scale,
+        sex=settings.sex,
+        table=settings.table,
+        build=settings.build,
+        force=force,
+        progress=_fraction_reporter(report),
+    )
     return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds)), list(files)
