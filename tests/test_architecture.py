@@ -115,3 +115,39 @@ class _FakeGraph:
 
     def find_modules_directly_imported_by(self, module: str) -> set[str]:
         return self.edges[module]
+
+
+#: the size a newcomer can read in one go (issue 32): lines per module, per function
+MAX_MODULE_LINES = 800
+MAX_FUNCTION_LINES = 150
+
+
+def _too_long(root: Path) -> tuple[list[str], list[str]]:
+    """Modules over :data:`MAX_MODULE_LINES` lines and functions (def line to last line,
+    docstring included) over :data:`MAX_FUNCTION_LINES` below ``root``."""
+    import ast
+
+    modules, functions = [], []
+    for path in sorted(root.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if text.count("\n") > MAX_MODULE_LINES:
+            modules.append(f"{path.relative_to(root.parent)} ({text.count(chr(10))} lines)")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                n = (node.end_lineno or node.lineno) - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    functions.append(f"{path.relative_to(root.parent)}:{node.name} ({n} lines)")
+    return modules, functions
+
+
+def test_modules_and_functions_fit_on_a_few_screens(tmp_path: Path) -> None:
+    modules, functions = _too_long(REPO / "workbench")
+    assert modules == [], "modules over 800 lines: " + ", ".join(modules)
+    assert functions == [], "functions over 150 lines: " + ", ".join(functions)
+    # the check itself finds a long function and a long module
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION_LINES))
+    (pkg / "long.py").write_text(f"def f():\n{body}\n" + "\n" * MAX_MODULE_LINES, "utf-8")
+    modules, functions = _too_long(pkg)
+    assert len(modules) == 1 and functions == ["pkg/long.py:f (151 lines)"]
