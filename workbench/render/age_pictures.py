@@ -32,6 +32,7 @@ import numpy as np
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.model.template import TemplateHead
+from workbench.render.panels import each_panel, panel_row
 from workbench.render.snapshots import _prefer_headless_gl, to_polydata
 
 if TYPE_CHECKING:
@@ -137,7 +138,6 @@ def render_compare(
     left to right.
     """
     _prefer_headless_gl()
-    import pyvista as pv
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -148,16 +148,9 @@ def render_compare(
         (source, "right side", source_label),
         (aged, "right side", aged_label),
     ]
-    plotter = pv.Plotter(
-        off_screen=True,
-        shape=(1, len(panels)),
-        window_size=[size[0] * len(panels), size[1]],
-        border=False,
-    )
+    plotter = panel_row(len(panels), size)
     try:
-        for col, (head, view, label) in enumerate(panels):
-            plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        for col, (head, view, label) in each_panel(plotter, panels):
             for mesh, colour in _head_layers(head):
                 plotter.add_mesh(
                     to_polydata(mesh, normals=True),
@@ -227,7 +220,6 @@ def render_growth_map(
     if not lim > 0:
         raise ValueError(f"limit must be positive, got {lim}")
     _prefer_headless_gl()
-    import pyvista as pv
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -236,16 +228,9 @@ def render_growth_map(
     poly.point_data["growth_mm"] = values
     ghost = to_polydata(source.skin, normals=True)
     eyes = aged.meshes.get("eyes")
-    plotter = pv.Plotter(
-        off_screen=True,
-        shape=(1, len(VIEWS)),
-        window_size=[size[0] * len(VIEWS), size[1]],
-        border=False,
-    )
+    plotter = panel_row(len(VIEWS), size)
     try:
-        for col, view in enumerate(VIEWS):
-            plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        for col, view in each_panel(plotter, VIEWS):
             last = col == len(VIEWS) - 1
             bar: ScalarBarArgs = {
                 "title": "growth, mm",

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from workbench.core.mesh import Mesh
+from workbench.render.panels import each_panel, panel_row
 from workbench.render.snapshots import _AXES, _prefer_headless_gl, to_polydata, view_directions
 
 if TYPE_CHECKING:
@@ -62,7 +63,6 @@ def render_heatmap(
     else:
         anterior, superior = frame
     _prefer_headless_gl()
-    import pyvista as pv
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -70,16 +70,9 @@ def render_heatmap(
     poly.point_data["distance_mm"] = values
     centre = mesh.bounds.mean(axis=0)
     radius = float(np.linalg.norm(mesh.extent))
-    plotter = pv.Plotter(
-        off_screen=True,
-        shape=(1, len(views)),
-        window_size=[size[0] * len(views), size[1]],
-        border=False,
-    )
+    plotter = panel_row(len(views), size)
     try:
-        for col, view in enumerate(views):
-            plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        for col, view in each_panel(plotter, views):
             bar: ScalarBarArgs | None = None
             if col == len(views) - 1:  # one bar, in the last panel
                 bar = {

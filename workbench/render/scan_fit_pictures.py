@@ -32,6 +32,7 @@ import numpy as np
 
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
+from workbench.render.panels import each_panel, panel_row
 from workbench.render.snapshots import _prefer_headless_gl, to_polydata
 
 if TYPE_CHECKING:
@@ -110,7 +111,6 @@ def render_distance_views(
     if not limit > 0:
         raise ValueError(f"limit must be positive, got {limit}")
     _prefer_headless_gl()
-    import pyvista as pv
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -124,16 +124,9 @@ def render_distance_views(
     half_height = 0.5 * float(np.max(bounds[1] - bounds[0])) * 1.08
     clim = [-limit, limit] if signed else [0.0, limit]
     culling = _inner_side(scan)
-    plotter = pv.Plotter(
-        off_screen=True,
-        shape=(1, len(views)),
-        window_size=[size[0] * len(views), size[1]],
-        border=False,
-    )
+    plotter = panel_row(len(views), size)
     try:
-        for col, view in enumerate(views):
-            plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        for col, view in each_panel(plotter, views):
             last = col == len(views) - 1
             bar: ScalarBarArgs = {
                 "title": "mm",

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.mesh import Mesh
+from workbench.render.panels import each_panel, panel_row
 
 # anterior and superior directions of each named frame (head frame: x to the
 # subject's left, y up, z forward)
@@ -93,16 +94,9 @@ def render_surfaces(
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    plotter = pv.Plotter(
-        off_screen=True,
-        shape=(1, len(views)),
-        window_size=[size[0] * len(views), size[1]],
-        border=False,
-    )
+    plotter = panel_row(len(views), size)
     try:
-        for col, view in enumerate(views):
-            plotter.subplot(0, col)
-            plotter.set_background("white")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        for _col, view in each_panel(plotter, views):
             for mesh, colour, opacity in layers:
                 plotter.add_mesh(
                     to_polydata(mesh),
