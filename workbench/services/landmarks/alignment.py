@@ -26,6 +26,16 @@ hand-placed landmarks when there are fewer than three):
 
 With three or more seed landmarks whose codes the reference also carries,
 the similarity is solved from them directly (Umeyama) and only refined.
+
+Why not :func:`workbench.core.rigid_search.search_pose` (the skull
+registration's and the scan fit's search)?  Its samples, rotations and hint
+come from the same module, but its robust, scaled pose is made for a skull or
+a face scan.  On a CT's whole skin (head and neck) without hints it shrank
+the head to 0.80-0.81 of its size; the median distance of the suggested skin
+landmarks to the truth (``tests/data/soft_tissue_truth``, both reference
+heads, 2026-12-06) was 43-82 mm on the Visible Human male (this ICP: 7-12 mm)
+and 54-80 mm on the female (this ICP: 35 mm); on headsq, whose skin holds an
+airway tube, both miss (39-42 mm).  So the landmark transfer keeps this ICP.
 """
 
 from __future__ import annotations
