@@ -136,8 +136,8 @@ def test_z_scores_beyond_two_are_highlighted(qtbot):
 
 
 def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
-    from workbench.qt.tools.age import drawing
-    from workbench.qt.tools.age.drawing import DISTANCE_TITLE, OVERLAY_OPACITY
+    from workbench.render.visuals.heads import DISTANCE_TITLE, OVERLAY_OPACITY
+    from workbench.render.visuals.update import mapper_dataset
 
     w = ageing
     tool = w.age
@@ -148,7 +148,7 @@ def test_overlay_colours_the_aged_skin_by_displacement(ageing, qtbot):
     assert np.allclose(tool.offset(), 0)
     assert np.allclose(tool.drawn_points("before"), src)  # in place, translucent
     assert tool.actors()["before"].GetProperty().GetOpacity() == pytest.approx(OVERLAY_OPACITY)
-    data = drawing.drawn_data(tool.actors()["after"])
+    data = mapper_dataset(tool.actors()["after"])
     from vtkmodules.util.numpy_support import vtk_to_numpy
 
     shown = vtk_to_numpy(data.GetPointData().GetArray(DISTANCE_TITLE))

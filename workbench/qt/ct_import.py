@@ -49,15 +49,14 @@ from PySide6.QtWidgets import (
 
 from workbench.core.cancel import CancelToken
 from workbench.qt.workers import show_fraction
-from workbench.render.snapshots import to_polydata
+from workbench.render.visuals.skull import add_iso_part
+from workbench.render.visuals.style import set_view_background
 from workbench.services.ct.ct_preview import CtPreview, PreviewSurface
 from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from workbench.qt.hosts import CtImportHost
 
-BONE = (0.93, 0.89, 0.80)
-DEBRIS = (0.55, 0.57, 0.62)
 PRESET_COLOURS = {"bone": QColor(235, 225, 200), "skin": QColor(232, 170, 140)}
 LOAD, PREVIEW, EXTRACT = "ct-load", "ct-preview", "open"
 DEBOUNCE_MS = 30
@@ -193,7 +192,7 @@ class CtImportDialog(QDialog):
         self.resize(900, 600)
 
         self.plotter = QtInteractor(self, auto_update=False)
-        self.plotter.set_background("#2b2f36", top="#59606b")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        set_view_background(self.plotter)
         self.plotter.clear_events_for_key("q")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         self.plotter.setMinimumSize(360, 300)
 
@@ -444,21 +443,9 @@ class CtImportDialog(QDialog):
         if self.state == "closed":
             return
         plotter = self.plotter
-        for name, mesh, colour, opacity in (
-            ("ct_preview", surface.mesh, BONE, 1.0),
-            ("ct_debris", surface.debris, DEBRIS, 0.45),
-        ):
+        for name, mesh in (("ct_preview", surface.mesh), ("ct_debris", surface.debris)):
             if mesh.n_faces:
-                plotter.add_mesh(
-                    to_polydata(mesh),
-                    color=colour,
-                    opacity=opacity,
-                    smooth_shading=True,
-                    name=name,
-                    pickable=False,
-                    render=False,
-                    reset_camera=False,
-                )
+                add_iso_part(plotter, name, mesh)  # bone colour; the debris grey, translucent
             else:
                 plotter.remove_actor(name, render=False)  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
         if surface.empty:

@@ -24,6 +24,9 @@ which re-fits the face in the worker.  The fit drawn is the session's
 (:class:`workbench.qt.session.Session`); the guides are the reconstruct
 panel's list (:class:`workbench.qt.hosts.GuideRows`).  Elsewhere the left button pans and the
 wheel zooms (the view never rotates by accident).
+
+The surfaces, lines, points and labels themselves are made by
+:mod:`workbench.render.visuals`; this view decides what is drawn where and when.
 """
 
 from __future__ import annotations
@@ -44,8 +47,13 @@ from PySide6.QtWidgets import (
 )
 
 from workbench.qt.lod import decimated, with_normals
-from workbench.qt.scene import SMOOTH, is_closed
+from workbench.qt.scene import is_closed
 from workbench.render.snapshots import to_polydata
+from workbench.render.visuals import markers, update
+from workbench.render.visuals.face import add_guide_face
+from workbench.render.visuals.markers import GUIDE, PREDICTION
+from workbench.render.visuals.skull import add_skull
+from workbench.render.visuals.style import set_view_background
 from workbench.services.guides.classic import AXES, Guide, guides_from_prediction
 
 if TYPE_CHECKING:
@@ -57,9 +65,6 @@ if TYPE_CHECKING:
 
 GRAB_RADIUS_PX = 8.0
 PRIORITY = 10.0
-GUIDE = (0.85, 0.10, 0.55)
-PREDICTION = (0.10, 0.75, 0.85)
-MEASURE = (0.95, 0.80, 0.15)
 #: vertical extent of a vline, horizontal extent of an hline (head frame, mm)
 VLINE_Y = (-80.0, 10.0)
 HLINE_X = (-40.0, 40.0)
@@ -141,7 +146,7 @@ class GuideView(QWidget):
         # (SceneView.tune)
         self._render_window().SetMultiSamples(0)
         self.plotter.enable_anti_aliasing("fxaa")
-        self.plotter.set_background("#1f2329")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        set_view_background(self.plotter, guide=True)
         self.plotter.enable_parallel_projection()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
         self.plotter.enable_2d_style()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
         self.plotter.clear_events_for_key("q")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
@@ -240,25 +245,9 @@ class GuideView(QWidget):
             self.pages.setCurrentWidget(self.placeholder)
             return
         if self._skull_light is not None:
-            p.add_mesh(
-                self._skull_light,
-                color=(0.93, 0.89, 0.80),
-                **SMOOTH,
-                pickable=False,
-                render=False,
-                name="gv_skull",
-            )
-        face = to_polydata(fit.recon.head.skin, normals=True)
-        self._face_actor = p.add_mesh(
-            face,
-            color=(0.91, 0.72, 0.60),
-            opacity=0.45,
-            **SMOOTH,
-            pickable=False,
-            render=False,
-            name="gv_face",
-        )
-        self._face_actor.GetProperty().BackfaceCullingOn()  # blended unsorted (no OIT)
+            add_skull(p, self._skull_light, name="gv_skull", pickable=False)
+        # translucent, back faces culled: blended unsorted (no OIT)
+        self._face_actor = add_guide_face(p, fit.recon.head.skin)
         self._draw_guides()
         self.drawn_fit = fit
         if reset_camera:
@@ -341,7 +330,6 @@ class GuideView(QWidget):
         """The skull measurements' places, yellow, each with its short label."""
         if not self._marks:
             return
-        p = self.plotter
         pts = np.array([at for _label, at, _how in self._marks])
         # brought to the front of the head along the view (parallel projection: the
         # place on screen is the same), so the translucent face cannot hide them
@@ -349,31 +337,13 @@ class GuideView(QWidget):
             pts[:, 2] = self._front() - 1.0
         else:
             pts[:, 0] = 149.0
-        p.add_points(
-            pts,
-            color=MEASURE,
-            point_size=9,
-            render_points_as_spheres=True,
-            pickable=False,
-            render=False,
-            name="gv_marks",
-        )
         # one label per kind and side (the two canine points of a side share a place)
         labels: dict[tuple[str, int], np.ndarray] = {}
         for (label, at, _how), shown in zip(self._marks, pts, strict=True):
             side = int(np.sign(round(at[0], 1))) if self.side == "frontal" else 0
             labels.setdefault((label, side), shown)
-        p.add_point_labels(
-            np.array(list(labels.values())),
-            [label for label, _side in labels],
-            font_size=9,
-            text_color=MEASURE,
-            shape_opacity=0.0,
-            show_points=False,
-            always_visible=True,
-            pickable=False,
-            render=False,
-            name="gv_mark_labels",
+        markers.add_measure_marks(
+            self.plotter, pts, np.array(list(labels.values())), [label for label, _side in labels]
         )
 
     def _add_set(
@@ -385,9 +355,6 @@ class GuideView(QWidget):
         *,
         track: bool,
     ) -> None:
-        import pyvista as pv
-
-        p = self.plotter
         lines: list[np.ndarray] = []
         points: list[np.ndarray] = []
         slots: list[tuple[int, str, int, int]] = []
@@ -402,43 +369,17 @@ class GuideView(QWidget):
             slots.append((row, "lines" if len(seg) == 2 else "points", first, len(seg)))
             label_points.append(seg[0] if g.kind == "hline" else seg[-1])
             label_text.append(g.id)
-        actors = {}
-        if lines:
-            pts = np.vstack(lines)
-            n = len(lines)
-            cells = np.column_stack([np.full(n, 2), 2 * np.arange(n), 2 * np.arange(n) + 1])
-            actors["lines"] = p.add_mesh(
-                pv.PolyData(pts, lines=cells.ravel()),
-                color=colour,
-                line_width=width,
-                pickable=False,
-                render=False,
-                name=f"{prefix}_lines",
-            )
-        if points:
-            actors["points"] = p.add_points(
-                np.vstack(points),
-                color=colour,
-                point_size=14,
-                render_points_as_spheres=True,
-                pickable=False,
-                render=False,
-                name=f"{prefix}_points",
-            )
+        actors = markers.add_guide_set(self.plotter, lines, points, colour, width, prefix)
         if track:
             self._guide_slots = {row: (actors[kind], first, n) for row, kind, first, n in slots}
             if label_points:
-                p.add_point_labels(
+                markers.add_flat_labels(
+                    self.plotter,
                     np.array(label_points),
                     label_text,
-                    font_size=10,
-                    text_color=colour,
-                    shape_opacity=0.0,
-                    show_points=False,
-                    always_visible=True,
-                    pickable=False,
-                    render=False,
-                    name=f"{prefix}_labels",
+                    colour,
+                    10,
+                    f"{prefix}_labels",
                 )
 
     def _reset_camera(self) -> None:
@@ -481,12 +422,7 @@ class GuideView(QWidget):
         """New skin vertex positions (head frame) during a drag; no actor is re-created."""
         if self._face_actor is None:
             return
-        data = self._face_actor.GetMapper().GetInput()
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        pts = vtk_to_numpy(data.GetPoints().GetData())
-        pts[:] = skin_head
-        data.GetPoints().Modified()
+        update.set_input_points(self._face_actor, skin_head)
         self.plotter.update()
 
     def show_dragged(self, guide: Guide) -> None:
@@ -498,13 +434,8 @@ class GuideView(QWidget):
         seg = self._segment(guide)
         if slot is None or seg is None or len(seg) != slot[2]:
             return
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        actor, first, n = slot
-        data = actor.GetMapper().GetInput()
-        pts = vtk_to_numpy(data.GetPoints().GetData())
-        pts[first : first + n] = seg
-        data.GetPoints().Modified()
+        actor, first, _n = slot
+        update.set_input_points(actor, seg, first)
         self.plotter.update()
 
     # ------------------------------------------------------------ mouse

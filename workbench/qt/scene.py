@@ -16,7 +16,9 @@ Renders are coalesced: :meth:`SceneView.request_render` schedules one render
 on the next event-loop turn however many layers changed.
 :meth:`SceneView.update_points` moves a layer's vertices in place (no actor
 re-creation) for interactive previews.  The scene never writes the case; it
-only draws what the window hands it.
+only draws what the window hands it.  What a layer looks like (colours, sizes,
+colour bars) is the render layer's (:mod:`workbench.render.visuals`); the scene
+decides when to draw, which layer an actor belongs to, and removes actors.
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ from PySide6.QtCore import QObject, QTimer, Signal
 from PySide6.QtWidgets import QWidget
 
 from workbench.core.mesh import Mesh
-from workbench.render.snapshots import to_polydata
+from workbench.render.visuals import face, markers, skull, update
+from workbench.render.visuals import muscles as muscle_visuals
+from workbench.render.visuals.style import set_view_background
 
 #: layer name → menu title (also the row order of the Layers dock)
 LAYERS = {
@@ -45,34 +49,6 @@ LAYERS = {
 HIDDEN_BY_DEFAULT = frozenset({"muscles"})
 #: starting opacity per layer (1.0 where not listed)
 DEFAULT_OPACITY = {"face": 0.6}
-BONE = (0.93, 0.89, 0.80)
-#: smooth shading from the point normals a mesh brings (``to_polydata(mesh,
-#: normals=True)``): pyvista's ``smooth_shading=True`` would run VTK's normals
-#: filter on the GUI thread each time (80 ms for a 100k-triangle skull)
-SMOOTH: dict[str, Any] = {"smooth_shading": False, "interpolation": "phong"}
-SKIN = (0.91, 0.72, 0.60)
-STATUS_COLOURS = {"placed": (0.10, 0.70, 0.25), "suggested": (1.0, 0.55, 0.0)}
-SELECTED = (1.0, 0.95, 0.1)
-DOWEL = (0.15, 0.35, 0.85)
-GUIDE = (0.85, 0.10, 0.55)
-MUSCLE = (0.72, 0.12, 0.12)
-MUSCLE_FIBRE = (0.45, 0.04, 0.05)
-
-
-#: colour bars: vertical, inside the view's right edge (titles included), and
-#: added without pyvista's immediate render (the next paint draws them; that
-#: render cost ~85 ms of the GUI thread on top of the paint)
-SCALAR_BAR: dict[str, Any] = {
-    "vertical": True,
-    "render": False,
-    "position_x": 0.82,
-    "position_y": 0.25,
-    "width": 0.07,
-    "height": 0.5,
-    "title_font_size": 14,
-    "label_font_size": 12,
-}
-
 #: OpenGL renderer strings of software rasterisers (no graphics card in use)
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
@@ -147,7 +123,7 @@ class SceneView(QObject):
         renderer = getattr(plotter, "renderer", None)
         if renderer is not None:
             renderer.SetUseOIT(False)
-        plotter.set_background("#2b2f36", top="#59606b")
+        set_view_background(plotter)
         window = getattr(plotter, "render_window", None)
         self._end_observer = (
             None if window is None else window.AddObserver("EndEvent", self._rendered)
@@ -302,25 +278,8 @@ class SceneView(QObject):
         actors = self._actors.get(layer)
         if not actors:
             raise KeyError(f"layer {layer!r} has nothing drawn")
-        self._move_points(actors[0], points)
+        update.move_points(actors[0], points)
         self.request_render()
-
-    @staticmethod
-    def _move_points(actor: Any, points: np.ndarray) -> None:
-        data = _drawn_data(actor)
-        new = np.asarray(points, dtype=float).reshape(-1, 3)
-        vtk_points = data.GetPoints()
-        if vtk_points is None or new.shape[0] != vtk_points.GetNumberOfPoints():
-            raise ValueError(f"expected {data.GetNumberOfPoints()} points, got {new.shape[0]}")
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        vtk_to_numpy(vtk_points.GetData())[:] = new
-        vtk_points.Modified()
-        normals = data.GetPointData().GetNormals()
-        if normals is not None and data.GetPolys().IsHomogeneous() == 3:  # triangles only
-            vtk_to_numpy(normals)[:] = _vertex_normals(new, data)
-            normals.Modified()
-        data.Modified()
 
     def reset_camera(
         self, anterior: Sequence[float] | None = None, superior: Sequence[float] | None = None
@@ -344,14 +303,7 @@ class SceneView(QObject):
         self.clear("skull")
         if mesh is None:
             return None
-        actor = self.plotter.add_mesh(
-            to_polydata(mesh, normals=True),
-            color=BONE,
-            **SMOOTH,
-            pickable=True,
-            name="layer_skull",
-            render=False,
-        )
+        actor = skull.add_skull(self.plotter, mesh, name="layer_skull", pickable=True)
         self._add("skull", actor)
         self.request_render()
         return actor
@@ -365,79 +317,25 @@ class SceneView(QObject):
     ) -> None:
         """Placed (green) and suggested (orange) points; the selected one in yellow."""
         self.clear("landmarks")
-        radius = self._marker_size()
-        for status, colour in STATUS_COLOURS.items():
-            mask = np.array([s == status for s in statuses], dtype=bool)
-            if mask.any():
-                actor = self.plotter.add_points(
-                    np.asarray(points)[mask],
-                    color=colour,
-                    point_size=radius,
-                    render_points_as_spheres=True,
-                    pickable=False,
-                    render=False,
-                    name=f"layer_landmarks_{status}",
-                )
-                self._add("landmarks", actor)
+        size = self._marker_size()
+        p = self.plotter
+        drawn = markers.add_status_markers(
+            p, points, statuses, markers.STATUS_COLOURS, size, "layer_landmarks_"
+        )
         if selected is not None and np.isfinite(selected).all():
-            actor = self.plotter.add_points(
-                np.asarray(selected, float)[None],
-                color=SELECTED,
-                point_size=radius * 1.8,
-                pickable=False,
-                render_points_as_spheres=True,
-                render=False,
-                name="layer_landmarks_selected",
-            )
-            self._add("landmarks", actor)
+            drawn.append(markers.add_selected(p, selected, size, "layer_landmarks_selected"))
             if label:
-                labels = self.plotter.add_point_labels(
-                    np.asarray(selected, float)[None],
-                    [label],
-                    font_size=14,
-                    point_size=1,
-                    shape_opacity=0.6,
-                    always_visible=True,
-                    pickable=False,
-                    render=False,
-                    name="layer_landmarks_label",
-                )
-                self._add("landmarks", labels)
+                drawn.append(markers.add_label(p, selected, label, "layer_landmarks_label"))
+        for actor in drawn:
+            self._add("landmarks", actor)
         self.request_render()
 
     def show_dowels(self, origins: np.ndarray, tips: np.ndarray) -> None:
         """Each dowel as a line from its skull origin to its tip, with a tip sphere."""
-        import pyvista as pv
-
         self.clear("dowels")
         if len(origins):
-            n = len(origins)
-            pts = np.vstack([origins, tips])
-            lines = np.column_stack([np.full(n, 2), np.arange(n), np.arange(n) + n]).ravel()
-            poly = pv.PolyData(pts, lines=lines)
-            self._add(
-                "dowels",
-                self.plotter.add_mesh(
-                    poly,
-                    color=DOWEL,
-                    line_width=4,
-                    pickable=False,
-                    render=False,
-                    name="layer_dowels_pegs",
-                ),
-            )
-            self._add(
-                "dowels",
-                self.plotter.add_points(
-                    np.asarray(tips),
-                    color=DOWEL,
-                    point_size=self._marker_size() * 0.8,
-                    render_points_as_spheres=True,
-                    pickable=False,
-                    render=False,
-                    name="layer_dowels_tips",
-                ),
-            )
+            for actor in markers.add_dowels(self.plotter, origins, tips, self._marker_size()):
+                self._add("dowels", actor)
         self.request_render()
 
     def show_face(
@@ -447,20 +345,8 @@ class SceneView(QObject):
         self.clear("face")
         if mesh is None:
             return
-        poly = to_polydata(mesh, normals=True)
-        kw: dict[str, Any] = {"color": SKIN}
-        if scalars is not None:
-            poly.point_data[title or "mm"] = np.asarray(scalars, float)
-            kw = {
-                "scalars": title or "mm",
-                "cmap": "viridis",
-                "scalar_bar_args": dict(SCALAR_BAR, title=title or "mm"),
-            }
-        actor = self.plotter.add_mesh(
-            poly, **SMOOTH, pickable=False, render=False, name="layer_face", **kw
-        )
-        actor.GetProperty().BackfaceCullingOn()  # translucent: see SetUseOIT above
-        self._add("face", actor)
+        # translucent: back faces culled (see SetUseOIT above)
+        self._add("face", face.add_face(self.plotter, mesh, scalars, title))
         self.request_render()
 
     def show_truth(
@@ -470,117 +356,40 @@ class SceneView(QObject):
         self.clear("truth")
         if mesh is None:
             return
-        poly = to_polydata(mesh, normals=True)
-        kw: dict[str, Any] = {"color": (0.7, 0.7, 0.75)}
-        if signed_mm is not None:
-            poly.point_data["signed mm"] = np.asarray(signed_mm, float)
-            kw = {
-                "scalars": "signed mm",
-                "cmap": "RdBu_r",
-                "clim": (-limit_mm, limit_mm),
-                "nan_color": (0.6, 0.6, 0.6),
-                "scalar_bar_args": dict(SCALAR_BAR, title="signed mm"),
-            }
-        actor = self.plotter.add_mesh(
-            poly, **SMOOTH, pickable=False, render=False, name="layer_truth", **kw
-        )
-        actor.GetProperty().BackfaceCullingOn()  # translucent: see SetUseOIT above
-        self._add("truth", actor)
+        self._add("truth", face.add_truth(self.plotter, mesh, signed_mm, limit_mm))
         self.request_render()
 
     def show_guides(
         self, segments: list[tuple[np.ndarray, np.ndarray]], points: np.ndarray
     ) -> None:
         """Guide lines (pairs of end points) and guide points, input frame."""
-        import pyvista as pv
-
         self.clear("guides")
-        if segments:
-            pts = np.array([p for seg in segments for p in seg], float)
-            n = len(segments)
-            lines = np.column_stack([np.full(n, 2), 2 * np.arange(n), 2 * np.arange(n) + 1]).ravel()
-            self._add(
-                "guides",
-                self.plotter.add_mesh(
-                    pv.PolyData(pts, lines=lines),
-                    color=GUIDE,
-                    line_width=3,
-                    pickable=False,
-                    render=False,
-                    name="layer_guides_lines",
-                ),
-            )
-        if len(points):
-            self._add(
-                "guides",
-                self.plotter.add_points(
-                    np.asarray(points, float),
-                    color=GUIDE,
-                    point_size=self._marker_size(),
-                    render_points_as_spheres=True,
-                    pickable=False,
-                    render=False,
-                    name="layer_guides_points",
-                ),
-            )
+        for actor in markers.add_guides(self.plotter, segments, points, self._marker_size()):
+            self._add("guides", actor)
         self.request_render()
 
     def show_muscles(self, muscles: Sequence[Sequence[np.ndarray]]) -> tuple[int, int]:
         """Muscle grids as red sheets with darker fibre lines (mm, input frame).
 
         ``muscles`` holds, per muscle, its grid rows as ``(n_i, 3)`` arrays in
-        order (fixed end → free end for a linear muscle, outer → inner ring
-        for a sphincter; see :class:`workbench.model.muscles.MuscleGrid`).
-        Rows are resampled to a common point count; consecutive rows span the
-        sheet, and the rows plus the columns across them are drawn as lines.
+        order (see :mod:`workbench.render.visuals.muscles`).
         Returns ``(number of sheet triangles, number of polylines)``.
         """
-        import pyvista as pv
-
         self.clear("muscles")
-        points, faces, lines = _muscle_geometry(muscles)
-        if not len(points):
+        actors, n_faces, n_lines = muscle_visuals.add_muscles(self.plotter, muscles)
+        if not actors:
             return 0, 0
-        if len(faces):
-            # normals from numpy (Mesh.vertex_normals), not VTK's normals
-            # filter: that took ~50 ms of the GUI thread per fit
-            sheet = to_polydata(Mesh(points, faces), normals=True)
-            self._add(
-                "muscles",
-                self.plotter.add_mesh(
-                    sheet,
-                    color=MUSCLE,
-                    **SMOOTH,
-                    pickable=False,
-                    render=False,
-                    name="layer_muscles_sheets",
-                ),
-            )
-        if lines:
-            cells = np.concatenate([np.r_[len(line), line] for line in lines])
-            fibres = pv.PolyData(points, lines=cells)
-            self._add(
-                "muscles",
-                self.plotter.add_mesh(
-                    fibres,
-                    color=MUSCLE_FIBRE,
-                    line_width=2.5,
-                    pickable=False,
-                    render=False,
-                    name="layer_muscles_fibres",
-                ),
-            )
+        for actor in actors:
+            self._add("muscles", actor)
         self.request_render()
-        return len(faces), len(lines)
+        return n_faces, n_lines
 
     def layer_points(self, layer: str) -> np.ndarray:
         """The drawn points of ``layer``'s first actor (mm, input frame; a copy)."""
         actors = self._actors.get(layer)
         if not actors:
             raise KeyError(f"layer {layer!r} has nothing drawn")
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        return np.array(vtk_to_numpy(_drawn_data(actors[0]).GetPoints().GetData()), dtype=float)
+        return update.drawn_points(update.source_data(actors[0]))
 
     def move_layer_points(self, layer: str, points: np.ndarray) -> None:
         """Move the points of every actor of ``layer`` in place (they share one layout,
@@ -589,96 +398,8 @@ class SceneView(QObject):
         if not actors:
             raise KeyError(f"layer {layer!r} has nothing drawn")
         for actor in actors:
-            self._move_points(actor, points)
+            update.move_points(actor, points)
         self.request_render()
 
     def _marker_size(self) -> float:
-        return 12.0
-
-
-def _drawn_data(actor: Any) -> Any:
-    """The dataset ``actor`` was drawn from (the one to move points in).
-
-    A surface coloured by scalars reaches its mapper through a pass-through
-    algorithm of pyvista's (it sets the active scalars), whose output stays
-    empty until the first render and is a shallow copy after it: the data is
-    the producer's at the top of the mapper's input pipeline.
-    """
-    mapper = actor.GetMapper()
-    algorithm = mapper.GetInputAlgorithm()
-    while (
-        algorithm is not None
-        and algorithm.GetNumberOfInputPorts() > 0
-        and algorithm.GetNumberOfInputConnections(0) > 0
-    ):
-        algorithm = algorithm.GetInputAlgorithm(0, 0)
-    data = algorithm.GetOutputDataObject(0) if algorithm is not None else None
-    return data if data is not None else mapper.GetInput()
-
-
-def _muscle_geometry(
-    muscles: Sequence[Sequence[np.ndarray]],
-) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
-    """Points, sheet triangles and fibre polylines (point ids) of muscle grids."""
-    pts: list[np.ndarray] = []
-    tris: list[np.ndarray] = []
-    lines: list[np.ndarray] = []
-    offset = 0
-    for rows in muscles:
-        grid = _resampled_grid([np.asarray(r, float).reshape(-1, 3) for r in rows])
-        if grid is None:
-            continue
-        n_rows, n_cols = grid.shape[:2]
-        ids = offset + np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
-        pts.append(grid.reshape(-1, 3))
-        if n_rows > 1 and n_cols > 1:
-            a, b = ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel()
-            c, d = ids[1:, 1:].ravel(), ids[1:, :-1].ravel()
-            tris += [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
-        lines += [ids[i] for i in range(n_rows) if n_cols > 1]
-        lines += [ids[:, j] for j in range(n_cols) if n_rows > 1]
-        offset += n_rows * n_cols
-    points = np.vstack(pts) if pts else np.zeros((0, 3))
-    faces = np.vstack(tris) if tris else np.zeros((0, 3), np.int64)
-    return points, faces, lines
-
-
-def _resampled_grid(rows: list[np.ndarray]) -> np.ndarray | None:
-    """Rows of unequal length → ``(n_rows, n_cols, 3)``, each row resampled by arc length."""
-    rows = [r for r in rows if len(r)]
-    if not rows:
-        return None
-    n_cols = max(len(r) for r in rows)
-    out = np.empty((len(rows), n_cols, 3))
-    for i, row in enumerate(rows):
-        if len(row) == n_cols:
-            out[i] = row
-            continue
-        if len(row) == 1:
-            out[i] = row[0]
-            continue
-        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(row, axis=0), axis=1))]
-        t = np.linspace(0.0, s[-1], n_cols)
-        out[i] = np.column_stack([np.interp(t, s, row[:, k]) for k in range(3)])
-    return out
-
-
-def _vertex_normals(points: np.ndarray, data: Any) -> np.ndarray:
-    """Unit vertex normals of the triangles of ``data`` at ``points``.
-
-    Area-weighted, as :attr:`Mesh.vertex_normals` (the normals the surface
-    was first drawn with), so the shading does not jump on the first update.
-    """
-    from vtkmodules.util.numpy_support import vtk_to_numpy
-
-    cells = vtk_to_numpy(data.GetPolys().GetConnectivityArray()).reshape(-1, 3)
-    t = points[cells]
-    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])  # length = 2 × area
-    n = len(points)
-    flat = cells.ravel()
-    # float64 (bincount with weights), whatever numpy's stubs say
-    out: np.ndarray = np.column_stack(
-        [np.bincount(flat, np.repeat(cross[:, k], 3), minlength=n) for k in range(3)]
-    )
-    out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
-    return out
+        return markers.MARKER_PX

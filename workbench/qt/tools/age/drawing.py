@@ -6,17 +6,18 @@ the heads and the caption in the 3D view.  The aged skin has the source's vertic
 triangles, so it is built once and its points are moved in place for each age.
 
 Units mm, each head in its own Frankfort frame; the actors are the tool's own, not
-:data:`workbench.qt.scene.LAYERS`.
+:data:`workbench.qt.scene.LAYERS`.  How the heads look is
+:mod:`workbench.render.visuals.heads`; this part decides when they are drawn and
+removes them.
 """
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.core.mesh import Mesh
+from workbench.render.visuals import heads, update
 
 if TYPE_CHECKING:
     from workbench.qt.panels.age_panel import AgePanel
@@ -25,10 +26,6 @@ if TYPE_CHECKING:
 
 #: space between the two heads side by side (mm)
 GAP_MM = 40.0
-#: opacity of the source skin in the overlay
-OVERLAY_OPACITY = 0.25
-DISTANCE_TITLE = "displacement mm"
-BEFORE_COLOUR = (0.80, 0.80, 0.84)
 
 
 class AgeDrawing:
@@ -78,38 +75,18 @@ class AgeDrawing:
 
     def draw(self) -> None:
         """(Re)draw the source head and the shown aged head for the panel's mode."""
-        from workbench.qt.scene import SKIN, SMOOTH
-        from workbench.render.snapshots import to_polydata
-
         self.clear()
         source = self.source
         if source is None or self.scene.closed:
             return
         overlay = self.panel.mode() == "overlay"
-        skin = source.head.skin
-        before = to_polydata(skin.transformed(_shift(self.offset())), normals=True)
-        actor = self.plotter.add_mesh(
-            before,
-            color=BEFORE_COLOUR if overlay else SKIN,
-            **SMOOTH,
-            opacity=OVERLAY_OPACITY if overlay else 1.0,
-            pickable=False,
-            render=False,
-            name="age_before",
-        )
-        if overlay:  # a translucent shell over the aged head: no depth sorting needed
-            actor.GetProperty().BackfaceCullingOn()
-        self._actors["before"] = actor
-        self._caption = self.plotter.add_text(
-            "", position="upper_left", font_size=11, color="black", name="age_caption"
-        )
+        skin = source.head.skin.transformed(_shift(self.offset()))
+        self._actors["before"] = heads.add_age_source(self.plotter, skin, overlay=overlay)
+        self._caption = heads.add_age_caption(self.plotter)
         self._draw_after(rebuild=True)
 
     def _draw_after(self, rebuild: bool = False) -> None:
         """The aged skin of :attr:`step`: built once, then its points moved in place."""
-        from workbench.qt.scene import SCALAR_BAR, SKIN, SMOOTH
-        from workbench.render.snapshots import to_polydata
-
         source, step = self.source, self.step
         if source is None or "before" not in self._actors or self.scene.closed:
             return
@@ -118,41 +95,16 @@ class AgeDrawing:
         if rebuild or actor is None:
             if actor is not None:
                 self.plotter.remove_actor(actor, render=False)
-            # a copy: VTK may share the array, and its points are moved in place below
-            skin = source.head.skin
-            poly = to_polydata(Mesh(skin.vertices.copy(), skin.faces.copy()), normals=True)
-            kw: dict[str, Any] = {"color": SKIN}
-            if overlay:
-                poly.point_data[DISTANCE_TITLE] = np.zeros(poly.n_points)
-                kw = {
-                    "scalars": DISTANCE_TITLE,
-                    "cmap": "viridis",
-                    "clim": (0.0, 10.0),
-                    "scalar_bar_args": dict(
-                        SCALAR_BAR, title=DISTANCE_TITLE, n_labels=6, fmt="%.0f"
-                    ),
-                }
-            actor = self.plotter.add_mesh(
-                poly, **SMOOTH, pickable=False, render=False, name="age_after", **kw
-            )
+            actor = heads.add_aged_skin(self.plotter, source.head.skin, overlay=overlay)
             self._actors["after"] = actor
         if step is not None:
-            data = drawn_data(actor)
-            _set_array(data.GetPoints().GetData(), step.result.head.skin.vertices)
-            data.GetPoints().Modified()
-            normals = data.GetPointData().GetNormals()
-            if normals is not None:
-                _set_array(normals, step.normals)
-            if overlay:
-                scalars = data.GetPointData().GetArray(DISTANCE_TITLE)
-                if scalars is not None:
-                    _set_array(scalars, step.distance)
-                hi = max(1.0, 5.0 * math.ceil(float(np.percentile(step.distance, 99)) / 5.0))
-                actor.GetMapper().SetScalarRange(0.0, hi)
-                lut = actor.GetMapper().GetLookupTable()
-                if lut is not None:
-                    lut.SetRange(0.0, hi)
-            data.Modified()
+            heads.show_aged(
+                actor,
+                step.result.head.skin.vertices,
+                step.normals,
+                step.distance,
+                overlay=overlay,
+            )
         actor.SetVisibility(self.active and step is not None)
         self._update_caption()
         self.scene.request_render()
@@ -166,15 +118,12 @@ class AgeDrawing:
             text = f"left: {s.from_age:g} y (source)   right: {shown} (aged)"
         else:
             text = f"{shown} (coloured: displacement from {s.from_age:g} y, mm); source translucent"
-        self._caption.SetText(2, text)  # a corner annotation: 2 = upper left
+        heads.set_caption(self._caption, text)
         self._caption.SetVisibility(self.active)
 
     def drawn_points(self, which: str) -> np.ndarray:
         """The drawn skin points of ``"before"`` or ``"after"`` (mm; tests)."""
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        actor = self._actors[which]
-        return vtk_to_numpy(drawn_data(actor).GetPoints().GetData()).copy()
+        return update.drawn_points(update.mapper_dataset(self._actors[which]))
 
     def reset_camera(self) -> None:
         """Look at both heads from the front (+z toward the face, +y up)."""
@@ -196,24 +145,7 @@ class AgeDrawing:
         self.scene.request_render()
 
 
-def drawn_data(actor: Any) -> Any:
-    """The polydata an actor of ``plotter.add_mesh`` draws (mm): pyvista's mapper dataset.
-
-    Not ``GetMapper().GetInput()``: with scalars the mapper is fed through a
-    pipeline connection, and its input is an empty output until the first render.
-    """
-    return actor.mapper.dataset
-
-
 def _shift(offset: np.ndarray) -> np.ndarray:
     m = np.eye(4)
     m[:3, 3] = offset
     return m
-
-
-def _set_array(vtk_array: Any, values: np.ndarray) -> None:
-    from vtkmodules.util.numpy_support import vtk_to_numpy
-
-    target = vtk_to_numpy(vtk_array)
-    target[:] = np.asarray(values, float).reshape(target.shape)
-    vtk_array.Modified()

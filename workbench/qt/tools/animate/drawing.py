@@ -6,7 +6,8 @@ frame moves the points (and normals) of the existing actors, never re-adds one.
 :func:`load_animator` is the worker's part (no Qt, no VTK).
 
 Units mm, the head's own frame (Frankfort: x to the subject's left, y up, z toward the
-face).
+face).  How the head looks is :mod:`workbench.render.visuals.heads`; this part decides
+when it is drawn, which parts are visible, and removes the actors.
 """
 
 from __future__ import annotations
@@ -15,8 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.core.mesh import Mesh
-from workbench.core.normals import vertex_normals
+from workbench.render.visuals import heads, update
 
 if TYPE_CHECKING:
     from workbench.qt.panels.animate_panel import AnimatePanel
@@ -26,7 +26,6 @@ if TYPE_CHECKING:
 #: parts drawn under the skin (the "Skull and teeth" check box); the eyes are always shown
 INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth")
 ALWAYS_SHOWN = ("eyes",)
-INNER_COLOURS = {"eyes": (0.95, 0.95, 0.95), "upper_teeth": (1.0, 1.0, 0.94)}
 #: parts moved with the jaw, and the parts the gaze turns
 JAW_MOVED = ("mandible", "lower_teeth", "tongue")
 GAZE_MOVED = ("eyes",)
@@ -56,24 +55,13 @@ class AnimateDrawing:
 
     def draw(self) -> None:
         """(Re)draw the skin and the inner parts of the loaded head."""
-        from workbench.qt.scene import BONE, SKIN, SMOOTH
-        from workbench.render.snapshots import to_polydata
-
         self.clear()
         anim = self.animator
         if anim is None:
             return
         meshes = anim.meshes()
         skin = meshes["skin"]
-        actor = self.plotter.add_mesh(
-            to_polydata(skin, normals=True),
-            color=SKIN,
-            **SMOOTH,
-            pickable=False,
-            render=False,
-            name="animate_skin",
-        )
-        self._actors["skin"] = actor
+        self._actors["skin"] = heads.add_animated_skin(self.plotter, skin)
         self._faces = {part: mesh.faces for part, mesh in meshes.items()}
         # vertex-face incidence of each part, kept for the per-frame normals
         self._vf = {part: mesh.vertex_faces_matrix for part, mesh in meshes.items()}
@@ -81,19 +69,7 @@ class AnimateDrawing:
         for part in INNER_PARTS + ALWAYS_SHOWN:
             if part not in meshes:
                 continue
-            poly = to_polydata(meshes[part], normals=True)
-            paint: dict[str, Any] = {"color": INNER_COLOURS.get(part, BONE)}
-            if part == "eyes":  # an iris and pupil, so that the gaze can be seen
-                poly.point_data["rgb"] = eye_colours(anim)
-                paint = {"scalars": "rgb", "rgb": True}
-            actor = self.plotter.add_mesh(
-                poly,
-                **paint,
-                **SMOOTH,
-                pickable=False,
-                render=False,
-                name=f"animate_{part}",
-            )
+            actor = heads.add_animated_part(self.plotter, part, meshes[part], anim)
             actor.SetVisibility(part in ALWAYS_SHOWN or self.panel.bones.isChecked())
             self._actors[part] = actor
         self._jaw_drawn = anim.jaw_deg
@@ -118,11 +94,7 @@ class AnimateDrawing:
                 actor.SetVisibility(bool(on))
         skin = self._actors.get("skin")
         if skin is not None:  # the bones show through a translucent skin
-            skin.GetProperty().SetOpacity(0.55 if on else 1.0)
-            if on:
-                skin.GetProperty().BackfaceCullingOn()
-            else:
-                skin.GetProperty().BackfaceCullingOff()
+            heads.set_see_through(skin, bool(on))
         self.scene.request_render()
 
     def _move_skin(self, points: np.ndarray) -> None:
@@ -130,7 +102,7 @@ class AnimateDrawing:
         anim = self.animator
         if actor is None or anim is None:
             return
-        _set_points(actor, points, self._faces["skin"], self._vf.get("skin"))
+        update.set_surface_points(actor, points, self._faces["skin"], self._vf.get("skin"))
         self._points = points
 
     def _move_inner(self) -> None:
@@ -141,7 +113,7 @@ class AnimateDrawing:
         for part, points in inner_points(anim, JAW_MOVED + GAZE_MOVED).items():
             actor = self._actors.get(part)
             if actor is not None:
-                _set_points(actor, points, self._faces[part], self._vf.get(part))
+                update.set_surface_points(actor, points, self._faces[part], self._vf.get(part))
         self._jaw_drawn = anim.jaw_deg
         self._gaze_drawn = anim.gaze
         self.scene.request_render()
@@ -153,10 +125,7 @@ class AnimateDrawing:
 
     def drawn_points(self, part: str) -> np.ndarray:
         """``(n, 3)`` vertices (mm) of a drawn part as the 3D view has them (tests)."""
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        data = self._actors[part].GetMapper().GetInput()
-        return vtk_to_numpy(data.GetPoints().GetData()).copy()
+        return update.drawn_points(self._actors[part].GetMapper().GetInput())
 
     def reset_camera(self) -> None:
         """Look at the face from the front (the head frame: +z toward the face, +y up)."""
@@ -206,52 +175,3 @@ def inner_points(anim: Animator, parts: tuple[str, ...]) -> dict[str, np.ndarray
             v = anim._turned_eyes(v)
         out[part] = anim._out(v)
     return out
-
-
-#: iris and pupil half-angles (degrees from the eye's forward axis, +z at rest): an iris
-#: about 12 mm across on a 24 mm eye, a pupil about 4 mm
-IRIS_DEG, PUPIL_DEG, EDGE_DEG = 30.0, 11.0, 4.0
-EYE_WHITE, IRIS, PUPIL = (242, 240, 235), (88, 110, 128), (14, 12, 12)
-
-
-def eye_colours(anim: Animator) -> np.ndarray:
-    """``(n, 3)`` uint8 colours of the eyes' vertices: white, an iris and a pupil about each
-    eye's forward axis at rest (+z in the head frame), so a turned eye is seen turned."""
-    v = np.asarray(anim.head.meshes["eyes"].vertices, float)
-    centres = np.asarray(anim.head.eye_centres, float)
-    owner = np.linalg.norm(v[:, None] - centres[None], axis=2).argmin(axis=1)
-    d = v - centres[owner]
-    cos = d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    # soft edges over EDGE_DEG (per-vertex colours of a 2.5k-vertex eye look jagged otherwise)
-    iris = np.clip((IRIS_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
-    pupil = np.clip((PUPIL_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
-    rgb = np.asarray(EYE_WHITE, float) * (1 - iris) + np.asarray(IRIS, float) * iris
-    rgb = rgb * (1 - pupil) + np.asarray(PUPIL, float) * pupil
-    return np.round(rgb).astype(np.uint8)
-
-
-def _set_points(actor: Any, points: np.ndarray, faces: np.ndarray, vf: Any = None) -> None:
-    """Move an actor's polydata points (and its normals) in place.
-
-    ``vf``: the part's ``Mesh.vertex_faces_matrix`` (its topology does not
-    change), so a frame's normals are one sparse product, not a rebuild.
-    """
-    from vtkmodules.util.numpy_support import vtk_to_numpy
-
-    data = actor.GetMapper().GetInput()
-    vtk_points = data.GetPoints()
-    new = np.asarray(points, float)
-    vtk_to_numpy(vtk_points.GetData())[:] = new
-    vtk_points.Modified()
-    normals = data.GetPointData().GetNormals()
-    if normals is not None:
-        if vf is None:
-            vtk_to_numpy(normals)[:] = vertex_normals(Mesh(new, faces))
-        else:
-            t = new[faces]
-            summed = np.asarray(vf @ np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-            length = np.linalg.norm(summed, axis=1, keepdims=True)
-            vtk_to_numpy(normals)[:] = summed / np.where(length > 0, length, 1.0)
-        normals.Modified()
-    data.Modified()

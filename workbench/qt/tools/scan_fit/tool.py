@@ -1,7 +1,8 @@
 """The "Fit scan" tool's controller: the dock, the worker's jobs, drawing and picking on the scan.
 
 See :mod:`workbench.qt.tools.scan_fit` for what the tool does; the worker side is
-:mod:`~workbench.qt.tools.scan_fit.work`.  Frames and units: mm, the scan's own frame.
+:mod:`~workbench.qt.tools.scan_fit.work`; the scan, skin and markers are drawn with
+:mod:`workbench.render.visuals`.  Frames and units: mm, the scan's own frame.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from workbench.qt.tools.scan_fit.state import (
     ScanLandmarks,
 )
 from workbench.qt.tools.scan_fit.work import read_scan, run_scan_fit, save_pack
+from workbench.render.visuals import face, markers
+from workbench.render.visuals.scalar_bars import set_bar_visible
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
@@ -41,15 +44,12 @@ CHANNEL = "scan_fit"
 #: distance colouring of the scan (mm)
 DISTANCE_RANGE_MM = (0.0, 2.5)
 DISTANCE_TITLE = "scan to fitted skin mm"
-SCAN_GREY = (0.78, 0.78, 0.80)
-NAN_GREY = (0.55, 0.55, 0.57)
 #: landmark marker colours by state
 STATE_COLOURS = {
     "placed": (0.10, 0.75, 0.25),
     "guess": (1.0, 0.55, 0.0),
     "over hole": (0.62, 0.42, 0.95),
 }
-SELECTED = (1.0, 0.95, 0.1)
 MARKER_PX = 10.0
 
 
@@ -504,37 +504,23 @@ class ScanFitTool(QObject):
         self.scene.request_render()
 
     def draw_scan(self) -> None:
-        from workbench.qt.scene import SCALAR_BAR, SMOOTH
-        from workbench.render.snapshots import to_polydata
-
         self._clear("scan")
         self._scan_poly = None
         if self.scan is None:
             return
-        poly = to_polydata(self.scan.mesh, normals=True)
-        kw: dict[str, Any] = {"color": SCAN_GREY}
         view = self.view
-        if view is not None and len(view.distance) == poly.n_points:
-            poly.point_data[DISTANCE_TITLE] = view.distance
-            kw = {
-                "scalars": DISTANCE_TITLE,
-                "cmap": "viridis",
-                "clim": DISTANCE_RANGE_MM,
-                "nan_color": NAN_GREY,
-                "scalar_bar_args": dict(SCALAR_BAR, title=DISTANCE_TITLE, n_labels=6, fmt="%.1f"),
-            }
-        actor = self.plotter.add_mesh(
-            poly, **SMOOTH, pickable=True, render=False, name="scan_fit_scan", **kw
+        actor, self._scan_poly = face.add_scan(
+            self.plotter,
+            self.scan.mesh,
+            None if view is None else view.distance,
+            title=DISTANCE_TITLE,
+            clim=DISTANCE_RANGE_MM,
         )
-        self._scan_poly = poly
         self._add("scan", actor)
         self._show_scan_key()
         self.scene.request_render()
 
     def draw_skin(self) -> None:
-        from workbench.qt.scene import SKIN, SMOOTH
-        from workbench.render.snapshots import to_polydata
-
         self._clear("skin")
         if self.view is None:
             return
@@ -544,16 +530,10 @@ class ScanFitTool(QObject):
         for i, part in enumerate(parts):
             if not part.n_faces:
                 continue
-            actor = self.plotter.add_mesh(
-                to_polydata(part, normals=True),
-                color=SKIN,
-                **SMOOTH,
-                pickable=False,
-                render=False,
-                reset_camera=False,  # redrawn on the detail toggle: keep the user's view
-                name=f"scan_fit_skin_{'on' if i else 'off'}_scan",
+            # translucent over the scan (back faces culled, no sorting); the camera is kept
+            actor = face.add_skin_part(
+                self.plotter, part, name=f"scan_fit_skin_{'on' if i else 'off'}_scan"
             )
-            actor.GetProperty().BackfaceCullingOn()  # translucent over the scan (no sorting)
             self._add("skin", actor)
             if i:  # the part on the scan: only while the scan is hidden
                 self._on_scan_skin = actor
@@ -561,9 +541,7 @@ class ScanFitTool(QObject):
         self.scene.request_render()
 
     def _show_scan_key(self) -> None:
-        bars = self.plotter.scalar_bars
-        if DISTANCE_TITLE in bars:
-            bars[DISTANCE_TITLE].SetVisibility(self.panel.layer_visible("scan"))
+        set_bar_visible(self.plotter, DISTANCE_TITLE, self.panel.layer_visible("scan"))
 
     def _scan_shown(self) -> bool:
         return self.panel.layer_visible("scan") and self.scan is not None
@@ -584,56 +562,36 @@ class ScanFitTool(QObject):
         self._clear("landmarks")
         override = override or {}
         states = self.landmark_states()
-        for state, colour in STATE_COLOURS.items():
-            codes = [c for c, s in states.items() if s == state]
-            pts = [override.get(c, self.position_of(c)) for c in codes]
-            pts = [p for p in pts if p is not None]
-            if pts:
-                self._add(
-                    "landmarks",
-                    self.plotter.add_points(
-                        np.array(pts, float),
-                        color=colour,
-                        point_size=MARKER_PX,
-                        render_points_as_spheres=True,
-                        pickable=False,
-                        render=False,
-                        name=f"scan_fit_landmarks_{state.replace(' ', '_')}",
-                    ),
-                )
+        points, statuses = [], []
+        for code, state in states.items():
+            p = override.get(code, self.position_of(code))
+            if p is not None:
+                points.append(p)
+                statuses.append(state)
+        drawn = []
+        if points:
+            drawn += markers.add_status_markers(
+                self.plotter,
+                np.array(points, float),
+                statuses,
+                STATE_COLOURS,
+                MARKER_PX,
+                "scan_fit_landmarks_",
+            )
         code = self.panel.selected_code()
         p = override.get(code) if code else None
         if p is None and code:
             p = self.position_of(code)
         if code and p is not None:
-            self._add(
-                "landmarks",
-                self.plotter.add_points(
-                    np.asarray(p, float)[None],
-                    color=SELECTED,
-                    point_size=MARKER_PX * 1.8,
-                    render_points_as_spheres=True,
-                    pickable=False,
-                    render=False,
-                    name="scan_fit_landmarks_selected",
-                ),
+            drawn.append(
+                markers.add_selected(self.plotter, p, MARKER_PX, "scan_fit_landmarks_selected")
             )
             if not override:
                 name = self.scan.names.get(code, "") if self.scan is not None else ""
-                self._add(
-                    "landmarks",
-                    self.plotter.add_point_labels(
-                        np.asarray(p, float)[None],
-                        [f"{code}: {name} ({states.get(code, 'not placed')})"],
-                        font_size=14,
-                        point_size=1,
-                        shape_opacity=0.6,
-                        always_visible=True,
-                        pickable=False,
-                        render=False,
-                        name="scan_fit_landmarks_label",
-                    ),
-                )
+                text = f"{code}: {name} ({states.get(code, 'not placed')})"
+                drawn.append(markers.add_label(self.plotter, p, text, "scan_fit_landmarks_label"))
+        for actor in drawn:
+            self._add("landmarks", actor)
         self.scene.request_render()
 
     def reset_camera(self) -> None:
