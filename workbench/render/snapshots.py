@@ -53,15 +53,18 @@ def _prefer_headless_gl() -> None:
 def to_polydata(mesh: Mesh, *, normals: bool = False):
     """``mesh`` as ``pyvista.PolyData`` (mm, same frame).
 
-    With ``normals`` the mesh's cached :attr:`Mesh.vertex_normals` become the
+    The points are a copy: moving them (a view's in-place update) leaves ``mesh`` as it
+    was.  With ``normals`` the mesh's cached :attr:`Mesh.vertex_normals` become the
     active point normals, so a renderer can shade it smoothly (Gouraud)
     without running VTK's normals filter on the drawing thread.
     """
     import pyvista as pv
 
     faces = np.asarray(mesh.faces, np.int64)
+    # a copy of the points: VTK wraps a float64 array without copying, and a view that
+    # moves drawn points in place (the build slider, a drag) would move the mesh itself
     poly = pv.PolyData.from_regular_faces(
-        np.asarray(mesh.vertices, float),
+        np.array(mesh.vertices, dtype=float, copy=True),
         faces,  # type: ignore[arg-type]  # pyvista stub: NDArray[int]
     )
     if normals:
