@@ -124,13 +124,17 @@ class MenuHost(Protocol):
 
 
 class Feedback(Protocol):
-    """Where a tool reports: the status line, readable errors, and notes for the user."""
+    """Where a tool reports: the status line, readable errors, and notes for the user;
+    whether someone is there to answer a question (``interactive``) and the dialogs' parent."""
 
     messages: list[str]
+    interactive: bool
 
     def status(self, text: str) -> None: ...
 
     def show_error(self, what: str, exc: BaseException) -> None: ...
+
+    def window(self) -> QWidget: ...
 
 
 class FileHost(CtImportHost, Protocol):

@@ -58,6 +58,12 @@ if TYPE_CHECKING:
     from workbench.services.reconstruction.build_faces import BuildFaces
 
 GUIDE_COLUMNS = ("Guide", "Value mm", "On", "Rule")
+#: what each kind of guide is, in words (the value's meaning)
+GUIDE_KINDS = {
+    "vline": "a vertical line in the front view (value: x, mm from the midline)",
+    "hline": "a horizontal line in the front view (value: y, mm above the Frankfort plane)",
+    "point": "a point in the side view (value: y, z in mm)",
+}
 FIGURES = (
     ("max_tip_error_mm", "largest dowel-tip error", "mm"),
     ("min_tissue_mm", "thinnest tissue over bone", "mm"),
@@ -94,6 +100,8 @@ class ReconstructPanel(QWidget):
     Signals
     -------
     reconstruct_requested()
+    accept_held_requested(), discard_held_requested()
+        Apply or drop a refit held back because it would change the face where no edit was.
     opacity_changed(float)
     colouring_changed(str)
         "skin", "spread" (the ensemble's spread) or "band" (the 95 % band's half-width).
@@ -104,6 +112,9 @@ class ReconstructPanel(QWidget):
     """
 
     reconstruct_requested = Signal()
+    #: the user's answer about a refit held back (see :meth:`show_held`)
+    accept_held_requested = Signal()
+    discard_held_requested = Signal()
     opacity_changed = Signal(float)
     colouring_changed = Signal(str)
     build_changed = Signal(float)
@@ -137,8 +148,20 @@ class ReconstructPanel(QWidget):
         self.opacity.setValue(60)
         self.opacity.setToolTip("Skin opacity (%); the same as the Layers dock's face slider")
         self.opacity.valueChanged.connect(lambda v: self.opacity_changed.emit(v / 100.0))
+        # a refit held back (it would turn the face or move it away from the edit): the
+        # user decides; hidden while there is none
+        self.held_note = QLabel()
+        self.held_note.setWordWrap(True)
+        self.held_note.setStyleSheet("color: #8a4b00;")
+        self.accept_held = QPushButton("Apply the new face")
+        self.accept_held.clicked.connect(self.accept_held_requested.emit)
+        self.discard_held = QPushButton("Keep the previous face")
+        self.discard_held.clicked.connect(self.discard_held_requested.emit)
         form = QFormLayout()
         form.addRow(self.run_button)
+        form.addRow(self.held_note)
+        form.addRow(self.accept_held, self.discard_held)
+        self.show_held(None)
         form.addRow(self.use_guides)
         form.addRow(self.auto_refit)
         form.addRow("Ensemble fits", self.ensemble)
@@ -182,6 +205,13 @@ class ReconstructPanel(QWidget):
         layout.addWidget(self.predictions)
         layout.addWidget(self.figures)
         document.part_changed.connect(self._on_part)
+
+    def show_held(self, reason: str | None) -> None:
+        """Say why a refit was held back and offer to apply or drop it (None: hide)."""
+        held = reason is not None
+        self.held_note.setText(f"The new face was not applied: {reason}." if held else "")
+        for widget in (self.held_note, self.accept_held, self.discard_held):
+            widget.setVisible(held)
 
     def _make_build_slider(self) -> QWidget:
         """The build row: "Build", the slider and the current BMI; the faces' labels below."""
@@ -350,7 +380,7 @@ class ReconstructPanel(QWidget):
         self.guide_table.setRowCount(len(self.guides))
         for row, g in enumerate(self.guides):
             value = ", ".join(f"{v:.1f}" for v in g.value)
-            cells = [f"{g.label} [{g.kind}]", value, "", g.rule_id]
+            cells = [g.label, value, "", g.rule_id]
             for col, text in enumerate(cells):
                 item = QTableWidgetItem(text)
                 flags = Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsEnabled
@@ -362,7 +392,10 @@ class ReconstructPanel(QWidget):
                         Qt.CheckState.Checked if g.enabled else Qt.CheckState.Unchecked
                     )
                 item.setFlags(flags)
-                item.setToolTip(f"{g.citation}\n{g.derivation}\nsource: {g.source}")
+                item.setToolTip(
+                    f"{g.label}: {GUIDE_KINDS.get(g.kind, g.kind)}\n{g.citation}\n"
+                    f"{g.derivation}\nsource: {g.source}"
+                )
                 self.guide_table.setItem(row, col, item)
 
     def show_result(self, fit: FitResult | None) -> None:

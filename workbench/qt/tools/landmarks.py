@@ -16,7 +16,7 @@ import numpy as np
 
 from workbench.commands.landmarks import MoveLandmark, PlaceLandmark, ReplaceLandmarkSet
 from workbench.core.errors import WorkbenchError
-from workbench.services.landmarks.snap import snap_landmark
+from workbench.services.landmarks.snap import SnapResult, snap_landmark
 from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
@@ -26,6 +26,10 @@ if TYPE_CHECKING:
     from workbench.qt.panels.landmarks_panel import LandmarksPanel
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
+
+
+#: a snap moving a landmark farther than this (mm) is applied only when the user confirms
+MAX_SNAP_MM = 10.0
 
 
 class LandmarkTool:
@@ -109,6 +113,33 @@ class LandmarkTool:
             )
             self.feedback.messages.extend(reg.warnings)
 
+    def _snap_is_wanted(self, result: SnapResult) -> bool:
+        """A snap that moves the landmark far (more than :data:`MAX_SNAP_MM`) found another
+        feature more often than the one meant: it is applied only when the user says so
+        (never when nobody is there to ask)."""
+        distance = result.moved_mm
+        if distance <= MAX_SNAP_MM:
+            return True
+        question = (
+            f"Snapping {result.code} would move it {distance:.1f} mm ({result.explanation}). "
+            f"A snap that far has often found another feature than the one meant."
+        )
+        if self.feedback.interactive:
+            from PySide6.QtWidgets import QMessageBox
+
+            answer = QMessageBox.question(
+                self.feedback.window(),
+                "Move the landmark that far?",
+                f"{question}\n\nMove it anyway?",
+                QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Cancel,
+                QMessageBox.StandardButton.Cancel,
+            )
+            if answer == QMessageBox.StandardButton.Yes:
+                return True
+        self.status(f"Not snapped: {question} Place it by hand where the feature is.")
+        self.feedback.messages.append(question)
+        return False
+
     def snap_selected(self) -> None:
         """Snap the selected skull landmark to the feature its definition names ("Snap", S).
 
@@ -129,6 +160,8 @@ class LandmarkTool:
             )
         except (WorkbenchError, ValueError) as exc:
             self.show_error(f"Could not snap {code}", exc)
+            return
+        if result.moves and not self._snap_is_wanted(result):
             return
         if result.moves and not self.document.push(
             MoveLandmark(

@@ -18,15 +18,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from PySide6.QtCore import QObject, QTimer
+from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.qt import dialogs
 from workbench.qt.panels.reconstruct_panel import BAND_TITLE
 from workbench.qt.scene import is_closed
 from workbench.services.reconstruction import case_steps
+from workbench.services.reconstruction.refit_check import RefitChange, compare_refit
 
 if TYPE_CHECKING:
-    from PySide6.QtWidgets import QDockWidget
+    from PySide6.QtWidgets import QDockWidget, QWidget
 
     from workbench.qt.document import Document
     from workbench.qt.guide_view import GuideView
@@ -49,10 +50,16 @@ FIT_PARTS = ("specimen", "landmarks", "dowels", "orientation", "guides")
 
 
 class ReconstructHost(Protocol):
-    """What the tool uses of the window: messages, the guide view's toggle, the docks."""
+    """What the tool uses of the window: messages, the guide view's toggle, the docks,
+    whether someone is there to answer a question and the dialogs' parent."""
+
+    messages: list[str]
+    interactive: bool
 
     @property
     def docks(self) -> dict[str, QDockWidget]: ...
+
+    def window(self) -> QWidget: ...
 
     def status(self, text: str) -> None: ...
 
@@ -63,6 +70,8 @@ class ReconstructHost(Protocol):
 
 class ReconstructTool(QObject):
     """Dowel plan, face fit, its drawing and the comparison (see the module docstring).
+
+    ``held_changed(bool)``: a refit is held back (True) or no longer (False).
 
     Parameters
     ----------
@@ -78,6 +87,8 @@ class ReconstructTool(QObject):
     host
         The window (status line, errors, the guide view's toggle, the docks).
     """
+
+    held_changed = Signal(bool)
 
     def __init__(
         self,
@@ -95,6 +106,8 @@ class ReconstructTool(QObject):
         parent: QObject | None = None,
     ) -> None:
         super().__init__(parent)
+        #: a refit held back because it would break the face, with why (see :meth:`show_fit`)
+        self.held: tuple[case_steps.FitResult, RefitChange] | None = None
         self.document, self.session, self.runner = document, session, runner
         self.scene, self.plotter, self.detail = scene, plotter, detail
         self.guide_view = guide_view
@@ -104,6 +117,11 @@ class ReconstructTool(QObject):
         self.host = host
         panel = reconstruct_panel
         panel.reconstruct_requested.connect(self.reconstruct)
+        panel.accept_held_requested.connect(self.accept_held)
+        panel.discard_held_requested.connect(self.discard_held)
+        self.held_changed.connect(
+            lambda on: panel.show_held(self.held[1].text() if on and self.held else None)
+        )
         panel.colouring_changed.connect(lambda _v: self.draw_face())
         panel.build_changed.connect(self.show_build)
         # while the build slider moves the skull is drawn light (lod.py); full quality again
@@ -170,6 +188,63 @@ class ReconstructTool(QObject):
         )
 
     def show_fit(self, fit: case_steps.FitResult) -> None:
+        """Show a new fit, unless it would break the face shown (:func:`compare_refit`):
+        then the previous face stays, the new one is held (:attr:`held`) and the user is
+        asked (:meth:`accept_held`, :meth:`discard_held`)."""
+        previous = self.session.fit
+        if previous is not None:
+            change = compare_refit(previous, fit)
+            if not change.safe:
+                self._hold(fit, change)
+                return
+        self._apply_fit(fit)
+
+    def _hold(self, fit: case_steps.FitResult, change: RefitChange) -> None:
+        """Keep the face on screen; the new fit waits for the user's word."""
+        self.held = (fit, change)
+        self.held_changed.emit(True)
+        text = (
+            f"The new face was not applied: {change.text()}. The previous face is still "
+            "shown; accept the new one (Reconstruct dock) or undo the edit (Ctrl+Z)."
+        )
+        self.host.status(text)
+        self.host.messages.append(text)
+        if not self.host.interactive:
+            return
+        from PySide6.QtWidgets import QMessageBox
+
+        answer = QMessageBox.question(
+            self.host.window(),
+            "Apply the new face?",
+            f"The refit after your edit would change the face where you did not edit it:\n\n"
+            f"{change.text()}.\n\nApply it anyway? (No keeps the previous face; undo the edit "
+            "with Ctrl+Z to go back.)",
+            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
+            QMessageBox.StandardButton.No,
+        )
+        if answer == QMessageBox.StandardButton.Yes:
+            self.accept_held()
+
+    def accept_held(self) -> None:
+        """Apply the refit that was held back."""
+        if self.held is None:
+            return
+        fit, _change = self.held
+        self.held = None
+        self.held_changed.emit(False)
+        self._apply_fit(fit)
+
+    def discard_held(self) -> None:
+        """Drop the refit that was held back (the previous face stays)."""
+        if self.held is not None:
+            self.held = None
+            self.held_changed.emit(False)
+            self.host.status("The new face was discarded; the previous face stays.")
+
+    def _apply_fit(self, fit: case_steps.FitResult) -> None:
+        if self.held is not None:  # a newer fit replaces the one held back
+            self.held = None
+            self.held_changed.emit(False)
         self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
         reg = fit.recon.registration
         check = {} if reg is None else reg.figures.get("self_check") or {}
