@@ -61,7 +61,7 @@ def test_smile_moves_the_mouth_corners_and_relax_returns(animating, qtbot):
     tool = w.animate
     assert w.docks["animate"].isVisible()
     actor = tool.actors()["skin"]
-    w.animate_panel.expression.setCurrentText("smile")
+    w.animate_panel.select_expression("smile")
     assert tool.running
     qtbot.waitUntil(lambda: not tool.running, timeout=MOVE_MS)
     assert _corners(w).min() >= 2.0
@@ -211,7 +211,7 @@ def test_scrubbing_a_track_gives_run_tracks_frames(animating, qtbot):
     w = animating
     tool, panel = w.animate, w.animate_panel
     # a pose from the sliders first: the track must not depend on what was shown before
-    panel.expression.setCurrentText("anger")
+    panel.select_expression("anger")
     with qtbot.waitSignal(tool.frame_shown, timeout=MOVE_MS):
         assert tool.open_track(TRACK)
     assert panel.frame.isEnabled() and panel.frame.maximum() == 60
@@ -308,7 +308,7 @@ def test_record_keyframes_and_save_the_track(animating, qtbot, tmp_path):
 
     w = animating
     tool, panel = w.animate, w.animate_panel
-    panel.expression.setCurrentText("smile")
+    panel.select_expression("smile")
     panel.lids.setValue(50)
     key = tool.record_key()  # no track yet: a new one, the key at 0 s
     assert key is not None and key.t == 0.0

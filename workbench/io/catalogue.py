@@ -90,6 +90,14 @@ class CatalogueEntry:
         return self.side != "midline"
 
     @property
+    def display_name(self) -> str:
+        """The name with its side when the name does not say it: ``"Alar curvature point,
+        left"`` (the subject's left); a midline landmark's name as it is."""
+        if self.side not in ("left", "right") or self.side in self.name.lower():
+            return self.name
+        return f"{self.name}, {self.side}"
+
+    @property
     def base(self) -> str:
         """Code without the side suffix (``"ex_l"`` → ``"ex"``)."""
         return self.code[:-2] if self.is_bilateral else self.code

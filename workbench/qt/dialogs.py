@@ -10,6 +10,7 @@ dialogs are not shown; the message goes to ``window.messages`` instead.
 from __future__ import annotations
 
 import traceback
+from pathlib import Path
 
 from PySide6.QtWidgets import QInputDialog, QMessageBox, QWidget
 
@@ -93,3 +94,20 @@ def ask_replace_folder(parent: QWidget, folder: object, what: str) -> bool:
         QMessageBox.StandardButton.Cancel,
     )
     return answer == QMessageBox.StandardButton.Yes
+
+
+def start_folder(case_path: object | None) -> Path:
+    """Where a dialog for an output folder opens: the case file's folder, else the home
+    folder (never the folder of the evidence, which the outputs must not clutter)."""
+    if case_path is not None:
+        return Path(str(case_path)).parent
+    return Path.home()
+
+
+def ask_new_folder(parent: QWidget, title: str, suggested: Path) -> str:
+    """Ask for an output folder, which may be a new name (the folder is made by the writer);
+    ``suggested`` (a path) is offered.  "" when cancelled."""
+    from PySide6.QtWidgets import QFileDialog
+
+    name, _ = QFileDialog.getSaveFileName(parent, title, str(suggested), "Folders (*)")
+    return name

@@ -398,7 +398,16 @@ class FileTool:
             self.open_case(name)
 
     def ask_export(self) -> None:
-        name = QFileDialog.getExistingDirectory(self.host.window(), "Export into folder")
+        """Ask for the export folder (a new name is fine), starting in the case's folder."""
+        if self.session.fit is None:
+            self.status("Nothing to export yet: reconstruct the face first (Reconstruct).")
+            return
+        case_path = self.document.path
+        stem = Path(case_path).stem if case_path is not None else "case"
+        suggested = dialogs.start_folder(case_path) / f"{stem}_reconstruction"
+        name = dialogs.ask_new_folder(
+            self.host.window(), "Export the reconstruction into a folder", suggested
+        )
         if name:
             self.export_to(name)
 

@@ -47,6 +47,7 @@ from PySide6.QtWidgets import (
     QProgressBar,
     QScrollArea,
     QSplitter,
+    QTabBar,
     QWidget,
 )
 
@@ -233,13 +234,13 @@ class MainWindow(QMainWindow):
         """The tool panels as tabbed docks on the right, the Layers dock below them."""
         self.docks: dict[str, QDockWidget] = {}
         for key, title, panel in (
-            ("landmarks", "Skull landmarks", self.landmarks_panel),
+            ("landmarks", "Landmarks", self.landmarks_panel),
             ("dowels", "Dowels", self.dowels_panel),
-            ("reconstruct", "Reconstruct and guides", self.reconstruct_panel),
+            ("reconstruct", "Reconstruct", self.reconstruct_panel),
             ("compare", "Compare", self.compare_panel),
-            ("fit_scan", "Fit scan", self.scan_fit_panel),
+            ("fit_scan", "Scan fit", self.scan_fit_panel),
             ("animate", "Animate", self.animate_panel),
-            ("age", "Age progression", self.age_panel),
+            ("age", "Age", self.age_panel),
         ):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
@@ -249,6 +250,11 @@ class MainWindow(QMainWindow):
                 self.tabifyDockWidget(next(iter(self.docks.values())), dock)
             self.docks[key] = dock
         self.docks["landmarks"].raise_()
+        # the tabs' names whole (issue 33: they read "Sku… D… C…"): arrows scroll the tab
+        # row where it is narrower than the names
+        for bar in self.findChildren(QTabBar):
+            bar.setElideMode(Qt.TextElideMode.ElideNone)
+            bar.setUsesScrollButtons(True)
         self.layers_panel = LayersPanel(self.scene)
         self.docks["layers"] = dock = QDockWidget("Layers", self)
         dock.setObjectName("dock_layers")
@@ -299,6 +305,10 @@ class MainWindow(QMainWindow):
         )
         self.docks["age"].visibilityChanged.connect(self.age.set_active)
         self.session.fit_changed.connect(lambda fit: self.age.fit_changed(fit is not None))
+        # the case's own head in the Animate dock once a face is fitted (issue 33)
+        self.session.fit_changed.connect(
+            lambda fit: self.animate.fit_changed(None if fit is None else fit.recon.head)
+        )
         self.runner.busy_changed.connect(self._on_busy)
         self.runner.progress_changed.connect(
             lambda _channel, step, f: show_fraction(self.progress, f, step)
@@ -419,7 +429,7 @@ class MainWindow(QMainWindow):
         if expression is not None:
             panel = self.animate_panel
             panel.intensity.setValue(round(100 * weight))
-            panel.expression.setCurrentText(expression)
+            panel.select_expression(expression)
         self.animate.ensure_loaded()
 
     def show_age(

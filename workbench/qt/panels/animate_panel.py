@@ -32,10 +32,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from workbench.services.animation.animator import GAZE_RANGE_DEG
+from workbench.services.animation.animator import GAZE_RANGE_DEG, expression_label
 
 #: head chooser entries: title → reference head sex
 HEADS = {"Reference male": "male", "Reference female": "female"}
+#: the case's own head, offered once the face is fitted (the tool's key for it)
+RECONSTRUCTION = "This case's reconstruction"
+RECONSTRUCTION_KEY = "reconstruction"
 #: jaw slider range (degrees; the service allows more, 20° is a wide-open mouth)
 JAW_MAX_DEG = 20.0
 #: gaze slider range (degrees either way; the service's GAZE_RANGE_DEG)
@@ -118,12 +121,16 @@ class AnimatePanel(QWidget):
         form = QFormLayout()
         self.head = QComboBox()
         self.head.addItems(list(HEADS))
-        self.head.currentTextChanged.connect(lambda t: self.head_changed.emit(HEADS[t]))
+        self.head.currentTextChanged.connect(lambda _t: self.head_changed.emit(self.sex()))
         form.addRow("Head", self.head)
         self.expression = QComboBox()
-        self.expression.addItems(list(expressions))
-        self.expression.setToolTip("FACS-based presets (EMFACS prototypes and single action units)")
-        self.expression.currentTextChanged.connect(lambda _t: self._emit_expression())
+        for name in expressions:  # shown with its action units; the name is the item's data
+            self.expression.addItem(expression_label(name), name)
+        self.expression.setToolTip(
+            "FACS-based presets (EMFACS prototypes of the six basic emotions) and single "
+            "action units (AU, Ekman, Friesen & Hager 2002)"
+        )
+        self.expression.currentIndexChanged.connect(lambda _i: self._emit_expression())
         form.addRow("Expression", self.expression)
         self.intensity, self.intensity_value = _slider(100, 100)
         self.intensity.valueChanged.connect(lambda _v: self._emit_expression())
@@ -239,7 +246,20 @@ class AnimatePanel(QWidget):
 
     # ------------------------------------------------------------ reading
     def sex(self) -> str:
-        return HEADS[self.head.currentText()]
+        """The head to animate: ``"male"``, ``"female"`` (the reference heads) or
+        ``"reconstruction"`` (the case's fitted head)."""
+        text = self.head.currentText()
+        return RECONSTRUCTION_KEY if text == RECONSTRUCTION else HEADS.get(text, "male")
+
+    def offer_reconstruction(self, on: bool) -> None:
+        """List the case's reconstruction among the heads (once a face is fitted) or not."""
+        index = self.head.findText(RECONSTRUCTION)
+        if on and index < 0:
+            self.head.addItem(RECONSTRUCTION)
+        elif not on and index >= 0:
+            if self.head.currentIndex() == index:
+                self.head.setCurrentIndex(0)
+            self.head.removeItem(index)
 
     def weight(self) -> float:
         return self.intensity.value() / 100.0
@@ -277,8 +297,19 @@ class AnimatePanel(QWidget):
         if not self._quiet:
             self.muscle_changed.emit(code, value / 100.0)
 
+    def expression_name(self) -> str:
+        """The palette name of the expression shown (``"smile"``, ``"au12"``)."""
+        data = self.expression.currentData()
+        return str(data) if data is not None else self.expression.currentText()
+
+    def select_expression(self, name: str) -> None:
+        """Show the palette expression ``name``."""
+        index = self.expression.findData(name)
+        if index >= 0:
+            self.expression.setCurrentIndex(index)
+
     def _emit_expression(self) -> None:
-        self.expression_changed.emit(self.expression.currentText(), self.weight())
+        self.expression_changed.emit(self.expression_name(), self.weight())
 
     # ------------------------------------------------------------ showing
     def set_muscles(self, codes: Iterable[str]) -> None:

@@ -37,9 +37,10 @@ from workbench.core.errors import WorkbenchError
 from workbench.io.tables import list_tables, load_depth_table
 from workbench.model.reconstruction_setup import parse_build
 from workbench.qt.document import Document
+from workbench.qt.panels.build_choice import build_combo, chosen_build, select_build
 from workbench.services.reconstruction.case_steps import DowelPreview
+from workbench.services.tissue.dowel_sites import site_label
 
-BUILDS = ("slender", "normal", "obese", "-2", "-1", "1", "2")
 COLUMNS = ("Code", "Table mm", "Depth mm", "Source", "Use")
 
 
@@ -58,12 +59,10 @@ class DowelsPanel(QWidget):
         self.sex_combo = QComboBox()
         self.sex_combo.addItems(["male", "female"])
         self.sex_combo.currentTextChanged.connect(lambda v: self._set("sex", v))
-        self.build_combo = QComboBox()
-        self.build_combo.addItems(list(BUILDS))
-        self.build_combo.setToolTip(
-            "slender/normal/obese where the table has such groups; a number k means mean + k SD"
+        self.build_combo = build_combo()
+        self.build_combo.currentIndexChanged.connect(
+            lambda _i: self._set("build", chosen_build(self.build_combo))
         )
-        self.build_combo.currentTextChanged.connect(lambda v: self._set("build", v))
         form = QFormLayout()
         form.addRow("Depth table", self.table_combo)
         form.addRow("Sex", self.sex_combo)
@@ -110,10 +109,7 @@ class DowelsPanel(QWidget):
                 self.table_combo.addItem(table_id)
             self.table_combo.setCurrentText(table_id)
             self.sex_combo.setCurrentText(dowels.sex)
-            build = dowels.build_text
-            if self.build_combo.findText(build) < 0:
-                self.build_combo.addItem(build)
-            self.build_combo.setCurrentText(build)
+            select_build(self.build_combo, dowels.build_text)
             self.citation.setText(_citation(table_id))
         finally:
             self._refreshing = False
@@ -127,7 +123,7 @@ class DowelsPanel(QWidget):
             self.table.setRowCount(len(dowels))
             for row, d in enumerate(dowels):
                 cells = [
-                    d.code,
+                    site_label(d.code),
                     "" if d.table_depth_mm is None else f"{d.table_depth_mm:.1f}",
                     f"{d.depth_mm:.1f}",
                     d.source,

@@ -12,6 +12,8 @@ Positions are mm in the specimen's input frame.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
@@ -29,8 +31,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from workbench.commands.landmarks import DeleteLandmark, SetLandmarkStatus
+from workbench.commands.landmarks import DeleteLandmark, ReplaceLandmarkSet, SetLandmarkStatus
 from workbench.commands.reconstruction_setup import SetOrientation
+from workbench.core.landmarks import LandmarkSet
 from workbench.io.catalogue import LandmarkCatalogue
 from workbench.model.reconstruction_setup import Orientation
 from workbench.qt.document import Document
@@ -51,6 +54,12 @@ DIRECTIONS = {
     "+z": (0, 0, 1),
     "-z": (0, 0, -1),
 }
+
+
+SNAP_TIP = (
+    "Move the selected landmark to the feature its definition names, near where it is, "
+    "e.g. glabella to the most anterior midline point (S)"
+)
 
 
 class LandmarksPanel(QWidget):
@@ -89,7 +98,7 @@ class LandmarksPanel(QWidget):
         for i, code in enumerate(self.codes):
             entry = catalogue.entry(code, "skull")
             self.table.setItem(i, 0, QTableWidgetItem(code))
-            name = QTableWidgetItem(entry.name)
+            name = QTableWidgetItem(entry.display_name)
             name.setToolTip(entry.definition)
             self.table.setItem(i, 1, name)
             self.table.setItem(i, 2, QTableWidgetItem("missing"))
@@ -107,11 +116,7 @@ class LandmarksPanel(QWidget):
         self.absent_button.setToolTip("The anatomy is missing or damaged here (A)")
         self.absent_button.clicked.connect(self.mark_absent)
         self.snap_button = QPushButton("Snap")
-        self.snap_button.setToolTip(
-            "Move the selected landmark to the feature its definition "
-            "names, near where it is, e.g. glabella to the most "
-            "anterior midline point (S)"
-        )
+        self.snap_button.setToolTip(SNAP_TIP)
         self.snap_button.clicked.connect(self.request_snap)
         self.delete_button = QPushButton("Clear")
         self.delete_button.setToolTip("Forget this landmark (back to missing)")
@@ -122,8 +127,20 @@ class LandmarksPanel(QWidget):
             "placed landmarks are kept and guide the transfer"
         )
         self.suggest_button.clicked.connect(self.suggest_requested.emit)
+        self.accept_button = QPushButton("Accept suggested")
+        self.accept_button.setToolTip(
+            "Keep every suggested landmark where it is, as if placed by hand (one undo step); "
+            "accepted landmarks stay put and guide later suggestions and fits"
+        )
+        self.accept_button.clicked.connect(self.accept_suggested)
         buttons = QHBoxLayout()
-        for b in (self.absent_button, self.snap_button, self.delete_button, self.suggest_button):
+        for b in (
+            self.absent_button,
+            self.snap_button,
+            self.delete_button,
+            self.suggest_button,
+            self.accept_button,
+        ):
             buttons.addWidget(b)
 
         self.anterior = QComboBox()
@@ -187,6 +204,7 @@ class LandmarksPanel(QWidget):
 
     def _show_description(self) -> None:
         code = self.selected_code()
+        self._enable_buttons(code)
         if not code:
             return
         entry = self.catalogue.entry(code, "skull")
@@ -197,8 +215,26 @@ class LandmarksPanel(QWidget):
         status = lm.status if lm is not None else "missing"
         note = f"<br><i>{lm.description}</i>" if lm is not None and lm.description else ""
         self.description.setText(
-            f"<b>{entry.name}</b> ({code}) — {status}{where}<br>{entry.definition}{note}"
+            f"<b>{entry.display_name}</b> ({code}) — {status}{where}<br>{entry.definition}{note}"
         )
+
+    def _enable_buttons(self, code: str) -> None:
+        """Snap only where it can work (a landmark with a position whose definition names a
+        feature, or a midline one); Accept only while there are suggestions."""
+        from workbench.io.snap_rules import load_snap_rules
+
+        lms = self.document.case.landmarks["skull"]
+        lm = lms.get(code) if code else None
+        snappable = bool(code) and (
+            code in load_snap_rules() or not self.catalogue.entry(code, "skull").is_bilateral
+        )
+        self.snap_button.setEnabled(snappable and lm is not None and lm.is_defined)
+        self.snap_button.setToolTip(
+            SNAP_TIP
+            if snappable or not code
+            else f"{code}'s definition names no feature to snap to"
+        )
+        self.accept_button.setEnabled(any(x.status == "suggested" for x in lms))
 
     # ------------------------------------------------------------ widgets → commands
     def selected_code(self) -> str:
@@ -227,6 +263,23 @@ class LandmarksPanel(QWidget):
         code = self.selected_code()
         if code:
             self.document.push(SetLandmarkStatus(surface="skull", code=code, status="absent"))
+
+    def accept_suggested(self) -> None:
+        """Every suggested skull landmark becomes placed where it is (one undoable step)."""
+        lms = self.document.case.landmarks["skull"]
+        suggested = [lm for lm in lms if lm.status == "suggested"]
+        if not suggested:
+            return
+        accepted = LandmarkSet(
+            lms.surface,
+            tuple(
+                replace(lm, status="placed", confidence=1.0) if lm.status == "suggested" else lm
+                for lm in lms
+            ),
+        )
+        self.document.push(
+            ReplaceLandmarkSet("skull", accepted, f"Accept {len(suggested)} suggested landmarks")
+        )
 
     def request_snap(self) -> None:
         code = self.selected_code()

@@ -34,7 +34,7 @@ from PySide6.QtWidgets import (
 
 from workbench.core.landmarks import LandmarkSet
 from workbench.io.tables import list_tables
-from workbench.qt.panels.dowels_panel import BUILDS
+from workbench.qt.panels.build_choice import build_combo
 
 if TYPE_CHECKING:
     from workbench.commands.stack import CommandStack
@@ -102,12 +102,7 @@ class ScanFitPanel(QWidget):
         self.table_combo = QComboBox()
         self.table_combo.addItems(list_tables())
         self.table_combo.setToolTip("Tissue depths that place the skull under the fitted skin")
-        self.build_combo = QComboBox()
-        self.build_combo.addItems(list(BUILDS))
-        self.build_combo.setCurrentText("normal")
-        self.build_combo.setToolTip(
-            "slender/normal/obese where the table has such groups; a number k means mean + k SD"
-        )
+        self.build_combo = build_combo()
         self.fit_button = QPushButton("Fit")
         self.fit_button.setToolTip(
             "Fit the reference head to the scan: from zero landmarks, or seeded by the "

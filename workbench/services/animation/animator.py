@@ -252,6 +252,17 @@ EXPRESSIONS.update(
 )
 
 
+def expression_label(name: str) -> str:
+    """A palette name as the window lists it: ``"AU1 inner brow raiser"``, ``"happiness
+    (AU6+12 (Duchenne smile))"``; unknown names as they are."""
+    e = EXPRESSIONS.get(name)
+    if e is None:
+        return name
+    if name.startswith("au") and name[2:].isdigit():
+        return f"{name.upper()} {e.note}"
+    return f"{name.replace('_', ' ')} ({e.note})" if e.note and name != "neutral" else name
+
+
 def mix(weights: Mapping[str, float]) -> Expression:
     """Weighted sum of palette expressions (``{name: weight}``), contractions clipped to 0..1."""
     muscles: dict[str, float] = {}

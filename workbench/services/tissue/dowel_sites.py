@@ -425,6 +425,22 @@ def signed_k(k: float) -> str:
     return f"{'+' if k >= 0 else '-'} {abs(k):g}"
 
 
+def site_label(code: str) -> str:
+    """An interpolated site's code in words (``i:v-g:0.25`` → "between v and g, 25 % of the
+    way to g"); any other code as it is."""
+    if not code.startswith("i:"):
+        return code
+    _, parents, weights = (code.split(":") + ["", ""])[:3]
+    names = parents.split("-")
+    if len(names) == 2:
+        try:
+            share = float(weights)
+        except ValueError:
+            return f"between {names[0]} and {names[1]}"
+        return f"between {names[0]} and {names[1]}, {share:.0%} of the way to {names[1]}"
+    return "between " + ", ".join(names[:-1]) + f" and {names[-1]}"
+
+
 def _note(skipped: list[str] | None, rule: SiteRule, why: str) -> None:
     if skipped is not None:
-        skipped.append(f"{rule.code}: {why}")
+        skipped.append(f"no dowel {site_label(rule.code)}: {why}")

@@ -543,13 +543,17 @@ class AgeTool(QObject, AgeDrawing):
         return [self.target]
 
     def ask_export(self) -> None:
-        from PySide6.QtWidgets import QFileDialog
+        """Ask for the export folder (a new name is fine), starting in the case's folder."""
+        from workbench.qt import dialogs
 
         if self.source is None:
             self.host.status("Open the Age progression dock first (the head loads there).")
             return
-        name, _ = QFileDialog.getSaveFileName(
-            self.host.window(), "Export the aged head (a new folder)", f"aged_{self.target}y", ""
+
+        case_path = None if self.document is None else self.document.path
+        suggested = dialogs.start_folder(case_path) / f"aged_{self.target}y"
+        name = dialogs.ask_new_folder(
+            self.host.window(), "Export the aged head (a new folder)", suggested
         )
         if name:
             self.export_to(name)

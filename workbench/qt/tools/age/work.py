@@ -30,12 +30,6 @@ if TYPE_CHECKING:
 #: fraction of an age step done when the service reports a step (by its first word)
 STEP_FRACTIONS = {"measuring": 0.05, "solving": 0.3, "warping": 0.45}
 
-OVERLAY_OPACITY = 0.25
-DISTANCE_TITLE = "displacement mm"
-#: fraction of an age step done when the service reports a step (by its first word)
-STEP_FRACTIONS = {"measuring": 0.05, "solving": 0.3, "warping": 0.45}
-BEFORE_COLOUR = (0.80, 0.80, 0.84)
-
 
 # ------------------------------------------------------------------ worker side (plain data)
 @dataclass(frozen=True)

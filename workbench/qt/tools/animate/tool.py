@@ -20,6 +20,7 @@ from workbench.qt.tools.animate.drawing import AnimateDrawing, load_animator
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
 
+    from workbench.model.template import TemplateHead
     from workbench.qt.panels.animate_panel import AnimatePanel
     from workbench.qt.scene import SceneView
     from workbench.qt.workers import TaskRunner
@@ -78,6 +79,7 @@ class AnimateTool(QObject, AnimateDrawing):
         self.panel, self.scene, self.plotter = panel, scene, plotter
         self.runner, self.host = runner, host
         self.animator: Animator | None = None
+        self._fitted: TemplateHead | None = None
         self.sex = ""
         self._loading = ""
         self._actors: dict[str, Any] = {}
@@ -144,21 +146,39 @@ class AnimateTool(QObject, AnimateDrawing):
             self.load(self.panel.sex())
 
     def load(self, sex: str) -> None:
+        """Load a reference head (``"male"``, ``"female"``) or the case's reconstruction
+        (``"reconstruction"``: the fitted head, in its head frame) in the worker."""
         if sex == self._loading or (sex == self.sex and self.animator is not None):
             return
+        if sex == "reconstruction":
+            head = self.fitted_head()
+            if head is None:
+                self.panel.show_status("Reconstruct the face first: there is no fitted head.")
+                return
+            from workbench.services.animation.animator import Animator
+
+            what, job = "the reconstruction", lambda: Animator(head)
+        else:
+            what, job = f"the reference {sex} head", lambda: load_animator(sex)
         self._loading = sex
-        self.panel.show_status(f"Loading the reference {sex} head …")
+        self.panel.show_status(f"Loading {what} …")
 
         def done(anim: Animator) -> None:
             self._loaded(sex, anim)
 
-        self.runner.submit(
-            CHANNEL,
-            f"Loading the {sex} head for animation …",
-            lambda: load_animator(sex),
-            done,
-            self._failed,
-        )
+        self.runner.submit(CHANNEL, f"Loading {what} for animation …", job, done, self._failed)
+
+    def fit_changed(self, head: TemplateHead | None) -> None:
+        """The case's fitted head changed: offer it, and reload it if it is the one shown."""
+        self._fitted = head
+        self.panel.offer_reconstruction(head is not None)
+        if self.sex == "reconstruction" and head is not None and self.animator is not None:
+            self.sex = ""  # a new fit: the head shown is out of date
+            self.load("reconstruction")
+
+    def fitted_head(self) -> TemplateHead | None:
+        """The case's fitted head (head frame, mm), or None before a fit."""
+        return self._fitted
 
     def _failed(self, exc: BaseException) -> None:
         self._loading = ""
@@ -174,16 +194,17 @@ class AnimateTool(QObject, AnimateDrawing):
         self.panel.set_muscles(anim.muscle_codes)
         self.draw()
         self.reset_camera()
+        what = "The reconstruction" if sex == "reconstruction" else f"Reference {sex} head"
         self.panel.show_status(
-            f"Reference {sex} head: {len(anim.head.skin.vertices):,} skin vertices, "
+            f"{what}: {len(anim.head.skin.vertices):,} skin vertices, "
             f"{len(anim.muscle_codes)} muscles."
         )
-        self.host.status(f"Animate: the reference {sex} head (view only: the case is not changed).")
+        self.host.status(f"Animate: {what.lower()} (view only: the case is not changed).")
         self.loaded.emit()
         if self.track is not None:  # opened before the head was there: frames for its muscles
             self.set_track(self.track, self.track_path)
             return
-        name = self.panel.expression.currentText()
+        name = self.panel.expression_name()
         if name and name != "neutral":
             self.set_expression(name, self.panel.weight())
 

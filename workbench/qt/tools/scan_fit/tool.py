@@ -151,12 +151,13 @@ class ScanFitTool(QObject):
 
     def settings(self) -> ScanFitSettings:
         from workbench.model.reconstruction_setup import parse_build
+        from workbench.qt.panels.build_choice import chosen_build
 
         p = self.panel
         return ScanFitSettings(
             p.sex_combo.currentText(),
             p.table_combo.currentText() or DEFAULT_DEPTH_TABLE,
-            parse_build(p.build_combo.currentText()),
+            parse_build(chosen_build(p.build_combo)),
         )
 
     # ------------------------------------------------------------ open
