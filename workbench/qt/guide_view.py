@@ -368,7 +368,7 @@ class GuideView(QWidget):
             target.append(seg)
             slots.append((row, "lines" if len(seg) == 2 else "points", first, len(seg)))
             label_points.append(seg[0] if g.kind == "hline" else seg[-1])
-            label_text.append(g.id)
+            label_text.append(g.label)  # the name an artist reads, not the id
         actors = markers.add_guide_set(self.plotter, lines, points, colour, width, prefix)
         if track:
             self._guide_slots = {row: (actors[kind], first, n) for row, kind, first, n in slots}

@@ -104,7 +104,7 @@ def compare_refit(previous: FitResult, new: FitResult) -> RefitChange:
     rotation = _rotation_deg(new.recon.input_to_head, previous.recon.input_to_head)
     if rotation > MAX_ROTATION_DEG:
         reasons.append(
-            f"the new face is turned {rotation:.0f} degrees against the previous one "
+            f"it is turned {rotation:.0f} degrees against the face shown "
             f"(more than {MAX_ROTATION_DEG:g}): the skull's registration slipped"
         )
     was_in, now_in = previous.inputs, new.inputs
@@ -126,7 +126,7 @@ def compare_refit(previous: FitResult, new: FitResult) -> RefitChange:
                 away = float(np.percentile(moved, 95))
                 if away > MAX_AWAY_MM:
                     reasons.append(
-                        f"the face moved {away:.1f} mm (95th percentile) more than "
+                        f"it moved {away:.1f} mm (95th percentile) more than "
                         f"{EDIT_RADIUS_MM:g} mm away from the landmark(s) changed "
                         f"({', '.join(edited)})"
                     )
