@@ -189,3 +189,20 @@ def test_an_implausible_orbit_leaves_the_eye_and_says_why(head_male):
     moves, figures, _ = eye_moves(head_male, lms, "stephan2009", {"eye_centre_l": target})
     np.testing.assert_allclose(moves[0], [1.0, 0.0, 2.0])
     assert figures["eye_l_by"] == "guide"
+
+
+def test_no_skin_inside_the_bone_at_the_thinnest_build(head_female, head_male):
+    """At −2 SD the table's depths put skin into thin bone: what the clearance refits leave
+    inside is moved out to the minimum tissue, counted and said (issue 33)."""
+    from dataclasses import replace
+
+    from workbench.services.tissue.dowels import DepthSettings
+
+    skull = skull_surface(head_female)
+    thin = replace(SAME_EYES, depth=DepthSettings(build=-2.0))
+    recon = reconstruct(skull, head_female.skull_landmarks, head_male, settings=thin)
+    assert recon.figures["penetrating_vertices"] == 0
+    assert recon.figures["min_tissue_mm"] >= 0.0
+    clamped = recon.figures["clamped_vertices"]
+    assert clamped >= 0
+    assert (clamped > 0) == any("moved out to the minimum tissue" in w for w in recon.warnings)

@@ -377,6 +377,7 @@ def fit_head(
         "penetrating_vertices": int(((signed < 0) & checked).sum()),
         "thin_vertices": int(((signed < settings.min_tissue_mm) & checked).sum()),
         "refits": int(cl.refits),
+        "clamped_vertices": int(cl.clamped),
         "extra_correspondences": int(cl.extra),
         "correspondences": len(src_a),
         **eye_figures,
@@ -439,6 +440,10 @@ def _dowel_correspondences(
     return src, dst, labels, held
 
 
+#: passes of the last resort that moves skin left inside the bone out to the minimum tissue
+CLAMP_PASSES = 10
+
+
 @dataclass(frozen=True)
 class _Clearance:
     """The skin warp after the clearance refits (head frame, mm) and what they found."""
@@ -452,6 +457,8 @@ class _Clearance:
     checked: np.ndarray  # skin vertices the depth check applies to
     refits: int
     extra: int  # clearance correspondences added
+    #: skin vertices still inside the bone after the refits, moved out to the minimum tissue
+    clamped: int = 0
 
 
 def _clearance_refits(
@@ -498,7 +505,25 @@ def _clearance_refits(
         lam = np.concatenate([lam, np.full(int(keep.sum()), SMOOTHING)])
         labels += ["clearance"] * int(keep.sum())
         extra += int(keep.sum())
-    return _Clearance(src_a, dst_a, lam, warp, moved, signed, checked, refits, extra)
+    # what the refits left inside the bone (thin bone, lips over teeth at a slender build)
+    # is moved out along the bone's normal to the minimum tissue: no build offered may put
+    # skin inside bone (issue 33); the count is a figure and a note of the fit
+    # (a few passes: a vertex pushed out of a concave spot may land behind another face)
+    clamped_ids: set[int] = set()
+    for attempt in range(CLAMP_PASSES):
+        inside = checked & (signed < 0.0)
+        if not inside.any():
+            break
+        clamped_ids.update(np.flatnonzero(inside).tolist())
+        moved = moved.copy()
+        # a vertex still inside after a pass sits where bone folds: a little more each time
+        out = settings.min_tissue_mm * (1.0 + 0.25 * attempt)
+        moved[inside] = bone_pt[inside] + out * normal[inside]
+        _, signed, bone_pt, normal, checked = _thin_spots(
+            moved, index, t_weight, settings.min_tissue_mm, exempt
+        )
+    clamped = len(clamped_ids)
+    return _Clearance(src_a, dst_a, lam, warp, moved, signed, checked, refits, extra, clamped)
 
 
 def _anchors(
@@ -648,6 +673,12 @@ def reconstruct(
             f"{100 * inferred:.0f} % of the face lies over missing bone and is "
             "inferred from the reference head (marked in the head pack, the report "
             "and the pictures)"
+        )
+    if figures.get("clamped_vertices"):
+        warnings.append(
+            f"{figures['clamped_vertices']} skin vertices lay inside the bone after "
+            f"{figures['refits']} refits and were moved out to the minimum tissue "
+            f"({settings.min_tissue_mm:g} mm)"
         )
     if figures["penetrating_vertices"]:
         warnings.append(
