@@ -300,9 +300,7 @@ class MainWindow(QMainWindow):
             lambda part: self.guide_view.refresh() if part == "guides" else None
         )
         self.document.stack_changed.connect(self._update_title)
-        self.docks["animate"].visibilityChanged.connect(
-            lambda v: self.animate.ensure_loaded() if v else None
-        )
+        self.docks["animate"].visibilityChanged.connect(self.animate.set_active)
         self.docks["age"].visibilityChanged.connect(self.age.set_active)
         self.session.fit_changed.connect(lambda fit: self.age.fit_changed(fit is not None))
         # the case's own head in the Animate dock once a face is fitted (issue 33)

@@ -26,7 +26,9 @@ from workbench.qt.tools.age.work import (
     export_ages,
     load_source,
 )
-from workbench.qt.tools.common import folder_is_free
+from workbench.qt.tools.common import CaseLayersAside, folder_is_free
+from workbench.render.visuals.heads import DISTANCE_TITLE
+from workbench.render.visuals.scalar_bars import set_bar_visible
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
@@ -118,7 +120,7 @@ class AgeTool(QObject, AgeDrawing):
         self._actors: dict[str, Any] = {}
         self._caption: Any = None
         self.gui_call = GuiCall()
-        self._hidden_layers: list[str] = []
+        self._aside = CaseLayersAside(scene)
         panel.source_changed.connect(self.load)
         panel.settings_changed.connect(self._settings_changed)
         panel.target_changed.connect(self.request)
@@ -155,27 +157,18 @@ class AgeTool(QObject, AgeDrawing):
         specimen's frame, not the heads') are hidden, and shown again after.
         """
         self.active = bool(on)
-        self._hide_case_layers(self.active)
+        self._aside.set_aside(self.active)
         for actor in self._actors.values():
             actor.SetVisibility(self.active and self._wanted(actor))
         if self._caption is not None:
             self._caption.SetVisibility(self.active)
+        # the displacement colour bar goes and comes with the aged skin it belongs to
+        after = self._actors.get("after")
+        shown = self.active and after is not None and self._wanted(after)
+        set_bar_visible(self.plotter, DISTANCE_TITLE, shown)
         self.scene.request_render()
         if on:
             self.ensure_loaded()
-
-    def _hide_case_layers(self, hide: bool) -> None:
-        scene = self.scene
-        if hide:
-            for layer, visible in scene.visible.items():
-                if visible and scene.has(layer):
-                    scene.set_visible(layer, False)
-                    self._hidden_layers.append(layer)
-            return
-        for layer in self._hidden_layers:  # unless the user showed or hid it meanwhile
-            if not scene.visible.get(layer, True):
-                scene.set_visible(layer, True)
-        self._hidden_layers.clear()
 
     def _wanted(self, actor: Any) -> bool:
         return actor is not self._actors.get("after") or self.step is not None

@@ -16,6 +16,7 @@ from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.core.errors import WorkbenchError
 from workbench.qt.tools.animate.drawing import AnimateDrawing, load_animator
+from workbench.qt.tools.common import CaseLayersAside
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
@@ -80,6 +81,9 @@ class AnimateTool(QObject, AnimateDrawing):
         self.runner, self.host = runner, host
         self.animator: Animator | None = None
         self._fitted: TemplateHead | None = None
+        #: the dock is in front (its head shown, the case's layers set aside)
+        self.active = False
+        self._aside = CaseLayersAside(scene)
         self.sex = ""
         self._loading = ""
         self._actors: dict[str, Any] = {}
@@ -139,6 +143,24 @@ class AnimateTool(QObject, AnimateDrawing):
         self.track_timer.setInterval(0)
         self.track_timer.timeout.connect(self._track_tick)
 
+    # ------------------------------------------------------------ in front or left
+    def set_active(self, on: bool) -> None:
+        """The dock was shown (the head loaded and shown, the case's layers set aside) or
+        left (the head hidden, the case's layers back, the simulation and the timeline
+        stopped): the tool's head never stays in the view of another tool (issue 33)."""
+        self.active = bool(on)
+        self._aside.set_aside(self.active)
+        if not self.active:
+            self.timer.stop()
+            if self.playing:
+                self.pause()
+        skin = self._actors.get("skin")
+        if skin is not None:
+            skin.SetVisibility(self.active)
+        self._show_inner(self.active and self.panel.bones.isChecked())
+        if self.active:
+            self.ensure_loaded()
+
     # ------------------------------------------------------------ loading
     def ensure_loaded(self) -> None:
         """Load the panel's head unless it is loaded or on its way (the dock was opened)."""
@@ -193,6 +215,9 @@ class AnimateTool(QObject, AnimateDrawing):
         self.animator, self.sex = anim, sex
         self.panel.set_muscles(anim.muscle_codes)
         self.draw()
+        if not self.active:  # loaded while another tool is in front: drawn, not shown
+            for actor in self._actors.values():
+                actor.SetVisibility(False)
         self.reset_camera()
         what = "The reconstruction" if sex == "reconstruction" else f"Reference {sex} head"
         self.panel.show_status(

@@ -1,0 +1,38 @@
+"""Each tool shows its own heads and takes them away when it is left (issue 33): the Animate
+and Age docks set the case's layers aside while in front, and leaving them hides their heads
+(and the age colour bar) and brings the case back."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+pytest.importorskip("pytestqt")
+if os.environ.get("QT_QPA_PLATFORM") != "xcb":
+    pytest.skip(
+        "the 3D view needs QT_QPA_PLATFORM=xcb under Xvfb (see HEADLESS.md)",
+        allow_module_level=True,
+    )
+
+pytestmark = pytest.mark.gui
+
+
+def test_the_animate_head_goes_when_the_dock_is_left(qtbot, window, skull_obj):
+    window.open_skull(skull_obj, scale=15.0)
+    qtbot.waitUntil(lambda: not window.busy, timeout=30_000)
+    assert window.scene.visible["skull"] and window.scene.has("skull")
+
+    window.show_animate()
+    qtbot.waitUntil(lambda: window.animate.animator is not None, timeout=60_000)
+    skin = window.animate._actors["skin"]
+    assert skin.GetVisibility() and not window.scene.visible["skull"]  # the case aside
+
+    window.docks["landmarks"].raise_()
+    qtbot.waitUntil(lambda: not window.animate.active, timeout=5_000)
+    assert not skin.GetVisibility() and window.scene.visible["skull"]  # the case back
+    assert not window.animate.timer.isActive()
+
+    window.show_animate()
+    qtbot.waitUntil(lambda: window.animate.active, timeout=5_000)
+    assert skin.GetVisibility() and not window.scene.visible["skull"]
