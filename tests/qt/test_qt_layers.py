@@ -21,7 +21,7 @@ if os.environ.get("QT_QPA_PLATFORM") != "xcb":
         allow_module_level=True,
     )
 
-from workbench.qt.scene import HIDDEN_BY_DEFAULT, LAYERS
+from workbench.qt.scene import HIDDEN_BY_DEFAULT, LAYERS, ON_DEMAND
 
 pytestmark = pytest.mark.gui
 
@@ -71,6 +71,8 @@ def test_every_layer_toggles_and_fades_from_the_dock_and_the_menu_in_sync(window
     scene.layer_changed.connect(emitted.append)
 
     for layer in LAYERS:
+        if layer in ON_DEMAND:  # (a held-back refit: tests/qt/test_safe_edits.py)
+            continue
         assert scene.actors(layer), f"{layer}: nothing drawn after the fit"
         start = scene.visible[layer]
         assert panel.checks[layer].isChecked() == menu[f"layer_{layer}"].isChecked() == start

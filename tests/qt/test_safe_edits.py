@@ -55,15 +55,19 @@ def test_a_turned_refit_is_held_back_until_the_user_applies_it(fitted):
     assert window.fit is shown and tool.held is not None and tool.held[0] is turned
     assert "turned 30 degrees" in tool.held[1].text()
     assert np.array_equal(window.scene.layer_points("face"), face_before)  # still on screen
+    # the held face is drawn as a ghost over the one kept
+    assert np.allclose(window.scene.layer_points("held"), turned.recon.face.vertices)
     assert not panel.held_note.isHidden() and "not applied" in panel.held_note.text()
     assert any("not applied" in m for m in window.messages)
 
     tool.discard_held()
     assert tool.held is None and window.fit is shown and panel.held_note.isHidden()
+    assert not window.scene.has("held")
 
     tool.show_fit(turned)
     panel.accept_held.click()
     assert tool.held is None and window.fit is turned and panel.held_note.isHidden()
+    assert not window.scene.has("held")
 
 
 def test_a_safe_refit_is_shown_at_once(fitted):

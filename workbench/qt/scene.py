@@ -43,12 +43,15 @@ LAYERS = {
     "guides": "Guides",
     "muscles": "Muscles",
     "face": "Face (skin)",
+    "held": "Held-back refit (ghost)",
     "truth": "True skin (compare)",
 }
 #: layers hidden until the user switches them on (everything else starts visible)
 HIDDEN_BY_DEFAULT = frozenset({"muscles"})
 #: starting opacity per layer (1.0 where not listed)
-DEFAULT_OPACITY = {"face": 0.6}
+DEFAULT_OPACITY = {"face": 0.6, "held": 0.35}
+#: layers drawn only while there is something to show (a refit held back for the user)
+ON_DEMAND = frozenset({"held"})
 #: OpenGL renderer strings of software rasterisers (no graphics card in use)
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
@@ -347,6 +350,13 @@ class SceneView(QObject):
             return
         # translucent: back faces culled (see SetUseOIT above)
         self._add("face", face.add_face(self.plotter, mesh, scalars, title))
+        self.request_render()
+
+    def show_held(self, mesh: Mesh | None) -> None:
+        """A refit held back (see the reconstruct tool), as a ghost over the face; None: gone."""
+        self.clear("held")
+        if mesh is not None:
+            self._add("held", face.add_held_face(self.plotter, mesh))
         self.request_render()
 
     def show_truth(

@@ -203,6 +203,7 @@ class ReconstructTool(QObject):
         """Keep the face on screen; the new fit waits for the user's word."""
         self.held = (fit, change)
         self.held_changed.emit(True)
+        self.scene.show_held(fit.recon.face)  # the new face as a ghost over the one kept
         text = (
             f"The new face was not applied: {change.text()}. The previous face is still "
             "shown; accept the new one (Reconstruct dock) or undo the edit (Ctrl+Z)."
@@ -232,6 +233,7 @@ class ReconstructTool(QObject):
         fit, _change = self.held
         self.held = None
         self.held_changed.emit(False)
+        self.scene.show_held(None)
         self._apply_fit(fit)
 
     def discard_held(self) -> None:
@@ -239,12 +241,14 @@ class ReconstructTool(QObject):
         if self.held is not None:
             self.held = None
             self.held_changed.emit(False)
+            self.scene.show_held(None)
             self.host.status("The new face was discarded; the previous face stays.")
 
     def _apply_fit(self, fit: case_steps.FitResult) -> None:
         if self.held is not None:  # a newer fit replaces the one held back
             self.held = None
             self.held_changed.emit(False)
+            self.scene.show_held(None)
         self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
         reg = fit.recon.registration
         check = {} if reg is None else reg.figures.get("self_check") or {}

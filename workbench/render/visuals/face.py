@@ -49,6 +49,18 @@ def add_face(
     return cull_back_faces(actor)
 
 
+#: a refit held back (it would turn the face or move it away from the edit): amber, faint
+HELD = (0.95, 0.55, 0.10)
+
+
+def add_held_face(plotter: Any, mesh: Mesh, *, name: str = "layer_held") -> Any:
+    """A refit the window held back, drawn as a faint amber ghost over the face shown
+    (its opacity is the layer's)."""
+    poly = to_polydata(mesh, normals=True)
+    actor = plotter.add_mesh(poly, color=HELD, **SMOOTH, pickable=False, render=False, name=name)
+    return cull_back_faces(actor)
+
+
 def add_truth(
     plotter: Any,
     mesh: Mesh,
