@@ -9,6 +9,7 @@ dialogs are not shown; the message goes to ``window.messages`` instead.
 
 from __future__ import annotations
 
+import re
 import traceback
 from pathlib import Path
 
@@ -46,12 +47,26 @@ def show_error(parent: QWidget, what: str, exc: BaseException) -> QMessageBox:
     return box
 
 
+def _in_window_words(problem: str) -> str:
+    """A units problem as the command line says it, with its option advice replaced by what
+    the dialog offers (issue 33: the window's dialog spoke of ``--scale``)."""
+    text = re.sub(
+        r"confirm with --units (\w+), or give --scale or a reference length",
+        r"choose \1 below, or 'other scale factor…' for a factor of your own",
+        problem,
+    )
+    return text.replace(
+        "give --scale or scale to a reference length",
+        "choose 'other scale factor…' below (millimetres per file unit)",
+    )
+
+
 def ask_units(parent: QWidget, file_name: str, problem: str) -> float | None:
     """Ask for the units of a mesh whose size does not look like mm; returns the mm factor."""
     choice, ok = QInputDialog.getItem(
         parent,
         "Units of the mesh file",
-        f"{file_name}: {problem}\n\nWhich unit are the file's numbers in?",
+        f"{file_name}: {_in_window_words(problem)}\n\nWhich unit are the file's numbers in?",
         list(UNITS),
         0,
         False,
