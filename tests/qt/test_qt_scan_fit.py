@@ -283,3 +283,22 @@ def test_tool_actions_are_in_the_menus(window) -> None:
     file_menu = window.menuBar().actions()[0].menu()
     titles = [a.text() for a in file_menu.actions()]
     assert titles.index("Open face sca&n…") == titles.index("Open c&ase…") + 1
+
+
+def test_save_pack_asks_for_a_folder_in_the_case_folder_not_beside_the_scan(
+    qtbot, window, scan_case, tmp_path, monkeypatch
+):
+    """The dialog opens in the case file's folder (else home), never in the evidence's."""
+    from pathlib import Path
+
+    from workbench.qt import dialogs
+
+    path, _truth = scan_case
+    _open(qtbot, window, path)
+    asked: list[Path] = []
+    monkeypatch.setattr(dialogs, "ask_new_folder", lambda _p, _t, s: asked.append(s) or "")
+    window.scan_fit.ask_save()
+    assert asked == [Path.home() / f"{Path(path).stem}_fit"]
+    assert window.save_to(tmp_path / "case.fcase")
+    window.scan_fit.ask_save()
+    assert asked[-1] == tmp_path / f"{Path(path).stem}_fit"

@@ -279,14 +279,16 @@ class ScanFitTool(QObject):
 
     # ------------------------------------------------------------ save
     def ask_save(self) -> None:
-        from PySide6.QtWidgets import QFileDialog
+        """Ask for the pack's folder (a new name is fine), starting in the case file's folder
+        (never beside the scan, which is evidence)."""
+        from workbench.qt import dialogs
 
         if self.scan is None:
             self.host.status("Open a scan first.")
             return
-        default = str(self.scan.path.with_name(f"{self.scan.path.stem}_fit"))
-        name, _ = QFileDialog.getSaveFileName(
-            self.host.window(), "Save the fitted head as a pack (a new folder)", default, ""
+        suggested = dialogs.start_folder(self.document.path) / f"{self.scan.path.stem}_fit"
+        name = dialogs.ask_new_folder(
+            self.host.window(), "Save the fitted head as a pack (a new folder)", suggested
         )
         if name:
             self.save_to(name)
