@@ -14,11 +14,12 @@ from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from workbench.pipelines.outcome import Say
+
 if TYPE_CHECKING:
     from workbench.model.template import TemplateHead
     from workbench.services.age.change import AgeResult
 
-Say = Callable[[str], None]
 #: writes the pictures and the PDF into the staged folder: ``draw(folder, head, results)``;
 #: the window wraps it to run on its GUI thread
 Draw = Callable[[Path, "TemplateHead", list["AgeResult"]], list[Path]]

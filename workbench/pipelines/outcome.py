@@ -25,6 +25,15 @@ from typing import Any
 
 from workbench.core.errors import WorkbenchError
 
+#: what hears a job's progress lines and notes (print, a status bar, a list)
+Say = Callable[[str], None]
+
+
+def quiet(_message: str) -> None:
+    """A :data:`Say` that drops what it hears."""
+    return None
+
+
 #: the name shown for the standard output in an error (it has no file name)
 STDOUT_NAME = "the standard output"
 

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from workbench.core.errors import InputError
+from workbench.pipelines.outcome import Say, quiet
 
 if TYPE_CHECKING:
     from workbench.core.mesh import Mesh
@@ -34,7 +35,6 @@ if TYPE_CHECKING:
     from workbench.services.reconstruction.job import JobResult, JobSettings
     from workbench.services.reconstruction.service import FitResult
 
-Say = Callable[[str], None]
 #: the fit's key figures (in the report's ``fit`` section): printed, and a batch row's columns
 FIT_FIGURES = (
     "max_tip_error_mm",
@@ -47,10 +47,6 @@ FIT_FIGURES = (
 #: draws the report's pictures: ``draw(out, result, note) -> {name: path relative to out}``;
 #: the window wraps it to run on its GUI thread (VTK never runs on a worker)
 Draw = Callable[[Path, "JobResult", Say], dict[str, str]]
-
-
-def _quiet(_message: str) -> None:
-    return None
 
 
 @dataclass
@@ -121,7 +117,7 @@ def reconstruct_to_folder(
     from workbench.io.outputs import check_output_folder, relocate, staged_folder
     from workbench.services.reconstruction.job import job_inputs, run_reconstruction
 
-    say = notify or _quiet
+    say = notify or quiet
     inputs = job_inputs(skull_path, settings, truth)
     if not staged:
         check_output_folder(out, inputs, force)
@@ -151,7 +147,7 @@ def write_reconstruction(
     pictures: bool = True,
     formats: tuple[str, ...] = (),
     draw: Draw | None = None,
-    note: Say = _quiet,
+    note: Say = quiet,
 ) -> dict[str, Path]:
     """The job's files, validation figures, pictures and report, all into the folder ``out``.
 
@@ -255,7 +251,7 @@ def _skull_of(result: JobResult) -> Mesh:
     return mesh
 
 
-def reconstruction_pictures(out: Path, result: JobResult, note: Say = _quiet) -> dict[str, str]:
+def reconstruction_pictures(out: Path, result: JobResult, note: Say = quiet) -> dict[str, str]:
     """The report's pictures into ``out/pictures``: {name: path relative to ``out``}.
 
     Without off-screen rendering the job goes on without pictures, and

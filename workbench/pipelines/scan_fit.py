@@ -14,18 +14,15 @@ from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from workbench.pipelines.outcome import Say, quiet
+
 if TYPE_CHECKING:
     from workbench.core.landmarks import LandmarkSet
     from workbench.services.scan_fit.settings import ScanFit
 
-Say = Callable[[str], None]
 #: writes the pictures and the PDF into the staged pack: ``draw(folder, fit, scan_name, note)``;
 #: the window wraps it to run on its GUI thread
 Draw = Callable[[Path, "ScanFit", str, Say], list[Path]]
-
-
-def _quiet(_message: str) -> None:
-    return None
 
 
 def fit_scan_to_folder(
@@ -35,7 +32,7 @@ def fit_scan_to_folder(
     landmarks: str | PathLike[str] | LandmarkSet | None = None,
     report: bool = True,
     draw: Draw | None = None,
-    note: Say = _quiet,
+    note: Say = quiet,
     **settings: Any,
 ) -> tuple[ScanFit, list[Path]]:
     """Fit the reference head to the scan and write the pack with its report into ``out``.
@@ -60,7 +57,7 @@ def fit_scan_to_folder(
 
 
 def write_scan_fit_report(
-    folder: Path, result: ScanFit, scan_name: str, note: Say = _quiet
+    folder: Path, result: ScanFit, scan_name: str, note: Say = quiet
 ) -> list[Path]:
     """``pictures/*.png`` and ``fit_report.pdf`` into the staged pack; without OpenGL, no maps."""
     from workbench import __version__

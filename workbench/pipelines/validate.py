@@ -11,18 +11,13 @@ in mm, positive outside the true skin.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-Say = Callable[[str], None]
-
-
-def _quiet(_message: str) -> None:
-    return None
+from workbench.pipelines.outcome import Say, quiet
 
 
 @dataclass
@@ -45,7 +40,7 @@ def validate_to_folder(
     identity: bool = False,
     pictures: bool = True,
     force: bool = False,
-    say: Say = _quiet,
+    say: Say = quiet,
     notify: Say | None = None,
 ) -> ValidationFolder:
     """Run the manifest's cases (or ``case_ids``) and write the study's folder ``out`` as a whole.

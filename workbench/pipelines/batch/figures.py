@@ -26,7 +26,6 @@ from workbench.pipelines.reconstruct import FIT_FIGURES
 
 Figures = dict[str, Any]
 
-RECONSTRUCT_FIT = FIT_FIGURES
 VALIDATION_KEYS = ("n", "mean_abs_mm", "rms_mm", "p95_mm", "pct_within_2_5mm", "pct_within_5mm")
 FIT_SCAN_KEYS = (
     "face_within_1mm_fraction",
@@ -71,7 +70,7 @@ def _scalars(data: Any, keys: tuple[str, ...] | None = None, prefix: str = "") -
 
 def reconstruct_figures(report: dict[str, Any]) -> Figures:
     """``reconstruct``: the fit's figures, the ensemble spread and a ``--truth`` validation."""
-    out = _scalars(report.get("fit"), RECONSTRUCT_FIT)
+    out = _scalars(report.get("fit"), FIT_FIGURES)
     ensemble = report.get("ensemble")
     if isinstance(ensemble, dict):
         spread = ensemble.get("spread_mm")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from PySide6.QtWidgets import QComboBox, QWidget
 
-from workbench.io.build_model import BUILD_ALIASES, load_build_model
+from workbench.io.build_model import load_build_model
 
 #: the uniform choices: mean + k SD of the table group at every landmark
 SD_CHOICES = ((-2.0, "thin everywhere"), (-1.0, ""), (1.0, ""), (2.0, "full everywhere"))
@@ -52,7 +52,8 @@ def build_combo(parent: QWidget | None = None) -> QComboBox:
 def select_build(combo: QComboBox, value: str) -> None:
     """Show ``value`` (a stored build: ``normal``, ``heavy``, ``-1``, ``bmi:27``, an alias);
     a value not offered is added as it is."""
-    wanted = {"average": "normal", "obese": BUILD_ALIASES["obese"]}.get(value, value)
+    # the list offers the average as "normal" (what older cases store) and "heavy" for "obese"
+    wanted = {"average": "normal", "obese": "heavy"}.get(value, value)
     index = combo.findData(wanted)
     if index < 0:
         combo.addItem(value, value)

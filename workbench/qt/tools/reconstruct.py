@@ -231,24 +231,23 @@ class ReconstructTool(QObject):
         if self.held is None:
             return
         fit, _change = self.held
-        self.held = None
-        self.held_changed.emit(False)
-        self.scene.show_held(None)
         self._apply_fit(fit)
 
     def discard_held(self) -> None:
         """Drop the refit that was held back (the previous face stays)."""
         if self.held is not None:
-            self.held = None
-            self.held_changed.emit(False)
-            self.scene.show_held(None)
+            self._release_held()
             self.host.status("The new face was discarded; the previous face stays.")
 
+    def _release_held(self) -> None:
+        """No refit is held back any more: the note, the buttons and the ghost go."""
+        self.held = None
+        self.held_changed.emit(False)
+        self.scene.show_held(None)
+
     def _apply_fit(self, fit: case_steps.FitResult) -> None:
-        if self.held is not None:  # a newer fit replaces the one held back
-            self.held = None
-            self.held_changed.emit(False)
-            self.scene.show_held(None)
+        if self.held is not None:  # applied, or a newer fit replaces the one held back
+            self._release_held()
         self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
         reg = fit.recon.registration
         check = {} if reg is None else reg.figures.get("self_check") or {}
