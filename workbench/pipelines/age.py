@@ -68,6 +68,7 @@ def write_age_report_pdf(
         source_keys,
         write_age_report,
     )
+    from workbench.services.age.growth_tables import load_vault_norms
 
     try:
         from workbench.render.age_pictures import render_age_pictures
@@ -80,7 +81,11 @@ def write_age_report_pdf(
             note(message)
     change = dict(results[0].head.provenance.get("age_change") or {})
     table = load_growth_norms(str(change.get("norms") or results[0].figures["norms"]))
-    citations = {key: table.citation(key) for key in source_keys(results)}
+    vault = load_vault_norms()  # the vault's own table (issue 33): its keys are not the norms'
+    citations = {
+        key: cited if (cited := table.citation(key)) != key else vault.citation(key)
+        for key in source_keys(results)
+    }
     charts = load_head_circumference()
     citations |= {name: charts.citation(name) for name in chart_references(results)}
     credited: dict[str, str] = {}

@@ -12,7 +12,10 @@ measurements (horizontal = x, vertical = y, depth = z) are read.
    d_t = μ_t + (σ_t/σ_c)(d_c − μ_c).  The global factor s is the head
    circumference's change at a kept z-score (WHO 2006 below 4 y, UK90 from
    4 y; ages past the chart's end are read at its last age, since the head
-   hardly grows after 18: the digest's 2–4 % after 20).
+   hardly grows after 18: the digest's 2–4 % after 20).  The vault's height
+   (vertex over the porions) keeps its z-score in its own norms (Dezső 1967,
+   7-17 y), not the face's, where they cover both ages
+   (:mod:`workbench.services.age.targets`).
 3. **Solve** (§8.5.3, :func:`workbench.core.growth_solve.solve_landmarks`):
    the measurements with norms are hard constraints; Kähler's Table 8.2
    measurements without norms here and each landmark's nearby pairs are
@@ -23,15 +26,18 @@ measurements (horizontal = x, vertical = y, depth = z) are read.
    along the skin normal so that the circle segment through it has the
    target arc length (s times the current one, plus the optional young-child
    increase of up to 10 %, §8.5.5).
-5. **Deform the whole head** (§8.3.2): a thin-plate spline from the
-   current landmarks (and arc middles) to the solved ones moves skin,
-   skull, teeth, tongue and eyes; the eyeballs move with their centres and
-   scale by the warp's local size change; each skull landmark is then put
-   back at its source tissue depth below its skin partner (no depth table
-   by age is shipped: the source head's depths are kept, not scaled with
-   the head) by a second, smooth warp of the inner parts; the result is
-   settled in the Frankfort frame of its skull landmarks.  Muscles are skin
-   triangles with barycentric weights, so they ride on the new skin.
+5. **Deform the whole head** (§8.3.2): a landmark spline from the current
+   landmarks (and arc middles) to the solved ones (Kähler's, with a rounded
+   kernel that leaves no crease at a landmark:
+   :mod:`workbench.services.age.smooth_warp`) moves skin, skull, teeth,
+   tongue and eyes; each skull landmark is then put back at
+   its source tissue depth below its skin partner (no depth table by age is
+   shipped: the source head's depths are kept, not scaled with the head) by
+   a second, smooth warp of the inner parts; the eyeballs are scaled about
+   their centres by their own growth (axial length by age) and seated in
+   the lids (:mod:`workbench.services.age.eyes`); the result is settled in
+   the Frankfort frame of its skull landmarks.  Muscles are skin triangles
+   with barycentric weights, so they ride on the new skin.
 
 The warp steps (4-5) are in :mod:`workbench.services.age.warp_steps`.
 """
@@ -52,13 +58,31 @@ from workbench.core.growth_solve import (
     Constraint,
     SoftPair,
     arc_length,
-    nearby_pairs,
     solve_landmarks,
 )
-from workbench.core.head_measure import head_circumference_mm, head_section, section_perimeter
+from workbench.core.head_measure import head_section, section_perimeter
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.model.template import TemplateHead
+from workbench.services.age.growth_tables import load_eyeball_growth
+from workbench.services.age.proportions import proportion_figures
+from workbench.services.age.targets import (
+    HEAD_SIZE,
+    VAULT_HEIGHTS,
+    HeadSize,
+    MeasurementRow,
+    head_size,
+    norm_targets,
+    scale_targets,
+    vault_targets,
+)
+from workbench.services.age.targets import (  # re-exported: callers import them from here
+    hc_scale as hc_scale,
+)
+from workbench.services.age.targets import (
+    measure_circumference as measure_circumference,
+)
+from workbench.services.age.targets import rounded as _r
 from workbench.services.age.warp_steps import (
     SLIVER_MM2,
     arc_middles,
@@ -80,69 +104,8 @@ AGE_LIMITS = (0.0, 100.0)
 MAX_ARC_INCREASE = 0.10
 #: nearest landmarks each landmark is softly tied to
 SOFT_NEIGHBOURS = 4
-#: Table 8.2's head-size measurements: with no norms here they are *hard* constraints at
-#: the head-circumference scale s, since the circumference chart is the norm of the head's
-#: size (as soft pairs the face's norms pulled the vault along: 0.7 % below the chart)
-HEAD_SIZE = ("depth:g-op", "horizontal:t_l-t_r", "vertical:v-t_l", "vertical:v-t_r")
 #: rounds of the head-size correction (the tape predicted from the warp, a secant step)
 HEAD_SIZE_ROUNDS = 4
-
-
-@dataclass(frozen=True)
-class MeasurementRow:
-    """One measurement before and after (mm; z-scores against the norms of the sex)."""
-
-    measurement_id: str
-    name: str
-    kind: str
-    a: str
-    b: str
-    constraint: str  # "norms" (hard), "scale" (follows s), "unconstrained"
-    before_mm: float
-    after_mm: float = float("nan")
-    target_mm: float = float("nan")
-    mean_from: float = float("nan")
-    sd_from: float = float("nan")
-    mean_to: float = float("nan")
-    sd_to: float = float("nan")
-    source: str = ""
-    note: str = ""
-
-    @property
-    def z_before(self) -> float:
-        return (self.before_mm - self.mean_from) / self.sd_from
-
-    @property
-    def z_after(self) -> float:
-        return (self.after_mm - self.mean_to) / self.sd_to
-
-    @property
-    def residual_mm(self) -> float:
-        return self.after_mm - self.target_mm
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "measurement_id": self.measurement_id,
-            "name": self.name,
-            "kind": self.kind,
-            "landmarks": [self.a, self.b],
-            "constraint": self.constraint,
-            "before_mm": _r(self.before_mm),
-            "target_mm": _r(self.target_mm),
-            "after_mm": _r(self.after_mm),
-            "residual_mm": _r(self.residual_mm),
-        }
-        if self.constraint == "norms":
-            out |= {
-                "norm_from": {"mean_mm": _r(self.mean_from), "sd_mm": _r(self.sd_from)},
-                "norm_to": {"mean_mm": _r(self.mean_to), "sd_mm": _r(self.sd_to)},
-                "z_before": _r(self.z_before, 3),
-                "z_after": _r(self.z_after, 3),
-                "source": self.source,
-            }
-        if self.note:
-            out["note"] = self.note
-        return out
 
 
 @dataclass(frozen=True)
@@ -158,27 +121,6 @@ class AgeResult:
     warnings: tuple[str, ...] = ()
     landmarks_before: Mapping[str, np.ndarray] = field(default_factory=dict)
     landmarks_after: Mapping[str, np.ndarray] = field(default_factory=dict)
-
-
-def _missing_row(
-    measurement_id: str, name: str, kind: str, a: str, b: str, index: Mapping[str, int]
-) -> MeasurementRow:
-    """The row of a measurement the head's landmarks do not allow (named in its note)."""
-    gone = " and ".join(c for c in (a, b) if c not in index)
-    return MeasurementRow(
-        measurement_id,
-        name,
-        kind,
-        a,
-        b,
-        "unconstrained",
-        float("nan"),
-        note=f"landmark {gone} missing on the head",
-    )
-
-
-def _r(value: float, digits: int = 2) -> float | None:
-    return None if not np.isfinite(value) else round(float(value), digits)
 
 
 def in_frankfort_frame(head: TemplateHead) -> tuple[TemplateHead, bool]:
@@ -218,14 +160,6 @@ def head_points(head: TemplateHead) -> dict[str, np.ndarray]:
     return pts
 
 
-def measure_circumference(head: TemplateHead) -> float:
-    """Head circumference (mm) over glabella and opisthocranion, or NaN if either is absent."""
-    pts = head.skin_landmarks.as_dict()
-    if "g" not in pts or "op" not in pts:
-        return float("nan")
-    return head_circumference_mm(head.skin, pts["g"], pts["op"])
-
-
 def _check_age(value: float, what: str) -> float:
     age = float(value)
     if not np.isfinite(age) or not AGE_LIMITS[0] <= age <= AGE_LIMITS[1]:
@@ -233,17 +167,6 @@ def _check_age(value: float, what: str) -> float:
             what, f"age {value} is not an age in years", f"give {AGE_LIMITS[0]:g}-{AGE_LIMITS[1]:g}"
         )
     return age
-
-
-def _hc_age(hc: Any, sex: str, age: float, notes: list[str]) -> float:
-    lo, hi = hc.age_range(sex)
-    if age > hi:
-        notes.append(
-            f"head circumference at {age:g} y read at the chart's last age {hi:g} y "
-            "(the head hardly grows after it)"
-        )
-        return float(hi)
-    return max(float(lo), age)
 
 
 _NORMS: dict[tuple[str, int], Any] = {}
@@ -261,26 +184,6 @@ def _cached_norms(norms: str, load: Callable[[str], Any]) -> Any:
     if key not in _NORMS:
         _NORMS[key] = load(norms)
     return _NORMS[key]
-
-
-def hc_scale(hc: Any, sex: str, a0: float, a1: float, z: float) -> float:
-    """Factor by which a head circumference at z-score ``z`` changes from age a0 to a1.
-
-    Within one chart: value_at(a1, z) / value_at(a0, z).  Across the WHO →
-    UK90 switch at 4 y the two charts disagree in level (the UK90 median at
-    4 y is 20 mm, 1.4 SD, above the WHO one for boys), so the z-score read in
-    one chart is not the same head in the other: the change is chained at the
-    switch age, each chart giving only its own ratio at the same relative
-    position z.
-    """
-    switch = 4.0
-    lo, hi = sorted((a0, a1))
-    if hi < switch or lo >= switch:
-        return float(hc.value_at(sex, a1, z) / hc.value_at(sex, a0, z))
-    below = hc.value_at(sex, switch - 1e-9, z) / hc.value_at(sex, lo, z)
-    above = hc.value_at(sex, hi, z) / hc.value_at(sex, switch, z)
-    growth = float(below * above)
-    return growth if a1 > a0 else 1.0 / growth
 
 
 def age_head(
@@ -324,9 +227,13 @@ def age_head(
 
     # 1-2. measure and set the targets
     say("measuring the head ...")
-    rows, hard = _norm_targets(table, sex, eth, a0, a1, p, index)
-    size = _head_size(head, hc_ref, sex, a0, a1, notes)
-    soft, arcs = _scale_targets(p, index, size.scale, rows, hard)
+    rows, hard = norm_targets(table, sex, eth, a0, a1, p, index, hc_ref.age_range(sex)[1])
+    vault_rows, vault_hard = vault_targets(sex, a0, a1, p, index, notes)
+    rows += vault_rows
+    hard += vault_hard
+    size = head_size(head, hc_ref, sex, a0, a1, notes)
+    held = [h for h in HEAD_SIZE if not (vault_hard and h in VAULT_HEIGHTS)]
+    soft, arcs = scale_targets(p, index, size.scale, rows, hard, held)
     anchor = [index[c] for c in ("t_l", "t_r") if c in index] or [
         index[c] for c in ("po_l", "po_r") if c in index
     ]
@@ -339,7 +246,8 @@ def age_head(
 
     # 5. deform the whole head
     say("warping the head ...")
-    aged = deform(head, solved.warp)
+    eye_scale = load_eyeball_growth().scale(a0, a1)
+    aged = deform(head, solved.warp, eye_scale)
     aged, pushed, skull = skin_out_of_skull(
         aged, head.skin.face_normals, keep=head.skin.face_areas < SLIVER_MM2
     )
@@ -360,6 +268,10 @@ def age_head(
         **_outcome_figures(head, aged, skull, out_rows, hc_ref, sex, size, solved),
         "skin_vertices_moved_out_of_skull": pushed,
         **_fold_figures(head, aged),
+        "vault_height": "head-ear height norms (Dezső 1967)"
+        if vault_hard
+        else "head-circumference scale",
+        **proportion_figures(head, aged, eye_scale),
         "seconds": round(seconds, 3),
         "unconstrained": [r.measurement_id for r in out_rows if r.constraint == "unconstrained"],
     }
@@ -415,188 +327,6 @@ def _checked_request(
     return a0, a1, table, eth
 
 
-def _norm_targets(
-    table: Any,
-    sex: str,
-    eth: str,
-    a0: float,
-    a1: float,
-    p: np.ndarray,
-    index: Mapping[str, int],
-) -> tuple[list[MeasurementRow], list[Constraint]]:
-    """Rows of the measurements with norms and the hard constraints they give (§8.5.4).
-
-    ``p`` holds the head's landmarks (mm, Frankfort frame) in the order of
-    ``index``.  Each measurement with norms at both ages keeps its z-score,
-    d_t = μ_t + (σ_t/σ_c)(d_c − μ_c); one whose norms do not cover both ages
-    follows the head scale, one the head's landmarks do not allow is listed
-    as unconstrained.  Raises :class:`InputError` when an age lies outside
-    every measurement's norms or when no hard constraint is left.
-    """
-    rows: list[MeasurementRow] = []
-    hard: list[Constraint] = []
-    usable_ages: list[tuple[float, float]] = []
-    for m in table.measurements:
-        if not table.has(m.measurement_id, sex, eth):
-            continue
-        lo, hi = table.age_range(m.measurement_id, sex, eth)
-        usable_ages.append((lo, hi))
-        if m.a not in index or m.b not in index:
-            rows.append(_missing_row(m.measurement_id, m.name, m.kind, m.a, m.b, index))
-            continue
-        d_c = float(np.linalg.norm(p[index[m.a]] - p[index[m.b]]))
-        if not (lo <= a0 <= hi and lo <= a1 <= hi):
-            rows.append(
-                MeasurementRow(
-                    m.measurement_id,
-                    m.name,
-                    m.kind,
-                    m.a,
-                    m.b,
-                    "scale",
-                    d_c,
-                    note=f"norms cover {lo:g}-{hi:g} y only: follows the head scale",
-                )
-            )
-            continue
-        mu_c, sd_c = table.at(m.measurement_id, sex, a0, eth)
-        mu_t, sd_t = table.at(m.measurement_id, sex, a1, eth)
-        d_t = mu_t + (sd_t / sd_c) * (d_c - mu_c)  # Kähler §8.5.4
-        hard.append(Constraint(index[m.a], index[m.b], d_t, None, m.measurement_id))
-        rows.append(
-            MeasurementRow(
-                m.measurement_id,
-                m.name,
-                m.kind,
-                m.a,
-                m.b,
-                "norms",
-                d_c,
-                target_mm=d_t,
-                mean_from=mu_c,
-                sd_from=sd_c,
-                mean_to=mu_t,
-                sd_to=sd_t,
-                source=table.source_of(m.measurement_id, sex, eth),
-            )
-        )
-    if usable_ages:
-        lo_all = min(a for a, _ in usable_ages)
-        hi_all = max(b for _, b in usable_ages)
-        for age, what in ((a0, "--from"), (a1, "--to")):
-            if not lo_all <= age <= hi_all:
-                raise InputError(
-                    what,
-                    f"age {age:g} y is outside the norms' range {lo_all:g}-{hi_all:g} y "
-                    f"({table.norms_id}, {sex}, {eth})",
-                    "choose an age the norms cover, or import a norms table that covers it "
-                    "(--norms FILE.csv)",
-                )
-    if not hard:
-        raise InputError(
-            "--norms",
-            f"{table.norms_id} gives no measurement with norms at both {a0:g} and {a1:g} y "
-            f"for {sex}, {eth} that the head's landmarks allow",
-        )
-    return rows, hard
-
-
-@dataclass(frozen=True)
-class _HeadSize:
-    """The head circumference before and at the target age, and the global scale s."""
-
-    hc_c: float  # measured on the source head (mm)
-    h0: float  # the chart's ages read for the source and target ages (years)
-    h1: float
-    z_hc: float  # the source's z-score on the chart
-    scale: float  # s: the circumference's change at a kept z-score
-    hc_t: float  # target circumference, s · hc_c (mm)
-
-
-def _head_size(
-    head: TemplateHead, hc_ref: Any, sex: str, a0: float, a1: float, notes: list[str]
-) -> _HeadSize:
-    """The head circumference's change from ``a0`` to ``a1`` years at a kept z-score.
-
-    Raises :class:`InputError` when the circumference cannot be measured;
-    chart notes (ages read at the chart's end) are added to ``notes``.
-    """
-    hc_c = measure_circumference(head)
-    if not np.isfinite(hc_c):
-        raise InputError(
-            "HEAD",
-            "the head circumference cannot be measured (glabella or opisthocranion missing, or "
-            "no closed section of the skin through them)",
-            "the global scale of measurements without norms comes from it",
-        )
-    h0 = _hc_age(hc_ref, sex, a0, notes)
-    h1 = _hc_age(hc_ref, sex, a1, notes)
-    z_hc = hc_ref.z(sex, h0, hc_c)
-    scale = hc_scale(hc_ref, sex, h0, h1, z_hc)
-    return _HeadSize(hc_c, h0, h1, z_hc, scale, scale * hc_c)
-
-
-def _scale_targets(
-    p: np.ndarray,
-    index: Mapping[str, int],
-    scale: float,
-    rows: list[MeasurementRow],
-    hard: list[Constraint],
-) -> tuple[list[SoftPair], list[Any]]:
-    """Kähler's Table 8.2 measurements without norms here, at the head scale ``scale``.
-
-    Appends their rows to ``rows`` and the head-size measurements (as hard
-    constraints, mm along their axis) to ``hard``; returns the soft pairs
-    (each landmark's nearby pairs, then the table's other measurements) and
-    the table's arcs, which are met after the solve.
-    """
-    from workbench.io.growth_table82 import AXIS_OF, load_table82
-
-    soft: list[SoftPair] = [SoftPair(a, b, (0, 1, 2), "nearby") for a, b in nearby_pairs(p)]
-    hard_pairs = {(c.a, c.b) for c in hard} | {(c.b, c.a) for c in hard}
-    arcs = []
-    for t in load_table82():
-        if t.a not in index or t.b not in index:
-            rows.append(_missing_row(t.measurement, t.measurement, t.kind, t.a, t.b, index))
-            continue
-        ia, ib = index[t.a], index[t.b]
-        if t.kind == "arc":
-            arcs.append(t)
-            continue
-        if t.norm_measurement_id and (ia, ib) in hard_pairs:
-            continue  # covered by its norms
-        axes = (0, 1, 2) if t.kind == "euclidean" else (AXIS_OF[t.kind],)
-        before = (
-            float(np.linalg.norm(p[ia] - p[ib]))
-            if t.kind == "euclidean"
-            else float(abs(p[ia, axes[0]] - p[ib, axes[0]]))
-        )
-        if t.measurement in HEAD_SIZE and t.kind in AXIS_OF:
-            ax = AXIS_OF[t.kind]
-            hard.append(Constraint(ia, ib, scale * float(p[ia, ax] - p[ib, ax]), ax, t.measurement))
-        else:
-            soft.append(SoftPair(ia, ib, axes, t.measurement))
-        rows.append(
-            MeasurementRow(
-                t.measurement,
-                t.measurement,
-                t.kind,
-                t.a,
-                t.b,
-                "scale",
-                before,
-                target_mm=scale * before,
-                note="no norms here (Kähler Table 8.2): "
-                + (
-                    "held at the head-circumference scale"
-                    if t.measurement in HEAD_SIZE
-                    else "follows the head scale"
-                ),
-            )
-        )
-    return soft, arcs
-
-
 @dataclass(frozen=True)
 class _Solved:
     """The landmark solve after the head-size correction and the skin warp it gives."""
@@ -617,7 +347,7 @@ def _solve_to_head_size(
     soft: list[SoftPair],
     arcs: list[Any],
     index: Mapping[str, int],
-    size: _HeadSize,
+    size: HeadSize,
     arc_increase: float,
     anchor: list[int],
 ) -> _Solved:
@@ -726,7 +456,7 @@ def _outcome_figures(
     out_rows: Sequence[MeasurementRow],
     hc_ref: Any,
     sex: str,
-    size: _HeadSize,
+    size: HeadSize,
     solved: _Solved,
 ) -> dict[str, Any]:
     """The report's figures of the residuals, the circumference, the solve and the face

@@ -143,10 +143,14 @@ def report_dict(
             "inputs": [dict(i) for i in inputs],
         },
         "method": "Kähler 2003 §8.5: measurements with norms keep their z-score "
-        "(d_t = mu_t + sd_t/sd_c (d_c - mu_c)) as hard constraints; Table 8.2 measurements "
-        "without norms and nearby landmark pairs follow the head-circumference scale; per-axis "
-        "least squares (SVD, condition clamp), translation anchored at the tragia; arcs after "
-        "the solve; the whole head warped (thin-plate spline), source tissue depths kept",
+        "(d_t = mu_t + sd_t/sd_c (d_c - mu_c)) as hard constraints, the vault's height "
+        "(head-ear height, vertex over porion) too where its norms cover both ages; Table 8.2 "
+        "measurements without norms and nearby landmark pairs follow the head-circumference "
+        "scale; per-axis least squares (SVD, condition clamp), translation anchored at the "
+        "tragia; arcs after the solve; the whole head warped (Kähler's landmark spline with a "
+        "rounded kernel), source tissue depths kept; eyeballs scaled by their own growth "
+        "(axial length by age) and seated in the lids",
+        "growth_tables": _growth_table_citations(),
         "ages": [
             {
                 "to_age": r.to_age,
@@ -158,6 +162,22 @@ def report_dict(
             }
             for r in results
         ],
+    }
+
+
+def _growth_table_citations() -> dict[str, dict[str, str]]:
+    """Citations of the growth tables beside the facial norms (eyeball growth, vault height)."""
+    from workbench.services.age.growth_tables import load_eyeball_growth, load_vault_norms
+
+    vault = load_vault_norms()
+    keys = {
+        vault.source_of(m, s, vault.ethnicities()[0])
+        for m in vault.measurement_ids()
+        for s in ("female", "male")
+    }
+    return {
+        "eyeball_axial_length": dict(load_eyeball_growth().citations),
+        "vault_norms": {k: vault.citation(k) for k in sorted(keys)},
     }
 
 

@@ -1,16 +1,16 @@
 """The warp steps of the age change (:func:`workbench.services.age.change.age_head`, step 5).
 
-Units mm; the head is in its Frankfort frame.  The skin's thin-plate spline
+Units mm; the head is in its Frankfort frame.  The skin's landmark spline
 from the current landmarks and arc middles to the solved ones, the whole-head
-deformation it drives (eyeballs scaled by the warp's local size change, the
-source tissue depths restored below the new skin landmarks), the relaxation
-of skin triangles the warp turned over, and the push of skin that ended inside
-the aged skull back outside it.
+deformation it drives (the source tissue depths restored below the new skin
+landmarks, the eyeballs scaled by their own growth and seated in the
+lids), the relaxation of skin triangles the warp turned over, and the push of
+skin that ended inside the aged skull back outside it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -23,6 +23,8 @@ from workbench.core.normals import normals_within_radius
 from workbench.core.spatial import MeshIndex
 from workbench.core.tps import fit_warp
 from workbench.model.template import TemplateHead
+from workbench.services.age.eyes import scale_eyes, seat_eyes
+from workbench.services.age.smooth_warp import fit_rounded_warp
 
 #: regulariser of the inner parts' depth-restoring warp (as the scan fit's)
 INNER_SMOOTHING = 2.0
@@ -175,17 +177,11 @@ def unfold(
     return skin.with_vertices(v)
 
 
-def _local_scale(warp: Callable[[np.ndarray], np.ndarray], point: np.ndarray) -> float:
-    """Cube root of the warp's Jacobian determinant at ``point`` (central differences, 1 mm)."""
-    e = np.eye(3)
-    cols = [(warp((point + e[i])[None])[0] - warp((point - e[i])[None])[0]) / 2 for i in range(3)]
-    det = float(np.linalg.det(np.column_stack(cols)))
-    return float(np.cbrt(det)) if det > 0 else 1.0
-
-
 def skin_warp(src: np.ndarray, dst: np.ndarray, lam: np.ndarray) -> Any:
-    """The thin-plate spline of the skin: coinciding sources (stomion and stomion superius
-    of closed lips) merged, hard-constraint landmarks exact, the rest loose."""
+    """The skin's landmark spline (Kähler's, with the rounded kernel of
+    :mod:`workbench.services.age.smooth_warp`: no crease at a landmark): coinciding
+    sources (stomion and stomion superius of closed lips) merged, hard-constraint
+    landmarks exact, the rest loose (λ, mm)."""
     key = np.round(src, 6)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
@@ -194,7 +190,7 @@ def skin_warp(src: np.ndarray, dst: np.ndarray, lam: np.ndarray) -> Any:
     merged /= np.bincount(inverse, minlength=len(first))[:, None]
     lam_merged = np.full(len(first), np.inf)
     np.minimum.at(lam_merged, inverse, lam)
-    return fit_warp(src[first], merged, smoothing=lam_merged)
+    return fit_rounded_warp(src[first], merged, smoothing=lam_merged)
 
 
 def warp_points(
@@ -241,7 +237,17 @@ def warp_points(
     return src, dst, lam, arc_rows
 
 
-def deform(head: TemplateHead, warp: Any) -> TemplateHead:
+def deform(head: TemplateHead, warp: Any, eye_scale: float = 1.0) -> TemplateHead:
+    """``head`` (Frankfort frame, mm) moved by the skin ``warp``, settled in its new frame.
+
+    Every part follows the warp (the eyeballs rigidly with their centres);
+    triangles it turned over are relaxed; the inner parts are warped again so
+    that each skull landmark lies at its source tissue depth below its skin
+    partner; the eyeballs are then scaled about their centres by
+    ``eye_scale`` (their own growth, :mod:`workbench.services.age.eyes`) and
+    moved along their gaze to sit in the lids as on the source; last the head
+    is moved into the Frankfort frame of its skull landmarks.
+    """
     from workbench.io.catalogue import load_catalogue
     from workbench.services.landmarks.frame import head_frame_from_landmarks
     from workbench.services.registration.skull_registration import head_transformed
@@ -252,15 +258,6 @@ def deform(head: TemplateHead, warp: Any) -> TemplateHead:
     sliver = head.skin.face_areas < SLIVER_MM2
     skin = unfold(warped.skin, head.skin.face_normals, keep=sliver)
     warped = replace(warped, meshes={**warped.meshes, "skin": skin})
-    # eyeballs: scaled about their new centres by the warp's local size change
-    eyes = warped.meshes["eyes"].vertices
-    owner = np.linalg.norm(eyes[:, None] - warped.eye_centres[None], axis=2).argmin(axis=1)
-    factors = np.array([_local_scale(warp, c) for c in head.eye_centres])
-    eyes = warped.eye_centres[owner] + factors[owner, None] * (eyes - warped.eye_centres[owner])
-    meshes = dict(warped.meshes)
-    meshes["eyes"] = warped.meshes["eyes"].with_vertices(eyes)
-    warped = replace(warped, meshes=meshes, eye_radius=float(head.eye_radius * factors.mean()))
-
     # the source tissue depths restored below the new skin landmarks
     catalogue = load_catalogue()
     skin_old = head.skin_landmarks.as_dict()
@@ -292,6 +289,7 @@ def deform(head: TemplateHead, warp: Any) -> TemplateHead:
             eye_centres=moved.eye_centres,
             tmj_axis=moved.tmj_axis,
         )
+    warped = seat_eyes(head, scale_eyes(warped, head.eye_radius * float(eye_scale)))
     try:
         settle = head_frame_from_landmarks(warped.skull_landmarks).input_to_head
     except WorkbenchError:
