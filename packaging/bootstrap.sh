@@ -47,6 +47,18 @@ if command -v dpkg >/dev/null 2>&1; then
   fi
 fi
 
+# the tests check exported glTF files with the Khronos glTF-Validator (an npm package,
+# installed by the test into a cache folder): it needs node and npm
+if [ "$mode" = test ] && ! { command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1; }; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+    echo "installing system packages: nodejs npm (glTF validation in the tests)"
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nodejs npm \
+      >/dev/null || echo "could not install nodejs/npm: the glTF validation test will skip" >&2
+  else
+    echo "node/npm not found: the glTF validation test will skip" >&2
+  fi
+fi
+
 # --------------------------------------------------------------- python environment
 py="${PYTHON:-python3}"
 if ! "$py" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)'; then

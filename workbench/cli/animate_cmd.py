@@ -40,7 +40,7 @@ import argparse
 import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -139,6 +139,29 @@ def register(sub: argparse._SubParsersAction) -> None:
         "approximation: there is no official ARKit-FACS mapping); or a table of your own with "
         "the columns arkit_name,recipe,source,notes (recipe like au26:0.5;au27:0.5). Shapes "
         "with an empty recipe (gaze, tongueOut, cheekPuff ...) are written as zero displacement",
+    )
+    from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
+
+    p.add_argument(
+        "--skin-tone",
+        choices=list(SKIN_TONES),
+        default=DEFAULT_SKIN_TONE,
+        help=".glb only: the skin's colour, a Monk Skin Tone swatch (mst1-mst10; light, medium "
+        "and dark are mst3, mst6, mst9); an artistic default, not evidence. A fit-scan pack's "
+        "own skin texture is used instead when HEAD is such a pack (default: %(default)s)",
+    )
+    p.add_argument(
+        "--iris",
+        choices=list(IRIS_COLOURS),
+        default=DEFAULT_IRIS,
+        help=".glb only: the iris colour painted on the eyes (default: %(default)s)",
+    )
+    p.add_argument(
+        "--eyes",
+        choices=["texture", "vertex"],
+        default="texture",
+        help=".glb only: the eyes' iris as a texture (default) or as vertex colours on finer "
+        "eyeballs",
     )
     add_force_option(p)
     p.set_defaults(handler=run)
@@ -333,7 +356,14 @@ def _write_glb(
         keyframes = ramp_keyframes(args.expression, args.clip_seconds)
     with output_path(args.out, args, *inputs) as target:
         _, settled, seconds = export_head_glb(
-            head, target, names, keyframes, weights=weights, names_arkit=recipes, frame=frame
+            head,
+            target,
+            names,
+            keyframes,
+            weights=weights,
+            names_arkit=recipes,
+            frame=frame,
+            **_looks(args, head),
         )
     size = args.out.stat().st_size
     clip = f"; clip neutral -> {args.expression} over {args.clip_seconds:g} s" if keyframes else ""
@@ -479,6 +509,20 @@ def _write_skin(target: Path, anim: Animator, frame: str, what: str) -> None:
         write_mesh(target, skin)
 
 
+def _looks(args: argparse.Namespace, head: TemplateHead) -> dict[str, Any]:
+    """The colours of a .glb: the options, and a fit-scan pack's own skin texture."""
+    from workbench.io.skin_colour_export import read_skin_texture
+
+    looks: dict[str, Any] = {"skin_tone": args.skin_tone, "iris": args.iris, "eyes": args.eyes}
+    root = Path(str(args.head))
+    for folder in (root, root / "head"):  # a fit-scan pack, or a folder holding one
+        texture = read_skin_texture(folder, head.skin) if folder.is_dir() else None
+        if texture is not None:
+            looks["skin_texture"] = texture
+            break
+    return looks
+
+
 def _glb_frame(frame: str) -> str:
     """The frame line of a written ``.glb``: the head's own (that of its PLY files), metres."""
     return (
@@ -514,7 +558,7 @@ def _write_track_glb(
         raise InputError(args.track, "animates nothing a .glb can hold (only neutral keys)")
     with output_path(args.out, args, *inputs) as target:
         _, settled, seconds = export_head_glb(
-            head, target, names, keyframes, poses=poses, frame=frame
+            head, target, names, keyframes, poses=poses, frame=frame, **_looks(args, head)
         )
     size = args.out.stat().st_size
     gaze = any(k.gaze != (0.0, 0.0) for k in track.keys)

@@ -1,9 +1,28 @@
 """glTF 2.0 binary (``.glb``) export of a head with morph targets (shape keys) and a clip.
 
 The file holds one scene with a root node ``head`` and, below it, the skin
-node (one mesh, one primitive: ``POSITION``, ``NORMAL``, ``indices``) with
-one morph target per expression, and a node per inner part (eyes, upper and
-lower teeth, tongue, mandible, cranium ...).
+node (one mesh: ``POSITION``, ``NORMAL``, ``indices``) with one morph target
+per expression, and a node per inner part (eyes, upper and lower teeth,
+tongue, mandible, cranium ...).
+
+Materials
+---------
+Every primitive has a PBR metallic-roughness material (metallic 0), given
+per node as a :class:`workbench.core.appearance.Look`; without one a node
+gets the plain preset of its name (:func:`workbench.core.appearance.plain_look`;
+the skin node the skin preset).  Per-vertex colours are ``COLOR_0`` (linear
+RGB) on one primitive with the look's first material: the skin carries its
+tone with the lips blended in that way, rather than split triangle by
+triangle.  A look with several materials and no per-vertex colours is one
+mesh with a primitive per material, sharing the vertex and morph-target
+accessors.  A texture (PNG, embedded) comes with ``TEXCOORD_0``; glTF's
+texture origin is the image's top-left, so ``v`` is ``1 - v`` of the look's
+(OBJ-style) coordinates.  Where the texture coordinates differ between the
+corners that meet at a vertex (the skin atlas gives every triangle its own
+patch), that vertex is written once per coordinate, with its normal and
+morph displacements copied.  ``baseColorFactor`` is the linear value of the
+preset's sRGB colour (white under a texture or ``COLOR_0``).  The colours
+are artistic defaults, not evidence; ``asset.extras`` says so.
 
 Units and axes
 --------------
@@ -12,12 +31,13 @@ glTF is metres.  The vertices are the caller's meshes in the caller's frame,
 at the identity transform: a glTF position × 1000 is the mm coordinate of
 the same vertex in the workbench's PLY files of that head (same axes, same
 handedness, same origin).  The asset's ``extras`` say so (``units``,
-``mm_per_unit``, ``frame``).  For the head frame (x to the subject's left,
-y up, z toward the face) this is glTF's own convention (+Y up, +Z the
-asset's front); a head in a skull file's frame keeps that frame's axes.
-Blender's glTF importer turns glTF's +Y up into Blender's +Z up, its PLY
-importer turns nothing: import the PLY with Forward Axis -Z, Up Axis Y
-and Scale 0.001 and the two overlay.
+``mm_per_unit``, ``frame``, ``note``, ``axes``, ``materials``).  The PLY
+files are in mm and declare no up axis; glTF declares metres and +Y up.  For
+the head frame (x to the subject's left, y up, z toward the face) this is
+glTF's own convention (+Y up, +Z the asset's front); a head in a skull
+file's frame keeps that frame's axes.  Blender's glTF importer turns glTF's
++Y up into Blender's +Z up, its PLY importer turns nothing: import the PLY
+with Forward Axis -Z, Up Axis Y and Scale 0.001 and the two overlay.
 
 Morph targets
 -------------
@@ -41,6 +61,7 @@ The optional animation clip is a ``weights`` channel per morphed node
 
 from __future__ import annotations
 
+import io
 import struct
 from collections.abc import Mapping, Sequence
 from os import PathLike
@@ -49,6 +70,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib as g
 
+from workbench.core.appearance import Look, Material, plain_look, srgb_to_linear
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
 from workbench.io.atomic import write_bytes_atomic
@@ -58,15 +80,56 @@ MM_TO_M = 0.001
 
 Keyframes = Sequence[tuple[float, Mapping[str, float]]]
 
-__all__ = ["MM_TO_M", "write_glb"]
+#: what ``asset.extras.axes`` says: glTF's +Y up holds for the head frame, not for every frame
+AXES_NOTE = (
+    "no rotation is applied: in the head frame (x to the subject's left, y up, z toward the "
+    "face) +Y is up and +Z the front, as glTF expects; a head in a skull file's frame keeps "
+    "that file's axes (the PLY files, in mm, declare no up axis)"
+)
+
+#: what ``asset.extras.materials`` says about the colours
+MATERIALS_NOTE = (
+    "PBR metallic-roughness, metallic 0; colours are artistic defaults "
+    "(workbench.core.appearance presets) or the scan's own colours, not evidence about the person"
+)
+
+__all__ = ["AXES_NOTE", "MATERIALS_NOTE", "MM_TO_M", "png_bytes", "split_corners", "write_glb"]
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """An ``(h, w, 3)`` uint8 sRGB image as PNG bytes (Pillow)."""
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8), "RGB").save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def split_corners(
+    faces: np.ndarray, corner_uv: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices split where their corners' texture coordinates differ.
+
+    Returns ``(source, new_faces, uv)``: for each new vertex the index of the
+    vertex it copies, the triangles over the new vertices, and one ``(u, v)``
+    per new vertex.  A vertex whose corners all share one coordinate stays one
+    vertex.
+    """
+    f = np.asarray(faces, np.int64).reshape(-1)
+    uv = np.asarray(corner_uv, np.float64).reshape(-1, 2)
+    keys = np.column_stack([f.astype(np.float64), uv])
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    return unique[:, 0].astype(np.int64), inverse.reshape(-1, 3), unique[:, 1:]
 
 
 class _Builder:
-    """Accumulates one binary buffer and its bufferViews/accessors."""
+    """Accumulates one binary buffer and its bufferViews/accessors, materials and images."""
 
     def __init__(self) -> None:
         self.gltf = g.GLTF2(asset=g.Asset(version="2.0", generator="workbench"))
         self.blob = bytearray()
+        self._materials: dict[str, int] = {}
+        self._images: dict[int, int] = {}
 
     def _view(self, data: bytes, target: int | None) -> int:
         pad = -len(self.blob) % 4
@@ -106,34 +169,98 @@ class _Builder:
         self.gltf.accessors.append(acc)
         return len(self.gltf.accessors) - 1
 
+    def _texture(self, image: np.ndarray) -> int:
+        """The texture index of ``image`` (embedded once however many materials use it)."""
+        key = id(image)
+        if key not in self._images:
+            if not self.gltf.samplers:
+                self.gltf.samplers.append(
+                    g.Sampler(
+                        magFilter=g.LINEAR,
+                        minFilter=g.LINEAR,
+                        wrapS=g.CLAMP_TO_EDGE,
+                        wrapT=g.CLAMP_TO_EDGE,
+                    )
+                )
+            view = self._view(png_bytes(image), None)
+            self.gltf.images.append(g.Image(bufferView=view, mimeType="image/png"))
+            self.gltf.textures.append(g.Texture(sampler=0, source=len(self.gltf.images) - 1))
+            self._images[key] = len(self.gltf.textures) - 1
+        return self._images[key]
+
+    def material(self, material: Material, vertex_colours: bool) -> int:
+        """The index of ``material`` (one glTF material per name and colouring)."""
+        key = f"{material.name}|{vertex_colours}"
+        if key in self._materials:
+            return self._materials[key]
+        pbr = g.PbrMetallicRoughness(
+            baseColorFactor=[1.0, 1.0, 1.0, 1.0],
+            metallicFactor=float(material.metallic),
+            roughnessFactor=float(material.roughness),
+        )
+        if material.texture is not None:
+            pbr.baseColorTexture = g.TextureInfo(index=self._texture(material.texture))
+        elif not vertex_colours:
+            pbr.baseColorFactor = [*(float(c) for c in srgb_to_linear(material.srgb)), 1.0]
+        self.gltf.materials.append(
+            g.Material(
+                name=material.name,
+                pbrMetallicRoughness=pbr,
+                extras={"srgb": list(material.srgb), "source": material.source},
+            )
+        )
+        self._materials[key] = len(self.gltf.materials) - 1
+        return self._materials[key]
+
     def mesh(
         self,
         name: str,
         mesh: Mesh,
+        look: Look,
         targets: Mapping[str, np.ndarray] | None = None,
         weights: Sequence[float] | None = None,
     ) -> int:
-        v = mesh.vertices * MM_TO_M
+        """A mesh with a primitive per material of ``look``; ``targets``: displacements (mm)."""
+        faces = mesh.faces
+        positions = mesh.vertices * MM_TO_M
         normals = vertex_normals(mesh)
-        attributes = g.Attributes(
-            POSITION=self.accessor(v, g.VEC3, min_max=True),
-            NORMAL=self.accessor(normals, g.VEC3),
-        )
-        prim = g.Primitive(
-            attributes=attributes,
-            indices=self.accessor(
-                mesh.faces.reshape(-1).astype(np.uint32),
-                g.SCALAR,
-                target=g.ELEMENT_ARRAY_BUFFER,
-            ),
-            mode=g.TRIANGLES,
-        )
-        out = g.Mesh(name=name, primitives=[prim])
+        deltas = [np.asarray(d) * MM_TO_M for d in (targets or {}).values()]
+        colours = None if look.vertex_srgb is None else srgb_to_linear(look.vertex_srgb)
+        uv = None
+        if look.corner_uv is not None:
+            source, faces, uv = split_corners(faces, look.corner_uv)
+            uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])  # glTF: origin at the top-left
+            positions, normals = positions[source], normals[source]
+            deltas = [d[source] for d in deltas]
+            colours = None if colours is None else colours[source]
+        attributes = {
+            "POSITION": self.accessor(positions, g.VEC3, min_max=True),
+            "NORMAL": self.accessor(normals, g.VEC3),
+        }
+        if uv is not None:
+            attributes["TEXCOORD_0"] = self.accessor(uv, g.VEC2)
+        if colours is not None:
+            attributes["COLOR_0"] = self.accessor(colours, g.VEC3)
+        morphs = [self.accessor(d, g.VEC3, min_max=True) for d in deltas]
+        # per-vertex colours replace the per-triangle materials (the first one carries them)
+        which = np.zeros(len(faces), np.int64) if colours is not None else look.faces_of(len(faces))
+        out = g.Mesh(name=name, primitives=[])
+        for k, material in enumerate(look.materials):
+            rows = faces[which == k]
+            if not len(rows):
+                continue
+            prim = g.Primitive(
+                attributes=g.Attributes(**attributes),
+                indices=self.accessor(
+                    rows.reshape(-1).astype(np.uint32), g.SCALAR, target=g.ELEMENT_ARRAY_BUFFER
+                ),
+                material=self.material(material, colours is not None),
+                mode=g.TRIANGLES,
+            )
+            if morphs:
+                prim.targets = [g.Attributes(POSITION=m) for m in morphs]
+            out.primitives.append(prim)
         if targets:
-            prim.targets = [
-                g.Attributes(POSITION=self.accessor(d * MM_TO_M, g.VEC3, min_max=True))
-                for d in targets.values()
-            ]
             out.weights = [float(w) for w in (weights or [0.0] * len(targets))]
             out.extras = {"targetNames": list(targets)}
         self.gltf.meshes.append(out)
@@ -181,6 +308,25 @@ def _with_arkit(
     return out
 
 
+def _look_for(
+    name: str, mesh: Mesh, looks: Mapping[str, Look], default: str, has_targets: bool
+) -> tuple[Mesh, Look]:
+    """The look of a node and the mesh to write (a look's replacement mesh only without
+    morph targets, whose displacements belong to the given mesh)."""
+    look = looks.get(name) or plain_look(default)
+    if look.mesh is not None and has_targets:
+        look = plain_look(default)
+    mesh = look.mesh if look.mesh is not None else mesh
+    n, m = mesh.n_vertices, mesh.n_faces
+    if look.corner_uv is not None and np.shape(look.corner_uv) != (m, 3, 2):
+        raise ValueError(f"{name}: texture coordinates for {len(look.corner_uv)} of {m} triangles")
+    if look.vertex_srgb is not None and len(look.vertex_srgb) != n:
+        raise ValueError(f"{name}: colours for {len(look.vertex_srgb)} of {n} vertices")
+    if look.face_material is not None and len(look.face_material) != m:
+        raise ValueError(f"{name}: materials for {len(look.face_material)} of {m} triangles")
+    return mesh, look
+
+
 def write_glb(
     path: str | PathLike[str],
     skin: Mesh,
@@ -194,6 +340,7 @@ def write_glb(
     skin_name: str = "skin",
     clip_name: str = "expression",
     frame: str = "",
+    looks: Mapping[str, Look] | None = None,
 ) -> Path:
     """Write a ``.glb``: the skin with morph targets, inner parts as nodes, an optional clip.
 
@@ -210,10 +357,14 @@ def write_glb(
         weights (LINEAR); targets not named in a keyframe have weight 0 there
     names_arkit : ``{ARKit name: {target name: weight}}``: extra targets made of the others
     frame : what the meshes' frame is (the frame of the head's PLY files), for ``extras``
+    looks : ``{node name: Look}`` (materials, textures, colours; see
+        :func:`workbench.core.appearance.head_looks`); a node without one gets the
+        plain preset of its name, the skin node the skin preset
     """
     path = Path(path)
     extra_nodes = dict(extra_nodes or {})
     node_targets = dict(node_targets or {})
+    looks = dict(looks or {})
     deltas = _with_arkit(_displacements(skin, targets, skin_name), names_arkit)
     names = list(deltas)
     for key in [*(weights or {})] + [k for _, frame in (animation or []) for k in frame]:
@@ -227,9 +378,12 @@ def write_glb(
         "mm_per_unit": 1000,
         "frame": frame or "the frame of the meshes given (the head's PLY files), axes unchanged",
         "note": "a position x 1000 is the vertex in mm in the head's PLY files",
+        "axes": AXES_NOTE,
+        "materials": MATERIALS_NOTE,
     }
     morphed: list[int] = []
-    skin_node = b.node(skin_name, b.mesh(skin_name, skin, deltas, default))
+    skin_mesh, skin_look = _look_for(skin_name, skin, looks, "skin", True)
+    skin_node = b.node(skin_name, b.mesh(skin_name, skin_mesh, skin_look, deltas, default))
     morphed.append(skin_node)
     children = [skin_node]
     for name, mesh in extra_nodes.items():
@@ -243,38 +397,44 @@ def write_glb(
             # the same target list (and order) as the skin, so one set of weights drives both
             part_deltas = {n: d.get(n, zero) for n in targets}
             part_deltas = _with_arkit(part_deltas, names_arkit)
-            node = b.node(name, b.mesh(name, mesh, part_deltas, default))
+            mesh, look = _look_for(name, mesh, looks, name, True)
+            node = b.node(name, b.mesh(name, mesh, look, part_deltas, default))
             morphed.append(node)
         else:
-            node = b.node(name, b.mesh(name, mesh))
+            mesh, look = _look_for(name, mesh, looks, name, False)
+            node = b.node(name, b.mesh(name, mesh, look))
         children.append(node)
     root = b.node("head")
     b.gltf.nodes[root].children = children
     b.gltf.scenes = [g.Scene(name="head", nodes=[root])]
     b.gltf.scene = 0
-
     if animation:
-        times = np.array([float(t) for t, _ in animation])
-        if np.any(np.diff(times) <= 0) or times[0] < 0:
-            raise ValueError("animation key times must be >= 0 and strictly increasing")
-        values = np.array([[float(frame.get(n, 0.0)) for n in names] for _, frame in animation])
-        t_acc = b.accessor(times, g.SCALAR, target=None, min_max=True)
-        w_acc = b.accessor(values.reshape(-1), g.SCALAR, target=None)
-        clip = g.Animation(name=clip_name)
-        for node in morphed:
-            clip.samplers.append(
-                g.AnimationSampler(input=t_acc, output=w_acc, interpolation="LINEAR")
-            )
-            clip.channels.append(
-                g.AnimationChannel(
-                    sampler=len(clip.samplers) - 1,
-                    target=g.AnimationChannelTarget(node=node, path="weights"),
-                )
-            )
-        b.gltf.animations = [clip]
+        _clip(b, animation, names, morphed, clip_name)
 
     payload = b.to_bytes()
     if payload[:4] != b"glTF" or struct.unpack("<I", payload[8:12])[0] != len(payload):
         raise RuntimeError("internal error: malformed GLB")
     write_bytes_atomic(path, payload)
     return path
+
+
+def _clip(
+    b: _Builder, animation: Keyframes, names: list[str], morphed: list[int], clip_name: str
+) -> None:
+    """The weights clip: one LINEAR ``weights`` channel per morphed node."""
+    times = np.array([float(t) for t, _ in animation])
+    if np.any(np.diff(times) <= 0) or times[0] < 0:
+        raise ValueError("animation key times must be >= 0 and strictly increasing")
+    values = np.array([[float(frame.get(n, 0.0)) for n in names] for _, frame in animation])
+    t_acc = b.accessor(times, g.SCALAR, target=None, min_max=True)
+    w_acc = b.accessor(values.reshape(-1), g.SCALAR, target=None)
+    clip = g.Animation(name=clip_name)
+    for node in morphed:
+        clip.samplers.append(g.AnimationSampler(input=t_acc, output=w_acc, interpolation="LINEAR"))
+        clip.channels.append(
+            g.AnimationChannel(
+                sampler=len(clip.samplers) - 1,
+                target=g.AnimationChannelTarget(node=node, path="weights"),
+            )
+        )
+    b.gltf.animations = [clip]

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.appearance import SkinTexture
 from workbench.core.colour_transfer import ScanColours, SkinColours, scan_colour_at
 from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
@@ -264,4 +265,32 @@ def write_coloured_skin(
     return [ply_path, obj_path, mtl_path, png_path]
 
 
-__all__ = ["atlas_layout", "texture_atlas", "write_coloured_skin"]
+def read_skin_texture(folder: str | PathLike[str], skin: Mesh) -> SkinTexture | None:
+    """The atlas a pack holds for ``skin`` (``skin_textured.obj`` + ``skin_texture.png``).
+
+    None when either file is missing or the OBJ's triangles or vertices are not
+    ``skin``'s (within 1e-6 mm): the atlas belongs to another skin.
+    """
+    from PIL import Image
+
+    from workbench.io.mesh_formats import obj
+
+    root = Path(folder)
+    obj_path, png_path = root / OBJ_NAME, root / PNG_NAME
+    if not (obj_path.is_file() and png_path.is_file()):
+        return None
+    parsed = obj.read(obj_path, obj_path.read_bytes())
+    same = (
+        parsed.corner_uv is not None
+        and np.array_equal(parsed.faces, skin.faces)
+        and parsed.vertices.shape == skin.vertices.shape
+        and np.allclose(parsed.vertices, skin.vertices, rtol=0.0, atol=1e-6)
+    )
+    if not same or parsed.corner_uv is None:
+        return None
+    with Image.open(png_path) as im:
+        image = np.asarray(im.convert("RGB"), dtype=np.uint8)
+    return SkinTexture(image, np.asarray(parsed.corner_uv, float), file=PNG_NAME)
+
+
+__all__ = ["atlas_layout", "read_skin_texture", "texture_atlas", "write_coloured_skin"]

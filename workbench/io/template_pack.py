@@ -8,6 +8,12 @@ x = 0 midsagittal, y up, z toward the face, Frankfort Horizontal at y = 0)::
     muscles.json                      (24 grids of Kähler's Table 7.1 as skin triangles + barycentric
                                        weights + depth, and their positions on this skin in mm)
     template.json                     (id, content hash, sex, provenance, regions, openings)
+    head.obj  head.mtl  eye_<iris>.png  (every part in one OBJ with a material each, for
+                                         Blender and other tools: see write_head_obj)
+
+The PLY files hold the geometry; ``head.obj`` holds the same vertices (mm, the
+pack's frame) for tools that read materials.  Its colours are artistic
+defaults (:mod:`workbench.core.appearance`), not evidence.
 """
 
 from __future__ import annotations
@@ -19,10 +25,19 @@ from typing import Any
 
 import numpy as np
 
+from workbench.core.appearance import (
+    DEFAULT_IRIS,
+    DEFAULT_SKIN_TONE,
+    SkinTexture,
+    head_looks,
+    srgb_to_linear,
+)
 from workbench.core.errors import InputError
 from workbench.core.json_limits import read_json
 from workbench.core.mesh import Mesh, concatenate
+from workbench.io.atomic import write_bytes_atomic
 from workbench.io.markups import read_mrk_json, write_mrk_json
+from workbench.io.mesh_formats import obj
 from workbench.io.meshes import read_mesh, write_mesh
 from workbench.model.muscles import MuscleGrid
 from workbench.model.template import PARTS, TemplateHead
@@ -72,6 +87,88 @@ HEAD_FRAME_TEXT = (
 )
 
 
+#: the pack's OBJ of every part with its materials, and its material library
+HEAD_OBJ = "head.obj"
+HEAD_MTL = "head.mtl"
+
+
+def write_head_obj(
+    head: TemplateHead,
+    folder: str | PathLike[str],
+    *,
+    frame: str = HEAD_FRAME_TEXT,
+    skin_tone: str = DEFAULT_SKIN_TONE,
+    iris: str = DEFAULT_IRIS,
+    skin_texture: SkinTexture | None = None,
+) -> list[Path]:
+    """``head.obj`` (every part an ``o`` object, its triangles under ``usemtl``),
+    ``head.mtl`` and the textures it names, into ``folder``; returns the files written.
+
+    Vertices are the head's, in mm and its frame (``frame`` says which, in a
+    comment): the same numbers as the pack's PLY files, in the same part
+    order.  Materials (:func:`workbench.core.appearance.head_looks`): skin
+    and lips from ``skin_tone``, or the skin's colour atlas -- ``skin_texture``,
+    else the pack's own ``skin_texture.png`` when ``folder`` holds one made
+    for this skin (``fit-scan``); the eyes the ``iris`` texture
+    (``eye_<iris>.png``, equal-area map about the gaze); teeth, bone and tongue
+    their presets.  ``Kd`` is linear RGB, as Blender reads and writes it.
+    """
+    from workbench.io.gltf_export import png_bytes
+    from workbench.io.skin_colour_export import read_skin_texture
+
+    out = Path(folder)
+    if skin_texture is None:
+        skin_texture = read_skin_texture(out, head.skin)
+    looks = head_looks(
+        head.meshes,
+        head.eye_centres,
+        regions=head.regions,
+        tone=skin_tone,
+        iris=iris,
+        skin_texture=skin_texture,
+    )
+    # the pack's own atlas is referenced where it is; other textures are written
+    kept = {skin_texture.file} if skin_texture is not None and skin_texture.file else set()
+    groups, materials, written = [], {}, []
+    for part in (p for parts in FILES.values() for p in parts):
+        look, mesh = looks[part], head.meshes[part]
+        groups.append(
+            obj.ObjGroup(
+                part,
+                mesh.vertices,
+                mesh.faces,
+                [m.name for m in look.materials],
+                look.face_material,
+                look.corner_uv,
+            )
+        )
+        for m in look.materials:
+            if m.texture is not None and not (
+                m.texture_file in kept and (out / m.texture_file).is_file()
+            ):
+                written.append(write_bytes_atomic(out / m.texture_file, png_bytes(m.texture)))
+            kd = srgb_to_linear(m.srgb)
+            materials[m.name] = obj.MtlMaterial(
+                m.name,
+                (float(kd[0]), float(kd[1]), float(kd[2])),
+                m.roughness,
+                m.texture_file if m.texture is not None else "",
+                m.metallic,
+                f"sRGB {m.srgb[0]} {m.srgb[1]} {m.srgb[2]}; {m.source}",
+            )
+    note = "colours are artistic defaults, not evidence about the person"
+    written.append(
+        write_bytes_atomic(out / HEAD_MTL, obj.encode_mtl(list(materials.values()), [note]))
+    )
+    comments = [f"frame: {frame}", "every part of the head; same vertices as the pack's PLY files"]
+    written.append(
+        write_bytes_atomic(
+            out / HEAD_OBJ, obj.encode_groups(groups, mtllib=HEAD_MTL, comments=comments)
+        )
+    )
+    return written
+
+
 def export_template(
     head: TemplateHead, folder: str | PathLike[str], *, frame: str = HEAD_FRAME_TEXT
 ) -> list[Path]:
@@ -79,7 +176,9 @@ def export_template(
 
     ``frame`` is recorded in ``template.json``: pass another description when
     the head was mapped out of the head frame first (a fitted head exported in
-    the skull file's frame, for instance).  Units are always mm.
+    the skull file's frame, for instance).  Units are always mm.  Besides the
+    PLY files, ``head.obj`` holds every part with a material
+    (:func:`write_head_obj`, default colours).
     """
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -109,6 +208,7 @@ def export_template(
     path = out / "muscles.json"
     path.write_text(json.dumps(_jsonable(muscles), indent=1) + "\n", encoding="utf-8")
     written.append(path)
+    written += write_head_obj(head, out, frame=frame)
     info = {
         "@schema": "template-pack-v1",
         "template_id": head.template_id,

@@ -7,6 +7,11 @@ and comments are ignored, except 3D Slicer's ``SPACE=RAS``/``SPACE=LPS`` tag in
 the comment block that opens the file (:attr:`ParsedMesh.space`), where the
 writer puts ``# SPACE=RAS``.
 
+:func:`encode_groups` writes several parts into one OBJ (an ``o`` object
+each), their triangles grouped by ``usemtl`` material and, where a part has
+texture coordinates, ``v/vt`` corners; :func:`encode_mtl` writes the material
+library it names (``Kd``, ``map_Kd`` and the PBR extension's ``Pr``/``Pm``).
+
 Colour data are kept but never make a readable mesh unreadable: vertex
 colours written ``v x y z r g b`` (0..1, or 0..255) become
 :attr:`ParsedMesh.vertex_rgb`; ``vt`` texture coordinates become
@@ -20,6 +25,8 @@ from __future__ import annotations
 
 import re
 import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -233,3 +240,92 @@ def encode(
     body = format_rows("v %r %r %r\n", vertices)
     body += format_rows("f %d %d %d\n", np.asarray(faces) + 1)
     return (head + body).encode("ascii")
+
+
+@dataclass(frozen=True, eq=False)
+class ObjGroup:
+    """One part of a multi-part OBJ.
+
+    ``face_material`` indexes ``materials`` per triangle (None: all the first);
+    ``corner_uv`` ``(m, 3, 2)`` gives every triangle corner a texture
+    coordinate (u right, v up), or None for no ``vt``.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    materials: Sequence[str]
+    face_material: np.ndarray | None = None
+    corner_uv: np.ndarray | None = None
+
+
+def _group_text(group: ObjGroup, v0: int, t0: int) -> tuple[str, int, int]:
+    """The text of one group; vertex and ``vt`` numbers start after ``v0`` and ``t0``."""
+    faces = np.asarray(group.faces, np.int64).reshape(-1, 3)
+    out = [f"o {group.name}\n", format_rows("v %r %r %r\n", np.asarray(group.vertices, float))]
+    n_uv = 0
+    if group.corner_uv is not None:
+        uv, index = np.unique(
+            np.asarray(group.corner_uv, float).reshape(-1, 2), axis=0, return_inverse=True
+        )
+        out.append(format_rows("vt %.7f %.7f\n", uv))
+        n_uv = len(uv)
+        rows = np.stack([faces + v0 + 1, index.reshape(-1, 3) + t0 + 1], axis=-1).reshape(-1, 6)
+        fmt = "f %d/%d %d/%d %d/%d\n"
+    else:
+        rows, fmt = faces + v0 + 1, "f %d %d %d\n"
+    which = (
+        np.zeros(len(faces), np.int64)
+        if group.face_material is None
+        else np.asarray(group.face_material, np.int64)
+    )
+    for k, material in enumerate(group.materials):
+        mine = rows[which == k]
+        if len(mine):
+            out.append(f"usemtl {material}\n")
+            out.append(format_rows(fmt, mine))
+    return "".join(out), v0 + len(group.vertices), t0 + n_uv
+
+
+def encode_groups(
+    groups: Sequence[ObjGroup],
+    *,
+    mtllib: str,
+    comments: Sequence[str] = (),
+    space: str = "RAS",
+) -> bytes:
+    """One OBJ of several parts with their materials (``mtllib``), exact doubles."""
+    lines = [UNITS_NOTE, space_tag(space), f"written by {WRITER_NAME}", *comments]
+    text = "".join(f"# {line}\n" for line in lines) + f"mtllib {mtllib}\n"
+    v0 = t0 = 0
+    for group in groups:
+        part, v0, t0 = _group_text(group, v0, t0)
+        text += part
+    return text.encode("utf-8")
+
+
+@dataclass(frozen=True)
+class MtlMaterial:
+    """One ``newmtl`` entry: diffuse colour ``kd`` (0-1), roughness, optional texture."""
+
+    name: str
+    kd: tuple[float, float, float]
+    roughness: float
+    map_kd: str = ""
+    metallic: float = 0.0
+    comment: str = ""
+
+
+def encode_mtl(materials: Sequence[MtlMaterial], comments: Sequence[str] = ()) -> bytes:
+    """A material library: ``Kd`` (white under a ``map_Kd`` texture), no ambient or
+    metal (``Ka`` 0, ``Pm``), a dim specular whose ``Ns`` matches the roughness ``Pr``
+    (Blender's importer reads ``Pr``/``Pm``; others read ``Ns``)."""
+    text = "".join(f"# {line}\n" for line in [f"written by {WRITER_NAME}", *comments])
+    for m in materials:
+        kd = (1.0, 1.0, 1.0) if m.map_kd else m.kd
+        ns = 1000.0 * (1.0 - m.roughness) ** 2
+        text += f"\nnewmtl {m.name}\n" + (f"# {m.comment}\n" if m.comment else "")
+        text += "Ka 0 0 0\nKd {:.6f} {:.6f} {:.6f}\n".format(*kd)
+        text += f"Ks 0.1 0.1 0.1\nNs {ns:.3f}\nPr {m.roughness:.3f}\nPm {m.metallic:.3f}\n"
+        text += "d 1\nillum 2\n" + (f"map_Kd {m.map_kd}\n" if m.map_kd else "")
+    return text.encode("utf-8")

@@ -183,6 +183,7 @@ def _growth_table_citations() -> dict[str, dict[str, str]]:
 
 def write_sequence_glb(path: Path, head: TemplateHead, results: Sequence[AgeResult]) -> Path:
     """The source skin with one morph target per age and a clip through them (one s per age)."""
+    from workbench.core.appearance import head_looks
     from workbench.io.gltf_export import write_glb
 
     # each aged head is settled in its own Frankfort frame; the source head is in its own,
@@ -209,6 +210,8 @@ def write_sequence_glb(path: Path, head: TemplateHead, results: Sequence[AgeResu
         node_targets=node_targets,
         animation=frames,
         clip_name="growth",
+        # skin, lips, painted eyes and teeth (artistic defaults: workbench.core.appearance)
+        looks=head_looks(head.meshes, head.eye_centres, regions=head.regions),
     )
 
 

@@ -10,6 +10,12 @@ the frame of its PLY files (a reconstruction's ``head/`` pack and
 reference heads: the head frame), in metres: a glTF vertex × 1000 is the
 PLY's vertex in mm.  A glTF frame with weight 1 on one target is the skin
 ``workbench animate --expression NAME --out FILE.ply`` writes.
+
+Every part has a material (:func:`workbench.core.appearance.head_looks`):
+the skin a skin-tone preset with the lips apart, or the fit's colour atlas
+when one is given (:func:`workbench.io.skin_colour_export.read_skin_texture`
+reads it from a ``fit-scan`` pack); the eyes an iris texture; teeth, bone and
+tongue their presets.  The colours are artistic defaults, not evidence.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, SkinTexture, head_looks
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.io.arkit_table import read_arkit_table
@@ -143,6 +150,10 @@ def export_head_glb(
     progress: Callable[[str], None] | None = None,
     poses: Mapping[str, Expression] | None = None,
     frame: str = "",
+    skin_tone: str = DEFAULT_SKIN_TONE,
+    iris: str = DEFAULT_IRIS,
+    skin_texture: SkinTexture | None = None,
+    eyes: str = "texture",
 ) -> tuple[Path, ExpressionTargets, float]:
     """Write the head as ``.glb`` with the expressions as morph targets.
 
@@ -155,7 +166,24 @@ def export_head_glb(
     use must be among ``names``.  ``poses`` adds targets that are not palette
     expressions (a track's key poses and visemes, named by the caller), after
     ``names``; ``names=[]`` with ``poses`` exports only those.
+
+    ``skin_tone`` (:data:`~workbench.core.appearance.SKIN_TONES`), ``iris``
+    (:data:`~workbench.core.appearance.IRIS_COLOURS`), ``skin_texture`` (the
+    fit's atlas, made for this skin) and ``eyes`` (``"texture"`` or
+    ``"vertex"``: finer globes with per-vertex colours) choose the materials.
     """
+    try:  # refuse a bad colour name before the expressions are settled
+        looks = head_looks(
+            head.meshes,
+            getattr(head, "eye_centres", None),  # (stand-ins for a head may lack these)
+            regions=getattr(head, "regions", None),
+            tone=skin_tone,
+            iris=iris,
+            skin_texture=skin_texture,
+            eyes=eyes,
+        )
+    except ValueError as exc:
+        raise InputError("appearance", str(exc)) from None
     t0 = time.perf_counter()
     given = None if names is None else list(names)
     chosen = [] if given is not None and not given and poses else _check_names(given)
@@ -178,6 +206,7 @@ def export_head_glb(
         animation=keyframes,
         names_arkit=names_arkit,
         frame=frame or "the head's own frame, as in its PLY files",
+        looks=looks,
     )
     return out, settled, seconds
 
