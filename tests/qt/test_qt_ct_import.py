@@ -124,7 +124,9 @@ def test_extract_starts_a_case_with_the_bone_surface(qtbot, window, dialog, head
     mesh = window.document.case.specimen.mesh
     bone = headsq_surfaces["bone"]
     assert mesh.n_faces == bone.n_faces
-    np.testing.assert_allclose(mesh.bounds, bone.bounds, atol=1e-4)
+    # the CT's LPS surface, read as RAS (x and y negated) like a mesh-from-ct file, so the
+    # case's landmark files and report (RAS) lie on the CT in 3D Slicer
+    np.testing.assert_allclose(mesh.vertices, bone.vertices * [-1.0, -1.0, 1.0], atol=1e-4)
     assert any("bone surface" in note and "iso 1150" in note for note in window.document.notes)
     shown = [(f, top, value) for channel, f, top, value in progress if channel == "open"]
     fractions = [f for f, _, _ in shown]

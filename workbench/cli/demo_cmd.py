@@ -208,7 +208,8 @@ def _picture(meshes: dict, path: Path) -> str | None:
             [(meshes["bone"], "ivory", 1.0), (meshes["skin"], "peachpuff", 0.35)],
             path,
             views=("front", "three_quarter", "side"),
-            orientation=(anatomy["anterior"], anatomy["superior"]),
+            # with the subject's left: headsq's file is a mirror image, shown flipped
+            orientation=(anatomy["anterior"], anatomy["superior"], anatomy["left"]),
         )
     except (RuntimeError, OSError, ValueError) as exc:  # a missing GL stack must not fail the job
         print(f"  note: no picture: off-screen rendering unavailable ({type(exc).__name__}: {exc})")

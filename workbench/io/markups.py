@@ -9,7 +9,11 @@ Slicer loads both.  Slicer files may store LPS (x, y negated; Slicer 5's
 default): readers honour the file's system, writers use LPS unless
 ``coordinate_system="RAS"``.  The flip is exact and floats are written with
 ``repr``, so write → read is exact.  MeshLab ``.pp`` and the CSV hold mesh
-coordinates as they are.
+coordinates as they are.  A reconstruction's landmark files are written in
+:data:`OUTPUT_SYSTEM` (RAS), the frame its report names for its positions
+(:data:`OUTPUT_FRAME`, said once: in the ``.fcsv`` ``CoordinateSystem`` line,
+the ``.mrk.json`` ``coordinateSystem`` and ``workbench.frame`` fields, and the
+report's landmark section).
 
 Slicer 5 point states
 ---------------------
@@ -94,6 +98,17 @@ KEY = (
     "workbench"  #: extra .mrk.json key for status/confidence (Slicer ignores it, drops it on save)
 )
 _FLIP = {"RAS": np.array([1.0, 1.0, 1.0]), "LPS": np.array([-1.0, -1.0, 1.0])}
+#: the coordinate system of the landmark files a reconstruction writes
+#: (``skull_landmarks.mrk.json`` / ``.fcsv``), the same as its meshes' ``SPACE`` tag
+OUTPUT_SYSTEM = "RAS"
+#: that frame's name, as the report's landmark section gives it
+OUTPUT_FRAME_NAME = "RAS (3D Slicer's world frame), mm"
+#: that frame in words, as ``report.json`` states it for its positions and directions and
+#: the ``.mrk.json`` file in its header
+OUTPUT_FRAME = (
+    f"{OUTPUT_FRAME_NAME}: the skull file's coordinates as the workbench reads them (a mesh "
+    "tagged SPACE=LPS with x and y negated), so they lie on the skull in Slicer"
+)
 PathLike = str | os.PathLike[str]
 
 
@@ -356,6 +371,13 @@ def _slicer_point(
     return _Point(label, None, False, status, confidence, text)
 
 
+def _frame_note(system: str) -> str:
+    """The ``.mrk.json`` header's words for the frame of the positions written in ``system``."""
+    if system == OUTPUT_SYSTEM:
+        return OUTPUT_FRAME
+    return f"{system}, mm: the mesh coordinates (Slicer's RAS world) with x and y negated"
+
+
 # ------------------------------------------------------------- .mrk.json
 def read_mrk_json(
     path: PathLike,
@@ -458,7 +480,7 @@ def write_mrk_json(
         "lastUsedControlPointNumber": len(points),
         "controlPoints": points,
         "measurements": [],
-        KEY: {"surface": landmark_set.surface, "frame": "mesh coordinates = Slicer RAS world"},
+        KEY: {"surface": landmark_set.surface, "frame": _frame_note(cs)},
     }
     doc = {"@schema": MRK_SCHEMA, "markups": [markup]}
     _write_text(Path(path), json.dumps(doc, indent=4, ensure_ascii=False, allow_nan=False) + "\n")

@@ -181,12 +181,12 @@ def _other_formats(result: JobResult, out: Path, formats: tuple[str, ...]) -> di
     others = [e for e in formats if e != "ply"]  # the folder already holds the PLY files
     if not others:
         return {}
-    from workbench.io.markups import write_fcsv
+    from workbench.io.markups import OUTPUT_SYSTEM, write_fcsv
 
     files: dict[str, Path] = {}
     lms = result.opened.case.landmarks["skull"]
     if len(lms):  # Slicer's older markups format beside the .mrk.json
-        write_fcsv(out / "skull_landmarks.fcsv", lms, coordinate_system="RAS")
+        write_fcsv(out / "skull_landmarks.fcsv", lms, coordinate_system=OUTPUT_SYSTEM)
         files["landmarks_fcsv"] = out / "skull_landmarks.fcsv"
     recon, builds = result.recon, result.fit.builds if result.fit is not None else None
     for ext in others:

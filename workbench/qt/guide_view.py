@@ -14,7 +14,17 @@ point *is* ``(y, z)``:
 * in yellow, where the skull measurements behind the guides were taken (the
   widest aperture, the nasal spine, the canines, the incisal edge and the
   cemento-enamel junctions, :func:`workbench.services.guides.measure.marks_for_view`),
-  and under the view the measurements that could not be taken, with why.
+  and under the view the measurements that could not be taken, with why;
+* at the view's edges, small letters naming the subject's sides (R/L, S/I,
+  A/P; :class:`workbench.render.visuals.orientation.EdgeLetters`).
+
+Handedness: the frontal view looks at the face from in front (+z toward the
+camera, y up), so the subject's right (−x) is on the viewer's left, as in a
+photograph, the main 3D view and the report pictures; the lateral view looks
+at the subject's left side (from +x), the face toward the screen's left.  The
+head frame is right-handed and anatomically true even for a mirror-image
+skull file (its reflection is in the fit's input → head map), so this view
+never needs reflecting.
 
 A guide is dragged with the left button (press within
 :data:`GRAB_RADIUS_PX` of it): the window previews the re-solved face at
@@ -52,6 +62,7 @@ from workbench.render.snapshots import to_polydata
 from workbench.render.visuals import markers, update
 from workbench.render.visuals.face import add_guide_face
 from workbench.render.visuals.markers import GUIDE, PREDICTION
+from workbench.render.visuals.orientation import HEAD, Anatomy, EdgeLetters
 from workbench.render.visuals.skull import add_skull
 from workbench.render.visuals.style import set_view_background
 from workbench.services.guides.classic import AXES, Guide, guides_from_prediction
@@ -150,6 +161,9 @@ class GuideView(QWidget):
         self.plotter.enable_parallel_projection()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
         self.plotter.enable_2d_style()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
         self.plotter.clear_events_for_key("q")  # type: ignore[arg-type]  # pyvista stub bug: wraps-typed method
+        # R/L, S/I, A/P at the edges (put back after each clear_actors)
+        self.letters = EdgeLetters(self.plotter.renderer)
+        self.letters.set_anatomy(HEAD)
         # until a fit is drawn a plain label stands in for the 3D view: an
         # empty OpenGL view would still cost a software-GL paint, in the same
         # pass as the main view's when the first fit opens this view
@@ -196,6 +210,8 @@ class GuideView(QWidget):
 
         The view keeps showing the previous fit for the ~0.2 s the light
         skull takes, rather than being drawn twice (face first, then skull).
+        The main view takes the fit's handedness (its input → head map) at
+        once, so the two views never show the subject mirrored to each other.
         """
         fit = self.session.fit
         self._skull_light = None
@@ -203,6 +219,7 @@ class GuideView(QWidget):
         if fit is None:
             self.refresh()
             return
+        self.scene.set_anatomy(Anatomy.from_head_frame(fit.recon.input_to_head))
 
         def prepare() -> tuple[Any, Any]:
             from workbench.services.guides.measure import marks_for_view
@@ -516,6 +533,7 @@ class GuideView(QWidget):
         for tag in self._tags.values():
             self._iren.RemoveObserver(tag)
         self._tags = {}
+        self.letters.detach()
         self.plotter.close()
 
 

@@ -3,6 +3,14 @@
 Units mm, everything in the specimen's **input frame** (the skull file's
 coordinates), so the evidence, landmarks, dowels and the fitted face overlay.
 
+One handedness (:mod:`workbench.render.visuals.orientation`): a frontal view
+shows the subject's right on the viewer's left, as the guide view and the
+report pictures do.  When the input frame is a mirror image of the subject
+(the landmarks or the file's known anatomy say so), :meth:`SceneView.reset_camera`
+has the view reflect its display across the midsagittal plane — the data,
+picking and the files stay in the input frame — and small letters at the
+view's edges (R/L, S/I, A/P) name the subject's sides.
+
 Each layer (``LAYERS``) holds one or more actors, is replaced as a whole when
 its data change (addressed by name) and keeps a visibility and an opacity
 that apply to *every* actor of the layer (surfaces, lines, points, labels)
@@ -33,6 +41,7 @@ from PySide6.QtWidgets import QWidget
 from workbench.core.mesh import Mesh
 from workbench.render.visuals import face, markers, skull, update
 from workbench.render.visuals import muscles as muscle_visuals
+from workbench.render.visuals.orientation import Anatomy, DisplayMirror, EdgeLetters, reflection
 from workbench.render.visuals.style import set_view_background
 
 #: layer name → menu title (also the row order of the Layers dock)
@@ -80,6 +89,27 @@ def gl_renderer(render_window: Any) -> str:
 
 def is_software_gl(renderer: str) -> bool:
     return any(name in renderer.lower() for name in SOFTWARE_GL)
+
+
+def case_anatomy(case: Any) -> Anatomy | None:
+    """The subject's directions in ``case``'s input frame, for the camera; None when unknown.
+
+    From the head frame of the skull landmarks when they define one (with a
+    reflection in it when their left/right labels say the file is a mirror
+    image), else from the case's orientation (its ``left``, when given, says
+    the same), as :func:`workbench.services.reconstruction.case_steps.view_axes`.
+    """
+    from workbench.core.errors import WorkbenchError
+    from workbench.services.landmarks.frame import input_frame
+
+    try:
+        to_head, _ = input_frame(case.landmarks["skull"])
+    except (WorkbenchError, ValueError, KeyError, np.linalg.LinAlgError):
+        orient = case.orientation
+        if orient is None:
+            return None
+        return Anatomy.of(orient.anterior, orient.superior, orient.left)
+    return Anatomy.from_head_frame(to_head)
 
 
 class SceneView(QObject):
@@ -131,6 +161,15 @@ class SceneView(QObject):
         self._end_observer = (
             None if window is None else window.AddObserver("EndEvent", self._rendered)
         )
+        #: the subject's directions in the input frame (None: unknown), as last reset
+        self.anatomy: Anatomy | None = None
+        # the display reflection and the side letters apply while the case's layers are
+        # shown (the age and animate tools lend this view's camera for their heads)
+        self.mirror: DisplayMirror | None = None
+        self.letters: EdgeLetters | None = None
+        if renderer is not None:
+            self.mirror = DisplayMirror(renderer, when=self.case_shown)
+            self.letters = EdgeLetters(renderer, when=self.case_shown)
 
     # ------------------------------------------------------------ rendering
     def request_render(self) -> None:
@@ -224,6 +263,10 @@ class SceneView(QObject):
         if self._end_observer is not None and window is not None:
             window.RemoveObserver(self._end_observer)
         self._end_observer = None
+        for helper in (self.mirror, self.letters):
+            if helper is not None:
+                helper.detach()
+        self.mirror = self.letters = None
 
     # ------------------------------------------------------------ layers
     def actors(self, layer: str) -> list[Any]:
@@ -284,17 +327,61 @@ class SceneView(QObject):
         update.move_points(actors[0], points)
         self.request_render()
 
-    def reset_camera(
-        self, anterior: Sequence[float] | None = None, superior: Sequence[float] | None = None
+    def case_shown(self) -> bool:
+        """Some layer of the case is drawn and visible (not set aside for a tool's heads)."""
+        return any(self.visible.get(k, True) and self._actors.get(k) for k in LAYERS)
+
+    @property
+    def mirrored(self) -> bool:
+        """The view shows its input frame reflected (a mirror-image input, see the module doc)."""
+        return self.mirror is not None and self.mirror.active
+
+    def set_anatomy(
+        self, anatomy: Anatomy | None, centre: Sequence[float] | np.ndarray | None = None
     ) -> None:
-        """Look at the face (``anterior`` toward the camera) when the orientation is known."""
-        if anterior is not None and superior is not None:
-            a = np.asarray(anterior, float)
-            focus = np.asarray(self.plotter.center, float)
+        """The subject's directions in the input frame (None: unknown); the camera stays.
+
+        The letters at the edges follow them; a mirror-image input is shown
+        reflected across the midsagittal plane through ``centre`` (mm, input
+        frame; default the camera's focal point), so the subject's right is on
+        the viewer's left.  A reflection already shown for the same
+        midsagittal direction is kept (the view does not jump).
+        """
+        self.anatomy = anatomy
+        if self.letters is not None:
+            self.letters.set_anatomy(anatomy)
+        if self.mirror is not None:
+            if anatomy is None or not anatomy.mirrored:
+                self.mirror.reflect_world(None)
+            elif centre is not None or not self._reflects_across(anatomy.left):
+                point = self.plotter.camera.focal_point if centre is None else centre
+                self.mirror.reflect_world(reflection(point, anatomy.left))
+        self.request_render()
+
+    def _reflects_across(self, normal: np.ndarray) -> bool:
+        """The view already reflects across a plane normal to ``normal`` (within ~6°)."""
+        world = None if self.mirror is None else self.mirror.world
+        if world is None:
+            return False
+        current = np.eye(3) - world[:3, :3]  # 2 n nᵀ
+        axis = current @ normal
+        return float(np.linalg.norm(axis)) > 1.99  # |2 n (n · normal)| = 2 cos θ
+
+    def reset_camera(self, anatomy: Anatomy | None = None) -> None:
+        """Look at the face from the front when the subject's directions are known.
+
+        ``anatomy`` holds them in the input frame (:func:`case_anatomy`); a
+        mirror-image input is shown reflected across the midsagittal plane
+        through the view's centre (:meth:`set_anatomy`).
+        """
+        focus = np.asarray(self.plotter.center, float)
+        self.set_anatomy(anatomy, centre=focus)
+        if anatomy is not None:
+            # (the reflection keeps the anterior and superior directions and the focus)
             self.plotter.camera_position = [
-                tuple(focus + 600.0 * a),
+                tuple(focus + 600.0 * anatomy.anterior),
                 tuple(focus),
-                tuple(np.asarray(superior, float)),
+                tuple(anatomy.superior),
             ]
         # Plotter.reset_camera always renders (pyvista 0.49 ignores render=False);
         # the renderer's own reset does not, so the next paint draws it

@@ -4,7 +4,12 @@ Units and frame: meshes and dowels in mm, in the *input* frame (e.g. scanner
 coordinates).  ``frame`` is the 4×4 matrix from that frame to the head frame
 (x to the subject's left, y up, z toward the face, Frankfort Horizontal at
 y = 0); it only orients the camera, so "front" looks at the face and "side"
-at the right profile even when the skull lies in scanner coordinates.  The
+at the right profile even when the skull lies in scanner coordinates.  A
+frame that is a mirror image of the subject (a reflection in ``frame``) is
+drawn from the true side and flipped on screen, so "front" shows the subject's
+right on the viewer's left in every case; on the pictures of one view, letters
+at the left and right edges (R/L, A/P) say so
+(:func:`workbench.render.snapshots.show_handedness`).  The
 pictures are orthographic (parallel projection) and share one scale and one
 centre per view, with a 50 mm scale bar, so they can be compared and
 measured on the page.
@@ -42,7 +47,13 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
-from workbench.render.snapshots import _prefer_headless_gl, to_polydata, view_directions
+from workbench.render.snapshots import (
+    _prefer_headless_gl,
+    show_handedness,
+    to_polydata,
+    view_directions,
+)
+from workbench.render.visuals.orientation import Anatomy
 
 VIEWS = ("front", "side", "three_quarter")
 BONE, SKIN, EYE, BACKGROUND = "#e9e0c9", "#e3b48f", "#d8dde3", "white"
@@ -97,7 +108,7 @@ def render_reconstruction(
         Pixels per view.
     """
     origins, tips = _check(skull, face, dowels, spread)
-    anterior, superior = _orientation(frame)
+    anterior, superior, left = _orientation(frame)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _prefer_headless_gl()
@@ -108,7 +119,7 @@ def render_reconstruction(
     if face is not None:  # a bust: the face cut just below the skull (no long neck)
         face_pd, kept = _face_bust(face, skull, superior, spread, inferred)
         framed.append(kept)
-    cameras = {v: _camera(np.vstack(framed), v, anterior, superior, size) for v in views}
+    cameras = {v: _camera(np.vstack(framed), v, anterior, superior, size, left) for v in views}
     scene = _Scene(
         # the skull's cached vertex normals: VTK's normals filter on a 200k-triangle skull for
         # every picture it is in cost ~0.1 s each
@@ -318,7 +329,7 @@ def render_builds(
         Pixels per panel (one panel per face; the band picture has three).
     """
     names = _check_builds(faces, bmi, main, band_face, band_mm)
-    anterior, superior = _orientation(frame)
+    anterior, superior, left = _orientation(frame)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _prefer_headless_gl()
@@ -351,7 +362,7 @@ def render_builds(
             framed = np.vstack([kept for _, kept in busts.values()])
             labels = {n: _build_label(n, bmi, main) for n in names}
             for view in BUILD_VIEWS:
-                cam = _camera(framed, view, anterior, superior, size)
+                cam = _camera(framed, view, anterior, superior, size, left)
 
                 def build(p, name: str, cam: dict = cam) -> None:
                     p.add_mesh(
@@ -370,7 +381,7 @@ def render_builds(
                 )
         if band_face is not None and band_mm is not None:
             band_pd, kept = bust(band_face, {"band_mm": np.asarray(band_mm, float)})
-            cameras = {v: _camera(kept, v, anterior, superior, size) for v in VIEWS}
+            cameras = {v: _camera(kept, v, anterior, superior, size, left) for v in VIEWS}
             band_range = _nice_range(np.array([0.0, np.percentile(band_mm, 99.5)]))
 
             banded = _scalar_map(band_pd, "band_mm", band_range, eyes_pd, BAND_TITLE, VIEWS, size)
@@ -510,31 +521,41 @@ def _label(pv, plotter, cam: dict, text: str, size: tuple[int, int]) -> None:
     )
 
 
-def _orientation(frame: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Anterior and superior directions in the input frame."""
+def _orientation(frame: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Anterior, superior and (the subject's) left directions in the input frame."""
     if frame is None:
-        return np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+        return np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
     m = np.asarray(frame, float)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise InputError("frame", "the input-to-head frame must be a finite 4x4 matrix")
     rot = m[:3, :3]
     if abs(np.linalg.det(rot)) < 1e-9:
         raise InputError("frame", "the input-to-head frame is singular")
-    anterior, superior = (
-        np.linalg.solve(rot, [0.0, 0.0, 1.0]),
-        np.linalg.solve(rot, [0.0, 1.0, 0.0]),
+    anterior, superior, left = (np.linalg.solve(rot, axis) for axis in np.eye(3)[[2, 1, 0]])
+    return (
+        anterior / np.linalg.norm(anterior),
+        superior / np.linalg.norm(superior),
+        left / np.linalg.norm(left),
     )
-    return anterior / np.linalg.norm(anterior), superior / np.linalg.norm(superior)
 
 
 def _camera(
-    points: np.ndarray, view: str, anterior: np.ndarray, superior: np.ndarray, size: tuple[int, int]
+    points: np.ndarray,
+    view: str,
+    anterior: np.ndarray,
+    superior: np.ndarray,
+    size: tuple[int, int],
+    left: np.ndarray | None = None,
 ) -> dict:
-    """One orthographic camera that frames ``points`` for ``view`` with a margin."""
-    direction, up = view_directions(view, anterior, superior)
+    """One orthographic camera that frames ``points`` for ``view`` with a margin.
+
+    ``right`` is the picture's right as shown (flipped for a mirror-image frame).
+    """
+    anatomy = Anatomy.of(anterior, superior, left)
+    direction, up = view_directions(view, anterior, superior, left)
     up = up - direction * (up @ direction)
     up /= np.linalg.norm(up)
-    right = np.cross(up, direction)
+    right = np.cross(up, direction) * (-1.0 if anatomy.mirrored else 1.0)
     u, w = points @ right, points @ up
     lo, hi = np.array([u.min(), w.min()]), np.array([u.max(), w.max()])
     lo[1] -= 0.17 * (hi[1] - lo[1])  # room for the colour and scale bars
@@ -551,6 +572,7 @@ def _camera(
         "scale": half_h,
         "reach": reach,
         "aspect": size[0] / size[1],
+        "anatomy": anatomy,
     }
 
 
@@ -669,6 +691,8 @@ def _shoot(
         plotter.enable_parallel_projection()
         camera.parallel_scale = cam["scale"]
         camera.clipping_range = (1.0, 2.0 * cam["reach"] + 400.0)
+        # letters on a picture of one view (not beside the faces of a row of panels)
+        show_handedness(plotter.renderer, cam["anatomy"], letters=len(panels) == 1)
         plotter.suppress_rendering = False
         plotter.render()  # a screenshot of a window shown before keeps its last frame
         images.append(np.asarray(plotter.screenshot(return_img=True))[..., :3])

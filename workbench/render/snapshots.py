@@ -2,6 +2,13 @@
 
 Meshes arrive as :class:`workbench.core.mesh.Mesh` in mm; this module is the
 boundary where they become ``pyvista.PolyData``.
+
+Handedness: a "front" picture shows the subject's right on the viewer's left
+and "side" the subject's right profile (the face toward the picture's
+right), whatever the frame of the meshes.  A frame that is a mirror image of
+the subject (its anatomy ``left`` given and left-handed, see
+:class:`workbench.render.visuals.orientation.Anatomy`) is drawn from the
+true side and flipped on screen; the meshes themselves are never changed.
 """
 
 from __future__ import annotations
@@ -9,11 +16,13 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from workbench.core.mesh import Mesh
 from workbench.render.panels import each_panel, panel_row
+from workbench.render.visuals.orientation import Anatomy, add_edge_letters, mirror_of
 
 # anterior and superior directions of each named frame (head frame: x to the
 # subject's left, y up, z forward)
@@ -25,20 +34,49 @@ _AXES = {
 
 
 def view_directions(
-    view: str, anterior: Sequence[float] | np.ndarray, superior: Sequence[float] | np.ndarray
+    view: str,
+    anterior: Sequence[float] | np.ndarray,
+    superior: Sequence[float] | np.ndarray,
+    left: Sequence[float] | np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Camera direction (from the focus toward the camera) and view-up for a named view.
 
     "front" looks at the face, "side" at the subject's right profile,
-    "three_quarter" halfway between.
+    "three_quarter" halfway between.  The directions are in the meshes'
+    frame (no units); ``left``, the subject's left, tells the right side in a
+    frame that may be a mirror image (without it the frame is taken as
+    unmirrored: right = anterior × superior).  In a mirror-image frame the
+    picture must also be flipped on screen (:func:`frame_anatomy`).
     """
     a = np.asarray(anterior, float) / np.linalg.norm(anterior)
     s = np.asarray(superior, float) / np.linalg.norm(superior)
     right = np.cross(a, s)
+    if Anatomy.of(a, s, left).mirrored:
+        right = -right
     directions = {"front": a, "side": right, "three_quarter": (a + right) / np.sqrt(2.0)}
     if view not in directions:
         raise ValueError(f"unknown view {view!r}; use one of {sorted(directions)}")
     return directions[view], s
+
+
+def frame_anatomy(
+    frame: str = "HEAD", orientation: Sequence[Sequence[float] | np.ndarray] | None = None
+) -> Anatomy:
+    """The subject's directions in the meshes' frame: a named frame ("HEAD", "LPS", "RAS")
+    or ``orientation`` = ``(anterior, superior[, left])`` (a mirror image when ``left`` says so)."""
+    if orientation is not None:
+        a, s, *rest = orientation
+        return Anatomy.of(a, s, rest[0] if rest else None)
+    return Anatomy.of(*_AXES[frame])
+
+
+def show_handedness(renderer: Any, anatomy: Anatomy, letters: bool = True) -> None:
+    """After the camera is set: flip a mirror-image frame's picture on screen (so the
+    subject's right is on the viewer's left) and, with ``letters``, name the subject's sides
+    at the picture's left and right edges (R/L, or A/P in a profile)."""
+    mirror_of(renderer).flip_screen(anatomy.mirrored)
+    if letters:
+        add_edge_letters(renderer, anatomy)
 
 
 def _prefer_headless_gl() -> None:
@@ -79,7 +117,7 @@ def render_surfaces(
     *,
     views: Sequence[str] = ("front", "side", "three_quarter"),
     frame: str = "HEAD",
-    orientation: tuple[Sequence[float], Sequence[float]] | None = None,
+    orientation: Sequence[Sequence[float] | np.ndarray] | None = None,
     size: tuple[int, int] = (480, 560),
     points: Sequence[tuple[np.ndarray, str]] = (),
 ) -> Path:
@@ -87,11 +125,14 @@ def render_surfaces(
 
     ``frame`` names the coordinate convention of the meshes ("HEAD", "LPS" or
     "RAS") so that "front" looks at the face; ``orientation`` =
-    ``(anterior, superior)`` vectors overrides it for data in a
-    non-anatomical frame.  ``points`` adds ``((k, 3) positions, colour)``
-    markers (e.g. landmarks) drawn as small spheres.
+    ``(anterior, superior[, left])`` vectors overrides it for data in a
+    non-anatomical frame (``left`` for a mirror-image one: the pictures are
+    then flipped, see the module docstring).  ``points`` adds ``((k, 3)
+    positions, colour)`` markers (e.g. landmarks) drawn as small spheres.
+    Each panel names the subject's sides at its left and right edges (R/L, A/P).
     """
-    anterior, superior = orientation if orientation is not None else _AXES[frame]
+    anatomy = frame_anatomy(frame, orientation)
+    anterior, superior, left = anatomy.anterior, anatomy.superior, anatomy.left
     _prefer_headless_gl()
     import pyvista as pv
 
@@ -116,7 +157,7 @@ def render_surfaces(
                         point_size=9,
                         render_points_as_spheres=True,
                     )
-            direction, up = view_directions(view, anterior, superior)
+            direction, up = view_directions(view, anterior, superior, left)
             centre = np.mean([m.bounds.mean(axis=0) for m, _, _ in layers], axis=0)
             radius = max(float(np.linalg.norm(m.extent)) for m, _, _ in layers)
             plotter.camera.focal_point = centre
@@ -126,6 +167,7 @@ def render_surfaces(
             plotter.reset_camera()  # type: ignore[call-arg]  # pyvista stub bug: wraps-typed method
             plotter.camera.zoom(1.15)
             plotter.add_text(view.replace("_", " "), font_size=10, color="black")
+            show_handedness(plotter.renderer, anatomy)
         plotter.screenshot(str(path))
     finally:
         plotter.close()
