@@ -194,6 +194,34 @@ class SetNotes(_SetMetaField):
 
 
 @dataclass(eq=False)
+class SetCaseDetails(Command):
+    """Set the examiner's name and the case notes as one undo step (the window's
+    File ▸ Case details…); undo restores both and nothing else of ``case.meta``
+    (not ``modified``), as :class:`SetExaminer` and :class:`SetNotes` do for one."""
+
+    examiner: str = ""
+    notes: str = ""
+    _old: tuple[str, str] | None = field(default=None, init=False, repr=False)
+
+    def default_label(self) -> str:
+        return "Edit case details"
+
+    def do(self, case: Case) -> None:
+        for name in ("examiner", "notes"):
+            if not isinstance(getattr(self, name), str):
+                raise CommandError(f"{name} must be text")
+        old = (case.meta.examiner, case.meta.notes)
+        case.replace("meta", replace(case.meta, examiner=self.examiner, notes=self.notes))
+        self._old = old
+
+    def undo(self, case: Case) -> None:
+        if self._old is None:
+            raise RuntimeError(f"{self.label!r} was undone before it was done")
+        examiner, notes = self._old
+        case.replace("meta", replace(case.meta, examiner=examiner, notes=notes))
+
+
+@dataclass(eq=False)
 class AddEvidence(ReplacePartCommand):
     """Reference an original evidence file from the case (see the module docstring)."""
 

@@ -66,6 +66,14 @@ ACTIONS: tuple[ActionSpec, ...] = (
     ),
     ActionSpec("save_as", "&File", "Save &As…", QKeySequence.StandardKey.SaveAs, "ask_save_as"),
     ActionSpec(
+        "case_details",
+        "&File",
+        "Case &details…",
+        None,
+        "ask_case_details",
+        "The examiner's name (printed on the report) and the case notes; one undo step",
+    ),
+    ActionSpec(
         "export",
         "&File",
         "&Export…",

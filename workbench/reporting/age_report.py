@@ -17,6 +17,9 @@ Pure parts, testable without a PDF: :func:`highlighted_rows` (which rows
 print highlighted: a z-score outside ±2, the norms' usual range),
 :func:`measurement_table` (one age's table as text), :func:`source_keys`,
 :func:`chart_references` and :func:`provenance_credits`.
+
+Page 1 holds the provenance and the summary per target age; the warnings
+close the PDF in full, in "Appendix: technical notes" (issue 33).
 """
 
 from __future__ import annotations
@@ -43,6 +46,10 @@ METHOD: Final = (
     "norms here and nearby landmark pairs follow the head-circumference scale; per-axis least "
     "squares with a condition clamp, translation anchored at the tragia; arcs after the "
     "solve; the whole head warped, the source tissue depths kept."
+)
+NOTES_INTRO: Final = (
+    "Everything the software noted while changing the head's age, in full, each with the "
+    "target age it concerns."
 )
 TABLE_HEADERS: Final = (
     "measurement",
@@ -271,9 +278,15 @@ def write_age_report(
     pdf.set_title(f"Age change report, {case}")
     _title_page(pdf, source_head, results, case, created, software)
     _summary_section(pdf, results)
+    # the warnings close the report, in full; page 1 says how many there are
+    warnings = list(dict.fromkeys(f"{r.to_age:g} y: {w}" for r in results for w in r.warnings))
+    link = pdf.add_link()
+    pdf.notes_pointer(len(warnings), link, " on the change in age")
     _measurement_pages(pdf, results)
     _picture_pages(pdf, results, dict(pictures or {}), notes)
     _references(pdf, results, dict(citations or {}), credits)
+    if warnings:
+        pdf.notes_appendix([("", warnings)], NOTES_INTRO, link)
     path = Path(folder) / "report.pdf"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".part")
@@ -290,7 +303,7 @@ def _title_page(
     created: str,
     software: str,
 ) -> None:
-    """First page: title, the change in ages, provenance, units, frame, method and warnings."""
+    """First page: title, the change in ages, provenance, units, frame and method."""
     from workbench.reporting.pdf import ACCENT, DARK
 
     first = results[0]
@@ -323,9 +336,6 @@ def _title_page(
         ("Method", METHOD),
     ]
     pdf.key_values(pairs, key_width=30, mono_keys=frozenset({"Content hash"}))
-    warnings = [f"{r.to_age:g} y: {w}" for r in results for w in r.warnings]
-    if warnings:
-        pdf.box("Warnings", list(dict.fromkeys(warnings)))
 
 
 def _summary_section(pdf: ReportPDF, results: Sequence[Any]) -> None:

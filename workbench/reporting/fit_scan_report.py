@@ -12,6 +12,9 @@ Two steps, so the layout can be tested without a fit:
 * :func:`write_fit_scan_pdf` lays that dict out with the look of the other
   reports (:mod:`workbench.reporting.pdf`) and adds the pictures (PNG paths
   from :mod:`workbench.render.scan_fit_pictures`, drawn by the caller).
+
+Page 1 holds the provenance and the key figures; the warnings close the PDF
+in full, in "Appendix: technical notes" (issue 33).
 """
 
 from __future__ import annotations
@@ -32,6 +35,9 @@ COUNTED: Final = (
     "Counted: scan vertices whose nearest fitted-skin vertex lies in the face region, more "
     "than 4 mm from a hole or scan rim, seen from outside, believed to be the head and not "
     "on a thin sheet over the skin (a cord or strap over the face, hair); for each, the distance to the fitted skin surface."
+)
+NOTES_INTRO: Final = (
+    "Everything the software noted while reading the scan and fitting the reference head, in full."
 )
 #: captions and legends of the pictures (keys of :func:`render_scan_fit_pictures`)
 PICTURES: Final = {
@@ -390,8 +396,6 @@ def write_fit_scan_pdf(
         pairs.append((key, f"{item['sha256']}  {item['file']}"))
         sha_keys.add(key)
     pdf.key_values(pairs, key_width=34, mono_keys=frozenset(sha_keys))
-    if summary["warnings"]:
-        pdf.box("Warnings", summary["warnings"])
 
     pdf.heading("Key figures")
     pdf.para(COUNTED, size=8, color=GREY)
@@ -415,6 +419,8 @@ def write_fit_scan_pdf(
         styles=styles,
         size=7.8,
     )
+    link = pdf.add_link()
+    pdf.notes_pointer(len(summary["warnings"]), link, " on the scan and the fit")
 
     pics = dict(pictures or {})
     if pics or notes:
@@ -463,6 +469,8 @@ def write_fit_scan_pdf(
             aligns=("L", "R"),
             size=7.5,
         )
+    if summary["warnings"]:
+        pdf.notes_appendix([("", summary["warnings"])], NOTES_INTRO, link)
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
     pdf.output(str(tmp))

@@ -102,6 +102,24 @@ def num(value: Any, digits: int = 1) -> str:
     return str(value)
 
 
+#: short lowercase words a note may start with that are words, not landmark codes
+_WORDS = frozenset(
+    {"a", "an", "all", "at", "in", "it", "its", "no", "not", "on", "one", "set", "two"}
+)
+
+
+def sentence(text: Any) -> str:
+    """A note as a sentence: its first word capitalised (not when it is a code such as
+    ``pg`` or ``iC_r``) and a full stop at the end; the words themselves are kept."""
+    text = str(text).strip()
+    if not text:
+        return text
+    first = text.split(" ", 1)[0].rstrip(":,;")
+    if first.isalpha() and first.islower() and (len(first) > 3 or first in _WORDS):
+        text = text[0].upper() + text[1:]
+    return text if text.endswith((".", "!", "?")) else text + "."
+
+
 def describe_value(value: Any) -> str:
     """A guide value in words: number (mm), point, line or mapping."""
     if isinstance(value, list) and value and all(isinstance(v, int | float) for v in value):
@@ -225,6 +243,71 @@ class ReportPDF(FPDF):
         )
         self.set_fill_color(255, 255, 255)
         self.ln(1)
+
+    def numbered(self, items: Sequence[str], start: int = 1, size: float = 8.5) -> int:
+        """``items`` as a numbered list of sentences (:func:`sentence`), each with a hanging
+        indent; returns the number after the last item."""
+        indent = 8.0
+        for n, item in enumerate(items, start):
+            self.font(size)
+            self.set_text_color(*DARK)
+            if self.get_y() + 2 * size * 0.45 > self.page_break_trigger:
+                self.add_page()
+            self.set_x(self.l_margin)
+            self.cell(indent, size * 0.45, f"{n}.", align="R")
+            self.set_x(self.l_margin + indent + 1.5)
+            self.multi_cell(
+                0, size * 0.45, self.t(sentence(item)), new_x="LMARGIN", new_y="NEXT", align="L"
+            )
+            self.ln(0.8)
+        return start + len(items)
+
+    def notes_pointer(self, count: int, link: int | None = None, about: str = "") -> None:
+        """One grey line saying how many technical notes the closing appendix holds (a
+        link to it with ``link``); nothing when there are none."""
+        if not count:
+            return
+        self.ln(1)
+        self.font(8)
+        self.set_text_color(*GREY)
+        self.multi_cell(
+            0,
+            4,
+            self.t(
+                f"{count} technical note{'s' if count != 1 else ''}{about}: see "
+                "'Appendix: technical notes' at the end of this report."
+            ),
+            new_x="LMARGIN",
+            new_y="NEXT",
+            link=link,
+        )
+        self.set_text_color(*DARK)
+
+    def notes_appendix(
+        self,
+        groups: Sequence[tuple[str, Sequence[str]]],
+        intro: str,
+        link: int | None = None,
+        title: str = "Appendix: technical notes",
+    ) -> None:
+        """The closing section of a report: every note, in full, as numbered sentences under
+        the subheading of its group (a group without a title: no subheading).  ``link``
+        (from :meth:`add_link`) is pointed at the section's heading."""
+        self.heading(title, min_space=40)
+        if link is not None:
+            self.set_link(link, y=max(self.get_y() - 12, 0), page=self.page_no())
+        self.para(intro, size=8, color=GREY)
+        self.ln(1)
+        n = 1
+        for name, items in groups:
+            if not items:
+                continue
+            if name:
+                if self.get_y() + 16 > self.page_break_trigger:
+                    self.add_page()
+                self.ln(1)
+                self.subheading(name)
+            n = self.numbered(items, n)
 
     def grid(
         self,
@@ -409,6 +492,14 @@ class ReportPDF(FPDF):
         top = self.get_y()
         self._place(self.l_margin + (width - w) / 2, top, w, h, caption, path)
         self.set_xy(self.l_margin, top + h + 6.0)
+
+    def picture_at(self, x: float, top: float, width: float, caption: str, path: Path) -> float:
+        """``path`` drawn ``width`` mm wide at ``(x, top)``, captioned; returns the y below
+        its caption (the cursor is left there, at the left margin)."""
+        height = width * _aspect(path)
+        self._place(x, top, width, height, caption, path)
+        self.set_xy(self.l_margin, top + height + 6.0)
+        return top + height + 6.0
 
     def _place(self, x: float, top: float, w: float, h: float, caption: str, path: Path) -> None:
         """``path`` drawn in the ``w`` × ``h`` mm box at ``(x, top)``, ``caption`` centred

@@ -55,6 +55,12 @@ import numpy as np
 from workbench.core.data_paths import data_tables_dir
 from workbench.core.errors import InputError
 from workbench.io.atomic import write_with_atomic
+from workbench.reporting.first_page import (
+    appendix,
+    before_use_box,
+    face_and_figures,
+    key_figures,
+)
 from workbench.reporting.pdf import (
     ACCENT,
     DARK,
@@ -219,7 +225,13 @@ SOURCE_STYLE = {
 
 
 def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
-    """Lay out every section of ``report``; picture paths resolve against ``base``."""
+    """Lay out every section of ``report``; picture paths resolve against ``base``.
+
+    Page 1 is what a reader needs first: who and which case, the face (the three
+    builds' front picture, else the face's front view) with the key figures, and a
+    short "Before use" box with only what must be acted on.  Every warning follows,
+    in full, in the closing "Appendix: technical notes".
+    """
     software = f"{report['software']['name']} {report['software']['version']}"
     pdf = ReportPDF(report["case_id"], report["created"], software)
     pdf.add_page()
@@ -231,22 +243,19 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         for k in BUILD_PICTURES
         if builds is not None and k in listed
     }
+    # with no builds, the face's front view leads page 1 (and is not repeated later)
+    front = None if builds is not None or "face_front" not in listed else listed.pop("face_front")
     pictures = picture_groups(listed, base)
     _title(pdf, report)
-    check = report.get("self_check") or {}
-    if check.get("outcome") == "check":
-        # the self-check's doubt heads the first page, apart from the notes (issue 28)
-        pdf.box(
-            "CHECK THIS RECONSTRUCTION: the registration's self-check",
-            [*check["reasons"], "Confirm the orientation and the skull landmarks before use."],
-            fill=(255, 205, 205),
-        )
-    if report.get("warnings"):
-        pdf.box("Warnings", report["warnings"])
+    link = pdf.add_link()
     if builds is not None:
         _builds(pdf, builds, build_pictures.get("builds_front"))
-    if report.get("credits"):
-        pdf.box("Data credits", report["credits"])
+        pdf.heading("Key figures", min_space=25)
+        key_figures(pdf, report, wide=True)
+    else:
+        face_and_figures(pdf, report, None if front is None else resolve_picture(front, base))
+    before_use_box(pdf, report, link)
+    _details(pdf, report)
     _inputs(pdf, report["inputs"])
     _table(pdf, report["table"])
     _landmarks(pdf, report["landmarks"])
@@ -279,7 +288,10 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
             color=GREY,
         )
         for title in shown:
-            pdf.pictures(pictures.pop(title), title=title)
+            on_first = front is not None and title == "Reconstructed face"
+            pdf.pictures(
+                pictures.pop(title), title=f"{title} (front view on page 1)" if on_first else title
+            )
         if side is not None:
             pdf.pictures(
                 [("right side, slender to heavy, same scale", side)],
@@ -305,10 +317,15 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         pdf.heading("Other pictures", min_space=100)
         for items in pictures.values():
             pdf.pictures(items, columns=1 if len(items) == 1 else 3)
+    if report.get("credits"):
+        pdf.heading("Data credits", min_space=25)
+        pdf.numbered(report["credits"])
+    appendix(pdf, report, link)
     return pdf
 
 
 def _title(pdf: ReportPDF, report: dict[str, Any]) -> None:
+    """Title, case, examiner, depth table and build; the run's details follow on page 2."""
     pdf.font(17, "B")
     pdf.set_text_color(*ACCENT)
     pdf.cell(0, 9, pdf.t("Skull-to-face reconstruction report"), new_x="LMARGIN", new_y="NEXT")
@@ -317,20 +334,34 @@ def _title(pdf: ReportPDF, report: dict[str, Any]) -> None:
     pdf.cell(0, 7, pdf.t(f"Case {report['case_id']}"), new_x="LMARGIN", new_y="NEXT")
     pdf.ln(2)
     table = report["table"]
-    pairs = [("Case id", report["case_id"]), ("Created (UTC)", report["created"])]
-    if report.get("examiner"):
-        pairs.append(("Examiner", report["examiner"]))
-    pairs += [
-        ("Software", f"{report['software']['name']} {report['software']['version']}"),
-        ("Template", report["template"]["id"]),
-        ("Template SHA-256", report["template"]["content_hash"]),
-        ("Depth table", f"{table['id']}" + (f" ({table['group']})" if table.get("group") else "")),
-        ("Build", _build_text(report)),
-        ("Units", "mm (every length in this report)"),
-        ("Frame", report["frame"]),
-        ("Report schema", report["@schema"]),
-    ]
-    pdf.key_values(pairs, mono_keys=frozenset({"Template SHA-256"}))
+    pdf.key_values(
+        [
+            ("Case id", report["case_id"]),
+            ("Created (UTC)", report["created"]),
+            ("Examiner", report.get("examiner") or "not recorded"),
+            (
+                "Depth table",
+                f"{table['id']}" + (f" ({table['group']})" if table.get("group") else ""),
+            ),
+            ("Build", _build_text(report)),
+        ]
+    )
+
+
+def _details(pdf: ReportPDF, report: dict[str, Any]) -> None:
+    """Software, reference head, units, frame and schema: what the run was made with."""
+    pdf.heading("Software, reference head and frame")
+    pdf.key_values(
+        [
+            ("Software", f"{report['software']['name']} {report['software']['version']}"),
+            ("Template", report["template"]["id"]),
+            ("Template SHA-256", report["template"]["content_hash"]),
+            ("Units", "mm (every length in this report)"),
+            ("Frame", report["frame"]),
+            ("Report schema", report["@schema"]),
+        ],
+        mono_keys=frozenset({"Template SHA-256"}),
+    )
 
 
 def _build_text(report: dict[str, Any]) -> str:
@@ -371,6 +402,10 @@ def _table(pdf: ReportPDF, table: dict[str, Any]) -> None:
 
 
 def _landmarks(pdf: ReportPDF, landmarks: list[dict[str, Any]]) -> None:
+    """The landmark table; its header names the one frame of the positions (report.json) and
+    of the landmark files (:data:`workbench.io.markups.OUTPUT_FRAME_NAME`)."""
+    from workbench.io.markups import OUTPUT_FRAME_NAME
+
     pdf.heading("Skull landmarks and tissue depths", min_space=45)
     counts = {s: sum(lm["source"] == s for lm in landmarks) for s in SOURCE_STYLE}
     pdf.para(
@@ -379,7 +414,9 @@ def _landmarks(pdf: ReportPDF, landmarks: list[dict[str, Any]]) -> None:
             f"{n} {'without a depth' if s == 'none' else s}" for s, n in counts.items() if n
         )
         + ". Depths in mm along the dowel (skull landmark to skin); 'used' is the depth the fit "
-        "applied. Positions and dowel directions are in report.json.",
+        "applied. Positions and dowel directions are in report.json, the positions also in "
+        "skull_landmarks.mrk.json (and .fcsv when written), all in one frame: "
+        f"{OUTPUT_FRAME_NAME}, the skull file's coordinates as 3D Slicer shows them.",
         size=8,
         color=GREY,
     )
