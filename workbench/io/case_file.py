@@ -9,6 +9,11 @@ Layout
     Arrays (specimen vertices and faces...), ``np.save(allow_pickle=False)``.
 ``evidence/<name>``
     Original evidence files, byte-for-byte (stored, not compressed).
+``derived`` (in ``case.json``)
+    Optional results computed from the case (the fitted face), as plain
+    state with their arrays under ``arrays/`` like the parts' (see
+    :attr:`workbench.model.case.Case.derived`).  Not evidence; a state
+    records the digest of the inputs it came from.
 ``audit.jsonl``
     Append-only audit log (see :mod:`workbench.model.audit`), hash-chained;
     ``case.json`` ``audit_chain`` anchors its head and length.
@@ -292,6 +297,10 @@ def load_case(path: PathArg, *, allow_tampered: bool = False) -> LoadedCase:
         digests = (_digest(stored, path), _digest(doc, path))
         store = _evidence_store(doc, path)
         case = _build_case(doc, lambda ref: _load_array(archive, status, ref), path)
+        case.derived = {
+            name: join_arrays(state, lambda ref: _load_array(archive, status, ref))
+            for name, state in (doc.get("derived") or {}).items()
+        }
         for item in store:
             status[f"evidence/{item.name}"] = _evidence_status(archive, item)
         has_log = archive.has(AUDIT)
@@ -398,6 +407,12 @@ def _encode(case: Case, meta_state: dict[str, Any]) -> tuple[dict[str, Any], dic
         doc[name] = state
         if name == "evidence":
             doc["evidence_store"] = [e.to_state() for e in case.retained_evidence.values()]
+    if case.derived:
+        derived: dict[str, Any] = {}
+        for name, state in case.derived.items():
+            derived[name], part_blobs = split_arrays(state)
+            blobs.update(part_blobs)
+        doc["derived"] = derived
     return doc, blobs
 
 
@@ -641,6 +656,7 @@ def detached_copy(case: Case) -> Case:
         copy.replace(name, case.part(name))
     copy.audit = _bound_log(case).copy()
     copy.source_path = case.source_path
+    copy.derived = dict(case.derived)
     return copy
 
 

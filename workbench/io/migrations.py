@@ -48,6 +48,12 @@ Content seal (no format change)
     document as stored or as migrated by :func:`migrate`, so the same case
     in an older layout still verifies, while any change to its content
     does not.
+
+Derived results (no format change)
+    Format-3 files may carry an optional ``derived`` object (the fitted
+    face kept with the case, :mod:`workbench.services.reconstruction.stored_fit`).
+    Files without it are unchanged and nothing migrates; a version before
+    it refuses a file that has it (the schema names the key).
 """
 
 from __future__ import annotations

@@ -30,10 +30,16 @@ Each part has ``to_state`` / ``from_state`` through the explicit registry
 features add a registry entry (a typed part with its own commands) or, for
 loose values, a ``parameters`` key; never a class name in the file.
 
-Two things travel with a case but are *not* part of its undoable state:
-``audit`` (the append-only :class:`~workbench.model.audit.AuditLog`) and
+Three things travel with a case but are *not* part of its undoable state:
+``audit`` (the append-only :class:`~workbench.model.audit.AuditLog`),
 ``retained_evidence`` (every evidence file ever added, so its bytes stay in
-the case file even after ``AddEvidence`` is undone).
+the case file even after ``AddEvidence`` is undone) and ``derived``: results
+computed from the parts (the fitted face), ``{name: plain state}`` with
+arrays, kept so a reopened case shows them at once.  A derived state records
+the digest of the inputs it was computed from, so a reader can tell whether
+it still belongs to the parts (see
+:mod:`workbench.services.reconstruction.stored_fit`); it is never evidence and
+never edited by a command.
 
 Notes
 -----
@@ -184,6 +190,8 @@ class Case:
         self.events = CaseEvents()
         self.audit = AuditLog()
         self.source_path: Path | None = None
+        #: derived results kept with the case (see the module docstring): name → plain state
+        self.derived: dict[str, Mapping[str, Any]] = {}
         self._parts: dict[str, Any] = {}
         self._retained: dict[str, EvidenceFile] = {}
         for name, codec in PARTS.items():
