@@ -302,3 +302,37 @@ def test_save_pack_asks_for_a_folder_in_the_case_folder_not_beside_the_scan(
     assert window.save_to(tmp_path / "case.fcase")
     window.scan_fit.ask_save()
     assert asked[-1] == tmp_path / f"{Path(path).stem}_fit"
+
+
+def test_save_pack_writes_the_fit_shown_without_fitting_again(
+    qtbot, window, scan_case, tmp_path, monkeypatch
+):
+    """Save pack after Fit writes that fit (the same files the command line writes for
+    the same scan and landmarks), and fits again only when the landmarks changed since."""
+    from workbench.pipelines.scan_fit import fit_scan_to_folder
+    from workbench.services.scan_fit import pack
+
+    path, truth = scan_case
+    tool = window.scan_fit
+    _open(qtbot, window, path)
+    for code in ("po_l", "po_r", "or_l", "prn", "n"):
+        tool.place(code, truth[code].position)
+    window.fit_scan()
+    _wait(qtbot, window)
+    fits: list[int] = []
+    real = pack.fit_scan
+    monkeypatch.setattr(pack, "fit_scan", lambda *a, **k: (fits.append(1), real(*a, **k))[1])
+    assert tool.save_to(tmp_path / "pack")
+    _wait(qtbot, window)
+    assert not fits  # the fit shown was written
+    monkeypatch.setattr(pack, "fit_scan", real)
+    cli = tmp_path / "cli"
+    fit_scan_to_folder(path, cli, landmarks=tool.landmarks.placed, report=False)
+    for name in ("skin.ply", "skull.ply", "skin.mrk.json"):
+        assert (tmp_path / "pack" / name).read_bytes() == (cli / name).read_bytes(), name
+    # a landmark moved after the fit: the pack is of the landmarks placed now
+    monkeypatch.setattr(pack, "fit_scan", lambda *a, **k: (fits.append(1), real(*a, **k))[1])
+    tool.place("prn", truth["prn"].position + np.array([0.0, 0.0, 1.0]))
+    assert tool.save_to(tmp_path / "pack2")
+    _wait(qtbot, window)
+    assert fits == [1]

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from os import PathLike
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import numpy as np
 
@@ -85,6 +85,7 @@ def fit_scan_pack(
     progress: Progress | None = None,
     extra: Callable[[Path, ScanFit], list[Path]] | None = None,
     detail: bool = True,
+    fitted: ScanFit | None = None,
 ) -> tuple[ScanFit, list[Path]]:
     """Read the scan (and landmarks, bone),
     :func:`~workbench.services.scan_fit.fit.fit_scan`, write the pack and
@@ -106,6 +107,9 @@ def fit_scan_pack(
     unless ``detail`` is False.
     ``extra(folder, result)`` writes further files into the staged pack (the
     CLI's PDF report, which needs the render layer) and returns their paths.
+    ``fitted``: a fit of this scan made already (the window's, shown to the user),
+    written as it is when it was made from the same inputs (scan bytes, landmarks),
+    sex, table and build; otherwise the scan is fitted again.
     """
     from workbench.core.units import check_units_choice
     from workbench.io.outputs import check_output_folder, write_folder
@@ -123,22 +127,26 @@ def fit_scan_pack(
     bone = None
     if bone_path is not None:
         bone = _read_bone(bone_path, scan)
-    result = fit_scan(
-        prepared.mesh,
-        landmarks=lms,
-        sex=sex,
-        table=table,
-        build=build,
-        orientation=orientation,
-        bone=bone,
-        source=str(path),
-        inputs=inputs,
-        progress=progress,
-        detail=detail,
-        bone_source=str(bone_path),
-    )
+    if _same_fit(fitted, inputs, sex, table, build, bone, orientation, detail):
+        result = fitted
+    else:
+        result = fit_scan(
+            prepared.mesh,
+            landmarks=lms,
+            sex=sex,
+            table=table,
+            build=build,
+            orientation=orientation,
+            bone=bone,
+            source=str(path),
+            inputs=inputs,
+            progress=progress,
+            detail=detail,
+            bone_source=str(bone_path),
+        )
     # (fit_scan prepared the prepared mesh again, finding nothing to do: the file's story)
-    result = replace(result, warnings=(*prepared.notes, *result.warnings))
+    notes = tuple(n for n in prepared.notes if n not in result.warnings)  # (a reused fit has them)
+    result = replace(result, warnings=(*notes, *result.warnings))
     result.figures["scan_preparation"] = prepared.figures
 
     from workbench.io.samples import credits_for
@@ -151,6 +159,31 @@ def fit_scan_pack(
         return _write_pack(folder, result, scan.colours, path, progress, extra)
 
     return result, write_folder(out, write, force=force, inputs=sources)
+
+
+def _same_fit(
+    fitted: ScanFit | None,
+    inputs: list[dict[str, Any]],
+    sex: str,
+    table: str,
+    build: str | float,
+    bone: Any,
+    orientation: tuple | None,
+    detail: bool,
+) -> TypeGuard[ScanFit]:
+    """Whether ``fitted`` was made from these inputs and settings (so it need not be redone)."""
+    if fitted is None or bone is not None or orientation is not None:
+        return False
+    if detail and fitted.detail is None:
+        return False
+    made = fitted.head.provenance
+    depth = made.get("depth_table") or {}
+    return bool(
+        list(made.get("built_from") or []) == [dict(i) for i in inputs]
+        and depth.get("sex") == sex
+        and depth.get("table") == table
+        and depth.get("build") == str(build)
+    )
 
 
 def _read_scan(
@@ -256,7 +289,7 @@ def _write_pack(
     from workbench.core.colour_transfer import transfer_colours
     from workbench.io.skin_colour_export import write_coloured_skin
     from workbench.io.skin_detail_export import write_skin_detail
-    from workbench.io.template_pack import export_template
+    from workbench.io.template_pack import export_template, write_head_obj
 
     files = export_template(result.head, folder)
     if result.detail is not None:
@@ -275,6 +308,8 @@ def _write_pack(
             scan_colours=colours,
             index=index,
         )
+        # head.obj again, now that the folder holds the skin's own atlas (its map_Kd)
+        files += [f for f in write_head_obj(result.head, folder) if f not in files]
         result.figures["colour"] = {
             "kind": skin_rgb.kind,
             "observed_fraction": round(float(skin_rgb.observed_fraction), 4),

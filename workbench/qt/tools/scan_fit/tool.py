@@ -17,7 +17,7 @@ from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError, UnitsError, WorkbenchError
 from workbench.qt.document import Document
 from workbench.qt.gui_call import GuiCall
-from workbench.qt.tools.common import folder_is_free
+from workbench.qt.tools.common import CaseLayersAside, folder_is_free
 from workbench.qt.tools.scan_fit.state import (
     EditScanLandmarks,
     FitView,
@@ -32,6 +32,7 @@ from workbench.render.visuals.scalar_bars import set_bar_visible
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
 
+    from workbench.core.landmarks import LandmarkSet
     from workbench.io.catalogue import LandmarkCatalogue
     from workbench.qt.panels.scan_fit_panel import ScanFitPanel
     from workbench.qt.picking import ClickPicker
@@ -108,8 +109,13 @@ class ScanFitTool(QObject):
         self._show_history()
         self.saved: list[Path] = []
         self._actors: dict[str, list[Any]] = {}
+        #: the dock is in front (the window follows its visibility; alone, always)
+        self.active = True
+        self._aside = CaseLayersAside(scene)
         self._scan_poly: Any = None
         self._on_scan_skin: Any = None
+        #: the placed landmarks the last fit started with (Save pack reuses that fit)
+        self._fit_placed: LandmarkSet | None = None
         self._drag: tuple[str, np.ndarray] | None = None
         self._drag_scheduled = False
         self.picker: ClickPicker | None = ClickPicker(
@@ -206,6 +212,8 @@ class ScanFitTool(QObject):
         self._clear("skin")
         self.draw_landmarks()
         self.reset_camera()
+        # the scan has its own frame: the case's skull and face are set aside meanwhile
+        self._aside.set_aside(self.active)
         n = scan.mesh.n_faces
         self.host.status(
             f"Scan {scan.path.name}: {n:,} triangles ({scan.factor:g} mm per file unit). "
@@ -226,6 +234,7 @@ class ScanFitTool(QObject):
             self.host.show_error("The fit settings are not usable", exc)
             return
         placed = self.landmarks.placed
+        self._fit_placed = placed
         if 0 < len(placed) < 3:
             self.host.messages.append(
                 f"{len(placed)} landmark(s) placed: 3 or more orient the scan; "
@@ -330,13 +339,18 @@ class ScanFitTool(QObject):
             self.host.show_error("The fit settings are not usable", exc)
             return False
         placed, gui = self.landmarks.placed, self.gui_call
+        # the fit shown is written as it is when it is of these landmarks (the pack checks
+        # the scan, the landmarks and the settings it was made from)
+        same = self._fit_placed is not None and placed.equals(self._fit_placed)
+        fitted = self.view.fit if self.view is not None and same else None
         self.panel.set_running(True)
-        self.panel.show_state(f"Fitting and writing {out.name} …")
+        what = "Writing" if fitted is not None else "Fitting and writing"
+        self.panel.show_state(f"{what} {out.name} …")
         self.runner.submit(
             CHANNEL,
             f"Saving the fitted pack {out.name} …",
             lambda report: save_pack(
-                scan, out, placed, settings, force=force, report=report, gui=gui
+                scan, out, placed, settings, force=force, report=report, gui=gui, fitted=fitted
             ),
             self._saved,
             lambda exc: self._failed("The pack was not saved", exc),
@@ -480,9 +494,24 @@ class ScanFitTool(QObject):
             self.plotter.remove_actor(actor, render=False)
         self.scene.request_render()
 
+    def set_active(self, on: bool) -> None:
+        """The dock came to the front (its scan, fitted skin and landmarks shown, the case's
+        layers set aside) or was left (all of its drawing hidden, the case's layers back)."""
+        self.active = bool(on)
+        self._aside.set_aside(self.active and self.scan is not None)
+        for layer, actors in self._actors.items():
+            for actor in actors:
+                actor.SetVisibility(self.active and self.panel.layer_visible(layer))
+        if self._on_scan_skin is not None:
+            self._on_scan_skin.SetVisibility(
+                self.active and self.panel.layer_visible("skin") and not self._scan_shown()
+            )
+        self._show_scan_key()
+        self.scene.request_render()
+
     def _add(self, layer: str, actor: Any) -> None:
         self._actors.setdefault(layer, []).append(actor)
-        actor.SetVisibility(self.panel.layer_visible(layer))
+        actor.SetVisibility(self.active and self.panel.layer_visible(layer))
         if layer == "skin":
             actor.GetProperty().SetOpacity(self.panel.skin_opacity())
 
@@ -492,12 +521,12 @@ class ScanFitTool(QObject):
 
     def set_visible(self, layer: str, on: bool) -> None:
         for actor in self._actors.get(layer, []):
-            actor.SetVisibility(bool(on))
+            actor.SetVisibility(bool(on) and self.active)
         if layer == "scan":  # the scan's colour key goes with the scan
             self._show_scan_key()
         if self._on_scan_skin is not None:  # the fitted skin on the scan: instead of the scan
             self._on_scan_skin.SetVisibility(
-                self.panel.layer_visible("skin") and not self._scan_shown()
+                self.active and self.panel.layer_visible("skin") and not self._scan_shown()
             )
         self.scene.request_render()
 
@@ -540,11 +569,15 @@ class ScanFitTool(QObject):
             self._add("skin", actor)
             if i:  # the part on the scan: only while the scan is hidden
                 self._on_scan_skin = actor
-                actor.SetVisibility(self.panel.layer_visible("skin") and not self._scan_shown())
+                actor.SetVisibility(
+                    self.active and self.panel.layer_visible("skin") and not self._scan_shown()
+                )
         self.scene.request_render()
 
     def _show_scan_key(self) -> None:
-        set_bar_visible(self.plotter, DISTANCE_TITLE, self.panel.layer_visible("scan"))
+        set_bar_visible(
+            self.plotter, DISTANCE_TITLE, self.active and self.panel.layer_visible("scan")
+        )
 
     def _scan_shown(self) -> bool:
         return self.panel.layer_visible("scan") and self.scan is not None

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -143,6 +143,14 @@ def run_scan_fit(
     from workbench.services.scan_fit.fit import fit_scan
 
     seeds = placed if placed is not None and len(placed) else None
+    # the inputs as the pack records them (Save pack then writes this fit, not a new one)
+    inputs: list[dict[str, Any]] = [
+        {"role": "scan", "file": scan.path.name, "sha256": file_sha256(scan.path)}
+    ]
+    if seeds is not None:
+        inputs.append(
+            {"role": "skin_landmarks", "file": "(placed in the window)", "count": len(seeds)}
+        )
     result = fit_scan(
         scan.mesh,
         landmarks=seeds,
@@ -150,7 +158,7 @@ def run_scan_fit(
         table=settings.table,
         build=settings.build,
         source=str(scan.path),
-        inputs=[{"role": "scan", "file": scan.path.name, "sha256": file_sha256(scan.path)}],
+        inputs=inputs,
         progress=_fraction_reporter(report),
     )
     if report is not None:
@@ -167,6 +175,7 @@ def save_pack(
     force: bool = False,
     report: Callable[[str, float], None] | None = None,
     gui: GuiCall | None = None,
+    fitted: ScanFit | None = None,
 ) -> tuple[FitView, list[Path]]:
     """Worker: the scan-fit pipeline (:func:`~workbench.pipelines.scan_fit.fit_scan_to_folder`,
     as ``workbench fit-scan``) with the tool's inputs; returns the fit and the files.
@@ -174,7 +183,8 @@ def save_pack(
     The pack holds what the command line writes, ``fit_report.pdf`` and its
     pictures included (drawn on the GUI thread when ``gui`` is given).  The
     placed landmarks (scan frame, mm) go to the fit as they are and are
-    copied into the pack as :data:`PLACED_FILE`.
+    copied into the pack as :data:`PLACED_FILE`.  ``fitted``: the fit shown, written as
+    it is when it was made from the same scan, landmarks and settings (no second fit).
     """
     from workbench.io.markups import write_mrk_json
     from workbench.pipelines.scan_fit import fit_scan_to_folder, write_scan_fit_report
@@ -205,5 +215,6 @@ def save_pack(
         build=settings.build,
         force=force,
         progress=_fraction_reporter(report),
+        fitted=fitted,
     )
     return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds)), list(files)
