@@ -44,11 +44,20 @@ CT_FILTER = "Volumes (*.nhdr *.nrrd *.mha *.mhd *.nii *.nii.gz);;All files (*)"
 EXPORT_FORMATS = ("ply", "obj", "stl")
 
 
-def _with_orientation(opened: OpenedCase, source: Path) -> OpenedCase:
-    """Record the known anatomy directions of a public sample (not an undo step)."""
+def _with_orientation(opened: OpenedCase, source: Path, space: str | None = None) -> OpenedCase:
+    """Record the known anatomy directions of a public sample (not an undo step).
+
+    ``space``: the frame the sample's numbers were written in ("LPS": the case
+    reads them with x and y negated, as :func:`workbench.io.meshes.read_mesh` does).
+    """
+    import numpy as np
+
     from workbench.commands.reconstruction_setup import SetOrientation
+    from workbench.io.meshes import to_read_frame
 
     anatomy = case_steps.sample_orientation(source)
+    if anatomy is not None:
+        anatomy = {k: to_read_frame(np.asarray(v), space).tolist() for k, v in anatomy.items()}
     if anatomy is not None and opened.case.orientation is None:
         opened.stack.push(
             SetOrientation(
@@ -84,6 +93,23 @@ def _drawable(opened: Any) -> Any:
     return opened
 
 
+def _with_stored_fit(loaded: Any) -> tuple[Any, Any, str]:
+    """Worker side: ``(loaded, stored fit or None, why it could not be read or "")``.
+
+    The face a case file keeps (:mod:`workbench.services.reconstruction.stored_fit`) is
+    decoded here, with its inputs checked against the case's (current or stale).
+    """
+    from workbench.services.reconstruction import stored_fit
+
+    state = loaded.case.derived.get(stored_fit.KEY)
+    if state is None:
+        return loaded, None, ""
+    try:
+        return loaded, stored_fit.fit_from_state(state, loaded.case), ""
+    except stored_fit.StoredFitError as exc:
+        return loaded, None, str(exc)
+
+
 def case_from_ct(
     path: Path,
     tissue: str,
@@ -114,16 +140,19 @@ def case_from_ct(
     report("writing the surface", 0.71)
     folder = Path(tempfile.mkdtemp(prefix="workbench-ct-"))
     stem = path.name.split(".")[0]
-    surface = write_mesh(folder / f"{stem}_{tissue}.ply", result.mesh)
+    # tagged with the CT's frame: read back as RAS like any LPS-tagged mesh, so the case, its
+    # landmark files and report (RAS) lie on the CT in 3D Slicer
+    surface = write_mesh(folder / f"{stem}_{tissue}.ply", result.mesh, space=result.frame)
     report("starting the case", 0.74)
     opened = start_case_from_skull(surface, units="mm")
     opened.notes.insert(
         0,
         f"{tissue} surface of {path} at iso {result.iso:g} "
-        f"{result.units} ({result.rule}), frame {result.frame}",
+        f"{result.units} ({result.rule}), frame {result.frame}"
+        + (" (read as RAS: x and y negated)" if result.frame == "LPS" else ""),
     )
     report("orientation", 0.97)
-    opened = _with_orientation(opened, path)
+    opened = _with_orientation(opened, path, result.frame)
     report("done", 1.0)
     return opened
 
@@ -248,17 +277,19 @@ class FileTool:
         self.runner.submit(
             "open",
             f"Opening case {path.name} …",
-            lambda: _drawable(load_case(path)),
-            lambda loaded: self._opened_case(loaded, path),
+            lambda: _with_stored_fit(_drawable(load_case(path))),
+            lambda opened: self._opened_case(opened, path),
             lambda exc: self.show_error(f"Could not open {path.name}", exc),
         )
 
-    def _opened_case(self, loaded: Any, path: Path) -> None:
+    def _opened_case(self, opened: tuple[Any, Any, str], path: Path) -> None:
         """A loaded case file in the window, with its integrity and face notes.
 
         A case that fails its evidence, array or audit-chain check never gets
-        here: loading refuses it and the error names the first problem.
+        here: loading refuses it and the error names the first problem.  A
+        face kept in the file is shown at once (``host.restore_fit``).
         """
+        loaded, stored, problem = opened
         self.replace_case(OpenedCase(loaded.case, CommandStack(loaded.case)), path)
         chain = loaded.audit_chain.summary()
         audit = chain if chain.startswith("audit log") else f"audit log {chain}"
@@ -266,14 +297,18 @@ class FileTool:
             f"{path.name}: evidence and arrays match their hashes; {audit}; "
             f"case.json {loaded.content_seal.summary()}"
         ]
-        if "template_hash" in loaded.case.parameters:
+        if problem:
+            notes.append(f"{path.name}: the face kept in the file was not shown: {problem}")
+        elif stored is None and "template_hash" in loaded.case.parameters:
             notes.append(
-                f"{path.name} was reconstructed before, but a case file keeps the "
-                "settings, not the face: Reconstruct face (Ctrl+R) fits it again"
+                f"{path.name} was reconstructed before, but the file keeps the settings, not "
+                "the face: Reconstruct face (Ctrl+R) fits it again"
             )
         for note in notes:
             self.host.messages.append(note)
         self.status(f"{self.host.status_text()}; {audit}")
+        if stored is not None:
+            self.host.restore_fit(stored)
 
     def replace_case(self, opened: OpenedCase, path: Path | None) -> None:
         """Show ``opened`` as the window's case (``path``: its file; None: untitled)."""

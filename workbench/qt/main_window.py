@@ -45,6 +45,7 @@ from PySide6.QtWidgets import (
     QLabel,
     QMainWindow,
     QProgressBar,
+    QPushButton,
     QScrollArea,
     QSplitter,
     QTabBar,
@@ -73,7 +74,7 @@ from workbench.qt.panels.layers_panel import LayersPanel
 from workbench.qt.panels.reconstruct_panel import ReconstructPanel
 from workbench.qt.panels.scan_fit_panel import ScanFitPanel
 from workbench.qt.picking import ClickPicker
-from workbench.qt.scene import SceneView
+from workbench.qt.scene import SceneView, case_anatomy
 from workbench.qt.session import Session
 from workbench.qt.tools.age.tool import AgeTool
 from workbench.qt.tools.animate.tool import AnimateTool
@@ -86,6 +87,10 @@ from workbench.services.reconstruction import case_steps
 
 if TYPE_CHECKING:
     from workbench.services.case.case_setup import OpenedCase
+
+
+#: worker channels the status bar's Cancel stops, with what the status line calls them
+CANCELLABLE = {"fit": "the fit", "suggest": "the landmark suggestion"}
 
 
 class MainWindow(QMainWindow):
@@ -173,7 +178,13 @@ class MainWindow(QMainWindow):
         self.reconstruct_panel = ReconstructPanel(self.document)
         self.compare_panel = ComparePanel()
         self.landmarks = LandmarkTool(
-            self.document, self.scene, self.catalogue, self.landmarks_panel, self.runner, self
+            self.document,
+            self.scene,
+            self.catalogue,
+            self.landmarks_panel,
+            self.runner,
+            self,
+            self.session,
         )
         self.drags = DragTool(
             self.document,
@@ -291,6 +302,12 @@ class MainWindow(QMainWindow):
         self.statusBar().addWidget(self.status_label, 1)
         self._busy_text, self._status_before = "", ""
         self.statusBar().addPermanentWidget(self.progress)
+        # stops a long job that reports its progress (a fit, a suggestion); see cancel_jobs
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.setToolTip("Stop the fit or suggestion running (Esc in a drag)")
+        self.cancel_button.clicked.connect(self.cancel_jobs)
+        self.cancel_button.hide()
+        self.statusBar().addPermanentWidget(self.cancel_button)
 
     def _connect(self) -> None:
         """The window's own reactions: the case to the scene, docks to their tools, status."""
@@ -302,6 +319,7 @@ class MainWindow(QMainWindow):
         self.document.stack_changed.connect(self._update_title)
         self.docks["animate"].visibilityChanged.connect(self.animate.set_active)
         self.docks["age"].visibilityChanged.connect(self.age.set_active)
+        self.docks["fit_scan"].visibilityChanged.connect(self.scan_fit.set_active)
         self.session.fit_changed.connect(lambda fit: self.age.fit_changed(fit is not None))
         # the case's own head in the Animate dock once a face is fitted (issue 33)
         self.session.fit_changed.connect(
@@ -401,6 +419,12 @@ class MainWindow(QMainWindow):
     def ask_export(self) -> None:
         self.files.ask_export()
 
+    def ask_case_details(self) -> None:
+        """File ▸ Case details…: the examiner and the notes (:mod:`workbench.qt.case_details`)."""
+        from workbench.qt.case_details import open_case_details
+
+        self.case_details = open_case_details(self)
+
     def ask_load_truth(self) -> None:
         self.files.ask_load_truth()
 
@@ -477,6 +501,9 @@ class MainWindow(QMainWindow):
 
     # ------------------------------------------------------------ messages
     def status(self, text: str) -> None:
+        """Say ``text`` in the status line; it stays there after the jobs running end."""
+        if self._busy_text and text != self._busy_text:
+            self._status_before = text  # what to show again when the jobs are done
         self.status_label.setText(text)
 
     def status_text(self) -> str:
@@ -490,15 +517,22 @@ class MainWindow(QMainWindow):
         if self.interactive:
             dialogs.show_error(self, what, exc)
 
+    def cancel_jobs(self) -> None:
+        """Stop the running fit and suggestion (the face and landmarks shown stay)."""
+        stopped = [ch for ch in CANCELLABLE if self.runner.cancel(ch)]
+        if stopped:
+            self.status(f"Cancelled: {', '.join(CANCELLABLE[ch] for ch in stopped)}.")
+
     def _on_busy(self, busy: bool, text: str) -> None:
         """Progress bar and the job's text; when idle again, the message from before."""
+        self.cancel_button.setVisible(busy and any(map(self.runner.is_running, CANCELLABLE)))
         self.progress.setVisible(busy)
         if busy:
             self.progress.setRange(0, 0)  # indeterminate until the job reports progress
             if not self._busy_text:
                 self._status_before = self.status_label.text()
             self._busy_text = text
-            self.status(text)
+            self.status_label.setText(text)
             return
         if self._busy_text and self.status_label.text() == self._busy_text:
             self.status(self._status_before)  # nothing newer was said meanwhile
@@ -538,8 +572,9 @@ class MainWindow(QMainWindow):
         if self.document.case.specimen.mesh is None and self.scan_fit.has_scan:
             self.scan_fit.reset_camera()  # only a scan is shown: look at its face
             return
-        axes = case_steps.view_axes(self.document.case)
-        self.scene.reset_camera(*(axes or (None, None)))
+        # the face from the front, the subject's right on the viewer's left (a mirror-image
+        # file is shown reflected: one handedness with the guide view and the report)
+        self.scene.reset_camera(case_anatomy(self.document.case))
 
     def cancel_drag(self) -> None:
         """Esc: end a landmark or guide drag without moving anything."""
@@ -584,7 +619,11 @@ class MainWindow(QMainWindow):
         if part in FIT_PARTS:
             self.schedule_dowels()
             if self.session.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
-                self.reconstruct()
+                self.reconstruction.reconstruct(after_edit=True)
+
+    def restore_fit(self, stored: Any) -> None:
+        """Show the face a reopened case keeps (the Reconstruct tool's ``restore``)."""
+        self.reconstruction.restore(stored)
 
     def _on_layer_changed(self, layer: str) -> None:
         if layer == "face":  # the panel's opacity slider follows the Layers dock

@@ -42,6 +42,9 @@ class Session(QObject):
         self._preview: DowelPreview | None = None
         self._truth: tuple[str, Any] | None = None
         self._comparison: Comparison | None = None
+        #: the dense registration Suggest made: ``(skull mesh, orientation, sex, registration)``;
+        #: the next Reconstruct of that skull reuses it (no second registration)
+        self.suggested_registration: tuple[Any, Any, str, Any] | None = None
 
     # ------------------------------------------------------------ accessors
     @property
@@ -85,3 +88,4 @@ class Session(QObject):
         """A new case: no fit and no dowel plan yet (the true skin stays loaded)."""
         self.set_fit(None)
         self.set_preview(None)
+        self.suggested_registration = None

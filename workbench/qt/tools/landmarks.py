@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from workbench.qt.hosts import Feedback
     from workbench.qt.panels.landmarks_panel import LandmarksPanel
     from workbench.qt.scene import SceneView
+    from workbench.qt.session import Session
     from workbench.qt.workers import TaskRunner
 
 
@@ -47,8 +48,10 @@ class LandmarkTool:
         landmarks_panel: LandmarksPanel,
         runner: TaskRunner,
         feedback: Feedback,
+        session: Session | None = None,
     ) -> None:
         self.document = document
+        self.session = session
         self.scene = scene
         self.catalogue = catalogue
         self.landmarks_panel = landmarks_panel
@@ -97,13 +100,16 @@ class LandmarkTool:
         self.runner.submit(
             "suggest",
             "Suggesting skull landmarks …",
-            lambda: case_steps.suggest_landmarks(skull, current, sex, orient),
-            self._apply_suggestion,
+            lambda report: case_steps.suggest_landmarks(skull, current, sex, orient, report),
+            lambda result: self._apply_suggestion(result, (skull, orient, sex)),
             lambda exc: self.show_error("Could not suggest landmarks", exc),
+            progress=True,
         )
 
-    def _apply_suggestion(self, result: tuple) -> None:
+    def _apply_suggestion(self, result: tuple, made_for: tuple = ()) -> None:
         new_set, reg = result
+        if made_for and self.session is not None:  # the next Reconstruct reuses it
+            self.session.suggested_registration = (*made_for, reg)
         if self.document.push(ReplaceLandmarkSet("skull", new_set, "Suggest skull landmarks")):
             n = sum(lm.status == "suggested" for lm in new_set)
             d = reg.figures.get("median_observed_distance_mm")

@@ -15,16 +15,26 @@ coordinates).
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
+from workbench.core import value_state
 from workbench.qt import dialogs
 from workbench.qt.panels.reconstruct_panel import BAND_TITLE
 from workbench.qt.scene import is_closed
-from workbench.services.reconstruction import case_steps
+from workbench.services.guides.fit_guides import stored_guides
+from workbench.services.reconstruction import case_steps, stored_fit
+from workbench.services.reconstruction.preview_fit import PreviewFit
 from workbench.services.reconstruction.refit_check import RefitChange, compare_refit
+from workbench.services.reconstruction.service import (
+    MAX_WORKING_TRIANGLES,
+    FitInputs,
+    reusable_registration,
+)
 
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QDockWidget, QWidget
@@ -38,6 +48,8 @@ if TYPE_CHECKING:
     from workbench.qt.scene import SceneView
     from workbench.qt.session import Session
     from workbench.qt.workers import TaskRunner
+    from workbench.services.reconstruction.stored_fit import StoredFit
+    from workbench.services.registration.result import SkullRegistration
 
 #: the frame needs these (porions, orbitales, nasion) before dowels can be planned
 FRAME_CODES = ("po_l", "po_r", "or_l", "or_r")
@@ -108,6 +120,8 @@ class ReconstructTool(QObject):
         super().__init__(parent)
         #: a refit held back because it would break the face, with why (see :meth:`show_fit`)
         self.held: tuple[case_steps.FitResult, RefitChange] | None = None
+        #: seconds from an edit to its previewed face (:meth:`preview_edit`; tests, benchmarks)
+        self.edit_timings: list[float] = []
         self.document, self.session, self.runner = document, session, runner
         self.scene, self.plotter, self.detail = scene, plotter, detail
         self.guide_view = guide_view
@@ -132,6 +146,7 @@ class ReconstructTool(QObject):
         self._build_rest.timeout.connect(self._build_rested)
         panel.build_slider.sliderReleased.connect(self._build_rest.start)
         session.fit_changed.connect(panel.show_result)
+        runner.cancelled.connect(self._cancelled)
         session.truth_changed.connect(lambda truth: compare_panel.show_comparison(truth[0], None))
 
     # ------------------------------------------------------------ dowels
@@ -165,8 +180,16 @@ class ReconstructTool(QObject):
         self.dowels_panel.show_plan(None, dialogs.error_text("No dowels", exc)[0])
 
     # ------------------------------------------------------------ reconstruct
-    def reconstruct(self) -> None:
-        """Fit the face in the worker (guides and ensemble as the panel says)."""
+    def reconstruct(self, after_edit: bool = False) -> None:
+        """Fit the face in the worker (guides and ensemble as the panel says), with
+        progress and Cancel.
+
+        A refit reuses the registration of the shown fit (or of Suggest) when the
+        skull, its orientation and the reference head are the same
+        (:func:`~workbench.services.reconstruction.service.reusable_registration`).
+        ``after_edit``: a case edit asked for it; the face is previewed at once
+        (:meth:`preview_edit`) while the refit runs.
+        """
         case = self.document.case
         if case.specimen.mesh is None:
             self.host.status("Open a skull first.")
@@ -179,13 +202,78 @@ class ReconstructTool(QObject):
         except Exception as exc:  # noqa: BLE001 - shown as a readable message
             self.host.show_error("The stored guides are not usable", exc)
             return
+        registration = self._reusable_registration(inputs)
+        if after_edit:
+            self.preview_edit()
         self.runner.submit(
             "fit",
-            "Reconstructing the face …",
-            lambda: case_steps.fit_face(inputs),
+            "Refitting the face …" if registration is not None else "Reconstructing the face …",
+            lambda report: case_steps.fit_face(inputs, report, registration),
             self.show_fit,
             lambda exc: self.host.show_error("Could not reconstruct the face", exc),
+            progress=True,
         )
+
+    def _cancelled(self, channel: str) -> None:
+        """A fit was cancelled: the face of the last fit again (not an edit's preview)."""
+        if channel == "fit" and not self.scene.closed:
+            self.draw_face()
+            if self.session.fit is not None:
+                self.host.messages.append(
+                    "Fit cancelled: the face shown is the last fit; the edits after it are kept "
+                    "in the case (Reconstruct fits them)."
+                )
+
+    def _reusable_registration(self, inputs: FitInputs) -> SkullRegistration | None:
+        """The registration a fit of ``inputs`` may reuse: the shown fit's, or Suggest's of
+        the same skull, orientation and sex (None: the fit registers the skull itself)."""
+        reg = reusable_registration(self.session.fit, inputs)
+        made = self.session.suggested_registration
+        if reg is None and made is not None and inputs.skull.n_faces <= MAX_WORKING_TRIANGLES:
+            skull, orient, sex, suggested = made
+            same = skull is inputs.skull and orient == inputs.hint and sex == inputs.dowels.sex
+            if same and inputs.template is None:
+                reg = suggested
+        return reg
+
+    def preview_edit(self) -> bool:
+        """Show the face as the edit just made moves it, at once (the refit follows).
+
+        The last fit's warp is re-solved with the dowel tips of the moved skull
+        landmarks and the targets of the changed guides
+        (:class:`~workbench.services.reconstruction.preview_fit.PreviewFit`, a few ms);
+        False when the edit is not of that kind (a landmark added or removed,
+        dowel settings): the face then changes when the refit arrives.
+        """
+        fit = self.session.fit
+        if fit is None or fit.recon.landmarks is None or not self.scene.has("face"):
+            return False
+        t0 = time.perf_counter()
+        try:
+            preview = PreviewFit.from_fit(fit.recon, fit.head)
+        except ValueError:
+            return False
+        case = self.document.case
+        used = fit.recon.landmarks
+        moved = False
+        for lm in case.landmarks["skull"].defined():
+            before = used.get(lm.code)
+            if before is None or not before.is_defined:
+                continue
+            if not np.allclose(before.position, lm.position, atol=1e-6):
+                moved = preview.move_landmark(lm.code, lm.position) or moved
+        if case.guides is not None:
+            shown = {g.id: g for g in fit.guides}
+            for guide in stored_guides(case.guides) or ():
+                old = shown.get(guide.id)
+                if old is None or old.value != guide.value or old.enabled != guide.enabled:
+                    moved = preview.move_guide(guide) or moved
+        if not moved:
+            return False
+        self.scene.update_points("face", preview.skin())
+        self.edit_timings.append(time.perf_counter() - t0)
+        self.host.status("Face previewed from the edit; the refit follows …")
+        return True
 
     def show_fit(self, fit: case_steps.FitResult) -> None:
         """Show a new fit, unless it would break the face shown (:func:`compare_refit`):
@@ -245,16 +333,45 @@ class ReconstructTool(QObject):
         self.held_changed.emit(False)
         self.scene.show_held(None)
 
-    def _apply_fit(self, fit: case_steps.FitResult) -> None:
+    def restore(self, stored: StoredFit) -> None:
+        """Show the face a reopened case keeps, as it was saved (no fitting).
+
+        The panel takes the fit's guide and ensemble choices.  A *stale* face
+        (the case's inputs are not those it was fitted from) is shown with a
+        warning and, when "Re-fit on change" is on, fitted again in the worker.
+        """
+        fit, panel = stored.fit, self.reconstruct_panel
+        if fit.inputs is not None:
+            blocked = [w.blockSignals(True) for w in (panel.use_guides, panel.ensemble)]
+            panel.use_guides.setChecked(fit.inputs.use_guides)
+            panel.ensemble.setValue(fit.inputs.ensemble)
+            for w, b in zip((panel.use_guides, panel.ensemble), blocked, strict=True):
+                w.blockSignals(b)
+        self._apply_fit(fit, restored=True)
+        when = f" (fitted by version {stored.software})" if stored.software else ""
+        if stored.current:
+            text = f"The face kept in the case is shown as it was saved{when}."
+        else:
+            text = (
+                f"STALE: the face kept in the case was fitted from other inputs than the case "
+                f"has now{when}; reconstruct (Ctrl+R) before using it."
+            )
+        self.host.messages.append(text)
+        self.host.status(text)
+        if not stored.current and panel.auto_refit.isChecked():
+            self.reconstruct()
+
+    def _apply_fit(self, fit: case_steps.FitResult, restored: bool = False) -> None:
         if self.held is not None:  # applied, or a newer fit replaces the one held back
             self._release_held()
         self.session.set_fit(fit)  # the reconstruct panel follows (fit_changed)
+        self._keep_in_case(fit)
         reg = fit.recon.registration
         check = {} if reg is None else reg.figures.get("self_check") or {}
         if check.get("outcome") == "check":
             # the self-check's doubt first (issue 28): the user confirms before using the face
             self.host.status(f"CHECK: {check['reasons'][0]} (face fitted; confirm the orientation)")
-        else:
+        elif not restored:
             self.host.status(f"Face fitted in {self.runner.timings.get('fit', 0):.1f} s")
         if not self.guide_view.isVisible() and not self.guide_view.closed_by_user:
             # the first fit opens the guide view.  Both views then repaint
@@ -265,6 +382,14 @@ class ReconstructTool(QObject):
             self.scene.after_paint(lambda f=fit: self._draw_fit(f), render=False)
         else:
             self._draw_fit(fit)
+
+    def _keep_in_case(self, fit: case_steps.FitResult) -> None:
+        """The face shown is the one the case keeps (a derived result, saved with the case)."""
+        try:
+            self.document.case.derived[stored_fit.KEY] = stored_fit.fit_to_state(fit)
+        except (stored_fit.StoredFitError, value_state.StateError) as exc:
+            self.document.case.derived.pop(stored_fit.KEY, None)
+            self.host.messages.append(f"The face will not be kept in the case file: {exc}")
 
     def _draw_fit(self, fit: case_steps.FitResult) -> None:
         if fit is not self.session.fit or self.scene.closed:

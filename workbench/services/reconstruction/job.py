@@ -36,7 +36,7 @@ from workbench.core.mesh import Mesh
 from workbench.core.units import UNIT_SCALES
 from workbench.io.case_file import save_case
 from workbench.io.catalogue import load_catalogue
-from workbench.io.markups import write_mrk_json
+from workbench.io.markups import OUTPUT_FRAME, OUTPUT_SYSTEM, write_mrk_json
 from workbench.io.mesh_formats import ply
 from workbench.io.meshes import write_mesh
 from workbench.io.outputs import relocate, staged_folder
@@ -332,11 +332,17 @@ def build_report(
         "@schema": "reconstruction-report-v1",
         "case_id": case.meta.case_id,
         "created": utc_now(),
-        "examiner": inputs.examiner or case.meta.examiner or None,
+        "examiner": case.meta.examiner or inputs.examiner or None,  # the case's, if set now
         "software": {"name": "workbench", "version": __version__},
         "template": {"id": head.template_id, "content_hash": head.content_hash},
-        "frame": "input frame of the skull file (mm); the fit ran in the Frankfort head frame"
-        + (" (mirrored input: reflection included)" if recon.mirrored_input else ""),
+        # the frame of the landmark files too (one frame, said alike in both)
+        "frame": f"{OUTPUT_FRAME}; the fit ran in the Frankfort head frame"
+        + (
+            " (mirrored input: the skull file is a mirror image of the subject, the head "
+            "frame includes a reflection; views and pictures show the subject unmirrored)"
+            if recon.mirrored_input
+            else ""
+        ),
         "units": "mm",
         "inputs": [_input_record(ev) for ev in case.evidence]
         + [_file_record("table", _table_file(dowels.table))]
@@ -713,8 +719,12 @@ def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
     write_mrk_json(
         out / "skull_landmarks.mrk.json",
         result.opened.case.landmarks["skull"],
-        coordinate_system="RAS",
+        coordinate_system=OUTPUT_SYSTEM,
     )
     files["landmarks"] = out / "skull_landmarks.mrk.json"
+    if result.fit is not None:  # the face kept with the case: reopened, it is shown at once
+        from workbench.services.reconstruction.stored_fit import KEY, fit_to_state
+
+        result.opened.case.derived[KEY] = fit_to_state(result.fit, result.opened.case)
     files["case"] = save_case(result.opened.case, out / "case.fcase", result.opened.stack)
     return files

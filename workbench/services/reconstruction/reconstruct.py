@@ -642,8 +642,11 @@ def reconstruct(
             tuple(lm.moved(lm.position, "absent") if lm.code in doubtful else lm for lm in lms_h),
         )
     skull_h = reg.target_h
+    say = progress or (lambda _m: None)
+    say("planning the dowels ...")
     plan = plan_dowels(skull_h, lms_h, settings.depth)
     guide_fn = None if guides is None else guides(skull_h, lms_h, plan)
+    say("fitting the head to the dowels and guides ...")
     fit = fit_head(
         head,
         reg,

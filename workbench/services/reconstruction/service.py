@@ -55,6 +55,7 @@ from workbench.services.reconstruction.reconstruct import (
     ensemble_spread,
     reconstruct,
 )
+from workbench.services.registration.result import SkullRegistration
 from workbench.services.templates.cache import reference_head
 from workbench.services.tissue.dowels import DepthSettings, DowelPlan, build_model_for
 from workbench.services.tissue.tissue_model import TissueSettings
@@ -358,8 +359,45 @@ def working_skull(skull: Mesh, say: Progress = lambda _m: None) -> tuple[Mesh, l
     ]
 
 
-def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
+def reusable_registration(
+    previous: FitResult | None, inputs: FitInputs
+) -> SkullRegistration | None:
+    """The registration of ``previous`` if a fit of ``inputs`` may reuse it, else None.
+
+    It may when the skull (same vertices and faces), its orientation, the
+    reference head (sex, pack) and the jaw handling are those it was made
+    for, and the fit is of one reference head: an edit of landmarks, dowel
+    depths or guides then moves dowels and skin targets, not the skull.
+    """
+    if previous is None or previous.inputs is None or previous.recon.registration is None:
+        return None
+    old = previous.inputs
+    same_skull = old.skull is inputs.skull or (
+        np.array_equal(old.skull.vertices, inputs.skull.vertices)
+        and np.array_equal(old.skull.faces, inputs.skull.faces)
+    )
+    same = (
+        same_skull
+        and old.orientation == inputs.orientation
+        and old.template == inputs.template
+        and len(inputs.templates) <= 1
+        and old.dowels.sex == inputs.dowels.sex
+        and old.fit_settings.jaw == inputs.fit_settings.jaw
+    )
+    return previous.recon.registration if same else None
+
+
+def run_fit(
+    inputs: FitInputs,
+    progress: Progress | None = None,
+    *,
+    registration: SkullRegistration | None = None,
+) -> FitResult:
     """Fit the face as described by ``inputs`` (see the module docstring).
+
+    ``registration``: the dense skull registration of an earlier fit of the
+    same skull, orientation and reference head, reused (a refit after a
+    landmark or guide edit: :func:`reusable_registration`); None registers.
 
     Raises
     ------
@@ -380,7 +418,14 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     guides = FitGuides(dowels, stored_guides(inputs.guides), inputs.rules, inputs.use_guides)
     say("registering the reference skull and fitting the head ...")
     recon = reconstruct(
-        work, inputs.landmarks, head, settings=fit, guides=guides, hint=inputs.hint, progress=say
+        work,
+        inputs.landmarks,
+        head,
+        settings=fit,
+        guides=guides,
+        hint=inputs.hint,
+        progress=say,
+        registration=registration,
     )
     references = None
     if len(inputs.templates) > 1:
@@ -398,6 +443,7 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
     recon = replace(
         recon, warnings=recon.warnings + rejected + tuple(guides.problems(skull_h, lms_h))
     )
+    say("published guide predictions ...")
     try:
         predictions = published_predictions(
             lms_h,
@@ -418,6 +464,7 @@ def run_fit(inputs: FitInputs, progress: Progress | None = None) -> FitResult:
         seconds["ensemble"] = time.perf_counter() - t
     builds = None
     if references is None:
+        say("build faces ...")
         t = time.perf_counter()
         builds = build_faces(
             recon, build_model_for(), min_tissue_mm=fit.min_tissue_mm, bone=skull_h

@@ -38,6 +38,7 @@ class AgeDrawing:
     cache: dict[int, AgeStep]
     shown_age: int | None
     active: bool
+    camera_pending: bool
     _actors: dict[str, Any]
     _caption: Any
 
@@ -82,6 +83,8 @@ class AgeDrawing:
         overlay = self.panel.mode() == "overlay"
         skin = source.head.skin.transformed(_shift(self.offset()))
         self._actors["before"] = heads.add_age_source(self.plotter, skin, overlay=overlay)
+        # drawn while the dock is behind another (a reopened case's study): shown with the dock
+        self._actors["before"].SetVisibility(self.active)
         self._caption = heads.add_age_caption(self.plotter)
         self._draw_after(rebuild=True)
 
@@ -126,9 +129,14 @@ class AgeDrawing:
         return update.drawn_points(update.mapper_dataset(self._actors[which]))
 
     def reset_camera(self) -> None:
-        """Look at both heads from the front (+z toward the face, +y up)."""
+        """Look at both heads from the front (+z toward the face, +y up).
+
+        Only while the dock is in front: the main view belongs to the case's layers
+        otherwise (the camera is set when the dock comes to the front).
+        """
         source = self.source
-        if source is None or self.scene.closed:
+        self.camera_pending = not self.active
+        if source is None or self.scene.closed or not self.active:
             return
         v = source.head.skin.vertices
         lo = np.minimum(v.min(axis=0), v.min(axis=0) + self.offset())

@@ -114,6 +114,8 @@ class AgeTool(QObject, AgeDrawing):
         #: whole years computed around the target once it is done
         self.prefetch_years = 2
         self.active = False
+        #: the heads were drawn while the dock was behind another: set the camera when shown
+        self.camera_pending = False
         self.files: list[Path] = []
         self._loading = ""
         self._generation = 0
@@ -169,6 +171,8 @@ class AgeTool(QObject, AgeDrawing):
         self.scene.request_render()
         if on:
             self.ensure_loaded()
+            if self.camera_pending:  # heads drawn while the dock was behind another
+                self.reset_camera()
 
     def _wanted(self, actor: Any) -> bool:
         return actor is not self._actors.get("after") or self.step is not None
@@ -201,6 +205,11 @@ class AgeTool(QObject, AgeDrawing):
     def fit_changed(self, available: bool) -> None:
         """The case's reconstruction changed: offer it, and age the new one if it is the source."""
         self.panel.set_fit_available(available)  # withdrawn: the panel falls back to a reference
+        pending = self._pending
+        if available and pending is not None and pending.source == "reconstruction":
+            # a reopened case's study of its reconstruction: the head to age exists now
+            self.show_study(pending)
+            return
         if available and self.panel.source_key() == "fit" and self.source is not None:
             self.load("fit")
 
