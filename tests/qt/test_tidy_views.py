@@ -31,6 +31,8 @@ def test_the_animate_head_goes_when_the_dock_is_left(qtbot, window, skull_obj):
     window.docks["landmarks"].raise_()
     qtbot.waitUntil(lambda: not window.animate.active, timeout=5_000)
     assert not skin.GetVisibility() and window.scene.visible["skull"]  # the case back
+    # nothing of the head stays behind, the eyes included
+    assert not [p for p, a in window.animate.actors().items() if a.GetVisibility()]
     assert not window.animate.timer.isActive()
 
     window.show_animate()

@@ -43,6 +43,26 @@ def _kabsch_degrees(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
 
 
+def _stray(window) -> list:
+    """Bounds of visible actors no layer of the case or of the tool in front owns."""
+
+    def address(actor) -> str:
+        return actor.GetAddressAsString("vtkObject")
+
+    owned = [a for layer in window.scene.visible for a in window.scene.actors(layer)]
+    owned += [a for layer in ("scan", "skin", "landmarks") for a in window.scan_fit.actors(layer)]
+    if window.animate.active:
+        owned += list(window.animate.actors().values())
+    if window.age.active:
+        owned += list(window.age.actors().values())
+    mine = {address(a) for a in owned}
+    return [
+        a.GetBounds()
+        for a in window.plotter.renderer.GetActors()
+        if a.GetVisibility() and address(a) not in mine
+    ]
+
+
 class Shots:
     """Numbered window screenshots of one session."""
 
@@ -152,13 +172,14 @@ def test_the_whole_session(qtbot, new_window, shared_data, tmp_path, artefacts, 
     shot(window, "age_8")
 
     # the CT's own skin as a face scan (the Fit scan tool; the case is not touched)
-    skin = mesh_from_ct(ct, "skin").mesh
-    scan = write_mesh(tmp_path / f"{case}_skin.ply", skin)
-    window.open_scan(scan)
+    skin = mesh_from_ct(ct, "skin")  # written as mesh-from-ct writes it: its frame tagged
+    scan = write_mesh(tmp_path / f"{case}_skin.ply", skin.mesh, space=skin.frame)
+    window.open_scan(scan, units="mm")  # (a CT surface: mm, as the file says)
     assert window.wait_idle(300) and not window.errors, window.errors
     window.fit_scan()
     assert window.wait_idle(600) and not window.errors, window.errors
     assert window.scan_fit.view is not None
+    assert not _stray(window)  # the Animate and Age heads (and their eyes) went with them
     shot(window, "scan_fit")
 
     # examiner, save, export (the command line's folder, report with pictures)
@@ -184,11 +205,7 @@ def test_the_whole_session(qtbot, new_window, shared_data, tmp_path, artefacts, 
     assert again.fit.builds is not None and again.scene.has("guides")
     assert again.document.case.age_study is not None
     shot(again, "reopened")
-    for name, actors in again.scene._actors.items():  # DEBUG
-        for a in actors:
-            print("LAYER", name, a.GetVisibility(), np.round(a.GetBounds(), 0))
-    for a in again.plotter.renderer.GetActors():  # DEBUG
-        print("ACTOR", a.GetVisibility(), np.round(a.GetBounds(), 0), a)
+    assert not _stray(again)  # nothing but the case's own layers (no tool's head behind)
     again.show_age()
     qtbot.waitUntil(lambda: again.age.shown_age == 8, timeout=300_000)
     assert again.age.source is not None and again.age.source.key == "fit"

@@ -46,6 +46,7 @@ class AnimateDrawing:
     scene: SceneView
     plotter: Any
     animator: Animator | None
+    active: bool
     _actors: dict[str, Any]
     _points: np.ndarray | None
     _faces: dict[str, np.ndarray]
@@ -62,6 +63,7 @@ class AnimateDrawing:
         meshes = anim.meshes()
         skin = meshes["skin"]
         self._actors["skin"] = heads.add_animated_skin(self.plotter, skin)
+        self._actors["skin"].SetVisibility(self.active)
         self._faces = {part: mesh.faces for part, mesh in meshes.items()}
         # vertex-face incidence of each part, kept for the per-frame normals
         self._vf = {part: mesh.vertex_faces_matrix for part, mesh in meshes.items()}
@@ -70,11 +72,12 @@ class AnimateDrawing:
             if part not in meshes:
                 continue
             actor = heads.add_animated_part(self.plotter, part, meshes[part], anim)
-            actor.SetVisibility(part in ALWAYS_SHOWN or self.panel.bones.isChecked())
+            shown = part in ALWAYS_SHOWN or self.panel.bones.isChecked()
+            actor.SetVisibility(shown and self.active)
             self._actors[part] = actor
         self._jaw_drawn = anim.jaw_deg
         self._gaze_drawn = anim.gaze
-        self._show_inner(self.panel.bones.isChecked())
+        self._show_inner(self.active and self.panel.bones.isChecked())
 
     def actors(self) -> dict[str, Any]:
         """``{part: actor}`` drawn by this tool (tests)."""

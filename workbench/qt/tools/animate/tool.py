@@ -15,7 +15,7 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.core.errors import WorkbenchError
-from workbench.qt.tools.animate.drawing import AnimateDrawing, load_animator
+from workbench.qt.tools.animate.drawing import ALWAYS_SHOWN, AnimateDrawing, load_animator
 from workbench.qt.tools.common import CaseLayersAside
 
 if TYPE_CHECKING:
@@ -157,6 +157,10 @@ class AnimateTool(QObject, AnimateDrawing):
         skin = self._actors.get("skin")
         if skin is not None:
             skin.SetVisibility(self.active)
+        for part in ALWAYS_SHOWN:  # the eyes go with the head (they stayed behind before)
+            actor = self._actors.get(part)
+            if actor is not None:
+                actor.SetVisibility(self.active)
         self._show_inner(self.active and self.panel.bones.isChecked())
         if self.active:
             self.ensure_loaded()
