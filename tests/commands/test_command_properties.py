@@ -17,7 +17,8 @@ from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
-from workbench.commands import case_edits, landmarks, reconstruction_setup, stack
+from workbench.commands import appearance, case_edits, landmarks, reconstruction_setup, stack
+from workbench.commands.appearance import SetAppearance
 from workbench.commands.case_edits import (
     AddEvidence,
     DeleteParameter,
@@ -47,6 +48,7 @@ from workbench.commands.stack import Command, CommandStack, MacroCommand
 from workbench.core.errors import WorkbenchError
 from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh
+from workbench.model.appearance import Appearance, Hsv
 from workbench.model.case import Case
 from workbench.model.evidence import EvidenceFile
 from workbench.model.meta import CaseMeta
@@ -80,6 +82,7 @@ def base_case() -> Case:
         orientation=Orientation((0, 0, 1), (0, 1, 0)),
         guides=GuideList(({"id": "nose_tip", "value": [-20.0, 95.0]},)),
         parameters={"depth_table": "t0", "build": "average"},
+        appearance=Appearance(tone="dark"),
     )
 
 
@@ -126,6 +129,13 @@ FACTORIES: dict[str, Callable[[], Command]] = {
     "automatic orientation": lambda: SetOrientation(None),
     "set guides": lambda: SetGuides([{"id": "lip_parting", "kind": "hline", "value": [-70.0]}]),
     "recompute guides": lambda: SetGuides(None),
+    "colour the face": lambda: SetAppearance(
+        Appearance(tone="mst3", regions={"lips": (0.0, 0.5, 0.5)}, iris="green")
+    ),
+    "colour a region": lambda: SetAppearance(
+        Appearance().with_colour("brows", Hsv(0.1, 0.3, 0.2)), merge_key="brows"
+    ),
+    "remove the face colours": lambda: SetAppearance(None),
     "macro": lambda: MacroCommand(
         commands=[
             PlaceLandmark("skull", "g", [1, 2, 3]),
@@ -141,7 +151,7 @@ ABSTRACT = {Command, LandmarkCommand, ReplacePartCommand}
 
 def concrete_command_types() -> set[type]:
     found = set()
-    for module in (stack, landmarks, case_edits, reconstruction_setup):
+    for module in (stack, landmarks, case_edits, reconstruction_setup, appearance):
         for obj in vars(module).values():
             if (
                 isinstance(obj, type)
@@ -227,6 +237,14 @@ command_strategy = st.one_of(
     ),
     st.builds(lambda s: SetSpecimen(tetra(s)), st.sampled_from([0.5, 1.0, 2.0])),
     st.builds(SetExaminer, st.text(max_size=5)),
+    st.builds(
+        lambda v, key: SetAppearance(
+            None if v is None else Appearance().with_colour("lips", Hsv(0.0, 0.5, v)),
+            merge_key=key,
+        ),
+        st.sampled_from([None, 0.2, 0.4]),
+        st.sampled_from(["", "lips"]),
+    ),
     st.builds(
         lambda n, sha: AddEvidence(EvidenceFile(n, sha, 10, "other")),
         st.sampled_from(["a.bin", "b.bin"]),

@@ -14,6 +14,11 @@ Layout
     state with their arrays under ``arrays/`` like the parts' (see
     :attr:`workbench.model.case.Case.derived`).  Not evidence; a state
     records the digest of the inputs it came from.
+Optional parts (in ``case.json``)
+    A part registered as optional (:attr:`workbench.model.case.PartCodec.optional`,
+    e.g. ``appearance``, the colours chosen for the face) is left out while it
+    holds its default (``None``) and read as the default when absent, so
+    files written before it existed open unchanged and need no migration.
 ``audit.jsonl``
     Append-only audit log (see :mod:`workbench.model.audit`), hash-chained;
     ``case.json`` ``audit_chain`` anchors its head and length.
@@ -257,13 +262,19 @@ def _evidence_store(doc: Mapping[str, Any], path: Path) -> tuple[EvidenceFile, .
     return tuple(store.values())
 
 
+def _part_state(
+    doc: Mapping[str, Any], name: str, load: Callable[[Mapping[str, Any]], np.ndarray]
+) -> Any:
+    codec = PARTS[name]
+    if codec.optional and name not in doc:
+        return codec.to_state(codec.default())  # left out of the file while unused
+    return join_arrays(doc[name], load) if codec.has_arrays else doc[name]
+
+
 def _build_case(
     doc: Mapping[str, Any], load: Callable[[Mapping[str, Any]], np.ndarray], path: Path
 ) -> Case:
-    state = {
-        name: join_arrays(doc[name], load) if codec.has_arrays else doc[name]
-        for name, codec in PARTS.items()
-    }
+    state = {name: _part_state(doc, name, load) for name in PARTS}
     try:
         return Case.from_state(state)
     except (ValueError, TypeError, KeyError) as error:
@@ -399,6 +410,8 @@ def _encode(case: Case, meta_state: dict[str, Any]) -> tuple[dict[str, Any], dic
     }
     blobs: dict[str, bytes] = {}
     for name, state in case.to_state().items():
+        if PARTS[name].optional and state is None:
+            continue  # left out while unused (see PartCodec.optional)
         if name == "meta":
             state = meta_state
         if PARTS[name].has_arrays:

@@ -19,6 +19,7 @@ defaults (:mod:`workbench.core.appearance`), not evidence.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ import numpy as np
 from workbench.core.appearance import (
     DEFAULT_IRIS,
     DEFAULT_SKIN_TONE,
+    Look,
     SkinTexture,
     head_looks,
     srgb_to_linear,
@@ -100,6 +102,7 @@ def write_head_obj(
     skin_tone: str = DEFAULT_SKIN_TONE,
     iris: str = DEFAULT_IRIS,
     skin_texture: SkinTexture | None = None,
+    looks: Mapping[str, Look] | None = None,
 ) -> list[Path]:
     """``head.obj`` (every part an ``o`` object, its triangles under ``usemtl``),
     ``head.mtl`` and the textures it names, into ``folder``; returns the files written.
@@ -112,6 +115,8 @@ def write_head_obj(
     for this skin (``fit-scan``); the eyes the ``iris`` texture
     (``eye_<iris>.png``, equal-area map about the gaze); teeth, bone and tongue
     their presets.  ``Kd`` is linear RGB, as Blender reads and writes it.
+    ``looks`` replaces those of the parts it names (a case's chosen colours,
+    :func:`workbench.services.appearance.skin_look`).
     """
     from workbench.io.gltf_export import png_bytes
     from workbench.io.skin_colour_export import read_skin_texture
@@ -126,7 +131,7 @@ def write_head_obj(
         tone=skin_tone,
         iris=iris,
         skin_texture=skin_texture,
-    )
+    ) | dict(looks or {})
     # the pack's own atlas is referenced where it is; other textures are written
     kept = {skin_texture.file} if skin_texture is not None and skin_texture.file else set()
     groups, materials, written = [], {}, []

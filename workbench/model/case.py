@@ -17,6 +17,9 @@ guides      :class:`~workbench.model.reconstruction_setup.GuideList` set by the
             user, or ``None`` (computed from the skull)
 age_study   :class:`~workbench.model.age_study.AgeStudy` kept from the Age
             progression dock, or ``None`` (no study)
+appearance  :class:`~workbench.model.appearance.Appearance`: the colours chosen
+            for the face (artistic, not evidence), or ``None`` (none chosen);
+            optional in the file (absent when ``None``)
 parameters  read-only ``{str: JSON value}``: other settings and provenance of
             results (template id and hash, depth group)
 =========== ==================================================================
@@ -69,6 +72,7 @@ from psygnal import Signal
 from workbench.core.errors import WorkbenchError
 from workbench.core.landmarks import LandmarkSet
 from workbench.model.age_study import AgeStudy, age_study_from_state, age_study_to_state
+from workbench.model.appearance import Appearance, appearance_from_state, appearance_to_state
 from workbench.model.audit import AuditLog
 from workbench.model.evidence import (
     EvidenceFile,
@@ -118,6 +122,10 @@ class PartCodec:
     """How one part is validated, defaulted and turned into state and back.
 
     ``has_arrays`` tells the case file that the state may hold numpy arrays.
+    ``optional``: the case file leaves the part out while it holds its default
+    and reads a file without it as the default (a part added without a new
+    format version, so files written before it still open, and files that
+    never use it still open in the versions before it).
     """
 
     coerce: Callable[[Any], Any]
@@ -125,6 +133,7 @@ class PartCodec:
     from_state: Callable[[Any], Any]
     default: Callable[[], Any]
     has_arrays: bool = False
+    optional: bool = False
 
 
 #: The explicit registry of parts.  Order is the order of ``to_state()``.
@@ -155,6 +164,13 @@ PARTS: Mapping[str, PartCodec] = MappingProxyType(
         "age_study": PartCodec(
             _check_optional(AgeStudy), age_study_to_state, age_study_from_state, lambda: None
         ),
+        "appearance": PartCodec(
+            _check_optional(Appearance),
+            appearance_to_state,
+            appearance_from_state,
+            lambda: None,
+            optional=True,
+        ),
         "parameters": PartCodec(
             lambda v: freeze_json(v, "parameters"),
             thaw_json,
@@ -180,7 +196,8 @@ class Case:
         Initial part values by name (see :data:`PARTS`); missing parts get
         their defaults (a fresh :class:`CaseMeta`, no evidence, empty
         specimen, empty landmark sets, default dowel settings, automatic
-        orientation, computed guides, no age study, no parameters).
+        orientation, computed guides, no age study, no colours, no
+        parameters).
     """
 
     def __init__(self, **parts: Any) -> None:
@@ -232,6 +249,10 @@ class Case:
     @property
     def age_study(self) -> AgeStudy | None:
         return self._parts["age_study"]
+
+    @property
+    def appearance(self) -> Appearance | None:
+        return self._parts["appearance"]
 
     @property
     def parameters(self) -> Mapping[str, Any]:

@@ -11,7 +11,8 @@ The folder (all in the skull file's frame; mm unless the skull file is in
 other units, which ``face.ply`` then states in its header): ``face.ply``
 (with the 95 % band as the vertex property ``band_mm``), the three build
 faces and ``face_builds.glb``, ``head/`` (the fitted head as a template
-pack), ``skull_landmarks.mrk.json``, ``case.fcase``, ``report.json``,
+pack; its ``head.obj`` in the colours chosen for the case's face when it has
+some, an artistic choice), ``skull_landmarks.mrk.json``, ``case.fcase``, ``report.json``,
 ``report.pdf`` and its ``pictures/``.  The window adds the meshes in its
 other formats (``face.obj``, ``head/skin.stl`` ...).
 """
@@ -160,6 +161,7 @@ def write_reconstruction(
     from workbench.services.reconstruction.job import write_outputs
 
     files = write_outputs(result, out, staged=True)
+    files.update(_coloured_head(result, out))
     files.update(_other_formats(result, out, formats))
     report = result.report
     if truth is not None:
@@ -169,6 +171,35 @@ def write_reconstruction(
     files["report"] = write_report_json(report, out / "report.json")
     files["report_pdf"] = write_report_pdf(report, out / "report.pdf", base_dir=out)
     return files
+
+
+def _coloured_head(result: JobResult, out: Path) -> dict[str, Path]:
+    """``head/head.obj`` again in the colours chosen for the case's face, if it has some.
+
+    The case's :class:`~workbench.model.appearance.Appearance` (artistic, not
+    evidence): the skin's colours (computed on the fitted head in its head
+    frame) baked into ``head/skin_colours.png``, the eyes in its iris colour.
+    Nothing is written for a case without chosen colours (``head.obj`` keeps
+    the default materials).
+    """
+    appearance = result.opened.case.appearance
+    if appearance is None:
+        return {}
+    from workbench.io.template_pack import write_head_obj
+    from workbench.services.appearance import atlas_skin_look, skin_colours
+    from workbench.services.reconstruction.job import FITTED_HEAD_FRAME_TEXT, head_in_input_frame
+
+    colours = skin_colours(result.recon.head, appearance)
+    head = head_in_input_frame(result.recon)
+    look = atlas_skin_look(head.skin, colours, appearance)
+    written = write_head_obj(
+        head,
+        out / "head",
+        frame=FITTED_HEAD_FRAME_TEXT,
+        iris=appearance.iris,
+        looks={"skin": look},
+    )
+    return {f"head/{p.name}": p for p in written if p.suffix == ".png"}
 
 
 def _other_formats(result: JobResult, out: Path, formats: tuple[str, ...]) -> dict[str, Path]:

@@ -28,7 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, SkinTexture, head_looks
+from workbench.core.appearance import (
+    DEFAULT_IRIS,
+    DEFAULT_SKIN_TONE,
+    Look,
+    SkinTexture,
+    head_looks,
+)
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.io.arkit_table import read_arkit_table
@@ -154,6 +160,7 @@ def export_head_glb(
     iris: str = DEFAULT_IRIS,
     skin_texture: SkinTexture | None = None,
     eyes: str = "texture",
+    looks: Mapping[str, Look] | None = None,
 ) -> tuple[Path, ExpressionTargets, float]:
     """Write the head as ``.glb`` with the expressions as morph targets.
 
@@ -170,7 +177,9 @@ def export_head_glb(
     ``skin_tone`` (:data:`~workbench.core.appearance.SKIN_TONES`), ``iris``
     (:data:`~workbench.core.appearance.IRIS_COLOURS`), ``skin_texture`` (the
     fit's atlas, made for this skin) and ``eyes`` (``"texture"`` or
-    ``"vertex"``: finer globes with per-vertex colours) choose the materials.
+    ``"vertex"``: finer globes with per-vertex colours) choose the materials;
+    ``looks`` replaces those of the parts it names (a case's chosen colours:
+    :func:`workbench.services.appearance.appearance_looks`).
     """
     try:  # refuse a bad colour name before the expressions are settled
         looks = head_looks(
@@ -181,7 +190,7 @@ def export_head_glb(
             iris=iris,
             skin_texture=skin_texture,
             eyes=eyes,
-        )
+        ) | dict(looks or {})
     except ValueError as exc:
         raise InputError("appearance", str(exc)) from None
     t0 = time.perf_counter()

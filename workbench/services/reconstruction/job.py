@@ -41,6 +41,7 @@ from workbench.io.mesh_formats import ply
 from workbench.io.meshes import write_mesh
 from workbench.io.outputs import relocate, staged_folder
 from workbench.io.template_pack import export_template
+from workbench.model.appearance import Appearance
 from workbench.model.case import Case
 from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.model.template import TemplateHead
@@ -630,13 +631,16 @@ def write_build_files(
     *,
     units_per_mm: float = 1.0,
     units_label: str = "mm",
+    appearance: Appearance | None = None,
 ) -> dict[str, Path]:
     """``face_<build>.ply`` per build (the skull file's frame and units, as ``face.ply``),
     the band (``face_band_mm.npy``: half-width mm per vertex of ``face.ply``;
     ``face_band_edges_mm.npy``: (n, 2) inner and outer edge, mm along the face's outward
     normal) and ``face_builds.glb`` (the main face with one morph target per other build,
-    the skull file's frame, mm ÷ 1000)."""
+    the skull file's frame, mm ÷ 1000), its skin coloured as the case's ``appearance``
+    says (an artistic choice; None: the default tone)."""
     from workbench.io.gltf_export import write_glb
+    from workbench.services.appearance import skin_look
 
     files: dict[str, Path] = {}
     for name in builds.names:
@@ -653,12 +657,15 @@ def write_build_files(
     np.save(out / "face_band_edges_mm.npy", edges)
     files["band"] = out / "face_band_mm.npy"
     files["band_edges"] = out / "face_band_edges_mm.npy"
+    skin_name = f"face_{builds.main}".replace(" ", "_")
     files["builds_glb"] = write_glb(
         out / "face_builds.glb",
         recon.face,
         {n: recon.to_input(builds.vertices(n)) for n in builds.names if n != builds.main},
-        skin_name=f"face_{builds.main}".replace(" ", "_"),
+        skin_name=skin_name,
         frame=FITTED_HEAD_FRAME_TEXT,
+        # recon.face is the fitted head's skin vertex for vertex: its colours apply as they are
+        looks={skin_name: skin_look(recon.head, appearance)},
     )
     return files
 
@@ -696,6 +703,7 @@ def _write_into(result: JobResult, out: Path) -> dict[str, Path]:
                 out,
                 units_per_mm=k,
                 units_label=result.file_units_label,
+                appearance=result.opened.case.appearance,
             )
         )
     reg = result.recon.registration
