@@ -61,6 +61,11 @@ HIDDEN_BY_DEFAULT = frozenset({"muscles"})
 DEFAULT_OPACITY = {"face": 0.6, "held": 0.35}
 #: layers drawn only while there is something to show (a refit held back for the user)
 ON_DEMAND = frozenset({"held"})
+#: actors drawn with a layer and following its visibility and opacity, kept apart so that
+#: the layer's first actor stays its surface (:meth:`SceneView.update_points`): the
+#: fitted head's eyes go with the face.  Not in the menus; their state in
+#: :attr:`SceneView.visible` and :attr:`SceneView.opacity` is their owner's.
+COMPANIONS = {"eyes": "face"}
 #: OpenGL renderer strings of software rasterisers (no graphics card in use)
 SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
@@ -129,6 +134,8 @@ class SceneView(QObject):
         self.plotter = plotter
         self.visible: dict[str, bool] = {k: k not in HIDDEN_BY_DEFAULT for k in LAYERS}
         self.opacity: dict[str, float] = {k: DEFAULT_OPACITY.get(k, 1.0) for k in LAYERS}
+        for name, owner in COMPANIONS.items():
+            self.visible[name], self.opacity[name] = self.visible[owner], self.opacity[owner]
         self._actors: dict[str, list[Any]] = {}
         self._render_pending = False
         self.renders = 0
@@ -276,9 +283,15 @@ class SceneView(QObject):
         return bool(self._actors.get(layer))
 
     def clear(self, layer: str) -> None:
-        for actor in self._actors.pop(layer, []):
-            self.plotter.remove_actor(actor, render=False)
+        """Remove ``layer``'s actors and those of its :data:`COMPANIONS`."""
+        for name in (layer, *self._companions(layer)):
+            for actor in self._actors.pop(name, []):
+                self.plotter.remove_actor(actor, render=False)
         self.request_render()
+
+    @staticmethod
+    def _companions(layer: str) -> list[str]:
+        return [name for name, owner in COMPANIONS.items() if owner == layer]
 
     def _add(self, layer: str, actor: Any) -> None:
         """Register ``actor`` under ``layer`` with the layer's visibility and opacity."""
@@ -287,23 +300,26 @@ class SceneView(QObject):
         actor.GetProperty().SetOpacity(self.opacity.get(layer, 1.0))
 
     def set_visible(self, layer: str, on: bool) -> None:
-        """Show or hide every actor of ``layer`` (kept for later redraws)."""
+        """Show or hide every actor of ``layer`` and its companions (kept for later redraws)."""
         on = bool(on)
         changed = self.visible.get(layer) != on
-        self.visible[layer] = on
-        for actor in self._actors.get(layer, []):
-            actor.SetVisibility(on)
+        for name in (layer, *self._companions(layer)):
+            self.visible[name] = on
+            for actor in self._actors.get(name, []):
+                actor.SetVisibility(on)
         self.request_render()
         if changed:
             self.layer_changed.emit(layer)
 
     def set_opacity(self, layer: str, value: float) -> None:
-        """Opacity in [0, 1] of every actor of ``layer`` (kept for later redraws)."""
+        """Opacity in [0, 1] of every actor of ``layer`` and its companions (kept for later
+        redraws)."""
         value = min(max(float(value), 0.0), 1.0)
         changed = self.opacity.get(layer) != value
-        self.opacity[layer] = value
-        for actor in self._actors.get(layer, []):
-            actor.GetProperty().SetOpacity(value)
+        for name in (layer, *self._companions(layer)):
+            self.opacity[name] = value
+            for actor in self._actors.get(name, []):
+                actor.GetProperty().SetOpacity(value)
         self.request_render()
         if changed:
             self.layer_changed.emit(layer)
@@ -429,14 +445,22 @@ class SceneView(QObject):
         self.request_render()
 
     def show_face(
-        self, mesh: Mesh | None, scalars: np.ndarray | None = None, title: str = ""
+        self,
+        mesh: Mesh | None,
+        scalars: np.ndarray | None = None,
+        title: str = "",
+        eyes: face.PaintedEyes | None = None,
     ) -> None:
-        """The fitted skin; with ``scalars`` (per vertex, mm) as a colour map."""
+        """The fitted skin; with ``scalars`` (per vertex, mm) as a colour map; ``eyes`` (the
+        fitted head's, painted: :func:`~workbench.render.visuals.face.paint_eyes`) drawn with
+        it as the face's companion layer "eyes" (they do not move with the build slider)."""
         self.clear("face")
         if mesh is None:
             return
         # translucent: back faces culled (see SetUseOIT above)
         self._add("face", face.add_face(self.plotter, mesh, scalars, title))
+        if eyes is not None:
+            self._add("eyes", face.add_eyes(self.plotter, eyes))
         self.request_render()
 
     def show_held(self, mesh: Mesh | None) -> None:

@@ -14,7 +14,8 @@ face along -z, "right side" at the subject's right profile (camera on -x).
 
 Pictures (PNG), per aged result:
 
-* **compare** — source front, aged front, source right side, aged right side;
+* **compare** — source front, aged front, source right side, aged right side, the
+  eyes painted with an iris and pupil (:func:`workbench.render.visuals.face.paint_eyes`);
 * **growth** — the aged skin (front, right side) coloured by its signed
   distance to the source skin (mm; negative: inside the source skin, the
   head is smaller there; positive: outside, it grew), the source skin's
@@ -34,6 +35,8 @@ from workbench.core.spatial import MeshIndex
 from workbench.model.template import TemplateHead
 from workbench.render.panels import each_panel, panel_row
 from workbench.render.snapshots import _prefer_headless_gl, to_polydata
+from workbench.render.visuals.face import EYE_SHADING, eyes_polydata, paint_eyes
+from workbench.render.visuals.style import SMOOTH
 
 if TYPE_CHECKING:
     from pyvista.plotting._typing import ScalarBarArgs
@@ -113,12 +116,17 @@ def _place_camera(plotter: Any, view: str, centre: np.ndarray, half_height: floa
     camera.clipping_range = (1.0, 3000.0)
 
 
-def _head_layers(head: TemplateHead) -> list[tuple[Mesh, str]]:
-    layers = [(head.skin, SKIN_COLOUR)]
+def _add_eyes(plotter: Any, head: TemplateHead) -> None:
+    """The head's eyes painted with an iris and pupil (:func:`~workbench.render.visuals.face.paint_eyes`;
+    the plain mesh in :data:`EYE_COLOUR` when it holds no globe to paint)."""
     eyes = head.meshes.get("eyes")
-    if eyes is not None and eyes.n_vertices:
-        layers.append((eyes, EYE_COLOUR))
-    return layers
+    if eyes is None or not eyes.n_faces:
+        return
+    painted = paint_eyes(eyes, head.eye_centres, head.eye_radius)
+    if painted is None:
+        plotter.add_mesh(to_polydata(eyes, normals=True), color=EYE_COLOUR, **SMOOTH)
+    else:
+        plotter.add_mesh(eyes_polydata(painted), scalars="rgb", rgb=True, **SMOOTH, **EYE_SHADING)
 
 
 def render_compare(
@@ -151,13 +159,13 @@ def render_compare(
     plotter = panel_row(len(panels), size)
     try:
         for col, (head, view, label) in each_panel(plotter, panels):
-            for mesh, colour in _head_layers(head):
-                plotter.add_mesh(
-                    to_polydata(mesh, normals=True),
-                    color=colour,
-                    smooth_shading=True,
-                    specular=0.15,
-                )
+            plotter.add_mesh(
+                to_polydata(head.skin, normals=True),
+                color=SKIN_COLOUR,
+                smooth_shading=True,
+                specular=0.15,
+            )
+            _add_eyes(plotter, head)
             _place_camera(plotter, view, centre, half)
             plotter.add_text(
                 f"{label}: {view}", position=(8, size[1] - 24), font_size=10, color="black"
@@ -204,7 +212,7 @@ def render_growth_map(
 ) -> tuple[Path, float]:
     """One PNG: the aged skin coloured by ``values`` (default :func:`growth_distance`), mm.
 
-    Front and right side (aged eyes in white), the source skin's inner side in
+    Front and right side (the aged eyes painted), the source skin's inner side in
     grey behind it (its outline where it is larger), a colour
     bar labelled in mm over ``-limit … +limit`` (default :func:`colour_limit`).
     Returns the path and the limit used.
@@ -227,7 +235,6 @@ def render_growth_map(
     poly = to_polydata(aged.skin, normals=True)
     poly.point_data["growth_mm"] = values
     ghost = to_polydata(source.skin, normals=True)
-    eyes = aged.meshes.get("eyes")
     plotter = panel_row(len(VIEWS), size)
     try:
         for col, view in each_panel(plotter, VIEWS):
@@ -256,10 +263,7 @@ def render_growth_map(
                 scalar_bar_args=bar if last else {},
                 copy_mesh=True,
             )
-            if eyes is not None and eyes.n_vertices:
-                plotter.add_mesh(
-                    to_polydata(eyes, normals=True), color=EYE_COLOUR, smooth_shading=True
-                )
+            _add_eyes(plotter, aged)
             # the source skin's inner (back-facing) side only: a grey shape behind the aged
             # head where the source is larger, never a veil over the colours
             plotter.add_mesh(

@@ -24,7 +24,10 @@ Pictures (PNG, named ``<prefix>_<key>.png``; ``key`` is returned):
 - ``spread``: the face coloured by the ensemble spread (mm), front, side and
   three-quarter in one picture with one colour bar.
 
-``<view>`` is ``front``, ``side`` and ``three_quarter``.
+``<view>`` is ``front``, ``side`` and ``three_quarter``.  The eyes, when given,
+are painted with an iris and pupil (:func:`workbench.render.visuals.face.paint_eyes`:
+finer globes, the gaze read from each cornea in the frame drawn) in every picture
+with the face.
 
 :func:`render_builds` adds the pictures of an unknown body build (named
 ``<key>.png``, or ``<prefix>_<key>.png`` with a prefix):
@@ -53,7 +56,9 @@ from workbench.render.snapshots import (
     to_polydata,
     view_directions,
 )
+from workbench.render.visuals.face import EYE_SHADING, eyes_polydata, paint_eyes
 from workbench.render.visuals.orientation import Anatomy
+from workbench.render.visuals.style import SMOOTH
 
 VIEWS = ("front", "side", "three_quarter")
 BONE, SKIN, EYE, BACKGROUND = "#e9e0c9", "#e3b48f", "#d8dde3", "white"
@@ -100,7 +105,9 @@ def render_reconstruction(
     spread : (face.n_vertices,), optional
         Per-vertex ensemble spread of the face in mm (adds the ``spread`` picture).
     eyes : Mesh, optional
-        Eyeballs drawn with the face, so the eye openings are not see-through.
+        Eyeballs (mm, input frame), drawn with the face as painted globes with an
+        iris and pupil (:func:`~workbench.render.visuals.face.paint_eyes`), also
+        under the semi-transparent face and on the spread and inferred maps.
     inferred : (face.n_vertices,) bool, optional
         Skin over bone the registration did not find (shaped by the reference
         alone); with any, the ``inferred`` picture shows it in blue-grey.
@@ -127,7 +134,7 @@ def render_reconstruction(
         pegs=_pegs(pv, origins, tips) if len(origins) else None,
         depth_range=_nice_range(np.linalg.norm(tips - origins, axis=1)),
         face=face_pd,
-        eyes=to_polydata(eyes) if eyes is not None and eyes.n_faces else None,
+        eyes=_eyes_pd(eyes),
         size=size,
     )
 
@@ -225,15 +232,15 @@ class _Scene:
                 _scalar_bar(p, actors[0], "tissue depth (mm)", self.depth_range, self.size)
 
     def over(self, p, _v) -> None:
-        """The skull and dowels under the semi-transparent face."""
+        """The skull, dowels and eyes under the semi-transparent face."""
         self.draw_skull(p, False)
+        _add_eyes(p, self.eyes)
         p.add_mesh(self.face, color=SKIN, opacity=FACE_OPACITY, smooth_shading=True, specular=0.1)
 
     def alone(self, p, _v) -> None:
         """The face alone, with the eyes."""
         p.add_mesh(self.face, color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9)
-        if self.eyes is not None:
-            p.add_mesh(self.eyes, color=EYE, smooth_shading=True, specular=0.4)
+        _add_eyes(p, self.eyes)
 
     def inferred_painter(self, first_view: str) -> Callable[[Any, str], None]:
         """A painter for :func:`_shoot`: skin over missing bone in blue-grey, explained in
@@ -249,8 +256,7 @@ class _Scene:
                 show_scalar_bar=False,
                 specular=0.1,
             )
-            if self.eyes is not None:
-                p.add_mesh(self.eyes, color=EYE, smooth_shading=True)
+            _add_eyes(p, self.eyes)
             if v == first_view:
                 p.add_text(
                     "blue-grey: no bone under the skin (inferred from the reference)",
@@ -316,7 +322,8 @@ def render_builds(
     main : str, optional
         The build of the main face (``face.ply``), marked so under its face.
     eyes : Mesh, optional
-        Eyeballs drawn with every face (and grey on the band picture), input frame.
+        Eyeballs (mm, input frame), painted with an iris and pupil and drawn with
+        every face and on the band picture.
     skull : Mesh, optional
         The skull, input frame: the faces are cut :data:`NECK_MARGIN_MM` below it
         (a bust, as in :func:`render_reconstruction`); without it they are whole.
@@ -352,7 +359,7 @@ def render_builds(
     def path(key: str) -> Path:
         return out / (f"{prefix}_{key}.png" if prefix else f"{key}.png")
 
-    eyes_pd = to_polydata(eyes) if eyes is not None and eyes.n_faces else None
+    eyes_pd = _eyes_pd(eyes)
     written: dict[str, Path] = {}
     studio = _Studio(pv, size)
     try:
@@ -368,8 +375,7 @@ def render_builds(
                     p.add_mesh(
                         busts[name][0], color=SKIN, smooth_shading=True, specular=0.15, diffuse=0.9
                     )
-                    if eyes_pd is not None:
-                        p.add_mesh(eyes_pd, color=EYE, smooth_shading=True, specular=0.4)
+                    _add_eyes(p, eyes_pd)
                     _label(pv, p, cam, labels[name], size)
 
                 written[f"builds_{view}"] = _shoot(
@@ -393,6 +399,26 @@ def render_builds(
 
 
 # ---------------------------------------------------------------- helpers
+def _eyes_pd(eyes: Mesh | None) -> Any:
+    """The eyes as PolyData: painted globes with an iris and pupil
+    (:func:`~workbench.render.visuals.face.paint_eyes`), or the mesh as it is when it
+    holds no globe to paint; None without eyes."""
+    if eyes is None or not eyes.n_faces:
+        return None
+    painted = paint_eyes(eyes)
+    return to_polydata(eyes, normals=True) if painted is None else eyes_polydata(painted)
+
+
+def _add_eyes(p, eyes) -> None:
+    """Draw :func:`_eyes_pd`'s eyes (nothing for None): coloured per vertex when painted."""
+    if eyes is None:
+        return
+    if "rgb" in eyes.point_data:
+        p.add_mesh(eyes, scalars="rgb", rgb=True, **SMOOTH, **EYE_SHADING)
+    else:
+        p.add_mesh(eyes, color=EYE, **SMOOTH, specular=0.4)
+
+
 def _scalar_map(
     surface,
     scalars: str,
@@ -403,7 +429,7 @@ def _scalar_map(
     size: tuple[int, int],
 ):
     """A painter for :func:`_shoot`: ``surface`` coloured by its point data ``scalars`` (mm)
-    on ``scale``, the eyes grey, one colour bar titled ``title`` under the middle view."""
+    on ``scale``, with the eyes, one colour bar titled ``title`` under the middle view."""
 
     def paint(p, v: str) -> None:
         actor = p.add_mesh(
@@ -414,8 +440,7 @@ def _scalar_map(
             smooth_shading=True,
             show_scalar_bar=False,
         )
-        if eyes is not None:
-            p.add_mesh(eyes, color="#b0b0b0", smooth_shading=True)
+        _add_eyes(p, eyes)
         if v == views[len(views) // 2]:
             _scalar_bar(p, actor, title, scale, size)
 

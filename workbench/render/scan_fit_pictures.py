@@ -16,6 +16,10 @@ Pictures (PNG):
   red where the scan lies *outside* the fitted skin, blue inside, −2.5 … +2.5 mm;
 * **histogram** — the counted distances with the 1 mm and 2.5 mm lines (matplotlib, Agg).
 
+In both maps the fitted head's eyes, painted with an iris and pupil
+(:func:`workbench.render.visuals.face.paint_eyes`), lie under the scan: they show
+through its eye openings, and the scan is drawn wherever it covers them.
+
 Grey on the scan marks vertices *not counted* (NaN in ``ScanFit.scan_distance``):
 outside the face region, near a hole or field-of-view rim, hidden cavity walls,
 not the head (shoulders, a head holder), or thin sheets over the skin (a cord or
@@ -34,6 +38,8 @@ from workbench.core.mesh import Mesh
 from workbench.core.spatial import MeshIndex
 from workbench.render.panels import each_panel, panel_row
 from workbench.render.snapshots import _prefer_headless_gl, to_polydata
+from workbench.render.visuals.face import EYE_SHADING, PaintedEyes, eyes_polydata, paint_eyes
+from workbench.render.visuals.style import SMOOTH
 
 if TYPE_CHECKING:
     from pyvista.plotting._typing import ScalarBarArgs
@@ -91,6 +97,7 @@ def render_distance_views(
     views: Sequence[str] = VIEWS,
     skin: Mesh | None = None,
     skin_opacity: float = 0.0,
+    eyes: PaintedEyes | None = None,
     title: str = "scan vs fitted skin",
     size: tuple[int, int] = (440, 520),
 ) -> Path:
@@ -100,7 +107,11 @@ def render_distance_views(
     sequential one over ``0 … limit``.  The camera frames ``skin`` (the
     fitted head, so shoulders of a bust scan do not shrink the face) or else
     the counted vertices; ``skin_opacity`` > 0 also draws the fitted skin as
-    a translucent overlay.  Every panel has the same orthographic scale.
+    a translucent overlay.  ``eyes`` (the fitted head's, painted with an iris
+    and pupil: :func:`~workbench.render.visuals.face.paint_eyes`; same frame)
+    are drawn under the scan: they show through its eye openings, and where
+    the scan covers them (closed lids, a statue's eyes) the scan is drawn.
+    Every panel has the same orthographic scale.
     """
     values = np.asarray(values, dtype=np.float64).ravel()
     if len(values) != scan.n_vertices:
@@ -155,6 +166,8 @@ def render_distance_views(
                 scalar_bar_args=bar if last else {},
                 copy_mesh=True,
             )
+            if eyes is not None:
+                _add_eyes_under(plotter, eyes)
             if skin is not None and skin_opacity > 0:
                 plotter.add_mesh(
                     to_polydata(skin), color="#c9d6e8", opacity=skin_opacity, smooth_shading=True
@@ -179,6 +192,13 @@ def render_distance_views(
     finally:
         plotter.close()
     return path
+
+
+def _add_eyes_under(plotter: Any, eyes: PaintedEyes) -> None:
+    """The painted eyes, pushed back in depth a little so that a scan surface lying on
+    them (within a fraction of a millimetre) is drawn, not the eyes."""
+    actor = plotter.add_mesh(eyes_polydata(eyes), scalars="rgb", rgb=True, **SMOOTH, **EYE_SHADING)
+    actor.GetMapper().SetRelativeCoincidentTopologyPolygonOffsetParameters(2.0, 40.0)
 
 
 def _inner_side(scan: Mesh) -> Literal["back", "front"]:
@@ -286,6 +306,7 @@ def render_scan_fit_pictures(
     if scan is None or distance is None:
         return {}, ["the fit kept no scan or distances: no pictures"]
     skin = result.head.skin
+    eyes = _head_eyes(result.head)
     out: dict[str, Path] = {}
     notes: list[str] = []
     try:
@@ -306,6 +327,7 @@ def render_scan_fit_pictures(
                 folder / name,
                 signed=signed,
                 skin=skin,
+                eyes=eyes,
                 title="signed distance" if signed else "distance",
                 size=size,
             )
@@ -313,3 +335,12 @@ def render_scan_fit_pictures(
             notes.append(f"no {key} picture ({exc})")
     order = {"distance": 0, "signed": 1, "histogram": 2}
     return dict(sorted(out.items(), key=lambda kv: order[kv[0]])), notes
+
+
+def _head_eyes(head: Any) -> PaintedEyes | None:
+    """The fitted head's eyes painted (None when it has none, or no globe to paint)."""
+    meshes = getattr(head, "meshes", None) or {}
+    eyes = meshes.get("eyes")
+    if eyes is None or not eyes.n_faces:
+        return None
+    return paint_eyes(eyes, getattr(head, "eye_centres", None), getattr(head, "eye_radius", None))

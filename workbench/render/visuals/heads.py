@@ -2,9 +2,12 @@
 
 Age: the source head (beside the aged one, or a translucent grey shell over it) and
 the aged skin, drawn once from the source's topology and then given each age's points,
-normals and displacement colours in place (:func:`show_aged`).  Animate: the skin and
-the parts under it (skull, teeth, eyes with an iris and pupil so that the gaze can be
-seen); frames move their points with :func:`workbench.render.visuals.update.set_surface_points`.
+normals and displacement colours in place (:func:`show_aged`); the eyes of both, painted
+with an iris and pupil (:func:`head_eyes`), the aged ones moved in place
+(:func:`show_aged_eyes`).  Animate: the skin and the parts under it (skull, teeth, eyes
+with an iris and pupil so that the gaze can be seen); frames move their points with
+:func:`workbench.render.visuals.update.set_surface_points`.  Eyes are painted by
+:mod:`workbench.core.appearance`, as in the report pictures.
 """
 
 from __future__ import annotations
@@ -14,13 +17,23 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench.core import appearance
 from workbench.core.mesh import Mesh
 from workbench.render.snapshots import to_polydata
+from workbench.render.visuals.face import (
+    EYE_SHADING,
+    VIEW_EYE_LEVEL,
+    PaintedEyes,
+    add_eyes,
+    filtered_eye_colours,
+    paint_eyes,
+)
 from workbench.render.visuals.scalar_bars import bar_args
 from workbench.render.visuals.style import BONE, SKIN, SMOOTH, cull_back_faces
 from workbench.render.visuals.update import mapper_dataset, set_array
 
 if TYPE_CHECKING:
+    from workbench.model.template import TemplateHead
     from workbench.services.animation.animator import Animator
 
 # ------------------------------------------------------------------ age
@@ -101,8 +114,40 @@ def show_aged(
     data.Modified()
 
 
+def head_eyes(head: TemplateHead, level: int = VIEW_EYE_LEVEL) -> PaintedEyes | None:
+    """The eyes of ``head`` painted with an iris and pupil (its own frame, mm), or None
+    when it has none (:func:`~workbench.render.visuals.face.paint_eyes`)."""
+    eyes = head.meshes.get("eyes")
+    if eyes is None or not eyes.n_faces:
+        return None
+    return paint_eyes(eyes, head.eye_centres, head.eye_radius, level=level)
+
+
+def add_age_eyes(
+    plotter: Any, painted: PaintedEyes, *, name: str, offset: np.ndarray | None = None
+) -> Any:
+    """A head's painted eyes in the age view (moved by ``offset``, mm, as its skin is)."""
+    return add_eyes(plotter, painted, name=name, offset=offset)
+
+
+def show_aged_eyes(actor: Any, painted: PaintedEyes, head: TemplateHead) -> None:
+    """Move the eyes drawn from ``painted`` (the source head's) to those of the aged
+    ``head`` in place: its globe centres, radius and gazes (read from its corneas)."""
+    eyes = head.meshes["eyes"]
+    centres = np.asarray(head.eye_centres, float)
+    gazes = appearance.eye_gazes(eyes.vertices, centres)
+    vertices, normals = painted.posed(centres, float(head.eye_radius), gazes)
+    data = mapper_dataset(actor)
+    set_array(data.GetPoints().GetData(), vertices)
+    data.GetPoints().Modified()
+    drawn_normals = data.GetPointData().GetNormals()
+    if drawn_normals is not None:
+        set_array(drawn_normals, normals)
+    data.Modified()
+
+
 # ------------------------------------------------------------------ animate
-INNER_COLOURS = {"eyes": (0.95, 0.95, 0.95), "upper_teeth": (1.0, 1.0, 0.94)}
+INNER_COLOURS = {"upper_teeth": (1.0, 1.0, 0.94)}
 #: opacity of the skin while the parts under it are shown
 SEE_THROUGH_OPACITY = 0.55
 
@@ -120,12 +165,12 @@ def add_animated_skin(plotter: Any, skin: Mesh) -> Any:
 
 def add_animated_part(plotter: Any, part: str, mesh: Mesh, anim: Animator) -> Any:
     """A part under the skin, bone-coloured unless :data:`INNER_COLOURS` says otherwise; the
-    eyes coloured per vertex (:func:`eye_colours`)."""
+    eyes coloured per vertex (:func:`eye_colours`) and glossy."""
     poly = to_polydata(mesh, normals=True)
     paint: dict[str, Any] = {"color": INNER_COLOURS.get(part, BONE)}
     if part == "eyes":  # an iris and pupil, so that the gaze can be seen
         poly.point_data["rgb"] = eye_colours(anim)
-        paint = {"scalars": "rgb", "rgb": True}
+        paint = {"scalars": "rgb", "rgb": True, **EYE_SHADING}
     return plotter.add_mesh(
         poly,
         **paint,
@@ -145,24 +190,25 @@ def set_see_through(skin: Any, on: bool) -> None:
         skin.GetProperty().BackfaceCullingOff()
 
 
-#: iris and pupil half-angles (degrees from the eye's forward axis, +z at rest): an iris
-#: about 12 mm across on a 24 mm eye, a pupil about 4 mm
-IRIS_DEG, PUPIL_DEG, EDGE_DEG = 30.0, 11.0, 4.0
-EYE_WHITE, IRIS, PUPIL = (242, 240, 235), (88, 110, 128), (14, 12, 12)
+#: the colours of the pupil and the white of the animated eyes (sRGB): the presets of
+#: :mod:`workbench.core.appearance`, which paints them
+PUPIL, EYE_WHITE = appearance.PUPIL.srgb, appearance.SCLERA.srgb
 
 
 def eye_colours(anim: Animator) -> np.ndarray:
-    """``(n, 3)`` uint8 colours of the eyes' vertices: white, an iris and a pupil about each
-    eye's forward axis at rest (+z in the head frame), so a turned eye is seen turned."""
-    v = np.asarray(anim.head.meshes["eyes"].vertices, float)
-    centres = np.asarray(anim.head.eye_centres, float)
-    owner = np.linalg.norm(v[:, None] - centres[None], axis=2).argmin(axis=1)
-    d = v - centres[owner]
-    cos = d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    # soft edges over EDGE_DEG (per-vertex colours of a 2.5k-vertex eye look jagged otherwise)
-    iris = np.clip((IRIS_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
-    pupil = np.clip((PUPIL_DEG - angle) / EDGE_DEG + 0.5, 0.0, 1.0)[:, None]
-    rgb = np.asarray(EYE_WHITE, float) * (1 - iris) + np.asarray(IRIS, float) * iris
-    rgb = rgb * (1 - pupil) + np.asarray(PUPIL, float) * pupil
-    return np.round(rgb).astype(np.uint8)
+    """``(n, 3)`` uint8 sRGB colours of the eyes' vertices as the animator holds them at rest.
+
+    The pattern of :func:`workbench.core.appearance.eyes_colours` (pupil, iris
+    and sclera by the angle from each globe's gaze, read from its cornea in the
+    Frankfort frame of ``anim.head``; +z when a globe has none), averaged about
+    each vertex (:func:`~workbench.render.visuals.face.filtered_eye_colours`: the
+    animated globes keep their ~0.9 mm edges), one colour per vertex in the
+    order drawn: a frame turns the vertices, so the iris turns with the eye and
+    the gaze can be seen.
+    """
+    head = anim.head
+    eyes = head.meshes["eyes"]
+    centres = np.asarray(head.eye_centres, float).reshape(-1, 3)
+    radius = float(getattr(head, "eye_radius", appearance.EYE_RADIUS_MM))
+    gazes = appearance.eye_gazes(eyes.vertices, centres)
+    return filtered_eye_colours(eyes, centres, gazes, radius)

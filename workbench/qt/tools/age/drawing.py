@@ -2,8 +2,9 @@
 
 :class:`AgeDrawing` is the drawing half of :class:`~workbench.qt.tools.age.tool.AgeTool`
 (which it is mixed into): the tool decides which computed age is shown, this part puts
-the heads and the caption in the 3D view.  The aged skin has the source's vertices and
-triangles, so it is built once and its points are moved in place for each age.
+the heads, their eyes (painted with an iris and pupil) and the caption in the 3D view.
+The aged skin has the source's vertices and triangles, so it is built once and its
+points are moved in place for each age; so are the aged eyes, drawn from the source's.
 
 Units mm, each head in its own Frankfort frame; the actors are the tool's own, not
 :data:`workbench.qt.scene.LAYERS`.  How the heads look is
@@ -55,7 +56,8 @@ class AgeDrawing:
         self.reset_camera()
 
     def actors(self) -> dict[str, Any]:
-        """``{"before" | "after": actor}`` drawn by this tool (tests)."""
+        """``{"before" | "after" | "before_eyes" | "after_eyes": actor}`` drawn by this tool
+        (tests); the aged eyes only while an age is shown."""
         return dict(self._actors)
 
     def offset(self) -> np.ndarray:
@@ -83,8 +85,15 @@ class AgeDrawing:
         overlay = self.panel.mode() == "overlay"
         skin = source.head.skin.transformed(_shift(self.offset()))
         self._actors["before"] = heads.add_age_source(self.plotter, skin, overlay=overlay)
+        painted = heads.head_eyes(source.head)
+        if painted is not None and not overlay:  # (in the overlay the aged eyes are shown)
+            self._actors["before_eyes"] = heads.add_age_eyes(
+                self.plotter, painted, name="age_before_eyes", offset=self.offset()
+            )
         # drawn while the dock is behind another (a reopened case's study): shown with the dock
-        self._actors["before"].SetVisibility(self.active)
+        for key in ("before", "before_eyes"):
+            if key in self._actors:
+                self._actors[key].SetVisibility(self.active)
         self._caption = heads.add_age_caption(self.plotter)
         self._draw_after(rebuild=True)
 
@@ -109,8 +118,27 @@ class AgeDrawing:
                 overlay=overlay,
             )
         actor.SetVisibility(self.active and step is not None)
+        self._draw_aged_eyes(rebuild)
         self._update_caption()
         self.scene.request_render()
+
+    def _draw_aged_eyes(self, rebuild: bool) -> None:
+        """The aged head's eyes: drawn from the source's painted eyes once, then moved in
+        place to each age's globes; none while no age is shown (the tool shows every
+        actor it holds with the dock)."""
+        source, step = self.source, self.step
+        actor = self._actors.get("after_eyes")
+        painted = None if source is None else heads.head_eyes(source.head)
+        if actor is not None and (rebuild or step is None or painted is None):
+            self.plotter.remove_actor(self._actors.pop("after_eyes"), render=False)
+            actor = None
+        if step is None or painted is None or "eyes" not in step.result.head.meshes:
+            return
+        if actor is None:
+            actor = heads.add_age_eyes(self.plotter, painted, name="age_after_eyes")
+            self._actors["after_eyes"] = actor
+        heads.show_aged_eyes(actor, painted, step.result.head)
+        actor.SetVisibility(self.active)
 
     def _update_caption(self) -> None:
         if self._caption is None:
@@ -125,7 +153,7 @@ class AgeDrawing:
         self._caption.SetVisibility(self.active)
 
     def drawn_points(self, which: str) -> np.ndarray:
-        """The drawn skin points of ``"before"`` or ``"after"`` (mm; tests)."""
+        """The drawn points of ``which`` (a key of :meth:`actors`; mm; tests)."""
         return update.drawn_points(update.mapper_dataset(self._actors[which]))
 
     def reset_camera(self) -> None:
