@@ -61,6 +61,7 @@ COMMANDS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("validate_cmd", ("validate",)),
     ("animate_cmd", ("animate",)),
     ("age_cmd", ("age",)),
+    ("portrait_cmd", ("portrait",)),
     ("batch_cmd", ("batch",)),
     ("gui_cmd", ("gui",)),
 )

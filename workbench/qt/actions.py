@@ -104,6 +104,15 @@ ACTIONS: tuple[ActionSpec, ...] = (
     ActionSpec("load_truth", "&Tools", "Compare with a &true skin…", "Ctrl+T", "ask_load_truth"),
     ActionSpec("reset_view", "&View", "Reset &camera", "R", "reset_view"),
     ActionSpec("screenshot", "&View", "Save &window picture…", "Ctrl+Shift+S", "ask_screenshot"),
+    ActionSpec(
+        "portrait",
+        "&View",
+        "&Portrait…",
+        None,
+        "show_portrait",
+        "The fitted face as front, three-quarter and profile portraits (colour or clay); "
+        "Save… writes them as PNG and TIFF at print size",
+    ),
 )
 
 
