@@ -15,9 +15,10 @@ Wiring (built in this order by ``__init__``'s ``_build_*`` steps)::
     │                       service, its landmarks; own picker), AnimateTool (the
     │                       animation service's Animator, live skin), AgeTool (the age
     │                       service under a target-age slider), ReconstructTool (dowel
-    │                       plan, face fit and its drawing, comparison)
+    │                       plan, face fit and its drawing, comparison), AppearanceTool
+    │                       (the face's chosen colours, painted on the face layer)
     ├── panels              LandmarksPanel, DowelsPanel, ReconstructPanel, ComparePanel,
-    │                       ScanFitPanel, AnimatePanel, AgePanel (docks);
+    │                       ScanFitPanel, AnimatePanel, AgePanel, AppearancePanel (docks);
     │                       LayersPanel below them (visibility + opacity per layer)
     ├── GuideView           second view: guides over the session's fit (drags → DragTool)
     └── menus               actions.ACTIONS (File, Edit, Tools, View + layer toggles)
@@ -67,6 +68,7 @@ from workbench.qt.guide_view import GuideView
 from workbench.qt.lod import InteractiveDetail
 from workbench.qt.panels.age_panel import AgePanel
 from workbench.qt.panels.animate_panel import AnimatePanel
+from workbench.qt.panels.appearance_panel import AppearancePanel
 from workbench.qt.panels.compare_panel import ComparePanel
 from workbench.qt.panels.dowels_panel import DowelsPanel
 from workbench.qt.panels.landmarks_panel import LandmarksPanel
@@ -78,6 +80,7 @@ from workbench.qt.scene import SceneView, case_anatomy
 from workbench.qt.session import Session
 from workbench.qt.tools.age.tool import AgeTool
 from workbench.qt.tools.animate.tool import AnimateTool
+from workbench.qt.tools.appearance import AppearanceTool
 from workbench.qt.tools.drags import DragTool
 from workbench.qt.tools.landmarks import LandmarkTool
 from workbench.qt.tools.reconstruct import FIT_PARTS, ReconstructTool
@@ -240,6 +243,10 @@ class MainWindow(QMainWindow):
             case_sex=lambda: self.document.case.dowels.sex,
             parent=self,
         )
+        self.appearance_panel = AppearancePanel()  # the face's chosen colours (artistic)
+        self.appearance = AppearanceTool(
+            self.appearance_panel, self.document, self.session, self.scene, self, parent=self
+        )
 
     def _build_docks(self) -> None:
         """The tool panels as tabbed docks on the right, the Layers dock below them."""
@@ -252,6 +259,7 @@ class MainWindow(QMainWindow):
             ("fit_scan", "Scan fit", self.scan_fit_panel),
             ("animate", "Animate", self.animate_panel),
             ("age", "Age", self.age_panel),
+            ("appearance", "Appearance", self.appearance_panel),
         ):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock_{key}")
@@ -430,6 +438,12 @@ class MainWindow(QMainWindow):
 
     def ask_screenshot(self) -> None:
         self.files.ask_screenshot()
+
+    def show_portrait(self) -> None:
+        """View ▸ Portrait…: the fitted face as appeal pictures (:mod:`workbench.qt.portrait_dialog`)."""
+        from workbench.qt.portrait_dialog import open_portrait
+
+        self.portrait = open_portrait(self)
 
     # ------------------------------------------------------------ fit scan (the tool's)
     def open_scan(self, path: str | Path, units: str = "auto", scale: float | None = None) -> None:
@@ -616,6 +630,8 @@ class MainWindow(QMainWindow):
             self.show_skull()
         if part == "landmarks":
             self.landmarks.draw_landmarks()
+        if part == "appearance" and self.session.fit is not None:
+            self.draw_face()  # the eyes take the chosen iris colour
         if part in FIT_PARTS:
             self.schedule_dowels()
             if self.session.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
@@ -734,6 +750,7 @@ class MainWindow(QMainWindow):
         self.scan_fit.detach()
         self.animate.detach()
         self.age.detach()
+        self.appearance.detach()
         self.detail.detach()
         self.files.gui_call.close()
         self.scene.detach()

@@ -23,9 +23,11 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.core import value_state
+from workbench.core.appearance import DEFAULT_IRIS
 from workbench.qt import dialogs
 from workbench.qt.panels.reconstruct_panel import BAND_TITLE
 from workbench.qt.scene import is_closed
+from workbench.render.visuals.face import VIEW_EYE_LEVEL, paint_eyes
 from workbench.services.guides.fit_guides import stored_guides
 from workbench.services.reconstruction import case_steps, stored_fit
 from workbench.services.reconstruction.preview_fit import PreviewFit
@@ -435,10 +437,20 @@ class ReconstructTool(QObject):
         for old in FACE_BARS:
             if old != title and old in bars:
                 bars.remove_scalar_bar(old, render=False)
+        # the fitted head's eyes, painted (iris, pupil) in the input frame; they stay
+        # where they are when the build slider moves the skin
+        recon = fit.recon
+        chosen = self.document.case.appearance  # the case's iris colour (an artistic choice)
+        eyes = paint_eyes(
+            recon.mesh_to_input(recon.head.meshes["eyes"]),
+            recon.to_input(np.asarray(recon.head.eye_centres, float)),
+            level=VIEW_EYE_LEVEL,
+            iris=chosen.iris if chosen is not None else DEFAULT_IRIS,
+        )
         if scalars is None:
-            self.scene.show_face(face)
+            self.scene.show_face(face, eyes=eyes)
         else:
-            self.scene.show_face(face, scalars, title)
+            self.scene.show_face(face, scalars, title, eyes=eyes)
 
     def show_build(self, z: float) -> None:
         """The build slider moved: morph the drawn face to build score ``z`` in place.
