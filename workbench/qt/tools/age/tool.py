@@ -252,11 +252,12 @@ class AgeTool(QObject, AgeDrawing):
             if source.key == "fit"
             else f"the reference {source.key.partition(':')[2]} head"
         )
-        self.host.status(
-            f"Age progression: {what} ({n:,} skin vertices; the heads are view only, Keep in "
-            "case records the settings; the case's layers are hidden while this dock is in "
-            "front)."
-        )
+        if self.active:  # (a reopened case's study loads behind another dock: no word then)
+            self.host.status(
+                f"Age progression: {what} ({n:,} skin vertices; the heads are view only, Keep "
+                "in case records the settings; the case's layers are hidden while this dock "
+                "is in front)."
+            )
         self.request(self.panel.target_age())
 
     def _settings_changed(self) -> None:
