@@ -182,6 +182,28 @@ def test_the_whole_session(qtbot, new_window, shared_data, tmp_path, artefacts, 
     assert not _stray(window)  # the Animate and Age heads (and their eyes) went with them
     shot(window, "scan_fit")
 
+    # the session's own heads in the Animate and Age docks (as the command line takes them)
+    heads = window.animate_panel.head
+    assert heads.findData("scan") >= 0 and heads.findData("aged") >= 0
+    assert heads.itemText(heads.findData("aged")) == "The aged head (8 y)"
+    heads.setCurrentIndex(heads.findData("scan"))
+    window.show_animate("smile")
+    qtbot.waitUntil(lambda: window.animate.sex == "scan", timeout=120_000)
+    scanned = window.scan_fit.view.fit.head
+    assert window.animate.animator.head.skin.n_vertices == scanned.skin.n_vertices
+    window.age_panel.source.setCurrentText("Fitted scan (Fit scan dock)")
+    window.show_age(to_age=12)
+    qtbot.waitUntil(
+        lambda: window.age.source is not None
+        and window.age.source.key == "scan"
+        and window.age.shown_age == 12,
+        timeout=300_000,
+    )
+    assert window.wait_idle(300) and not window.errors, window.errors
+    shot(window, "age_of_the_scan_12")
+    assert not window.age.keep()  # the fitted scan is not part of the case: not kept
+    assert window.document.case.age_study.source == "reconstruction"
+
     # examiner, save, export (the command line's folder, report with pictures)
     window.docks["reconstruct"].raise_()
     assert window.document.push(SetCaseDetails(examiner="Walk-through examiner", notes=""))

@@ -328,6 +328,11 @@ class MainWindow(QMainWindow):
         self.docks["animate"].visibilityChanged.connect(self.animate.set_active)
         self.docks["age"].visibilityChanged.connect(self.age.set_active)
         self.docks["fit_scan"].visibilityChanged.connect(self.scan_fit.set_active)
+        # the session's own heads offered to the Animate and Age docks (issue 33): the head
+        # fitted to a scan, and the aged head shown (as the command line takes their packs)
+        self.scan_fit.fitted.connect(self.age.scan_changed)
+        self.scan_fit.fitted.connect(lambda head: self.animate.offer_head("scan", head))
+        self.age.shown.connect(self._offer_aged_head)
         self.session.fit_changed.connect(lambda fit: self.age.fit_changed(fit is not None))
         # the case's own head in the Animate dock once a face is fitted (issue 33)
         self.session.fit_changed.connect(
@@ -636,6 +641,11 @@ class MainWindow(QMainWindow):
             self.schedule_dowels()
             if self.session.fit is not None and self.reconstruct_panel.auto_refit.isChecked():
                 self.reconstruction.reconstruct(after_edit=True)
+
+    def _offer_aged_head(self, age: int) -> None:
+        step = self.age.step
+        head = None if step is None else step.result.head
+        self.animate.offer_head("aged", head, f"The aged head ({age} y)")
 
     def restore_fit(self, stored: Any) -> None:
         """Show the face a reopened case keeps (the Reconstruct tool's ``restore``)."""

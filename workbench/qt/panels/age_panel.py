@@ -46,6 +46,12 @@ SOURCES = {
     "Reference male": "reference:male",
     "Reference female": "reference:female",
     "Reconstructed head (this case)": "fit",
+    "Fitted scan (Fit scan dock)": "scan",
+}
+#: the sources that exist only once made, with what to do first
+MADE_SOURCES = {
+    "fit": "Reconstruct the face first (Reconstruct dock)",
+    "scan": "Fit a scan first (Fit scan dock)",
 }
 #: how before and after are shown
 MODES = {"side": "Side by side", "overlay": "Overlay, coloured by distance"}
@@ -192,7 +198,8 @@ class AgePanel(QWidget):
         self.source = QComboBox()
         self.source.addItems(list(SOURCES))
         self.source.setToolTip("The head to age: a reference head, or this case's reconstruction")
-        self._set_fit_enabled(False)
+        for key in MADE_SOURCES:
+            self._set_source_enabled(key, False)
         self.source.currentTextChanged.connect(lambda t: self.source_changed.emit(SOURCES[t]))
         form.addRow("Head", self.source)
         self.sex = QComboBox()
@@ -377,18 +384,22 @@ class AgePanel(QWidget):
         if emit:
             self.target_changed.emit(int(value))
 
-    def _set_fit_enabled(self, on: bool) -> None:
+    def _set_source_enabled(self, key: str, on: bool) -> None:
         model: Any = self.source.model()
-        item = model.item(list(SOURCES.values()).index("fit"))
+        item = model.item(list(SOURCES.values()).index(key))
         if item is not None:
             item.setEnabled(bool(on))
-            item.setToolTip("" if on else "Reconstruct the face first (Reconstruct dock)")
+            item.setToolTip("" if on else MADE_SOURCES[key])
 
     # ------------------------------------------------------------ showing
     def set_fit_available(self, on: bool) -> None:
         """Offer (or withdraw) the case's reconstructed head as the source."""
-        self._set_fit_enabled(on)
-        if not on and self.source_key() == "fit":
+        self.set_source_available("fit", on)
+
+    def set_source_available(self, key: str, on: bool) -> None:
+        """Offer (or withdraw) a head made in this session (``"fit"``, ``"scan"``)."""
+        self._set_source_enabled(key, on)
+        if not on and self.source_key() == key:
             self.source.setCurrentText("Reference male")
 
     def set_age_range(self, lo: float, hi: float) -> None:

@@ -39,6 +39,13 @@ HEADS = {"Reference male": "male", "Reference female": "female"}
 #: the case's own head, offered once the face is fitted (the tool's key for it)
 RECONSTRUCTION = "This case's reconstruction"
 RECONSTRUCTION_KEY = "reconstruction"
+#: the session's own heads (the tool's key → the list's title), offered while they exist:
+#: the reconstruction, the head fitted to a scan (Fit scan dock), the aged head (Age dock)
+SESSION_HEADS = {
+    RECONSTRUCTION_KEY: RECONSTRUCTION,
+    "scan": "The fitted scan",
+    "aged": "The aged head",
+}
 #: jaw slider range (degrees; the service allows more, 20° is a wide-open mouth)
 JAW_MAX_DEG = 20.0
 #: gaze slider range (degrees either way; the service's GAZE_RANGE_DEG)
@@ -248,18 +255,28 @@ class AnimatePanel(QWidget):
     def sex(self) -> str:
         """The head to animate: ``"male"``, ``"female"`` (the reference heads) or
         ``"reconstruction"`` (the case's fitted head)."""
-        text = self.head.currentText()
-        return RECONSTRUCTION_KEY if text == RECONSTRUCTION else HEADS.get(text, "male")
+        key = self.head.currentData()
+        if isinstance(key, str):  # one of the session's heads
+            return key
+        return HEADS.get(self.head.currentText(), "male")
 
-    def offer_reconstruction(self, on: bool) -> None:
-        """List the case's reconstruction among the heads (once a face is fitted) or not."""
-        index = self.head.findText(RECONSTRUCTION)
+    def offer_head(self, key: str, on: bool, title: str | None = None) -> None:
+        """List one of the session's heads (:data:`SESSION_HEADS`) while it exists, under
+        ``title`` (e.g. "The aged head (8 y)"), or take it off the list."""
+        index = self.head.findData(key)
+        title = title or SESSION_HEADS[key]
         if on and index < 0:
-            self.head.addItem(RECONSTRUCTION)
-        elif not on and index >= 0:
+            self.head.addItem(title, key)
+        elif on:
+            self.head.setItemText(index, title)
+        elif index >= 0:
             if self.head.currentIndex() == index:
                 self.head.setCurrentIndex(0)
             self.head.removeItem(index)
+
+    def offer_reconstruction(self, on: bool) -> None:
+        """List the case's reconstruction among the heads (once a face is fitted) or not."""
+        self.offer_head(RECONSTRUCTION_KEY, on)
 
     def weight(self) -> float:
         return self.intensity.value() / 100.0

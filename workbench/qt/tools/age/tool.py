@@ -102,6 +102,8 @@ class AgeTool(QObject, AgeDrawing):
         self.panel, self.scene, self.plotter = panel, scene, plotter
         self.runner, self.host = runner, host
         self.fitted_head, self.case_sex = fitted_head, case_sex
+        #: the head fitted to a scan in the Fit scan dock (:meth:`scan_changed`), or None
+        self.scan_head: TemplateHead | None = None
         self.source: SourceHead | None = None
         self.norms: NormsInfo | None = None
         #: computed ages of the current source and settings, and the ages that failed
@@ -192,6 +194,11 @@ class AgeTool(QObject, AgeDrawing):
             if head is None:
                 self.panel.show_error("Reconstruct the face first: no reconstructed head to age.")
                 return
+        elif key == "scan":
+            head = self.scan_head
+            if head is None:
+                self.panel.show_error("Fit a scan first (Fit scan dock): no fitted scan to age.")
+                return
         self._loading = key
         self.panel.show_status("Loading the head …")
         self.runner.submit(
@@ -213,6 +220,15 @@ class AgeTool(QObject, AgeDrawing):
         if available and self.panel.source_key() == "fit" and self.source is not None:
             self.load("fit")
 
+    def scan_changed(self, head: TemplateHead | None) -> None:
+        """The head fitted to a scan (Fit scan dock) changed: offer it, and age the new one
+        if it is the source (head frame or the scan's frame: it is put in its Frankfort
+        frame when loaded, as a reconstruction is)."""
+        self.scan_head = head
+        self.panel.set_source_available("scan", head is not None)
+        if head is not None and self.panel.source_key() == "scan" and self.source is not None:
+            self.load("scan")
+
     def _load_failed(self, exc: BaseException) -> None:
         self._loading = ""
         self.panel.show_status("The head could not be loaded.")
@@ -227,7 +243,8 @@ class AgeTool(QObject, AgeDrawing):
         blocked = [w.blockSignals(True) for w in (panel.sex, panel.ethnicity)]
         try:
             kind, _, sex = source.key.partition(":")
-            panel.sex.setCurrentText(sex if kind == "reference" else self.case_sex())
+            own = self.case_sex() if source.key == "fit" else source.head.sex  # a scan: its fit's
+            panel.sex.setCurrentText(sex if kind == "reference" else own)
             if panel.ethnicity.count() == 0:
                 panel.ethnicity.addItems(list(source.norms.ethnicities))
                 if "European" in source.norms.ethnicities:
@@ -247,10 +264,8 @@ class AgeTool(QObject, AgeDrawing):
         self.reset_camera()
         self.loaded.emit()
         n = source.head.skin.n_vertices
-        what = (
-            "the case's reconstructed head"
-            if source.key == "fit"
-            else f"the reference {source.key.partition(':')[2]} head"
+        what = {"fit": "the case's reconstructed head", "scan": "the head fitted to the scan"}.get(
+            source.key, f"the reference {source.key.partition(':')[2]} head"
         )
         if self.active:  # (a reopened case's study loads behind another dock: no word then)
             self.host.status(
@@ -325,6 +340,12 @@ class AgeTool(QObject, AgeDrawing):
         doc = self.document
         if doc is None or not self.case_open():
             self.host.status("Open a case first: the age study is kept in a case.")
+            return False
+        if self.panel.source_key() == "scan":
+            self.panel.show_error(
+                "Not kept: the fitted scan is not part of the case (save it with Save pack… in "
+                "the Fit scan dock); a kept study ages a reference head or the reconstruction."
+            )
             return False
         try:
             study = self.current_study()

@@ -18,6 +18,13 @@ from workbench.core.errors import WorkbenchError
 from workbench.qt.tools.animate.drawing import ALWAYS_SHOWN, AnimateDrawing, load_animator
 from workbench.qt.tools.common import CaseLayersAside
 
+#: the session's heads the dock animates, as the status line names them
+SESSION_WHAT = {
+    "reconstruction": "the reconstruction",
+    "scan": "the fitted scan",
+    "aged": "the aged head",
+}
+
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QWidget
 
@@ -80,7 +87,8 @@ class AnimateTool(QObject, AnimateDrawing):
         self.panel, self.scene, self.plotter = panel, scene, plotter
         self.runner, self.host = runner, host
         self.animator: Animator | None = None
-        self._fitted: TemplateHead | None = None
+        #: the session's own heads offered for animation (key of SESSION_WHAT → head)
+        self._session_heads: dict[str, TemplateHead] = {}
         #: the dock is in front (its head shown, the case's layers set aside)
         self.active = False
         self._aside = CaseLayersAside(scene)
@@ -176,14 +184,14 @@ class AnimateTool(QObject, AnimateDrawing):
         (``"reconstruction"``: the fitted head, in its head frame) in the worker."""
         if sex == self._loading or (sex == self.sex and self.animator is not None):
             return
-        if sex == "reconstruction":
-            head = self.fitted_head()
+        if sex in SESSION_WHAT:
+            head = self._session_heads.get(sex)
             if head is None:
-                self.panel.show_status("Reconstruct the face first: there is no fitted head.")
+                self.panel.show_status(f"There is no {SESSION_WHAT[sex].removeprefix('the ')}.")
                 return
             from workbench.services.animation.animator import Animator
 
-            what, job = "the reconstruction", lambda: Animator(head)
+            what, job = SESSION_WHAT[sex], lambda: Animator(head)
         else:
             what, job = f"the reference {sex} head", lambda: load_animator(sex)
         self._loading = sex
@@ -194,17 +202,27 @@ class AnimateTool(QObject, AnimateDrawing):
 
         self.runner.submit(CHANNEL, f"Loading {what} for animation …", job, done, self._failed)
 
+    def offer_head(self, key: str, head: TemplateHead | None, title: str | None = None) -> None:
+        """One of the session's heads changed (``key`` of :data:`SESSION_WHAT`: the case's
+        reconstruction, the fitted scan, the aged head): offer it, and reload it if it is
+        the one shown (as ``workbench animate`` takes a reconstruction, a fit-scan pack or
+        an aged head)."""
+        if head is None:
+            self._session_heads.pop(key, None)
+        else:
+            self._session_heads[key] = head
+        self.panel.offer_head(key, head is not None, title)
+        if self.sex == key and head is not None and self.animator is not None:
+            self.sex = ""  # a new head: the one shown is out of date
+            self.load(key)
+
     def fit_changed(self, head: TemplateHead | None) -> None:
         """The case's fitted head changed: offer it, and reload it if it is the one shown."""
-        self._fitted = head
-        self.panel.offer_reconstruction(head is not None)
-        if self.sex == "reconstruction" and head is not None and self.animator is not None:
-            self.sex = ""  # a new fit: the head shown is out of date
-            self.load("reconstruction")
+        self.offer_head("reconstruction", head)
 
     def fitted_head(self) -> TemplateHead | None:
         """The case's fitted head (head frame, mm), or None before a fit."""
-        return self._fitted
+        return self._session_heads.get("reconstruction")
 
     def _failed(self, exc: BaseException) -> None:
         self._loading = ""

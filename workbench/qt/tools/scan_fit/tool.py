@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from PySide6.QtCore import QObject, QTimer
+from PySide6.QtCore import QObject, QTimer, Signal
 
 from workbench.core.data_paths import DEFAULT_DEPTH_TABLE
 from workbench.core.errors import InputError, UnitsError, WorkbenchError
@@ -73,6 +73,10 @@ class ScanFitTool(QObject):
     ``document`` (default: ``host.document``, else a document of the tool's own) holds
     the undo stack the placements are pushed on: the window's one stack.
     """
+
+    #: the head fitted to the scan (head frame, mm) once a fit is shown; None when a new
+    #: scan replaces it (the Age and Animate docks offer it)
+    fitted = Signal(object)
 
     def __init__(
         self,
@@ -204,6 +208,7 @@ class ScanFitTool(QObject):
     def _scan_opened(self, scan: OpenedScan) -> None:
         self.runner.cancel(CHANNEL)  # a fit of the previous scan is of no use now
         self.scan, self.view = scan, None
+        self.fitted.emit(None)
         self.landmarks.clear(scan.path.name)
         self.panel.show_scan(scan)
         self.panel.show_fit(None)
@@ -271,6 +276,7 @@ class ScanFitTool(QObject):
     def _show_fit(self, view: FitView) -> None:
         self.panel.set_running(False)
         self.view = view
+        self.fitted.emit(view.fit.head)
         fig = view.fit.figures
         seconds = self.runner.timings.get(CHANNEL, 0.0)
         self.panel.show_fit(view)
