@@ -194,9 +194,11 @@ def test_the_whole_session(qtbot, new_window, shared_data, tmp_path, artefacts, 
     window.age_panel.source.setCurrentText("Fitted scan (Fit scan dock)")
     window.show_age(to_age=12)
     qtbot.waitUntil(
-        lambda: window.age.source is not None
-        and window.age.source.key == "scan"
-        and window.age.shown_age == 12,
+        lambda: (
+            window.age.source is not None
+            and window.age.source.key == "scan"
+            and window.age.shown_age == 12
+        ),
         timeout=300_000,
     )
     assert window.wait_idle(300) and not window.errors, window.errors
