@@ -256,7 +256,9 @@ class ReconstructTool(QObject):
         except ValueError:
             return False
         case = self.document.case
-        used = fit.recon.landmarks
+        # the case's landmarks when it was fitted (the fit's own may be articulated or snapped):
+        # only those the user changed since are moved
+        used = fit.inputs.landmarks if fit.inputs and fit.inputs.landmarks else fit.recon.landmarks
         moved = False
         for lm in case.landmarks["skull"].defined():
             before = used.get(lm.code)
