@@ -53,15 +53,6 @@ def _wait(app, window, timeout: float = 600.0) -> None:
         app.processEvents()
 
 
-def turn_degrees(a: np.ndarray, b: np.ndarray) -> float:
-    """Rotation (degrees) of the best rigid fit of point set ``a`` onto ``b`` (Kabsch)."""
-    pa, pb = a - a.mean(0), b - b.mean(0)
-    u, _s, vt = np.linalg.svd(pa.T @ pb)
-    d = np.sign(np.linalg.det(u @ vt))
-    r = u @ np.diag([1.0, 1.0, d]) @ vt
-    return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("ct", nargs="?", default=str(DEFAULT_CT))
@@ -72,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from workbench.commands.landmarks import MoveLandmark
     from workbench.qt.main_window import MainWindow
+    from workbench.services.reconstruction.refit_check import face_turn_deg
 
     app = QApplication.instance() or QApplication(sys.argv)
     window = MainWindow(auto_update=False, interactive=False)
@@ -116,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         if tool.held is not None:
             held += 1
             tool.accept_held()
-        turns.append(turn_degrees(before, window.fit.recon.face.vertices))
+        turns.append(face_turn_deg(before, window.fit.recon.face.vertices))
         print(
             f"edit {i + 1:2d} {code:5s} {step:+.1f} mm: face {to_face[-1]:.3f} s, "
             f"refit {to_refit[-1]:.2f} s, turn {turns[-1]:.2f} deg"

@@ -35,14 +35,6 @@ CTS = {
 }
 
 
-def _kabsch_degrees(a: np.ndarray, b: np.ndarray) -> float:
-    pa, pb = a - a.mean(0), b - b.mean(0)
-    u, _s, vt = np.linalg.svd(pa.T @ pb)
-    d = np.sign(np.linalg.det(u @ vt))
-    r = u @ np.diag([1.0, 1.0, d]) @ vt
-    return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
-
-
 def _stray(window) -> list:
     """Bounds of visible actors no layer of the case or of the tool in front owns."""
 
@@ -90,6 +82,7 @@ def test_the_whole_session(qtbot, new_window, shared_data, tmp_path, artefacts, 
     from workbench.io.meshes import write_mesh
     from workbench.qt.panels.animate_panel import RECONSTRUCTION
     from workbench.services.ct.ct_mesh import mesh_from_ct
+    from workbench.services.reconstruction.refit_check import face_turn_deg
 
     ct = shared_data.joinpath(*CTS[case])
     if not ct.exists():
@@ -141,7 +134,7 @@ def test_the_whole_session(qtbot, new_window, shared_data, tmp_path, artefacts, 
     assert time.perf_counter() - t0 < 5.0 and tool.edit_timings  # the preview was drawn
     assert window.wait_idle(300) and not window.errors, window.errors
     assert tool.held is None
-    assert _kabsch_degrees(before.recon.face.vertices, window.fit.recon.face.vertices) < 5.0
+    assert face_turn_deg(before.recon.face.vertices, window.fit.recon.face.vertices) < 5.0
     shot(window, "guides_after_edits")
 
     # a thinner build (refit): no skin inside the bone

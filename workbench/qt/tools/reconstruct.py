@@ -31,7 +31,11 @@ from workbench.render.visuals.face import VIEW_EYE_LEVEL, paint_eyes
 from workbench.services.guides.fit_guides import stored_guides
 from workbench.services.reconstruction import case_steps, stored_fit
 from workbench.services.reconstruction.preview_fit import PreviewFit
-from workbench.services.reconstruction.refit_check import RefitChange, compare_refit
+from workbench.services.reconstruction.refit_check import (
+    RefitChange,
+    compare_refit,
+    moved_landmarks,
+)
 from workbench.services.reconstruction.service import (
     MAX_WORKING_TRIANGLES,
     FitInputs,
@@ -256,16 +260,13 @@ class ReconstructTool(QObject):
         except ValueError:
             return False
         case = self.document.case
-        # the case's landmarks when it was fitted (the fit's own may be articulated or snapped):
-        # only those the user changed since are moved
-        used = fit.inputs.landmarks if fit.inputs and fit.inputs.landmarks else fit.recon.landmarks
+        # against the case's landmarks when it was fitted (the fit's own may be articulated
+        # or snapped): only those the user changed since are moved
+        given = fit.inputs.landmarks if fit.inputs and fit.inputs.landmarks else fit.recon.landmarks
         moved = False
-        for lm in case.landmarks["skull"].defined():
-            before = used.get(lm.code)
-            if before is None or not before.is_defined:
-                continue
-            if not np.allclose(before.position, lm.position, atol=1e-6):
-                moved = preview.move_landmark(lm.code, lm.position) or moved
+        for code, places in moved_landmarks(given, case.landmarks["skull"].defined()).items():
+            if len(places) == 2:  # moved (not added or removed: the refit decides those)
+                moved = preview.move_landmark(code, places[1]) or moved
         if case.guides is not None:
             shown = {g.id: g for g in fit.guides}
             for guide in stored_guides(case.guides) or ():

@@ -24,7 +24,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from workbench.core.rigid_search import rigid_motion
+
 if TYPE_CHECKING:
+    from workbench.core.landmarks import LandmarkSet
     from workbench.services.reconstruction.service import FitInputs, FitResult
 
 #: a refit may turn the face by at most this against the previous fit (degrees)
@@ -57,18 +60,32 @@ class RefitChange:
         return "; ".join(self.reasons)
 
 
-def _rotation_deg(a: np.ndarray, b: np.ndarray) -> float:
-    """The angle of the rotation between two similarity frames' linear parts (degrees)."""
-    r = np.asarray(a, float)[:3, :3] @ np.linalg.inv(np.asarray(b, float)[:3, :3])
-    r = r / np.cbrt(abs(np.linalg.det(r)))
+def _angle_deg(r: np.ndarray) -> float:
+    """The angle of rotation matrix ``r`` (degrees)."""
     return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))))
 
 
-def edited_landmarks(before: FitInputs, after: FitInputs) -> dict[str, np.ndarray]:
-    """Codes whose positions differ between two fits' inputs, with their old and new places
-    ((k, 3) points, input frame, mm); a landmark added or removed counts with its one place."""
-    old = {} if before.landmarks is None else before.landmarks.as_dict()
-    new = {} if after.landmarks is None else after.landmarks.as_dict()
+def _rotation_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle of the rotation between two similarity frames' linear parts (degrees)."""
+    r = np.asarray(a, float)[:3, :3] @ np.linalg.inv(np.asarray(b, float)[:3, :3])
+    return _angle_deg(r / np.cbrt(abs(np.linalg.det(r))))
+
+
+def face_turn_deg(before: np.ndarray, after: np.ndarray) -> float:
+    """How far a face turned between two fits: the angle (degrees) of the best rigid motion
+    of its vertices ``before`` onto ``after`` (same vertex order, mm)."""
+    a, b = np.asarray(before, float), np.asarray(after, float)
+    r, _t = rigid_motion(a, b, np.ones(len(a)))
+    return _angle_deg(r)
+
+
+def moved_landmarks(
+    old_set: LandmarkSet | None, new_set: LandmarkSet | None
+) -> dict[str, np.ndarray]:
+    """Codes whose positions differ between two landmark sets, with their old and new places
+    ((k, 3) points, mm); a landmark added or removed counts with its one place."""
+    old = {} if old_set is None else old_set.as_dict()
+    new = {} if new_set is None else new_set.as_dict()
     out: dict[str, np.ndarray] = {}
     for code in sorted(set(old) | set(new)):
         places = [p for p in (old.get(code), new.get(code)) if p is not None]
@@ -76,6 +93,11 @@ def edited_landmarks(before: FitInputs, after: FitInputs) -> dict[str, np.ndarra
             continue
         out[code] = np.asarray(places, float).reshape(-1, 3)
     return out
+
+
+def edited_landmarks(before: FitInputs, after: FitInputs) -> dict[str, np.ndarray]:
+    """:func:`moved_landmarks` between two fits' inputs (input frame)."""
+    return moved_landmarks(before.landmarks, after.landmarks)
 
 
 def _only_landmarks_changed(before: FitInputs, after: FitInputs) -> bool:
