@@ -167,3 +167,27 @@ def test_bad_colours_in_a_file_are_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(CaseFileError, match="beige"):
         load_case(unknown, allow_tampered=True)
+
+
+def test_hair_and_brow_styles_are_part_of_the_colours(tmp_path: Path) -> None:
+    """The styles of the hair library (issue 34): validated, kept in the case file, absent
+    from the state when none is chosen (older files read as before)."""
+    groomed = LOOK.with_style("hair", "medium").with_style("brows", "thin")
+    assert groomed.style("hair") == "medium" and groomed.style("beard") == "none"
+    assert groomed.grooming == (("hair", "medium"), ("brows", "thin"))
+    assert groomed.with_style("hair", "none").grooming == (("brows", "thin"),)
+    assert set(groomed.changed_fields(LOOK)) == {"hair style", "brows style"}
+    assert "grooming" not in LOOK.to_state()
+    assert groomed.to_state()["grooming"] == {"hair": "medium", "brows": "thin"}
+    assert Appearance.from_state(groomed.to_state()) == groomed
+    case = Case(appearance=groomed)
+    path = save_case(case, tmp_path / "groomed.fcase")
+    assert _doc(path)["appearance"]["grooming"] == {"hair": "medium", "brows": "thin"}
+    assert load_case(path).case.appearance == groomed
+    with pytest.raises(AppearanceError, match="unknown 'mohawk'"):
+        Appearance(grooming={"hair": "mohawk"})
+    with pytest.raises(AppearanceError, match="unknown kind 'wig'"):
+        Appearance(grooming={"wig": "long"})
+    with pytest.raises(AppearanceError, match="expected an object"):
+        Appearance.from_state({**LOOK.to_state(), "grooming": ["hair", "long"]})
+    assert Appearance(regions={"hair": (0.1, 0.3, 0.2)}).colour("hair") == Hsv(0.1, 0.3, 0.2)

@@ -149,7 +149,7 @@ LIPS_RULE = (
     "saturation x 1.35, value x 0.82"
 )
 EYEBROWS = Preset(_hex("#3b2a1e"), "hand-picked: dark brown")
-HAIR = Preset(_hex("#3b2a1e"), "hand-picked: dark brown (a hook: no hair mesh yet)")
+HAIR = Preset(_hex("#3b2a1e"), "hand-picked: dark brown (hair, beard and moustache by default)")
 BONE = Preset(_hex("#e3d9c3"), "hand-picked: ivory of dry bone")
 TONGUE = Preset(_hex("#b9656a"), "hand-picked: pink-red")
 OTHER = Preset(_hex("#b4b4b4"), "hand-picked: neutral grey for a part without a preset")
@@ -179,6 +179,8 @@ PART_MATERIALS: dict[str, tuple[str, Preset]] = {
     "brows": ("brows", EYEBROWS),
     "eyebrows": ("brows", EYEBROWS),
     "hair": ("hair", HAIR),
+    "beard": ("hair", HAIR),
+    "moustache": ("hair", HAIR),
 }
 
 

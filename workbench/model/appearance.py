@@ -27,6 +27,15 @@ Fields
 ``iris``
     An iris colour of :data:`workbench.core.appearance.IRIS_COLOURS`, used
     when the head's eyes are exported.
+``grooming``
+    The hair, brow, beard and moustache styles chosen from the library of
+    :mod:`workbench.core.grooming` (artistic additions, not evidence:
+    :data:`workbench.core.grooming.ARTISTIC_NOTE`), per kind of
+    :data:`~workbench.core.grooming.KINDS`; kinds without an entry have none.
+    Case files written before this field load without it.  The ``hair``
+    region's colour (set by hand, else :data:`~workbench.core.appearance.HAIR`)
+    colours the hair, beard and moustache; the brows take the ``brows``
+    region's colour when it is set by hand, else the hair's.
 
 Notes
 -----
@@ -45,10 +54,12 @@ from typing import Any
 
 from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
 from workbench.core.errors import InputError
+from workbench.core.grooming import KINDS, NONE, GroomingError, check_style
 
 #: the regions a colour can be set for, in the order they are drawn over the base
-#: (``skin`` is the base itself; ``eyes`` is the skin around the eyes, not the eyeballs)
-REGIONS = ("skin", "cheeks", "eyes", "brows", "lips")
+#: (``skin`` is the base itself; ``eyes`` is the skin around the eyes, not the eyeballs;
+#: ``hair`` colours the hair, beard and moustache and the skin they grow from)
+REGIONS = ("skin", "cheeks", "eyes", "brows", "lips", "hair")
 #: what the window calls each region
 REGION_TITLES = {
     "skin": "Skin (base)",
@@ -56,6 +67,7 @@ REGION_TITLES = {
     "eyes": "Around the eyes",
     "brows": "Brows",
     "lips": "Lips",
+    "hair": "Hair and beard",
 }
 #: said wherever the colours are shown or written
 ARTISTIC_NOTE = (
@@ -115,13 +127,19 @@ class Appearance:
         ``{region: Hsv or [h, s, v]}`` is accepted.
     iris : str
         Iris colour of an exported head's eyes.
+    grooming : tuple of (str, str)
+        ``(kind, style)`` of the hair, brows, beard and moustache chosen, in
+        :data:`~workbench.core.grooming.KINDS` order (``none`` is not stored);
+        a mapping ``{kind: style}`` is accepted.
     """
 
     tone: str = DEFAULT_SKIN_TONE
     regions: tuple[tuple[str, Hsv], ...] = ()
     iris: str = DEFAULT_IRIS
+    grooming: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
+        self._check_grooming()
         if self.tone not in SKIN_TONES:
             raise AppearanceError(
                 "skin tone", f"unknown preset {self.tone!r}", f"use one of {', '.join(SKIN_TONES)}"
@@ -149,7 +167,33 @@ class Appearance:
                 raise AppearanceError(f"{name} colour", exc.problem) from None
         object.__setattr__(self, "regions", tuple((r, found[r]) for r in REGIONS if r in found))
 
+    def _check_grooming(self) -> None:
+        given = self.grooming
+        pairs = list(given.items()) if isinstance(given, Mapping) else list(given)
+        found: dict[str, str] = {}
+        for pair in pairs:
+            if isinstance(pair, (str, bytes)) or len(pair) != 2:
+                raise AppearanceError("hair and brows", f"expected (kind, style), got {pair!r}")
+            kind, style = pair
+            if not isinstance(style, str):
+                raise AppearanceError(f"{kind} style", f"expected a name, got {style!r}")
+            try:
+                check_style(str(kind), style)
+            except GroomingError as exc:
+                raise AppearanceError(exc.source, exc.problem, exc.hint) from None
+            if kind in found:
+                raise AppearanceError("hair and brows", f"{kind!r} given twice")
+            found[kind] = style
+        kept = tuple((k, found[k]) for k in KINDS if found.get(k, NONE) != NONE)
+        object.__setattr__(self, "grooming", kept)
+
     # ------------------------------------------------------------ reading
+    def style(self, kind: str) -> str:
+        """The style chosen for ``kind`` (hair, brows, beard, moustache), or ``"none"``."""
+        if kind not in KINDS:
+            raise AppearanceError("hair and brows", f"unknown kind {kind!r}")
+        return dict(self.grooming).get(kind, NONE)
+
     def colour(self, region: str) -> Hsv | None:
         """The colour set by hand for ``region``, or None (the region follows the base)."""
         if region not in REGIONS:
@@ -178,28 +222,41 @@ class Appearance:
         """A copy on preset ``tone``, the hand-set base dropped (other regions kept)."""
         return replace(self.with_colour("skin", None), tone=tone)
 
+    def with_style(self, kind: str, style: str) -> Appearance:
+        """A copy with ``style`` (``"none"``: nothing) chosen for ``kind``."""
+        self.style(kind)  # checks the kind
+        rest = dict(self.grooming)
+        rest[kind] = style
+        return replace(self, grooming=tuple(rest.items()))
+
     def changed_fields(self, other: Appearance | None) -> tuple[str, ...]:
-        """What differs from ``other`` ("tone", "iris", region names); all if None."""
+        """What differs from ``other`` ("tone", "iris", region names, kinds of
+        :data:`~workbench.core.grooming.KINDS` as e.g. "hair style"); all if None."""
         if other is None:
-            return ("tone", "iris", *(r for r, _ in self.regions))
+            styles = tuple(f"{k} style" for k, _ in self.grooming)
+            return ("tone", "iris", *(r for r, _ in self.regions), *styles)
         out = [f for f in ("tone", "iris") if getattr(self, f) != getattr(other, f)]
         out += [r for r in REGIONS if self.colour(r) != other.colour(r)]
+        out += [f"{k} style" for k in KINDS if self.style(k) != other.style(k)]
         return tuple(out)
 
     # ------------------------------------------------------------ state
     def to_state(self) -> dict[str, Any]:
-        return {
+        state: dict[str, Any] = {
             "tone": self.tone,
             "regions": {r: c.to_state() for r, c in self.regions},
             "iris": self.iris,
         }
+        if self.grooming:  # absent when empty, so cases without hair read as before
+            state["grooming"] = dict(self.grooming)
+        return state
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any]) -> Appearance:
         if not isinstance(state, Mapping):
             raise AppearanceError("appearance", f"expected an object, got {type(state).__name__}")
         known = {"tone", "regions", "iris"}
-        unknown = sorted(set(state) - known)
+        unknown = sorted(set(state) - known - {"grooming"})
         if unknown:
             raise AppearanceError("appearance", f"unknown fields {', '.join(unknown)}")
         missing = sorted(known - set(state))
@@ -208,7 +265,15 @@ class Appearance:
         regions = state["regions"]
         if not isinstance(regions, Mapping):
             raise AppearanceError("region colours", "expected an object {region: [h, s, v]}")
-        return cls(tone=state["tone"], regions=tuple(regions.items()), iris=state["iris"])
+        grooming = state.get("grooming", {})
+        if not isinstance(grooming, Mapping):
+            raise AppearanceError("hair and brows", "expected an object {kind: style}")
+        return cls(
+            tone=state["tone"],
+            regions=tuple(regions.items()),
+            iris=state["iris"],
+            grooming=tuple(grooming.items()),
+        )
 
 
 # ------------------------------------------------------------------ part codec

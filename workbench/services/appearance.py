@@ -58,6 +58,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from workbench.core.appearance import (
+    HAIR,
     LIPS_RULE,
     ROUGHNESS,
     SRGB,
@@ -94,8 +95,10 @@ BROW_LEVELS = (0.12, 0.55)
 LIPS_FEATHER_MM = 2.0
 #: the brow's half-height (mm) is half the height of sci over mso, clipped to this range
 BROW_HALF_MM = (2.5, 6.0)
-#: the regions painted over the base, in order (later ones cover earlier ones)
-PAINTED = tuple(r for r in REGIONS if r != "skin")
+#: the regions painted over the base, in order (later ones cover earlier ones); the
+#: ``hair`` colour is painted where the chosen hair and beard grow
+#: (:func:`workbench.services.grooming.hair_cover`), not over a fixed region
+PAINTED = tuple(r for r in REGIONS if r not in ("skin", "hair"))
 _SIDES = ("l", "r")
 
 
@@ -125,6 +128,8 @@ def region_colour(appearance: Appearance | None, region: str) -> Hsv:
         return base
     if region == "lips":
         return _hsv_of(lip_srgb(hsv_srgb(base)))
+    if region == "hair":
+        return _hsv_of(HAIR.srgb)
     dh, fs, fv, _ = RULES[region]
     return Hsv((base.h + dh) % 1.0, min(1.0, base.s * fs), min(1.0, base.v * fv))
 
@@ -138,6 +143,8 @@ def region_source(appearance: Appearance | None, region: str) -> str:
         return f"skin: {skin_tone(look.tone).source}"
     if region == "lips":
         return f"lips: {LIPS_RULE}"
+    if region == "hair":
+        return f"hair: {HAIR.source}"
     return f"{region}: {RULES[region][3]}"
 
 
@@ -147,7 +154,9 @@ def colour_summary(appearance: Appearance | None) -> str:
     base = "a base set by hand (HSV)" if look.custom_base else f"skin tone {look.tone}"
     own = [r for r, _ in look.regions if r != "skin"]
     regions = f"; set by hand: {', '.join(own)}" if own else ""
-    return f"{base}{regions}; iris {look.iris}. {ARTISTIC_NOTE}"
+    styles = ", ".join(f"{k} {v.replace('_', ' ')}" for k, v in look.grooming)
+    groomed = f"; {styles} (artistic additions, not evidence)" if styles else ""
+    return f"{base}{regions}; iris {look.iris}{groomed}. {ARTISTIC_NOTE}"
 
 
 # ------------------------------------------------------------------ region weights
@@ -284,6 +293,14 @@ def skin_colours(
         colour = srgb_to_linear(hsv_srgb(region_colour(appearance, region)))
         a = np.clip(np.asarray(w[region], float), 0.0, 1.0)[:, None]
         out = out * (1.0 - a) + colour * a
+    if appearance is not None and appearance.grooming:
+        from workbench.services.grooming import hair_cover
+
+        cover = hair_cover(head, appearance)
+        if cover is not None and cover.any():
+            colour = srgb_to_linear(hsv_srgb(region_colour(appearance, "hair")))
+            a = cover[:, None]
+            out = out * (1.0 - a) + colour * a
     return linear_to_srgb(out)
 
 
