@@ -245,7 +245,13 @@ class MainWindow(QMainWindow):
         )
         self.appearance_panel = AppearancePanel()  # the face's chosen colours (artistic)
         self.appearance = AppearanceTool(
-            self.appearance_panel, self.document, self.session, self.scene, self, parent=self
+            self.appearance_panel,
+            self.document,
+            self.session,
+            self.scene,
+            self,
+            parent=self,
+            runner=self.runner,
         )
 
     def _build_docks(self) -> None:

@@ -52,6 +52,7 @@ LAYERS = {
     "guides": "Guides",
     "muscles": "Muscles",
     "face": "Face (skin)",
+    "hair": "Hair and brows (artistic)",
     "held": "Held-back refit (ghost)",
     "truth": "True skin (compare)",
 }
@@ -461,6 +462,15 @@ class SceneView(QObject):
         self._add("face", face.add_face(self.plotter, mesh, scalars, title))
         if eyes is not None:
             self._add("eyes", face.add_eyes(self.plotter, eyes))
+        self.request_render()
+
+    def show_hair(self, pieces: Sequence[tuple[Mesh, np.ndarray, np.ndarray]]) -> None:
+        """The hair, brows, beard and moustache chosen for the face: ``(mesh, sRGB per vertex,
+        shading normals)`` per piece, input frame, mm (the Appearance dock draws them);
+        empty: none.  Drawn opaque whatever the face's opacity."""
+        self.clear("hair")
+        for i, (mesh, srgb, normals) in enumerate(pieces):
+            self._add("hair", face.add_hair(self.plotter, mesh, srgb, normals, name=f"hair_{i}"))
         self.request_render()
 
     def show_held(self, mesh: Mesh | None) -> None:

@@ -80,6 +80,8 @@ from workbench.core.appearance import (
     SkinTexture,
 )
 from workbench.core.errors import InputError
+from workbench.core.grooming import ARTISTIC_NOTE as GROOMING_NOTE
+from workbench.core.grooming import GroomingError
 from workbench.render.portrait_scene import (
     OCCLUSION_RAYS,
     OCCLUSION_REACH_MM,
@@ -91,6 +93,7 @@ from workbench.render.portrait_scene import (
 from workbench.render.snapshots import _prefer_headless_gl
 
 if TYPE_CHECKING:
+    from workbench.model.appearance import Appearance
     from workbench.model.template import TemplateHead
 
 #: the views, in the order they are drawn and written
@@ -219,6 +222,10 @@ class Portrait:
     skin_texture: bool = False
     seconds: dict[str, float] = field(default_factory=dict)
     head: TemplateHead | None = None
+    #: the hair, brows, beard and moustache drawn, ``(kind, style)``; and the case's
+    #: colours in words when a case's appearance was drawn
+    grooming: tuple[tuple[str, str], ...] = ()
+    appearance_note: str = ""
 
     def summary(self) -> dict[str, Any]:
         """What ``portrait.json`` records (plain data)."""
@@ -239,6 +246,12 @@ class Portrait:
                 else (self.skin_tone if self.colour else "clay (no colour claimed)")
             ),
             "iris": self.iris if self.colour else None,
+            "case_appearance": self.appearance_note or None,
+            "artistic_additions": (
+                {"hair_and_brows": dict(self.grooming), "note": GROOMING_NOTE}
+                if self.grooming
+                else None
+            ),
             "lens": {
                 "focal_length_mm": LENS_MM,
                 "film": "35 mm (24 mm frame height)",
@@ -435,6 +448,7 @@ def make_portrait(
     skin_tone: str = DEFAULT_SKIN_TONE,
     iris: str = DEFAULT_IRIS,
     skin_texture: SkinTexture | None = None,
+    appearance: Appearance | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> Portrait:
     """Draw ``head`` (any frame, mm; moved into its head frame first) in ``views``.
@@ -442,11 +456,16 @@ def make_portrait(
     ``size`` is the side of each square picture in pixels
     (:data:`SIZE_LIMITS`); ``colour`` False draws the clay version (and
     ignores ``skin_tone``, ``iris`` and ``skin_texture``).  ``skin_texture``
-    (a fit's atlas, made for this skin) replaces the skin tone.  Must run on
-    the thread that may use VTK (the GUI thread in the window).
+    (a fit's atlas, made for this skin) replaces the skin tone.
+    ``appearance`` (a case's colours and hair, :class:`~workbench.model.appearance.Appearance`)
+    replaces ``skin_tone`` and ``iris`` and adds its hair, brows and beard
+    (in clay too).  Must run on the thread that may use VTK (the GUI thread
+    in the window).
     """
     views = check_views(views)
     size = check_size(size)
+    if appearance is not None:
+        skin_tone, iris = appearance.tone, appearance.iris
     _check_looks(skin_tone, iris)
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -460,7 +479,10 @@ def make_portrait(
             skin_tone=skin_tone,
             iris=iris,
             skin_texture=skin_texture if colour else None,
+            appearance=appearance,
         )
+    except GroomingError:
+        raise
     except ValueError as exc:  # a skin texture made for another skin
         raise InputError("skin texture", str(exc)) from None
     cameras = portrait_cameras(framed, views)
@@ -489,7 +511,15 @@ def make_portrait(
         skin_texture is not None and colour,
         seconds,
         framed,
+        appearance.grooming if appearance is not None else (),
+        _appearance_note(appearance) if appearance is not None else "",
     )
+
+
+def _appearance_note(appearance: Appearance) -> str:
+    from workbench.services.appearance import colour_summary
+
+    return colour_summary(appearance)
 
 
 # ------------------------------------------------------------------ files
@@ -503,6 +533,9 @@ def _metadata(portrait: Portrait, view: str) -> dict[str, str]:
         look = f"the fit's skin texture, {portrait.iris} iris"
     else:
         look = f"{portrait.skin_tone} skin, {portrait.iris} iris"
+    if portrait.grooming:
+        styles = ", ".join(f"{k} {v.replace('_', ' ')}" for k, v in portrait.grooming)
+        look += f"; {styles} ({GROOMING_NOTE})"
     return {
         "Title": f"Portrait, {view.replace('_', ' ')} view",
         "Description": DISCLAIMER,

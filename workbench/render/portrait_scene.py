@@ -48,6 +48,7 @@ from workbench.core.appearance import (
 from workbench.core.mesh import Mesh
 
 if TYPE_CHECKING:
+    from workbench.model.appearance import Appearance
     from workbench.model.template import TemplateHead
 
 #: the no-colour version: one neutral clay (sRGB, no hue) and its roughness
@@ -202,6 +203,7 @@ def portrait_parts(
     skin_tone: str,
     iris: str,
     skin_texture: SkinTexture | None,
+    appearance: Appearance | None = None,
 ) -> list[DrawnPart]:
     """The parts to draw (head frame, mm) with their colours: the Looks, or clay.
 
@@ -209,7 +211,14 @@ def portrait_parts(
     ambient occlusion (:func:`occlusion`; not a skin that carries a scan's
     texture, whose colours hold the scan's own shading), and the skin is
     refined once more.  The eyes are finer globes with painted vertices.
+    With an ``appearance`` (a case's colours) its tone, painted regions and
+    iris replace ``skin_tone`` and ``iris``, and its hair, brows, beard and
+    moustache are drawn as ribbons (:func:`workbench.services.grooming.hair_meshes`;
+    in clay too, as on a sculpted bust), after the occlusion: hair is not
+    shaded by it but darkens towards its roots.
     """
+    if appearance is not None:
+        skin_tone, iris = appearance.tone, appearance.iris
     meshes = {p: head.meshes[p] for p in PARTS if p in head.meshes}
     centres = np.asarray(head.eye_centres, float).reshape(-1, 3)
     gazes = None
@@ -224,6 +233,10 @@ def portrait_parts(
         looks = head_looks(
             others, None, regions=head.regions, tone=skin_tone, skin_texture=skin_texture
         )
+        if appearance is not None and skin_texture is None and "skin" in looks:
+            from workbench.services.appearance import skin_colours
+
+            looks["skin"] = replace(looks["skin"], vertex_srgb=skin_colours(head, appearance))
     drawn: dict[str, DrawnPart] = {}
     for name, mesh in meshes.items():
         normals = np.asarray(mesh.vertex_normals, float)
@@ -257,6 +270,18 @@ def portrait_parts(
     if "skin" in drawn:
         for _ in range(SKIN_LEVELS - 1):
             drawn["skin"] = _refined(drawn["skin"])
+    if appearance is not None and appearance.grooming:
+        from workbench.services.grooming import hair_meshes
+
+        for hair in hair_meshes(head, appearance):
+            n = hair.mesh.n_vertices
+            drawn[hair.kind] = DrawnPart(
+                hair.kind,
+                hair.mesh,
+                hair.normals,
+                hair.roughness if colour else CLAY_ROUGHNESS,
+                hair.srgb if colour else _solid(CLAY_SRGB, n),
+            )
     return list(drawn.values())
 
 

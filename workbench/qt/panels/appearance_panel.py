@@ -10,8 +10,11 @@ choice and not evidence; "Colour the face" (show the colours on the face
 layer, a view setting); the skin-tone preset and the iris colour; one box per
 region (skin, cheeks, around the eyes, brows, lips) with a swatch, hue (0-359°),
 saturation and value (0-100 %) sliders and "Follow the skin" (drop the
-colour set by hand: the region follows the base by its rule again); and
-"Remove colours" (the case keeps no colouring).
+colour set by hand: the region follows the base by its rule again; the hair's
+box has "Use the preset"); the hair, brows, beard and moustache styles of the
+library (:mod:`workbench.core.grooming`), under their own note that they are
+artistic additions, not evidence; and "Remove colours" (the case keeps no
+colouring).
 """
 
 from __future__ import annotations
@@ -35,7 +38,14 @@ from PySide6.QtWidgets import (
 )
 
 from workbench.core.appearance import IRIS_COLOURS, MONK_SCALE, SKIN_TONES
+from workbench.core.grooming import ARTISTIC_NOTE as GROOMING_NOTE
+from workbench.core.grooming import KINDS, LIBRARY, NONE
 from workbench.model.appearance import ARTISTIC_NOTE, REGION_TITLES, REGIONS, Appearance, Hsv
+
+#: what the dock calls each kind of hair
+KIND_TITLES = {"hair": "Hair", "brows": "Brows", "beard": "Beard", "moustache": "Moustache"}
+#: regions whose "follow" button goes back to a preset rather than to the skin
+PRESET_REGIONS = ("skin", "hair")
 
 #: slider ranges: hue in degrees, saturation and value in percent
 SCALES = {"h": 360, "s": 100, "v": 100}
@@ -85,11 +95,17 @@ class RegionBox(QGroupBox):
             grid.addWidget(slider, row, 2)
             grid.addWidget(value, row, 3)
             self.sliders[key], self.values[key] = slider, value
-        self.follow = QPushButton("Follow the skin" if region != "skin" else "Use the preset")
+        self.follow = QPushButton(
+            "Use the preset" if region in PRESET_REGIONS else "Follow the skin"
+        )
         self.follow.setToolTip(
             "Drop the colour set by hand: the region follows the skin tone by its rule"
-            if region != "skin"
-            else "Drop the base set by hand: the skin takes the preset chosen above"
+            if region not in PRESET_REGIONS
+            else (
+                "Drop the base set by hand: the skin takes the preset chosen above"
+                if region == "skin"
+                else "Drop the colour set by hand: the hair takes its preset (dark brown)"
+            )
         )
         grid.addWidget(self.follow, 3, 1, 1, 3)
         grid.setColumnStretch(2, 1)
@@ -139,6 +155,8 @@ class AppearancePanel(QWidget):
         "Follow the skin" (or "Use the preset") of a region.
     remove_requested()
         "Remove colours".
+    style_chosen(str, str)
+        A hair, brows, beard or moustache style picked: kind and style (``"none"``).
     """
 
     shown_toggled = Signal(bool)
@@ -147,6 +165,7 @@ class AppearancePanel(QWidget):
     colour_changed = Signal(str, object, bool)
     follow_requested = Signal(str)
     remove_requested = Signal()
+    style_chosen = Signal(str, str)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -169,6 +188,7 @@ class AppearancePanel(QWidget):
             box.follow.clicked.connect(lambda _c=False, r=region: self.follow_requested.emit(r))
             layout.addWidget(box)
             self.boxes[region] = box
+        layout.addWidget(self._build_styles())
         row = QHBoxLayout()
         self.remove = QPushButton("Remove colours")
         self.remove.setToolTip("The case keeps no colouring (the face is drawn plain)")
@@ -205,6 +225,31 @@ class AppearancePanel(QWidget):
         form.addRow("Iris", self.iris)
         return form
 
+    def _build_styles(self) -> QGroupBox:
+        group = QGroupBox("Hair and brows (artistic additions)")
+        form = QFormLayout(group)
+        note = QLabel(f"<i>{GROOMING_NOTE}</i>")
+        note.setWordWrap(True)
+        note.setObjectName("grooming_note")
+        form.addRow(note)
+        self.styles: dict[str, QComboBox] = {}
+        for kind in KINDS:
+            combo = QComboBox()
+            combo.setObjectName(f"style_{kind}")
+            combo.addItem("none", NONE)
+            for name, style in LIBRARY[kind].items():
+                combo.addItem(style.title, name)
+            combo.setToolTip(
+                f"{KIND_TITLES[kind]} grown on the face from its landmarks; follows builds, "
+                "age and expressions"
+            )
+            combo.activated.connect(
+                lambda i, k=kind, c=combo: self.style_chosen.emit(k, c.itemData(i))
+            )
+            form.addRow(KIND_TITLES[kind], combo)
+            self.styles[kind] = combo
+        return group
+
     def _moved(self, box: RegionBox, *, final: bool) -> None:
         box.show_values()
         dragging = any(s.isSliderDown() for s in box.sliders.values())
@@ -220,7 +265,9 @@ class AppearancePanel(QWidget):
         """Set every widget (signals blocked) to ``appearance`` (None: the defaults) with
         ``colours`` / ``rgb`` the colour each region is painted with."""
         look = appearance if appearance is not None else Appearance()
-        for combo, key in ((self.tone, look.tone), (self.iris, look.iris)):
+        pairs = [(self.tone, look.tone), (self.iris, look.iris)]
+        pairs += [(self.styles[k], look.style(k)) for k in KINDS]
+        for combo, key in pairs:
             blocked = combo.blockSignals(True)
             combo.setCurrentIndex(max(0, combo.findData(key)))
             combo.blockSignals(blocked)

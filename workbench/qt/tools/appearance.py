@@ -19,6 +19,15 @@ the face drawn is that skin in the input frame, vertex for vertex.  While a
 visible face shows them, the view's lower left corner says they are an
 artistic choice (:data:`VIEW_NOTE`).
 
+The hair, brows, beard and moustache the case chose are drawn on the
+``hair`` layer over the face as it is shown (the build slider's build
+included), grown once per head and style in a worker
+(:func:`workbench.services.grooming.head_grooming`) and rebuilt on the drawn
+skin :data:`HAIR_SETTLE_MS` after it stops moving.  For a light view every
+:data:`VIEW_STRIDE`-th strand of the scalp hair is drawn; portraits and
+exports draw them all.  They are artistic additions, not evidence (the dock
+and the layer's name say so).
+
 "Colour the face" is a view setting, not part of the case: whenever the
 case's colours change (an edit, undo, redo, another case) it is ticked if the
 case has colours and cleared if it has none; ticked by hand with no colours,
@@ -31,10 +40,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from PySide6.QtCore import QObject
+from PySide6.QtCore import QObject, QTimer
 
+from workbench.core.frame import apply_transform
 from workbench.model.appearance import REGIONS, Appearance, Hsv
 from workbench.render.visuals.face import add_colour_note, face_painted, paint_face
+from workbench.render.visuals.update import drawn_points, source_data
 from workbench.services import appearance as colouring
 
 if TYPE_CHECKING:
@@ -45,6 +56,10 @@ if TYPE_CHECKING:
 
 #: the caption in the 3D view while the face shows chosen colours
 VIEW_NOTE = "Face colours: an artistic choice, not evidence"
+#: the view draws every n-th strand of the scalp hair (a lighter scene)
+VIEW_STRIDE = 2
+#: the hair is rebuilt on a moved face once it has rested this long (ms)
+HAIR_SETTLE_MS = 150
 
 
 class AppearanceTool(QObject):
@@ -71,10 +86,18 @@ class AppearanceTool(QObject):
         scene: SceneView,
         host: Any,
         parent: QObject | None = None,
+        runner: Any = None,
     ) -> None:
         super().__init__(parent)
         self.panel, self.document, self.session = panel, document, session
-        self.scene, self.host = scene, host
+        self.scene, self.host, self.runner = scene, host, runner
+        #: what the hair layer was drawn for: (face actor, its points' time, fit, look)
+        self._hair_key: tuple[Any, ...] | None = None
+        self._growing: tuple[Any, ...] | None = None
+        self._hair_timer = QTimer(self)
+        self._hair_timer.setSingleShot(True)
+        self._hair_timer.setInterval(HAIR_SETTLE_MS)
+        self._hair_timer.timeout.connect(self.draw_hair)
         #: the colours previewed while a slider is dragged (not in the case yet)
         self.preview: Appearance | None = None
         self._weights: tuple[Any, dict[str, np.ndarray]] | None = None
@@ -86,6 +109,7 @@ class AppearanceTool(QObject):
         panel.colour_changed.connect(self.set_colour)
         panel.follow_requested.connect(lambda region: self.set_colour(region, None, True))
         panel.remove_requested.connect(self.remove)
+        panel.style_chosen.connect(self.set_style)
         document.case_replaced.connect(self._case_replaced)
         document.part_changed.connect(self._part_changed)
         session.fit_changed.connect(lambda _fit: self.paint())
@@ -153,6 +177,66 @@ class AppearanceTool(QObject):
         on = bool(actors) and face_painted(actors[0]) and bool(actors[0].GetVisibility())
         if bool(self.note.GetVisibility()) != on:
             self.note.SetVisibility(on)
+        if self._hair_wanted() != self._hair_key and not self._hair_timer.isActive():
+            self._hair_timer.start()
+
+    # ------------------------------------------------------------ hair
+    def _hair_wanted(self) -> tuple[Any, ...] | None:
+        """What the hair layer should be drawn for now (None: nothing to draw)."""
+        actors = self.scene.actors("face")
+        look, fit = self.appearance(), self.session.fit
+        if not actors or fit is None or look is None or not look.grooming:
+            return None
+        points = source_data(actors[0]).GetPoints()
+        hair_look = (look.grooming, look.colour("hair"), look.colour("brows"), look.tone)
+        return (actors[0], points.GetMTime() if points is not None else 0, fit, hair_look)
+
+    def draw_hair(self) -> None:
+        """Draw the chosen hair on the face as shown (grown in a worker the first time)."""
+        from workbench.services.grooming import grooming_ready, hair_meshes, head_grooming
+
+        wanted = self._hair_wanted()
+        if wanted is None:
+            if self.scene.has("hair"):
+                self.scene.show_hair([])
+            self._hair_key = None
+            return
+        fit, look = self.session.fit, self.appearance()
+        assert fit is not None and look is not None
+        head = fit.recon.head
+        if not grooming_ready(head, look):
+            if self.runner is None:
+                head_grooming(head, look)
+            else:
+                key = (head, look.grooming)
+                if self._growing != key:
+                    self._growing = key
+                    self.runner.submit(
+                        "hair",
+                        "Growing the hair and brows …",
+                        lambda: head_grooming(head, look),
+                        lambda _g: self._grown(),
+                        self._grow_failed,
+                    )
+                return
+        recon = fit.recon
+        shown = drawn_points(source_data(self.scene.actors("face")[0]))
+        skin = apply_transform(recon.input_to_head, shown)
+        rotation = np.linalg.inv(recon.input_to_head)[:3, :3]
+        pieces = [
+            (recon.mesh_to_input(hair.mesh), hair.srgb, hair.normals @ rotation.T)
+            for hair in hair_meshes(head, look, skin, stride=VIEW_STRIDE)
+        ]
+        self.scene.show_hair(pieces)
+        self._hair_key = wanted
+
+    def _grown(self) -> None:
+        self._growing = None
+        self.draw_hair()
+
+    def _grow_failed(self, exc: BaseException) -> None:
+        self._growing = None
+        self.host.status(f"The hair could not be placed: {exc}")
 
     def _show_panel(self) -> None:
         look = self.appearance()
@@ -205,6 +289,10 @@ class AppearanceTool(QObject):
             self.paint()
             return True
         return self._push(new, merge_key=region if colour is not None else "")
+
+    def set_style(self, kind: str, style: str) -> bool:
+        """Choose ``style`` (``"none"``: nothing) for ``kind`` (hair, brows, beard, moustache)."""
+        return self._push(self._current().with_style(kind, style))
 
     def remove(self) -> bool:
         """The case keeps no colours (the face is drawn plain)."""

@@ -134,6 +134,29 @@ def add_colour_note(plotter: Any, text: str) -> Any:
 HELD = (0.95, 0.55, 0.10)
 
 
+def add_hair(
+    plotter: Any, mesh: Mesh, srgb: np.ndarray, normals: np.ndarray, *, name: str = "hair"
+) -> Any:
+    """Hair ribbons (:func:`workbench.services.grooming.hair_meshes`, mapped to the view's
+    frame) in their sRGB colours per vertex, lit with their shading ``normals``, two-sided
+    and not pickable."""
+    poly = to_polydata(mesh)
+    poly.point_data["Normals"] = np.asarray(normals, float)
+    poly.point_data.active_normals_name = "Normals"
+    poly.point_data["srgb"] = np.asarray(srgb, np.uint8)
+    actor = plotter.add_mesh(
+        poly,
+        scalars="srgb",
+        rgb=True,
+        pickable=False,
+        render=False,
+        name=name,
+        specular=0.15,
+        **SMOOTH,
+    )
+    return actor
+
+
 def add_held_face(plotter: Any, mesh: Mesh, *, name: str = "layer_held") -> Any:
     """A refit the window held back, drawn as a faint amber ghost over the face shown
     (its opacity is the layer's)."""
