@@ -114,3 +114,41 @@ def test_a_missing_head_is_named(tmp_path: Path, capsys) -> None:
 def test_the_command_knows_the_renderers_views_and_limits() -> None:
     assert portrait_cmd.VIEWS == portrait.VIEWS
     assert portrait_cmd.SIZE_LIMITS == portrait.SIZE_LIMITS
+
+
+def test_hair_options_and_the_case_appearance(tmp_path: Path, head_female, capsys) -> None:
+    """``--hair``/``--brows`` draw pieces of the library, said to be artistic additions; a
+    folder whose case.fcase keeps an appearance is drawn in it, the options changing it."""
+    out = tmp_path / "groomed"
+    args = ["portrait", "reference:female", "--out", str(out), "--size", "256"]
+    assert main([*args, "--views", "profile", "--hair", "long", "--brows", "thin"]) == 0
+    said = capsys.readouterr().out
+    assert "hair long, brows thin: artistic additions, not evidence" in said
+    summary = json.loads((out / "portrait.json").read_text())
+    assert summary["artistic_additions"]["hair_and_brows"] == {"hair": "long", "brows": "thin"}
+    assert "not evidence" in summary["artistic_additions"]["note"]
+    text = Image.open(out / "portrait_profile.png").text  # type: ignore[attr-defined]
+    assert "hair long" in text["Comment"] and "not evidence" in text["Comment"]
+    # a reconstruction folder's case keeps an appearance: it is used, options change it
+    from argparse import Namespace
+
+    from workbench.io.case_file import save_case
+    from workbench.model.appearance import Appearance
+    from workbench.model.case import Case
+
+    folder = tmp_path / "recon"
+    folder.mkdir()
+    kept = Appearance(tone="mst9", iris="green", grooming={"beard": "full"})
+    save_case(Case(appearance=kept), folder / "case.fcase")
+    none = {k: None for k in ("hair", "brows", "beard", "moustache")}
+    options = Namespace(head=str(folder), skin_tone=None, iris=None, **none)
+    assert portrait_cmd.chosen_appearance(options) == kept
+    options.iris, options.beard, options.hair = "blue", "none", "buzz"
+    changed = portrait_cmd.chosen_appearance(options)
+    assert changed is not None and changed.iris == "blue" and changed.tone == "mst9"
+    assert dict(changed.grooming) == {"hair": "buzz"}
+    plain = Namespace(head="reference:male", skin_tone="mst2", iris=None, **none)
+    assert portrait_cmd.chosen_appearance(plain) is None
+    with pytest.raises(SystemExit) as stopped:
+        main([*args, "--hair", "mohawk"])
+    assert stopped.value.code == 2 and "invalid choice: 'mohawk'" in capsys.readouterr().err

@@ -148,3 +148,39 @@ def test_the_menu_opens_the_portrait_of_the_fitted_face_and_saves(fitted, tmp_pa
     assert Image.open(out / "portrait_profile.tif").size == (400, 400)
     assert not window.errors, window.errors
     dialog.close()
+
+
+def test_the_case_appearance_with_hair_is_drawn_by_default(qtbot, head_male) -> None:
+    """A case with an appearance (Appearance dock): the dialog draws its colours and hair;
+    unticked, the dialog's own tone and iris apply again, without the hair."""
+    from workbench.model.appearance import Appearance
+    from workbench.qt.portrait_dialog import open_portrait
+
+    look = Appearance(tone="mst8", iris="blue", grooming={"hair": "buzz", "brows": "thick"})
+    host = _Host(qtbot, head_male)
+    host.document = SimpleNamespace(path=None, case=SimpleNamespace(appearance=look))
+    dialog = open_portrait(host)
+    assert dialog is not None
+    qtbot.addWidget(dialog)
+    assert dialog.case_look.isChecked() and not dialog.skin_tone.isEnabled()
+    portrait = dialog.portrait
+    assert portrait.skin_tone == "mst8" and portrait.iris == "blue"
+    assert dict(portrait.grooming) == {"hair": "buzz", "brows": "thick"}
+    with_hair = portrait.images["profile"].astype(int)
+    dialog.case_look.setChecked(False)
+    assert dialog.skin_tone.isEnabled() and dialog.portrait.grooming == ()
+    bare = dialog.portrait.images["profile"].astype(int)
+    # the top of the head is darker with hair (the dark brown preset) than bare skin
+    top = slice(0, with_hair.shape[0] // 3)
+    assert with_hair[top].mean() < bare[top].mean() - 5.0
+    assert not host.errors
+
+
+def test_without_a_case_appearance_the_option_is_off(qtbot, head_male) -> None:
+    from workbench.qt.portrait_dialog import open_portrait
+
+    host = _Host(qtbot, head_male)
+    dialog = open_portrait(host)
+    qtbot.addWidget(dialog)
+    assert not dialog.case_look.isEnabled() and not dialog.case_look.isChecked()
+    assert dialog.options()["appearance"] is None

@@ -14,6 +14,13 @@ the skin tone and the iris are defaults the user picks, not evidence, and
 ``--no-colour`` draws the head in a neutral clay that claims no colour.  A
 fit-scan pack's own skin texture (its colour atlas) is used for the skin when
 HEAD holds one, unless ``--no-colour``.
+
+A reconstruction folder whose ``case.fcase`` keeps an appearance (colours,
+iris, hair and brows chosen in the window's Appearance dock) is drawn in it;
+``--skin-tone``, ``--iris``, ``--hair``, ``--brows``, ``--beard`` and
+``--moustache`` change single choices (``none`` removes a piece).  Hair,
+brows and beard are artistic additions, not evidence, and ``portrait.json``
+and each picture's metadata say so.
 """
 
 from __future__ import annotations
@@ -25,10 +32,12 @@ from typing import TYPE_CHECKING
 
 from workbench.cli.common import add_force_option
 from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
+from workbench.core.grooming import KINDS, style_names
 from workbench.pipelines.outcome import JobOutcome
 
 if TYPE_CHECKING:
     from workbench.core.appearance import SkinTexture
+    from workbench.model.appearance import Appearance
     from workbench.model.template import TemplateHead
 
 #: the views and the size limits (also in :mod:`workbench.render.portrait`, which the
@@ -72,16 +81,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--skin-tone",
         choices=list(SKIN_TONES),
-        default=DEFAULT_SKIN_TONE,
+        default=None,
         help="the skin's colour, a Monk Skin Tone swatch (mst1-mst10; light, medium and dark "
-        "are mst3, mst6, mst9); an artistic default, not evidence (default: %(default)s)",
+        "are mst3, mst6, mst9); an artistic default, not evidence (default: the case's, else "
+        f"{DEFAULT_SKIN_TONE})",
     )
     p.add_argument(
         "--iris",
         choices=list(IRIS_COLOURS),
-        default=DEFAULT_IRIS,
-        help="the iris colour painted on the eyes (default: %(default)s)",
+        default=None,
+        help=f"the iris colour painted on the eyes (default: the case's, else {DEFAULT_IRIS})",
     )
+    for kind in KINDS:
+        p.add_argument(
+            f"--{kind}",
+            choices=list(style_names(kind)),
+            default=None,
+            metavar="STYLE",
+            help=f"{kind} style: {', '.join(style_names(kind))} (an artistic addition, not "
+            "evidence; default: the case's, else none)",
+        )
     p.add_argument(
         "--views",
         default=",".join(VIEWS),
@@ -106,6 +125,37 @@ def _skin_texture(spec: str, head: TemplateHead) -> SkinTexture | None:
     return None
 
 
+def case_appearance(spec: str) -> Appearance | None:
+    """The appearance kept in a reconstruction folder's ``case.fcase``, if it has one."""
+    if spec.startswith("reference:"):
+        return None
+    path = Path(spec) / "case.fcase"
+    if not path.is_file():
+        return None
+    from workbench.io.case_file import load_case
+
+    return load_case(path).case.appearance
+
+
+def chosen_appearance(args: argparse.Namespace) -> Appearance | None:
+    """The case's appearance with the options' changes; None when neither gives one
+    (then the plain ``--skin-tone`` / ``--iris`` defaults apply, as before)."""
+    from workbench.model.appearance import Appearance
+
+    base = case_appearance(str(args.head))
+    styles = {k: getattr(args, k) for k in KINDS if getattr(args, k) is not None}
+    if base is None and not styles:
+        return None
+    look = base if base is not None else Appearance()
+    if args.skin_tone is not None:
+        look = look.with_tone(args.skin_tone)
+    if args.iris is not None:
+        look = look.replaced(iris=args.iris)
+    for kind, style in styles.items():
+        look = look.with_style(kind, style)
+    return look
+
+
 def run(args: argparse.Namespace) -> JobOutcome:
     """Render and write the portrait folder; its key figures as values."""
     from workbench.cli.animate_cmd import load_head
@@ -118,6 +168,11 @@ def run(args: argparse.Namespace) -> JobOutcome:
     head, _frame, inputs = load_head(args.head)
     check_output_folder(args.out, inputs, args.force)  # before the rendering
     texture = _skin_texture(str(args.head), head) if args.colour else None
+    appearance = chosen_appearance(args)
+    skin_tone = args.skin_tone or DEFAULT_SKIN_TONE
+    iris = args.iris or DEFAULT_IRIS
+    if appearance is not None:
+        skin_tone, iris = appearance.tone, appearance.iris
     loaded = time.perf_counter() - t0
     saved = save_portrait(
         head,
@@ -128,17 +183,21 @@ def run(args: argparse.Namespace) -> JobOutcome:
         views=views,
         size=size,
         colour=args.colour,
-        skin_tone=args.skin_tone,
-        iris=args.iris,
+        skin_tone=skin_tone,
+        iris=iris,
         skin_texture=texture,
+        appearance=appearance,
     )
     seconds = saved.summary["seconds"]
     look = (
         "clay, no colour"
         if not args.colour
-        else ("the scan's skin texture" if texture is not None else f"{args.skin_tone} skin")
-        + f", {args.iris} iris"
+        else ("the scan's skin texture" if texture is not None else f"{skin_tone} skin")
+        + f", {iris} iris"
     )
+    if appearance is not None and appearance.grooming:
+        styles = ", ".join(f"{k} {v.replace('_', ' ')}" for k, v in appearance.grooming)
+        look += f"; {styles}: artistic additions, not evidence"
     print(
         f"wrote {args.out}: {len(views)} views ({', '.join(views)}) at {size} x {size} px, "
         f"PNG and TIFF, 300 dpi ({look}); rendered in {seconds.get('render', 0.0):.1f} s. "
@@ -150,6 +209,9 @@ def run(args: argparse.Namespace) -> JobOutcome:
             "views": len(views),
             "size_px": size,
             "colour": bool(args.colour),
+            "hair_and_brows": ", ".join(f"{k} {v}" for k, v in appearance.grooming)
+            if appearance is not None
+            else "",
             "load_s": round(loaded, 2),
             "render_s": round(float(seconds.get("render", 0.0)), 2),
             "write_s": round(float(seconds.get("write", 0.0)), 2),

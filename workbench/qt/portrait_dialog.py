@@ -3,7 +3,9 @@
 :class:`PortraitDialog` shows the front, three-quarter and profile portraits
 of the current case's reconstruction (the fitted head, in its head frame),
 drawn by :func:`workbench.render.portrait.make_portrait` at a preview size
-(:data:`PREVIEW_PX`) with colour on or off, a skin tone and an iris colour.
+(:data:`PREVIEW_PX`) with colour on or off and, by default, the case's own
+appearance (the Appearance dock's skin colours, iris, hair, brows and beard;
+"Case's appearance"), else a skin tone and an iris colour picked here.
 *Save…* asks for a new folder and writes the full-size pictures (PNG and
 TIFF, :data:`SAVE_PX` pixels, 300 dpi) and ``portrait.json`` through
 :func:`workbench.render.portrait.save_portrait`, the function behind
@@ -40,6 +42,7 @@ from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLO
 from workbench.core.errors import InputError, WorkbenchError
 
 if TYPE_CHECKING:
+    from workbench.model.appearance import Appearance
     from workbench.model.template import TemplateHead
     from workbench.render.portrait import Portrait, SavedPortrait
 
@@ -121,8 +124,22 @@ class PortraitDialog(QDialog):
         self.iris = QComboBox()
         self.iris.addItems(list(IRIS_COLOURS))
         self.iris.setCurrentText(DEFAULT_IRIS)
+        self.case_look = QCheckBox("Case's &appearance")
+        self.case_look.setObjectName("portrait_case_appearance")
+        chosen = self.appearance_of_case()
+        self.case_look.setEnabled(chosen is not None)
+        self.case_look.setChecked(chosen is not None)
+        self.case_look.setToolTip(
+            "The colours, iris, hair and brows chosen in the Appearance dock"
+            if chosen is not None
+            else "The case has no appearance yet: choose one in the Appearance dock"
+        )
+        if chosen is not None:
+            self.skin_tone.setCurrentText(chosen.tone)
+            self.iris.setCurrentText(chosen.iris)
         options = QHBoxLayout()
         options.addWidget(self.colour)
+        options.addWidget(self.case_look)
         for title, box in (("&Skin tone", self.skin_tone), ("&Iris", self.iris)):
             label = QLabel(title)
             label.setBuddy(box)
@@ -145,18 +162,34 @@ class PortraitDialog(QDialog):
         layout.addLayout(options)
         layout.addWidget(note)
         layout.addWidget(buttons)
-        self.colour.toggled.connect(self.skin_tone.setEnabled)
-        self.colour.toggled.connect(self.iris.setEnabled)
+        self.colour.toggled.connect(self._enable)
+        self.case_look.toggled.connect(self._enable)
+        self._enable()
         self.colour.toggled.connect(self.refresh)
+        self.case_look.toggled.connect(self.refresh)
         self.skin_tone.currentTextChanged.connect(self.refresh)
         self.iris.currentTextChanged.connect(self.refresh)
 
+    def appearance_of_case(self) -> Appearance | None:
+        """The case's chosen appearance (the Appearance dock), or None."""
+        document = getattr(self.host, "document", None)
+        case = getattr(document, "case", None)
+        return getattr(case, "appearance", None)
+
+    def _enable(self, *_args: Any) -> None:
+        """Tone and iris are picked here only with colour and without the case's appearance."""
+        own = self.colour.isChecked() and not self.case_look.isChecked()
+        self.skin_tone.setEnabled(own)
+        self.iris.setEnabled(own)
+
     def options(self) -> dict[str, Any]:
         """The choices as :func:`~workbench.render.portrait.make_portrait` options."""
+        chosen = self.appearance_of_case() if self.case_look.isChecked() else None
         return {
             "colour": self.colour.isChecked(),
             "skin_tone": self.skin_tone.currentText(),
             "iris": self.iris.currentText(),
+            "appearance": chosen,
         }
 
     def refresh(self) -> bool:
