@@ -134,3 +134,35 @@ def test_styles_are_case_edits_drawn_on_the_face(window, qtbot) -> None:
     window.redo()
     _settled(window, qtbot)
     assert len(window.scene.actors("hair")) == 1
+
+
+def test_the_age_dock_shows_the_hair_on_both_heads(window, qtbot) -> None:
+    """The case's hair on the source and the aged reconstruction: the same strands, tied to
+    the skin, so the aged head's hair sits on its own (smaller) head."""
+    panel = window.appearance_panel
+    if window.document.case.appearance is None or not window.document.case.appearance.grooming:
+        _choose(panel.styles["hair"], "short")
+    window.show_age(to_age=8, reconstructed=True)
+    qtbot.waitUntil(lambda: window.age.shown_age == 8, timeout=300_000)
+
+    def drawn() -> bool:
+        keys = window.age.actors()
+        return any(k.startswith("after_hair_") for k in keys) and any(
+            k.startswith("before_hair_") for k in keys
+        )
+
+    qtbot.waitUntil(drawn, timeout=60_000)
+    actors = window.age.actors()
+    before = drawn_points(source_data(actors["before_hair_hair"]))
+    after = drawn_points(source_data(actors["after_hair_hair"]))
+    assert before.shape == after.shape
+    # an 8-year-old's head is smaller: the aged hair spans less than the adult's
+    assert np.ptp(after[:, 1]) < np.ptp(before[:, 1])
+    assert window.age.actors()["after_hair_hair"].GetVisibility()
+    try:
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        window.scene.request_render()
+        qtbot.waitUntil(lambda: not window.scene.render_queued, timeout=20_000)
+        window.save_screenshot(SHOTS / "hair_in_age_dock.png")
+    except OSError:
+        pass

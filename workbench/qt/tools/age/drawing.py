@@ -6,6 +6,12 @@ the heads, their eyes (painted with an iris and pupil) and the caption in the 3D
 The aged skin has the source's vertices and triangles, so it is built once and its
 points are moved in place for each age; so are the aged eyes, drawn from the source's.
 
+When the source is the case's reconstruction and the case chose hair, brows or
+a beard (the Appearance dock), they are drawn on both heads: the same strands,
+tied to the skin, so the aged head shows them on its grown or aged face
+(:func:`workbench.services.grooming.hair_meshes` with the aged skin; grown in
+a worker the first time).  They are artistic additions, not evidence.
+
 Units mm, each head in its own Frankfort frame; the actors are the tool's own, not
 :data:`workbench.qt.scene.LAYERS`.  How the heads look is
 :mod:`workbench.render.visuals.heads`; this part decides when they are drawn and
@@ -21,12 +27,16 @@ import numpy as np
 from workbench.render.visuals import heads, update
 
 if TYPE_CHECKING:
+    from workbench.model.appearance import Appearance
     from workbench.qt.panels.age_panel import AgePanel
     from workbench.qt.scene import SceneView
     from workbench.qt.tools.age.work import AgeSettings, AgeStep, SourceHead
 
 #: space between the two heads side by side (mm)
 GAP_MM = 40.0
+#: every n-th strand of the scalp hair is drawn in the dock (1: all; the heads here have no
+#: painted scalp under the hair, so a thinned preview would show bare skin between strands)
+HAIR_STRIDE = 1
 
 
 class AgeDrawing:
@@ -42,6 +52,9 @@ class AgeDrawing:
     camera_pending: bool
     _actors: dict[str, Any]
     _caption: Any
+    runner: Any
+    document: Any
+    _hair_growing: Any = None
 
     def settings(self) -> AgeSettings:
         raise NotImplementedError  # the tool's: the panel's choices
@@ -119,8 +132,59 @@ class AgeDrawing:
             )
         actor.SetVisibility(self.active and step is not None)
         self._draw_aged_eyes(rebuild)
+        self._draw_hair()
         self._update_caption()
         self.scene.request_render()
+
+    # ------------------------------------------------------------ hair
+    def hair_look(self) -> Appearance | None:
+        """The case's appearance when the source is its reconstruction and hair was chosen."""
+        source, document = self.source, self.document
+        look = document.case.appearance if document is not None else None
+        if source is None or source.key != "fit" or look is None or not look.grooming:
+            return None
+        return look
+
+    def _draw_hair(self) -> None:
+        """The case's hair on the source head (not in the overlay) and the aged head."""
+        from workbench.render.visuals.face import add_hair
+        from workbench.services.grooming import grooming_ready, hair_meshes, head_grooming
+
+        for key in [k for k in self._actors if "_hair_" in k]:
+            self.plotter.remove_actor(self._actors.pop(key), render=False)
+        source, look, step = self.source, self.hair_look(), self.step
+        if source is None or look is None or self.scene.closed:
+            return
+        head = source.head
+        if not grooming_ready(head, look):
+            growing = (head, look.grooming)
+            if self._hair_growing != growing:
+                self._hair_growing = growing
+                self.runner.submit(
+                    "age_hair",
+                    "Growing the hair and brows …",
+                    lambda: head_grooming(head, look),
+                    lambda _g: self._hair_grown(),
+                    lambda _exc: self._hair_grown(failed=True),
+                )
+            return
+        skins: dict[str, np.ndarray] = {}
+        if self.panel.mode() != "overlay":
+            skins["before"] = head.skin.vertices + self.offset()
+        if step is not None:
+            skins["after"] = step.result.head.skin.vertices
+        for which, vertices in skins.items():
+            for piece in hair_meshes(head, look, vertices, stride=HAIR_STRIDE):
+                name = f"{which}_hair_{piece.kind}"
+                actor = add_hair(self.plotter, piece.mesh, piece.srgb, piece.normals, name=name)
+                actor.SetVisibility(self.active)
+                self._actors[name] = actor
+
+    def _hair_grown(self, failed: bool = False) -> None:
+        self._hair_growing = None
+        if not failed:
+            self._draw_hair()
+            self.scene.request_render()
 
     def _draw_aged_eyes(self, rebuild: bool) -> None:
         """The aged head's eyes: drawn from the source's painted eyes once, then moved in

@@ -375,6 +375,10 @@ class AgeTool(QObject, AgeDrawing):
         self.panel.show_case_note(f"The case keeps an age study: {study_text(study)}.")
 
     def _part_changed(self, part: str) -> None:
+        if part == "appearance":  # the hair chosen for the face: on both heads
+            self._draw_hair()
+            self.scene.request_render()
+            return
         if part != "age_study" or self.document is None:
             return
         study = self.document.case.age_study
