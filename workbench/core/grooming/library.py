@@ -77,15 +77,15 @@ def _styles(*styles: Style) -> dict[str, Style]:
 
 
 HAIR = _styles(
-    Style("hair", "buzz", "Buzz cut", 0.6, (3.0, 5.0), (0.3, 0.9), 0.4, segments=3,
+    Style("hair", "buzz", "Buzz cut", 0.35, (3.0, 5.0), (0.3, 0.9), 0.55, segments=2,
           comb=(0.6, 1.0, 0.0), hug=0.3),
-    Style("hair", "short", "Short", 0.28, (18.0, 32.0), (1.0, 5.0), 1.3, gravity=0.004,
-          segments=8, comb=(0.5, 1.0, 0.4), shape={"part": 25.0, "taper": 0.45}, hug=1.0),
-    Style("hair", "medium", "Medium (over the ears)", 0.25, (70.0, 120.0), (2.0, 9.0), 1.5,
-          gravity=0.012, segments=14, comb=(0.8, 0.6, 0.5), shape={"part": 25.0, "taper": 0.8,
+    Style("hair", "short", "Short", 0.2, (18.0, 32.0), (1.0, 5.0), 1.6, gravity=0.004,
+          segments=6, comb=(0.5, 1.0, 0.4), shape={"part": 25.0, "taper": 0.45}, hug=1.0),
+    Style("hair", "medium", "Medium (over the ears)", 0.18, (70.0, 120.0), (2.0, 9.0), 1.8,
+          gravity=0.012, segments=10, comb=(0.8, 0.6, 0.5), shape={"part": 25.0, "taper": 0.8,
           "hang_gravity": 0.06, "back": 0.8}, hug=2.0),
-    Style("hair", "long", "Long (to the shoulders)", 0.25, (150.0, 260.0), (2.0, 10.0), 1.5,
-          gravity=0.02, segments=24, comb=(0.9, 0.5, 0.4), shape={"part": 0.0,
+    Style("hair", "long", "Long (to the shoulders)", 0.18, (150.0, 260.0), (2.0, 10.0), 1.8,
+          gravity=0.02, segments=14, comb=(0.9, 0.5, 0.4), shape={"part": 0.0,
           "hang_gravity": 0.06, "back": 0.8}, hug=2.5),
     Style("hair", "bald_pattern", "Bald pattern (horseshoe)", 0.3, (10.0, 18.0), (0.8, 3.0),
           1.1, gravity=0.004, segments=6, comb=(1.0, 0.6, 0.0), shape={"crown": 0.42},
@@ -104,12 +104,12 @@ BROWS = _styles(
           shape={"arch": 2.0, "thick": 0.55, "tail": 2.5}, hug=0.2),
 )  # fmt: skip
 BEARDS = _styles(
-    Style("beard", "stubble", "Stubble", 1.6, (0.8, 1.8), (0.05, 0.2), 0.12, segments=2,
+    Style("beard", "stubble", "Stubble", 1.1, (0.8, 1.8), (0.05, 0.2), 0.14, segments=2,
           comb=(1.0, 0.0, 0.0), tip_width=0.6, hug=0.2),
-    Style("beard", "short", "Short beard", 0.8, (5.0, 9.0), (0.4, 2.0), 0.35, segments=4,
+    Style("beard", "short", "Short beard", 0.55, (5.0, 9.0), (0.4, 2.0), 0.42, segments=3,
           comb=(1.0, 0.0, 0.0), hug=1.0),
-    Style("beard", "full", "Full beard", 0.6, (16.0, 28.0), (1.0, 6.0), 0.6, gravity=0.01,
-          segments=7, comb=(1.0, -0.2, 0.0), hug=4.0),
+    Style("beard", "full", "Full beard", 0.45, (16.0, 28.0), (1.0, 6.0), 0.7, gravity=0.01,
+          segments=6, comb=(1.0, -0.2, 0.0), hug=4.0),
     Style("beard", "goatee", "Goatee", 0.8, (6.0, 12.0), (0.5, 2.5), 0.35, segments=4,
           comb=(1.0, 0.0, 0.0), shape={"goatee": 1.0}, hug=1.5),
 )  # fmt: skip
