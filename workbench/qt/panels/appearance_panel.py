@@ -7,14 +7,14 @@ colours the face layer and hands the colours back through
 
 The dock shows, top to bottom: the note that the colours are an artistic
 choice and not evidence; "Colour the face" (show the colours on the face
-layer, a view setting); the skin-tone preset and the iris colour; one box per
-region (skin, cheeks, around the eyes, brows, lips) with a swatch, hue (0-359°),
-saturation and value (0-100 %) sliders and "Follow the skin" (drop the
-colour set by hand: the region follows the base by its rule again; the hair's
-box has "Use the preset"); the hair, brows, beard and moustache styles of the
-library (:mod:`workbench.core.grooming`), under their own note that they are
-artistic additions, not evidence; and "Remove colours" (the case keeps no
-colouring).
+layer, a view setting); the skin-tone preset and the iris colour; the hair,
+brows, beard and moustache styles of the library (:mod:`workbench.core.grooming`),
+under their own note that they are artistic additions, not evidence; one box per
+region (skin, cheeks, around the eyes, brows, lips, hair and beard) with a
+swatch, hue (0-359°), saturation and value (0-100 %) sliders and "Follow the
+skin" (drop the colour set by hand: the region follows the base by its rule
+again; the skin's and the hair's boxes have "Use the preset"); and "Remove
+colours" (the case keeps no colouring).
 """
 
 from __future__ import annotations
@@ -179,6 +179,7 @@ class AppearancePanel(QWidget):
         self.shown.toggled.connect(self.shown_toggled)
         layout.addWidget(self.shown)
         layout.addLayout(self._build_presets())
+        layout.addWidget(self._build_styles())
         self.boxes: dict[str, RegionBox] = {}
         for region in REGIONS:
             box = RegionBox(region)
@@ -188,7 +189,6 @@ class AppearancePanel(QWidget):
             box.follow.clicked.connect(lambda _c=False, r=region: self.follow_requested.emit(r))
             layout.addWidget(box)
             self.boxes[region] = box
-        layout.addWidget(self._build_styles())
         row = QHBoxLayout()
         self.remove = QPushButton("Remove colours")
         self.remove.setToolTip("The case keeps no colouring (the face is drawn plain)")
