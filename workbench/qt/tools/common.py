@@ -19,21 +19,48 @@ class CaseLayersAside:
 
     The age and animate tools draw heads in their own head frame, not the specimen's: the
     two are never shown together (issue 33: the tools' heads stayed on screen after).
+
+    Every tool of one view shares one record (kept on the scene): the layers are hidden
+    when the first tool comes to the front and shown again only when the last one has
+    left.  Two tools switching places (one tab to another) may report in either order; a
+    tool leaving after the next one came must not bring the case's face back under the
+    next tool's head.
     """
 
     def __init__(self, scene: Any) -> None:
         self.scene = scene
-        self.hidden: list[str] = []
+
+    def _shared(self) -> tuple[set[int], list[str]]:
+        record = getattr(self.scene, "_case_layers_aside", None)
+        if record is None:
+            record = (set(), [])
+            self.scene._case_layers_aside = record
+        return record
+
+    @property
+    def hidden(self) -> list[str]:
+        """The layers this view's tools have hidden (shown again when the last one leaves)."""
+        return self._shared()[1]
 
     def set_aside(self, aside: bool) -> None:
         scene = self.scene
+        owners, hidden = self._shared()
         if aside:
+            first = not owners
+            owners.add(id(self))
+            if not first:
+                return
             for layer, visible in scene.visible.items():
                 if visible and scene.has(layer):
                     scene.set_visible(layer, False)
-                    self.hidden.append(layer)
+                    hidden.append(layer)
             return
-        for layer in self.hidden:  # unless the user showed or hid it meanwhile
+        if id(self) not in owners:
+            return
+        owners.discard(id(self))
+        if owners:
+            return  # another tool with heads of its own is still in front
+        for layer in hidden:  # unless the user showed or hid it meanwhile
             if not scene.visible.get(layer, True):
                 scene.set_visible(layer, True)
-        self.hidden.clear()
+        hidden.clear()
