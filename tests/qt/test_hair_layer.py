@@ -139,9 +139,7 @@ def test_styles_are_case_edits_drawn_on_the_face(window, qtbot) -> None:
 def test_the_age_dock_shows_the_hair_on_both_heads(window, qtbot) -> None:
     """The case's hair on the source and the aged reconstruction: the same strands, tied to
     the skin, so the aged head's hair sits on its own (smaller) head."""
-    panel = window.appearance_panel
-    if window.document.case.appearance is None or not window.document.case.appearance.grooming:
-        _choose(panel.styles["hair"], "short")
+    _choose(window.appearance_panel.styles["hair"], "short")
     window.show_age(to_age=8, reconstructed=True)
     qtbot.waitUntil(lambda: window.age.shown_age == 8, timeout=300_000)
 
@@ -166,3 +164,39 @@ def test_the_age_dock_shows_the_hair_on_both_heads(window, qtbot) -> None:
         window.save_screenshot(SHOTS / "hair_in_age_dock.png")
     except OSError:
         pass
+
+
+def test_the_animate_dock_moves_the_hair_with_the_face(window, qtbot) -> None:
+    """The case's reconstruction animated: its beard and brows are drawn and move with the
+    skin (an open jaw carries the beard down), the scalp hair stays on the skull."""
+    from workbench.qt.panels.animate_panel import RECONSTRUCTION
+
+    panel = window.appearance_panel
+    _choose(panel.styles["hair"], "short")
+    _choose(panel.styles["beard"], "short")
+    window.animate_panel.head.setCurrentText(RECONSTRUCTION)
+    window.show_animate()
+    qtbot.waitUntil(lambda: window.animate.sex == "reconstruction", timeout=120_000)
+    qtbot.waitUntil(
+        lambda: "hair_beard" in window.animate.actors() and not window.busy, timeout=60_000
+    )
+    tool = window.animate
+
+    def points(kind: str) -> np.ndarray:
+        return drawn_points(source_data(tool.actors()[f"hair_{kind}"]))
+
+    beard, hair = points("beard"), points("hair")
+    tool.set_jaw(15.0)
+    qtbot.waitUntil(lambda: not tool.running, timeout=60_000)
+    moved_beard = np.linalg.norm(points("beard") - beard, axis=1)
+    moved_hair = np.linalg.norm(points("hair") - hair, axis=1)
+    assert np.quantile(moved_beard, 0.9) > 3.0  # the chin went down with the jaw
+    assert np.median(moved_hair) < 0.5
+    assert tool.actors()["hair_beard"].GetVisibility()
+    try:
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        window.save_screenshot(SHOTS / "hair_in_animate_dock.png")
+    except OSError:
+        pass
+    window.docks["appearance"].raise_()
+    qtbot.waitUntil(lambda: not tool.actors()["hair_beard"].GetVisibility(), timeout=10_000)

@@ -103,6 +103,19 @@ def set_input_points(actor: Any, points: np.ndarray, first: int = 0) -> None:
     data.GetPoints().Modified()
 
 
+def set_points_and_normals(actor: Any, points: np.ndarray, normals: np.ndarray) -> None:
+    """Overwrite the points and point normals of ``actor``'s :func:`source_data` (any
+    mapper pipeline, e.g. per-vertex colours) with ``points`` and ``normals`` given by the
+    caller: nothing is recomputed (hair ribbons carry their own shading normals)."""
+    data = source_data(actor)
+    set_array(data.GetPoints().GetData(), points)
+    data.GetPoints().Modified()
+    vtk_normals = data.GetPointData().GetNormals()
+    if vtk_normals is not None:
+        set_array(vtk_normals, normals)
+    data.Modified()
+
+
 def set_surface_points(actor: Any, points: np.ndarray, faces: np.ndarray, vf: Any = None) -> None:
     """Move a surface actor's polydata points (and its normals) in place.
 

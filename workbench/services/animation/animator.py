@@ -663,6 +663,11 @@ class Animator:
         """Triangles as stored: wound the other way for a head stored mirrored."""
         return mesh.faces[:, ::-1] if self._mirrored else mesh.faces
 
+    def to_shown(self, points: np.ndarray) -> np.ndarray:
+        """Points ``(k, 3)`` of the Frankfort head frame (:attr:`head`'s) in the frame the
+        skin is shown and stored in (the head's own, mm)."""
+        return self._out(np.asarray(points, float))
+
     def skin(self, *, exact: bool = True) -> Mesh:
         """The current skin as shown (:meth:`visible`; mm, in the head's own frame)."""
         return Mesh(self._out(self.visible(exact=exact)), self._faces_out(self.head.skin))

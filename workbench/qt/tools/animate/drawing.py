@@ -5,6 +5,12 @@
 frame moves the points (and normals) of the existing actors, never re-adds one.
 :func:`load_animator` is the worker's part (no Qt, no VTK).
 
+When the head is the case's reconstruction and the case chose hair, brows or a beard
+(the Appearance dock), they are drawn on it and move with every frame: the strands are
+tied to the skin (:func:`workbench.services.grooming.hair_meshes` on the frame's skin,
+every :data:`HAIR_STRIDE`-th scalp strand; grown in a worker the first time).  They are
+artistic additions, not evidence.
+
 Units mm, the head's own frame (Frankfort: x to the subject's left, y up, z toward the
 face).  How the head looks is :mod:`workbench.render.visuals.heads`; this part decides
 when it is drawn, which parts are visible, and removes the actors.
@@ -12,6 +18,7 @@ when it is drawn, which parts are visible, and removes the actors.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,6 +26,7 @@ import numpy as np
 from workbench.render.visuals import heads, update
 
 if TYPE_CHECKING:
+    from workbench.model.appearance import Appearance
     from workbench.qt.panels.animate_panel import AnimatePanel
     from workbench.qt.scene import SceneView
     from workbench.services.animation.animator import Animator
@@ -26,6 +34,9 @@ if TYPE_CHECKING:
 #: parts drawn under the skin (the "Skull and teeth" check box); the eyes are always shown
 INNER_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth")
 ALWAYS_SHOWN = ("eyes",)
+#: every n-th strand of the scalp hair is drawn (each frame rebuilds the ribbons: ~60 ms for
+#: short hair, brows and a beard at 2, twice that at 1)
+HAIR_STRIDE = 2
 #: parts moved with the jaw, and the parts the gaze turns
 JAW_MOVED = ("mandible", "lower_teeth", "tongue")
 GAZE_MOVED = ("eyes",)
@@ -53,6 +64,10 @@ class AnimateDrawing:
     _vf: dict[str, Any]
     _jaw_drawn: float
     _gaze_drawn: tuple[float, float]
+    sex: str
+    host: Any
+    runner: Any
+    _hair_growing: Any = None
 
     def draw(self) -> None:
         """(Re)draw the skin and the inner parts of the loaded head."""
@@ -78,6 +93,77 @@ class AnimateDrawing:
         self._jaw_drawn = anim.jaw_deg
         self._gaze_drawn = anim.gaze
         self._show_inner(self.active and self.panel.bones.isChecked())
+        self.draw_hair()
+
+    # ------------------------------------------------------------ hair
+    def hair_look(self) -> Appearance | None:
+        """The case's appearance when the head is its reconstruction and hair was chosen."""
+        document = getattr(self.host, "document", None)
+        look = document.case.appearance if document is not None else None
+        if self.sex != "reconstruction" or look is None or not look.grooming:
+            return None
+        return look
+
+    def draw_hair(self) -> None:
+        """The case's hair on the animated head as it is now (none for other heads)."""
+        from workbench.render.visuals.face import add_hair
+        from workbench.services.grooming import grooming_ready, head_grooming
+
+        for key in [k for k in self._actors if k.startswith("hair_")]:
+            self.plotter.remove_actor(self._actors.pop(key), render=False)
+        anim, look = self.animator, self.hair_look()
+        if anim is None or look is None or self.scene.closed:
+            return
+        if not grooming_ready(anim.head, look):
+            growing = (anim.head, look.grooming)
+            if self._hair_growing != growing:
+                self._hair_growing = growing
+                head = anim.head
+                self.runner.submit(
+                    "animate_hair",
+                    "Growing the hair and brows …",
+                    lambda: head_grooming(head, look),
+                    lambda _g: self._hair_grown(),
+                    lambda _exc: self._hair_grown(failed=True),
+                )
+            return
+        for piece in self._hair_pieces(anim, look):
+            name = f"hair_{piece.kind}"
+            actor = add_hair(self.plotter, piece.mesh, piece.srgb, piece.normals, name=name)
+            actor.SetVisibility(self.active)
+            self._actors[name] = actor
+        self.scene.request_render()
+
+    def _hair_pieces(self, anim: Animator, look: Appearance) -> list[Any]:
+        """The pieces on the animator's current skin, in the shown frame."""
+        from workbench.core.mesh import Mesh
+        from workbench.services.grooming import hair_meshes
+
+        pieces = hair_meshes(anim.head, look, anim.skin_in_head_frame(), stride=HAIR_STRIDE)
+        rotation = anim.to_shown(np.eye(3)) - anim.to_shown(np.zeros((1, 3)))
+        return [
+            replace(
+                p,
+                mesh=Mesh(anim.to_shown(p.mesh.vertices), p.mesh.faces),
+                normals=p.normals @ rotation,
+            )
+            for p in pieces
+        ]
+
+    def _hair_grown(self, failed: bool = False) -> None:
+        self._hair_growing = None
+        if not failed:
+            self.draw_hair()
+
+    def _move_hair(self) -> None:
+        """Move the hair's ribbons to the animator's current skin (points in place)."""
+        anim, look = self.animator, self.hair_look()
+        if anim is None or look is None or not any(k.startswith("hair_") for k in self._actors):
+            return
+        for piece in self._hair_pieces(anim, look):
+            actor = self._actors.get(f"hair_{piece.kind}")
+            if actor is not None:
+                update.set_points_and_normals(actor, piece.mesh.vertices, piece.normals)
 
     def actors(self) -> dict[str, Any]:
         """``{part: actor}`` drawn by this tool (tests)."""
@@ -107,6 +193,7 @@ class AnimateDrawing:
             return
         update.set_surface_points(actor, points, self._faces["skin"], self._vf.get("skin"))
         self._points = points
+        self._move_hair()
 
     def _move_inner(self) -> None:
         """Move the jaw's parts and the eyes to the animator's pose (points in place)."""

@@ -172,6 +172,12 @@ class AnimateTool(QObject, AnimateDrawing):
         self._show_inner(self.active and self.panel.bones.isChecked())
         if self.active:
             self.ensure_loaded()
+            if self.animator is not None:  # the case's hair as the Appearance dock has it now
+                self.draw_hair()
+        else:
+            for key, actor in self._actors.items():
+                if key.startswith("hair_"):
+                    actor.SetVisibility(False)
 
     # ------------------------------------------------------------ loading
     def ensure_loaded(self) -> None:
