@@ -390,3 +390,36 @@ def test_a_long_table_wraps_its_cells_and_repeats_its_heading_on_each_page(tmp_p
     for i in range(120):
         assert f"row{i:03d}" in flat and f"the {i}th value" in flat
     assert flat.replace(" ", "").count("x" * 120) == 1  # cut into pieces, all of them kept
+
+
+def test_the_appearance_section_says_the_hair_is_not_evidence(head, tmp_path) -> None:
+    """A case with chosen colours and hair (issue 34): report.json carries them under
+    ``appearance`` (schema-valid) and the PDF has the section, the note and the portraits."""
+    from PIL import Image
+
+    report = build_report(head, tmp_path, render=False)
+    pictures = dict(report.get("pictures") or {})
+    for i, view in enumerate(("front", "three_quarter", "profile")):
+        path = tmp_path / "pictures" / f"portrait_{view}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.new("RGB", (120, 120), (90 + 40 * i, 70, 60)).save(path)
+        pictures[f"portrait_{view}"] = str(path.relative_to(tmp_path))
+    report["pictures"] = pictures
+    report["appearance"] = {
+        "summary": "skin tone mst4; iris blue; hair short (artistic additions, not evidence).",
+        "note": "Colours are an artistic choice, not evidence.",
+        "artistic_additions": {
+            "hair_and_brows": {"hair": "short", "beard": "full"},
+            "note": "Hair, brows and beard are artistic additions, not evidence.",
+        },
+    }
+    validate_report(report)
+    pdf = write_report_pdf(report, tmp_path / "report.pdf")
+    text, _ = pdf_text(pdf)
+    assert "Appearance: an artistic presentation" in text
+    assert "hair short, beard full" in text and "Not evidence" in text
+    assert "Portraits in the chosen appearance" in text
+    bad = copy.deepcopy(report)
+    bad["appearance"]["colour"] = "red"
+    with pytest.raises(InputError):
+        validate_report(bad)

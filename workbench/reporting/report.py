@@ -71,10 +71,13 @@ from workbench.reporting.pdf import (
     num,
     picture_groups,
     resolve_picture,
+    view_caption,
 )
 
 #: picture keys of :func:`workbench.render.reconstruction.render_builds`
 BUILD_PICTURES = ("builds_front", "builds_side", "band")
+#: the portraits drawn in the case's appearance (keys of the report's pictures)
+PORTRAIT_PICTURES = ("portrait_front", "portrait_three_quarter", "portrait_profile")
 SCHEMA_ID = "reconstruction-report-v1"
 SCHEMA_FILE = "report.schema.json"
 PathArg = str | PathLike[str]
@@ -243,6 +246,11 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         for k in BUILD_PICTURES
         if builds is not None and k in listed
     }
+    portraits = [
+        (view_caption(k.removeprefix("portrait_")), resolve_picture(listed.pop(k), base))
+        for k in PORTRAIT_PICTURES
+        if k in listed
+    ]
     # with no builds, the face's front view leads page 1 (and is not repeated later)
     front = None if builds is not None or "face_front" not in listed else listed.pop("face_front")
     pictures = picture_groups(listed, base)
@@ -276,6 +284,8 @@ def build_pdf(report: dict[str, Any], base: Path) -> ReportPDF:
         _fit(pdf, report["fit"])
     if report.get("registration"):
         _registration(pdf, report["registration"], report.get("self_check"))
+    if report.get("appearance"):
+        _appearance(pdf, report["appearance"], portraits)
     shown = [title for _, title in GROUPS if title in pictures]
     side = build_pictures.get("builds_side")
     if shown or side is not None:
@@ -535,6 +545,26 @@ def _registration(pdf: ReportPDF, reg: dict[str, Any], check: dict[str, Any] | N
 
 
 COUNT_WORDS = {1: "one", 2: "two", 3: "three", 4: "four", 5: "five"}
+
+
+def _appearance(
+    pdf: ReportPDF, appearance: dict[str, Any], portraits: list[tuple[str, Path]]
+) -> None:
+    """The colours and hair chosen for the face, said to be artistic, with the portraits."""
+    pdf.heading("Appearance: an artistic presentation", min_space=110)
+    lines = [str(appearance.get("note") or "")]
+    additions = appearance.get("artistic_additions") or {}
+    if additions.get("hair_and_brows"):
+        styles = ", ".join(
+            f"{kind} {style.replace('_', ' ')}"
+            for kind, style in additions["hair_and_brows"].items()
+        )
+        lines.append(f"{styles}: {additions.get('note', '')}")
+    pdf.box("Not evidence", [line for line in lines if line])
+    if appearance.get("summary"):
+        pdf.para(f"Chosen: {appearance['summary']}", size=8, color=GREY)
+    if portraits:
+        pdf.pictures(portraits, columns=3, title="Portraits in the chosen appearance")
 
 
 def _bmi(value: Any) -> str:
