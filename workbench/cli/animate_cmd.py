@@ -19,6 +19,16 @@ FACS action-unit targets (the built-in table
 ``--arkit FILE.csv``); the action units a recipe needs are settled too, and
 shapes with an empty recipe are written as zero displacement.
 
+A ``.glb`` carries the hair, brows, beard and moustache of ``--hair``,
+``--brows``, ``--beard`` and ``--moustache`` (styles of
+:mod:`workbench.core.grooming`; ``none`` removes a piece), or those a
+reconstruction folder's ``case.fcase`` keeps with its colours (the window's
+Appearance dock; ``--skin-tone`` and ``--iris`` change single choices), as
+nodes of their own with the skin's morph targets (grown again on every
+settled expression, so the brows rise with the brows and the beard opens
+with the jaw), the skin painted under the hair.  They are artistic additions,
+not evidence.
+
 ``--track FILE.json`` animates over time (keyframed expressions, muscles,
 jaw, gaze and lids, and a timed phoneme track with Cohen-Massaro
 coarticulation; the format is in :mod:`workbench.services.animation.track`).
@@ -44,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.cli.common import add_force_option, output_path
+from workbench.cli.common import add_force_option, chosen_appearance, output_path
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_CLIP_SECONDS, check_range
 from workbench.model.template import TemplateHead
@@ -141,21 +151,34 @@ def register(sub: argparse._SubParsersAction) -> None:
         "with an empty recipe (gaze, tongueOut, cheekPuff ...) are written as zero displacement",
     )
     from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
+    from workbench.core.grooming import KINDS, style_names
 
     p.add_argument(
         "--skin-tone",
         choices=list(SKIN_TONES),
-        default=DEFAULT_SKIN_TONE,
+        default=None,
         help=".glb only: the skin's colour, a Monk Skin Tone swatch (mst1-mst10; light, medium "
         "and dark are mst3, mst6, mst9); an artistic default, not evidence. A fit-scan pack's "
-        "own skin texture is used instead when HEAD is such a pack (default: %(default)s)",
+        "own skin texture is used instead when HEAD is such a pack (default: the case's, else "
+        f"{DEFAULT_SKIN_TONE})",
     )
     p.add_argument(
         "--iris",
         choices=list(IRIS_COLOURS),
-        default=DEFAULT_IRIS,
-        help=".glb only: the iris colour painted on the eyes (default: %(default)s)",
+        default=None,
+        help=f".glb only: the iris colour painted on the eyes (default: the case's, else "
+        f"{DEFAULT_IRIS})",
     )
+    for kind in KINDS:
+        p.add_argument(
+            f"--{kind}",
+            choices=list(style_names(kind)),
+            default=None,
+            metavar="STYLE",
+            help=f".glb only: {kind} style: {', '.join(style_names(kind))} (an artistic "
+            "addition, not evidence; a node with the expressions as morph targets; default: "
+            "the case's, else none)",
+        )
     p.add_argument(
         "--eyes",
         choices=["texture", "vertex"],
@@ -243,6 +266,7 @@ def run(args: argparse.Namespace) -> JobOutcome | int:
     glb = args.out is not None and args.out.suffix.lower() == ".glb"
     if args.arkit is not None and not glb:
         raise InputError("--arkit", "needs --out FILE.glb", "ARKit targets are glTF morph targets")
+    _check_glb_only(args, glb)
     targets = _glb_targets(args, muscles) if glb else None
     recipes = None
     if targets is not None and args.arkit is not None:
@@ -354,6 +378,7 @@ def _write_glb(
     if args.expression is not None:
         weights = {args.expression: 1.0}
         keyframes = ramp_keyframes(args.expression, args.clip_seconds)
+    looks = _looks(args, head)
     with output_path(args.out, args, *inputs) as target:
         _, settled, seconds = export_head_glb(
             head,
@@ -363,7 +388,7 @@ def _write_glb(
             weights=weights,
             names_arkit=recipes,
             frame=frame,
-            **_looks(args, head),
+            **looks,
         )
     size = args.out.stat().st_size
     clip = f"; clip neutral -> {args.expression} over {args.clip_seconds:g} s" if keyframes else ""
@@ -372,7 +397,8 @@ def _write_glb(
         clip += f"; {len(recipes)} ARKit targets, {empty} of them zero (no AU basis)"
     print(
         f"wrote {args.out} ({settled.rest['skin'].n_vertices} vertices, {len(names)} morph "
-        f"targets settled in {seconds:.1f} s{clip}; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
+        f"targets settled in {seconds:.1f} s{clip}{_hair_note(looks)}; {size / 1e6:.1f} MB; "
+        f"{_glb_frame(frame)})"
     )
     return JobOutcome(
         0,
@@ -381,6 +407,7 @@ def _write_glb(
             "morph_targets": len(names),
             "targets_seconds": round(seconds, 1),
             "output_bytes": size,
+            "hair_and_brows": _hair_styles(looks),
         },
     )
 
@@ -435,6 +462,7 @@ def _run_track(args: argparse.Namespace) -> JobOutcome:
             "has an unsupported extension",
             "use .ply or .obj (last frame), DIR/frame_####.ply (every frame) or .glb (a clip)",
         )
+    _check_glb_only(args, suffix == ".glb")
     pattern = _frame_pattern(args.out)
     if pattern is not None and suffix == ".glb":
         raise InputError(args.out, "a .glb holds the whole clip", "drop the #### from the name")
@@ -509,18 +537,54 @@ def _write_skin(target: Path, anim: Animator, frame: str, what: str) -> None:
         write_mesh(target, skin)
 
 
+def _check_glb_only(args: argparse.Namespace, glb: bool) -> None:
+    """``--hair`` and the other styles go into a .glb only."""
+    from workbench.core.grooming import KINDS
+
+    given = [f"--{k}" for k in KINDS if getattr(args, k, None) is not None]
+    if given and not glb:
+        raise InputError(
+            ", ".join(given),
+            "needs --out FILE.glb",
+            "hair, brows, beard and moustache are exported as glTF nodes",
+        )
+
+
 def _looks(args: argparse.Namespace, head: TemplateHead) -> dict[str, Any]:
-    """The colours of a .glb: the options, and a fit-scan pack's own skin texture."""
+    """The colours of a .glb: the options, the case's appearance (a reconstruction
+    folder's ``case.fcase``) with its hair, and a fit-scan pack's own skin texture."""
+    from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE
     from workbench.io.skin_colour_export import read_skin_texture
 
-    looks: dict[str, Any] = {"skin_tone": args.skin_tone, "iris": args.iris, "eyes": args.eyes}
+    appearance = chosen_appearance(args)
+    looks: dict[str, Any] = {
+        "skin_tone": args.skin_tone or DEFAULT_SKIN_TONE,
+        "iris": args.iris or DEFAULT_IRIS,
+        "eyes": args.eyes,
+    }
     root = Path(str(args.head))
     for folder in (root, root / "head"):  # a fit-scan pack, or a folder holding one
         texture = read_skin_texture(folder, head.skin) if folder.is_dir() else None
         if texture is not None:
             looks["skin_texture"] = texture
             break
+    if appearance is not None:
+        looks.update(skin_tone=appearance.tone, iris=appearance.iris, appearance=appearance)
+        if "skin_texture" not in looks:  # the case's colours, the skin painted under the hair
+            from workbench.services.appearance import skin_look
+
+            looks["looks"] = {"skin": skin_look(head, appearance)}
     return looks
+
+
+def _hair_styles(looks: dict[str, Any]) -> str:
+    appearance = looks.get("appearance")
+    return ", ".join(f"{k} {v}" for k, v in appearance.grooming) if appearance else ""
+
+
+def _hair_note(looks: dict[str, Any]) -> str:
+    styles = _hair_styles(looks)
+    return f"; {styles.replace('_', ' ')}: artistic additions, not evidence" if styles else ""
 
 
 def _glb_frame(frame: str) -> str:
@@ -556,9 +620,10 @@ def _write_track_glb(
     poses, keyframes = glb_clip(track, frames, names)
     if not names and not poses:
         raise InputError(args.track, "animates nothing a .glb can hold (only neutral keys)")
+    looks = _looks(args, head)
     with output_path(args.out, args, *inputs) as target:
         _, settled, seconds = export_head_glb(
-            head, target, names, keyframes, poses=poses, frame=frame, **_looks(args, head)
+            head, target, names, keyframes, poses=poses, frame=frame, **looks
         )
     size = args.out.stat().st_size
     gaze = any(k.gaze != (0.0, 0.0) for k in track.keys)
@@ -569,7 +634,7 @@ def _write_track_glb(
         f"{sum(1 for n in poses if n.startswith('viseme_'))} visemes) settled in {seconds:.1f} s; "
         f"clip of {frames.n_frames} frames at {track.fps:g} fps over {frames.times[-1]:g} s"
         + ("; gaze is not in the .glb" if gaze else "")
-        + f"; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
+        + f"{_hair_note(looks)}; {size / 1e6:.1f} MB; {_glb_frame(frame)})"
     )
     return JobOutcome(
         0,
@@ -577,5 +642,6 @@ def _write_track_glb(
             "vertices": settled.rest["skin"].n_vertices,
             "morph_targets": len(names) + len(poses),
             "output_bytes": size,
+            "hair_and_brows": _hair_styles(looks),
         },
     )

@@ -57,13 +57,28 @@ appended after them with their own names.
 
 The optional animation clip is a ``weights`` channel per morphed node
 (LINEAR interpolation, times in seconds).
+
+Hair and other ribbons
+----------------------
+A node may be shaded otherwise (:class:`Shading`): hair, brows, beards and
+moustaches (:mod:`workbench.services.grooming`, artistic additions) are thin
+open ribbons, written with their own shading normals (the skin's normal under
+each strand, leaning to the ribbon's edges) rather than those of their
+triangles, materials with ``doubleSided`` true, and their colours split into
+``baseColorFactor`` (the per-channel maximum of the vertex colours: the
+colour of the lightest strands) times ``COLOR_0`` (each vertex relative to it,
+0..1), so a viewer that ignores ``COLOR_0`` still shows the hair's hue.
+Their morph targets are **sparse** accessors (only the vertices that move;
+displacements shorter than the node's ``min_displacement_mm`` are written as
+0): most of a head's hair does not move when the face smiles.
 """
 
 from __future__ import annotations
 
 import io
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 
@@ -73,7 +88,7 @@ import pygltflib as g
 from workbench.core.appearance import Look, Material, plain_look, srgb_to_linear
 from workbench.core.mesh import Mesh
 from workbench.core.normals import vertex_normals
-from workbench.io.atomic import write_bytes_atomic
+from workbench.io.atomic import write_with_atomic
 
 #: metres per millimetre (glTF is metres, the workbench mm)
 MM_TO_M = 0.001
@@ -93,7 +108,34 @@ MATERIALS_NOTE = (
     "(workbench.core.appearance presets) or the scan's own colours, not evidence about the person"
 )
 
-__all__ = ["AXES_NOTE", "MATERIALS_NOTE", "MM_TO_M", "png_bytes", "split_corners", "write_glb"]
+__all__ = [
+    "AXES_NOTE",
+    "MATERIALS_NOTE",
+    "MM_TO_M",
+    "Shading",
+    "png_bytes",
+    "split_corners",
+    "write_glb",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class Shading:
+    """How a node is shaded when it is not a closed surface (hair ribbons).
+
+    ``normals`` ``(n, 3)``: unit shading normals per vertex of the node's mesh
+    (None: the normals of its triangles); ``double_sided``: its materials are
+    ``doubleSided`` (seen from behind too); ``tinted``: its per-vertex colours
+    are split into ``baseColorFactor`` (their per-channel maximum) times
+    ``COLOR_0`` (0..1); ``min_displacement_mm``: morph targets are sparse
+    accessors holding only the vertices that move at least this far (None:
+    dense, every vertex, as the skin's).
+    """
+
+    normals: np.ndarray | None = None
+    double_sided: bool = False
+    tinted: bool = False
+    min_displacement_mm: float | None = None
 
 
 def png_bytes(image: np.ndarray) -> bytes:
@@ -188,9 +230,18 @@ class _Builder:
             self._images[key] = len(self.gltf.textures) - 1
         return self._images[key]
 
-    def material(self, material: Material, vertex_colours: bool) -> int:
-        """The index of ``material`` (one glTF material per name and colouring)."""
-        key = f"{material.name}|{vertex_colours}"
+    def material(
+        self,
+        material: Material,
+        vertex_colours: bool,
+        *,
+        double_sided: bool = False,
+        factor: np.ndarray | None = None,
+    ) -> int:
+        """The index of ``material`` (one glTF material per name, colouring and sides);
+        ``factor``: the linear base colour under ``COLOR_0`` (default white)."""
+        tint = None if factor is None else tuple(round(float(c), 7) for c in factor)
+        key = f"{material.name}|{vertex_colours}|{double_sided}|{tint}"
         if key in self._materials:
             return self._materials[key]
         pbr = g.PbrMetallicRoughness(
@@ -202,15 +253,51 @@ class _Builder:
             pbr.baseColorTexture = g.TextureInfo(index=self._texture(material.texture))
         elif not vertex_colours:
             pbr.baseColorFactor = [*(float(c) for c in srgb_to_linear(material.srgb)), 1.0]
+        elif tint is not None:
+            pbr.baseColorFactor = [*tint, 1.0]
         self.gltf.materials.append(
             g.Material(
                 name=material.name,
                 pbrMetallicRoughness=pbr,
+                doubleSided=bool(double_sided),
                 extras={"srgb": list(material.srgb), "source": material.source},
             )
         )
         self._materials[key] = len(self.gltf.materials) - 1
         return self._materials[key]
+
+    def target(self, delta_m: np.ndarray, min_m: float | None) -> int:
+        """A morph target's ``POSITION`` accessor (metres): dense, or with ``min_m``
+        sparse (displacements shorter than ``min_m`` written as 0)."""
+        d = np.ascontiguousarray(delta_m, dtype="<f4")
+        if min_m is None:
+            return self.accessor(d, g.VEC3, min_max=True)
+        if min_m > 0.0:
+            d = d.copy()
+            d[np.einsum("ij,ij->i", d, d) < np.float32(min_m) ** 2] = 0.0
+        moved = np.flatnonzero(np.any(d != 0.0, axis=1))
+        if 16 * len(moved) >= 12 * len(d):  # index + value per vertex: dense is smaller
+            return self.accessor(d, g.VEC3, min_max=True)
+        if not len(moved):  # a sparse accessor holds at least one value
+            moved = np.zeros(1, np.int64)
+        acc = g.Accessor(
+            byteOffset=None,
+            componentType=g.FLOAT,
+            count=len(d),
+            type=g.VEC3,
+            min=[float(v) for v in d.min(axis=0)],
+            max=[float(v) for v in d.max(axis=0)],
+            sparse=g.Sparse(
+                count=len(moved),
+                indices=g.AccessorSparseIndices(
+                    bufferView=self._view(moved.astype("<u4").tobytes(), None),
+                    componentType=g.UNSIGNED_INT,
+                ),
+                values=g.AccessorSparseValues(bufferView=self._view(d[moved].tobytes(), None)),
+            ),
+        )
+        self.gltf.accessors.append(acc)
+        return len(self.gltf.accessors) - 1
 
     def mesh(
         self,
@@ -219,19 +306,29 @@ class _Builder:
         look: Look,
         targets: Mapping[str, np.ndarray] | None = None,
         weights: Sequence[float] | None = None,
+        shading: Shading | None = None,
     ) -> int:
         """A mesh with a primitive per material of ``look``; ``targets``: displacements (mm)."""
+        shading = shading or Shading()
         faces = mesh.faces
         positions = mesh.vertices * MM_TO_M
-        normals = vertex_normals(mesh)
-        deltas = [np.asarray(d) * MM_TO_M for d in (targets or {}).values()]
+        if shading.normals is not None:
+            normals = np.asarray(shading.normals, float)
+            if normals.shape != mesh.vertices.shape:
+                raise ValueError(f"{name}: {len(normals)} normals for {mesh.n_vertices} vertices")
+        else:
+            normals = vertex_normals(mesh)
         colours = None if look.vertex_srgb is None else srgb_to_linear(look.vertex_srgb)
-        uv = None
+        factor = None
+        if colours is not None and shading.tinted:
+            factor = colours.max(axis=0)
+            colours = np.divide(colours, factor, out=np.zeros_like(colours), where=factor > 0)
+            colours = np.clip(colours, 0.0, 1.0)
+        uv = source = None
         if look.corner_uv is not None:
             source, faces, uv = split_corners(faces, look.corner_uv)
             uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])  # glTF: origin at the top-left
             positions, normals = positions[source], normals[source]
-            deltas = [d[source] for d in deltas]
             colours = None if colours is None else colours[source]
         attributes = {
             "POSITION": self.accessor(positions, g.VEC3, min_max=True),
@@ -241,7 +338,12 @@ class _Builder:
             attributes["TEXCOORD_0"] = self.accessor(uv, g.VEC2)
         if colours is not None:
             attributes["COLOR_0"] = self.accessor(colours, g.VEC3)
-        morphs = [self.accessor(d, g.VEC3, min_max=True) for d in deltas]
+        floor = shading.min_displacement_mm
+        floor_m = None if floor is None else floor * MM_TO_M
+        morphs = []
+        for delta in (targets or {}).values():  # one at a time: hair has many vertices
+            d = np.asarray(delta, np.float64) * MM_TO_M
+            morphs.append(self.target(d if source is None else d[source], floor_m))
         # per-vertex colours replace the per-triangle materials (the first one carries them)
         which = np.zeros(len(faces), np.int64) if colours is not None else look.faces_of(len(faces))
         out = g.Mesh(name=name, primitives=[])
@@ -254,7 +356,12 @@ class _Builder:
                 indices=self.accessor(
                     rows.reshape(-1).astype(np.uint32), g.SCALAR, target=g.ELEMENT_ARRAY_BUFFER
                 ),
-                material=self.material(material, colours is not None),
+                material=self.material(
+                    material,
+                    colours is not None,
+                    double_sided=shading.double_sided,
+                    factor=factor,
+                ),
                 mode=g.TRIANGLES,
             )
             if morphs:
@@ -270,42 +377,79 @@ class _Builder:
         self.gltf.nodes.append(g.Node(name=name, mesh=mesh))
         return len(self.gltf.nodes) - 1
 
-    def to_bytes(self) -> bytes:
+    def chunks(self) -> list[bytes | bytearray]:
+        """The GLB: header, JSON chunk and binary chunk (the buffer itself, not a copy:
+        a head with hair holds tens of MB)."""
+        self.blob.extend(b"\0" * (-len(self.blob) % 4))
         self.gltf.buffers = [g.Buffer(byteLength=len(self.blob))]
-        self.gltf.set_binary_blob(bytes(self.blob))
-        return b"".join(self.gltf.save_to_bytes())
+        text = self.gltf.gltf_to_json(separators=(",", ":"), indent=None).encode("utf-8")
+        text += b" " * (-len(text) % 4)
+        total = 12 + 8 + len(text) + 8 + len(self.blob)
+        return [
+            struct.pack("<4sII", b"glTF", 2, total),
+            struct.pack("<I4s", len(text), b"JSON"),
+            text,
+            struct.pack("<I4s", len(self.blob), b"BIN\0"),
+            self.blob,
+        ]
 
 
-def _displacements(
-    rest: Mesh, targets: Mapping[str, np.ndarray], what: str
-) -> dict[str, np.ndarray]:
-    out: dict[str, np.ndarray] = {}
-    for name, pos in targets.items():
-        p = np.asarray(pos, dtype=np.float64)
-        if p.shape != rest.vertices.shape:
-            raise ValueError(
-                f"{what} target {name!r}: expected {rest.vertices.shape} positions, got {p.shape}"
-            )
-        out[name] = p - rest.vertices
-    return out
+class _Deltas(Mapping[str, np.ndarray]):
+    """A node's morph displacements (mm), each computed when read: ``positions - rest``
+    (0 for a target the node does not move), and the ARKit targets as weighted sums of
+    those, so a node with many vertices and targets (hair) never holds them all at once.
+    The names and shapes are checked at once."""
 
+    def __init__(
+        self,
+        rest: Mesh,
+        positions: Mapping[str, np.ndarray],
+        names: Sequence[str],
+        arkit: Mapping[str, Mapping[str, float]] | None,
+        what: str,
+    ) -> None:
+        self._rest = rest.vertices
+        self._positions = dict(positions)
+        self._arkit = dict(arkit or {})
+        for name, pos in self._positions.items():
+            if np.shape(pos) != self._rest.shape:
+                raise ValueError(
+                    f"{what} target {name!r}: expected {self._rest.shape} positions, "
+                    f"got {np.shape(pos)}"
+                )
+        for name, mix in self._arkit.items():
+            if name in names:
+                raise ValueError(f"ARKit target name {name!r} is already a target name")
+            for used in mix:
+                if used not in names:
+                    raise ValueError(f"ARKit target {name!r} uses unknown target {used!r}")
+        self._names = [*names, *self._arkit]
 
-def _with_arkit(
-    deltas: dict[str, np.ndarray], names_arkit: Mapping[str, Mapping[str, float]] | None
-) -> dict[str, np.ndarray]:
-    if not names_arkit:
-        return deltas
-    out = dict(deltas)
-    for arkit, mix in names_arkit.items():
-        if arkit in deltas:
-            raise ValueError(f"ARKit target name {arkit!r} is already a target name")
-        total = np.zeros_like(next(iter(deltas.values())))
-        for name, w in mix.items():
-            if name not in deltas:
-                raise ValueError(f"ARKit target {arkit!r} uses unknown target {name!r}")
-            total += float(w) * deltas[name]
-        out[arkit] = total
-    return out
+    def _base(self, name: str) -> np.ndarray:
+        pos = self._positions.get(name)
+        if pos is None:
+            return np.zeros_like(self._rest, dtype=np.float64)
+        return np.asarray(pos, np.float64) - self._rest
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        mix = self._arkit.get(name)
+        if mix is None:
+            if name not in self._names:
+                raise KeyError(name)
+            return self._base(name)
+        total = np.zeros_like(self._rest, dtype=np.float64)
+        for used, w in mix.items():
+            total += float(w) * self._base(used)
+        return total
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
 
 
 def _look_for(
@@ -341,6 +485,7 @@ def write_glb(
     clip_name: str = "expression",
     frame: str = "",
     looks: Mapping[str, Look] | None = None,
+    shading: Mapping[str, Shading] | None = None,
 ) -> Path:
     """Write a ``.glb``: the skin with morph targets, inner parts as nodes, an optional clip.
 
@@ -360,12 +505,15 @@ def write_glb(
     looks : ``{node name: Look}`` (materials, textures, colours; see
         :func:`workbench.core.appearance.head_looks`); a node without one gets the
         plain preset of its name, the skin node the skin preset
+    shading : ``{node name: Shading}`` for nodes that are not closed surfaces (hair
+        ribbons: their own normals, two-sided materials, tinted colours, sparse targets)
     """
     path = Path(path)
+    shading = dict(shading or {})
     extra_nodes = dict(extra_nodes or {})
     node_targets = dict(node_targets or {})
     looks = dict(looks or {})
-    deltas = _with_arkit(_displacements(skin, targets, skin_name), names_arkit)
+    deltas = _Deltas(skin, targets, list(targets), names_arkit, skin_name)
     names = list(deltas)
     for key in [*(weights or {})] + [k for _, frame in (animation or []) for k in frame]:
         if key not in deltas:
@@ -383,7 +531,10 @@ def write_glb(
     }
     morphed: list[int] = []
     skin_mesh, skin_look = _look_for(skin_name, skin, looks, "skin", True)
-    skin_node = b.node(skin_name, b.mesh(skin_name, skin_mesh, skin_look, deltas, default))
+    skin_node = b.node(
+        skin_name,
+        b.mesh(skin_name, skin_mesh, skin_look, deltas, default, shading.get(skin_name)),
+    )
     morphed.append(skin_node)
     children = [skin_node]
     for name, mesh in extra_nodes.items():
@@ -392,17 +543,14 @@ def write_glb(
             unknown = set(part) - set(targets)
             if unknown:
                 raise ValueError(f"node {name!r}: unknown targets {sorted(unknown)}")
-            d = _displacements(mesh, part, name)
-            zero = np.zeros_like(mesh.vertices)
             # the same target list (and order) as the skin, so one set of weights drives both
-            part_deltas = {n: d.get(n, zero) for n in targets}
-            part_deltas = _with_arkit(part_deltas, names_arkit)
+            part_deltas = _Deltas(mesh, part, list(targets), names_arkit, name)
             mesh, look = _look_for(name, mesh, looks, name, True)
-            node = b.node(name, b.mesh(name, mesh, look, part_deltas, default))
+            node = b.node(name, b.mesh(name, mesh, look, part_deltas, default, shading.get(name)))
             morphed.append(node)
         else:
             mesh, look = _look_for(name, mesh, looks, name, False)
-            node = b.node(name, b.mesh(name, mesh, look))
+            node = b.node(name, b.mesh(name, mesh, look, shading=shading.get(name)))
         children.append(node)
     root = b.node("head")
     b.gltf.nodes[root].children = children
@@ -411,10 +559,16 @@ def write_glb(
     if animation:
         _clip(b, animation, names, morphed, clip_name)
 
-    payload = b.to_bytes()
-    if payload[:4] != b"glTF" or struct.unpack("<I", payload[8:12])[0] != len(payload):
+    chunks = b.chunks()
+    if struct.unpack("<I", chunks[0][8:12])[0] != sum(len(c) for c in chunks):
         raise RuntimeError("internal error: malformed GLB")
-    write_bytes_atomic(path, payload)
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as handle:
+            for chunk in chunks:
+                handle.write(chunk)
+
+    write_with_atomic(path, write)
     return path
 
 

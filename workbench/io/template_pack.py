@@ -12,8 +12,12 @@ x = 0 midsagittal, y up, z toward the face, Frankfort Horizontal at y = 0)::
                                          Blender and other tools: see write_head_obj)
 
 The PLY files hold the geometry; ``head.obj`` holds the same vertices (mm, the
-pack's frame) for tools that read materials.  Its colours are artistic
-defaults (:mod:`workbench.core.appearance`), not evidence.
+pack's frame) for tools that read materials, and may hold hair, brows, beard
+and moustache after them (a reconstruction whose case chose some: artistic
+additions, not evidence, and not in the PLY files).  Its colours are
+artistic defaults (:mod:`workbench.core.appearance`), not evidence.  Like
+the PLY files it is in mm: Blender takes an OBJ's numbers as metres, so
+import it with Scale 0.001 to lay it over the glTF files (metres).
 """
 
 from __future__ import annotations
@@ -92,6 +96,8 @@ HEAD_FRAME_TEXT = (
 #: the pack's OBJ of every part with its materials, and its material library
 HEAD_OBJ = "head.obj"
 HEAD_MTL = "head.mtl"
+#: decimals (mm) of the vertices of extra parts in ``head.obj`` (hair: 1 µm, a smaller file)
+EXTRA_DECIMALS = 3
 
 
 def write_head_obj(
@@ -103,6 +109,7 @@ def write_head_obj(
     iris: str = DEFAULT_IRIS,
     skin_texture: SkinTexture | None = None,
     looks: Mapping[str, Look] | None = None,
+    extra: Mapping[str, tuple[Mesh, Look]] | None = None,
 ) -> list[Path]:
     """``head.obj`` (every part an ``o`` object, its triangles under ``usemtl``),
     ``head.mtl`` and the textures it names, into ``folder``; returns the files written.
@@ -117,6 +124,12 @@ def write_head_obj(
     their presets.  ``Kd`` is linear RGB, as Blender reads and writes it.
     ``looks`` replaces those of the parts it names (a case's chosen colours,
     :func:`workbench.services.appearance.skin_look`).
+
+    ``extra`` adds parts after the head's own, ``{name: (mesh, look)}`` in the
+    same frame and mm (the hair, brows, beard and moustache a case chose:
+    artistic additions, which their materials' comments say), their vertices
+    to :data:`EXTRA_DECIMALS` decimals.  Names must not be those of the head's
+    parts; a material name used twice must have one colour.
     """
     from workbench.io.gltf_export import png_bytes
     from workbench.io.skin_colour_export import read_skin_texture
@@ -134,9 +147,18 @@ def write_head_obj(
     ) | dict(looks or {})
     # the pack's own atlas is referenced where it is; other textures are written
     kept = {skin_texture.file} if skin_texture is not None and skin_texture.file else set()
-    groups, materials, written = [], {}, []
-    for part in (p for parts in FILES.values() for p in parts):
-        look, mesh = looks[part], head.meshes[part]
+    own = [p for parts in FILES.values() for p in parts]
+    extra = dict(extra or {})
+    clash = sorted(set(extra) & set(own))
+    if clash:
+        raise ValueError(f"extra parts named as the head's own: {', '.join(clash)}")
+    parts: list[tuple[str, Mesh, Look]] = [(p, head.meshes[p], looks[p]) for p in own]
+    for name, (mesh, look) in extra.items():
+        parts.append((name, mesh.with_vertices(np.round(mesh.vertices, EXTRA_DECIMALS)), look))
+    groups: list[obj.ObjGroup] = []
+    materials: dict[str, obj.MtlMaterial] = {}
+    written: list[Path] = []
+    for part, mesh, look in parts:
         groups.append(
             obj.ObjGroup(
                 part,
@@ -153,6 +175,8 @@ def write_head_obj(
             ):
                 written.append(write_bytes_atomic(out / m.texture_file, png_bytes(m.texture)))
             kd = srgb_to_linear(m.srgb)
+            if part in extra and m.name in materials and materials[m.name].kd != tuple(kd):
+                raise ValueError(f"extra part {part!r}: material {m.name!r} is already defined")
             materials[m.name] = obj.MtlMaterial(
                 m.name,
                 (float(kd[0]), float(kd[1]), float(kd[2])),
@@ -161,11 +185,17 @@ def write_head_obj(
                 m.metallic,
                 f"sRGB {m.srgb[0]} {m.srgb[1]} {m.srgb[2]}; {m.source}",
             )
-    note = "colours are artistic defaults, not evidence about the person"
-    written.append(
-        write_bytes_atomic(out / HEAD_MTL, obj.encode_mtl(list(materials.values()), [note]))
-    )
+    notes = ["colours are artistic defaults, not evidence about the person"]
     comments = [f"frame: {frame}", "every part of the head; same vertices as the pack's PLY files"]
+    if extra:
+        names = ", ".join(extra)
+        notes.append(f"{names}: artistic additions, not evidence about the person")
+        comments.append(
+            f"then {names}: artistic additions (not evidence), not in the PLY files; mm"
+        )
+    written.append(
+        write_bytes_atomic(out / HEAD_MTL, obj.encode_mtl(list(materials.values()), notes))
+    )
     written.append(
         write_bytes_atomic(
             out / HEAD_OBJ, obj.encode_groups(groups, mtllib=HEAD_MTL, comments=comments)

@@ -178,26 +178,39 @@ def _coloured_head(result: JobResult, out: Path) -> dict[str, Path]:
 
     The case's :class:`~workbench.model.appearance.Appearance` (artistic, not
     evidence): the skin's colours (computed on the fitted head in its head
-    frame) baked into ``head/skin_colours.png``, the eyes in its iris colour.
-    Nothing is written for a case without chosen colours (``head.obj`` keeps
-    the default materials).
+    frame) baked into ``head/skin_colours.png``, the eyes in its iris colour,
+    and the hair, brows, beard and moustache it chose as objects of their own
+    after the head's parts (artistic additions; grown on the fitted head and
+    mapped into the skull file's frame with it), each with its material in
+    ``head.mtl``.  Nothing is written for a case without chosen colours
+    (``head.obj`` keeps the default materials).
     """
     appearance = result.opened.case.appearance
     if appearance is None:
         return {}
     from workbench.io.template_pack import write_head_obj
     from workbench.services.appearance import atlas_skin_look, skin_colours
-    from workbench.services.reconstruction.job import FITTED_HEAD_FRAME_TEXT, head_in_input_frame
+    from workbench.services.grooming import hair_look
+    from workbench.services.reconstruction.job import (
+        FITTED_HEAD_FRAME_TEXT,
+        hair_in_input_frame,
+        head_in_input_frame,
+    )
 
     colours = skin_colours(result.recon.head, appearance)
     head = head_in_input_frame(result.recon)
     look = atlas_skin_look(head.skin, colours, appearance)
+    hair = {
+        piece.kind: (piece.mesh, hair_look(piece, appearance))
+        for piece in hair_in_input_frame(result.recon, appearance)
+    }
     written = write_head_obj(
         head,
         out / "head",
         frame=FITTED_HEAD_FRAME_TEXT,
         iris=appearance.iris,
         looks={"skin": look},
+        extra=hair,
     )
     return {f"head/{p.name}": p for p in written if p.suffix == ".png"}
 

@@ -8,8 +8,9 @@ the comment block that opens the file (:attr:`ParsedMesh.space`), where the
 writer puts ``# SPACE=RAS``.
 
 :func:`encode_groups` writes several parts into one OBJ (an ``o`` object
-each), their triangles grouped by ``usemtl`` material and, where a part has
-texture coordinates, ``v/vt`` corners; :func:`encode_mtl` writes the material
+each, smoothing group ``s 1`` so importers shade it smooth), their triangles
+grouped by ``usemtl`` material and, where a part has texture coordinates,
+``v/vt`` corners; :func:`encode_mtl` writes the material
 library it names (``Kd``, ``map_Kd`` and the PBR extension's ``Pr``/``Pm``).
 
 Colour data are kept but never make a readable mesh unreadable: vertex
@@ -279,6 +280,7 @@ def _group_text(group: ObjGroup, v0: int, t0: int) -> tuple[str, int, int]:
         if group.face_material is None
         else np.asarray(group.face_material, np.int64)
     )
+    out.append("s 1\n")  # smooth shading (else Blender and others import every face flat)
     for k, material in enumerate(group.materials):
         mine = rows[which == k]
         if len(mine):

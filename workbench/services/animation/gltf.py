@@ -16,6 +16,14 @@ the skin a skin-tone preset with the lips apart, or the fit's colour atlas
 when one is given (:func:`workbench.io.skin_colour_export.read_skin_texture`
 reads it from a ``fit-scan`` pack); the eyes an iris texture; teeth, bone and
 tongue their presets.  The colours are artistic defaults, not evidence.
+
+Hair, brows, beard and moustache (an ``appearance`` with styles chosen,
+:mod:`workbench.services.grooming`; artistic additions, not evidence) are
+nodes of their own, grown on the rest skin and again on every settled
+expression's skin, so each has the skin's morph targets: the brows rise with
+the brows, the beard opens with the jaw.  Every strand is kept
+(:data:`HAIR_STRIDE`); the hair's targets are sparse (displacements under
+:data:`HAIR_MIN_MM` written as 0), see :mod:`workbench.io.gltf_export`.
 """
 
 from __future__ import annotations
@@ -38,12 +46,15 @@ from workbench.core.appearance import (
 from workbench.core.errors import InputError
 from workbench.core.mesh import Mesh
 from workbench.io.arkit_table import read_arkit_table
-from workbench.io.gltf_export import Keyframes, write_glb
+from workbench.io.gltf_export import Keyframes, Shading, write_glb
+from workbench.model.appearance import Appearance
 from workbench.model.template import TemplateHead
 from workbench.services.animation.animator import EXPRESSIONS, Animator, Expression
 from workbench.services.registration.jaw import JAW_PARTS, axis_rotation
 
 __all__ = [
+    "HAIR_MIN_MM",
+    "HAIR_STRIDE",
     "ExpressionTargets",
     "arkit_needed",
     "arkit_recipes",
@@ -53,6 +64,14 @@ __all__ = [
     "settle_expressions",
     "settle_poses",
 ]
+
+
+#: the animation's glTF keeps every so many strands of the scalp hair (brows and beards
+#: all); 1, every strand: long hair, thick brows, full beard and moustache on the male
+#: reference head make a 42 MB file with 8 expression targets, 78 MB with all 28
+HAIR_STRIDE = 1
+#: hair displacements (mm) below this are written as 0 in the glTF's sparse morph targets
+HAIR_MIN_MM = 0.01
 
 
 @dataclass
@@ -161,6 +180,8 @@ def export_head_glb(
     skin_texture: SkinTexture | None = None,
     eyes: str = "texture",
     looks: Mapping[str, Look] | None = None,
+    appearance: Appearance | None = None,
+    hair_stride: int = HAIR_STRIDE,
 ) -> tuple[Path, ExpressionTargets, float]:
     """Write the head as ``.glb`` with the expressions as morph targets.
 
@@ -180,6 +201,12 @@ def export_head_glb(
     ``"vertex"``: finer globes with per-vertex colours) choose the materials;
     ``looks`` replaces those of the parts it names (a case's chosen colours:
     :func:`workbench.services.appearance.appearance_looks`).
+
+    ``appearance``: the hair, brows, beard and moustache it chose (and their
+    colours) become nodes ``hair``, ``brows``, ``beard``, ``moustache`` with a
+    morph target per target of the skin (grown on each settled skin), the
+    scalp hair every ``hair_stride`` strand.  Its skin colours are not applied
+    here: pass them in ``looks``.
     """
     try:  # refuse a bad colour name before the expressions are settled
         looks = head_looks(
@@ -193,6 +220,8 @@ def export_head_glb(
         ) | dict(looks or {})
     except ValueError as exc:
         raise InputError("appearance", str(exc)) from None
+    # grown before the expressions are settled: a head without the landmarks fails at once
+    hair = _hair_parts(head, appearance, hair_stride)
     t0 = time.perf_counter()
     given = None if names is None else list(names)
     chosen = [] if given is not None and not given and poses else _check_names(given)
@@ -205,12 +234,24 @@ def export_head_glb(
     seconds = time.perf_counter() - t0
     rest = settled.stored_rest
     extra = {k: m for k, m in rest.items() if k != "skin"}
+    node_targets = dict(settled.stored_parts)
+    shading: dict[str, Shading] = {}
+    if hair:
+        looks = dict(looks)
+        for kind, (mesh, look, normals) in hair.items():
+            extra[kind] = mesh
+            looks[kind] = look
+            shading[kind] = Shading(
+                normals, double_sided=True, tinted=True, min_displacement_mm=HAIR_MIN_MM
+            )
+        node_targets.update(_hair_targets(head, appearance, settled.stored_skin, hair_stride))
     out = write_glb(
         path,
         rest["skin"],
         settled.stored_skin,
         extra_nodes=extra,
-        node_targets=settled.stored_parts,
+        node_targets=node_targets,
+        shading=shading,
         weights=weights,
         animation=keyframes,
         names_arkit=names_arkit,
@@ -218,6 +259,39 @@ def export_head_glb(
         looks=looks,
     )
     return out, settled, seconds
+
+
+def _hair_parts(
+    head: TemplateHead, appearance: Appearance | None, stride: int
+) -> dict[str, tuple[Mesh, Look, np.ndarray]]:
+    """``{kind: (mesh, look, shading normals)}`` of the chosen pieces on the rest skin
+    (the head's own frame): a material per kind in its colour, the strands' colours
+    per vertex."""
+    from workbench.services.grooming import hair_look, hair_meshes
+
+    if appearance is None:
+        return {}
+    return {
+        piece.kind: (piece.mesh, hair_look(piece, appearance), piece.normals)
+        for piece in hair_meshes(head, appearance, stride=stride)
+    }
+
+
+def _hair_targets(
+    head: TemplateHead,
+    appearance: Appearance | None,
+    skins: Mapping[str, np.ndarray],
+    stride: int,
+) -> dict[str, dict[str, np.ndarray]]:
+    """``{kind: {target: positions}}``: the pieces grown on each settled skin (float32:
+    the hair has many vertices)."""
+    from workbench.services.grooming import hair_meshes
+
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for name, skin in skins.items():
+        for piece in hair_meshes(head, appearance, skin, stride=stride):
+            out.setdefault(piece.kind, {})[name] = piece.mesh.vertices.astype(np.float32)
+    return out
 
 
 def ramp_keyframes(

@@ -46,6 +46,7 @@ from workbench.model.case import Case
 from workbench.model.reconstruction_setup import GuideList, Orientation
 from workbench.model.template import TemplateHead
 from workbench.services.case.case_setup import OpenedCase, start_case_from_skull
+from workbench.services.grooming import HairMesh, hair_look, hair_meshes
 from workbench.services.guides.classic import guides_from_json, guides_to_json
 from workbench.services.guides.fit_guides import MAX_NORM_SD, plausible_guides
 from workbench.services.landmarks.transfer import TransferResult
@@ -75,6 +76,7 @@ __all__ = [
     "JobResult",
     "JobSettings",
     "build_report",
+    "hair_in_input_frame",
     "head_in_input_frame",
     "job_inputs",
     "plausible_guides",
@@ -561,6 +563,28 @@ def head_in_input_frame(recon: Reconstruction) -> TemplateHead:
     )
 
 
+def hair_in_input_frame(
+    recon: Reconstruction,
+    appearance: Appearance | None,
+    vertices: np.ndarray | None = None,
+    *,
+    stride: int = 1,
+) -> list[HairMesh]:
+    """The case's chosen hair, brows, beard and moustache (artistic additions) grown on the
+    fitted head's skin, or on ``vertices`` (a build's skin, head frame), and mapped into the
+    skull file's frame as :func:`head_in_input_frame` maps the head: triangles turned over
+    for a mirrored input, normals turned with the frame.  Empty when none was chosen."""
+    pieces = hair_meshes(recon.head, appearance, vertices, stride=stride)
+    # normals map by the inverse transpose of the points' linear map (input -> head)
+    turn = np.asarray(recon.input_to_head, float)[:3, :3]
+    out = []
+    for piece in pieces:
+        n = piece.normals @ turn
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        out.append(replace(piece, mesh=recon.mesh_to_input(piece.mesh), normals=n))
+    return out
+
+
 def job_inputs(
     skull_path: str | PathLike[str] | None,
     settings: JobSettings,
@@ -620,6 +644,9 @@ def write_outputs(
     return relocate(files, temp, final)
 
 
+#: hair displacements (mm) below this are written as 0 in a glTF's sparse morph targets
+HAIR_MIN_MM = 0.01
+
 #: the band's files beside face.ply
 BAND_FILES = "face_band_mm.npy; inner/outer edges in face_band_edges_mm.npy"
 
@@ -638,8 +665,10 @@ def write_build_files(
     ``face_band_edges_mm.npy``: (n, 2) inner and outer edge, mm along the face's outward
     normal) and ``face_builds.glb`` (the main face with one morph target per other build,
     the skull file's frame, mm ÷ 1000), its skin coloured as the case's ``appearance``
-    says (an artistic choice; None: the default tone)."""
-    from workbench.io.gltf_export import write_glb
+    says (an artistic choice; None: the default tone), with the hair, brows, beard and
+    moustache it chose (artistic additions, every strand) as nodes of their own whose
+    morph targets follow the builds (grown on each build's skin)."""
+    from workbench.io.gltf_export import Shading, write_glb
     from workbench.services.appearance import skin_look
 
     files: dict[str, Path] = {}
@@ -658,14 +687,32 @@ def write_build_files(
     files["band"] = out / "face_band_mm.npy"
     files["band_edges"] = out / "face_band_edges_mm.npy"
     skin_name = f"face_{builds.main}".replace(" ", "_")
+    others = [n for n in builds.names if n != builds.main]
+    # recon.face is the fitted head's skin vertex for vertex: its colours apply as they are
+    looks = {skin_name: skin_look(recon.head, appearance)}
+    extra: dict[str, Mesh] = {}
+    extra_targets: dict[str, dict[str, np.ndarray]] = {}
+    shading: dict[str, Shading] = {}
+    if appearance is not None:
+        for piece in hair_in_input_frame(recon, appearance):
+            extra[piece.kind] = piece.mesh
+            looks[piece.kind] = hair_look(piece, appearance)
+            shading[piece.kind] = Shading(
+                piece.normals, double_sided=True, tinted=True, min_displacement_mm=HAIR_MIN_MM
+            )
+    for name in others if extra else ():  # float32: the hair has many vertices
+        for piece in hair_in_input_frame(recon, appearance, builds.vertices(name)):
+            extra_targets.setdefault(piece.kind, {})[name] = piece.mesh.vertices.astype(np.float32)
     files["builds_glb"] = write_glb(
         out / "face_builds.glb",
         recon.face,
-        {n: recon.to_input(builds.vertices(n)) for n in builds.names if n != builds.main},
+        {n: recon.to_input(builds.vertices(n)) for n in others},
+        extra_nodes=extra,
+        node_targets=extra_targets,
         skin_name=skin_name,
         frame=FITTED_HEAD_FRAME_TEXT,
-        # recon.face is the fitted head's skin vertex for vertex: its colours apply as they are
-        looks={skin_name: skin_look(recon.head, appearance)},
+        looks=looks,
+        shading=shading,
     )
     return files
 
