@@ -126,7 +126,10 @@ def test_the_same_in_any_file_axes(head_male, grown) -> None:
     shift = np.array([40.0, -300.0, 12.0])
     skin = head_male.skin
     turned = Mesh(skin.vertices @ rot.T + shift, skin.faces)
-    lm = {k: np.asarray(v, float) @ rot.T + shift for k, v in head_male.skin_landmarks.as_dict().items()}
+    lm = {
+        k: np.asarray(v, float) @ rot.T + shift
+        for k, v in head_male.skin_landmarks.as_dict().items()
+    }
     again = groom(turned, _parts(head_male, lm), CHOICE)
     for a, b in zip(grown.pieces, again.pieces, strict=True):
         assert a.strands == b.strands

@@ -8,7 +8,7 @@ import math
 import sys
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from workbench.core.errors import WorkbenchError
 from workbench.core.mesh import Mesh
@@ -16,6 +16,9 @@ from workbench.core.units import UNIT_SCALES, check_units_choice, resolve_units
 from workbench.io.atomic import json_default, write_json_atomic
 from workbench.io.meshes import MeshReadResult, read_mesh
 from workbench.io.samples import resolve_input
+
+if TYPE_CHECKING:
+    from workbench.model.appearance import Appearance
 
 
 def add_units_options(parser: argparse.ArgumentParser) -> None:
@@ -174,3 +177,38 @@ def print_self_check(check: Mapping[str, Any] | None) -> None:
     if check and check.get("outcome") == "check":
         for reason in check.get("reasons", ()):
             print(f"CHECK: {reason}")
+
+
+def case_appearance(spec: str) -> Appearance | None:
+    """The appearance kept in a reconstruction folder's ``case.fcase``, if it has one
+    (``reference:...`` heads and folders without a case file have none)."""
+    if spec.startswith("reference:"):
+        return None
+    path = Path(spec) / "case.fcase"
+    if not path.is_file():
+        return None
+    from workbench.io.case_file import load_case
+
+    return load_case(path).case.appearance
+
+
+def chosen_appearance(args: argparse.Namespace) -> Appearance | None:
+    """The case's appearance (:func:`case_appearance` of ``args.head``) with the options'
+    changes (``--skin-tone``, ``--iris``, ``--hair``, ``--brows``, ``--beard``,
+    ``--moustache``); None when neither gives one (then plain tone and iris defaults
+    apply, as before).  ``workbench portrait`` and ``workbench animate`` share it."""
+    from workbench.core.grooming import KINDS
+    from workbench.model.appearance import Appearance
+
+    base = case_appearance(str(args.head))
+    styles = {k: getattr(args, k) for k in KINDS if getattr(args, k, None) is not None}
+    if base is None and not styles:
+        return None
+    look = base if base is not None else Appearance()
+    if getattr(args, "skin_tone", None) is not None:
+        look = look.with_tone(args.skin_tone)
+    if getattr(args, "iris", None) is not None:
+        look = look.replaced(iris=args.iris)
+    for kind, style in styles.items():
+        look = look.with_style(kind, style)
+    return look

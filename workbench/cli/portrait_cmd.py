@@ -30,14 +30,13 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from workbench.cli.common import add_force_option
+from workbench.cli.common import add_force_option, chosen_appearance
 from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
 from workbench.core.grooming import KINDS, style_names
 from workbench.pipelines.outcome import JobOutcome
 
 if TYPE_CHECKING:
     from workbench.core.appearance import SkinTexture
-    from workbench.model.appearance import Appearance
     from workbench.model.template import TemplateHead
 
 #: the views and the size limits (also in :mod:`workbench.render.portrait`, which the
@@ -123,37 +122,6 @@ def _skin_texture(spec: str, head: TemplateHead) -> SkinTexture | None:
         if texture is not None:
             return texture
     return None
-
-
-def case_appearance(spec: str) -> Appearance | None:
-    """The appearance kept in a reconstruction folder's ``case.fcase``, if it has one."""
-    if spec.startswith("reference:"):
-        return None
-    path = Path(spec) / "case.fcase"
-    if not path.is_file():
-        return None
-    from workbench.io.case_file import load_case
-
-    return load_case(path).case.appearance
-
-
-def chosen_appearance(args: argparse.Namespace) -> Appearance | None:
-    """The case's appearance with the options' changes; None when neither gives one
-    (then the plain ``--skin-tone`` / ``--iris`` defaults apply, as before)."""
-    from workbench.model.appearance import Appearance
-
-    base = case_appearance(str(args.head))
-    styles = {k: getattr(args, k) for k in KINDS if getattr(args, k) is not None}
-    if base is None and not styles:
-        return None
-    look = base if base is not None else Appearance()
-    if args.skin_tone is not None:
-        look = look.with_tone(args.skin_tone)
-    if args.iris is not None:
-        look = look.replaced(iris=args.iris)
-    for kind, style in styles.items():
-        look = look.with_style(kind, style)
-    return look
 
 
 def run(args: argparse.Namespace) -> JobOutcome:

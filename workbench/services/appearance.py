@@ -129,7 +129,9 @@ def region_colour(appearance: Appearance | None, region: str) -> Hsv:
     if region == "lips":
         return _hsv_of(lip_srgb(hsv_srgb(base)))
     if region == "hair":
-        return _hsv_of(HAIR.srgb)
+        from workbench.services.grooming import hair_colour
+
+        return hair_colour(look)
     dh, fs, fv, _ = RULES[region]
     return Hsv((base.h + dh) % 1.0, min(1.0, base.s * fs), min(1.0, base.v * fv))
 

@@ -30,7 +30,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.core.appearance import ROUGHNESS, linear_to_srgb, srgb_to_linear
+from workbench.core.appearance import (
+    HAIR,
+    ROUGHNESS,
+    Look,
+    Material,
+    hsv_to_rgb,
+    linear_to_srgb,
+    rgb_to_hsv,
+    srgb_to_linear,
+)
 from workbench.core.grooming import ARTISTIC_NOTE, Grooming, HeadParts, groom
 from workbench.core.mesh import Mesh
 from workbench.model.appearance import Appearance, Hsv
@@ -109,20 +118,38 @@ def hair_cover(head: TemplateHead, appearance: Appearance | None) -> np.ndarray 
 
 
 def _srgb(colour: Hsv) -> np.ndarray:
-    from workbench.services.appearance import hsv_srgb
+    """sRGB 0-255 of an HSV colour (as :func:`workbench.services.appearance.hsv_srgb`)."""
+    return np.clip(np.rint(hsv_to_rgb(colour.to_state()) * 255.0), 0, 255)
 
-    return np.asarray(hsv_srgb(colour), float)
+
+def _hsv(srgb: tuple[int, int, int]) -> Hsv:
+    h, s, v = (float(x) for x in rgb_to_hsv(np.asarray(srgb, float) / 255.0))
+    return Hsv(h, min(s, 1.0), min(v, 1.0))
+
+
+def hair_colour(appearance: Appearance | None) -> Hsv:
+    """The hair's colour: set by hand (the ``hair`` region), else :data:`~workbench.core.appearance.HAIR`."""
+    own = appearance.colour("hair") if appearance is not None else None
+    return own if own is not None else _hsv(HAIR.srgb)
 
 
 def piece_colour(appearance: Appearance, kind: str) -> Hsv:
     """The colour of ``kind``'s strands (see the module notes)."""
-    from workbench.services.appearance import region_colour
-
-    hair = region_colour(appearance, "hair")
+    hair = hair_colour(appearance)
     if kind != "brows":
         return hair
     own = appearance.colour("brows")
     return own if own is not None else Hsv(hair.h, hair.s, hair.v * BROW_VALUE)
+
+
+def hair_look(piece: HairMesh, appearance: Appearance) -> Look:
+    """An export's :class:`~workbench.core.appearance.Look` of one piece: one material named
+    after its kind in the piece's colour (the case's hair colour, or its brows'), the
+    strands' own colours per vertex; the source says it is an artistic addition."""
+    srgb = _srgb(piece_colour(appearance, piece.kind))
+    colour = (int(srgb[0]), int(srgb[1]), int(srgb[2]))
+    material = Material(piece.kind, colour, piece.roughness, piece.source)
+    return Look((material,), vertex_srgb=piece.srgb)
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,6 +213,8 @@ __all__ = [
     "hair_cover",
     "hair_meshes",
     "grooming_ready",
+    "hair_colour",
+    "hair_look",
     "head_grooming",
     "piece_colour",
 ]
