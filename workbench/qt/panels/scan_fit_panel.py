@@ -11,6 +11,7 @@ confidence).  Units mm.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from html import escape
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,6 +46,21 @@ UNITS = ("auto", "mm", "cm", "m", "in")
 #: drawn layers of the tool and their check-box titles
 LAYER_TITLES = {"scan": "Scan", "skin": "Fitted skin", "landmarks": "Landmarks"}
 STATE_TEXT = {"placed": "placed", "guess": "first guess", "over hole": "guess, over a hole"}
+#: how the scan is coloured: the choices of the "Scan colours" box (key, title)
+SCAN_COLOUR_CHOICES = (("distance", "distance to the fit"), ("own", "the scan's own colours"))
+#: the choice for a scan that carries colours until the user picks another: the person
+#: is recognised, and lid, lip and brow landmarks placed, on the scan's own colours; the
+#: distance map (and the fit's figures) check the fit, one choice away
+DEFAULT_SCAN_COLOURS = "own"
+COLOURS_TIP = (
+    "Draw the scan in its own colours (to recognise the person and place landmarks on "
+    "the lid, lip and brow borders) or by its distance to the fitted skin (0–2.5 mm, to "
+    "check the fit)"
+)
+NO_COLOURS_TIP = (
+    "This scan carries no colours (PLY or OBJ vertex colours, or an OBJ texture named "
+    "by its material's map_Kd): it is drawn by its distance to the fit"
+)
 
 
 class ScanFitPanel(QWidget):
@@ -66,6 +82,9 @@ class ScanFitPanel(QWidget):
     detail_toggled(bool)
         Draw the fitted skin with the scan's fine detail (the subdivided,
         displaced skin) instead of the animatable skin itself.
+    scan_colours_changed(str)
+        ``"own"``: draw the scan in its own colours; ``"distance"``: by its
+        distance to the fitted skin (:data:`SCAN_COLOUR_CHOICES`).
     """
 
     open_requested = Signal()
@@ -82,11 +101,15 @@ class ScanFitPanel(QWidget):
     visibility_changed = Signal(str, bool)
     opacity_changed = Signal(float)
     detail_toggled = Signal(bool)
+    scan_colours_changed = Signal(str)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.codes: list[str] = []
         self._filling = False
+        #: the scan colouring the user chose last (kept for the next coloured scan)
+        self.preferred_scan_colours = DEFAULT_SCAN_COLOURS
+        self._setting_colours = False
 
         self.open_button = QPushButton("Open scan…")
         self.open_button.setToolTip("A face scan: PLY, STL, OBJ, VTK or VTP (holes are fine)")
@@ -146,28 +169,7 @@ class ScanFitPanel(QWidget):
         self.figures.setTextFormat(Qt.TextFormat.RichText)
         self.figures.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
 
-        self.layer_checks: dict[str, QCheckBox] = {}
-        shown = QGridLayout()
-        for col, (layer, title) in enumerate(LAYER_TITLES.items()):
-            check = QCheckBox(title)
-            check.setChecked(True)
-            check.toggled.connect(lambda on, name=layer: self.visibility_changed.emit(name, on))
-            shown.addWidget(check, 0, col)
-            self.layer_checks[layer] = check
-        self.opacity = QSlider(Qt.Orientation.Horizontal)
-        self.opacity.setRange(0, 100)
-        self.opacity.setValue(35)
-        self.opacity.setToolTip("Opacity of the fitted skin over the scan (%)")
-        self.opacity.valueChanged.connect(lambda v: self.opacity_changed.emit(v / 100.0))
-        shown.addWidget(QLabel("Fitted skin opacity"), 1, 0)
-        shown.addWidget(self.opacity, 1, 1, 1, 2)
-        self.detail_check = QCheckBox("Fine detail")
-        self.detail_check.setToolTip(
-            "Show the fitted skin with the scan's fine detail (lid creases, lip borders, "
-            "nostrils) carried onto the subdivided skin; the animatable skin is unchanged"
-        )
-        self.detail_check.toggled.connect(self.detail_toggled.emit)
-        shown.addWidget(self.detail_check, 2, 0, 1, 3)
+        shown = self._layer_controls()
 
         self.place_check = QCheckBox("Place and drag landmarks on the scan")
         self.place_check.setToolTip(
@@ -227,6 +229,39 @@ class ScanFitPanel(QWidget):
         self.set_running(False)
         self.show_scan(None)
 
+    def _layer_controls(self) -> QGridLayout:
+        """The drawn layers' check boxes, the scan's colouring, the fitted skin's opacity
+        and its fine detail."""
+        self.layer_checks: dict[str, QCheckBox] = {}
+        shown = QGridLayout()
+        for col, (layer, title) in enumerate(LAYER_TITLES.items()):
+            check = QCheckBox(title)
+            check.setChecked(True)
+            check.toggled.connect(lambda on, name=layer: self.visibility_changed.emit(name, on))
+            shown.addWidget(check, 0, col)
+            self.layer_checks[layer] = check
+        self.opacity = QSlider(Qt.Orientation.Horizontal)
+        self.opacity.setRange(0, 100)
+        self.opacity.setValue(35)
+        self.opacity.setToolTip("Opacity of the fitted skin over the scan (%)")
+        self.opacity.valueChanged.connect(lambda v: self.opacity_changed.emit(v / 100.0))
+        self.scan_colours_combo = QComboBox()
+        for key, title in SCAN_COLOUR_CHOICES:
+            self.scan_colours_combo.addItem(title, key)
+        self.scan_colours_combo.currentIndexChanged.connect(self._on_scan_colours)
+        shown.addWidget(QLabel("Scan colours"), 1, 0)
+        shown.addWidget(self.scan_colours_combo, 1, 1, 1, 2)
+        shown.addWidget(QLabel("Fitted skin opacity"), 2, 0)
+        shown.addWidget(self.opacity, 2, 1, 1, 2)
+        self.detail_check = QCheckBox("Fine detail")
+        self.detail_check.setToolTip(
+            "Show the fitted skin with the scan's fine detail (lid creases, lip borders, "
+            "nostrils) carried onto the subdivided skin; the animatable skin is unchanged"
+        )
+        self.detail_check.toggled.connect(self.detail_toggled.emit)
+        shown.addWidget(self.detail_check, 3, 0, 1, 3)
+        return shown
+
     # ------------------------------------------------------------ reads
     def selected_code(self) -> str:
         rows = self.table.selectionModel().selectedRows()
@@ -260,6 +295,37 @@ class ScanFitPanel(QWidget):
     def skin_opacity(self) -> float:
         return self.opacity.value() / 100.0
 
+    def scan_colours(self) -> str:
+        """``"own"`` when the scan is to be drawn in its own colours, else ``"distance"``."""
+        combo = self.scan_colours_combo
+        return "own" if combo.isEnabled() and combo.currentData() == "own" else "distance"
+
+    def set_scan_colours(self, key: str) -> None:
+        """Choose ``"own"`` or ``"distance"`` as the user would (ignored while the scan has
+        no colours)."""
+        index = self.scan_colours_combo.findData(key)
+        if index >= 0 and self.scan_colours_combo.isEnabled():
+            self.scan_colours_combo.setCurrentIndex(index)
+
+    def _on_scan_colours(self, _index: int) -> None:
+        if self._setting_colours:
+            return
+        self.preferred_scan_colours = self.scan_colours()
+        self.scan_colours_changed.emit(self.scan_colours())
+
+    def _show_colour_choice(self, available: bool, tip: str) -> None:
+        """Enable the Scan colours box (at the user's last choice) or disable it at
+        "distance" with ``tip`` saying why; emits nothing."""
+        combo = self.scan_colours_combo
+        self._setting_colours = True
+        try:
+            combo.setEnabled(available)
+            key = self.preferred_scan_colours if available else "distance"
+            combo.setCurrentIndex(max(0, combo.findData(key)))
+            combo.setToolTip(tip)
+        finally:
+            self._setting_colours = False
+
     def _on_selection(self) -> None:
         if not self._filling:
             self.selection_changed.emit(self.selected_code())
@@ -277,12 +343,25 @@ class ScanFitPanel(QWidget):
     def show_scan(self, scan: OpenedScan | None) -> None:
         if scan is None:
             self.file_label.setText("No scan open.")
+            self._show_colour_choice(False, NO_COLOURS_TIP)
             return
         n = scan.mesh.n_faces
         extent = scan.mesh.vertices.max(axis=0) - scan.mesh.vertices.min(axis=0)
+        colours = scan.colours
+        if colours is not None:
+            what = "a texture" if colours.kind == "texture" else "vertex colours"
+            self._show_colour_choice(True, f"{COLOURS_TIP}. This scan carries {what}.")
+        elif scan.colour_note:
+            self._show_colour_choice(
+                False, f"This scan's colours could not be read: {scan.colour_note}"
+            )
+        else:
+            self._show_colour_choice(False, NO_COLOURS_TIP)
+        carried = {"texture": ", textured", "vertex": ", vertex colours"}
         self.file_label.setText(
             f"{scan.path.name}: {n:,} triangles, "
-            f"{' x '.join(f'{v:.0f}' for v in extent)} mm ({scan.factor:g} mm per unit)"
+            f"{' x '.join(f'{v:.0f}' for v in extent)} mm ({scan.factor:g} mm per unit"
+            f"{carried.get(colours.kind, '') if colours is not None else ''})"
         )
         if scan.scale is None and self.units_combo.findText(scan.units) >= 0:
             self.units_combo.setCurrentText(scan.units)  # what the scan was read with
@@ -367,7 +446,7 @@ def figures_html(view: FitView) -> str:
     absent = list(lms.get("absent", []))
     orient = fig.get("orientation", {}) or {}
     depths = fig.get("tissue_depths", {}) or {}
-    rows = [
+    rows: list[tuple[str, str]] = [
         ("Face within 1 mm", _pct(fig.get("face_within_1mm_fraction"))),
         ("Face within 2.5 mm", _pct(fig.get("face_within_2_5mm_fraction"))),
         ("Mean distance", _mm(fig.get("face_mean_distance_mm"))),
@@ -395,6 +474,15 @@ def figures_html(view: FitView) -> str:
                 f"{_pct(detail.get('face_within_2_5mm_fraction'))} within 2.5 mm",
             ),
         )
+    colours = view.skin_colours
+    if colours is not None:
+        source = "texture" if colours.kind == "texture" else "vertex colours"
+        rows.append(
+            (
+                "Skin colour",
+                f"{_pct(colours.observed_fraction)} from the scan ({source}), the rest filled",
+            )
+        )
     user = fig.get("skin_landmark_to_user_mm")
     if isinstance(user, dict):
         rows.append(("To placed landmarks", f"mean {_mm(user.get('mean'))}"))
@@ -408,5 +496,6 @@ def figures_html(view: FitView) -> str:
     body = "<tr><td colspan=2><b>Fit</b> (face region, mm)</td></tr>" + "".join(
         f"<tr><td>{k}</td><td>&nbsp;<b>{v}</b></td></tr>" for k, v in rows
     )
-    notes = "".join(f"<br><i>note: {w}</i>" for w in view.fit.warnings)
+    warnings = [*view.fit.warnings, *([escape(view.colour_note)] if view.colour_note else [])]
+    notes = "".join(f"<br><i>note: {w}</i>" for w in warnings)
     return f"<table>{body}</table>{notes}"

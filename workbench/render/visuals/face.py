@@ -1,6 +1,7 @@
 """Skin surfaces: the fitted face (plain or coloured by a value), the true skin coloured by
 its signed distance, the guide view's translucent face, a face scan coloured by its
-distance to the fitted skin, and the fitted skin over a scan.
+distance to the fitted skin or in its own colours (vertex colours or texture), and the
+fitted skin over a scan (plain, or in the scan's colours carried onto it).
 
 Translucent skins have their back faces culled (:func:`~workbench.render.visuals.style.cull_back_faces`).
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import threading
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from workbench.core.mesh import Mesh
 from workbench.render.snapshots import to_polydata
 from workbench.render.visuals.scalar_bars import bar_args
 from workbench.render.visuals.style import SKIN, SMOOTH, cull_back_faces
+
+if TYPE_CHECKING:
+    from workbench.core.colour_transfer import ScanColours
 
 TRUTH_GREY = (0.7, 0.7, 0.75)
 #: where a value is missing (NaN)
@@ -204,17 +208,31 @@ def add_guide_face(plotter: Any, mesh: Mesh, *, name: str = "gv_face") -> Any:
     return cull_back_faces(actor)
 
 
-def add_skin_part(plotter: Any, mesh: Mesh, *, name: str) -> Any:
+#: the point array of a scan, or of a fitted skin, drawn in the scan's own colours (sRGB,
+#: uint8, shown as they are)
+SCAN_COLOURS = "scan colours"
+
+
+def add_skin_part(plotter: Any, mesh: Mesh, *, name: str, rgb: np.ndarray | None = None) -> Any:
     """A fitted skin (part) drawn over a scan, translucent by its caller; the camera is
-    kept (it is redrawn when the user toggles detail)."""
+    kept (it is redrawn when the user toggles detail).
+
+    ``rgb``: ``(n_vertices, 3)`` uint8 sRGB per vertex of ``mesh`` (the scan's colours
+    carried onto the skin), drawn as they are; else the plain skin colour.
+    """
+    poly = to_polydata(mesh, normals=True)
+    kw: dict[str, Any] = {"color": SKIN}
+    if rgb is not None and len(rgb) == poly.n_points:
+        poly.point_data[SCAN_COLOURS] = np.ascontiguousarray(rgb, np.uint8)
+        kw = {"scalars": SCAN_COLOURS, "rgb": True}
     actor = plotter.add_mesh(
-        to_polydata(mesh, normals=True),
-        color=SKIN,
+        poly,
         **SMOOTH,
         pickable=False,
         render=False,
         reset_camera=False,
         name=name,
+        **kw,
     )
     return cull_back_faces(actor)
 
@@ -227,14 +245,29 @@ def add_scan(
     title: str,
     clim: tuple[float, float],
     name: str = "scan_fit_scan",
+    colours: ScanColours | None = None,
 ) -> tuple[Any, Any]:
     """A face scan, pickable: grey, or coloured by ``distance`` (per vertex, mm; NaN
-    where not counted) with a bar titled ``title`` when it has one value per vertex.
+    where not counted) with a bar titled ``title`` when it has one value per vertex,
+    or in its own ``colours`` (:func:`scan_polydata`; ``distance`` is then not shown).
+    The camera is left as it is (redrawn when the user changes the colouring).
 
-    Returns ``(actor, polydata)``: the polydata is the surface clicks are picked on.
+    Returns ``(actor, polydata)``: the polydata is the surface clicks are picked on
+    (the scan's triangles; a textured scan's vertices are split where their
+    texture coordinates differ, the surface is the same).
     """
+    if colours is not None:
+        poly = scan_polydata(mesh, colours)
+        if colours.image is not None:
+            kw: dict[str, Any] = {"texture": scan_texture(colours.image), "color": "white"}
+        else:
+            kw = {"scalars": SCAN_COLOURS, "rgb": True}
+        actor = plotter.add_mesh(
+            poly, **SMOOTH, pickable=True, render=False, reset_camera=False, name=name, **kw
+        )
+        return actor, poly
     poly = to_polydata(mesh, normals=True)
-    kw: dict[str, Any] = {"color": SCAN_GREY}
+    kw = {"color": SCAN_GREY}
     if distance is not None and len(distance) == poly.n_points:
         poly.point_data[title] = distance
         kw = {
@@ -244,8 +277,69 @@ def add_scan(
             "nan_color": NAN_GREY,
             "scalar_bar_args": bar_args(title, n_labels=6, fmt="%.1f"),
         }
-    actor = plotter.add_mesh(poly, **SMOOTH, pickable=True, render=False, name=name, **kw)
+    actor = plotter.add_mesh(
+        poly, **SMOOTH, pickable=True, render=False, reset_camera=False, name=name, **kw
+    )
     return actor, poly
+
+
+def scan_polydata(mesh: Mesh, colours: ScanColours) -> Any:
+    """``pyvista.PolyData`` of a scan in its own colours (mm, the scan's frame).
+
+    Vertex colours: the scan's vertices and triangles with the point array
+    :data:`SCAN_COLOURS`.  A texture (it wins, as in the colour transfer): VTK
+    holds one texture coordinate per point, so the scan's vertices come first
+    (each with one of its corners' coordinates) and a vertex gets one more point
+    per other coordinate its corners have (a seam), with the vertex's normal;
+    the triangles are ``colours.faces`` (the file's corner order, which the
+    coordinates follow).  Corners of a triangle without a texture (NaN) take the
+    image's corner.  Raises ValueError when the colours belong to another mesh.
+    """
+    if colours.n_vertices != mesh.n_vertices:
+        raise ValueError(
+            f"the colours are of {colours.n_vertices} vertices, the scan has {mesh.n_vertices}"
+        )
+    if colours.image is None or colours.corner_uv is None:
+        poly = to_polydata(mesh, normals=True)
+        assert colours.vertex_rgb is not None
+        poly.point_data[SCAN_COLOURS] = np.ascontiguousarray(colours.vertex_rgb, np.uint8)
+        return poly
+    import pyvista as pv
+
+    faces = np.asarray(colours.faces, np.int64)
+    uv = np.nan_to_num(np.asarray(colours.corner_uv, float), nan=0.0).reshape(-1, 2)
+    vid = faces.ravel()
+    n = mesh.n_vertices
+    # each vertex keeps one of its corners' coordinates; only the corners across a seam
+    # (another coordinate) become new points, one per distinct (vertex, coordinate)
+    per_vertex = np.zeros((n, 2))
+    per_vertex[vid] = uv
+    seam = np.flatnonzero((per_vertex[vid] != uv).any(axis=1))
+    keys = np.column_stack([vid[seam].astype(float), uv[seam]])
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    corner_point = vid.copy()
+    corner_point[seam] = n + inverse.ravel()
+    points = np.r_[np.arange(n), vid[seam][first]]
+    poly = pv.PolyData.from_regular_faces(
+        np.array(mesh.vertices[points], float),
+        corner_point.reshape(-1, 3),  # type: ignore[arg-type]
+    )
+    poly.point_data["Normals"] = np.asarray(mesh.vertex_normals, float)[points]
+    poly.point_data.active_normals_name = "Normals"
+    poly.active_texture_coordinates = np.r_[per_vertex, uv[seam][first]]
+    return poly
+
+
+def scan_texture(image: np.ndarray) -> Any:
+    """A VTK texture of a scan's sRGB image (row 0 at the top), interpolated and
+    mip-mapped.  Not marked sRGB: the dock's lighting is not gamma-corrected, and the
+    scan's vertex colours (and the fitted skin's) are drawn as they are too."""
+    import pyvista as pv
+
+    tex = pv.Texture(np.ascontiguousarray(np.asarray(image, np.uint8)[::-1]))
+    tex.InterpolateOn()
+    tex.MipmapOn()
+    return tex
 
 
 # ------------------------------------------------------------------ painted eyes

@@ -11,7 +11,14 @@ Frames and units: mm.  The 3D view shows the scan in **its own input frame**
 (the scan file's coordinates after units), so the fitted skin and its
 landmarks are mapped back with :meth:`ScanFit.to_input`.  The scan is
 coloured by each vertex's distance to the fitted skin (0–2.5 mm; grey where
-the service does not count it: outside the face, at hole rims, not the head).
+the service does not count it: outside the face, at hole rims, not the head),
+or, when the file carries colours (PLY / OBJ vertex colours, an OBJ texture
+through its material's ``map_Kd``), in its own colours: the dock's "Scan
+colours" choice, the scan's own colours by default (the person is recognised,
+and lid, lip and brow landmarks placed, on them; the distance map checks the
+fit).  The fitted skin then carries the scan's colours as the pack's does
+(:func:`~workbench.qt.tools.scan_fit.work.skin_colours`).  A colour problem (a
+missing texture image) never stops the scan from opening: the dock says it.
 
 Landmarks (skin, the reference head's codes): the fit's landmarks are the
 *first guess* (orange; violet over holes, where the service marks them

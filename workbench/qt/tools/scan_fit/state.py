@@ -20,6 +20,7 @@ from workbench.core.landmarks import Landmark, LandmarkSet
 from workbench.core.mesh import Mesh
 
 if TYPE_CHECKING:
+    from workbench.core.colour_transfer import ScanColours, SkinColours
     from workbench.model.case import Case
     from workbench.services.scan_fit.settings import ScanFit
 
@@ -44,6 +45,17 @@ class OpenedScan:
     ``units`` / ``scale`` are what the user chose (given again to the pack
     writer); ``factor`` is the mm per file unit applied; ``codes`` the
     reference head's skin landmark codes with their ``names``.
+
+    Colours (:func:`workbench.io.scan_colours.read_scan_colours`): ``colours``
+    are the file's own (vertex colours, or a texture image with per-corner
+    texture coordinates), aligned with ``mesh``; ``working_colours`` the same
+    carried onto the working scan the fit uses (the pack's
+    :func:`~workbench.io.scan_colours.colours_on_working_scan`), so the fit's
+    skin takes them as the pack's does.  Both None when the file carries none,
+    or they could not be read: ``colour_note`` then says why (the scan opens
+    all the same).  ``vertex_of``: each file vertex's working vertex (-1: left
+    out; None when the working scan was simplified), to show the fit's distances
+    on the file's mesh.
     """
 
     path: Path
@@ -54,6 +66,10 @@ class OpenedScan:
     codes: tuple[str, ...]
     names: dict[str, str]
     messages: tuple[str, ...] = ()
+    colours: ScanColours | None = None
+    working_colours: ScanColours | None = None
+    colour_note: str = ""
+    vertex_of: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -85,6 +101,16 @@ class FitView:
     detail_parts : (Mesh, Mesh), optional
         The same two parts of the detailed skin (the fit's detail layer over
         the subdivided skin), when the fit has one.
+    skin_colours : SkinColours, optional
+        The scan's colours carried onto the fitted skin (one per skin vertex,
+        so also per vertex of each of ``skin_parts``, which share its
+        vertices): :func:`~workbench.core.colour_transfer.transfer_colours`
+        as the pack does, observed where the scan is close, filled elsewhere.
+        None when the scan has no colours.
+    detail_colours : SkinColours, optional
+        The same for the detailed skin's vertices (``detail_parts``).
+    colour_note : str
+        Why the fitted skin carries no colours although the scan has them.
     seeds : int
         Placed landmarks the fit was given.
     confidence : dict
@@ -105,6 +131,9 @@ class FitView:
     seeds: int = 0
     confidence: dict[str, float] = field(default_factory=dict)
     detail_parts: tuple[Mesh, Mesh] | None = None
+    skin_colours: SkinColours | None = None
+    detail_colours: SkinColours | None = None
+    colour_note: str = ""
 
 
 @dataclass

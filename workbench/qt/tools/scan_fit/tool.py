@@ -147,6 +147,7 @@ class ScanFitTool(QObject):
         p.visibility_changed.connect(self.set_visible)
         p.opacity_changed.connect(lambda v: self._set_opacity("skin", v))
         p.detail_toggled.connect(lambda _on: self.draw_skin())
+        p.scan_colours_changed.connect(lambda _key: self.draw_scan())
         runner.progress_changed.connect(self._on_progress)
         runner.cancelled.connect(lambda ch: self._on_cancelled() if ch == CHANNEL else None)
 
@@ -220,11 +221,18 @@ class ScanFitTool(QObject):
         # the scan has its own frame: the case's skull and face are set aside meanwhile
         self._aside.set_aside(self.active)
         n = scan.mesh.n_faces
+        carried = ""
+        if scan.colours is not None:
+            carried = ", textured" if scan.colours.kind == "texture" else ", vertex colours"
         self.host.status(
-            f"Scan {scan.path.name}: {n:,} triangles ({scan.factor:g} mm per file unit). "
-            "Fit it (Fit scan dock) or place 3+ skin landmarks first."
+            f"Scan {scan.path.name}: {n:,} triangles ({scan.factor:g} mm per file unit"
+            f"{carried}). Fit it (Fit scan dock) or place 3+ skin landmarks first."
         )
         self.host.messages.extend(scan.messages)
+        if scan.colour_note:  # the scan is open; only its colours are missing
+            note = f"its colours could not be read ({scan.colour_note})"
+            self.panel.show_state(f"Opened; {note}: it is shown and fitted without them.")
+            self.host.messages.append(f"{scan.path.name}: {note}")
 
     # ------------------------------------------------------------ fit
     def fit(self) -> None:
@@ -287,6 +295,9 @@ class ScanFitTool(QObject):
         self.draw_landmarks()
         self.reset_camera()
         self.host.messages.extend(view.fit.warnings)
+        if view.colour_note:
+            self.panel.show_state(f"Fitted in {seconds:.1f} s; {view.colour_note}.")
+            self.host.messages.append(view.colour_note)
         self.host.status(
             f"Scan fitted: {fig.get('face_within_1mm_fraction', 0) * 100:.1f} % of the face "
             f"within 1 mm, {fig.get('fold_overs', 0)} fold-overs ({seconds:.1f} s)"
@@ -547,12 +558,14 @@ class ScanFitTool(QObject):
         if self.scan is None:
             return
         view = self.view
+        own = self.scan.colours if self.panel.scan_colours() == "own" else None
         actor, self._scan_poly = face.add_scan(
             self.plotter,
             self.scan.mesh,
             None if view is None else view.distance,
             title=DISTANCE_TITLE,
             clim=DISTANCE_RANGE_MM,
+            colours=own,
         )
         self._add("scan", actor)
         self._show_scan_key()
@@ -562,15 +575,17 @@ class ScanFitTool(QObject):
         self._clear("skin")
         if self.view is None:
             return
-        parts = self.view.skin_parts
+        parts, colours = self.view.skin_parts, self.view.skin_colours
         if self.panel.detail_shown() and self.view.detail_parts is not None:
-            parts = self.view.detail_parts
+            parts, colours = self.view.detail_parts, self.view.detail_colours
+        # the scan's colours carried onto the skin: one per skin vertex, which both parts share
+        rgb = None if colours is None else colours.rgb
         for i, part in enumerate(parts):
             if not part.n_faces:
                 continue
             # translucent over the scan (back faces culled, no sorting); the camera is kept
             actor = face.add_skin_part(
-                self.plotter, part, name=f"scan_fit_skin_{'on' if i else 'off'}_scan"
+                self.plotter, part, name=f"scan_fit_skin_{'on' if i else 'off'}_scan", rgb=rgb
             )
             self._add("skin", actor)
             if i:  # the part on the scan: only while the scan is hidden
@@ -582,7 +597,11 @@ class ScanFitTool(QObject):
 
     def _show_scan_key(self) -> None:
         set_bar_visible(
-            self.plotter, DISTANCE_TITLE, self.active and self.panel.layer_visible("scan")
+            self.plotter,
+            DISTANCE_TITLE,
+            self.active
+            and self.panel.layer_visible("scan")
+            and self.panel.scan_colours() == "distance",
         )
 
     def _scan_shown(self) -> bool:

@@ -19,7 +19,8 @@ from workbench.qt.gui_call import GuiCall
 from workbench.qt.tools.scan_fit.state import FitView, OpenedScan, ScanFitSettings
 
 if TYPE_CHECKING:
-    from workbench.services.scan_fit.settings import ScanFit
+    from workbench.core.colour_transfer import ScanColours, SkinColours
+    from workbench.services.scan_fit.settings import PreparedScan, ScanFit
 
 #: fraction of the fit done when the service reports a step (by the step's first word)
 STEP_FRACTIONS = {
@@ -40,11 +41,16 @@ def read_scan(path: str | Path, units: str = "auto", scale: float | None = None)
     "auto" and the size does not look like mm (the window asks), and
     :class:`~workbench.core.errors.InputError` for a file that is not a
     face scan (a point cloud, a few triangles, a size not a head's).
+
+    The colours the file carries (PLY / OBJ vertex colours, an OBJ texture
+    through its material's ``map_Kd``) are read too (:func:`read_colours`); a
+    problem with them leaves the scan without colours and says why
+    (``OpenedScan.colour_note``), it never stops the scan from opening.
     """
     from workbench.core.units import check_units_choice, resolve_units
     from workbench.io.catalogue import load_catalogue
     from workbench.io.meshes import read_mesh
-    from workbench.services.scan_fit.checks import check_scan_mesh
+    from workbench.services.scan_fit.checks import prepare_scan
     from workbench.services.templates.cache import reference_head
 
     check_units_choice(units, scale)
@@ -52,7 +58,8 @@ def read_scan(path: str | Path, units: str = "auto", scale: float | None = None)
     read = read_mesh(path, units=units if scale is None else "auto", scale=scale, kind="face")
     if scale is None and units == "auto":
         resolve_units(read.units, "auto", source=str(path))
-    check_scan_mesh(read.mesh, path)
+    # the checks of check_scan_mesh, the working scan kept (to carry the colours onto it)
+    prepared = prepare_scan(read.mesh, path)
     _ = read.mesh.vertex_normals  # cached: spares the GUI thread when drawing
     codes = reference_head("male").skin_landmarks.codes
     catalogue = load_catalogue()
@@ -60,9 +67,65 @@ def read_scan(path: str | Path, units: str = "auto", scale: float | None = None)
     for code in codes:
         entry = catalogue.get(code, "skin")
         names[code] = entry.name if entry is not None else ""
+    colours, working, note = read_colours(path, read.mesh, prepared)
     return OpenedScan(
-        path, units, scale, read.mesh, float(read.scale_applied), tuple(codes), names, read.messages
+        path,
+        units,
+        scale,
+        read.mesh,
+        float(read.scale_applied),
+        tuple(codes),
+        names,
+        read.messages,
+        colours=colours,
+        working_colours=working,
+        colour_note=note,
+        vertex_of=prepared.vertex_of,
     )
+
+
+def _problem(exc: BaseException) -> str:
+    """A colour problem in a few words: the file's name and what is wrong."""
+    from workbench.core.errors import InputError
+
+    if isinstance(exc, InputError):
+        return f"{Path(exc.source).name}: {exc.problem}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def read_colours(
+    path: Path, mesh: Mesh, prepared: PreparedScan
+) -> tuple[ScanColours | None, ScanColours | None, str]:
+    """Worker: ``(file colours, colours on the working scan, note)`` of the scan file.
+
+    ``mesh`` is the file's mesh (:func:`~workbench.io.meshes.read_mesh`) and
+    ``prepared`` its working scan.  No colours: ``(None, None, "")``.  Any
+    problem (an unreadable or missing texture image, colours that do not match
+    the mesh) gives ``(None, None, why)``: the scan is shown and fitted without
+    its colours.
+    """
+    from workbench.io.scan_colours import colours_on_working_scan, read_scan_colours
+
+    try:
+        colours = read_scan_colours(path)
+        if colours is None:
+            return None, None, ""
+        if colours.n_vertices != mesh.n_vertices or len(colours.faces) != mesh.n_faces:
+            return (
+                None,
+                None,
+                (
+                    f"its colours belong to {colours.n_vertices:,} vertices and "
+                    f"{len(colours.faces):,} triangles, the mesh has {mesh.n_vertices:,} and "
+                    f"{mesh.n_faces:,}"
+                ),
+            )
+        working = colours_on_working_scan(
+            colours, mesh.vertices, prepared.mesh, prepared.vertex_of, prepared.face_source
+        )
+    except Exception as exc:  # noqa: BLE001 - a colour problem must not stop the scan opening
+        return None, None, _problem(exc)
+    return colours, working, ""
 
 
 def _fraction_reporter(report: Callable[[str, float], None] | None) -> Callable[[str], None]:
@@ -79,8 +142,52 @@ def _fraction_reporter(report: Callable[[str, float], None] | None) -> Callable[
     return say
 
 
-def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
-    """Worker: map a fit into the scan's frame for drawing (see :class:`FitView`)."""
+def skin_colours(
+    fit: ScanFit, working: ScanColours | None
+) -> tuple[SkinColours | None, SkinColours | None, str]:
+    """Worker: the scan's colours carried onto the fitted skin and onto its detailed skin
+    (head frame, as the pack does: :func:`~workbench.core.colour_transfer.transfer_colours`
+    from the fit's working scan, observed within 3 mm, filled elsewhere), and a note.
+
+    ``(None, None, "")`` when the scan has no colours; ``(None, None, why)`` when
+    they could not be carried over (the fit is shown all the same).
+    """
+    from workbench.core.colour_transfer import transfer_colours
+    from workbench.core.spatial import MeshIndex
+
+    if working is None or fit.scan is None:
+        return None, None, ""
+    try:
+        index = MeshIndex.shared(fit.scan)  # the pack's index of the same scan
+        skin = transfer_colours(fit.head.skin, fit.scan, working, index=index)
+        detail = None
+        if fit.detail is not None:
+            fine = fit.detail.apply(fit.head.skin.vertices)
+            detail = transfer_colours(fine, fit.scan, working, index=index)
+    except Exception as exc:  # noqa: BLE001 - the fit is shown without its colours
+        return (
+            None,
+            None,
+            f"the scan's colours could not be carried onto the skin ({_problem(exc)})",
+        )
+    return skin, detail, ""
+
+
+def fit_view(
+    fit: ScanFit,
+    scan: Mesh,
+    seeds: int = 0,
+    *,
+    vertex_of: np.ndarray | None = None,
+    colours: ScanColours | None = None,
+) -> FitView:
+    """Worker: map a fit into the scan's frame for drawing (see :class:`FitView`).
+
+    ``vertex_of`` (:attr:`OpenedScan.vertex_of`) puts the fit's distances (per
+    working scan vertex) onto the vertices of the file's mesh ``scan``;
+    ``colours`` (:attr:`OpenedScan.working_colours`) are carried onto the
+    fitted skin (:func:`skin_colours`).
+    """
     from workbench.core.spatial import MeshIndex
     from workbench.services.templates.regions import face_regions
 
@@ -110,11 +217,8 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
     face = skin.vertices[np.unique(ids)] if len(ids) else skin.vertices
     lo, hi = face.min(axis=0), face.max(axis=0)
     a, s = back[:3, :3] @ [0.0, 0.0, 1.0], back[:3, :3] @ [0.0, 1.0, 0.0]
-    distance = (
-        np.asarray(fit.scan_distance, float)
-        if fit.scan_distance is not None
-        else np.full(scan.n_vertices, np.nan)
-    )
+    distance = on_file_vertices(fit.scan_distance, scan.n_vertices, vertex_of)
+    skin_rgb, detail_rgb, note = skin_colours(fit, colours)
     return FitView(
         fit,
         skin,
@@ -129,7 +233,27 @@ def fit_view(fit: ScanFit, scan: Mesh, seeds: int = 0) -> FitView:
         seeds,
         {c: float(lms[c].confidence) for c in codes},
         detail_parts,
+        skin_rgb,
+        detail_rgb,
+        note,
     )
+
+
+def on_file_vertices(
+    distance: np.ndarray | None, n_file: int, vertex_of: np.ndarray | None
+) -> np.ndarray:
+    """The fit's per working-scan-vertex ``distance`` on the file's ``n_file`` vertices
+    (NaN: not counted, or left out of the working scan); as it is when the two have
+    the same vertices, or no map is known."""
+    if distance is None:
+        return np.full(n_file, np.nan)
+    d = np.asarray(distance, float)
+    if vertex_of is None or len(vertex_of) != n_file or int(vertex_of.max(initial=-1)) >= len(d):
+        return d
+    kept = vertex_of >= 0
+    out = np.full(n_file, np.nan)
+    out[kept] = d[vertex_of[kept]]
+    return out
 
 
 def run_scan_fit(
@@ -162,8 +286,15 @@ def run_scan_fit(
         progress=_fraction_reporter(report),
     )
     if report is not None:
-        report("drawing the fit", 0.98)
-    return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds))
+        step = "carrying the scan's colours onto" if scan.working_colours else "drawing"
+        report(f"{step} the fit", 0.97)
+    return fit_view(
+        result,
+        scan.mesh,
+        0 if seeds is None else len(seeds),
+        vertex_of=scan.vertex_of,
+        colours=scan.working_colours,
+    )
 
 
 def save_pack(
@@ -217,4 +348,11 @@ def save_pack(
         progress=_fraction_reporter(report),
         fitted=fitted,
     )
-    return fit_view(result, scan.mesh, 0 if seeds is None else len(seeds)), list(files)
+    view = fit_view(
+        result,
+        scan.mesh,
+        0 if seeds is None else len(seeds),
+        vertex_of=scan.vertex_of,
+        colours=scan.working_colours,
+    )
+    return view, list(files)
