@@ -200,3 +200,28 @@ def test_the_animate_dock_moves_the_hair_with_the_face(window, qtbot) -> None:
         pass
     window.docks["appearance"].raise_()
     qtbot.waitUntil(lambda: not tool.actors()["hair_beard"].GetVisibility(), timeout=10_000)
+
+
+def test_export_report_shows_the_portraits_and_says_not_evidence(window, qtbot, tmp_path) -> None:
+    """File > Export of a case with hair: the report's appearance section (schema-valid
+    report.json, the PDF's section) with portraits in the case's appearance, and head.obj
+    with the pieces as objects of their own."""
+    import json
+
+    import pypdf
+
+    _choose(window.appearance_panel.styles["hair"], "short")
+    _choose(window.appearance_panel.styles["brows"], "thick")
+    out = tmp_path / "export"
+    assert window.export_to(out)
+    assert window.wait_idle(300) and not window.errors, window.errors
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    section = report["appearance"]
+    assert "not evidence" in section["note"]
+    assert section["artistic_additions"]["hair_and_brows"]["hair"] == "short"
+    for view in ("front", "three_quarter", "profile"):
+        assert (out / report["pictures"][f"portrait_{view}"]).is_file()
+    text = "\n".join(p.extract_text() for p in pypdf.PdfReader(str(out / "report.pdf")).pages)
+    assert "Appearance: an artistic presentation" in text and "hair short" in text
+    obj = (out / "head" / "head.obj").read_text(encoding="utf-8")
+    assert "\no hair\n" in obj and "\no brows\n" in obj

@@ -164,6 +164,9 @@ def write_reconstruction(
     files.update(_coloured_head(result, out))
     files.update(_other_formats(result, out, formats))
     report = result.report
+    section = appearance_section(result)
+    if section is not None:
+        report["appearance"] = section
     if truth is not None:
         report["validation"] = validation_figures(truth, result.settings.scale, result)
     if pictures:
@@ -295,6 +298,48 @@ def _skull_of(result: JobResult) -> Mesh:
     return mesh
 
 
+#: the side (px) of the report's portraits in the case's appearance (a third of the page
+#: width is about 60 mm: 900 px prints it at ~380 dpi)
+REPORT_PORTRAIT_PX = 900
+
+
+def appearance_section(result: JobResult) -> dict[str, Any] | None:
+    """The report's ``appearance``: what the case chose for the face (colours, iris, hair)
+    and that it is an artistic presentation, not evidence; None when it chose nothing."""
+    appearance = result.opened.case.appearance
+    if appearance is None:
+        return None
+    from workbench.core.grooming import ARTISTIC_NOTE as GROOMING_NOTE
+    from workbench.model.appearance import ARTISTIC_NOTE
+    from workbench.services.appearance import colour_summary
+
+    summary = colour_summary(appearance).removesuffix(ARTISTIC_NOTE).strip()
+    additions = (
+        {"hair_and_brows": dict(appearance.grooming), "note": GROOMING_NOTE}
+        if appearance.grooming
+        else None
+    )
+    return {"summary": summary, "note": ARTISTIC_NOTE, "artistic_additions": additions}
+
+
+def _portraits(out: Path, result: JobResult, note: Say) -> dict[str, Path]:
+    """Front, three-quarter and profile portraits in the case's appearance (with its hair)
+    into ``out/pictures`` for the report; none when the case chose no appearance."""
+    appearance = result.opened.case.appearance
+    if appearance is None:
+        return {}
+    from workbench.core.errors import WorkbenchError
+    from workbench.render.portrait import make_portrait, write_portrait
+
+    try:
+        portrait = make_portrait(result.recon.head, size=REPORT_PORTRAIT_PX, appearance=appearance)
+        written = write_portrait(portrait, out / "pictures", formats=("png",))
+    except (RuntimeError, OSError, ValueError, WorkbenchError) as exc:
+        note(f"no portraits in the report (rendering failed: {exc})")
+        return {}
+    return {f"portrait_{view}": paths[0] for view, paths in written.items()}
+
+
 def reconstruction_pictures(out: Path, result: JobResult, note: Say = quiet) -> dict[str, str]:
     """The report's pictures into ``out/pictures``: {name: path relative to ``out``}.
 
@@ -343,6 +388,7 @@ def reconstruction_pictures(out: Path, result: JobResult, note: Say = quiet) -> 
             )
         except (RuntimeError, OSError, ValueError, InputError) as exc:
             note(f"no build pictures (rendering failed: {exc})")
+    paths |= _portraits(out, result, note)
     return {k: str(Path(p).relative_to(out)) for k, p in paths.items()}
 
 
