@@ -168,6 +168,49 @@ def test_eyes_and_lids_go_to_the_published_projection(female_case, head_female, 
     assert "eye_l_shift_mm" not in same.figures
 
 
+def test_the_lids_rest_on_the_globes(female_case, head_female, head_male):
+    """No skin inside an eyeball (cornea included) after the fit: the lids rest on it with
+    the clearance (issue 34: eyes showed through the lids, wide and bulging), the preview
+    does the same, and the rest of the face is untouched."""
+    from workbench.core.spatial import MeshIndex
+    from workbench.services.reconstruction.reconstruct import (
+        GLOBE_CLEARANCE_MM,
+        LID_SPREAD_MM,
+        lids_on_globes,
+    )
+
+    skin_in = reconstruct(
+        *female_case[:1],
+        head_female.skull_landmarks,
+        head_male,
+        registration=female_case[1].registration,
+    )
+    eyes = skin_in.head.meshes["eyes"]
+    signed = MeshIndex(eyes).signed_distance(skin_in.head.skin.vertices)
+    # (moved along the normal at the old closest point: on the cornea's curve the new
+    # closest point can be a little nearer)
+    assert signed.min() >= GLOBE_CLEARANCE_MM - 0.05
+    assert {"skin_in_globes", "lid_vertices_rested", "max_lid_move_mm"} <= set(skin_in.figures)
+    # a skin pushed 2 mm into a globe comes back out; skin far from the eyes is not moved
+    v = skin_in.head.skin.vertices.copy()
+    centre = skin_in.head.eye_centres[0]
+    lid = np.linalg.norm(v - centre, axis=1).argmin()
+    v[lid] = centre + (v[lid] - centre) * 0.5
+    rested, figures = lids_on_globes(v, eyes)
+    assert MeshIndex(eyes).signed_distance(rested[lid][None])[0] == pytest.approx(
+        GLOBE_CLEARANCE_MM, abs=0.05
+    )
+    # (the fitted lids, rested along their old closest points' normals, may move a few
+    # hundredths of a mm more: only skin away from both globes is compared exactly)
+    to_globes = np.linalg.norm(v[:, None] - skin_in.head.eye_centres[None], axis=2).min(axis=1)
+    far = to_globes > skin_in.head.eye_radius + GLOBE_CLEARANCE_MM + LID_SPREAD_MM + 4.0
+    assert far.sum() > 3000 and np.array_equal(rested[far], v[far])
+    assert figures["skin_in_globes"] >= 1
+    assert np.abs(rested - v)[~far].max() < 8.0
+    same, _ = lids_on_globes(skin_in.head.skin.vertices, None)
+    assert np.array_equal(same, skin_in.head.skin.vertices)
+
+
 def test_an_implausible_orbit_leaves_the_eye_and_says_why(head_male):
     lms = head_male.skull_landmarks
     ec = lms["ec_l"]

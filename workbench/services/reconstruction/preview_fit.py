@@ -15,9 +15,11 @@ thing owns:
 
 The same regularised landmark warp as the full fit is then re-solved
 (``(k+4)²`` system, k ≈ 300) and applied to the reference skin only (about
-5 000 vertices): a few milliseconds.  Because the warp is re-solved with the
-last fit's correspondences, a preview of an unchanged state reproduces the
-fitted skin exactly.  The full fit runs again when the drag ends.
+5 000 vertices): a few milliseconds.  The lids are then rested on the last
+fit's eyeballs as the fit rests them
+(:func:`~workbench.services.reconstruction.reconstruct.lids_on_globes`).
+Because the warp is re-solved with the last fit's correspondences, a preview
+of an unchanged state reproduces the fitted skin exactly.  The full fit runs again when the drag ends.
 
 Units mm.  Landmark positions in and skin vertices out are in the
 specimen's **input frame** (the skull file's coordinates); internally the
@@ -33,10 +35,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from workbench.core.frame import apply_transform
+from workbench.core.mesh import Mesh
 from workbench.core.tps import fit_warp
 from workbench.model.template import TemplateHead
 from workbench.services.guides.classic import AXES, Guide
-from workbench.services.reconstruction.reconstruct import SMOOTHING, Reconstruction
+from workbench.services.reconstruction.reconstruct import (
+    SMOOTHING,
+    Reconstruction,
+    lids_on_globes,
+)
 
 
 @dataclass
@@ -55,6 +62,7 @@ class PreviewFit:
     dowels: dict[str, tuple[float, np.ndarray]]  # skull code → (depth mm, unit direction)
     _rows: dict[str, np.ndarray] = field(default_factory=dict)
     smoothing: np.ndarray | None = None  # (k,) λ per correspondence (mm); None = SMOOTHING
+    eyes: Mesh | None = None  # the last fit's eyeballs (head frame), the lids rest on
 
     @classmethod
     def from_fit(cls, recon: Reconstruction, reference: TemplateHead) -> PreviewFit:
@@ -80,6 +88,7 @@ class PreviewFit:
             dowels,
             {k: np.array(v, dtype=np.int64) for k, v in rows.items()},
             None if recon.smoothing is None else np.array(recon.smoothing, float),
+            recon.head.meshes.get("eyes"),
         )
 
     # ------------------------------------------------------------ edits
@@ -138,7 +147,7 @@ class PreviewFit:
         """The previewed skin vertices in the head frame (mm)."""
         lam = SMOOTHING if self.smoothing is None else self.smoothing
         warp = fit_warp(self.sources, self.targets, smoothing=lam)
-        return warp(self.skin_vertices, workers=1)
+        return lids_on_globes(warp(self.skin_vertices, workers=1), self.eyes)[0]
 
     def to_input(self, points_head: np.ndarray) -> np.ndarray:
         """Head-frame points (mm) → the input frame."""
