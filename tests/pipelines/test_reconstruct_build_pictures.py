@@ -34,7 +34,9 @@ def fake_result(builds) -> SimpleNamespace:
     )
     return SimpleNamespace(
         recon=recon,
-        opened=SimpleNamespace(case=SimpleNamespace(specimen=SimpleNamespace(mesh=TRI))),
+        opened=SimpleNamespace(
+            case=SimpleNamespace(specimen=SimpleNamespace(mesh=TRI), appearance=None)
+        ),
         spread=None,
         fit=SimpleNamespace(builds=builds),
     )
