@@ -59,7 +59,8 @@ def test_moving_a_landmark_moves_its_dowel_tip_and_the_face_near_it(fitted, head
     # around it let go
     targets = recon.targets.copy()
     targets[row] += recon.input_to_head[:3, :3] @ [0.0, 4.0, 0.0]
-    from workbench.services.reconstruction.reconstruct import ANCHOR_CLEARANCE_MM, lids_on_globes
+    from workbench.services.reconstruction.lids import lids_on_globes
+    from workbench.services.reconstruction.reconstruct import ANCHOR_CLEARANCE_MM
 
     anchor = np.array([lab == "anchor" for lab in recon.labels])
     keep = ~(anchor & (np.linalg.norm(recon.sources - skin_g, axis=1) < ANCHOR_CLEARANCE_MM))

@@ -173,7 +173,7 @@ def test_the_lids_rest_on_the_globes(female_case, head_female, head_male):
     the clearance (issue 34: eyes showed through the lids, wide and bulging), the preview
     does the same, and the rest of the face is untouched."""
     from workbench.core.spatial import MeshIndex
-    from workbench.services.reconstruction.reconstruct import (
+    from workbench.services.reconstruction.lids import (
         GLOBE_CLEARANCE_MM,
         LID_SPREAD_MM,
         lids_on_globes,

@@ -17,7 +17,7 @@ The same regularised landmark warp as the full fit is then re-solved
 (``(k+4)²`` system, k ≈ 300) and applied to the reference skin only (about
 5 000 vertices): a few milliseconds.  The lids are then rested on the last
 fit's eyeballs as the fit rests them
-(:func:`~workbench.services.reconstruction.reconstruct.lids_on_globes`).
+(:func:`~workbench.services.reconstruction.lids.lids_on_globes`).
 Because the warp is re-solved with the last fit's correspondences, a preview
 of an unchanged state reproduces the fitted skin exactly.  The full fit runs again when the drag ends.
 
@@ -39,11 +39,8 @@ from workbench.core.mesh import Mesh
 from workbench.core.tps import fit_warp
 from workbench.model.template import TemplateHead
 from workbench.services.guides.classic import AXES, Guide
-from workbench.services.reconstruction.reconstruct import (
-    SMOOTHING,
-    Reconstruction,
-    lids_on_globes,
-)
+from workbench.services.reconstruction.lids import lids_on_globes
+from workbench.services.reconstruction.reconstruct import SMOOTHING, Reconstruction
 
 
 @dataclass
