@@ -71,7 +71,8 @@ def test_every_layer_toggles_and_fades_from_the_dock_and_the_menu_in_sync(window
     scene.layer_changed.connect(emitted.append)
 
     for layer in LAYERS:
-        if layer in ON_DEMAND:  # (a held-back refit: tests/qt/test_safe_edits.py)
+        if layer in ON_DEMAND:  # (a held-back refit: tests/qt/test_safe_edits.py; hair:
+            # tests/qt/test_hair_layer.py)
             continue
         assert scene.actors(layer), f"{layer}: nothing drawn after the fit"
         start = scene.visible[layer]

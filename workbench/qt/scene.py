@@ -60,8 +60,9 @@ LAYERS = {
 HIDDEN_BY_DEFAULT = frozenset({"muscles"})
 #: starting opacity per layer (1.0 where not listed)
 DEFAULT_OPACITY = {"face": 0.6, "held": 0.35}
-#: layers drawn only while there is something to show (a refit held back for the user)
-ON_DEMAND = frozenset({"held"})
+#: layers drawn only while there is something to show (a refit held back for the user; the
+#: hair, brows and beard the case chose in the Appearance dock)
+ON_DEMAND = frozenset({"held", "hair"})
 #: actors drawn with a layer and following its visibility and opacity, kept apart so that
 #: the layer's first actor stays its surface (:meth:`SceneView.update_points`): the
 #: fitted head's eyes go with the face.  Not in the menus; their state in
