@@ -127,11 +127,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             if owner:  # the outcome is decided: a late Ctrl-C no longer changes it
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
             watch.restore()
-    except KeyboardInterrupt:  # in the instant between the command's end and the above
+    except KeyboardInterrupt as exc:  # in the instant between the command's end and the above
+        _KEPT.append(exc)
         code = _interrupted()
     if owner and code == EXIT_INTERRUPTED:
         _end_process(code)
+    _KEPT.clear()
     return code
+
+
+#: the interrupt (and what it turned into) of a command that ends interrupted, kept until the
+#: process ends: its traceback holds the frames the interrupt left, with their objects (a
+#: VTK render window half-way through a picture).  Freed as the except block ends, those
+#: objects' native clean-up could crash (exit 139 after "interrupted", seen once in ~100
+#: interrupted runs of ``workbench age``); kept, nothing is freed before ``os._exit``.
+_KEPT: list[BaseException] = []
 
 
 def _run(argv: Sequence[str] | None, watch: _Interrupts) -> int:
@@ -147,10 +157,12 @@ def _run(argv: Sequence[str] | None, watch: _Interrupts) -> int:
             return _interrupted()
         _flush_stdout()
         return code
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        _KEPT.append(exc)
         return _interrupted()
-    except BrokenPipeError:
+    except BrokenPipeError as exc:
         if watch.seen:
+            _KEPT.append(exc)
             return _interrupted()
         # the reader went away (``workbench samples list | head``): a normal end
         _silence_stdout()
@@ -159,6 +171,7 @@ def _run(argv: Sequence[str] | None, watch: _Interrupts) -> int:
         if watch.seen:
             # whatever the interrupt turned into on its way out (an ImportError when it
             # hit a compiled module's import, an error of a library that caught it)
+            _KEPT.append(exc)
             return _interrupted()
         return failure_status(exc, args, flush_stdout=_flush_stdout)
 
