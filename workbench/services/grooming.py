@@ -5,7 +5,7 @@ are grown on the head's skin from its own skin landmarks
 (:func:`workbench.core.grooming.groom`) and tied to the skin, so the same
 strands are rebuilt on any skin with the head's triangles: a build variant,
 the aged head, a frame of an animation (:func:`hair_meshes` with
-``vertices``).  Growing takes 0.5-3 s for one head, so the grown pieces are
+``vertices``).  Growing takes 0.5-2 s for one head, so the grown pieces are
 kept for the last few heads and choices (:data:`CACHE_SIZE`).
 
 Colours: the hair, beard and moustache take the ``hair`` region's colour,
