@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.cli.common import add_force_option, chosen_appearance, output_path
+from workbench.cli.common import add_force_option, add_style_options, chosen_appearance, output_path
 from workbench.core.errors import InputError
 from workbench.core.limits import MAX_CLIP_SECONDS, check_range
 from workbench.model.template import TemplateHead
@@ -151,7 +151,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "with an empty recipe (gaze, tongueOut, cheekPuff ...) are written as zero displacement",
     )
     from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
-    from workbench.core.grooming import KINDS, style_names
 
     p.add_argument(
         "--skin-tone",
@@ -169,16 +168,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f".glb only: the iris colour painted on the eyes (default: the case's, else "
         f"{DEFAULT_IRIS})",
     )
-    for kind in KINDS:
-        p.add_argument(
-            f"--{kind}",
-            choices=list(style_names(kind)),
-            default=None,
-            metavar="STYLE",
-            help=f".glb only: {kind} style: {', '.join(style_names(kind))} (an artistic "
-            "addition, not evidence; a node with the expressions as morph targets; default: "
-            "the case's, else none)",
-        )
+    add_style_options(p, ".glb only, a node with the expressions as morph targets: ")
     p.add_argument(
         "--eyes",
         choices=["texture", "vertex"],

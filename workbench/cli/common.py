@@ -179,6 +179,23 @@ def print_self_check(check: Mapping[str, Any] | None) -> None:
             print(f"CHECK: {reason}")
 
 
+def add_style_options(parser: argparse.ArgumentParser, note: str = "") -> None:
+    """``--hair``, ``--brows``, ``--beard`` and ``--moustache STYLE`` (the library of
+    :mod:`workbench.core.grooming`; default None: the case's, else none); ``note`` is
+    added to each help text."""
+    from workbench.core.grooming import KINDS, style_names
+
+    for kind in KINDS:
+        parser.add_argument(
+            f"--{kind}",
+            choices=list(style_names(kind)),
+            default=None,
+            metavar="STYLE",
+            help=f"{note}{kind} style: {', '.join(style_names(kind))} (an artistic addition, "
+            "not evidence; default: the case's, else none)",
+        )
+
+
 def case_appearance(spec: str) -> Appearance | None:
     """The appearance kept in a reconstruction folder's ``case.fcase``, if it has one
     (``reference:...`` heads and folders without a case file have none)."""

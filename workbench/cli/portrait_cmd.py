@@ -30,9 +30,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from workbench.cli.common import add_force_option, chosen_appearance
+from workbench.cli.common import add_force_option, add_style_options, chosen_appearance
 from workbench.core.appearance import DEFAULT_IRIS, DEFAULT_SKIN_TONE, IRIS_COLOURS, SKIN_TONES
-from workbench.core.grooming import KINDS, style_names
 from workbench.pipelines.outcome import JobOutcome
 
 if TYPE_CHECKING:
@@ -91,15 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help=f"the iris colour painted on the eyes (default: the case's, else {DEFAULT_IRIS})",
     )
-    for kind in KINDS:
-        p.add_argument(
-            f"--{kind}",
-            choices=list(style_names(kind)),
-            default=None,
-            metavar="STYLE",
-            help=f"{kind} style: {', '.join(style_names(kind))} (an artistic addition, not "
-            "evidence; default: the case's, else none)",
-        )
+    add_style_options(p)
     p.add_argument(
         "--views",
         default=",".join(VIEWS),

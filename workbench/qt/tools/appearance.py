@@ -44,6 +44,7 @@ from PySide6.QtCore import QObject, QTimer
 
 from workbench.core.frame import apply_transform
 from workbench.model.appearance import REGIONS, Appearance, Hsv
+from workbench.qt.tools.common import HairGrower
 from workbench.render.visuals.face import add_colour_note, face_painted, paint_face
 from workbench.render.visuals.update import drawn_points, source_data
 from workbench.services import appearance as colouring
@@ -93,7 +94,12 @@ class AppearanceTool(QObject):
         self.scene, self.host, self.runner = scene, host, runner
         #: what the hair layer was drawn for: (face actor, its points' time, fit, look)
         self._hair_key: tuple[Any, ...] | None = None
-        self._growing: tuple[Any, ...] | None = None
+        self._grower = HairGrower(
+            runner,
+            "hair",
+            self.draw_hair,
+            lambda exc: self.host.status(f"The hair could not be placed: {exc}"),
+        )
         self._hair_timer = QTimer(self)
         self._hair_timer.setSingleShot(True)
         self._hair_timer.setInterval(HAIR_SETTLE_MS)
@@ -193,7 +199,7 @@ class AppearanceTool(QObject):
 
     def draw_hair(self) -> None:
         """Draw the chosen hair on the face as shown (grown in a worker the first time)."""
-        from workbench.services.grooming import grooming_ready, hair_meshes, head_grooming
+        from workbench.services.grooming import hair_meshes
 
         wanted = self._hair_wanted()
         if wanted is None:
@@ -204,21 +210,8 @@ class AppearanceTool(QObject):
         fit, look = self.session.fit, self.appearance()
         assert fit is not None and look is not None
         head = fit.recon.head
-        if not grooming_ready(head, look):
-            if self.runner is None:
-                head_grooming(head, look)
-            else:
-                key = (head, look.grooming)
-                if self._growing != key:
-                    self._growing = key
-                    self.runner.submit(
-                        "hair",
-                        "Growing the hair and brows …",
-                        lambda: head_grooming(head, look),
-                        lambda _g: self._grown(),
-                        self._grow_failed,
-                    )
-                return
+        if not self._grower.ready(head, look):
+            return
         recon = fit.recon
         shown = drawn_points(source_data(self.scene.actors("face")[0]))
         skin = apply_transform(recon.input_to_head, shown)
@@ -229,14 +222,6 @@ class AppearanceTool(QObject):
         ]
         self.scene.show_hair(pieces)
         self._hair_key = wanted
-
-    def _grown(self) -> None:
-        self._growing = None
-        self.draw_hair()
-
-    def _grow_failed(self, exc: BaseException) -> None:
-        self._growing = None
-        self.host.status(f"The hair could not be placed: {exc}")
 
     def _show_panel(self) -> None:
         look = self.appearance()

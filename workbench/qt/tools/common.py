@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -64,3 +65,54 @@ class CaseLayersAside:
             if not scene.visible.get(layer, True):
                 scene.set_visible(layer, True)
         hidden.clear()
+
+
+class HairGrower:
+    """Grows the hair a case chose on a head in the window's worker, once per head and choice.
+
+    The grooming service keeps grown pieces (:func:`workbench.services.grooming.head_grooming`);
+    :meth:`ready` says whether they are there, and if not asks the worker for them (one job
+    per head and choice at a time) and calls ``done`` on the GUI thread when they are.  The
+    main view's hair layer, the Age dock and the Animate dock each hold one.  Without a
+    worker (``runner`` None) the hair is grown at once.
+    """
+
+    def __init__(
+        self,
+        runner: Any,
+        channel: str,
+        done: Callable[[], None],
+        failed: Callable[[BaseException], None] | None = None,
+    ) -> None:
+        self.runner, self.channel, self.done, self.failed = runner, channel, done, failed
+        self._growing: tuple[int, Any] | None = None
+
+    def ready(self, head: Any, look: Any) -> bool:
+        """The pieces of ``look`` (an Appearance) are grown on ``head``; else ask for them."""
+        from workbench.services.grooming import grooming_ready, head_grooming
+
+        if grooming_ready(head, look):
+            return True
+        if self.runner is None:
+            head_grooming(head, look)
+            return True
+        key = (id(head), look.grooming)  # (a head compares by its arrays: by identity here)
+        if self._growing != key:
+            self._growing = key
+            self.runner.submit(
+                self.channel,
+                "Growing the hair and brows …",
+                lambda: head_grooming(head, look),
+                self._grown,
+                self._failed,
+            )
+        return False
+
+    def _grown(self, _grown: Any) -> None:
+        self._growing = None
+        self.done()
+
+    def _failed(self, exc: BaseException) -> None:
+        self._growing = None
+        if self.failed is not None:
+            self.failed(exc)

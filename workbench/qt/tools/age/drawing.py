@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench.qt.tools.common import HairGrower
 from workbench.render.visuals import heads, update
 
 if TYPE_CHECKING:
@@ -54,7 +55,7 @@ class AgeDrawing:
     _caption: Any
     runner: Any
     document: Any
-    _hair_growing: Any = None
+    _hair_grower: HairGrower | None = None
 
     def settings(self) -> AgeSettings:
         raise NotImplementedError  # the tool's: the panel's choices
@@ -148,7 +149,7 @@ class AgeDrawing:
     def _draw_hair(self) -> None:
         """The case's hair on the source head (not in the overlay) and the aged head."""
         from workbench.render.visuals.face import add_hair
-        from workbench.services.grooming import grooming_ready, hair_meshes, head_grooming
+        from workbench.services.grooming import hair_meshes
 
         for key in [k for k in self._actors if "_hair_" in k]:
             self.plotter.remove_actor(self._actors.pop(key), render=False)
@@ -156,17 +157,9 @@ class AgeDrawing:
         if source is None or look is None or self.scene.closed:
             return
         head = source.head
-        if not grooming_ready(head, look):
-            growing = (head, look.grooming)
-            if self._hair_growing != growing:
-                self._hair_growing = growing
-                self.runner.submit(
-                    "age_hair",
-                    "Growing the hair and brows …",
-                    lambda: head_grooming(head, look),
-                    lambda _g: self._hair_grown(),
-                    lambda _exc: self._hair_grown(failed=True),
-                )
+        if self._hair_grower is None:
+            self._hair_grower = HairGrower(self.runner, "age_hair", self._hair_grown)
+        if not self._hair_grower.ready(head, look):
             return
         skins: dict[str, np.ndarray] = {}
         if self.panel.mode() != "overlay":
@@ -180,11 +173,9 @@ class AgeDrawing:
                 actor.SetVisibility(self.active)
                 self._actors[name] = actor
 
-    def _hair_grown(self, failed: bool = False) -> None:
-        self._hair_growing = None
-        if not failed:
-            self._draw_hair()
-            self.scene.request_render()
+    def _hair_grown(self) -> None:
+        self._draw_hair()
+        self.scene.request_render()
 
     def _draw_aged_eyes(self, rebuild: bool) -> None:
         """The aged head's eyes: drawn from the source's painted eyes once, then moved in

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench.qt.tools.common import HairGrower
 from workbench.render.visuals import heads, update
 
 if TYPE_CHECKING:
@@ -67,7 +68,7 @@ class AnimateDrawing:
     sex: str
     host: Any
     runner: Any
-    _hair_growing: Any = None
+    _hair_grower: HairGrower | None = None
 
     def draw(self) -> None:
         """(Re)draw the skin and the inner parts of the loaded head."""
@@ -107,25 +108,15 @@ class AnimateDrawing:
     def draw_hair(self) -> None:
         """The case's hair on the animated head as it is now (none for other heads)."""
         from workbench.render.visuals.face import add_hair
-        from workbench.services.grooming import grooming_ready, head_grooming
 
         for key in [k for k in self._actors if k.startswith("hair_")]:
             self.plotter.remove_actor(self._actors.pop(key), render=False)
         anim, look = self.animator, self.hair_look()
         if anim is None or look is None or self.scene.closed:
             return
-        if not grooming_ready(anim.head, look):
-            growing = (anim.head, look.grooming)
-            if self._hair_growing != growing:
-                self._hair_growing = growing
-                head = anim.head
-                self.runner.submit(
-                    "animate_hair",
-                    "Growing the hair and brows …",
-                    lambda: head_grooming(head, look),
-                    lambda _g: self._hair_grown(),
-                    lambda _exc: self._hair_grown(failed=True),
-                )
+        if self._hair_grower is None:
+            self._hair_grower = HairGrower(self.runner, "animate_hair", self.draw_hair)
+        if not self._hair_grower.ready(anim.head, look):
             return
         for piece in self._hair_pieces(anim, look):
             name = f"hair_{piece.kind}"
@@ -149,11 +140,6 @@ class AnimateDrawing:
             )
             for p in pieces
         ]
-
-    def _hair_grown(self, failed: bool = False) -> None:
-        self._hair_growing = None
-        if not failed:
-            self.draw_hair()
 
     def _move_hair(self) -> None:
         """Move the hair's ribbons to the animator's current skin (points in place)."""
