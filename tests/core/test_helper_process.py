@@ -91,3 +91,16 @@ def test_only_marked_workbench_functions_may_run() -> None:
         with pytest.raises(ValueError, match="may not run"):
             helper_process._resolve(name)
     assert helper_process._resolve(DECIMATE) is decimate
+
+
+def test_no_fallback_raises_instead_of_running_here(skull, monkeypatch) -> None:
+    """``fallback=False`` (a worker thread that must not run the function itself): no
+    helper means an error, never an in-process run."""
+    helper_process._stop()
+    monkeypatch.setattr(helper_process.sys, "executable", "/nonexistent/python")
+    with pytest.raises(RuntimeError, match="could not start"):
+        helper_process.call(DECIMATE, skull.vertices, skull.faces, 30_000, fallback=False)
+    assert helper_process._child is None
+    monkeypatch.setenv("WORKBENCH_NO_HELPER_PROCESS", "1")
+    with pytest.raises(RuntimeError, match="switched off"):
+        helper_process.call(DECIMATE, skull.vertices, skull.faces, 30_000, fallback=False)

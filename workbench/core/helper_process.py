@@ -28,8 +28,12 @@ there, unless the calling thread has opted in with :func:`offload_here`
 (the desktop window's worker threads do); then it goes to the child.
 :func:`call` always goes to the child: the reconstruction job uses it to
 decimate a large skull on the second core while its checks run
-(:func:`workbench.services.reconstruction.service.prefetch_working_skull`).
-Other command-line runs and scripts never start a second process.
+(:func:`workbench.services.reconstruction.service.prefetch_working_skull`),
+and ``workbench reconstruct`` to draw its report pictures while it writes its
+other files (:mod:`workbench.pipelines.pictures`).  Other command-line runs
+and scripts never start a second process.  The child's file descriptor 1 is
+its stderr: replies travel on a private copy of the pipe, so output printed by
+a C library (VTK, a graphics driver) cannot corrupt them.
 """
 
 from __future__ import annotations
@@ -147,15 +151,19 @@ def _stop() -> None:
 atexit.register(_stop)
 
 
-def call(name: str, *args: Any) -> Any:
+def call(name: str, *args: Any, fallback: bool = True) -> Any:
     """``name(*args)`` in the helper process (in-process if it is unavailable).
 
     ``name`` is ``"module:function"`` of a :func:`runnable` function.  Exceptions
-    raised by the function are raised here again.  Thread-safe.
+    raised by the function are raised here again.  Thread-safe.  ``fallback=False``:
+    raise ``RuntimeError`` instead of running in-process when there is no helper
+    (for a caller on a thread that must not run the function itself).
     """
     global _child, _problem
     fn = _resolve(name)
     if os.environ.get("WORKBENCH_NO_HELPER_PROCESS"):
+        if not fallback:
+            raise RuntimeError("the helper process is switched off (WORKBENCH_NO_HELPER_PROCESS)")
         return fn(*args)
     with _lock:
         if _child is None or _child.poll() is not None:  # first call, or the child died
@@ -164,6 +172,8 @@ def call(name: str, *args: Any) -> Any:
                 _child = _start()
             except OSError as exc:
                 _problem = f"helper process could not start ({exc}); running in-process"
+                if not fallback:
+                    raise RuntimeError(_problem) from exc
                 return fn(*args)
         try:
             stdin, stdout = _child.stdin, _child.stdout
@@ -192,8 +202,13 @@ def status() -> str:
 
 def _serve() -> None:
     """The child's loop: one request at a time until stdin closes."""
-    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
-    sys.stdout = sys.stderr  # stray prints must not corrupt the reply stream
+    stdin = sys.stdin.buffer
+    # replies go to a private copy of the pipe; file descriptor 1 becomes stderr, so that
+    # stray output, Python's or a C library's (VTK, EGL drivers), cannot corrupt the replies
+    sys.stdout.flush()
+    stdout = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
     with contextlib.suppress(AttributeError, OSError):
         os.nice(10)  # background work: the window's renderer comes first
     while True:

@@ -29,6 +29,7 @@ import numpy as np
 
 from workbench.core.errors import InputError
 from workbench.pipelines.outcome import Say, quiet
+from workbench.pipelines.pictures import PicturesAside, draw_scene, picture_scene
 
 if TYPE_CHECKING:
     from workbench.core.mesh import Mesh
@@ -122,7 +123,10 @@ def reconstruct_to_folder(
     inputs = job_inputs(skull_path, settings, truth)
     if not staged:
         check_output_folder(out, inputs, force)
-    result = run_reconstruction(skull_path, settings, progress=progress)
+    aside = PicturesAside() if pictures else None  # drawn in the helper process meanwhile
+    result = run_reconstruction(
+        skull_path, settings, progress=progress, on_fit=aside.warm if aside else None
+    )
     notes: list[str] = []
 
     def note(message: str) -> None:
@@ -130,10 +134,14 @@ def reconstruct_to_folder(
         say(f"  note: {message}")
 
     if staged:
-        files = write_reconstruction(result, out, truth=truth, pictures=pictures, note=note)
+        files = write_reconstruction(
+            result, out, truth=truth, pictures=pictures, note=note, aside=aside
+        )
     else:
         with staged_folder(out, force, inputs, notify=notify) as temp:
-            files = write_reconstruction(result, temp, truth=truth, pictures=pictures, note=note)
+            files = write_reconstruction(
+                result, temp, truth=truth, pictures=pictures, note=note, aside=aside
+            )
         files = relocate(files, temp, Path(os.path.abspath(out)))
         result.opened.case.source_path = files["case"]
     result.report["_seconds"] = {k: round(v, 2) for k, v in result.seconds.items()}
@@ -149,6 +157,7 @@ def write_reconstruction(
     formats: tuple[str, ...] = (),
     draw: Draw | None = None,
     note: Say = quiet,
+    aside: PicturesAside | None = None,
 ) -> dict[str, Path]:
     """The job's files, validation figures, pictures and report, all into the folder ``out``.
 
@@ -156,10 +165,15 @@ def write_reconstruction(
     face, the build faces and the head's parts again in these mesh formats
     besides PLY (``"obj"``, ``"stl"``).  ``draw`` replaces the picture drawer
     (:func:`reconstruction_pictures`), e.g. to run it on another thread.
+    ``aside`` (without ``draw``): draw the pictures in the helper process while
+    the other files are written (:mod:`workbench.pipelines.pictures`).
     """
     from workbench.reporting.report import write_report_json, write_report_pdf
     from workbench.services.reconstruction.job import write_outputs
 
+    aside = aside if pictures and draw is None else None
+    if aside is not None:
+        aside.start(out / "pictures", result)
     files = write_outputs(result, out, staged=True)
     files.update(_coloured_head(result, out))
     files.update(_other_formats(result, out, formats))
@@ -169,7 +183,9 @@ def write_reconstruction(
         report["appearance"] = section
     if truth is not None:
         report["validation"] = validation_figures(truth, result.settings.scale, result)
-    if pictures:
+    if aside is not None:
+        report["pictures"] = _with_portraits(out, result, *aside.finish(), note)
+    elif pictures:
         report["pictures"] = (draw or reconstruction_pictures)(out, result, note)
     files["report"] = write_report_json(report, out / "report.json")
     files["report_pdf"] = write_report_pdf(report, out / "report.pdf", base_dir=out)
@@ -345,50 +361,20 @@ def reconstruction_pictures(out: Path, result: JobResult, note: Say = quiet) -> 
 
     Without off-screen rendering the job goes on without pictures, and
     ``note`` says why; the three build faces and the band map are drawn apart,
-    so a failure there loses only those pictures.
+    so a failure there loses only those pictures
+    (:func:`workbench.pipelines.pictures.draw_scene`).
     """
-    from workbench.render.reconstruction import render_builds, render_reconstruction
-    from workbench.services.reconstruction.reconstruct import articulated_skull
+    drawn, notes = draw_scene(str(out / "pictures"), picture_scene(result))
+    return _with_portraits(out, result, {k: Path(p) for k, p in drawn.items()}, notes, note)
 
-    recon = result.recon
-    active = recon.plan.active()
-    origins = recon.to_input(np.array([d.origin for d in active]))
-    tips = recon.to_input(np.array([d.tip for d in active]))
-    skull = _skull_of(result)
-    if recon.registration is not None and recon.registration.occlusion is not None:
-        skull = articulated_skull(recon.registration)  # the skull the face was fitted over
-    eyes = recon.mesh_to_input(recon.head.meshes["eyes"])
-    try:
-        paths = render_reconstruction(
-            skull,
-            recon.face,
-            (origins, tips),
-            out / "pictures",
-            frame=recon.input_to_head,
-            eyes=eyes,
-            spread=result.spread,
-            inferred=recon.inferred,
-        )
-    except (RuntimeError, OSError, ValueError) as exc:
-        note(f"no pictures (off-screen rendering failed: {exc})")
-        return {}
-    builds = result.fit.builds if result.fit is not None else None
-    if builds is not None:
-        try:
-            paths |= render_builds(
-                {name: builds.face(name, recon) for name in builds.names},
-                out / "pictures",
-                frame=recon.input_to_head,
-                bmi=builds.bmi,
-                main=builds.main,
-                eyes=eyes,
-                skull=skull,
-                band_face=recon.face,
-                band_mm=builds.half_width_mm,
-            )
-        except (RuntimeError, OSError, ValueError, InputError) as exc:
-            note(f"no build pictures (rendering failed: {exc})")
-    paths |= _portraits(out, result, note)
+
+def _with_portraits(
+    out: Path, result: JobResult, paths: dict[str, Path], notes: list[str], note: Say
+) -> dict[str, str]:
+    """``paths`` and the portraits in the case's appearance, relative to ``out``; ``notes`` said."""
+    for message in notes:
+        note(message)
+    paths = paths | _portraits(out, result, note)
     return {k: str(Path(p).relative_to(out)) for k, p in paths.items()}
 
 
