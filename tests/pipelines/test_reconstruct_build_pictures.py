@@ -123,7 +123,6 @@ def test_pictures_aside_falls_back_to_drawing_here(renderers, monkeypatch, tmp_p
 
     monkeypatch.setattr(helper_process, "call", no_helper)
     aside = PicturesAside()
-    aside.warm()
     aside.start(tmp_path / "pictures", fake_result(fake_builds()))
     paths, notes = aside.finish()
     assert notes == []
@@ -136,7 +135,6 @@ def test_pictures_aside_draws_in_the_helper(monkeypatch, tmp_path: Path) -> None
     """The real renderers, in the helper process: the same pictures as drawn here."""
     monkeypatch.delenv("WORKBENCH_NO_HELPER_PROCESS", raising=False)
     aside = PicturesAside()
-    aside.warm()
     (tmp_path / "aside").mkdir()  # the job's (staged) folder
     aside.start(tmp_path / "aside" / "pictures", fake_result(fake_builds()))
     paths, notes = aside.finish()

@@ -10,10 +10,11 @@ it runs.
 Why a second process: ``workbench reconstruct`` spent ~4 s of its ~18 s (on
 an 817k-triangle CT bone, 2 cores) importing VTK and drawing, one after the
 other with writing the meshes, the case and the report.
-:class:`PicturesAside` imports VTK in the helper process
-(:mod:`workbench.core.helper_process`) while the fit runs, and draws there
-while the job writes its other files; only the PDF, which holds the pictures,
-waits for them.  The helper runs at a lower priority, so the files the job
+:class:`PicturesAside` imports VTK and draws in the helper process
+(:mod:`workbench.core.helper_process`) while the job writes its other files;
+only the PDF, which holds the pictures, waits for them.  (Importing VTK there
+while the fit ran slowed the fit, which uses both cores, by about as much as
+it saved.)  The helper runs at a lower priority, so the files the job
 writes come first.  If the helper cannot draw (it could not start, or died),
 the pictures are drawn here as before; a picture that fails to render is a
 note, never a failed job.  The window does not use this: it draws on its own
@@ -144,12 +145,6 @@ def draw_scene(out_dir: str, scene: PictureScene) -> tuple[dict[str, str], list[
     return {k: str(p) for k, p in paths.items()}, notes
 
 
-@helper_process.runnable
-def warm_renderer() -> None:
-    """Import VTK and the picture code (~0.7 s), so that a later :func:`draw_scene` starts at once."""
-    import workbench.render.reconstruction  # noqa: F401
-
-
 def _in_helper(future: Future, name: str, *args: object) -> None:
     """Run ``name(*args)`` in the helper process on a thread of its own; the outcome into ``future``."""
 
@@ -165,18 +160,14 @@ def _in_helper(future: Future, name: str, *args: object) -> None:
 class PicturesAside:
     """The job's pictures drawn in the helper process while the job goes on (module docstring).
 
-    :meth:`warm` as the fit starts; :meth:`start` once the fit is done and the
-    folder exists; :meth:`finish` where the report needs them.
+    :meth:`start` once the fit is done and the folder exists; :meth:`finish`
+    where the report needs them.
     """
 
     def __init__(self) -> None:
         self._drawing: Future | None = None
         self._scene: PictureScene | None = None
         self._out: Path | None = None
-
-    def warm(self) -> None:
-        """Start the helper and import VTK there (the fit runs meanwhile)."""
-        _in_helper(Future(), f"{_HERE}:warm_renderer")
 
     def start(self, out: Path, result: JobResult) -> None:
         """Start drawing ``result``'s pictures into ``out`` in the helper."""

@@ -124,9 +124,7 @@ def reconstruct_to_folder(
     if not staged:
         check_output_folder(out, inputs, force)
     aside = PicturesAside() if pictures else None  # drawn in the helper process meanwhile
-    result = run_reconstruction(
-        skull_path, settings, progress=progress, on_fit=aside.warm if aside else None
-    )
+    result = run_reconstruction(skull_path, settings, progress=progress)
     notes: list[str] = []
 
     def note(message: str) -> None:

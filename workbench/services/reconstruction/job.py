@@ -230,13 +230,8 @@ def run_reconstruction(
     skull_path: str | PathLike[str],
     settings: JobSettings = JobSettings(),
     progress: Progress | None = None,
-    on_fit: Callable[[], None] | None = None,
 ) -> JobResult:
-    """Open the skull as a case and reconstruct the face (see the module docstring).
-
-    ``on_fit`` is called once the case is open, as the fit starts: the caller may
-    start work of its own meanwhile (``workbench reconstruct`` loads its renderer).
-    """
+    """Open the skull as a case and reconstruct the face (see the module docstring)."""
     say = progress or (lambda _msg: None)
     times: dict[str, float] = {}
     t = time.perf_counter()
@@ -260,8 +255,6 @@ def run_reconstruction(
         tissue=settings.tissue,
     )
     times["open"] = time.perf_counter() - t
-    if on_fit is not None:
-        on_fit()
     fit = run_fit(inputs, progress=say)
     times.update(fit.seconds)
     record_fit(stack, fit)
