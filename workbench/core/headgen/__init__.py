@@ -5,9 +5,7 @@ feature vertices, ``data_tables/template/skin_control_mesh.json``) and code
 (Loop subdivision with boundary rules, :mod:`.subdivision`, and an
 anthropometric landmark warp).  Everything is in millimetres in the head frame
 of :mod:`workbench.core.frame` (x to the subject's left, y up, z forward,
-Frankfort Horizontal y = 0, origin between the porions).  Once the skull is
-fitted under it, :mod:`.tissue` lifts skin that lies closer to the bone than
-the minimum soft tissue.
+Frankfort Horizontal y = 0, origin between the porions).
 
 Submodules are imported lazily, so importing one part (say the skull) never
 pulls in the others.

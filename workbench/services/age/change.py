@@ -495,8 +495,7 @@ def _outcome_figures(
             "condition": [round(c, 1) for c in sol.condition],
             "dropped_singular_values": list(sol.dropped_singular_values),
         },
-        # 0 before on the built-in heads (their skin keeps >= 2 mm over the bone away from
-        # landmarks); a head built from a CT may start with some
+        # the reference heads have a few orbit vertices a fraction of a mm inside the bone
         "face_skin_inside_skull_vertices": {"after": inside, "before": inside0},
     }
 

@@ -48,8 +48,9 @@ def skin_out_of_skull(
     the index of the skull, which this leaves as it is).
 
     The warps keep the source's tissue depths at the paired landmarks, but
-    between them thin skin (the orbit rims, which the built-in heads cover by
-    about 2 mm; the nasal dorsum of a small child) can end inside.  The push is spread over the neighbourhood
+    between them thin skin (the orbit rims, where the reference heads already
+    have a few vertices a fraction of a mm inside the bone; the nasal dorsum of
+    a small child) can end inside.  The push is spread over the neighbourhood
     (pushed vertices held, the others relaxed to their neighbours' mean push),
     triangles it turned over (against ``rest_normals``; ``keep`` as in
     :func:`unfold`) are relaxed, and this repeats while skin is inside.

@@ -25,8 +25,7 @@ from workbench.core.errors import InputError, WorkbenchError
 from workbench.io.template_pack import export_template, load_template_pack
 from workbench.model.template import TemplateHead
 
-#: the workbench package (this file is workbench/services/templates/cache.py)
-_PACKAGE = Path(__file__).resolve().parents[2]
+_PACKAGE = Path(__file__).resolve().parents[1]
 #: sources whose content decides the built-in head
 _SOURCE_GLOBS = (
     "core/headgen/*.py",

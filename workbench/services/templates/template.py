@@ -22,15 +22,13 @@ images and midline dowels lie in the mid-sagittal plane, so the fitted skull
 is symmetric.  Skull regions that come closer to the skin than
 :data:`MIN_CLEARANCE_MM` are pushed inward by extra (mirrored)
 correspondences that ride on the landmark warp, so the skin never
-intersects the skull away from its openings.  For that test the eye
-openings are closed (:data:`FILLED_OPENINGS`: the globes fill them), so the
-orbital margins next to the lids are held under the skin too.
+intersects the skull away from its openings.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,12 +53,6 @@ CLEARANCE_SPACING_MM = 10.0
 #: No clearance constraint closer than this to a fitted skull landmark.
 LANDMARK_GAP_MM = 4.0
 BONE_PARTS = ("cranium", "mandible", "upper_teeth", "lower_teeth", "tongue")
-#: Skin openings the globes fill: the skull fit closes them for its skin-over-bone test
-#: (:func:`closed_openings`).  Left open, the bone next to them went unchecked: the
-#: lateral orbital rims lie a few mm from the outer eye corners, and the female head's
-#: came out through the skin there (31 skin vertices inside the cranium, 0.6 mm deep).
-#: The mouth slit (bone 10 mm and more behind the lips) and the neck stump stay open.
-FILLED_OPENINGS = ("eye_l", "eye_r")
 
 #: Landmarks of the mouth region whose dowels run parallel to the Frankfort
 #: plane.  At the alveolar margins (prosthion, infradentale, ectomolare ...)
@@ -171,7 +163,6 @@ def fit_skull_to_skin(
     *,
     extra_points: dict[str, np.ndarray] | None = None,
     openings: np.ndarray | None = None,
-    filled: Sequence[np.ndarray] = (),
     max_iterations: int = 40,
     damping: float = 0.5,
     tolerance_mm: float = 0.02,
@@ -208,24 +199,25 @@ def fit_skull_to_skin(
     openings : (m, 3), optional
         Skin points on the borders of openings (eyes, mouth, neck); near them
         the inside/outside test of the open skin is unreliable, so no
-        clearance constraints are placed there, and the reported minimum
-        clearance leaves out bone within 12 mm of them.
-    filled : sequence of (k,) int arrays, optional
-        Boundary loops of ``skin`` (vertex ids, in the triangles' winding)
-        that something fills, e.g. the eye openings (the globes).  The
-        skin-over-bone test closes them (:func:`closed_openings`), so bone
-        next to them is held under the skin like the rest; only the borders
-        of the other openings keep the constraints away.
+        clearance constraints are placed there.
 
     Returns
     -------
     warped parts, warped skull landmarks, warped extra points, report
     """
+    from scipy.spatial import cKDTree
+
     codes = sorted(depths)
     orig = dict(parts)
     extra0 = {k: np.asarray(v, float) for k, v in (extra_points or {}).items()}
     lms0 = skull_landmarks
-    skin_index, skin_face_normals, near_opening = _skin_over_bone_test(skin, openings, filled)
+    skin_index = MeshIndex(skin)
+    fn = np.cross(
+        skin.vertices[skin.faces[:, 1]] - skin.vertices[skin.faces[:, 0]],
+        skin.vertices[skin.faces[:, 2]] - skin.vertices[skin.faces[:, 0]],
+    )
+    skin_face_normals = fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-12)
+    near_opening = cKDTree(openings) if openings is not None and len(openings) else None
     part_names = [part_of.get(c, "cranium") for c in codes]
 
     # the skull's own Frankfort landmarks stay on the FH plane (y = 0)
@@ -306,29 +298,6 @@ def fit_skull_to_skin(
 
 #: x -> -x: the mirror image across the midsagittal plane (head frame)
 _MIRROR = np.array([-1.0, 1.0, 1.0])
-
-
-def _skin_over_bone_test(
-    skin: Mesh, openings: np.ndarray | None, filled: Sequence[np.ndarray]
-) -> tuple[MeshIndex, np.ndarray, Any]:
-    """What :func:`fit_skull_to_skin` measures bone against: the index of ``skin`` with the
-    ``filled`` loops closed (:func:`closed_openings`), its unit face normals, and a
-    k-d tree of the ``openings`` border points that are left open (None if none are),
-    near which no clearance constraint is placed.  mm, head frame."""
-    from scipy.spatial import cKDTree
-
-    surface = closed_openings(skin, filled) if len(filled) else skin
-    fn = np.cross(
-        surface.vertices[surface.faces[:, 1]] - surface.vertices[surface.faces[:, 0]],
-        surface.vertices[surface.faces[:, 2]] - surface.vertices[surface.faces[:, 0]],
-    )
-    normals = fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-12)
-    still_open = openings
-    if openings is not None and len(filled):
-        on_filled = cKDTree(skin.vertices[np.concatenate(filled)]).query(openings)[0] < 1e-9
-        still_open = openings[~on_filled]
-    near = cKDTree(still_open) if still_open is not None and len(still_open) else None
-    return MeshIndex(surface), normals, near
 
 
 def _with_mirror_images(src: np.ndarray, off: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -516,7 +485,6 @@ def build_reference_head(sex: str = "male", table_id: str = DEFAULT_DEPTH_TABLE)
     """The reference head for ``sex``: authored skin, procedural skull fitted under it."""
     from workbench.core.headgen.skin import build_skin
     from workbench.core.headgen.skull import build_skull
-    from workbench.core.headgen.tissue import lift_skin_off_bone
 
     skin = build_skin(sex)
     skull = build_skull(sex)
@@ -536,20 +504,7 @@ def build_reference_head(sex: str = "male", table_id: str = DEFAULT_DEPTH_TABLE)
         depths,
         extra_points=extra,
         openings=skin.mesh.vertices[np.concatenate(list(skin.openings.values()))],
-        filled=[skin.openings[k] for k in FILLED_OPENINGS],
     )
-    # bone left closer to the skin than the minimum between the clearance constraints
-    # (lateral orbital rims 1.2-1.5 mm, medial ones 1.4 mm) lifts the skin off it, by up
-    # to a millimetre (workbench.core.headgen.tissue); the skin landmarks stay put
-    unlifted = skin.mesh.vertices
-    lifted = lift_skin_off_bone(
-        skin.mesh,
-        [bones["cranium"], bones["mandible"]],
-        MIN_CLEARANCE_MM,
-        held=list(skin.landmark_vertices.values()),
-    )
-    skin = replace(skin, mesh=skin.mesh.with_vertices(lifted))
-    lift = np.linalg.norm(lifted - unlifted, axis=1)
     eye_centres = np.vstack([skin.eyeballs["l"][0], skin.eyeballs["r"][0]])
     eye_radius = float(skin.eyeballs["l"][1])
     meshes = {
@@ -575,32 +530,12 @@ def build_reference_head(sex: str = "male", table_id: str = DEFAULT_DEPTH_TABLE)
             "depth_table": table_id,
             "dowel_radius_mm": DOWEL_RADIUS_MM,
             "min_clearance_mm": report.min_clearance_mm,
-            "skin_lift_mm": {"max": float(lift.max()), "vertices": int((lift > 0).sum())},
             "depth_error_mm": report.depth_error_mm,
             "fit_iterations": report.iterations,
             "extra_constraints": report.extra_constraints,
             "not_representable": dict(skull.not_representable),
         },
     )
-
-
-def closed_openings(skin: Mesh, loops: Sequence[np.ndarray]) -> Mesh:
-    """``skin`` with each boundary loop of ``loops`` closed by a fan around its centroid.
-
-    The loops run in the triangles' winding (as
-    :func:`workbench.core.mesh.boundary_loops` gives them), so the fans face
-    outward like the skin.  The skin's vertices keep their ids (one centroid
-    per loop is appended).  mm, head frame.
-    """
-    vertices = [skin.vertices]
-    faces = [skin.faces]
-    for k, loop in enumerate(loops):
-        loop = np.asarray(loop, dtype=np.int64)
-        vertices.append(skin.vertices[loop].mean(axis=0, keepdims=True))
-        centre = np.full(len(loop), skin.n_vertices + k)
-        # the skin triangle on the border runs a -> b, so the fan's runs b -> a
-        faces.append(np.stack([np.roll(loop, -1), loop, centre], axis=1))
-    return Mesh(np.concatenate(vertices), np.concatenate(faces))
 
 
 def _globes(
