@@ -42,6 +42,19 @@ def test_edited_or_incomplete_pack_is_refused(head_female, tmp_path):
         load_template_pack(tmp_path)
 
 
+def test_every_source_of_the_cache_key_exists() -> None:
+    # a pattern that matches nothing leaves edits to those files out of the key, and a
+    # stale cached head in use (after the move to services/templates/ the package root
+    # was services/, and no source file counted)
+    from workbench.services.templates import cache
+
+    roots = [(cache._PACKAGE, cache._SOURCE_GLOBS), (cache._tables_root(), cache._TABLE_GLOBS)]
+    for root, patterns in roots:
+        for pattern in patterns:
+            assert any(root.glob(pattern)), f"{pattern} matches nothing under {root}"
+    assert (cache._PACKAGE / "core" / "headgen" / "skin.py").is_file()
+
+
 def test_cached_head_is_reused_and_keyed_by_sources(head_male):
     key = source_key()
     assert len(key) == 16

@@ -25,7 +25,8 @@ from workbench.core.errors import InputError, WorkbenchError
 from workbench.io.template_pack import export_template, load_template_pack
 from workbench.model.template import TemplateHead
 
-_PACKAGE = Path(__file__).resolve().parents[1]
+#: the workbench package (this file is workbench/services/templates/cache.py)
+_PACKAGE = Path(__file__).resolve().parents[2]
 #: sources whose content decides the built-in head
 _SOURCE_GLOBS = (
     "core/headgen/*.py",
