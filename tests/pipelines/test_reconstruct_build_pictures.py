@@ -153,3 +153,32 @@ def test_no_pictures_into_a_folder_that_is_gone(tmp_path: Path) -> None:
     gone = tmp_path / "staged" / "pictures"
     paths, notes = draw_scene(str(gone), picture_scene(fake_result(None)))
     assert paths == {} and "no longer exists" in notes[0] and not gone.parent.exists()
+
+
+def test_a_failed_job_waits_for_the_helper_before_its_folder_goes(
+    renderers, monkeypatch, tmp_path: Path
+) -> None:
+    """Writing the meshes fails while the pictures are drawn aside: the error comes out,
+    but only once the helper is done with the folder (the staged folder is removed next)."""
+    from workbench.pipelines import reconstruct
+    from workbench.services.reconstruction import job
+
+    order: list[str] = []
+
+    class Aside:
+        def start(self, out, result):
+            order.append("start")
+
+        def wait(self):
+            order.append("wait")
+
+        def finish(self):
+            raise AssertionError("no report for a failed job")
+
+    def broken(result, out, staged):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(job, "write_outputs", broken)
+    with pytest.raises(OSError, match="disk full"):
+        reconstruct.write_reconstruction(fake_result(None), tmp_path, aside=Aside())  # type: ignore[arg-type]
+    assert order == ["start", "wait"]

@@ -23,6 +23,7 @@ GUI thread (``Draw`` in :mod:`workbench.pipelines.reconstruct`).
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -174,6 +175,13 @@ class PicturesAside:
         self._scene, self._out = picture_scene(result), out
         self._drawing = Future()
         _in_helper(self._drawing, f"{_HERE}:draw_scene", str(out), self._scene)
+
+    def wait(self) -> None:
+        """Wait until the helper is done with the folder (whatever came of it): a job that
+        failed meanwhile removes the folder only then."""
+        if self._drawing is not None:
+            with contextlib.suppress(BaseException):
+                self._drawing.exception()
 
     def finish(self) -> tuple[dict[str, Path], list[str]]:
         """Wait for the pictures: ({name: path}, notes on pictures not made); drawn here if

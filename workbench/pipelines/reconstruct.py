@@ -172,9 +172,14 @@ def write_reconstruction(
     aside = aside if pictures and draw is None else None
     if aside is not None:
         aside.start(out / "pictures", result)
-    files = write_outputs(result, out, staged=True)
-    files.update(_coloured_head(result, out))
-    files.update(_other_formats(result, out, formats))
+    try:
+        files = write_outputs(result, out, staged=True)
+        files.update(_coloured_head(result, out))
+        files.update(_other_formats(result, out, formats))
+    except BaseException:
+        if aside is not None:  # the folder is removed on the way out: let the helper finish
+            aside.wait()
+        raise
     report = result.report
     section = appearance_section(result)
     if section is not None:
