@@ -70,6 +70,14 @@ def _bare(mesh: Mesh) -> Mesh:
     return Mesh(mesh.vertices, mesh.faces)
 
 
+def job_skull(result: JobResult) -> Mesh:
+    """The case's skull mesh (mm, the skull file's frame); a job always has one."""
+    mesh = result.opened.case.specimen.mesh
+    if mesh is None:
+        raise InputError("the case", "has no skull mesh", "open a skull before reconstructing")
+    return mesh
+
+
 def picture_scene(result: JobResult) -> PictureScene:
     """The scene of a job's pictures: the skull the face was fitted over (with the jaw in
     occlusion when the fit moved it there), the face, the dowels, the eyes, the build faces."""
@@ -79,9 +87,7 @@ def picture_scene(result: JobResult) -> PictureScene:
     active = recon.plan.active()
     origins = recon.to_input(np.array([d.origin for d in active]))
     tips = recon.to_input(np.array([d.tip for d in active]))
-    skull = result.opened.case.specimen.mesh
-    if skull is None:
-        raise InputError("the case", "has no skull mesh", "open a skull before reconstructing")
+    skull = job_skull(result)
     if recon.registration is not None and recon.registration.occlusion is not None:
         skull = articulated_skull(recon.registration)
     builds = result.fit.builds if result.fit is not None else None
@@ -103,7 +109,7 @@ def picture_scene(result: JobResult) -> PictureScene:
 
 
 @helper_process.runnable
-def draw_scene(out_dir: str, scene: PictureScene) -> tuple[dict[str, str], list[str]]:
+def draw_scene(out_dir: str, scene: PictureScene) -> tuple[dict[str, Path], list[str]]:
     """Draw ``scene`` into ``out_dir``: ({name: path}, notes on pictures that could not be made).
 
     Without off-screen rendering no picture is made and a note says why; the
@@ -143,7 +149,7 @@ def draw_scene(out_dir: str, scene: PictureScene) -> tuple[dict[str, str], list[
             )
         except (RuntimeError, OSError, ValueError, InputError) as exc:
             notes.append(f"no build pictures (rendering failed: {exc})")
-    return {k: str(p) for k, p in paths.items()}, notes
+    return paths, notes
 
 
 def _in_helper(future: Future, name: str, *args: object) -> None:
@@ -189,7 +195,6 @@ class PicturesAside:
         if self._drawing is None or self._scene is None or self._out is None:
             return {}, []
         try:
-            paths, notes = self._drawing.result()
+            return self._drawing.result()
         except (RuntimeError, OSError, EOFError):  # the helper died or could not be reached
-            paths, notes = draw_scene(str(self._out), self._scene)
-        return {k: Path(p) for k, p in paths.items()}, notes
+            return draw_scene(str(self._out), self._scene)

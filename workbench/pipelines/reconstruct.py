@@ -27,12 +27,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.core.errors import InputError
 from workbench.pipelines.outcome import Say, quiet
-from workbench.pipelines.pictures import PicturesAside, draw_scene, picture_scene
+from workbench.pipelines.pictures import PicturesAside, draw_scene, job_skull, picture_scene
 
 if TYPE_CHECKING:
-    from workbench.core.mesh import Mesh
     from workbench.model.case import Case
     from workbench.services.reconstruction.job import JobResult, JobSettings
     from workbench.services.reconstruction.service import FitResult
@@ -285,7 +283,7 @@ def validation_figures(truth_path: Path, scale: float | None, result: JobResult)
 
     truth = read_mesh(truth_path, units="mm" if scale is None else "auto", scale=scale).mesh
     recon = result.recon
-    bone = _skull_of(result)
+    bone = job_skull(result)
     anterior = unit(np.linalg.inv(recon.input_to_head)[:3, :3] @ [0.0, 0.0, 1.0])
     _, (mine, base) = score_surfaces(
         truth,
@@ -307,14 +305,6 @@ def validation_figures(truth_path: Path, scale: float | None, result: JobResult)
         "reconstruction (positive: outside)",
         "baseline": {"method": "uniform 6 mm offset of the bone", **base.figures},
     }
-
-
-def _skull_of(result: JobResult) -> Mesh:
-    """The case's skull mesh (mm, the skull file's frame); a job always has one."""
-    mesh = result.opened.case.specimen.mesh
-    if mesh is None:
-        raise InputError("the case", "has no skull mesh", "open a skull before reconstructing")
-    return mesh
 
 
 #: the side (px) of the report's portraits in the case's appearance (a third of the page
@@ -367,8 +357,9 @@ def reconstruction_pictures(out: Path, result: JobResult, note: Say = quiet) -> 
     so a failure there loses only those pictures
     (:func:`workbench.pipelines.pictures.draw_scene`).
     """
-    drawn, notes = draw_scene(str(out / "pictures"), picture_scene(result))
-    return _with_portraits(out, result, {k: Path(p) for k, p in drawn.items()}, notes, note)
+    return _with_portraits(
+        out, result, *draw_scene(str(out / "pictures"), picture_scene(result)), note
+    )
 
 
 def _with_portraits(
