@@ -6,6 +6,7 @@ import argparse
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -279,3 +280,33 @@ def test_finaliser_errors_after_an_interrupt_are_not_printed():
         assert sys.unraisablehook == reported.append
     finally:
         sys.unraisablehook = saved
+
+
+def test_an_interrupt_printed_by_compiled_code_is_raised_again(capsys):
+    """Compiled code that prints an exception and goes on (numpy's ``import_array`` when
+    Ctrl-C lands in the import it makes) calls ``sys.excepthook``: no traceback is shown,
+    the interrupt is raised again a moment later, and the hook found is put back."""
+    import ctypes
+
+    from workbench.cli import main as cli_main
+
+    saved = sys.excepthook
+    reported: list = []
+    sys.excepthook = lambda *exc: reported.append(exc[0])
+    try:
+        watch = cli_main._Interrupts()
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                ctypes.pythonapi.PyErr_SetNone(ctypes.py_object(KeyboardInterrupt))
+                ctypes.pythonapi.PyErr_Print()  # what numpy's import_array does on failure
+                assert watch.seen and not reported
+                for _ in range(500):  # raised again within ~10 ms, by a timer thread
+                    time.sleep(0.01)
+            sys.excepthook(ValueError, ValueError("other"), None)  # others: as before
+        finally:
+            watch.restore()
+        assert reported == [ValueError]
+        assert sys.excepthook is not watch._printed
+    finally:
+        sys.excepthook = saved
+    assert "KeyboardInterrupt" not in capsys.readouterr().err

@@ -187,7 +187,12 @@ class _Interrupts:
     prints "Exception ignored ..." with a traceback and goes on.  Such reports
     are silenced and the interrupt raised again a moment later (from a timer
     thread: raised at once it would land in the same callback), and if the
-    command ends before that, it ends as interrupted (:meth:`pending`).  Where
+    command ends before that, it ends as interrupted (:meth:`pending`).  The
+    same holds for one printed through ``sys.excepthook`` by compiled code that
+    prints it and goes on (numpy's ``import_array`` in an extension's start-up,
+    when the interrupt lands in the import it makes: the caller then gets an
+    ``ImportError``, and a library that treats the module as optional carries
+    on; seen once in CI as a traceback and exit 0).  Where
     SIGINT is ignored or handled by someone else (a Dask worker, another
     program's handler) only the dropped-interrupt part applies.
     """
@@ -198,8 +203,10 @@ class _Interrupts:
         self._armed = False
         self._lock = threading.Lock()
         self._hook = sys.unraisablehook
+        self._excepthook = sys.excepthook
         self._handler: Any = None
         sys.unraisablehook = self._unraisable
+        sys.excepthook = self._printed
         on_main = threading.current_thread() is threading.main_thread()
         if on_main and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             self._handler = signal.signal(signal.SIGINT, self._sigint)
@@ -219,6 +226,16 @@ class _Interrupts:
             # (pyvista's Renderer.__del__ reading an attribute never set): the command
             # ends as interrupted, and that one line is all the user needs to see
             return
+        self._dropped()
+
+    def _printed(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if isinstance(exc_type, type) and issubclass(exc_type, KeyboardInterrupt):
+            self._dropped()
+        else:
+            self._excepthook(exc_type, exc, tb)
+
+    def _dropped(self) -> None:
+        """An interrupt that could not propagate: seen, and raised again in a moment."""
         self.seen = True
         with self._lock:
             if self._armed or self._redelivered >= _MAX_REDELIVERIES:
@@ -245,10 +262,12 @@ class _Interrupts:
         return armed
 
     def restore(self) -> None:
-        """Put back the handler and hook found (a SIG_IGN set meanwhile is kept)."""
+        """Put back the handler and hooks found (a SIG_IGN set meanwhile is kept)."""
         self.pending()
         if sys.unraisablehook == self._unraisable:
             sys.unraisablehook = self._hook
+        if sys.excepthook == self._printed:
+            sys.excepthook = self._excepthook
         if self._handler is not None and signal.getsignal(signal.SIGINT) == self._sigint:
             signal.signal(signal.SIGINT, self._handler)
 
