@@ -28,6 +28,8 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
+from workbench.core.unique import unique_ints
+
 
 def _frozen(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
@@ -282,10 +284,12 @@ class Mesh:
         # than np.unique(axis=0) on 10^6 edges
         e = self.edges_sorted
         key = e[:, 0] * np.int64(self.n_vertices) + e[:, 1]
-        keys, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+        # (unique_ints: one sort; np.unique with inverse and counts took 1.0 s on an
+        # 820k-face CT bone)
+        keys, inverse, counts, _ = unique_ints(key)
         n = np.int64(self.n_vertices)
         uniq = np.stack([keys // n, keys % n], axis=1)
-        return uniq, inverse.ravel(), counts
+        return uniq, inverse, counts
 
     @property
     def edges_unique(self) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench.core.mesh import Mesh, boundary_loops, degenerate_face_mask, duplicate_face_mask
+from workbench.core.unique import unique_ints
 
 
 @dataclass(frozen=True)
@@ -205,13 +206,13 @@ def weld_coincident_vertices(mesh: Mesh, step_mm: float) -> tuple[Repaired, np.n
     if float(side[0]) * float(side[1]) * float(side[2]) >= 2.0**62:  # keys would overflow
         raise ValueError(f"weld step {step_mm:g} mm is too fine for a mesh this large")
     key = (cells[:, 0] * side[1] + cells[:, 1]) * side[2] + cells[:, 2]
-    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    _, inverse, _, first = unique_ints(key)
     rows = np.flatnonzero(finite)
     vertex_of = np.full(n, -1, np.int64)
     vertex_of[rows] = inverse.ravel()
     faces = vertex_of[mesh.faces]
     faces = faces[(faces >= 0).all(axis=1)]
-    source = rows[first]  # (np.unique's first occurrence is the lowest index)
+    source = rows[first]  # (the first occurrence is the lowest index)
     merged = n - len(source)
     if merged == 0 and finite.all():
         return _unchanged(mesh), np.arange(n)
