@@ -32,7 +32,12 @@ Algorithm (per call; vectorised, no loop over vertices)
    bound the concavity in the definition when they have positions (the
    ball then reaches both), the depth of each point below the profile's
    upper convex hull (the line touching it on both sides), measured along
-   the direction.  No concavity deeper than :data:`MIN_DEPTH_MM`: not moved.
+   the direction.  Only the profile seen from the direction counts
+   (:meth:`~workbench.core.surface_patch.PatchIndex.seen_from`,
+   :func:`~workbench.core.surface_patch.front_profile`): a CT bone's section
+   also holds inner walls (sinuses, the nasal floor, the inner table), which
+   lie far below the hull.  No concavity deeper than :data:`MIN_DEPTH_MM`, or
+   one deeper than :data:`MAX_DEPTH_MM` (a gap in the surface): not moved.
 
 Landmarks with no rule (sutures, midpoints, constructions): a midline one is
 only moved onto the midsagittal plane (the nearest point of the surface's
@@ -60,12 +65,20 @@ import numpy as np
 from workbench.core.errors import LandmarkError
 from workbench.core.landmarks import LandmarkSet
 from workbench.core.mesh import Mesh
-from workbench.core.surface_patch import PatchIndex, depth_below_upper_hull, plane_section
+from workbench.core.surface_patch import (
+    PatchIndex,
+    depth_below_upper_hull,
+    front_profile,
+    plane_section,
+)
 from workbench.io.catalogue import LandmarkCatalogue, load_catalogue
 from workbench.io.snap_rules import SnapRule, load_snap_rules
 
 #: a profile concavity shallower than this (mm) is not a feature
 MIN_DEPTH_MM = 0.3
+#: a profile "concavity" deeper than this (mm) is a gap in the surface (bone the iso level
+#: lost), not a feature: subspinale and supramentale lie a few mm deep
+MAX_DEPTH_MM = 20.0
 #: extremum heights within this of the top (mm) count as ties; the one nearest the start wins
 TIE_MM = 0.25
 #: extra searches from the winner until it stays put (see :func:`_climb`)
@@ -320,10 +333,20 @@ def _search(
     """The feature's position in one ball (input frame), or a sentence saying why none."""
     pts, head, nrm = _candidates(index, to_head, start, radius_mm, rule.midline)
     axis = rule.axis
-    keep = nrm @ axis > 0.0  # outer surface facing the direction
+    keep = np.ones(len(pts), bool)
     if limits is not None:
         along = head[:, _along(rule)]
         keep &= (along > limits[0]) & (along < limits[1])
+    keep &= nrm @ axis > 0.0  # outer surface facing the direction
+    if rule.rule == "deepest" and keep.any():
+        # the outer profile only, what a view along the direction sees: a CT section also
+        # holds inner walls (sinuses, the nasal floor), which face forward too
+        idx = np.flatnonzero(keep)
+        keep[idx] = index.seen_from(pts[idx], to_head[:3, :3].T @ axis)
+        idx = np.flatnonzero(keep)
+        front = front_profile(head[idx, _along(rule)], head[idx] @ axis)
+        keep[idx] = False
+        keep[idx[front]] = True
     if not keep.any():
         where = " on the midline profile" if rule.midline else ""
         if limits is not None:
@@ -342,6 +365,11 @@ def _search(
         return (
             f"{code}: no concavity deeper than {MIN_DEPTH_MM:g} mm in the midline profile "
             f"within {radius_mm:.0f} mm; not moved"
+        )
+    if depth.max() > MAX_DEPTH_MM:  # a gap in the outer profile (bone lost at the iso level)
+        return (
+            f"{code}: the midline profile within {radius_mm:.0f} mm has a gap "
+            f"{depth.max():.0f} mm deep (bone missing from the surface?); not moved"
         )
     return pts[np.argmax(depth)]
 
@@ -390,12 +418,14 @@ def snap_suggested(
 
     Used after the dense registration: the registration puts a landmark
     where the reference's landmark lands, the rule then puts it on the
-    feature its definition names (most anterior, lowest, deepest ...).  A
-    midline landmark without a rule (n, rhi, pr, ...) goes to the nearest
-    point of the surface's midline profile: the dense registration left the
-    VHP male's nasion up to 3.8 mm to one side of the midline on the
-    robustness corpus, and a midline landmark lies on that plane by its
-    definition.  Placed landmarks are the user's and never move.  The head
+    feature its definition names (most anterior, lowest, deepest ...);
+    extremum features go first, so a concavity (ss between ans and pr) is
+    bounded by landmarks already on their features.  A midline landmark
+    without a rule (rhi, pr, ...) goes to the nearest point of the surface's
+    midline profile: the dense registration left the VHP male's nasion up to
+    3.8 mm to one side of the midline on the robustness corpus, and a midline
+    landmark lies on that plane by its definition.  Placed landmarks are the
+    user's and never move.  The head
     frame is the landmarks' own (:func:`snap_frame`); when they cannot make one
     (the registration marked a porion absent: too little bone seen there)
     ``fallback_frame`` (the registration's input → head transform) is used, and
@@ -410,6 +440,9 @@ def snap_suggested(
         return code in rules or (entry is not None and entry.side == "midline")
 
     todo = [lm.code for lm in landmarks if lm.status == "suggested" and snaps(lm.code)]
+    # extremum features first: a concavity is then bounded by its snapped landmarks (ss by
+    # ans on the spine's most anterior point, not where the registration left it)
+    todo.sort(key=lambda c: 0 if c in rules and rules[c].rule == "extremum" else 1)
     if not todo:
         return landmarks, []
     try:
@@ -421,9 +454,7 @@ def snap_suggested(
     out, notes = landmarks, []
     for code in todo:
         try:
-            result = snap_landmark(
-                mesh, landmarks, code, rules=rules, catalogue=catalogue, to_head=frame
-            )
+            result = snap_landmark(mesh, out, code, rules=rules, catalogue=catalogue, to_head=frame)
         except LandmarkError as exc:
             notes.append(f"{code} not snapped: {exc}")
             continue
