@@ -82,10 +82,17 @@ def registration_hash() -> str:
     return f"{scored_code_hash()[:12]}v{TRUTH_VERSION}"
 
 
+#: data tables the scored landmarks depend on (the snap rules move the delivered landmarks)
+SCORED_TABLES = ("data_tables/landmarks/*.csv",)
+
+
 def scored_code_hash() -> str:
-    """Hash of every imported Python file a variant's automatic registration can run through."""
+    """Hash of every imported Python file a variant's automatic registration can run through,
+    and of the landmark tables (:data:`SCORED_TABLES`)."""
     root = code_root()
-    return files_hash((p for pkg in SCORED_PACKAGES for p in (root / pkg).rglob("*.py")), root)
+    files = [p for pkg in SCORED_PACKAGES for p in (root / pkg).rglob("*.py")]
+    files += [p for pattern in SCORED_TABLES for p in root.glob(pattern)]
+    return files_hash(files, root)
 
 
 def jsonable(x: Any, nd: int = 4) -> Any:
