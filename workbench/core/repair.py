@@ -209,7 +209,7 @@ def weld_coincident_vertices(mesh: Mesh, step_mm: float) -> tuple[Repaired, np.n
     _, inverse, _, first = unique_ints(key)
     rows = np.flatnonzero(finite)
     vertex_of = np.full(n, -1, np.int64)
-    vertex_of[rows] = inverse.ravel()
+    vertex_of[rows] = inverse
     faces = vertex_of[mesh.faces]
     faces = faces[(faces >= 0).all(axis=1)]
     source = rows[first]  # (the first occurrence is the lowest index)

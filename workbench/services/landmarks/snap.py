@@ -333,20 +333,18 @@ def _search(
     """The feature's position in one ball (input frame), or a sentence saying why none."""
     pts, head, nrm = _candidates(index, to_head, start, radius_mm, rule.midline)
     axis = rule.axis
-    keep = np.ones(len(pts), bool)
+    keep = nrm @ axis > 0.0  # outer surface facing the direction
     if limits is not None:
         along = head[:, _along(rule)]
         keep &= (along > limits[0]) & (along < limits[1])
-    keep &= nrm @ axis > 0.0  # outer surface facing the direction
     if rule.rule == "deepest" and keep.any():
         # the outer profile only, what a view along the direction sees: a CT section also
         # holds inner walls (sinuses, the nasal floor), which face forward too
         idx = np.flatnonzero(keep)
-        keep[idx] = index.seen_from(pts[idx], to_head[:3, :3].T @ axis)
-        idx = np.flatnonzero(keep)
-        front = front_profile(head[idx, _along(rule)], head[idx] @ axis)
-        keep[idx] = False
-        keep[idx[front]] = True
+        idx = idx[index.seen_from(pts[idx], to_head[:3, :3].T @ axis)]
+        idx = idx[front_profile(head[idx, _along(rule)], head[idx] @ axis)]
+        keep[:] = False
+        keep[idx] = True
     if not keep.any():
         where = " on the midline profile" if rule.midline else ""
         if limits is not None:
@@ -425,8 +423,8 @@ def snap_suggested(
     midline profile: the dense registration left the VHP male's nasion up to
     3.8 mm to one side of the midline on the robustness corpus, and a midline
     landmark lies on that plane by its definition.  Placed landmarks are the
-    user's and never move.  The head
-    frame is the landmarks' own (:func:`snap_frame`); when they cannot make one
+    user's and never move.  The head frame is the landmarks' own
+    (:func:`snap_frame`); when they cannot make one
     (the registration marked a porion absent: too little bone seen there)
     ``fallback_frame`` (the registration's input → head transform) is used, and
     without it nothing moves and the note says why.  Returns the new set and
